@@ -1,0 +1,1 @@
+"""OpenCL C sources of rsocl (package data; read with importlib.resources)."""

@@ -1,0 +1,98 @@
+/* The row-timed shutter operator H (forward), its adjoint, and the diagonal and
+ * per-pixel blocks of H Hᵀ. Layouts: f[T][m][n], g[K][m][n], first/frac[K][m][n],
+ * len[K], gain[K]. Each work item handles one pixel and loops over the exposure
+ * window only: cost ~ K*m*n*L, never K*T*m*n. Needs common.cl. */
+
+/* g[k, p] = gain[k] * sum_s w(k, s, p) f[s, p];   global size (m*n, K) */
+__kernel void forward(__global const real *f, __global real *g,
+                      __global const int *first, __global const real *frac,
+                      __global const real *len, __global const real *gain,
+                      int T, int L, int mn_)
+{
+    size_t p = get_global_id(0), k = get_global_id(1);
+    size_t mn = (size_t)mn_;
+    if (p >= mn) return;
+    size_t q = k * mn + p;
+    g[q] = gain[k] * window_dot(f, first[q], frac[q], len[k], T, L, mn, p);
+}
+
+/* f[s, p] = base[s, p] (or 0) + sum_k gain[k] w(k, s, p) g[k, p];   global size (m*n) */
+inline void adjoint_pixel(__global const real *base, __global const real *g, __global real *f,
+                          __global const int *first, __global const real *frac,
+                          __global const real *len, __global const real *gain,
+                          int K, int T, int L, size_t mn, size_t p)
+{
+    for (int s = 0; s < T; ++s) {
+        size_t i = (size_t)s * mn + p;
+        f[i] = base ? base[i] : (real)0;
+    }
+    for (int k = 0; k < K; ++k) {
+        size_t q = (size_t)k * mn + p;
+        window_scatter(f, first[q], frac[q], len[k], T, L, mn, p, gain[k] * g[q]);
+    }
+}
+
+__kernel void adjoint(__global const real *g, __global real *f,
+                      __global const int *first, __global const real *frac,
+                      __global const real *len, __global const real *gain,
+                      int K, int T, int L, int mn)
+{
+    size_t p = get_global_id(0);
+    if (p >= (size_t)mn) return;
+    adjoint_pixel(0, g, f, first, frac, len, gain, K, T, L, (size_t)mn, p);
+}
+
+/* f = base + Hᵀ g */
+__kernel void adjoint_add(__global const real *base, __global const real *g, __global real *f,
+                          __global const int *first, __global const real *frac,
+                          __global const real *len, __global const real *gain,
+                          int K, int T, int L, int mn)
+{
+    size_t p = get_global_id(0);
+    if (p >= (size_t)mn) return;
+    adjoint_pixel(base, g, f, first, frac, len, gain, K, T, L, (size_t)mn, p);
+}
+
+/* psi[k, p] = gain[k]^2 sum_s w(k, s, p)^2;   global size (m*n, K) */
+__kernel void psi(__global real *out, __global const int *first, __global const real *frac,
+                  __global const real *len, __global const real *gain, int T, int L, int mn_)
+{
+    size_t p = get_global_id(0), k = get_global_id(1);
+    size_t mn = (size_t)mn_;
+    if (p >= mn) return;
+    size_t q = k * mn + p;
+    real acc = (real)0;
+    for (int j = 0; j < L; ++j) {
+        if (first[q] + j >= T) break;
+        real w = shutter_weight(j, frac[q], len[k]);
+        acc += w * w;
+    }
+    out[q] = gain[k] * gain[k] * acc;
+}
+
+/* Per-pixel block M[k][l] = gain[k] gain[l] sum_s w(k, s) w(l, s), stored out[(k*K + l)*mn + p].
+ * global size (m*n) */
+__kernel void gram(__global real *out, __global const int *first, __global const real *frac,
+                   __global const real *len, __global const real *gain, int K, int T, int L, int mn_)
+{
+    size_t p = get_global_id(0);
+    size_t mn = (size_t)mn_;
+    if (p >= mn) return;
+    for (int k = 0; k < K; ++k) {
+        size_t qk = (size_t)k * mn + p;
+        for (int l = 0; l <= k; ++l) {
+            size_t ql = (size_t)l * mn + p;
+            real acc = (real)0;
+            for (int j = 0; j < L; ++j) {
+                int s = first[qk] + j;
+                if (s >= T) break;
+                int jl = s - first[ql];
+                if (jl < 0 || jl >= L) continue;
+                acc += shutter_weight(j, frac[qk], len[k]) * shutter_weight(jl, frac[ql], len[l]);
+            }
+            acc *= gain[k] * gain[l];
+            out[((size_t)k * K + l) * mn + p] = acc;
+            out[((size_t)l * K + k) * mn + p] = acc;
+        }
+    }
+}

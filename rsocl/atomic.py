@@ -1,0 +1,103 @@
+"""Atomic file writes: readers see either the old file or the complete new one.
+
+A writer gets a temporary path in the target's directory, writes and closes
+its file there; on success the temporary file is flushed to disk (``fsync``)
+and renamed over the target with :func:`os.replace`, which is atomic on POSIX
+and Windows when both paths are on the same file system. On any exception the
+temporary file is removed and the exception propagates, so a failed write
+never leaves a partial file behind nor clobbers an existing good one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+__all__ = ["atomic_path"]
+
+
+def _default_mode() -> int:
+    """Permission bits a newly created regular file gets: ``0o666`` minus the umask."""
+    # os.umask can only be read by setting it; restore it at once.
+    umask = os.umask(0o022)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def _fsync_file(path: Path) -> None:
+    with open(path, "rb+") as handle:
+        os.fsync(handle.fileno())
+
+
+def _fsync_directory(directory: Path) -> None:
+    """Persist the rename itself (best effort: not every platform can open a directory)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Context manager yielding a temporary path that replaces ``path`` on success.
+
+    The temporary file is created (empty) with :func:`tempfile.mkstemp` in the
+    directory of ``path``, named ``<name>.<random>.tmp``. The caller writes
+    the complete file there and closes it before the ``with`` block ends;
+    writers that pick a format from the file name must be told the format
+    explicitly (e.g. ``savefig(tmp, format="png")``), since the name ends in
+    ``.tmp``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Final destination. Its directory must exist. An existing file there is
+        replaced only when the block completes without an exception; it keeps
+        its permission bits, a new file gets the usual ``0o666 & ~umask``.
+
+    Yields
+    ------
+    pathlib.Path
+        The temporary path to write to.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the directory of ``path`` does not exist.
+    ValueError
+        If ``path`` names an existing directory.
+
+    Examples
+    --------
+    >>> with atomic_path("out.npy") as tmp:          # doctest: +SKIP
+    ...     with open(tmp, "wb") as handle:
+    ...         np.save(handle, array)
+    """
+    path = Path(os.fspath(path))
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise FileNotFoundError(f"path: directory {str(directory)!r} does not exist (writing {str(path)!r})")
+    if path.is_dir():
+        raise ValueError(f"path must name a file, {str(path)!r} is a directory")
+    mode = (path.stat().st_mode & 0o7777) if path.exists() else _default_mode()
+    fd, tmp_name = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=directory)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.chmod(tmp, mode)
+        _fsync_file(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    _fsync_directory(directory)

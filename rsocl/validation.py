@@ -1,0 +1,78 @@
+"""Small checks that turn bad input into a ``ValueError`` naming the parameter.
+
+Every public constructor in rsocl validates through these helpers so that
+messages look the same everywhere: the parameter's name, its value and the
+allowed range.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+__all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "choice", "finite_array"]
+
+
+def finite(name: str, value) -> float:
+    """Return ``value`` as a float, or raise if it is not a finite real number."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be a finite real number, got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return value
+
+
+def positive(name: str, value, unit: str = "") -> float:
+    """A finite number ``> 0``."""
+    value = finite(name, value)
+    if value <= 0:
+        raise ValueError(f"{name} must be > 0{' ' + unit if unit else ''}, got {value!r}")
+    return value
+
+
+def non_negative(name: str, value, unit: str = "") -> float:
+    """A finite number ``>= 0``."""
+    value = finite(name, value)
+    if value < 0:
+        raise ValueError(f"{name} must be >= 0{' ' + unit if unit else ''}, got {value!r}")
+    return value
+
+
+def in_range(name: str, value, low: float, high: float) -> float:
+    """A finite number in the closed interval ``[low, high]``."""
+    value = finite(name, value)
+    if not low <= value <= high:
+        raise ValueError(f"{name} must be in [{low}, {high}], got {value!r}")
+    return value
+
+
+def positive_int(name: str, value, maximum: int | None = None) -> int:
+    """An integer ``>= 1`` (and ``<= maximum`` when given)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    value = int(value)
+    if value < 1 or (maximum is not None and value > maximum):
+        upper = f" and <= {maximum}" if maximum is not None else ""
+        raise ValueError(f"{name} must be an integer >= 1{upper}, got {value!r}")
+    return value
+
+
+def choice(name: str, value, allowed) -> str:
+    """One of a fixed set of strings."""
+    if value not in allowed:
+        raise ValueError(f"{name} must be one of {sorted(allowed)}, got {value!r}")
+    return value
+
+
+def finite_array(name: str, array) -> np.ndarray:
+    """A real array with no NaN or inf; returned as a NumPy array (no copy when possible)."""
+    array = np.asarray(array)
+    if array.dtype.kind not in "biuf":
+        raise ValueError(f"{name} must be a real-valued array, got dtype {array.dtype}")
+    if array.dtype.kind == "f" and not np.all(np.isfinite(array)):
+        bad = int(np.count_nonzero(~np.isfinite(array)))
+        raise ValueError(f"{name} contains {bad} NaN or inf value(s); all values must be finite")
+    return array
