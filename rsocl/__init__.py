@@ -1,0 +1,14 @@
+"""rsocl: compressive high-speed imaging with an array of rotated rolling-shutter cameras.
+
+Describe the array with :class:`Camera` and :class:`Rig`, apply the row-timed
+shutter operator with :class:`RollingShutterOperator`, and recover the
+high-speed datacube with :func:`reconstruct` (ADMM on an OpenCL device).
+Conventions: ``../shared/MODEL.md`` of the project, summarised in the README.
+"""
+
+from .operator import RollingShutterOperator
+from .reconstruct import Result, reconstruct
+from .rig import Camera, Rig
+
+__version__ = "0.1.0"
+__all__ = ["Camera", "Rig", "RollingShutterOperator", "reconstruct", "Result", "__version__"]

@@ -17,7 +17,7 @@ from importlib import resources
 
 import numpy as np
 
-__all__ = ["Device", "get_device", "list_devices", "NoOpenCLError"]
+__all__ = ["Device", "get_device", "device_for_queue", "list_devices", "NoOpenCLError"]
 
 INSTALL_HINT = ('install an OpenCL runtime, e.g. the CPU one that ships as a wheel: '
                 'pip install "rsocl[pocl]"')
@@ -195,7 +195,9 @@ def _device_for(spec: str | None) -> Device:
     else:
         dev = _pick(spec if spec is not None else os.environ.get("RSOCL_DEVICE") or None)
         ctx = cl.Context([dev])
-    return Device(ctx, cl.CommandQueue(ctx), dev)
+    found = Device(ctx, cl.CommandQueue(ctx), dev)
+    _BY_QUEUE[found.queue.int_ptr] = found
+    return found
 
 
 def get_device(device=None) -> Device:
@@ -208,3 +210,17 @@ def get_device(device=None) -> Device:
     if device is not None and not isinstance(device, str):
         raise ValueError(f"device must be a spec string like '0:0' or 'pocl', or an rsocl Device; got {device!r}")
     return _device_for(device)
+
+
+_BY_QUEUE: dict = {}
+
+
+def device_for_queue(queue) -> Device:
+    """The :class:`Device` that owns ``queue``; a queue made outside rsocl is wrapped once.
+
+    Regularizers receive device arrays only and use this to reach the program cache.
+    """
+    key = queue.int_ptr
+    if key not in _BY_QUEUE:
+        _BY_QUEUE[key] = Device(queue.context, queue, queue.device)
+    return _BY_QUEUE[key]

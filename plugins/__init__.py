@@ -1,0 +1,1 @@
+"""rsocl's built-in plugins, registered through entry points like any third party's."""

@@ -1,0 +1,99 @@
+"""The ADMM of MODEL.md (Eqs. 11-15) with all state on the OpenCL device.
+
+One iteration is two launches of work on the device: the fused data step
+(``admm_data_step``: dual update, ``v = theta + b``, ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)``,
+``u = f - b``) and the regularizer's ``theta = denoise(u, lam/eta)``. Nothing
+crosses to the host but the few partial sums of the history.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .operator import RollingShutterOperator
+from .reduction import sum_sq_diff
+
+__all__ = ["ADMM", "block_inverse"]
+
+
+def block_inverse(gram: np.ndarray, eta: float) -> np.ndarray:
+    """``(eta I + M)⁻¹`` for each per-pixel block of ``gram`` (``(..., K, K)``), in float64.
+
+    ``eta > 0``: the blocks are symmetric positive definite and inverted exactly.
+    ``eta = 0`` (GAP): pseudo-inverse, so unsampled pixels and cameras with
+    identical windows give a zero or least-norm update instead of a division by zero.
+    """
+    K = gram.shape[-1]
+    block = np.asarray(gram, dtype=np.float64) + eta * np.eye(K)
+    if eta > 0:
+        return np.linalg.inv(block)
+    return np.linalg.pinv(block, hermitian=True)
+
+
+class ADMM:
+    """ADMM state on the device; :meth:`step` runs one iteration.
+
+    Parameters
+    ----------
+    op : RollingShutterOperator
+    g : pyopencl.array.Array
+        Snapshots ``(K, m, n)`` on the device.
+    regularizer : rsocl.regularizer.Regularizer
+    lam, eta : float
+        Regularization and penalty (``eta = 0``: GAP, no dual variable; denoiser weight ``lam``).
+    projection : {"exact", "paper"}
+    x0 : pyopencl.array.Array or None
+        Initial ``theta``; zeros when None.
+    """
+
+    def __init__(self, op: RollingShutterOperator, g, regularizer, *, lam, eta, projection="exact", x0=None):
+        import pyopencl as cl
+        import pyopencl.array as cla
+
+        self.op, self.g, self.regularizer = op, g, regularizer
+        self.lam, self.eta, self.projection = float(lam), float(eta), projection
+        self.weight = self.lam / self.eta if self.eta > 0 else self.lam
+        queue, shape = op.queue, op.domain_shape
+        if projection == "exact":
+            inverse = np.moveaxis(block_inverse(op.gram(), self.eta), (2, 3), (0, 1))
+            self.inverse = cla.to_device(queue, np.ascontiguousarray(inverse, dtype=op.dtype))
+        else:
+            self.inverse = op.psi_device()
+        self.theta = cla.zeros(queue, shape, op.dtype) if x0 is None else x0.copy()
+        self.b = cla.zeros(queue, shape, op.dtype)
+        self.f = self.theta.copy()
+        self.u = cla.empty(queue, shape, op.dtype)
+        self.hx = cla.empty(queue, op.range_shape, op.dtype)
+        self.program = op.device.program(
+            ["admm.cl"], REAL=op._ctype(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
+            NCH=op.K, PROJECTION_EXACT=int(projection == "exact"))
+        self.g_norm2 = sum_sq_diff(g)
+        self.iteration = 0
+        cl.enqueue_barrier(queue)
+
+    @staticmethod
+    def buffers_bytes(op: RollingShutterOperator, projection: str) -> int:
+        """Device memory of the solver's own arrays (theta, b, f, u, H·theta, inverse blocks), bytes."""
+        cube = int(np.prod(op.domain_shape)) * op.dtype.itemsize
+        snap = int(np.prod(op.range_shape)) * op.dtype.itemsize
+        inverse = snap * op.K if projection == "exact" else snap
+        return 4 * cube + 2 * snap + inverse
+
+    def step(self):
+        """One ADMM iteration (enqueued; nothing is read back)."""
+        op = self.op
+        update_dual = int(self.eta > 0 and self.iteration > 0)
+        self.program.admm_data_step(
+            op.queue, (op.mn,), None, self.theta.data, self.b.data, self.f.data, self.u.data, self.g.data,
+            *op._geometry(), self.inverse.data, op.dtype.type(self.eta),
+            np.int32(op.T), np.int32(op.L), np.int32(op.mn), np.int32(update_dual))
+        self.regularizer.denoise(self.u, self.weight, out=self.theta)
+        self.iteration += 1
+
+    def residual(self) -> float:
+        """Relative data residual ``‖g - H theta‖ / ‖g‖`` (0 when ``g`` is all zero and so is ``H theta``)."""
+        self.op.forward_into(self.theta, self.hx)
+        r2 = sum_sq_diff(self.g, self.hx)
+        if self.g_norm2 == 0:
+            return float(np.sqrt(r2))
+        return float(np.sqrt(r2 / self.g_norm2))

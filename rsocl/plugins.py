@@ -1,0 +1,103 @@
+"""Plugin registry: regularizers and camera backends found through entry points.
+
+Groups ``rsocl.regularizers`` and ``rsocl.cameras`` are read with
+:mod:`importlib.metadata`. Listing never imports a plugin; a plugin is imported
+on first use. rsocl's own plugins are declared in its ``pyproject.toml`` the
+same way a third party declares its own, so there is no special path for them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import metadata
+
+__all__ = ["GROUPS", "PluginInfo", "available", "load", "status", "PluginError"]
+
+GROUPS = ("rsocl.regularizers", "rsocl.cameras")
+
+
+class PluginError(ValueError):
+    """A plugin name is unknown, ambiguous, or its module failed to import."""
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """One entry point: its name, target (``module:attr``), distribution and version."""
+
+    group: str
+    name: str
+    value: str
+    distribution: str
+    version: str
+    entry_point: object
+
+    def load(self):
+        try:
+            return self.entry_point.load()
+        except Exception as exc:  # a broken plugin must never break the others
+            raise PluginError(f"plugin {self.name!r} ({self.group}) from distribution {self.distribution} "
+                              f"{self.version} failed to load: {type(exc).__name__}: {exc}") from exc
+
+
+def _check_group(group):
+    if group not in GROUPS:
+        raise ValueError(f"group must be one of {list(GROUPS)}, got {group!r}")
+
+
+def _entries(group):
+    found = {}
+    for dist in metadata.distributions():
+        dist_name = dist.metadata["Name"] or "?"
+        for ep in dist.entry_points:
+            if ep.group != group:
+                continue
+            info = PluginInfo(group, ep.name, ep.value, dist_name, dist.version or "?", ep)
+            found.setdefault(ep.name, {})[dist_name] = info
+    return found
+
+
+def available(group: str = "rsocl.regularizers") -> dict:
+    """Plugin names of ``group`` -> :class:`PluginInfo`, without importing any plugin.
+
+    Raises :class:`PluginError` when two distributions claim one name.
+    """
+    _check_group(group)
+    out = {}
+    for name, by_dist in sorted(_entries(group).items()):
+        if len(by_dist) > 1:
+            dists = " and ".join(f"{d} {i.version}" for d, i in sorted(by_dist.items()))
+            raise PluginError(f"plugin name {name!r} in group {group} is claimed by two distributions: {dists}; "
+                              "uninstall one of them")
+        out[name] = next(iter(by_dist.values()))
+    return out
+
+
+def load(group: str, name: str):
+    """Import and return the object registered as ``name`` in ``group``."""
+    plugins = available(group)
+    if name not in plugins:
+        raise PluginError(f"unknown {group.split('.')[-1][:-1]} {name!r}; available: {sorted(plugins) or 'none'}")
+    return plugins[name].load()
+
+
+def status(group: str):
+    """``[(PluginInfo or None, name, "ok" | "broken: cause")]`` for every plugin, importing each.
+
+    Name collisions are reported as broken rows instead of raising.
+    """
+    _check_group(group)
+    rows = []
+    for name, by_dist in sorted(_entries(group).items()):
+        if len(by_dist) > 1:
+            dists = " and ".join(sorted(by_dist))
+            for info in by_dist.values():
+                rows.append((info, name, f"broken: name claimed by {dists}"))
+            continue
+        info = next(iter(by_dist.values()))
+        try:
+            info.load()
+            rows.append((info, name, "ok"))
+        except PluginError as exc:
+            cause = exc.__cause__
+            rows.append((info, name, f"broken: {type(cause).__name__}: {cause}"))
+    return rows
