@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device import device_for_queue
+from rsocl.device import device_for_queue, voxel_grid
 from rsocl.regularizer import Option, Regularizer
 
 __all__ = ["TV"]
@@ -25,35 +25,32 @@ class TV(Regularizer):
 
     def workspace_bytes(self, shape, dtype) -> int:
         planes = 3 if self.temporal_weight > 0 else 2
-        return 2 * planes * int(np.prod(shape)) * np.dtype(dtype).itemsize
+        return planes * int(np.prod(shape)) * np.dtype(dtype).itemsize
 
     def _denoise(self, x, weight, out):
         import pyopencl as cl
         import pyopencl.array as cla
 
         T, m, n = x.shape
-        real = "double" if x.dtype == np.float64 else "float"
         temporal = int(self.temporal_weight > 0 and T > 1)
-        dev = device_for_queue(x.queue)
-        prog = dev.program(["tv.cl"], REAL=real, TEMPORAL=temporal)
+        real = "double" if x.dtype == np.float64 else "float"
+        prog = device_for_queue(x.queue).program(["tv.cl"], REAL=real, TEMPORAL=temporal)
         planes = 3 if temporal else 2
+        cache = self.__dict__.setdefault("_dual", {})
         key = (x.shape, x.dtype.str, planes, x.queue.int_ptr)
-        cache = self.__dict__.setdefault("_buffers", {})
         if key not in cache:
             cache.clear()
-            cache[key] = (cla.empty(x.queue, (planes,) + x.shape, x.dtype),
-                          cla.empty(x.queue, (planes,) + x.shape, x.dtype))
-        p_in, p_out = cache[key]
+            cache[key] = cla.empty(x.queue, (planes,) + x.shape, x.dtype)
+        p = cache[key]
         wt = float(self.temporal_weight) if temporal else 0.0
         tau = 1.0 / (2.0 * (2.0 + wt * wt))
-        scalar = x.dtype.type
-        gsize = (n, m, T)
-        cl.enqueue_fill_buffer(x.queue, p_in.data, scalar(0), 0, p_in.nbytes)
-        for _ in range(self.iterations - 1):
-            prog.tv_step(x.queue, gsize, None, x.data, p_in.data, p_out.data, scalar(tau),
-                         scalar(tau / weight), scalar(wt), np.int32(T), np.int32(m), np.int32(n))
-            p_in, p_out = p_out, p_in
-        prog.tv_primal_out(x.queue, gsize, None, x.data, p_in.data, out.data, scalar(wt),
-                           np.int32(T), np.int32(m), np.int32(n))
+        real_t = x.dtype.type
+        sizes = (np.int32(T), np.int32(m), np.int32(n))
+        gsize, lsize = voxel_grid(T, m, n)
+        cl.enqueue_fill_buffer(x.queue, p.data, real_t(0), 0, p.nbytes)
+        for i in range(self.iterations):
+            prog.tv_primal(x.queue, gsize, lsize, x.data, p.data, out.data, real_t(wt), *sizes)
+            if i < self.iterations - 1:
+                prog.tv_dual(x.queue, gsize, lsize, out.data, p.data, real_t(tau), real_t(tau / weight),
+                             real_t(wt), *sizes)
         return out
-

@@ -17,7 +17,7 @@ from importlib import resources
 
 import numpy as np
 
-__all__ = ["Device", "get_device", "device_for_queue", "list_devices", "NoOpenCLError"]
+__all__ = ["Device", "get_device", "device_for_queue", "list_devices", "voxel_grid", "NoOpenCLError"]
 
 INSTALL_HINT = ('install an OpenCL runtime, e.g. the CPU one that ships as a wheel: '
                 'pip install "rsocl[pocl]"')
@@ -149,6 +149,16 @@ class Device:
         return cache[key]
 
 
+def voxel_grid(T: int, m: int, n: int):
+    """Global and local sizes for one work item per voxel of a ``(T, m, n)`` array.
+
+    Rows of up to 64 columns form a work group (PoCL vectorises along it; GPUs
+    get a warp-sized multiple); the global size is padded and kernels check bounds.
+    """
+    lx = min(64, -(-n // 8) * 8)
+    return ((-(-n // lx) * lx, m, T), (lx, 1, 1))
+
+
 def kernel_source(name: str) -> str:
     """Text of ``kernels/<name>`` from the installed package (wheel or editable)."""
     return resources.files("rsocl.kernels").joinpath(name).read_text(encoding="utf-8")
@@ -161,6 +171,7 @@ def _build(context, files, defines):
     if uses_double:
         lines.append("#pragma OPENCL EXTENSION cl_khr_fp64 : enable")
     lines += [f"#define {k} {v}" for k, v in defines]
+    lines.append(f"#define REAL_IS_DOUBLE {int(dict(defines).get('REAL') == 'double')}")
     source = "\n".join(lines) + "\n" + "\n".join(kernel_source(f) for f in ("common.cl",) + tuple(files))
     return Kernels(cl.Program(context, source).build(options=["-cl-std=CL1.2"]))
 
