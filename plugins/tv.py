@@ -32,7 +32,7 @@ class TV(Regularizer):
         import pyopencl.array as cla
 
         T, m, n = x.shape
-        temporal = int(self.temporal_weight > 0 and T > 1)
+        temporal = int(self.temporal_weight > 0)
         real = "double" if x.dtype == np.float64 else "float"
         prog = device_for_queue(x.queue).program(["tv.cl"], REAL=real, TEMPORAL=temporal)
         planes = 3 if temporal else 2

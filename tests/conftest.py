@@ -1,8 +1,46 @@
-"""Make the in-tree package importable when rsocl is not installed."""
+"""Shared fixtures: the OpenCL device under test and the shared data folder.
 
-import sys
+The device is rsocl's default choice (``RSOCL_DEVICE`` / ``PYOPENCL_CTX`` respected),
+so CI can run the same tests on PoCL and under Oclgrind. ``RSOCL_TEST_SMALL=1``
+shrinks the problem sizes for slow simulated devices.
+"""
+
+import os
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+import numpy as np
+import pytest
+
+SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+SMALL = os.environ.get("RSOCL_TEST_SMALL") == "1"
+
+
+@pytest.fixture(scope="session")
+def device():
+    from rsocl.device import get_device
+
+    return get_device()
+
+
+@pytest.fixture(scope="session")
+def has_fp64(device):
+    return device.has_fp64
+
+
+@pytest.fixture(params=["float32", "float64"])
+def dtype(request, device):
+    if request.param == "float64" and not device.has_fp64:
+        pytest.skip(f"device {device.name} has no cl_khr_fp64")
+    return request.param
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
+
+
+def shared_video(name):
+    path = SHARED_DATA / f"{name}.npz"
+    if not path.exists():
+        pytest.skip(f"shared data {path} not present")
+    return path

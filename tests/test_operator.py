@@ -1,0 +1,119 @@
+"""The OpenCL operator against the NumPy reference, and the dot test, on many rigs."""
+
+import numpy as np
+import pytest
+
+from rsocl import Camera, RollingShutterOperator, Rig
+from rsocl import reference as ref
+
+TOL = {"float32": 1e-5, "float64": 1e-12}
+
+
+def _rigs():
+    yield "paper4-square", Rig.paper_array(4, (12, 12), t_e=0.18e-3, t_r=35e-6)
+    yield "paper4-binary", Rig.paper_array(4, (9, 11), t_e=0.18e-3, t_r=35e-6, mask="binary")
+    yield "one-camera", Rig.paper_array(1, (7, 5), t_e=1e-4, t_r=3e-5)
+    yield "eight-oblique", Rig.paper_array(8, (8, 10), t_e=1e-4, t_r=3e-5)
+    yield "eight-oblique-binary", Rig.paper_array(8, (6, 9), t_e=1e-4, t_r=3e-5, mask="binary")
+    yield "fractional-te-offset-gain", Rig(
+        [Camera(0, t_e=1.37e-4, t_r=3e-5, t_a=1.1e-5, gain=1.3), Camera(30, t_e=0.9e-4, t_r=3e-5, gain=0.7),
+         Camera(200, t_e=2.1e-4, t_r=3e-5, t_a=4e-5)], (10, 7))
+    yield "dt-binning", Rig.paper_array(4, (11, 6), t_e=1.6e-4, t_r=3e-5, dt=7.3e-5)
+    yield "dt-binning-binary", Rig.paper_array(3, (5, 13), t_e=1.6e-4, t_r=3e-5, dt=7.3e-5, mask="binary")
+    yield "te-multiple-of-tr", Rig.paper_array(2, (6, 6), t_e=4 * 3e-5, t_r=3e-5)
+    yield "te-multiple-binary", Rig.paper_array(2, (6, 6), t_e=4 * 3e-5, t_r=3e-5, mask="binary")
+    yield "short-exposure", Rig.paper_array(4, (6, 8), t_e=0.1 * 3e-5, t_r=3e-5)
+    yield "multi-frame", Rig([Camera(0, t_e=5e-5, t_r=1e-5, frames=3, t_d=1.2e-4), Camera(90, t_e=5e-5, t_r=1e-5)],
+                             (8, 8))
+    yield "row-map", Rig([Camera(t_e=6e-5, t_r=2e-5, row_map=np.random.default_rng(0).uniform(0, 9, (5, 6))),
+                          Camera(90, t_e=6e-5, t_r=2e-5)], (5, 6))
+    yield "one-row", Rig.paper_array(4, (1, 9), t_e=1e-4, t_r=3e-5)
+    yield "one-column", Rig.paper_array(4, (9, 1), t_e=1e-4, t_r=3e-5)
+    yield "one-pixel", Rig.paper_array(2, (1, 1), t_e=1e-4, t_r=3e-5)
+
+
+RIGS = dict(_rigs())
+
+
+def _rel(a, b):
+    return np.abs(a - b).max() / max(np.abs(b).max(), 1e-300)
+
+
+@pytest.mark.parametrize("name", sorted(RIGS))
+def test_matches_reference_and_dot_test(name, dtype, device, rng):
+    rig = RIGS[name]
+    op = RollingShutterOperator(rig, device=device, dtype=dtype)
+    f = rng.random((rig.T,) + rig.shape)
+    g = rng.random((rig.n_channels,) + rig.shape)
+    tol = TOL[dtype]
+    assert op.forward(f).shape == (rig.n_channels,) + rig.shape
+    assert op.forward(f).dtype == np.dtype(dtype)
+    assert _rel(op.forward(f), ref.forward(rig, f)) < tol
+    assert _rel(op.adjoint(g), ref.adjoint(rig, g)) < tol
+    assert _rel(op.psi, ref.psi(rig)) < tol
+    assert _rel(op.gram(), ref.gram(rig)) < tol
+    # dot test <H f, g> = <f, Hᵀ g>, with the device's own results
+    lhs = np.vdot(op.forward(f).astype(np.float64), g)
+    rhs = np.vdot(f, op.adjoint(g).astype(np.float64))
+    assert abs(lhs - rhs) <= 10 * tol * max(abs(lhs), abs(rhs))
+
+
+def test_weights_are_overlap_fractions():
+    rig = RIGS["fractional-te-offset-gain"]
+    w = ref.weights(rig)
+    assert w.min() >= 0 and w.max() <= 1
+    # each pixel's exact weights add up to its exposure in sub-frames (nothing clipped at T)
+    np.testing.assert_allclose(w.sum(axis=1), rig.windows.length[:, None, None] * np.ones(rig.shape))
+    # non-zero weights are consecutive and at most ceil(t_e/dt) + 1 long
+    nz = w > 0
+    assert nz.sum(axis=1).max() <= rig.window_length
+    first, last = rig.sampled_window()
+    np.testing.assert_array_equal(nz.sum(axis=1), last - first + 1)
+
+
+def test_binary_rule_is_the_papers():
+    rig = Rig.paper_array(1, (3, 1), t_e=3e-5 * 2.5, t_r=3e-5, mask="binary")
+    w = ref.weights(rig)[0, :, :, 0]
+    # row y starts at s = y and ends at y + 2.5: samples y, y+1, y+2
+    expected = np.zeros((rig.T, 3))
+    for y in range(3):
+        expected[y:y + 3, y] = 1
+    np.testing.assert_array_equal(w, expected)
+
+
+def test_device_arrays_stay_on_device(device, rng):
+    import pyopencl.array as cla
+
+    rig = RIGS["paper4-square"]
+    op = RollingShutterOperator(rig, device=device)
+    f = rng.random((rig.T,) + rig.shape).astype(np.float32)
+    f_dev = cla.to_device(device.queue, f)
+    g_dev = op.forward(f_dev)
+    assert isinstance(g_dev, cla.Array)
+    back = op.adjoint(g_dev)
+    assert isinstance(back, cla.Array) and back.shape == (rig.T,) + rig.shape
+    np.testing.assert_allclose(back.get(), op.adjoint(op.forward(f)), rtol=1e-6)
+
+
+def test_shape_and_dtype_errors(device):
+    import pyopencl.array as cla
+
+    rig = RIGS["paper4-square"]
+    op = RollingShutterOperator(rig, device=device)
+    with pytest.raises(ValueError, match=r"f must have shape"):
+        op.forward(np.zeros((rig.T + 1,) + rig.shape))
+    with pytest.raises(ValueError, match=r"g must have shape"):
+        op.adjoint(np.zeros((3,) + rig.shape))
+    with pytest.raises(ValueError, match="dtype"):
+        op.forward(cla.zeros(device.queue, (rig.T,) + rig.shape, np.int32))
+    with pytest.raises(ValueError, match="dtype must be"):
+        RollingShutterOperator(rig, device=device, dtype="float16")
+    with pytest.raises(ValueError, match="rig must be"):
+        RollingShutterOperator("rig", device=device)
+
+
+def test_datacube_too_large_for_device_is_refused(device):
+    # t_e = 10 s over 10 µs sub-frames: T = 10^6 sub-frames of 64x64, 16 GB in float32
+    rig = Rig([Camera(0, t_e=10.0, t_r=1e-5)], (64, 64))
+    with pytest.raises(ValueError, match="largest allocation"):
+        RollingShutterOperator(rig, device=device)

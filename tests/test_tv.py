@@ -1,0 +1,72 @@
+"""The TV kernels against scikit-image's Chambolle TV and the NumPy reference."""
+
+import numpy as np
+import pytest
+from skimage.restoration import denoise_tv_chambolle
+
+from rsocl import reference as ref
+from rsocl_plugins.tv import TV
+
+
+def _denoise(device, x, weight, dtype, **options):
+    import pyopencl.array as cla
+
+    out = TV(**options).denoise(cla.to_device(device.queue, x.astype(dtype)), weight)
+    assert isinstance(out, cla.Array) and out.dtype == np.dtype(dtype) and out.shape == x.shape
+    return out.get()
+
+
+@pytest.mark.parametrize("shape", [(7, 13, 17), (1, 9, 6), (5, 1, 8), (4, 6, 1)])
+@pytest.mark.parametrize("iterations", [1, 2, 15])
+def test_3d_matches_skimage(device, dtype, rng, shape, iterations):
+    x = rng.random(shape)
+    got = _denoise(device, x, 0.25, dtype, iterations=iterations, temporal_weight=1.0)
+    want = denoise_tv_chambolle(x.astype(dtype), weight=0.25, eps=0, max_num_iter=iterations)
+    np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
+
+
+@pytest.mark.parametrize("iterations", [1, 3, 20])
+def test_2d_per_subframe_matches_skimage(device, dtype, rng, iterations):
+    x = rng.random((5, 12, 10))
+    got = _denoise(device, x, 0.4, dtype, iterations=iterations, temporal_weight=0.0)
+    want = np.stack([denoise_tv_chambolle(f.astype(dtype), weight=0.4, eps=0, max_num_iter=iterations) for f in x])
+    np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
+
+
+@pytest.mark.parametrize("temporal_weight", [0.3, 2.0])
+def test_temporal_weight_matches_reference(device, dtype, rng, temporal_weight):
+    x = rng.random((6, 8, 9))
+    got = _denoise(device, x, 0.2, dtype, iterations=12, temporal_weight=temporal_weight)
+    want = ref.tv_chambolle(x, 0.2, 12, temporal_weight)
+    np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
+
+
+def test_more_weight_smooths_more(device, rng):
+    x = rng.random((6, 16, 16))
+    tv = [np.abs(np.diff(_denoise(device, x, w, "float32", iterations=30), axis=2)).sum() for w in (0.05, 0.5)]
+    assert tv[1] < 0.5 * tv[0]
+
+
+def test_weight_zero_is_identity(device, rng):
+    x = rng.random((3, 5, 4))
+    np.testing.assert_array_equal(_denoise(device, x, 0.0, "float32"), x.astype(np.float32))
+
+
+def test_options_are_validated():
+    with pytest.raises(ValueError, match="iterations"):
+        TV(iterations=0)
+    with pytest.raises(ValueError, match="temporal_weight"):
+        TV(temporal_weight=-1)
+    with pytest.raises(ValueError, match="unknown option"):
+        TV(lambda_=1)
+
+
+def test_input_is_validated(device):
+    import pyopencl.array as cla
+
+    with pytest.raises(ValueError, match="pyopencl.array.Array"):
+        TV().denoise(np.zeros((2, 2, 2)), 0.1)
+    with pytest.raises(ValueError, match="shape"):
+        TV().denoise(cla.zeros(device.queue, (2, 2), np.float32), 0.1)
+    with pytest.raises(ValueError, match="weight"):
+        TV().denoise(cla.zeros(device.queue, (2, 2, 2), np.float32), -1.0)
