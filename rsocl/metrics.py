@@ -1,9 +1,10 @@
 """Image-quality metrics of a reconstructed datacube against the ground truth.
 
-Both metrics use the same ``data_range`` convention: when not given it is the
-peak-to-peak range of the ground truth, ``truth.max() - truth.min()``, or
-``1.0`` when the truth is constant (the benchmark protocol scales scenes to
-[0, 1], so ``1.0`` is the natural value there).
+Both metrics use the same ``data_range`` convention: when not given it is
+``1.0`` for a ground truth inside [0, 1] (the benchmark protocol's scale: a
+uint8 video divided by 255, peak 1, as the snapshot-compressive-imaging
+literature reports PSNR), else the truth's peak-to-peak range (``1.0`` when
+that is zero).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 
 from . import validation as check
 
-__all__ = ["psnr", "ssim", "mse"]
+__all__ = ["psnr", "ssim", "mse", "default_data_range"]
 
 #: Window side skimage's SSIM uses by default, pixels.
 SSIM_WINDOW = 7
@@ -31,11 +32,20 @@ def _pair(estimate, truth):
     return estimate, truth
 
 
+def default_data_range(truth) -> float:
+    """``1.0`` for data in [0, 1], else ``max - min`` of ``truth`` (``1.0`` when constant)."""
+    truth = np.asarray(truth)
+    low, high = float(truth.min()), float(truth.max())
+    if low >= 0.0 and high <= 1.0:
+        return 1.0
+    peak_to_peak = high - low
+    return peak_to_peak if peak_to_peak > 0 else 1.0
+
+
 def _data_range(truth: np.ndarray, data_range) -> float:
     if data_range is not None:
         return check.positive("data_range", data_range, "(intensity units)")
-    peak_to_peak = float(truth.max()) - float(truth.min())
-    return peak_to_peak if peak_to_peak > 0 else 1.0
+    return default_data_range(truth)
 
 
 def mse(estimate, truth) -> float:

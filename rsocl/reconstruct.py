@@ -11,6 +11,7 @@ import numpy as np
 from . import validation as check
 from .admm import ADMM
 from .operator import RollingShutterOperator
+from .metrics import default_data_range
 from .plugins import load
 from .reduction import sum_sq_diff
 from .regularizer import Regularizer
@@ -104,7 +105,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     tol : float or None
         Stop when the relative change of the residual between iterations is below ``tol``.
     truth : array_like or None
-        Ground truth ``(T, m, n)``: adds per-iteration PSNR (data range of the truth).
+        Ground truth ``(T, m, n)``: adds per-iteration PSNR (dB; peak 1 for data in
+        [0, 1], see :func:`rsocl.metrics.default_data_range`).
     regularizer_options : dict or None
         Options of a regularizer given by name.
     progress : bool
@@ -153,9 +155,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     g_dev = cla.to_device(queue, np.ascontiguousarray(g, dtype=op.dtype))
     x0_dev = None if x0 is None else cla.to_device(queue, np.ascontiguousarray(x0, dtype=op.dtype))
     truth_dev = None if truth is None else cla.to_device(queue, np.ascontiguousarray(truth, dtype=op.dtype))
-    data_range = None
-    if truth is not None:
-        data_range = float(truth.max() - truth.min()) or 1.0
+    data_range = None if truth is None else default_data_range(truth)
 
     solver = ADMM(op, g_dev, reg, lam=lam, eta=eta, projection=projection, x0=x0_dev)
     history = {"residual": [], "time": []}
@@ -172,6 +172,11 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         for it in range(iterations):
             solver.step()
             residual = solver.residual()
+            if not math.isfinite(residual):
+                hint = (" The paper's diagonal step (projection='paper') is stable only when eta is large "
+                        f"against psi (max psi = {float(op.psi.max()):.3g}); use projection='exact' or raise eta."
+                        if projection == "paper" else " Check lam, eta and the data scale.")
+                raise FloatingPointError(f"ADMM diverged at iteration {it + 1}: the residual is {residual}.{hint}")
             history["residual"].append(residual)
             history["time"].append(time.perf_counter() - start)
             if truth_dev is not None:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from skimage.metrics import structural_similarity
 
-from rsocl.metrics import mse, psnr, ssim
+from rsocl.metrics import default_data_range, mse, psnr, ssim
 
 
 def _checker_noise(shape, sigma):
@@ -27,11 +27,19 @@ def test_psnr_closed_form_with_given_range(truth):
     assert psnr(estimate, truth, data_range=2.0) == pytest.approx(10 * math.log10(4 / sigma**2), rel=1e-12)
 
 
-def test_psnr_default_range_is_truth_peak_to_peak():
+def test_psnr_default_range_is_one_inside_unit_interval():
     truth = np.linspace(0.2, 0.7, 3 * 8 * 8).reshape(3, 8, 8)
     sigma = 0.01
     estimate = truth + _checker_noise(truth.shape, sigma)
-    expected = 10 * math.log10(0.5**2 / sigma**2)
+    expected = 10 * math.log10(1.0 / sigma**2)
+    assert psnr(estimate, truth) == pytest.approx(expected, rel=1e-9)
+
+
+def test_psnr_default_range_is_truth_peak_to_peak_outside_unit_interval():
+    truth = np.linspace(10.0, 60.0, 3 * 8 * 8).reshape(3, 8, 8)
+    sigma = 0.5
+    estimate = truth + _checker_noise(truth.shape, sigma)
+    expected = 10 * math.log10(50.0**2 / sigma**2)
     assert psnr(estimate, truth) == pytest.approx(expected, rel=1e-9)
 
 
@@ -83,7 +91,7 @@ def test_ssim_identical_is_one(truth):
 def test_ssim_matches_skimage_per_subframe_with_global_range(truth):
     rng = np.random.default_rng(2)
     estimate = truth + rng.normal(0, 0.1, truth.shape)
-    peak = truth.max() - truth.min()
+    peak = default_data_range(truth)
     mean, per = ssim(estimate, truth)
     for s in range(truth.shape[0]):
         expected = structural_similarity(estimate[s], truth[s], data_range=peak)
