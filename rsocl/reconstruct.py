@@ -165,7 +165,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=iterations, desc=f"ADMM-{reg.name}", unit="it", leave=False)
+        bar = tqdm(total=iterations, desc=f"ADMM-{reg.name}", unit="it", leave=False, mininterval=0.5,
+                   disable=None)
     queue.finish()
     start = time.perf_counter()
     try:
