@@ -1,0 +1,57 @@
+"""Device selection, install hints, fp64 checks."""
+
+import pytest
+
+from rsocl import device as devmod
+
+
+def test_default_device_and_spec_forms(device):
+    found = devmod.list_devices()
+    assert found, "the test environment must have an OpenCL device"
+    pi, di, platform, dev = found[0]
+    assert devmod._pick(f"{pi}:{di}") == dev
+    assert devmod._pick(str(pi)) == dev
+    assert devmod._pick(dev.name.strip()[:6].lower()) is not None
+    assert devmod.get_device(device) is device
+    assert devmod.get_device(None).name == device.name
+
+
+def test_unknown_spec_lists_devices():
+    with pytest.raises(ValueError, match="matches no OpenCL device; available: 0:0"):
+        devmod._pick("no-such-accelerator")
+    with pytest.raises(ValueError, match="device must be"):
+        devmod.get_device(3.5)
+
+
+def test_no_platform_says_how_to_install(monkeypatch):
+    monkeypatch.setattr(devmod, "list_devices", lambda: [])
+    with pytest.raises(devmod.NoOpenCLError, match=r'pip install "rsocl\[pocl\]"'):
+        devmod._pick(None)
+
+
+def test_fp64_on_a_device_without_it_is_a_clear_error(device, monkeypatch):
+    monkeypatch.setattr(devmod.Device, "has_fp64", property(lambda self: False))
+    with pytest.raises(ValueError, match="cl_khr_fp64"):
+        device.real_dtype("float64")
+    assert device.real_dtype("float32").name == "float32"
+    with pytest.raises(ValueError, match="dtype must be"):
+        device.real_dtype("int8")
+
+
+def test_rsocl_device_environment_variable(monkeypatch):
+    monkeypatch.setenv("RSOCL_DEVICE", "no-such-accelerator")
+    with pytest.raises(ValueError, match="no-such-accelerator"):
+        devmod._device_for.__wrapped__(None)  # the uncached resolver, so other tests keep their device
+
+
+def test_fits_check_names_the_numbers(device):
+    with pytest.raises(ValueError, match=r"MiB.*largest allocation"):
+        device.check_fits("a test buffer", device.max_alloc_bytes + 1)
+    with pytest.raises(ValueError, match="device memory in all"):
+        device.check_fits("a test problem", 10, total_bytes=device.global_mem_bytes + 1)
+    device.check_fits("a small buffer", 1024, total_bytes=2048)
+
+
+def test_kernels_ship_as_package_data():
+    for name in ("common.cl", "operator.cl", "tv.cl", "admm.cl", "reduce.cl"):
+        assert "__kernel" in devmod.kernel_source(name) or name == "common.cl"
