@@ -1,0 +1,218 @@
+"""The camera plugin contract (entry-point group ``rsocl.cameras``).
+
+A backend opens one physical (or simulated) camera from a plain ``config`` dict
+(the camera's table of the TOML rig file), and offers the few operations a
+synchronised rolling-shutter capture needs. Every wait has a timeout; every
+failure is one of the exceptions below, with the camera named.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["CameraError", "CameraTimeout", "CameraDisconnected", "Frame", "CameraBackend", "TRIGGER_MODES"]
+
+TRIGGER_MODES = ("free", "software", "line")
+
+
+class CameraError(RuntimeError):
+    """A camera could not do what was asked (bad setting, lost buffer, ...)."""
+
+
+class CameraTimeout(CameraError):
+    """No frame arrived within the timeout."""
+
+
+class CameraDisconnected(CameraError):
+    """The camera went away (unplugged, network lost, process died)."""
+
+
+@dataclass
+class Frame:
+    """One raw frame.
+
+    Attributes
+    ----------
+    image : ndarray, 2-D
+        Pixel values as delivered (uint8 / uint16), sensor orientation, after the ROI.
+    timestamp : float
+        Device timestamp in seconds when the backend has one, else host time.
+    pixel_format : str
+        ``"Mono8"``, ``"Mono12"``, ``"Mono16"``, ``"GREY"``, ``"Y16"``, ``"YUYV"``...
+    bit_depth : int
+        Significant bits per pixel.
+    meta : dict
+        Anything else the backend reports (frame id, exposure actually used, ...).
+    """
+
+    image: np.ndarray
+    timestamp: float
+    pixel_format: str
+    bit_depth: int
+    meta: dict = field(default_factory=dict)
+
+
+class CameraBackend:
+    """Base class of camera backends; a backend overrides the ``_`` hooks.
+
+    Parameters
+    ----------
+    config : dict
+        Backend-specific settings (address, ROI, ...), from the rig file.
+    name : str
+        Human-readable name used in errors (``"camera 2 (aravis 127.0.0.1)"``).
+    """
+
+    backend = "base"
+
+    def __init__(self, config: dict | None = None, name: str | None = None):
+        self.config = dict(config or {})
+        self.name = name or f"{self.backend} camera"
+        self._open = False
+        self._trigger_mode = "software"
+
+    # -------------------------------------------------------------- lifecycle
+    def open(self):
+        """Connect to the device. Idempotent."""
+        if not self._open:
+            self._wrap(self._open_device)
+            self._open = True
+        return self
+
+    def close(self):
+        """Release the device. Idempotent; never raises for an already closed camera."""
+        if self._open:
+            self._open = False
+            self._wrap(self._close_device)
+
+    def __enter__(self):
+        return self.open()
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def _need_open(self):
+        if not self._open:
+            raise CameraError(f"{self.name}: not open (use 'with camera:' or camera.open())")
+
+    def _wrap(self, fn, *args):
+        try:
+            return fn(*args)
+        except CameraError:
+            raise
+        except (OSError, RuntimeError) as exc:
+            raise CameraError(f"{self.name}: {type(exc).__name__}: {exc}") from exc
+
+    # -------------------------------------------------------------- settings
+    def set_exposure(self, seconds: float) -> float:
+        """Set the exposure time (s); returns the value the device actually uses."""
+        self._need_open()
+        if not (np.isfinite(seconds) and seconds > 0):
+            raise ValueError(f"{self.name}: exposure must be > 0 seconds, got {seconds!r}")
+        return float(self._wrap(self._set_exposure, float(seconds)))
+
+    def set_roi(self, x: int, y: int, width: int, height: int):
+        """Set the sensor region of interest, pixels."""
+        self._need_open()
+        for key, value in (("x", x), ("y", y)):
+            if int(value) < 0:
+                raise ValueError(f"{self.name}: ROI {key} must be >= 0, got {value!r}")
+        for key, value in (("width", width), ("height", height)):
+            if int(value) < 1:
+                raise ValueError(f"{self.name}: ROI {key} must be >= 1, got {value!r}")
+        self._wrap(self._set_roi, int(x), int(y), int(width), int(height))
+
+    def set_pixel_format(self, pixel_format: str):
+        """Select the pixel format (one of :attr:`pixel_formats`)."""
+        self._need_open()
+        if pixel_format not in self.pixel_formats:
+            raise ValueError(f"{self.name}: pixel_format must be one of {list(self.pixel_formats)}, "
+                             f"got {pixel_format!r}")
+        self._wrap(self._set_pixel_format, pixel_format)
+
+    def set_trigger(self, mode: str = "software", source: str | None = None):
+        """``"free"`` running, ``"software"`` trigger, or hardware ``"line"`` (``source`` e.g. ``"Line1"``)."""
+        self._need_open()
+        if mode not in TRIGGER_MODES:
+            raise ValueError(f"{self.name}: trigger mode must be one of {list(TRIGGER_MODES)}, got {mode!r}")
+        if mode == "line" and not source:
+            raise ValueError(f"{self.name}: trigger mode 'line' needs a source such as 'Line1'")
+        self._wrap(self._set_trigger, mode, source)
+        self._trigger_mode = mode
+
+    @property
+    def readout_time(self) -> float | None:
+        """Row readout time reported by the device (seconds per row), or None if it does not say."""
+        self._need_open()
+        return self._wrap(self._readout_time)
+
+    # -------------------------------------------------------------- capture
+    def start(self):
+        """Start acquisition (buffers queued, waiting for triggers)."""
+        self._need_open()
+        self._wrap(self._start)
+
+    def stop(self):
+        """Stop acquisition."""
+        if self._open:
+            self._wrap(self._stop)
+
+    def trigger(self):
+        """Fire a software trigger."""
+        self._need_open()
+        self._wrap(self._trigger)
+
+    def read(self, timeout: float = 2.0) -> Frame:
+        """Wait at most ``timeout`` seconds for the next frame."""
+        self._need_open()
+        if not (np.isfinite(timeout) and timeout > 0):
+            raise ValueError(f"{self.name}: timeout must be > 0 seconds, got {timeout!r}")
+        return self._wrap(self._read, float(timeout))
+
+    def capture(self, timeout: float = 2.0) -> Frame:
+        """One frame: software trigger (when in software mode) and read."""
+        if self._trigger_mode == "software":
+            self.trigger()
+        return self.read(timeout)
+
+    def __repr__(self):
+        return f"<{type(self).__name__} {self.name!r} {'open' if self._open else 'closed'}>"
+
+    # -------------------------------------------------------------- hooks
+    pixel_formats: tuple = ()
+
+    def _open_device(self):
+        raise NotImplementedError
+
+    def _close_device(self):
+        raise NotImplementedError
+
+    def _set_exposure(self, seconds):
+        raise NotImplementedError
+
+    def _set_roi(self, x, y, width, height):
+        raise NotImplementedError
+
+    def _set_pixel_format(self, pixel_format):
+        raise NotImplementedError
+
+    def _set_trigger(self, mode, source):
+        raise NotImplementedError
+
+    def _readout_time(self):
+        return None
+
+    def _start(self):
+        raise NotImplementedError
+
+    def _stop(self):
+        raise NotImplementedError
+
+    def _trigger(self):
+        raise NotImplementedError
+
+    def _read(self, timeout):
+        raise NotImplementedError
