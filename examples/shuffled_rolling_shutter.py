@@ -25,8 +25,9 @@ def main():
     parser.add_argument("--pattern", choices=["opt", "rnd"], default="opt")
     parser.add_argument("--bin", type=int, default=16, help="time steps per sub-frame")
     parser.add_argument("--iterations", type=int, default=200)
-    parser.add_argument("--lam", type=float, default=0.1)
-    parser.add_argument("--eta", type=float, default=0.2)
+    # psi = (t_e/dt)^2 = 1/256 here, far below the [0, 1]-scene defaults' scale: eta and lam follow it
+    parser.add_argument("--lam", type=float, default=1e-4)
+    parser.add_argument("--eta", type=float, default=1e-3)
     parser.add_argument("--out", default="wine")
     parser.add_argument("--data", default=str(DATA))
     args = parser.parse_args()

@@ -1,4 +1,4 @@
-"""The ``rsocl`` command: demo, simulate, reconstruct, info, devices, plugins."""
+"""The ``rsocl`` command: demo, simulate, reconstruct, capture, calibrate, info, devices, plugins."""
 
 from __future__ import annotations
 
@@ -206,7 +206,7 @@ def cmd_plugins(args):
             print("  (none)")
         for info, name, state in rows:
             broken += state != "ok"
-            print(f"  {name:<12} {info.distribution} {info.version:<10} {info.value:<36} {state}")
+            print(f"  {name:<12} {info.distribution} {info.version:<10} {info.value:<42} {state}")
     return 0
 
 
@@ -252,6 +252,12 @@ def build_parser():
     p.add_argument("--capture", default=None, help="read the rig from this capture file instead")
     p.add_argument("--camera-fps", type=float, default=67.0, help="camera frame rate, Hz (default 67)")
     p.set_defaults(func=cmd_info)
+
+    from .calibrate_cli import add_calibrate_parser
+    from .capture import add_capture_parser
+
+    add_capture_parser(sub)
+    add_calibrate_parser(sub)
 
     p = sub.add_parser("devices", help="list OpenCL platforms and devices")
     p.set_defaults(func=cmd_devices)

@@ -1,0 +1,182 @@
+"""rsocl capture with simulated cameras: the capture file, the round trip, failures and the command."""
+
+import argparse
+
+import h5py
+import numpy as np
+import pytest
+
+from rsocl import reconstruct, reference
+from rsocl.capture import CaptureFailed, add_capture_parser, capture_sets, cmd_capture, load_raw
+from rsocl.io import load_capture
+from rsocl.metrics import psnr
+from rsocl.rig import Rig
+from rsocl.rigfile import RigFile, save_rigfile
+from rsocl.scenes import builtin_scene
+from rsocl_plugins.simulated import SimulatedCamera
+
+SHAPE = (16, 16)
+T_E, T_R = 180e-6, 35e-6
+
+
+def _rigfile(configs=None, **camera_extra):
+    rig = Rig.paper_array(4, SHAPE, t_e=T_E, t_r=T_R)
+    rf = RigFile.from_rig(rig, configs=configs)
+    for i, extra in camera_extra.items():
+        rf.cameras[int(i[1:])].update(extra)
+    return RigFile(shape=rf.shape, cameras=rf.cameras, dt=rf.dt, mask=rf.mask)
+
+
+def test_capture_round_trip(tmp_path):
+    path = tmp_path / "rig.toml"
+    save_rigfile(path, _rigfile(configs=[{}, {"sensor": {"bit_depth": 12}}, {}, {}]))
+    out = tmp_path / "capture.h5"
+    assert capture_sets(path, out, sets=3) == out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.h5", "rig.toml"]   # no .partial left
+
+    capture = load_capture(out)
+    rig = capture.rig
+    assert rig == Rig.paper_array(4, SHAPE, t_e=T_E, t_r=T_R)
+    assert capture.snapshots.shape == (4,) + SHAPE and capture.truth.shape == (rig.T,) + SHAPE
+    assert capture.meta["status"] == "complete" and capture.meta["sets_complete"] == 3
+    assert capture.meta["rig_file"] == str(path) and capture.meta["cameras"][1]["exposure"] == T_E
+    assert capture.meta["cameras"][1]["readout_time"] == T_R
+    # the four simulated cameras together are the rig's forward model of the scene
+    np.testing.assert_array_equal(capture.truth, builtin_scene(SHAPE, rig.T, dtype=np.float64, seed=0))
+    expected = reference.forward(rig, capture.truth)
+    np.testing.assert_allclose(capture.snapshots[[0, 2, 3]], expected[[0, 2, 3]], rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(capture.snapshots[1], expected[1], atol=T_E / T_R / 4095 / 2 + 1e-5)  # 12 bits
+
+    raw = load_raw(out)
+    assert raw.status == "complete" and raw.failure is None and raw.sets_complete == 3
+    assert [f.shape for f in raw.frames] == [(3,) + SHAPE] * 4
+    assert [f.dtype for f in raw.frames] == [np.float32, np.uint16, np.float32, np.float32]
+    assert all(list(s) == [0, 1, 2] for s in raw.sets)
+    assert raw.frame_meta[1][2]["bit_depth"] == 12 and raw.frame_meta[1][2]["pixel_format"] == "Mono16"
+    assert raw.snapshot_sets.shape == (3, 4) + SHAPE
+    np.testing.assert_array_equal(raw.snapshot_sets[0], capture.snapshots)
+    later = reference.forward(rig, builtin_scene(SHAPE, rig.T, dtype=np.float64, seed=2))   # set 2: seed 2
+    np.testing.assert_allclose(raw.snapshot_sets[2][[0, 2, 3]], later[[0, 2, 3]], rtol=1e-5, atol=1e-5)
+    with h5py.File(out, "r") as h5:
+        assert h5.attrs["capture_status"] == "complete" and "failure" not in h5.attrs
+        assert h5["raw/1"].attrs["backend"] == "simulated" and h5["raw/1"].attrs["bit_depth"] == 12
+        assert h5["raw/0"].maxshape == (None,) + SHAPE
+
+    result = reconstruct(capture.snapshots, rig, iterations=60, truth=capture.truth)
+    assert psnr(result.datacube, capture.truth) > 18.0
+
+
+def test_each_frame_is_written_before_the_next_is_requested(tmp_path, monkeypatch):
+    from rsocl import capture as capture_module
+
+    log = []
+    real_read, real_add = SimulatedCamera._read, capture_module._Writer.add_raw
+    monkeypatch.setattr(SimulatedCamera, "_read", lambda self, t: log.append(("read", self.index)) or
+                        real_read(self, t))
+    monkeypatch.setattr(SimulatedCamera, "_trigger", (lambda trig: lambda self: log.append(("trigger", self.index))
+                                                      or trig(self))(SimulatedCamera._trigger))
+    monkeypatch.setattr(capture_module._Writer, "add_raw", lambda self, i, j, frame, cam: log.append(("write", i))
+                        or real_add(self, i, j, frame, cam))
+    capture_sets(_rigfile(), tmp_path / "c.h5", sets=2)
+    one_set = [("trigger", i) for i in range(4)] + [x for i in range(4) for x in (("read", i), ("write", i))]
+    assert log == one_set * 2
+
+
+def test_camera_failure_keeps_what_was_captured(tmp_path):
+    out = tmp_path / "capture.h5"
+    rf = _rigfile(configs=[{}, {}, {"fail_after": 2}, {}])
+    with pytest.raises(CaptureFailed, match=r"camera 2 \(simulated\): read failed in set 1: CameraDisconnected") as info:
+        capture_sets(rf, out, sets=3)
+    exc = info.value
+    assert (exc.path, exc.camera, exc.set_index, exc.phase, exc.sets_complete) == (out, 2, 1, "read", 1)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.h5"]
+
+    raw = load_raw(out)
+    assert raw.status == "failed" and raw.sets_complete == 1
+    assert raw.failure == {"camera": 2, "set": 1, "phase": "read", "type": "CameraDisconnected",
+                           "error": raw.failure["error"]}
+    assert "fail_after=2" in raw.failure["error"]
+    assert [f.shape[0] for f in raw.frames] == [2, 2, 1, 1]    # set 1: cameras 0, 1 read before camera 2 failed
+    assert raw.snapshot_sets.shape == (1, 4) + SHAPE
+    capture = load_capture(out)                              # set 0 is complete: a valid capture file
+    assert capture.meta["status"] == "failed" and capture.meta["failure"]["camera"] == 2
+    np.testing.assert_array_equal(capture.snapshots, raw.snapshot_sets[0])
+
+    # failure in the first set: raw frames and the failure are kept, but there are no snapshots yet
+    with pytest.raises(CaptureFailed, match="in set 0"):
+        capture_sets(_rigfile(configs=[{}, {"fail_after": 1}, {}, {}]), out, sets=2)
+    raw = load_raw(out)
+    assert [f.shape[0] for f in raw.frames] == [1, 0, 0, 0] and raw.failure["camera"] == 1
+    with pytest.raises(ValueError, match="snapshots"):
+        load_capture(out)
+
+
+def test_open_and_registration_failures(tmp_path):
+    out = tmp_path / "c.h5"
+    with pytest.raises(CaptureFailed, match="open failed before the first set") as info:
+        capture_sets(_rigfile(configs=[{}, {}, {}, {"scene": str(tmp_path / "missing.npz")}]), out)
+    assert (info.value.camera, info.value.set_index) == (3, None)
+    assert load_raw(out).failure["phase"] == "open"
+    # a cropped sensor ROI without a homography cannot be registered: the raw frame is still kept
+    with pytest.raises(CaptureFailed, match="register failed in set 0.*no homography"):
+        capture_sets(_rigfile(c1={"roi": [2, 3, 12, 10]}), out)
+    raw = load_raw(out)
+    assert raw.frames[1].shape == (1, 10, 12) and raw.failure["phase"] == "register"
+    # errors in the arguments or the rig write nothing
+    for bad in ({"sets": 0}, {"timeout": -1.0}):
+        with pytest.raises(ValueError):
+            capture_sets(_rigfile(), tmp_path / "none.h5", **bad)
+    with pytest.raises(ValueError, match="unknown config key"):
+        capture_sets(_rigfile(configs=[{"exposure": 1}, {}, {}, {}]), tmp_path / "none.h5")
+    with pytest.raises(ValueError, match="unknown camera 'nope'"):
+        capture_sets(_rigfile(c0={"backend": "nope"}), tmp_path / "none.h5")
+    assert not (tmp_path / "none.h5").exists() and not (tmp_path / "none.h5.partial").exists()
+
+
+def test_homography_registers_a_cropped_roi(tmp_path):
+    rf = _rigfile(c0={"roi": [2, 3, 12, 10], "homography": np.eye(3).tolist(), "angle": None})
+    capture = load_capture(capture_sets(rf, tmp_path / "c.h5"))
+    raw = load_raw(tmp_path / "c.h5")
+    registered = capture.snapshots[0]
+    np.testing.assert_allclose(registered[3:13, 2:14], raw.frames[0][0], rtol=1e-6)
+    assert np.all(registered[:3] == 0) and np.all(registered[:, :2] == 0)
+    np.testing.assert_array_equal(capture.rig.row_map(0), Rig.paper_array(1, SHAPE).row_map(0))  # angle 0
+
+
+def test_interrupt_is_recorded_and_re_raised(tmp_path, monkeypatch):
+    real_read = SimulatedCamera._read
+
+    def read(self, timeout):
+        if self.index == 1 and self._reads == 1:
+            raise KeyboardInterrupt
+        return real_read(self, timeout)
+
+    monkeypatch.setattr(SimulatedCamera, "_read", read)
+    with pytest.raises(KeyboardInterrupt):
+        capture_sets(_rigfile(), tmp_path / "c.h5", sets=3)
+    raw = load_raw(tmp_path / "c.h5")
+    assert raw.status == "interrupted" and raw.failure["type"] == "KeyboardInterrupt" and raw.sets_complete == 1
+
+
+def test_cmd_capture(tmp_path, capsys):
+    rig_path = tmp_path / "rig.toml"
+    save_rigfile(rig_path, _rigfile())
+    parser = argparse.ArgumentParser(prog="rsocl")
+    add_capture_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["capture", "--rig", str(rig_path), "--out", str(tmp_path / "c.h5"), "--sets", "2"])
+    assert args.func is cmd_capture and args.timeout == 2.0 and not args.quiet
+    assert args.func(args) == 0
+    assert "wrote" in capsys.readouterr().out and load_raw(tmp_path / "c.h5").sets_complete == 2
+    # and the capture file feeds 'rsocl reconstruct' as it is
+    from rsocl.cli import main
+
+    assert main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "r.h5"), "--iterations", "10",
+                 "--quiet"]) == 0
+    assert "PSNR" in capsys.readouterr().out
+
+    save_rigfile(rig_path, _rigfile(configs=[{"fail_after": 2}, {}, {}, {}]))
+    args = argparse.Namespace(rig=str(rig_path), out=str(tmp_path / "f.h5"), sets=3, timeout=1.0, quiet=True)
+    assert cmd_capture(args) == 1
+    captured = capsys.readouterr()
+    assert captured.out == "" and "rsocl capture: error: camera 0 (simulated): read failed in set 1" in captured.err
+    assert load_raw(tmp_path / "f.h5").status == "failed"
