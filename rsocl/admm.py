@@ -16,18 +16,28 @@ from .reduction import sum_sq_diff
 __all__ = ["ADMM", "block_inverse"]
 
 
-def block_inverse(gram: np.ndarray, eta: float) -> np.ndarray:
-    """``(eta I + M)⁻¹`` for each per-pixel block of ``gram`` (``(..., K, K)``), in float64.
+#: Eigenvalues of ``eta I + M`` below this fraction of the largest one (per pixel) are
+#: treated as zero: the pseudo-inverse of GAP, and no 1/eta blow-up for a tiny eta.
+RCOND = 1e-10
 
-    ``eta > 0``: the blocks are symmetric positive definite and inverted exactly.
-    ``eta = 0`` (GAP): pseudo-inverse, so unsampled pixels and cameras with
-    identical windows give a zero or least-norm update instead of a division by zero.
+
+def block_inverse(gram: np.ndarray, eta: float) -> np.ndarray:
+    """``(eta I + M)⁻¹`` for each symmetric per-pixel block of ``gram`` (``(..., K, K)``), in float64.
+
+    Computed from the eigen-decomposition ``M = V diag(λ) Vᵀ`` as
+    ``V diag(1/(eta + λ)) Vᵀ``, with the directions where ``eta + λ`` is below
+    ``RCOND`` times the block's largest eigenvalue left out. For ``eta = 0``
+    (GAP) this is the pseudo-inverse: pixels no camera samples and cameras with
+    identical windows give a zero or least-norm update, never a division by zero;
+    for a tiny ``eta`` the unsampled directions stay at zero instead of ``1/eta``.
     """
-    K = gram.shape[-1]
-    block = np.asarray(gram, dtype=np.float64) + eta * np.eye(K)
-    if eta > 0:
-        return np.linalg.inv(block)
-    return np.linalg.pinv(block, hermitian=True)
+    gram = np.asarray(gram, dtype=np.float64)
+    lam, vec = np.linalg.eigh(gram)
+    lam = np.clip(lam, 0.0, None) + eta
+    top = lam.max(axis=-1, keepdims=True)
+    keep = lam > RCOND * top
+    inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
+    return np.einsum("...ij,...j,...kj->...ik", vec, inv, vec)
 
 
 class ADMM:

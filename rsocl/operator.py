@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import validation as check
 from .device import get_device
 from .rig import Rig
 
@@ -85,7 +86,7 @@ class RollingShutterOperator:
             if x.dtype != self.dtype:
                 raise ValueError(f"{name} must have dtype {self.dtype.name} on the device, got {x.dtype}")
             return x, True
-        x = np.asarray(x)
+        x = check.finite_array(name, x)
         if x.shape != shape:
             raise ValueError(f"{name} must have shape {shape}, got {x.shape}")
         return cla.to_device(self.queue, np.ascontiguousarray(x, dtype=self.dtype)), False
