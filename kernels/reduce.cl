@@ -1,17 +1,17 @@
 /* Reductions and the bandwidth reference kernel. Needs common.cl. */
 
-/* Partial sums of (a - b)^2 (b may be 0: then of a^2), one per work group, with a
+/* Partial sums of w (a - b)^2 (b may be 0: then of a^2; w may be 0: no weights), one per work group, with a
  * compensated per-item sum and a tree in local memory. The host adds the partials
  * in double precision. Launch with a power-of-two local size. */
-__kernel void sum_sq_diff(__global const real *a, __global const real *b, __global acc_t *partials,
-                          __local acc_t *scratch, int n_)
+__kernel void sum_sq_diff(__global const real *a, __global const real *b, __global const real *w,
+                          __global acc_t *partials, __local acc_t *scratch, int n_)
 {
     size_t n = (size_t)n_;
     size_t gid = get_global_id(0), lid = get_local_id(0), stride = get_global_size(0);
     acc_t sum = 0, comp = 0;
     for (size_t i = gid; i < n; i += stride) {
         acc_t d = (acc_t)a[i] - (b ? (acc_t)b[i] : (acc_t)0);
-        acc_t y = d * d - comp;
+        acc_t y = (w ? (acc_t)w[i] : (acc_t)1) * d * d - comp;
         acc_t t = sum + y;
         comp = (t - sum) - y;
         sum = t;

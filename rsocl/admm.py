@@ -54,9 +54,13 @@ class ADMM:
     projection : {"exact", "paper"}
     x0 : pyopencl.array.Array or None
         Initial ``theta``; zeros when None.
+    valid : ndarray of bool, shape (K, m, n), or None
+        Snapshot pixels that enter the data term; the others (e.g. saturated ones)
+        are left out: their rows of ``H`` are dropped from the projection.
     """
 
-    def __init__(self, op: RollingShutterOperator, g, regularizer, *, lam, eta, projection="exact", x0=None):
+    def __init__(self, op: RollingShutterOperator, g, regularizer, *, lam, eta, projection="exact", x0=None,
+                 valid=None):
         import pyopencl as cl
         import pyopencl.array as cla
 
@@ -64,9 +68,22 @@ class ADMM:
         self.lam, self.eta, self.projection = float(lam), float(eta), projection
         self.weight = self.lam / self.eta if self.eta > 0 else self.lam
         queue, shape = op.queue, op.domain_shape
+        self.valid = None
+        if valid is not None and not np.all(valid):
+            self.valid = cla.to_device(queue, np.ascontiguousarray(valid, dtype=op.dtype))
         if projection == "exact":
-            inverse = np.moveaxis(block_inverse(op.gram(), self.eta), (2, 3), (0, 1))
+            gram = op.gram()
+            if self.valid is not None:
+                keep = np.moveaxis(np.asarray(valid, dtype=np.float64), 0, -1)      # (m, n, K)
+                mask = keep[..., :, None] * keep[..., None, :]
+                inverse = block_inverse(gram * mask, self.eta) * mask
+            else:
+                inverse = block_inverse(gram, self.eta)
+            inverse = np.moveaxis(inverse, (2, 3), (0, 1))
             self.inverse = cla.to_device(queue, np.ascontiguousarray(inverse, dtype=op.dtype))
+        elif self.valid is not None:
+            psi = np.where(valid, op.psi, np.inf)    # r / (eta + inf) = 0: left out
+            self.inverse = cla.to_device(queue, np.ascontiguousarray(psi, dtype=op.dtype))
         else:
             self.inverse = op.psi_device()
         self.theta = cla.zeros(queue, shape, op.dtype) if x0 is None else x0.copy()
@@ -77,7 +94,7 @@ class ADMM:
         self.program = op.device.program(
             ["admm.cl"], REAL=op._ctype(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
             NCH=op.K, PROJECTION_EXACT=int(projection == "exact"))
-        self.g_norm2 = sum_sq_diff(g)
+        self.g_norm2 = sum_sq_diff(g, weights=self.valid)
         self.iteration = 0
         cl.enqueue_barrier(queue)
 
@@ -101,9 +118,12 @@ class ADMM:
         self.iteration += 1
 
     def residual(self) -> float:
-        """Relative data residual ``‖g - H theta‖ / ‖g‖`` (0 when ``g`` is all zero and so is ``H theta``)."""
+        """Relative data residual ``‖g - H theta‖ / ‖g‖`` over the valid snapshot pixels.
+
+        When ``g`` is all zero the absolute ``‖H theta‖`` is returned.
+        """
         self.op.forward_into(self.theta, self.hx)
-        r2 = sum_sq_diff(self.g, self.hx)
+        r2 = sum_sq_diff(self.g, self.hx, weights=self.valid)
         if self.g_norm2 == 0:
             return float(np.sqrt(r2))
         return float(np.sqrt(r2 / self.g_norm2))

@@ -74,7 +74,7 @@ def _regularizer(regularizer, options, tv_iterations):
 
 def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta=None, tv_iterations=None,
                 projection="exact", device=None, dtype="float32", callback=None, x0=None, tol=None,
-                truth=None, regularizer_options=None, progress=False) -> Result:
+                truth=None, regularizer_options=None, saturation=None, progress=False) -> Result:
     """Reconstruct the ``(T, m, n)`` datacube from snapshots ``g`` ``(K, m, n)`` with ADMM.
 
     Parameters
@@ -109,6 +109,9 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         [0, 1], see :func:`rsocl.metrics.default_data_range`).
     regularizer_options : dict or None
         Options of a regularizer given by name.
+    saturation : float or None
+        Snapshot value (same units as ``g``) at or above which a pixel is flagged as
+        saturated and left out of the data term; None keeps every pixel.
     progress : bool
         Show a progress bar (tqdm).
     """
@@ -131,6 +134,12 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     if g.shape != expected:
         raise ValueError(f"g must have shape (K, m, n) = {expected} for this rig, got {g.shape}")
     cube = (rig.T,) + rig.shape
+    valid = None
+    if saturation is not None:
+        saturation = check.positive("saturation", saturation, "(snapshot units)")
+        valid = g < saturation
+        if not valid.any():
+            raise ValueError(f"every snapshot pixel is >= saturation = {saturation!r}: nothing left to fit")
     if x0 is not None:
         x0 = check.finite_array("x0", x0)
         if x0.shape != cube:
@@ -157,7 +166,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     truth_dev = None if truth is None else cla.to_device(queue, np.ascontiguousarray(truth, dtype=op.dtype))
     data_range = None if truth is None else default_data_range(truth)
 
-    solver = ADMM(op, g_dev, reg, lam=lam, eta=eta, projection=projection, x0=x0_dev)
+    solver = ADMM(op, g_dev, reg, lam=lam, eta=eta, projection=projection, x0=x0_dev, valid=valid)
     history = {"residual": [], "time": []}
     if truth is not None:
         history["psnr"] = []
@@ -201,5 +210,6 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         raise FloatingPointError("the reconstruction produced NaN or inf; check lam/eta and the data scale")
     params = {"regularizer": reg.name, "regularizer_options": dict(reg.values), "iterations": iterations,
               "lam": lam, "eta": eta, "projection": projection, "dtype": op.dtype.name,
-              "device": op.device.name, "tol": tol}
+              "device": op.device.name, "tol": tol, "saturation": saturation,
+              "saturated_pixels": 0 if valid is None else int(valid.size - valid.sum())}
     return Result(datacube, {k: np.asarray(v) for k, v in history.items()}, rig, params)

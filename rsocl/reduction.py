@@ -20,12 +20,16 @@ LOCAL_SIZE = 64
 MAX_GROUPS = 256
 
 
-def sum_sq_diff(a, b=None) -> float:
-    """``sum((a - b)**2)`` (``sum(a**2)`` when ``b`` is None) of device arrays, as a Python float."""
+def sum_sq_diff(a, b=None, weights=None) -> float:
+    """``sum(weights * (a - b)**2)`` of device arrays, as a Python float.
+
+    ``b`` None: ``a**2``; ``weights`` None: all ones.
+    """
     import pyopencl as cl
 
-    if b is not None and (b.shape != a.shape or b.dtype != a.dtype):
-        raise ValueError(f"b must match a ({a.shape}, {a.dtype}), got {b.shape}, {b.dtype}")
+    for name, other in (("b", b), ("weights", weights)):
+        if other is not None and (other.shape != a.shape or other.dtype != a.dtype):
+            raise ValueError(f"{name} must match a ({a.shape}, {a.dtype}), got {other.shape}, {other.dtype}")
     dev = device_for_queue(a.queue)
     acc = np.dtype(np.float64) if dev.has_fp64 else np.dtype(np.float32)
     ctype = {np.dtype(np.float32): "float", np.dtype(np.float64): "double"}
@@ -37,7 +41,8 @@ def sum_sq_diff(a, b=None) -> float:
     if key not in cache:
         cache[key] = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, groups * acc.itemsize)
     partials = cache[key]
-    prog.sum_sq_diff(a.queue, (groups * local,), (local,), a.data, None if b is None else b.data, partials,
+    prog.sum_sq_diff(a.queue, (groups * local,), (local,), a.data, None if b is None else b.data,
+                     None if weights is None else weights.data, partials,
                      cl.LocalMemory(local * acc.itemsize), np.int32(a.size))
     host = np.empty(groups, acc)
     cl.enqueue_copy(a.queue, host, partials)

@@ -172,3 +172,32 @@ def test_nan_in_the_rig_or_data_is_refused_before_any_kernel():
         rsocl.reconstruct(bad, rig)
     with pytest.raises(ValueError, match="NaN or inf"):
         RollingShutterOperator(rig).forward(np.full((rig.T, 8, 8), np.nan))
+
+
+@pytest.mark.parametrize("projection", ["exact", "paper"])
+def test_saturated_pixels_are_flagged_and_left_out(projection):
+    rig = rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6)
+    base = np.random.default_rng(0).random(rig.shape) * 0.5
+    truth = np.broadcast_to(base, (rig.T,) + rig.shape).copy()
+    truth[7:10, 4:10, 4:10] = 3.0                      # a brief flash far above full scale
+    g = ref.forward(rig, truth)
+    level = rig.exposure_subframes * 1.0               # full scale of a [0, 1] scene
+    clipped = np.minimum(g, level)
+    assert 0.05 < (g >= level).mean() < 0.2
+    outside = np.ones(truth.shape, bool)
+    outside[7:10, 4:10, 4:10] = False
+    kw = dict(iterations=60, projection=projection, lam=0.01, eta=0.2 if projection == "exact" else 5.0)
+    naive = rsocl.reconstruct(clipped, rig, **kw)
+    flagged = rsocl.reconstruct(clipped, rig, saturation=level, **kw)
+    assert flagged.params["saturated_pixels"] == int((clipped >= level).sum())
+    # the clipped values no longer pull the rest of the datacube down
+    mse = [np.mean((r.datacube - truth)[outside] ** 2) for r in (naive, flagged)]
+    assert mse[1] < 0.9 * mse[0]
+    # the residual is taken over the unsaturated pixels only, and they are fitted
+    assert flagged.history["residual"][-1] < 0.05
+
+
+def test_saturation_that_leaves_nothing_is_refused():
+    rig = rsocl.Rig.paper_array(2, (4, 4), t_e=1e-4, t_r=3e-5)
+    with pytest.raises(ValueError, match="saturation"):
+        rsocl.reconstruct(np.ones((2, 4, 4)), rig, saturation=0.5)
