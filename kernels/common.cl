@@ -42,6 +42,7 @@ inline real window_dot(__global const real *f, int first, real frac, real len,
     for (int j = 0; j < L; ++j) {
         int s = first + j;
         if (s >= T) break;
+        if (s < 0) continue;            /* before the first sub-frame solved for */
         real w = shutter_weight(j, frac, len);
         if (w != (real)0) acc += w * f[(size_t)s * mn + p];
     }
@@ -55,6 +56,7 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
     for (int j = 0; j < L; ++j) {
         int s = first + j;
         if (s >= T) break;
+        if (s < 0) continue;
         real w = shutter_weight(j, frac, len);
         if (w != (real)0) f[(size_t)s * mn + p] += scale * w;
     }

@@ -1,7 +1,8 @@
 /* The row-timed shutter operator H (forward), its adjoint, and the diagonal and
  * per-pixel blocks of H Hᵀ. Layouts: f[T][m][n], g[K][m][n], first/frac[K][m][n],
  * len[K], gain[K]. Each work item handles one pixel and loops over the exposure
- * window only: cost ~ K*m*n*L, never K*T*m*n. Needs common.cl. */
+ * window only: cost ~ K*m*n*L, never K*T*m*n. `first` counts from the first sub-frame
+ * solved for, so it may be negative; T is the number of sub-frames solved for. Needs common.cl. */
 
 /* g[k, p] = gain[k] * sum_s w(k, s, p) f[s, p];   global size (m*n, K) */
 __kernel void forward(__global const real *f, __global real *g,
@@ -64,6 +65,7 @@ __kernel void psi(__global real *out, __global const int *first, __global const 
     real acc = (real)0;
     for (int j = 0; j < L; ++j) {
         if (first[q] + j >= T) break;
+        if (first[q] + j < 0) continue;
         real w = shutter_weight(j, frac[q], len[k]);
         acc += w * w;
     }
@@ -86,6 +88,7 @@ __kernel void gram(__global real *out, __global const int *first, __global const
             for (int j = 0; j < L; ++j) {
                 int s = first[qk] + j;
                 if (s >= T) break;
+                if (s < 0) continue;
                 int jl = s - first[ql];
                 if (jl < 0 || jl >= L) continue;
                 acc += shutter_weight(j, frac[qk], len[k]) * shutter_weight(jl, frac[ql], len[l]);

@@ -28,6 +28,10 @@ class RollingShutterOperator:
         OpenCL device (see :func:`rsocl.device.get_device`).
     dtype : {"float32", "float64"}
         Arithmetic and storage type on the device.
+    subframes : slice or None
+        Model only these sub-frames (``step`` 1): the datacube is then
+        ``(stop - start, m, n)``. Default: all ``T``. Sub-frames outside must carry no
+        weight for the model to stay exact (see :meth:`Rig.sampled_range`).
 
     Notes
     -----
@@ -36,7 +40,7 @@ class RollingShutterOperator:
     Their cost is about ``K*m*n*(t_e/dt + 1)`` weight evaluations.
     """
 
-    def __init__(self, rig: Rig, device=None, dtype="float32"):
+    def __init__(self, rig: Rig, device=None, dtype="float32", subframes=None):
         import pyopencl.array as cla
 
         if not isinstance(rig, Rig):
@@ -46,13 +50,18 @@ class RollingShutterOperator:
         self.dtype = self.device.real_dtype(dtype)
         self.queue = self.device.queue
         m, n = rig.shape
-        self.K, self.T, self.mn = rig.n_channels, rig.T, m * n
+        subframes = slice(0, rig.T) if subframes is None else subframes
+        start, stop, step = subframes.indices(rig.T)
+        if step != 1 or stop <= start:
+            raise ValueError(f"subframes must be a non-empty slice of range({rig.T}) with step 1, got {subframes}")
+        self.subframes = slice(start, stop)
+        self.K, self.T, self.mn = rig.n_channels, stop - start, m * n
         self.L = rig.window_length
         itemsize = self.dtype.itemsize
         self.device.check_fits(f"a datacube of T={self.T} x {m} x {n} in {self.dtype.name}",
-                               rig.datacube_bytes(itemsize))
+                               self.T * m * n * itemsize)
         win = rig.windows
-        self.first = cla.to_device(self.queue, np.ascontiguousarray(win.index, dtype=np.int32))
+        self.first = cla.to_device(self.queue, np.ascontiguousarray(win.index - start, dtype=np.int32))
         self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype))
         self.length = cla.to_device(self.queue, win.length.astype(self.dtype))
         self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype))

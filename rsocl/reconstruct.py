@@ -153,18 +153,26 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         raise ValueError(f"dtype {np.dtype(dtype).name!r} is not supported by regularizer {reg!r}; "
                          f"supported: {list(reg.dtypes)}")
 
-    op = RollingShutterOperator(rig, device=device, dtype=dtype)
-    need = ADMM.buffers_bytes(op, projection) + reg.workspace_bytes(cube, op.dtype)
+    # model only the sub-frames some camera samples; the others stay zero in the result
+    solved = rig.sampled_range()
+    op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=solved)
+    solved_cube = (op.T,) + rig.shape
+    cube_bytes = int(np.prod(solved_cube)) * op.dtype.itemsize
+    need = ADMM.buffers_bytes(op, projection) + reg.workspace_bytes(solved_cube, op.dtype)
     if truth is not None:
-        need += rig.datacube_bytes(op.dtype.itemsize)
-    op.device.check_fits(f"ADMM with {reg.name} on T={rig.T} x {rig.shape[0]} x {rig.shape[1]} "
-                         f"({op.dtype.name})", rig.datacube_bytes(op.dtype.itemsize), total_bytes=need)
+        need += cube_bytes
+    op.device.check_fits(f"ADMM with {reg.name} on T={op.T} x {rig.shape[0]} x {rig.shape[1]} "
+                         f"({op.dtype.name})", cube_bytes, total_bytes=need)
 
     queue = op.queue
     g_dev = cla.to_device(queue, np.ascontiguousarray(g, dtype=op.dtype))
-    x0_dev = None if x0 is None else cla.to_device(queue, np.ascontiguousarray(x0, dtype=op.dtype))
-    truth_dev = None if truth is None else cla.to_device(queue, np.ascontiguousarray(truth, dtype=op.dtype))
-    data_range = None if truth is None else default_data_range(truth)
+    x0_dev = None if x0 is None else cla.to_device(queue, np.ascontiguousarray(x0[solved], dtype=op.dtype))
+    truth_dev = None
+    if truth is not None:
+        truth_dev = cla.to_device(queue, np.ascontiguousarray(truth[solved], dtype=op.dtype))
+        data_range = default_data_range(truth)
+        # squared error of the sub-frames left at zero, added to the device's sum
+        unsolved_sq = float(np.sum(truth.astype(np.float64) ** 2)) - float(np.sum(truth[solved].astype(np.float64) ** 2))
 
     solver = ADMM(op, g_dev, reg, lam=lam, eta=eta, projection=projection, x0=x0_dev, valid=valid)
     history = {"residual": [], "time": []}
@@ -190,7 +198,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
             history["residual"].append(residual)
             history["time"].append(time.perf_counter() - start)
             if truth_dev is not None:
-                mse = sum_sq_diff(solver.theta, truth_dev) / truth.size
+                mse = (sum_sq_diff(solver.theta, truth_dev) + max(unsolved_sq, 0.0)) / truth.size
                 history["psnr"].append(10 * math.log10(data_range ** 2 / mse) if mse > 0 else math.inf)
             if bar is not None:
                 bar.update(1)
@@ -205,11 +213,13 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     finally:
         if bar is not None:
             bar.close()
-    datacube = solver.theta.get()
+    datacube = np.zeros(cube, dtype=op.dtype)
+    datacube[solved] = solver.theta.get()
     if not np.all(np.isfinite(datacube)):
         raise FloatingPointError("the reconstruction produced NaN or inf; check lam/eta and the data scale")
     params = {"regularizer": reg.name, "regularizer_options": dict(reg.values), "iterations": iterations,
               "lam": lam, "eta": eta, "projection": projection, "dtype": op.dtype.name,
               "device": op.device.name, "tol": tol, "saturation": saturation,
-              "saturated_pixels": 0 if valid is None else int(valid.size - valid.sum())}
+              "saturated_pixels": 0 if valid is None else int(valid.size - valid.sum()),
+              "solved_subframes": [solved.start, solved.stop]}
     return Result(datacube, {k: np.asarray(v) for k, v in history.items()}, rig, params)

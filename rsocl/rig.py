@@ -285,6 +285,14 @@ class Rig:
         last = np.clip(last, 0, self.T - 1).astype(np.int64)
         return first, last
 
+    def sampled_range(self) -> slice:
+        """Sub-frames some camera samples at some pixel: ``slice(first, last + 1)``.
+
+        Sub-frames outside it carry no information; the solver leaves them out.
+        """
+        first, last = self.sampled_window()
+        return slice(int(first.min()), int(last.max()) + 1)
+
     @property
     def N_s(self) -> int:
         """Sub-frames one exposure spans under the paper's rule, ``ceil(t_e/t_r)`` (largest over cameras)."""

@@ -201,3 +201,22 @@ def test_saturation_that_leaves_nothing_is_refused():
     rig = rsocl.Rig.paper_array(2, (4, 4), t_e=1e-4, t_r=3e-5)
     with pytest.raises(ValueError, match="saturation"):
         rsocl.reconstruct(np.ones((2, 4, 4)), rig, saturation=0.5)
+
+
+def test_subframes_no_camera_samples_are_not_modelled(device):
+    # every camera triggers 40 sub-frames late: those 40 carry no information
+    cams = [rsocl.Camera(a, t_e=1e-4, t_r=3e-5, t_a=40 * 3e-5) for a in (0, 90, 180, 270)]
+    rig = rsocl.Rig(cams, (10, 10))
+    assert rig.sampled_range().start == 40 and rig.T == rig.sampled_range().stop
+    truth = np.zeros((rig.T, 10, 10))
+    truth[40:] = _scene(rsocl.Rig.paper_array(4, (10, 10), t_e=1e-4, t_r=3e-5))[: rig.T - 40]
+    g = ref.forward(rig, truth)
+    op = RollingShutterOperator(rig, device=device, dtype="float64", subframes=rig.sampled_range())
+    assert op.domain_shape == (rig.T - 40, 10, 10)
+    np.testing.assert_allclose(op.forward(truth[40:]), g, rtol=1e-12)
+    np.testing.assert_allclose(op.adjoint(g), ref.adjoint(rig, g)[40:], rtol=1e-12)
+    res = rsocl.reconstruct(g, rig, iterations=30, lam=0.01, truth=truth, dtype="float64")
+    assert res.params["solved_subframes"] == [40, rig.T]
+    assert not res.datacube[:40].any()
+    assert res.history["psnr"][-1] == pytest.approx(rsocl.metrics.psnr(res.datacube, truth), abs=1e-6)
+    assert res.history["residual"][-1] < 0.05
