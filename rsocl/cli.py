@@ -175,6 +175,16 @@ def cmd_info(args):
     return 0
 
 
+def cmd_plan(args):
+    from .plan import format_plan, plan
+
+    rig = _rig_from(args)
+    p = plan(rig, roi=args.roi, speed=args.speed, fps=args.fps, blur_pixels=args.blur, iterations=args.iterations,
+             regularizer=args.regularizer, dtype=args.dtype, device=args.device, measure=not args.no_measure)
+    print(format_plan(p))
+    return 0
+
+
 def cmd_devices(args):
     from .device import INSTALL_HINT, get_device, list_devices
 
@@ -252,6 +262,19 @@ def build_parser():
     p.add_argument("--capture", default=None, help="read the rig from this capture file instead")
     p.add_argument("--camera-fps", type=float, default=67.0, help="camera frame rate, Hz (default 67)")
     p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("plan", help="propose dt, ROI and T_se for a scene, with memory and time, before running")
+    _add_rig_args(p, shape=(256, 256))
+    p.add_argument("--roi", type=int, nargs=4, metavar=("Y", "X", "H", "W"), default=None,
+                   help="where the motion is, reference pixels (default: whole grid)")
+    p.add_argument("--speed", type=float, default=None, help="largest image speed, pixels/s")
+    p.add_argument("--fps", type=float, default=None, help="sub-frame rate wanted, Hz")
+    p.add_argument("--blur", type=float, default=1.0, help="motion allowed within a sub-frame, pixels (default 1)")
+    p.add_argument("--iterations", type=int, default=200)
+    p.add_argument("--regularizer", default="tv")
+    p.add_argument("--no-measure", action="store_true", help="memory only; do not time 3 iterations")
+    _add_device_args(p)
+    p.set_defaults(func=cmd_plan)
 
     from .calibrate_cli import add_calibrate_parser
     from .capture import add_capture_parser

@@ -1,0 +1,45 @@
+import numpy as np
+import pytest
+
+import rsocl
+from rsocl.cli import main
+from rsocl.plan import crop_rig, plan
+
+
+def test_crop_keeps_real_start_times():
+    rig = rsocl.Rig.paper_array(4, (20, 30), t_e=1e-4, t_r=3e-5)
+    sub = crop_rig(rig, (5, 7, 6, 8))
+    np.testing.assert_array_equal(sub.start_times(), rig.start_times()[:, 5:11, 7:15])
+    # only the sub-frames the crop's rows are read in are solved
+    assert sub.sampled_range().stop - sub.sampled_range().start < rig.T
+    with pytest.raises(ValueError, match="roi"):
+        crop_rig(rig, (15, 0, 10, 5))
+
+
+def test_plan_picks_the_coarsest_dt_that_resolves_the_motion(device):
+    rig = rsocl.Rig.paper_array(4, (32, 32), t_e=0.18e-3, t_r=35e-6)
+    p = plan(rig, speed=1 / (3.5 * 35e-6), measure=False)     # 1 px per 3.5 t_r
+    assert p.dt == pytest.approx(3 * 35e-6)
+    assert p.proposed.rig.T < rig.T
+    p = plan(rig, fps=1 / 70e-6, measure=False)
+    assert p.dt == pytest.approx(70e-6)
+    p = plan(rig, speed=1e9, measure=False)                   # too fast: dt = t_r, and says so
+    assert p.dt == pytest.approx(35e-6) and any("below t_r" in n for n in p.notes)
+
+
+def test_plan_reports_memory_and_time_of_both_problems(device):
+    rig = rsocl.Rig.paper_array(4, (48, 48), t_e=0.18e-3, t_r=35e-6)
+    p = plan(rig, roi=(8, 8, 16, 16), iterations=10)
+    assert p.proposed.memory_bytes < p.full.memory_bytes / 4
+    assert p.proposed.subframes < p.full.subframes
+    assert p.full.seconds_per_iteration > 0 and p.proposed.seconds == pytest.approx(
+        p.proposed.seconds_per_iteration * 10)
+
+
+def test_plan_command(capsys):
+    assert main(["plan", "--shape", "32", "32", "--roi", "0", "0", "16", "16", "--speed", "5000",
+                 "--no-measure"]) == 0
+    out = capsys.readouterr().out
+    assert "device memory" in out and "proposed ROI" in out
+    assert main(["plan", "--speed", "-1"]) == 2
+    assert "speed must be > 0" in capsys.readouterr().err
