@@ -28,23 +28,26 @@ inline real shutter_weight(int j, real frac, real len)
     real jj = (real)j;
     return (jj >= frac && jj <= frac + len) ? (real)1 : (real)0;
 #else
-    real lo = fmax((real)j, frac);
-    real hi = fmin((real)(j + 1), frac + len);
-    return fmax(hi - lo, (real)0);
+    /* plain comparisons: fmin/fmax are library calls that PoCL does not vectorise */
+    real jj = (real)j, end = frac + len;
+    real lo = jj > frac ? jj : frac;
+    real hi = jj + (real)1 < end ? jj + (real)1 : end;
+    return hi > lo ? hi - lo : (real)0;
 #endif
 }
 
-/* sum_s w(s) f[s, p] over one channel's window: the forward model of one pixel. */
+/* sum_s w(s) f[s, p] over one channel's window: the forward model of one pixel.
+ * Branch-free (clamped index, zero weight outside [0, T)) so CPU compilers keep
+ * neighbouring work items in SIMD lanes. */
 inline real window_dot(__global const real *f, int first, real frac, real len,
                        int T, int L, size_t mn, size_t p)
 {
     real acc = (real)0;
     for (int j = 0; j < L; ++j) {
         int s = first + j;
-        if (s >= T) break;
-        if (s < 0) continue;            /* before the first sub-frame solved for */
-        real w = shutter_weight(j, frac, len);
-        if (w != (real)0) acc += w * f[(size_t)s * mn + p];
+        int inside = (s >= 0) & (s < T);
+        real w = inside ? shutter_weight(j, frac, len) : (real)0;
+        acc += w * f[(size_t)clamp(s, 0, T - 1) * mn + p];
     }
     return acc;
 }

@@ -59,11 +59,13 @@ def _pick(spec: str | None):
     if not found:
         raise NoOpenCLError(f"no OpenCL platform with a device was found; {INSTALL_HINT}")
     if spec is None:
+        # simulators (Oclgrind) claim every device type: never pick one unasked
+        real = [e for e in found if "oclgrind" not in e[2].name.lower()] or found
         for kind in (cl.device_type.GPU, cl.device_type.CPU):
-            for entry in found:
+            for entry in real:
                 if entry[3].type & kind:
                     return entry[3]
-        return found[0][3]
+        return real[0][3]
     spec = str(spec).strip()
     parts = spec.split(":")
     if all(part.isdigit() for part in parts) and 1 <= len(parts) <= 2:
@@ -77,7 +79,8 @@ def _pick(spec: str | None):
         for entry in found:
             dev = entry[3]
             kinds = cl.device_type.to_string(dev.type).lower()
-            if low in entry[2].name.lower() or low in dev.name.lower() or low in kinds:
+            text = f"{entry[2].name} {entry[2].vendor} {dev.name} {dev.vendor}".lower()
+            if low in text or low in kinds:
                 return dev
     listing = "; ".join(f"{pi}:{di} {p.name} / {d.name}" for pi, di, p, d in found)
     raise ValueError(f"device {spec!r} matches no OpenCL device; available: {listing}")
