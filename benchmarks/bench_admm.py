@@ -1,0 +1,210 @@
+"""Time rsocl's ADMM-TV against the plain NumPy + scikit-image baseline, in one run.
+
+For each ROI size the paper's 4-camera array (angles 0, 90, 180, 270; t_e = 0.18 ms,
+t_r = 35 us) films a benchmark video (MODEL.md's protocol: resized, resampled to T
+sub-frames, [0, 1]); the snapshots are simulated in float64 with rsocl's operator.
+Four reconstructions then run with the same parameters and iteration count:
+
+    baseline float64  (numpy_admm_tv.py, a user's default dtype)
+    baseline float32
+    rsocl    float32  (OpenCL; one warm-up run first, excluded from the timing)
+    rsocl    float64
+
+and a Markdown table gives seconds per iteration, PSNR (peak 1), the speed-up over
+both baselines and the PSNR difference to the baseline of the same dtype.
+
+    python benchmarks/bench_admm.py --sizes 64 128 --iterations 20
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import rsocl  # noqa: E402
+from rsocl.device import get_device  # noqa: E402
+from rsocl.metrics import psnr  # noqa: E402
+from rsocl.scenes import builtin_scene, load_scene  # noqa: E402
+
+from numpy_admm_tv import admm_tv  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+#: Paper's simulated array: exposure and row readout time, seconds.
+T_E, T_R = 0.18e-3, 35e-6
+#: PSNR agreement required to call two runs "equal PSNR", dB.
+PSNR_TOLERANCE = 0.1
+#: Speed-up per iteration that the issue targets.
+TARGET = 10.0
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="square ROI sides, pixels")
+    p.add_argument("--iterations", type=int, default=30, help="ADMM iterations of every run")
+    p.add_argument("--video", default="runner40",
+                   help="video name in ../shared/data (runner40, traffic48) or a video file path")
+    p.add_argument("--tv-iterations", type=int, default=10, help="Chambolle iterations per TV call")
+    p.add_argument("--lam", type=float, default=0.1, help="regularization strength (data in [0, 1])")
+    p.add_argument("--eta", type=float, default=0.2, help="ADMM penalty")
+    p.add_argument("--device", default=None, help="OpenCL device spec for rsocl (default: rsocl's choice)")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="time every run this many times and keep the fastest (for a busy machine)")
+    p.add_argument("--out", type=Path, default=None, help="also write the report as Markdown to this file")
+    return p.parse_args(argv)
+
+
+def scene_source(video: str):
+    """The file to read for ``--video``, or None (built-in scene) when the data is absent."""
+    candidates = [Path(video)] if Path(video).suffix else []
+    candidates.append(DATA / f"{video}.npz")
+    for path in candidates:
+        if path.is_file():
+            return path
+    print(f"note: video {video!r} not found (looked in {DATA}); using rsocl.scenes.builtin_scene instead",
+          file=sys.stderr)
+    return None
+
+
+def signed(x: float) -> str:
+    """``x`` with a sign and 4 decimals; a difference that rounds to zero prints as ``+0.0000``."""
+    text = f"{x:+.4f}"
+    return "+0.0000" if text == "-0.0000" else text
+
+
+def machine(device_name: str) -> list:
+    cpu = platform.processor() or "unknown CPU"
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    cores = os.cpu_count()
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:
+        usable = cores
+    import skimage
+
+    lines = [f"- CPU: {cpu}, {cores} logical cores ({usable} usable by this process)",
+             f"- OpenCL device (rsocl): {device_name}",
+             f"- Python {platform.python_version()}, NumPy {np.__version__}, scikit-image {skimage.__version__}, "
+             f"rsocl {rsocl.__version__}"]
+    blas = {k: v for k, v in os.environ.items() if k.startswith("OPENBLAS")}
+    if blas:
+        lines.append("- environment: " + ", ".join(f"{k}={v}" for k, v in sorted(blas.items())))
+    if hasattr(os, "getloadavg"):
+        lines.append("- load average at start: " + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
+    return lines
+
+
+def run_baseline(g, rig, truth, dtype, params, repeat):
+    best, theta = np.inf, None
+    for _ in range(repeat):
+        theta, _, seconds = admm_tv(g, rig, dtype=dtype, **params)
+        best = min(best, seconds)
+    return best, psnr(theta, truth, data_range=1.0)
+
+
+def run_rsocl(g, rig, truth, dtype, params, device, repeat):
+    warm = dict(params, iterations=2)
+    rsocl.reconstruct(g, rig, device=device, dtype=dtype, **warm)          # kernel builds; not timed
+    best, theta = np.inf, None
+    for _ in range(repeat):
+        result = rsocl.reconstruct(g, rig, device=device, dtype=dtype, **params)
+        best = min(best, result.history["time"][-1] / params["iterations"])
+        theta = result.datacube
+    return best, psnr(theta, truth, data_range=1.0)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    if args.iterations < 1 or args.repeat < 1 or args.tv_iterations < 1:
+        raise SystemExit("--iterations, --tv-iterations and --repeat must be >= 1")
+    if not (args.lam > 0 and args.eta > 0):
+        raise SystemExit("--lam and --eta must be > 0 (the baseline is ADMM, not GAP)")
+    device_name = get_device(args.device).name
+    source = scene_source(args.video)
+    params = {"iterations": args.iterations, "lam": args.lam, "eta": args.eta,
+              "tv_iterations": args.tv_iterations}
+
+    header = ["# ADMM-TV: rsocl vs plain NumPy + scikit-image", ""]
+    header += machine(device_name)
+    header += [f"- scene: {source if source is not None else 'rsocl.scenes.builtin_scene'}; paper array, "
+               f"4 cameras, t_e = {T_E * 1e3:g} ms, t_r = {T_R * 1e6:g} us; lam = {args.lam:g}, "
+               f"eta = {args.eta:g}, {args.tv_iterations} TV iterations, {args.iterations} ADMM iterations"
+               + (f", best of {args.repeat}" if args.repeat > 1 else ""),
+               "- s/iteration: baseline = its loop; rsocl = history['time'][-1] / iterations (device-synced, "
+               "includes the per-iteration residual); PSNR with peak 1 on the [0, 1] scale", ""]
+    print("\n".join(header), flush=True)
+
+    columns = ["size", "T", "implementation", "dtype", "s/iteration", "PSNR (dB)",
+               "speed-up vs baseline f64", "speed-up vs baseline f32", "ΔPSNR vs baseline same dtype (dB)"]
+    rows, summary = [], []
+    for side in args.sizes:
+        rig = rsocl.Rig.paper_array(4, (side, side), T_E, T_R)
+        if source is None:
+            truth = builtin_scene(rig.shape, rig.T, dtype=np.float32)
+        else:
+            truth = load_scene(source, rig.shape, rig.T)
+        g = rsocl.RollingShutterOperator(rig, device=args.device, dtype="float64").forward(truth)
+        print(f"{side}x{side}: T = {rig.T} sub-frames ...", file=sys.stderr, flush=True)
+
+        runs = {}
+        for impl, dtype in (("baseline", "float64"), ("baseline", "float32"),
+                            ("rsocl", "float32"), ("rsocl", "float64")):
+            t0 = time.perf_counter()
+            if impl == "baseline":
+                runs[impl, dtype] = run_baseline(g, rig, truth, np.dtype(dtype).type, params, args.repeat)
+            else:
+                runs[impl, dtype] = run_rsocl(g, rig, truth, dtype, params, args.device, args.repeat)
+            sec, db = runs[impl, dtype]
+            print(f"  {impl} {dtype}: {sec:.4g} s/iteration, {db:.3f} dB ({time.perf_counter() - t0:.1f} s)",
+                  file=sys.stderr, flush=True)
+
+        base64, base32 = runs["baseline", "float64"], runs["baseline", "float32"]
+        for (impl, dtype), (sec, db) in runs.items():
+            same = runs["baseline", dtype]
+            rows.append([f"{side}×{side}", str(rig.T), impl, dtype, f"{sec:.4g}", f"{db:.3f}",
+                         f"{base64[0] / sec:.1f}×", f"{base32[0] / sec:.1f}×", signed(db - same[1])])
+
+        checks = []
+        for dtype in ("float32", "float64"):
+            sec, db = runs["rsocl", dtype]
+            diff = db - runs["baseline", dtype][1]
+            ok = abs(diff) <= PSNR_TOLERANCE
+            checks.append(f"rsocl {dtype} vs baseline {dtype}: {runs['baseline', dtype][0] / sec:.1f}× "
+                          f"(ΔPSNR {signed(diff)} dB, {'equal' if ok else 'NOT equal'} within {PSNR_TOLERANCE} dB)")
+        sec, db = runs["rsocl", "float32"]
+        diff = db - base64[1]
+        checks.append(f"rsocl float32 vs baseline float64 (a user's default): {base64[0] / sec:.1f}× "
+                      f"(ΔPSNR {signed(diff)} dB)")
+        summary.append(f"- {side}×{side}: " + "; ".join(checks))
+
+    widths = [max(len(c), *(len(r[i]) for r in rows)) for i, c in enumerate(columns)]
+    fmt = lambda cells: "| " + " | ".join(c.ljust(w) for c, w in zip(cells, widths)) + " |"  # noqa: E731
+    table = [fmt(columns), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [fmt(r) for r in rows]
+    body = table + ["", f"Speed-up per iteration (target: at least {TARGET:g}× at equal PSNR, ±{PSNR_TOLERANCE} dB):"]
+    body += summary
+    print("\n".join(body))
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text("\n".join(header + body) + "\n", encoding="utf-8")
+        print(f"\nwritten to {args.out}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
