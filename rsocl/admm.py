@@ -1,8 +1,8 @@
 """The ADMM of MODEL.md (Eqs. 11-15) with all state on the OpenCL device.
 
-One iteration is two launches of work on the device: the fused data step
-(``admm_data_step``: dual update, ``v = theta + b``, ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)``,
-``u = f - b``) and the regularizer's ``theta = denoise(u, lam/eta)``. Nothing
+One iteration is the data step in three launches (``admm_dual``: dual update and
+``v = theta + b``; ``admm_project``: ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)`` per pixel;
+``admm_difference``: ``u = f - b``) and the regularizer's ``theta = denoise(u, lam/eta)``. Nothing
 crosses to the host but the few partial sums of the history.
 """
 
@@ -109,11 +109,13 @@ class ADMM:
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
         op = self.op
-        update_dual = int(self.eta > 0 and self.iteration > 0)
-        self.program.admm_data_step(
-            op.queue, (op.mn,), None, self.theta.data, self.b.data, self.f.data, self.u.data, self.g.data,
-            *op._geometry(), self.inverse.data, op.dtype.type(self.eta),
-            np.int32(op.T), np.int32(op.L), np.int32(op.mn), np.int32(update_dual))
+        n = np.int32(int(np.prod(op.domain_shape)))
+        update_dual = np.int32(self.eta > 0 and self.iteration > 0)
+        self.program.admm_dual(op.queue, (int(n),), None, self.theta.data, self.b.data, self.f.data, update_dual, n)
+        self.program.admm_project(
+            op.queue, (op.mn,), None, self.f.data, self.g.data, *op._geometry(), self.inverse.data,
+            op.dtype.type(self.eta), np.int32(op.T), np.int32(op.L), np.int32(op.mn))
+        self.program.admm_difference(op.queue, (int(n),), None, self.f.data, self.b.data, self.u.data, n)
         self.regularizer.denoise(self.u, self.weight, out=self.theta)
         self.iteration += 1
 
