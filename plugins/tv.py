@@ -13,14 +13,19 @@ __all__ = ["TV"]
 class TV(Regularizer):
     """Isotropic TV (Chambolle), as ``skimage.restoration.denoise_tv_chambolle`` with ``eps=0``.
 
-    ``temporal_weight = 1`` is 3-D spatio-temporal TV; ``0`` is 2-D TV on each
-    sub-frame; other values scale the temporal finite difference.
+    ``temporal_weight = 1`` is scikit-image's 3-D TV; ``0`` is 2-D TV on each
+    sub-frame; other values scale the temporal finite difference. The default, 3,
+    was measured on the shared videos (paper array, 64x64, 200 iterations, PSNR in
+    dB): Runner 19.80 / 22.61 / 23.67 and Traffic 16.90 / 18.57 / 18.58 for weights
+    1 / 3 / 5, while on the fast built-in scene (1.4 px per sub-frame) 1 is best
+    (18.2 / 17.7 / 17.1): 3 keeps most of the gain on real videos.
     """
 
     name = "tv"
     options = {
         "iterations": Option(10, "iterations", "Chambolle iterations per denoising call", 1, 100000),
-        "temporal_weight": Option(1.0, "", "weight of the temporal difference (0: 2-D per sub-frame)", 0, 1e3),
+        "temporal_weight": Option(3.0, "", "weight of the temporal difference (0: 2-D per sub-frame, "
+                                           "1: scikit-image's 3-D TV)", 0, 1e3),
     }
 
     def workspace_bytes(self, shape, dtype) -> int:

@@ -1,4 +1,4 @@
-"""The ``rsocl`` command: demo, simulate, reconstruct, capture, calibrate, info, devices, plugins."""
+"""The ``rsocl`` command: demo, simulate, reconstruct, capture, calibrate, plan, bench, info, devices, plugins."""
 
 from __future__ import annotations
 
@@ -276,9 +276,11 @@ def build_parser():
     _add_device_args(p)
     p.set_defaults(func=cmd_plan)
 
+    from .bench import add_bench_parser
     from .calibrate_cli import add_calibrate_parser
     from .capture import add_capture_parser
 
+    add_bench_parser(sub)
     add_capture_parser(sub)
     add_calibrate_parser(sub)
 

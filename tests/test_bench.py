@@ -1,0 +1,193 @@
+"""rsocl bench: one point, the interp3d baseline, the Pareto front, the writers, the command end to end."""
+
+import argparse
+import csv
+import math
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from rsocl import bench
+from rsocl.bench import (BASELINE, COLUMNS, BenchPoint, build_points, device_memory_bytes, interp3d, pareto_front,
+                         parse_sweep, run_bench, run_point, write_outputs)
+from rsocl.operator import RollingShutterOperator
+from rsocl.plan import crop_rig
+from rsocl.rig import Rig
+
+FILES = ("bench.csv", "iterations.csv", "bench.md", "pareto.png", "cameras.png", "iterations.png")
+
+
+@pytest.fixture(scope="module")
+def still_scene(tmp_path_factory):
+    """A video whose frames are all the same image: a scene constant in time."""
+    rng = np.random.default_rng(3)
+    frame = (rng.uniform(0, 255, (20, 20))).astype(np.uint8)
+    path = tmp_path_factory.mktemp("scene") / "still.npz"
+    np.savez(path, video=np.repeat(frame[None], 5, axis=0))
+    return str(path)
+
+
+def test_single_point_row():
+    point = BenchPoint(shape=16, iterations=5)
+    row = run_point(point, {})
+    assert set(COLUMNS) <= set(row)
+    rig = point.rig()
+    assert row["T"] == rig.T and row["T_se"] == rig.T_se and row["subframes_evaluated"] == rig.T
+    assert row["regularizer"] == "tv" and row["cameras"] == 4 and row["roi"] == 16 and row["iterations"] == 5
+    assert 5 < row["psnr"] < 60 and 0 < row["ssim_mean"] <= 1
+    assert len(row["ssim_per_subframe"]) == rig.T
+    assert row["ssim_mean"] == pytest.approx(np.mean(row["ssim_per_subframe"]))
+    assert row["seconds"] > 0 and 0 < row["seconds_per_iteration"] <= row["seconds"]
+    assert len(row["_history"]["psnr"]) == 5
+    assert row["_history"]["psnr"][-1] == pytest.approx(row["psnr"], abs=1e-3)   # same truth, same window
+    # memory: the buffers rsocl allocates, by hand for TV (3 planes of workspace)
+    K, (m, n), T = 4, rig.shape, rig.T
+    by_hand = 4 * K * m * n + 4 * K * m * n + 2 * K * 4 + 4 * K * m * n           # geometry + snapshots
+    by_hand += 4 * (4 * T * m * n) + 2 * 4 * K * m * n + 4 * K * K * m * n       # theta b f u, H theta, inverse
+    by_hand += 3 * 4 * T * m * n + 4 * T * m * n                                # TV workspace, truth
+    assert row["peak_device_memory_bytes"] == by_hand == device_memory_bytes(rig, "tv", "float32")
+
+
+def test_interp3d_exact_for_a_scene_constant_in_time(still_scene):
+    row = run_point(BenchPoint(scene=still_scene, shape=16, regularizer=BASELINE, iterations=0,
+                               tv_iterations=None), {})
+    assert row["psnr"] == math.inf or row["psnr"] > 60
+    assert row["ssim_mean"] == pytest.approx(1.0, abs=1e-6)
+    assert row["peak_device_memory_bytes"] == 0 and row["seconds"] >= 0
+    # directly, with one camera, eight cameras and a cropped (row-map) rig
+    image = np.random.default_rng(0).uniform(size=(12, 12))
+    for rig in (Rig.paper_array(1, (12, 12), 180e-6, 35e-6), Rig.paper_array(8, (12, 12), 180e-6, 35e-6),
+                crop_rig(Rig.paper_array(4, (12, 12), 180e-6, 35e-6), (2, 2, 8, 8))):
+        cube = np.repeat(image[None, :rig.shape[0], :rig.shape[1]], rig.T, axis=0)
+        g = RollingShutterOperator(rig, dtype="float64").forward(cube)
+        np.testing.assert_allclose(interp3d(g, rig), cube, rtol=0, atol=1e-12)
+
+
+def test_interp3d_is_linear_in_time_between_samples():
+    rig = Rig.paper_array(2, (6, 6), 180e-6, 35e-6)
+    win = rig.windows
+    centre = win.index + win.fraction + win.length[:, None, None] / 2
+    g = np.stack([np.full(rig.shape, 1.0), np.full(rig.shape, 3.0)]) * win.length[:, None, None]
+    est = interp3d(g, rig)
+    y, x = 5, 0                                        # camera 0 late, camera 1 early at this pixel
+    t0, t1 = centre[0, y, x], centre[1, y, x]
+    assert t1 < t0
+    s = int(np.floor((t0 + t1) / 2))                   # a sub-frame centre between the two samples
+    expected = 3.0 + (s + 0.5 - t1) / (t0 - t1) * (1.0 - 3.0)
+    assert est[s, y, x] == pytest.approx(expected)
+    assert est[0, y, x] == pytest.approx(3.0) and est[-1, y, x] == pytest.approx(1.0)   # held outside
+
+
+def test_tv_beats_interp3d_on_the_builtin_scene():
+    cache = {}
+    tv = run_point(BenchPoint(shape=24, cameras=4, iterations=60), cache)
+    base = run_point(BenchPoint(shape=24, cameras=4, regularizer=BASELINE, iterations=0, tv_iterations=None), cache)
+    assert base["psnr"] < tv["psnr"] - 1.0
+
+
+def test_coarser_dt_keeps_the_intensity_scale(still_scene):
+    cache = {}
+    fine = run_point(BenchPoint(scene=still_scene, shape=12, iterations=30), cache)
+    coarse = run_point(BenchPoint(scene=still_scene, shape=12, iterations=30, dt_factor=2), cache)
+    assert coarse["T"] < fine["T"] and coarse["dt_us"] == pytest.approx(70.0)
+    assert coarse["subframes_evaluated"] == fine["subframes_evaluated"]       # both on the dt = t_r truth
+    assert coarse["psnr"] > fine["psnr"] - 3.0                                 # unscaled: ~6 dB lower
+
+
+def test_roi_crop_is_compared_with_the_full_roi_on_the_same_pixels():
+    cache = {}
+    full = run_point(BenchPoint(shape=16, iterations=5), cache)
+    crop = run_point(BenchPoint(shape=16, roi=8, iterations=5), cache)
+    assert crop["roi"] == 8 and crop["subframes_evaluated"] < full["subframes_evaluated"]
+    assert crop["psnr_full_roi"] is not None and 5 < crop["psnr_full_roi"] < 60
+    assert full["psnr_full_roi"] is None
+
+
+def test_pareto_front_on_synthetic_rows():
+    rows = [{"seconds": 1.0, "psnr": 20.0}, {"seconds": 2.0, "psnr": 19.0},   # 1 dominated by 0
+            {"seconds": 0.5, "psnr": 15.0}, {"seconds": 4.0, "psnr": 25.0},
+            {"seconds": 4.0, "psnr": 24.0},                                   # same time, lower PSNR
+            {"seconds": 3.0, "psnr": float("nan")}, {"seconds": None, "psnr": 30.0},
+            {"seconds": 8.0, "psnr": math.inf}]
+    assert pareto_front(rows) == [2, 0, 3, 7]
+    assert pareto_front([]) == []
+
+
+def test_points_and_sweep_parsing():
+    assert parse_sweep("cameras=1, 2,8") == ("cameras", [1, 2, 8])
+    assert parse_sweep("dt=1.5") == ("dt", [1.5])
+    assert parse_sweep("tv-iterations") == ("tv_iterations", None)
+    with pytest.raises(ValueError, match="--sweep must be one of"):
+        parse_sweep("speed")
+    with pytest.raises(ValueError, match="roi must be <= shape"):
+        BenchPoint(shape=16, roi=20)
+    default = BenchPoint(shape=16, iterations=8)
+    points, notes = build_points(default, ["cameras=1,4", "roi=8,16,32", "regularizer=tv,nope"])
+    pts = [p for p, _ in points]
+    assert pts[0] == default and len(set(pts)) == len(pts)
+    assert BenchPoint(shape=16, iterations=8, cameras=1) in pts
+    assert sum(p.regularizer == BASELINE for p in pts) == 3                    # C=4, C=1, ROI 8
+    assert pts[-1].roi == 8 and pts[-2].roi == 8                                # crops last, after the full ROI
+    assert any("roi=32" in n for n in notes) and any("nope" in n for n in notes)
+
+
+@pytest.fixture(scope="module")
+def tiny_result():
+    default = BenchPoint(shape=12, iterations=4)
+    return run_bench(default, ["cameras=1,4", "iterations=2,4", "dt=1,2", "roi=8"], progress=False)
+
+
+def test_writers_produce_csv_markdown_and_pngs(tmp_path, tiny_result):
+    assert not tiny_result.notes
+    files = write_outputs(tiny_result, tmp_path)
+    assert sorted(f.name for f in files) == sorted(FILES)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(FILES)        # no temporary files left
+    with open(tmp_path / "bench.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == len(tiny_result.rows) and tuple(rows[0]) == COLUMNS
+    assert {r["regularizer"] for r in rows} == {"tv", BASELINE}
+    default = next(r for r in rows if r["label"] == "default")
+    assert float(default["psnr"]) > 0 and len(default["ssim_per_subframe"].split()) == int(default["T"])
+    with open(tmp_path / "iterations.csv", newline="") as handle:
+        its = list(csv.DictReader(handle))
+    assert len(its) == 4 and float(its[-1]["psnr"]) == pytest.approx(float(default["psnr"]), abs=1e-3)
+    md = (tmp_path / "bench.md").read_text(encoding="utf-8")
+    assert "| point |" in md and "dt = 2·t_r" in md and "ROI 8×8" in md
+    assert "pick for speed" in md and "pick for quality" in md and "interp3d" in md
+    for name in ("pareto.png", "cameras.png", "iterations.png"):
+        image = iio.imread(tmp_path / name)
+        assert image.ndim == 3 and image.shape[0] > 100 and image.std() > 0
+
+
+def test_writers_without_sweeps_still_write_every_file(tmp_path):
+    result = run_bench(BenchPoint(shape=10, iterations=2), ["dtype=float32"], baseline=False, progress=False)
+    files = write_outputs(result, tmp_path)
+    assert sorted(f.name for f in files) == sorted(FILES)
+    assert "(no dt or roi sweep in this run)" in (tmp_path / "bench.md").read_text(encoding="utf-8")
+
+
+def test_cmd_bench_quick_end_to_end(tmp_path, capsys):
+    parser = argparse.ArgumentParser(prog="rsocl")
+    bench.add_bench_parser(parser.add_subparsers(dest="command"))
+    out = tmp_path / "b"
+    args = parser.parse_args(["bench", "--quick", "--shape", "12", "--iterations", "4", "--out", str(out),
+                              "--quiet", "--sweep", "cameras=1,2", "--sweep", "dt", "--sweep", "roi"])
+    assert args.func is bench.cmd_bench
+    assert bench.cmd_bench(args) == 0
+    assert sorted(p.name for p in out.iterdir()) == sorted(FILES)
+    line = capsys.readouterr().out
+    assert "points in" in line and "quality:" in line
+    with open(out / "bench.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert {int(r["cameras"]) for r in rows} == {1, 2, 4}
+    assert {float(r["dt_factor"]) for r in rows} == {1.0, 2.0, 4.0}
+    assert {int(r["roi"]) for r in rows} == {6, 9, 12}
+
+
+def test_cmd_bench_missing_scene(tmp_path):
+    parser = argparse.ArgumentParser(prog="rsocl")
+    bench.add_bench_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["bench", "--scene", str(tmp_path / "nope.npz"), "--out", str(tmp_path)])
+    with pytest.raises(FileNotFoundError, match="nope.npz"):
+        bench.cmd_bench(args)
