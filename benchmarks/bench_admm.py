@@ -120,6 +120,8 @@ def run_baseline(g, rig, truth, dtype, params, repeat):
 
 
 def run_rsocl(g, rig, truth, dtype, params, device, repeat):
+    # the baseline's TV is scikit-image's 3-D TV: the same algorithm is temporal_weight 1
+    params = dict(params, regularizer_options={"temporal_weight": 1.0})
     warm = dict(params, iterations=2)
     rsocl.reconstruct(g, rig, device=device, dtype=dtype, **warm)          # kernel builds; not timed
     best, theta = np.inf, None

@@ -118,12 +118,14 @@ class RollingShutterOperator:
 
     def adjoint_into(self, g, out, base=None):
         """``out = base + Hᵀ g`` (``base`` may be None) for device arrays."""
-        geo = self._geometry()
-        sizes = (np.int32(self.K), np.int32(self.T), np.int32(self.L), np.int32(self.mn))
+        import pyopencl as cl
+
         if base is None:
-            self.program.adjoint(self.queue, (self.mn,), None, g.data, out.data, *geo, *sizes)
-        else:
-            self.program.adjoint_add(self.queue, (self.mn,), None, base.data, g.data, out.data, *geo, *sizes)
+            cl.enqueue_fill_buffer(self.queue, out.data, self.dtype.type(0), 0, out.nbytes)
+        elif base is not out:
+            cl.enqueue_copy(self.queue, out.data, base.data)
+        self.program.adjoint_scatter(self.queue, (self.mn,), None, g.data, out.data, *self._geometry(),
+                                     np.int32(self.K), np.int32(self.T), np.int32(self.L), np.int32(self.mn))
         return out
 
     def forward(self, f):
