@@ -28,6 +28,8 @@ def main():
     # psi = (t_e/dt)^2 = 1/256 here, far below the [0, 1]-scene defaults' scale: eta and lam follow it
     parser.add_argument("--lam", type=float, default=1e-4)
     parser.add_argument("--eta", type=float, default=1e-3)
+    parser.add_argument("--temporal-weight", type=float, default=1.0,
+                        help="TV temporal weight (1: fast events such as this pour; rsocl's default is 3)")
     parser.add_argument("--out", default="wine")
     parser.add_argument("--data", default=str(DATA))
     args = parser.parse_args()
@@ -41,7 +43,8 @@ def main():
     # a scene in [0, 1] gives snapshots in [0, t_e/dt]: scale the 16-bit measurement to that
     g = (meas / meas.max() * rig.exposure_subframes)[None]
     print(f"{rig!r}: {rig.T} sub-frames of {args.bin} time steps from one measurement")
-    result = rsocl.reconstruct(g, rig, iterations=args.iterations, lam=args.lam, eta=args.eta, progress=True)
+    result = rsocl.reconstruct(g, rig, iterations=args.iterations, lam=args.lam, eta=args.eta, progress=True,
+                               regularizer_options={"temporal_weight": args.temporal_weight})
     print(f"residual {result.history['residual'][-1]:.4f} after {result.iterations} iterations, "
           f"{result.history['time'][-1]:.1f} s")
     out = Path(args.out)
