@@ -62,6 +62,9 @@ class DCT(Regularizer):
     """
 
     name = "dct"
+    #: measured on the shared videos (paper array, 64x64, 200 iterations): lam 0.3 with eta 0.2
+    #: gives Runner 20.82 dB, Traffic 16.90 dB; lam 0.08 gives 20.66 dB on Runner
+    recommended = {"lam": 0.3, "eta": 0.2}
     options = {
         "mode": Option("3d", "", "'3d': DCT along t, y, x; '2d': DCT of each sub-frame along y, x"),
         "block": Option(0, "pixels", "block size along every transformed axis (0: whole frame)", 0, 65536),

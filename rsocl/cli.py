@@ -47,8 +47,10 @@ def _add_solver_args(p):
 
     g = p.add_argument_group("solver (defaults for scenes in [0, 1])")
     g.add_argument("--iterations", type=int, default=DEFAULTS["iterations"])
-    g.add_argument("--lam", type=float, default=DEFAULTS["lam"], help="regularization weight")
-    g.add_argument("--eta", type=float, default=DEFAULTS["eta"], help="ADMM penalty; 0 runs GAP")
+    g.add_argument("--lam", type=float, default=None,
+                   help=f"regularization weight (default: the regularizer's recommendation, else {DEFAULTS['lam']})")
+    g.add_argument("--eta", type=float, default=None,
+                   help=f"ADMM penalty; 0 runs GAP (default: the regularizer's recommendation, else {DEFAULTS['eta']})")
     g.add_argument("--tv-iterations", type=int, default=None, help="inner denoiser iterations (TV default 10)")
     g.add_argument("--projection", choices=["exact", "paper"], default="exact")
     g.add_argument("--regularizer", default="tv", help="regularizer name (see 'rsocl plugins')")

@@ -89,9 +89,10 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     iterations : int
         ADMM iterations (default 200).
     lam : float
-        Regularization strength, >= 0 (default 0.1 for data in [0, 1]).
+        Regularization strength, >= 0 (default: the regularizer's ``recommended`` value,
+        else 0.1, for data in [0, 1]).
     eta : float
-        ADMM penalty, >= 0 (default 0.2); ``0`` runs GAP (denoiser weight ``lam``).
+        ADMM penalty, >= 0 (default likewise, else 0.2); ``0`` runs GAP (denoiser weight ``lam``).
     tv_iterations : int
         Inner iterations of an iterative denoiser (default: the regularizer's own, 10 for TV).
     projection : {"exact", "paper"}
@@ -121,8 +122,10 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     iterations = check.positive_int("iterations", DEFAULTS["iterations"] if iterations is None else iterations)
-    lam = check.non_negative("lam", DEFAULTS["lam"] if lam is None else lam)
-    eta = check.non_negative("eta", DEFAULTS["eta"] if eta is None else eta)
+    if lam is not None:
+        lam = check.non_negative("lam", lam)
+    if eta is not None:
+        eta = check.non_negative("eta", eta)
     if tv_iterations is not None:
         tv_iterations = check.positive_int("tv_iterations", tv_iterations)
     projection = check.choice("projection", projection, {"exact", "paper"})
@@ -150,6 +153,10 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         if truth.shape != cube:
             raise ValueError(f"truth must have shape (T, m, n) = {cube}, got {truth.shape}")
     reg = _regularizer(regularizer, regularizer_options, tv_iterations)
+    # a regularizer may recommend its own lam/eta (measured for it); else the global defaults
+    recommended = {**DEFAULTS, **getattr(reg, "recommended", {})}
+    lam = recommended["lam"] if lam is None else lam
+    eta = recommended["eta"] if eta is None else eta
     if np.dtype(dtype).name not in reg.dtypes:
         raise ValueError(f"dtype {np.dtype(dtype).name!r} is not supported by regularizer {reg!r}; "
                          f"supported: {list(reg.dtypes)}")

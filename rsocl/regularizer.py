@@ -62,6 +62,9 @@ class Regularizer:
         Declared options with defaults and units.
     dtypes : tuple of str
         Supported device dtypes.
+    recommended : dict
+        Optional ``lam``/``eta`` that :func:`rsocl.reconstruct` uses when the caller
+        gives none (measured for this regularizer; data in [0, 1]).
 
     Subclasses implement ``_denoise(x, weight, out)``; they may override
     :meth:`workspace_bytes` so the solver can check memory before running.
@@ -70,6 +73,7 @@ class Regularizer:
     name = "base"
     options: dict = {}
     dtypes = ("float32", "float64")
+    recommended: dict = {}
 
     def __init__(self, **options):
         unknown = sorted(set(options) - set(self.options))

@@ -118,3 +118,13 @@ def test_paper_projection_divergence_is_reported():
     g = np.ones((4, 16, 16)) * 3.0
     with pytest.raises(FloatingPointError, match="projection='paper'"):
         rsocl.reconstruct(g, rig, iterations=300, lam=1e3, eta=1e-3, projection="paper")
+
+
+def test_regularizer_recommendations_fill_unset_lam_and_eta(problem):
+    rig, truth, g = problem
+    res = rsocl.reconstruct(g, rig, regularizer="dct", iterations=2)
+    assert (res.params["lam"], res.params["eta"]) == (0.3, 0.2)
+    res = rsocl.reconstruct(g, rig, regularizer="dct", iterations=2, lam=0.05)
+    assert res.params["lam"] == 0.05
+    res = rsocl.reconstruct(g, rig, iterations=2)
+    assert (res.params["lam"], res.params["eta"]) == (0.1, 0.2)
