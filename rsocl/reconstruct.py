@@ -180,7 +180,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         truth_dev = cla.to_device(queue, np.ascontiguousarray(truth[solved], dtype=op.dtype))
         data_range = default_data_range(truth)
         # squared error of the sub-frames left at zero, added to the device's sum
-        unsolved_sq = float(np.sum(truth.astype(np.float64) ** 2)) - float(np.sum(truth[solved].astype(np.float64) ** 2))
+        unsolved_sq = sum(float(np.sum(part.astype(np.float64) ** 2))
+                          for part in (truth[:solved.start], truth[solved.stop:]))
 
     solver = ADMM(op, g_dev, reg, lam=lam, eta=eta, projection=projection, x0=x0_dev, valid=valid)
     history = {"residual": [], "time": []}
@@ -206,7 +207,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
             history["residual"].append(residual)
             history["time"].append(time.perf_counter() - start)
             if truth_dev is not None:
-                mse = (sum_sq_diff(solver.theta, truth_dev) + max(unsolved_sq, 0.0)) / truth.size
+                mse = (sum_sq_diff(solver.theta, truth_dev) + unsolved_sq) / truth.size
                 history["psnr"].append(10 * math.log10(data_range ** 2 / mse) if mse > 0 else math.inf)
             if bar is not None:
                 bar.update(1)
