@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 # the names of the former single module stay importable from here
@@ -30,7 +30,7 @@ from .bench_analysis import SPEED_PICK_DB, pareto_front, picks  # noqa: F401
 from .bench_baseline import interp3d
 from .bench_measure import _device_of, run_point
 from .bench_memory import device_memory_bytes
-from .bench_point import BASELINE, US, BenchPoint
+from .bench_point import BASELINE, US, BenchPoint, BenchResult
 from .bench_report import (COLUMNS, _num, markdown, tradeoff_lines, write_csv, write_iterations_csv,  # noqa: F401
                            write_outputs)
 
@@ -190,33 +190,6 @@ def _label(point: BenchPoint, default: BenchPoint) -> str:
     if point.device != default.device:
         parts.append(f"dev {point.device}")
     return " ".join(parts) or "default"
-
-
-@dataclass
-class BenchResult:
-    """Rows of a run and what the writers need besides."""
-
-    rows: list
-    default: BenchPoint
-    notes: list = field(default_factory=list)
-    seconds: float = 0.0
-    device: str = ""
-    #: The default point's seconds measured at the start and again at the end of the run: a
-    #: gauge of the timing noise (other load on the machine).
-    timing_check: tuple | None = None
-    #: 1-minute load average at the start and at the end of the run (None where unavailable).
-    load: tuple | None = None
-
-    def history(self):
-        """History of the longest run whose knobs other than ``iterations`` are the default's."""
-        best = None
-        for row in self.rows:
-            point = row["_point"]
-            if row.get("_history") is None or replace(point, iterations=self.default.iterations) != self.default:
-                continue
-            if best is None or point.iterations > best["_point"].iterations:
-                best = row
-        return None if best is None else best["_history"]
 
 
 def run_bench(default: BenchPoint, sweeps=None, *, quick=False, baseline=True, progress=True, cache=None,

@@ -4,12 +4,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
-from .bench_point import BASELINE, BenchPoint
+from .bench_point import BASELINE, BenchPoint, BenchResult
 
-if TYPE_CHECKING:
-    from .bench import BenchResult
 
 __all__ = ["SPEED_PICK_DB", "pareto_front", "picks"]
 

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-__all__ = ["BenchPoint", "BASELINE", "US"]
+__all__ = ["BenchPoint", "BenchResult", "BASELINE", "US"]
 
 US = 1e-6
 #: Name of the baseline's rows in the ``regularizer`` column.
@@ -107,3 +107,30 @@ class BenchPoint:
 
 def _scene_name(scene) -> str:
     return "builtin" if scene == "builtin" else Path(str(scene)).name
+
+
+@dataclass
+class BenchResult:
+    """Rows of a run and what the writers need besides."""
+
+    rows: list
+    default: BenchPoint
+    notes: list = field(default_factory=list)
+    seconds: float = 0.0
+    device: str = ""
+    #: The default point's seconds measured at the start and again at the end of the run: a
+    #: gauge of the timing noise (other load on the machine).
+    timing_check: tuple | None = None
+    #: 1-minute load average at the start and at the end of the run (None where unavailable).
+    load: tuple | None = None
+
+    def history(self):
+        """History of the longest run whose knobs other than ``iterations`` are the default's."""
+        best = None
+        for row in self.rows:
+            point = row["_point"]
+            if row.get("_history") is None or replace(point, iterations=self.default.iterations) != self.default:
+                continue
+            if best is None or point.iterations > best["_point"].iterations:
+                best = row
+        return None if best is None else best["_history"]

@@ -11,17 +11,14 @@ import io
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .atomic import atomic_path
 from .bench_analysis import (SPEED_PICK_DB, _comparable, _default_row, _reconstructions, _varied, pareto_front,
                              picks)
-from .bench_point import US, _scene_name
+from .bench_point import US, BenchResult, _scene_name
 
-if TYPE_CHECKING:
-    from .bench import BenchResult
 
 __all__ = ["COLUMNS", "write_csv", "write_iterations_csv", "tradeoff_lines", "markdown", "write_outputs"]
 
