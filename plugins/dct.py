@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device import device_for_queue, voxel_grid
+from rsocl.device import c_type, device_for_queue, voxel_grid
 from rsocl.regularizer import Option, Regularizer
 
 __all__ = ["DCT", "dct_matrix"]
@@ -113,8 +113,7 @@ class DCT(Regularizer):
         key = (x.shape, x.dtype.str, x.queue.int_ptr, self.mode, self.block)
         if key not in cache:
             cache.clear()
-            real = "double" if x.dtype == np.float64 else "float"
-            prog = device_for_queue(x.queue).program(["dct.cl"], REAL=real)
+            prog = device_for_queue(x.queue).program(["dct.cl"], REAL=c_type(x.dtype))
             parts, offsets, pos = [], {}, 0
             for L in self._lengths(x.shape):
                 C = dct_matrix(L)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device import device_for_queue, voxel_grid
+from rsocl.device import c_type, device_for_queue, voxel_grid
 from rsocl.regularizer import Option, Regularizer
 
 __all__ = ["TV"]
@@ -38,8 +38,7 @@ class TV(Regularizer):
 
         T, m, n = x.shape
         temporal = int(self.temporal_weight > 0)
-        real = "double" if x.dtype == np.float64 else "float"
-        prog = device_for_queue(x.queue).program(["tv.cl"], REAL=real, TEMPORAL=temporal)
+        prog = device_for_queue(x.queue).program(["tv.cl"], REAL=c_type(x.dtype), TEMPORAL=temporal)
         planes = 3 if temporal else 2
         cache = self.__dict__.setdefault("_dual", {})
         key = (x.shape, x.dtype.str, planes, x.queue.int_ptr)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .device import c_type
 from .operator import RollingShutterOperator
 from .reduction import sum_sq_diff
 
@@ -92,7 +93,7 @@ class ADMM:
         self.u = cla.empty(queue, shape, op.dtype)
         self.hx = cla.empty(queue, op.range_shape, op.dtype)
         self.program = op.device.program(
-            ["admm.cl"], REAL=op._ctype(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
+            ["admm.cl"], REAL=c_type(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
             NCH=op.K, PROJECTION_EXACT=int(projection == "exact"))
         self.g_norm2 = sum_sq_diff(g, weights=self.valid)
         self.iteration = 0

@@ -15,7 +15,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path"]
+__all__ = ["atomic_path", "output_path"]
 
 
 def _default_mode() -> int:
@@ -43,6 +43,21 @@ def _fsync_directory(directory: Path) -> None:
         pass
     finally:
         os.close(fd)
+
+
+def output_path(path, name: str = "path") -> Path:
+    """``path`` as a Path whose folder exists and which is not a directory.
+
+    Raises ``FileNotFoundError`` (missing folder) or ``ValueError`` (a directory),
+    naming the parameter ``name``.
+    """
+    path = Path(os.fspath(path))
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise FileNotFoundError(f"{name}: directory {str(directory)!r} does not exist (writing {str(path)!r})")
+    if path.is_dir():
+        raise ValueError(f"{name} must name a file, {str(path)!r} is a directory")
+    return path
 
 
 @contextlib.contextmanager
@@ -81,12 +96,8 @@ def atomic_path(path):
     ...     with open(tmp, "wb") as handle:
     ...         np.save(handle, array)
     """
-    path = Path(os.fspath(path))
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise FileNotFoundError(f"path: directory {str(directory)!r} does not exist (writing {str(path)!r})")
-    if path.is_dir():
-        raise ValueError(f"path must name a file, {str(path)!r} is a directory")
+    path = output_path(path)
+    directory = path.parent
     mode = (path.stat().st_mode & 0o7777) if path.exists() else _default_mode()
     fd, tmp_name = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=directory)
     os.close(fd)

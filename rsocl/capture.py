@@ -63,6 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from . import validation as check
+from .atomic import output_path
 from .rigfile import RigFile, load_rigfile
 
 __all__ = ["capture_sets", "CaptureFailed", "load_raw", "RawCapture", "add_capture_parser", "cmd_capture"]
@@ -338,12 +339,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
     for i, cam in enumerate(rig.cameras):
         if cam.frames != 1:
             raise ValueError(f"camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger")
-    out = Path(os.fspath(out_path))
-    directory = out.parent if str(out.parent) else Path(".")
-    if not directory.is_dir():
-        raise FileNotFoundError(f"out: directory {str(directory)!r} does not exist (writing {str(out)!r})")
-    if out.is_dir():
-        raise ValueError(f"out must name a file, {str(out)!r} is a directory")
+    out = output_path(out_path, "out")
     partial = out.with_name(out.name + PARTIAL_SUFFIX)
 
     backends = rigfile.backends()

@@ -17,7 +17,7 @@ from importlib import resources
 
 import numpy as np
 
-__all__ = ["Device", "get_device", "device_for_queue", "list_devices", "voxel_grid", "NoOpenCLError"]
+__all__ = ["Device", "get_device", "device_for_queue", "list_devices", "voxel_grid", "c_type", "NoOpenCLError"]
 
 INSTALL_HINT = ('install an OpenCL runtime, e.g. the CPU one that ships as a wheel: '
                 'pip install "rsocl[pocl]"')
@@ -110,6 +110,11 @@ class Device:
         return "cl_khr_fp64" in self.device.extensions or bool(getattr(self.device, "double_fp_config", 0))
 
     @property
+    def acc_dtype(self) -> np.dtype:
+        """Accumulator of reductions: float64 where the device has it, else float32."""
+        return np.dtype(np.float64) if self.has_fp64 else np.dtype(np.float32)
+
+    @property
     def max_alloc_bytes(self) -> int:
         """Largest single buffer, bytes (``CL_DEVICE_MAX_MEM_ALLOC_SIZE``)."""
         return int(self.device.max_mem_alloc_size)
@@ -150,6 +155,11 @@ class Device:
         if key not in cache:
             cache[key] = _build(self.context, key[0], key[1])
         return cache[key]
+
+
+def c_type(dtype) -> str:
+    """OpenCL C name of a float32/float64 NumPy dtype (``"float"`` or ``"double"``)."""
+    return "double" if np.dtype(dtype) == np.float64 else "float"
 
 
 def voxel_grid(T: int, m: int, n: int):

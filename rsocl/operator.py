@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import validation as check
-from .device import get_device
+from .device import c_type, get_device
 from .rig import Rig
 
 __all__ = ["RollingShutterOperator"]
@@ -65,15 +65,10 @@ class RollingShutterOperator:
         self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype))
         self.length = cla.to_device(self.queue, win.length.astype(self.dtype))
         self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype))
-        self.acc_dtype = np.dtype(np.float64) if self.device.has_fp64 else np.dtype(np.float32)
         self.program = self.device.program(
-            ["operator.cl"], REAL=self._ctype(self.dtype), ACC=self._ctype(self.acc_dtype),
+            ["operator.cl"], REAL=c_type(self.dtype), ACC=c_type(self.device.acc_dtype),
             MASK_BINARY=int(rig.mask == "binary"))
         self._psi = None
-
-    @staticmethod
-    def _ctype(dtype) -> str:
-        return "double" if np.dtype(dtype) == np.float64 else "float"
 
     @property
     def domain_shape(self):

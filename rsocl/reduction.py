@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .device import device_for_queue
+from .device import c_type, device_for_queue
 
 __all__ = ["sum_sq_diff"]
 
@@ -31,9 +31,8 @@ def sum_sq_diff(a, b=None, weights=None) -> float:
         if other is not None and (other.shape != a.shape or other.dtype != a.dtype):
             raise ValueError(f"{name} must match a ({a.shape}, {a.dtype}), got {other.shape}, {other.dtype}")
     dev = device_for_queue(a.queue)
-    acc = np.dtype(np.float64) if dev.has_fp64 else np.dtype(np.float32)
-    ctype = {np.dtype(np.float32): "float", np.dtype(np.float64): "double"}
-    prog = dev.program(["reduce.cl"], REAL=ctype[np.dtype(a.dtype)], ACC=ctype[acc])
+    acc = dev.acc_dtype
+    prog = dev.program(["reduce.cl"], REAL=c_type(a.dtype), ACC=c_type(acc))
     local = min(LOCAL_SIZE, 1 << (int(dev.device.max_work_group_size).bit_length() - 1))
     groups = max(1, min(MAX_GROUPS, -(-a.size // local)))
     key = ("partials", groups, acc.str)

@@ -180,11 +180,7 @@ class Rig:
             if not isinstance(cam, Camera):
                 raise ValueError(f"cameras[{i}] must be a Camera, got {type(cam).__name__}")
         self.cameras = cameras
-        try:
-            m, n = shape
-        except (TypeError, ValueError):
-            raise ValueError(f"shape must be (m, n), got {shape!r}") from None
-        self.shape = (check.positive_int("shape[0] (rows m)", m), check.positive_int("shape[1] (columns n)", n))
+        self.shape = check.grid_shape("shape", shape)
         t_r_min = min(cam.t_r for cam in cameras)
         if dt is None:
             dt = t_r_min

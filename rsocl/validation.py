@@ -12,7 +12,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "choice", "finite_array"]
+__all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "choice", "finite_array", "grid_shape"]
 
 
 def finite(name: str, value) -> float:
@@ -58,6 +58,15 @@ def positive_int(name: str, value, maximum: int | None = None) -> int:
         upper = f" and <= {maximum}" if maximum is not None else ""
         raise ValueError(f"{name} must be an integer >= 1{upper}, got {value!r}")
     return value
+
+
+def grid_shape(name: str, shape) -> tuple:
+    """``(m, n)``: rows and columns, each an integer >= 1."""
+    try:
+        m, n = shape
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be (m, n) rows and columns, got {shape!r}") from None
+    return positive_int(f"{name}[0] (rows m)", m), positive_int(f"{name}[1] (columns n)", n)
 
 
 def choice(name: str, value, allowed) -> str:

@@ -32,11 +32,7 @@ def _homography(name: str, H) -> np.ndarray:
 
 
 def _shape(shape) -> tuple:
-    try:
-        m, n = shape
-    except (TypeError, ValueError):
-        raise ValueError(f"shape must be (m, n) rows and columns, got {shape!r}") from None
-    return check.positive_int("shape[0] (rows m)", m), check.positive_int("shape[1] (columns n)", n)
+    return check.grid_shape("shape", shape)
 
 
 def _origin(frame_origin) -> tuple:
