@@ -1,10 +1,10 @@
 """Bandwidth of rsocl's kernels against a plain copy kernel, measured in one run on one device.
 
 For each kernel: the bytes it must move (each value read or written once, neighbours
-from cache), the time per launch (median of repeats), the bandwidth that makes, and
+from cache), the time per launch (median of round-robin repeats, each from cold caches), the bandwidth that makes, and
 its ratio to the copy kernel's bandwidth. Paper array, 128x128 by default, float32.
 
-    python benchmarks/roofline.py [--size 128] [--repeats 30] [--device SPEC]
+    python benchmarks/roofline.py [--size 128] [--repeats 60] [--caches cold|warm] [--device SPEC]
 """
 
 from __future__ import annotations
@@ -19,17 +19,77 @@ import rsocl
 from rsocl.device import get_device, voxel_grid
 
 
-def timed(queue, launch, repeats):
-    launch()
-    queue.finish()
-    samples = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        launch()
-        queue.finish()
-        samples.append(time.perf_counter() - t0)
-    return statistics.median(samples)
+FLUSH_SOURCE = """
+__kernel void flush(__global const float *big, __global float *out, int per_item)
+{
+    size_t i = get_global_id(0), n = get_global_size(0);
+    float acc = 0.0f;
+    for (int j = 0; j < per_item; ++j) acc += big[j * n + i];
+    out[i] = acc;
+}
+"""
 
+
+def cache_flusher(context, queue, nbytes=64 << 20, per_item=64):
+    """A launch that reads ``nbytes`` (more than any CPU cache), writing 1/per_item of that.
+
+    Run untimed before every timed launch, it leaves the caches cold and clean, so no
+    kernel pays for the write-back of the one before or profits from its data.
+    """
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    items = nbytes // 4 // per_item
+    big = cla.zeros(queue, items * per_item, np.float32)
+    out = cla.empty(queue, items, np.float32)
+    kernel = cl.Kernel(cl.Program(context, FLUSH_SOURCE).build(), "flush")
+    kernel.set_args(big.data, out.data, np.int32(per_item))
+
+    def flush(buffers=(big, out)):          # the default keeps the buffers alive
+        return cl.enqueue_nd_range_kernel(queue, kernel, (items,), None)
+    return flush
+
+
+def timed(queue, launches, repeats, prepare):
+    """Median seconds per launch of each callable, measured round-robin.
+
+    Interleaving the kernels (copy, tv, ..., copy, tv, ...) exposes them to the same
+    machine noise. ``prepare(launch)`` runs untimed before each timed launch: a cache
+    flush (cold: data from memory) or the launch itself (warm: its data in cache, as when
+    a reconstruction's working set fits in the last-level cache).
+    """
+    for launch in launches:
+        launch()
+    queue.finish()
+    samples = [[] for _ in launches]
+    for _ in range(repeats):
+        for i, launch in enumerate(launches):
+            prepare(launch)
+            queue.finish()
+            t0 = time.perf_counter()
+            launch()
+            queue.finish()
+            samples[i].append(time.perf_counter() - t0)
+    return [statistics.median(s) for s in samples]
+
+
+def cache_line_bytes(rig, itemsize, line=64):
+    """Bytes of the distinct cache lines of ``f[T, m, n]`` that the sampled windows touch.
+
+    A rotated camera's window runs across the planes of ``f``, so each plane it visits
+    gives it a few neighbouring pixels of a row: memory moves whole lines, so the traffic
+    the layout implies is larger than the sampled values.
+    """
+    first, last = rig.sampled_window()
+    mn = first.shape[1] * first.shape[2]
+    pix = np.arange(mn)
+    lines = []
+    for k in range(first.shape[0]):
+        lo, hi = first[k].ravel(), last[k].ravel()
+        for j in range(int((hi - lo).max()) + 1):
+            keep = lo + j <= hi
+            lines.append(((lo[keep] + j) * mn + pix[keep]) * itemsize // line)
+    return np.unique(np.concatenate(lines)).size * line
 
 def main():
     import pyopencl as cl
@@ -37,8 +97,10 @@ def main():
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=128)
-    parser.add_argument("--repeats", type=int, default=30)
+    parser.add_argument("--repeats", type=int, default=60)
     parser.add_argument("--device", default=None)
+    parser.add_argument("--caches", choices=("cold", "warm"), default="cold",
+                        help="cold: flush the caches before each launch; warm: run the kernel once first")
     args = parser.parse_args()
     dev = get_device(args.device)
     q = dev.queue
@@ -59,33 +121,45 @@ def main():
     # sampled voxels per channel and pixel: the window loop reads only those
     first, last = rig.sampled_window()
     samples = int(np.sum(last - first + 1))
+    lines = cache_line_bytes(rig, f32)
+    maps = K * mn * 3 * f32              # first, frac and the snapshot of every channel and pixel
     rows = [
-        ("copy (reference)", 2 * N * f32,
+        ("copy (reference)", 2 * N * f32, None,
          lambda: copy(q, (N,), None, x.data, y.data, np.int32(N))),
-        ("tv_primal (3-D)", (1 + 3 + 1) * N * f32,
+        ("tv_primal (3-D)", (1 + 3 + 1) * N * f32, None,
          lambda: tv.tv_primal(q, gsize, lsize, x.data, p.data, y.data, np.float32(1), *sizes)),
-        ("tv_dual (3-D)", (1 + 3 + 3) * N * f32,
+        ("tv_dual (3-D)", (1 + 3 + 3) * N * f32, None,
          lambda: tv.tv_dual(q, gsize, lsize, y.data, p.data, np.float32(1 / 6), np.float32(0.5), np.float32(1),
                             *sizes)),
-        ("forward H", (samples + K * mn * 3) * f32,
+        ("forward H", samples * f32 + maps, lines + maps,
          lambda: op.forward_into(x, g)),
-        ("adjoint Hᵀ", (N + 2 * samples + K * mn * 3) * f32,
+        ("adjoint Hᵀ", N * f32 + 2 * samples * f32 + maps, N * f32 + 2 * lines + maps,
          lambda: op.adjoint_into(g, y)),
     ]
-    print(f"device: {dev.name}; paper array {m}x{n}, T = {T}, {K} cameras, float32; "
-          f"median of {args.repeats} launches\n")
-    print("| kernel | bytes it must move | per voxel of the datacube | time (ms) | GB/s | vs copy |")
-    print("|---|---|---|---|---|---|")
-    copy_bw = None
-    for name, nbytes, launch in rows:
-        seconds = timed(q, launch, args.repeats)
-        bw = nbytes / seconds / 1e9
-        copy_bw = copy_bw or bw
-        print(f"| {name} | {nbytes / 2**20:.1f} MiB | {nbytes / N:.1f} B | {seconds * 1e3:.3f} | {bw:.2f} | "
-              f"{bw / copy_bw:.0%} |", flush=True)
+    print(f"device: {dev.name}; paper array {m}x{n}, T = {T}, {K} cameras, float32, "
+          f"{getattr(op, 'vector_width', 1)} pixels per work item in the operator; median of {args.repeats} round-robin launches, {args.caches} caches\n")
+    print("| kernel | bytes it must move | per voxel of the datacube | time (ms) | GB/s | vs copy "
+          "| in 64-B lines | GB/s in lines | vs copy, in lines |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    if args.caches == "cold":
+        flush = cache_flusher(dev.context, q)
+        prepare = lambda launch: flush()            # noqa: E731
+    else:
+        prepare = lambda launch: launch()           # noqa: E731
+    seconds = timed(q, [row[3] for row in rows], args.repeats, prepare)
+    copy_bw = rows[0][1] / seconds[0] / 1e9
+    for (name, nbytes, line_bytes, _), sec in zip(rows, seconds):
+        bw = nbytes / sec / 1e9
+        lines_cols = "| | |"
+        if line_bytes is not None:
+            lbw = line_bytes / sec / 1e9
+            lines_cols = f"{line_bytes / 2**20:.1f} MiB | {lbw:.2f} | {lbw / copy_bw:.0%} |"
+        print(f"| {name} | {nbytes / 2**20:.1f} MiB | {nbytes / N:.1f} B | {sec * 1e3:.3f} | {bw:.2f} | "
+              f"{bw / copy_bw:.0%} | {lines_cols}", flush=True)
     print("\nBytes: each array element read or written once (neighbours counted once, as from cache); "
-          "forward/adjoint: the sampled window of every channel and pixel plus the per-pixel maps.")
-
+          "forward/adjoint: the sampled window of every channel and pixel plus the per-pixel maps "
+          "(first, frac, snapshot). 'In 64-B lines': the distinct cache lines of the datacube those "
+          "windows touch, which is what memory moves for the rotated cameras.")
 
 if __name__ == "__main__":
     main()

@@ -3,8 +3,8 @@
  *
  *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [skipped in GAP]
  *                                             f  = v = theta + b
- *   admm_project   (one work item per pixel)  r = g - H v,  z = (eta I + M)^-1 r  (exact)
- *                                                            | r / (eta + psi)    (paper, Eq. 15)
+ *   admm_project   (one work item per tile    r = g - H v,  z = (eta I + M)^-1 r  (exact)
+ *                   of TILE_W pixels)                        | r / (eta + psi)    (paper, Eq. 15)
  *                                             f += Hᵀ z     (window loops only)
  *   admm_difference (one work item per voxel) u = f - b     (input of the denoiser)
  *
@@ -25,14 +25,12 @@ __kernel void admm_dual(__global const real *theta, __global real *b, __global r
     f[i] = th + bn;
 }
 
-__kernel void admm_project(__global real *f, __global const real *g,
-                           __global const int *first, __global const real *frac,
-                           __global const real *len, __global const real *gain,
-                           __global const real *inverse, real eta, int T, int L, int mn_)
+/* The projection of one pixel p (scalar path: the last, partial tile). */
+inline void project_pixel(__global real *f, __global const real *g,
+                          __global const int *first, __global const real *frac,
+                          __global const real *len, __global const real *gain,
+                          __global const real *inverse, real eta, int T, int L, size_t mn, size_t p)
 {
-    size_t p = get_global_id(0);
-    size_t mn = (size_t)mn_;
-    if (p >= mn) return;
     real r[NCH];
     for (int k = 0; k < NCH; ++k) {
         size_t q = (size_t)k * mn + p;
@@ -48,6 +46,38 @@ __kernel void admm_project(__global real *f, __global const real *g,
         real z = d > (real)0 ? r[k] / d : (real)0;
 #endif
         window_scatter(f, first[q], frac[q], len[k], T, L, mn, p, gain[k] * z);
+    }
+}
+
+/* global size ceil(m*n / TILE_W): one work item per tile of TILE_W pixels (common.cl). */
+__kernel void admm_project(__global real *f, __global const real *g,
+                           __global const int *first, __global const real *frac,
+                           __global const real *len, __global const real *gain,
+                           __global const real *inverse, real eta, int T, int L, int mn_)
+{
+    size_t mn = (size_t)mn_;
+    size_t p0 = get_global_id(0) * (size_t)TILE_W;
+    if (p0 >= mn) return;
+    if (p0 + TILE_W > mn) {
+        for (size_t p = p0; p < mn; ++p)
+            project_pixel(f, g, first, frac, len, gain, inverse, eta, T, L, mn, p);
+        return;
+    }
+    realw r[NCH];
+    for (int k = 0; k < NCH; ++k) {
+        size_t q0 = (size_t)k * mn + p0;
+        r[k] = vload_v(0, g + q0) - gain[k] * window_dot_v(f, first, frac, len[k], q0, T, L, mn, p0);
+    }
+    for (int k = 0; k < NCH; ++k) {
+        size_t q0 = (size_t)k * mn + p0;
+#if PROJECTION_EXACT
+        realw z = (realw)(real)0;
+        for (int l = 0; l < NCH; ++l) z += vload_v(0, inverse + ((size_t)k * NCH + l) * mn + p0) * r[l];
+#else
+        realw d = eta + vload_v(0, inverse + q0);     /* inverse holds psi here */
+        realw z = d > (realw)(real)0 ? r[k] / d : (realw)(real)0;
+#endif
+        window_scatter_v(f, first, frac, len[k], q0, T, L, mn, p0, gain[k] * z);
     }
 }
 

@@ -65,6 +65,84 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
     }
 }
 
+/* ---- Tiles of TILE_W neighbouring pixels, in explicit vectors ----
+ * A work item handles the TILE_W consecutive pixels p0 .. p0 + TILE_W - 1 (flat index)
+ * of one or all channels and loops over the union of their windows, [min first,
+ * max first + L) clipped to [0, T): every load and store is one contiguous vector, where
+ * a pixel-per-work-item loop makes per-lane gathers (2-4x slower on PoCL, measured with
+ * benchmarks/roofline.py). Lanes outside their own window get weight 0, so results equal
+ * the scalar loops above. The host defines TILE_W (default: 32 bytes of real); the last, partial tile
+ * takes the scalar loops. */
+#ifndef TILE_W
+#if REAL_IS_DOUBLE
+#define TILE_W 4
+#else
+#define TILE_W 8
+#endif
+#endif
+#define RSOCL_CAT_(a, b) a##b
+#define RSOCL_CAT(a, b) RSOCL_CAT_(a, b)
+typedef RSOCL_CAT(REAL, TILE_W) realw;
+typedef RSOCL_CAT(int, TILE_W) intw;
+#define vload_v RSOCL_CAT(vload, TILE_W)
+#define vstore_v RSOCL_CAT(vstore, TILE_W)
+#define convert_realw RSOCL_CAT(convert_, RSOCL_CAT(REAL, TILE_W))
+
+/* Sub-frames [*lo, *hi) that cover the windows of the TILE_W pixels starting at first + q0. */
+inline void tile_span(__global const int *first, size_t q0, int T, int L, int *lo, int *hi)
+{
+    int a = first[q0], b = a;
+    for (int i = 1; i < TILE_W; ++i) {
+        int v = first[q0 + i];
+        a = v < a ? v : a;
+        b = v > b ? v : b;
+    }
+    b += L;
+    *lo = a > 0 ? a : 0;
+    *hi = b < T ? b : T;
+}
+
+/* shutter_weight for TILE_W lanes at window positions j. It is 0 outside [0, L) with no
+ * extra test: 0 <= frac < 1 and frac + len < L = ceil(max len) + 1. */
+inline realw shutter_weight_v(realw j, realw frac, realw len)
+{
+    realw zero = (realw)(real)0;
+#if MASK_BINARY
+    return ((j >= frac) & (j <= frac + len)) ? (realw)(real)1 : zero;
+#else
+    realw end = frac + len, j1 = j + (real)1;
+    realw lo = j > frac ? j : frac;
+    realw hi = j1 < end ? j1 : end;
+    return hi > lo ? hi - lo : zero;
+#endif
+}
+
+/* window_dot for the tile of TILE_W pixels from p0 (geometry of the channel at q0). */
+inline realw window_dot_v(__global const real *f, __global const int *first, __global const real *frac,
+                          real len, size_t q0, int T, int L, size_t mn, size_t p0)
+{
+    int lo, hi;
+    tile_span(first, q0, T, L, &lo, &hi);
+    realw start = convert_realw(vload_v(0, first + q0)), fr = vload_v(0, frac + q0);
+    realw acc = (realw)(real)0;
+    for (int s = lo; s < hi; ++s)
+        acc += shutter_weight_v((realw)(real)s - start, fr, (realw)len) * vload_v(0, f + (size_t)s * mn + p0);
+    return acc;
+}
+
+/* window_scatter for the tile of TILE_W pixels from p0: f[s, p0 + i] += scale.si * w. */
+inline void window_scatter_v(__global real *f, __global const int *first, __global const real *frac,
+                             real len, size_t q0, int T, int L, size_t mn, size_t p0, realw scale)
+{
+    int lo, hi;
+    tile_span(first, q0, T, L, &lo, &hi);
+    realw start = convert_realw(vload_v(0, first + q0)), fr = vload_v(0, frac + q0);
+    for (int s = lo; s < hi; ++s) {
+        __global real *dst = f + (size_t)s * mn + p0;
+        vstore_v(vload_v(0, dst) + scale * shutter_weight_v((realw)(real)s - start, fr, (realw)len), 0, dst);
+    }
+}
+
 /* sqrt(v) for v >= 0 from the classic bit-level estimate of 1/sqrt refined by
  * Newton steps: plain arithmetic that CPU vectorisers (PoCL) keep in SIMD lanes,
  * where the library sqrt is called one lane at a time (measured 3-5x slower per

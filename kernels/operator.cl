@@ -1,37 +1,54 @@
 /* The row-timed shutter operator H (forward), its adjoint, and the diagonal and
  * per-pixel blocks of H Hᵀ. Layouts: f[T][m][n], g[K][m][n], first/frac[K][m][n],
- * len[K], gain[K]. Each work item handles one pixel and loops over the exposure
- * window only: cost ~ K*m*n*L, never K*T*m*n. `first` counts from the first sub-frame
- * solved for, so it may be negative; T is the number of sub-frames solved for. Needs common.cl. */
+ * len[K], gain[K]. Each work item handles one pixel (psi, gram) or one tile of TILE_W pixels
+ * (forward, adjoint; see common.cl) and loops over the exposure window only: cost
+ * ~ K*m*n*L, never K*T*m*n. `first` counts from the first sub-frame solved for, so it may
+ * be negative; T is the number of sub-frames solved for. Needs common.cl. */
 
-/* g[k, p] = gain[k] * sum_s w(k, s, p) f[s, p];   global size (m*n, K) */
+/* g[k, p] = gain[k] * sum_s w(k, s, p) f[s, p];   global size (ceil(m*n / TILE_W), K):
+ * one work item per tile of TILE_W pixels of one channel. */
 __kernel void forward(__global const real *f, __global real *g,
                       __global const int *first, __global const real *frac,
                       __global const real *len, __global const real *gain,
                       int T, int L, int mn_)
 {
-    size_t p = get_global_id(0), k = get_global_id(1);
-    size_t mn = (size_t)mn_;
-    if (p >= mn) return;
-    size_t q = k * mn + p;
-    g[q] = gain[k] * window_dot(f, first[q], frac[q], len[k], T, L, mn, p);
+    size_t k = get_global_id(1), mn = (size_t)mn_;
+    size_t p0 = get_global_id(0) * (size_t)TILE_W;
+    if (p0 >= mn) return;
+    size_t q0 = k * mn + p0;
+    if (p0 + TILE_W <= mn) {
+        vstore_v(gain[k] * window_dot_v(f, first, frac, len[k], q0, T, L, mn, p0), 0, g + q0);
+        return;
+    }
+    for (size_t p = p0, q = q0; p < mn; ++p, ++q)
+        g[q] = gain[k] * window_dot(f, first[q], frac[q], len[k], T, L, mn, p);
 }
 
 /* f[s, p] += sum_k gain[k] w(k, s, p) g[k, p], over each channel's window only;
- * global size (m*n). The host first sets f to 0 (Hᵀ g) or to a base (base + Hᵀ g) with a
- * voxel-parallel fill or copy: a per-pixel loop over the whole column runs 5x slower on
- * CPU devices. */
+ * global size ceil(m*n / TILE_W): one work item per tile of TILE_W pixels, all channels
+ * (tiles are disjoint, so there are no races). The host first sets f to 0 (Hᵀ g) or to a base
+ * (base + Hᵀ g) with a fill or copy: a per-pixel loop over the whole column runs 5x slower
+ * on CPU devices. */
 __kernel void adjoint_scatter(__global const real *g, __global real *f,
                               __global const int *first, __global const real *frac,
                               __global const real *len, __global const real *gain,
-                              int K, int T, int L, int mn)
+                              int K, int T, int L, int mn_)
 {
-    size_t p = get_global_id(0);
-    if (p >= (size_t)mn) return;
-    for (int k = 0; k < K; ++k) {
-        size_t q = (size_t)k * mn + p;
-        window_scatter(f, first[q], frac[q], len[k], T, L, (size_t)mn, p, gain[k] * g[q]);
+    size_t mn = (size_t)mn_;
+    size_t p0 = get_global_id(0) * (size_t)TILE_W;
+    if (p0 >= mn) return;
+    if (p0 + TILE_W <= mn) {
+        for (int k = 0; k < K; ++k) {
+            size_t q0 = (size_t)k * mn + p0;
+            window_scatter_v(f, first, frac, len[k], q0, T, L, mn, p0, gain[k] * vload_v(0, g + q0));
+        }
+        return;
     }
+    for (size_t p = p0; p < mn; ++p)
+        for (int k = 0; k < K; ++k) {
+            size_t q = (size_t)k * mn + p;
+            window_scatter(f, first[q], frac[q], len[k], T, L, mn, p, gain[k] * g[q]);
+        }
 }
 
 /* psi[k, p] = gain[k]^2 sum_s w(k, s, p)^2;   global size (m*n, K) */

@@ -94,7 +94,7 @@ class ADMM:
         self.hx = cla.empty(queue, op.range_shape, op.dtype)
         self.program = op.device.program(
             ["admm.cl"], REAL=c_type(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
-            NCH=op.K, PROJECTION_EXACT=int(projection == "exact"))
+            NCH=op.K, PROJECTION_EXACT=int(projection == "exact"), TILE_W=op.vector_width)
         self.g_norm2 = sum_sq_diff(g, weights=self.valid)
         self.iteration = 0
         cl.enqueue_barrier(queue)
@@ -114,7 +114,7 @@ class ADMM:
         update_dual = np.int32(self.eta > 0 and self.iteration > 0)
         self.program.admm_dual(op.queue, (int(n),), None, self.theta.data, self.b.data, self.f.data, update_dual, n)
         self.program.admm_project(
-            op.queue, (op.mn,), None, self.f.data, self.g.data, *op._geometry(), self.inverse.data,
+            op.queue, *op.tile_grid(), self.f.data, self.g.data, *op._geometry(), self.inverse.data,
             op.dtype.type(self.eta), np.int32(op.T), np.int32(op.L), np.int32(op.mn))
         self.program.admm_difference(op.queue, (int(n),), None, self.f.data, self.b.data, self.u.data, n)
         self.regularizer.denoise(self.u, self.weight, out=self.theta)

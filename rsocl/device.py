@@ -17,7 +17,7 @@ from importlib import resources
 
 import numpy as np
 
-__all__ = ["Device", "get_device", "device_for_queue", "list_devices", "voxel_grid", "c_type", "NoOpenCLError"]
+__all__ = ["Device", "get_device", "device_for_queue", "list_devices", "voxel_grid", "tile_grid", "c_type", "NoOpenCLError"]
 
 INSTALL_HINT = ('install an OpenCL runtime, e.g. the CPU one that ships as a wheel: '
                 'pip install "rsocl[pocl]"')
@@ -170,6 +170,18 @@ def voxel_grid(T: int, m: int, n: int):
     """
     lx = min(64, -(-n // 8) * 8)
     return ((-(-n // lx) * lx, m, T), (lx, 1, 1))
+
+
+def tile_grid(pixels: int, width: int, channels: int = 1):
+    """Global and local sizes for one work item per tile of ``width`` pixels (and channel).
+
+    The operator and ADMM kernels take ``width`` (``VW``) neighbouring pixels per work
+    item in explicit vectors; 64 tiles form a work group. The global size is padded and
+    kernels check bounds.
+    """
+    tiles = -(-int(pixels) // int(width))
+    lx = min(64, tiles)
+    return ((-(-tiles // lx) * lx, int(channels)), (lx, 1))
 
 
 def kernel_source(name: str) -> str:

@@ -11,10 +11,13 @@ from __future__ import annotations
 import numpy as np
 
 from . import validation as check
-from .device import c_type, get_device
+from .device import c_type, get_device, tile_grid
 from .rig import Rig
 
 __all__ = ["RollingShutterOperator"]
+
+#: Pixels per work item (one explicit vector of this many lanes): 32 bytes per load.
+VECTOR_WIDTH = {"float32": 8, "float64": 4}
 
 
 class RollingShutterOperator:
@@ -65,9 +68,11 @@ class RollingShutterOperator:
         self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype))
         self.length = cla.to_device(self.queue, win.length.astype(self.dtype))
         self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype))
+        #: pixels per work item of the forward, adjoint and ADMM projection kernels
+        self.vector_width = VECTOR_WIDTH[self.dtype.name]
         self.program = self.device.program(
             ["operator.cl"], REAL=c_type(self.dtype), ACC=c_type(self.device.acc_dtype),
-            MASK_BINARY=int(rig.mask == "binary"))
+            MASK_BINARY=int(rig.mask == "binary"), TILE_W=self.vector_width)
         self._psi = None
 
     @property
@@ -101,13 +106,17 @@ class RollingShutterOperator:
 
         return cla.empty(self.queue, shape, self.dtype)
 
+    def tile_grid(self, channels=1):
+        """Global and local sizes of a kernel with one work item per tile of pixels."""
+        return tile_grid(self.mn, self.vector_width, channels)
+
     def _geometry(self):
         return (self.first.data, self.frac.data, self.length.data, self.gain.data)
 
     # ------------------------------------------------------------------ H, Hᵀ
     def forward_into(self, f, out):
         """``out = H f`` for device arrays (no checks, no allocation)."""
-        self.program.forward(self.queue, (self.mn, self.K), None, f.data, out.data, *self._geometry(),
+        self.program.forward(self.queue, *self.tile_grid(self.K), f.data, out.data, *self._geometry(),
                              np.int32(self.T), np.int32(self.L), np.int32(self.mn))
         return out
 
@@ -119,7 +128,7 @@ class RollingShutterOperator:
             cl.enqueue_fill_buffer(self.queue, out.data, self.dtype.type(0), 0, out.nbytes)
         elif base is not out:
             cl.enqueue_copy(self.queue, out.data, base.data)
-        self.program.adjoint_scatter(self.queue, (self.mn,), None, g.data, out.data, *self._geometry(),
+        self.program.adjoint_scatter(self.queue, *self.tile_grid(), g.data, out.data, *self._geometry(),
                                      np.int32(self.K), np.int32(self.T), np.int32(self.L), np.int32(self.mn))
         return out
 
