@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 import rsocl
-from rsocl.device import get_device, voxel_grid
+from rsocl.device import element_launches, get_device, voxel_launches
 
 
 FLUSH_SOURCE = """
@@ -116,7 +116,7 @@ def main():
     p = cla.zeros(q, (3, T, m, n), np.float32)
     copy = dev.program(["reduce.cl"], REAL="float", ACC="double" if dev.has_fp64 else "float").copy
     tv = dev.program(["tv.cl"], REAL="float", TEMPORAL=1)
-    gsize, lsize = voxel_grid(T, m, n)
+    voxels = voxel_launches(T, m, n)
     sizes = (np.int32(T), np.int32(m), np.int32(n))
     # sampled voxels per channel and pixel: the window loop reads only those
     first, last = rig.sampled_window()
@@ -125,12 +125,13 @@ def main():
     maps = K * mn * 3 * f32              # first, frac and the snapshot of every channel and pixel
     rows = [
         ("copy (reference)", 2 * N * f32, None,
-         lambda: copy(q, (N,), None, x.data, y.data, np.int32(N))),
+         lambda: [copy(q, gs, ls, x.data, y.data, global_offset=off) for gs, ls, off in element_launches(N)]),
         ("tv_primal (3-D)", (1 + 3 + 1) * N * f32, None,
-         lambda: tv.tv_primal(q, gsize, lsize, x.data, p.data, y.data, np.float32(1), *sizes)),
+         lambda: [tv.tv_primal(q, gs, ls, x.data, p.data, y.data, np.float32(1), *sizes, global_offset=off)
+                  for gs, ls, off in voxels]),
         ("tv_dual (3-D)", (1 + 3 + 3) * N * f32, None,
-         lambda: tv.tv_dual(q, gsize, lsize, y.data, p.data, np.float32(1 / 6), np.float32(0.5), np.float32(1),
-                            *sizes)),
+         lambda: [tv.tv_dual(q, gs, ls, y.data, p.data, np.float32(1 / 6), np.float32(0.5), np.float32(1),
+                             *sizes, global_offset=off) for gs, ls, off in voxels]),
         ("forward H", samples * f32 + maps, lines + maps,
          lambda: op.forward_into(x, g)),
         ("adjoint Hᵀ", N * f32 + 2 * samples * f32 + maps, N * f32 + 2 * lines + maps,

@@ -15,10 +15,11 @@
 #define PROJECTION_EXACT 1
 #endif
 
-__kernel void admm_dual(__global const real *theta, __global real *b, __global real *f, int update_dual, int n)
+/* admm_dual and admm_difference: one work item per voxel on an exact grid
+ * (rsocl.device.element_launches), so no bounds test (it costs masked stores on PoCL). */
+__kernel void admm_dual(__global const real *theta, __global real *b, __global real *f, int update_dual)
 {
-    int i = get_global_id(0);
-    if (i >= n) return;
+    size_t i = get_global_id(0);
     real th = theta[i];
     real bn = update_dual ? b[i] - (f[i] - th) : b[i];
     b[i] = bn;
@@ -66,23 +67,23 @@ __kernel void admm_project(__global real *f, __global const real *g,
     realw r[NCH];
     for (int k = 0; k < NCH; ++k) {
         size_t q0 = (size_t)k * mn + p0;
-        r[k] = vload_v(0, g + q0) - gain[k] * window_dot_v(f, first, frac, len[k], q0, T, L, mn, p0);
+        r[k] = load_w(g + q0) - gain[k] * window_dot_v(f, first, frac, len[k], q0, T, L, mn, p0);
     }
     for (int k = 0; k < NCH; ++k) {
         size_t q0 = (size_t)k * mn + p0;
 #if PROJECTION_EXACT
         realw z = (realw)(real)0;
-        for (int l = 0; l < NCH; ++l) z += vload_v(0, inverse + ((size_t)k * NCH + l) * mn + p0) * r[l];
+        for (int l = 0; l < NCH; ++l) z += load_w(inverse + ((size_t)k * NCH + l) * mn + p0) * r[l];
 #else
-        realw d = eta + vload_v(0, inverse + q0);     /* inverse holds psi here */
+        realw d = eta + load_w(inverse + q0);     /* inverse holds psi here */
         realw z = d > (realw)(real)0 ? r[k] / d : (realw)(real)0;
 #endif
         window_scatter_v(f, first, frac, len[k], q0, T, L, mn, p0, gain[k] * z);
     }
 }
 
-__kernel void admm_difference(__global const real *f, __global const real *b, __global real *u, int n)
+__kernel void admm_difference(__global const real *f, __global const real *b, __global real *u)
 {
-    int i = get_global_id(0);
-    if (i < n) u[i] = f[i] - b[i];
+    size_t i = get_global_id(0);
+    u[i] = f[i] - b[i];
 }

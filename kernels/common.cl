@@ -84,8 +84,8 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
 #define RSOCL_CAT(a, b) RSOCL_CAT_(a, b)
 typedef RSOCL_CAT(REAL, TILE_W) realw;
 typedef RSOCL_CAT(int, TILE_W) intw;
-#define vload_v RSOCL_CAT(vload, TILE_W)
-#define vstore_v RSOCL_CAT(vstore, TILE_W)
+#define load_w(ptr) RSOCL_CAT(vload, TILE_W)(0, (ptr))        /* real or int tile */
+#define store_w(v, ptr) RSOCL_CAT(vstore, TILE_W)((v), 0, (ptr))
 #define convert_realw RSOCL_CAT(convert_, RSOCL_CAT(REAL, TILE_W))
 
 /* Sub-frames [*lo, *hi) that cover the windows of the TILE_W pixels starting at first + q0. */
@@ -123,10 +123,10 @@ inline realw window_dot_v(__global const real *f, __global const int *first, __g
 {
     int lo, hi;
     tile_span(first, q0, T, L, &lo, &hi);
-    realw start = convert_realw(vload_v(0, first + q0)), fr = vload_v(0, frac + q0);
+    realw start = convert_realw(load_w(first + q0)), fr = load_w(frac + q0);
     realw acc = (realw)(real)0;
     for (int s = lo; s < hi; ++s)
-        acc += shutter_weight_v((realw)(real)s - start, fr, (realw)len) * vload_v(0, f + (size_t)s * mn + p0);
+        acc += shutter_weight_v((realw)(real)s - start, fr, (realw)len) * load_w(f + (size_t)s * mn + p0);
     return acc;
 }
 
@@ -136,10 +136,10 @@ inline void window_scatter_v(__global real *f, __global const int *first, __glob
 {
     int lo, hi;
     tile_span(first, q0, T, L, &lo, &hi);
-    realw start = convert_realw(vload_v(0, first + q0)), fr = vload_v(0, frac + q0);
+    realw start = convert_realw(load_w(first + q0)), fr = load_w(frac + q0);
     for (int s = lo; s < hi; ++s) {
         __global real *dst = f + (size_t)s * mn + p0;
-        vstore_v(vload_v(0, dst) + scale * shutter_weight_v((realw)(real)s - start, fr, (realw)len), 0, dst);
+        store_w(load_w(dst) + scale * shutter_weight_v((realw)(real)s - start, fr, (realw)len), dst);
     }
 }
 

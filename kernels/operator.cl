@@ -17,7 +17,7 @@ __kernel void forward(__global const real *f, __global real *g,
     if (p0 >= mn) return;
     size_t q0 = k * mn + p0;
     if (p0 + TILE_W <= mn) {
-        vstore_v(gain[k] * window_dot_v(f, first, frac, len[k], q0, T, L, mn, p0), 0, g + q0);
+        store_w(gain[k] * window_dot_v(f, first, frac, len[k], q0, T, L, mn, p0), g + q0);
         return;
     }
     for (size_t p = p0, q = q0; p < mn; ++p, ++q)
@@ -40,7 +40,7 @@ __kernel void adjoint_scatter(__global const real *g, __global real *f,
     if (p0 + TILE_W <= mn) {
         for (int k = 0; k < K; ++k) {
             size_t q0 = (size_t)k * mn + p0;
-            window_scatter_v(f, first, frac, len[k], q0, T, L, mn, p0, gain[k] * vload_v(0, g + q0));
+            window_scatter_v(f, first, frac, len[k], q0, T, L, mn, p0, gain[k] * load_w(g + q0));
         }
         return;
     }

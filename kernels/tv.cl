@@ -8,38 +8,43 @@
 #define TEMPORAL 1
 #endif
 
+/* Launch with an exact grid (rsocl.device.voxel_launches): there is no bounds test, and
+ * neighbours across an edge are read at a clamped index and discarded with a select,
+ * because PoCL turns a per-work-item `if` into masked loads and stores (2x slower). */
+
 /* out = img + d(p), d the (negative) divergence of p.  global size (n, m, T) */
 __kernel void tv_primal(__global const real *img, __global const real *p, __global real *out,
                         real wt, int T, int m, int n)
 {
     int x = get_global_id(0), y = get_global_id(1), s = get_global_id(2);
-    if (x >= n || y >= m || s >= T) return;
-    size_t N = (size_t)T * m * n;
+    size_t N = (size_t)T * m * n, mn = (size_t)m * n;
     size_t i = ((size_t)s * m + y) * n + x;
     real d = -(p[i] + p[N + i]);
-    if (y > 0) d += p[i - n];
-    if (x > 0) d += p[N + i - 1];
+    real py = p[y > 0 ? i - n : i], px = p[N + (x > 0 ? i - 1 : i)];
+    d += y > 0 ? py : (real)0;
+    d += x > 0 ? px : (real)0;
 #if TEMPORAL
+    real pt = p[2 * N + (s > 0 ? i - mn : i)];
     d -= wt * p[2 * N + i];
-    if (s > 0) d += wt * p[2 * N + i - (size_t)m * n];
+    d += s > 0 ? wt * pt : (real)0;
 #endif
     out[i] = img[i] + d;
 }
 
-/* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|), in place.  global size (n, m, T) */
+/* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|), in place.  global size (n, m, T).
+ * At the far edges the clamped neighbour is the voxel itself: the difference is 0. */
 __kernel void tv_dual(__global const real *out, __global real *p,
                       real tau, real tau_over_weight, real wt, int T, int m, int n)
 {
     int x = get_global_id(0), y = get_global_id(1), s = get_global_id(2);
-    if (x >= n || y >= m || s >= T) return;
-    size_t N = (size_t)T * m * n;
+    size_t N = (size_t)T * m * n, mn = (size_t)m * n;
     size_t i = ((size_t)s * m + y) * n + x;
     real o = out[i];
-    real gy = (y < m - 1) ? out[i + n] - o : (real)0;
-    real gx = (x < n - 1) ? out[i + 1] - o : (real)0;
+    real gy = out[y < m - 1 ? i + n : i] - o;
+    real gx = out[x < n - 1 ? i + 1 : i] - o;
     real norm2 = gy * gy + gx * gx;
 #if TEMPORAL
-    real gt = (s < T - 1) ? wt * (out[i + (size_t)m * n] - o) : (real)0;
+    real gt = wt * (out[s < T - 1 ? i + mn : i] - o);
     norm2 += gt * gt;
 #endif
     real scale = (real)1 / ((real)1 + vector_friendly_sqrt(norm2) * tau_over_weight);

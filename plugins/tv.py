@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device import c_type, device_for_queue, voxel_grid
+from rsocl.device import c_type, device_for_queue, voxel_launches
 from rsocl.regularizer import Option, Regularizer
 
 __all__ = ["TV"]
@@ -50,11 +50,14 @@ class TV(Regularizer):
         tau = 1.0 / (2.0 * (2.0 + wt * wt))
         real_t = x.dtype.type
         sizes = (np.int32(T), np.int32(m), np.int32(n))
-        gsize, lsize = voxel_grid(T, m, n)
+        launches = voxel_launches(T, m, n)          # exact grids: the kernels have no bounds test
         cl.enqueue_fill_buffer(x.queue, p.data, real_t(0), 0, p.nbytes)
         for i in range(self.iterations):
-            prog.tv_primal(x.queue, gsize, lsize, x.data, p.data, out.data, real_t(wt), *sizes)
+            for gsize, lsize, offset in launches:
+                prog.tv_primal(x.queue, gsize, lsize, x.data, p.data, out.data, real_t(wt), *sizes,
+                               global_offset=offset)
             if i < self.iterations - 1:
-                prog.tv_dual(x.queue, gsize, lsize, out.data, p.data, real_t(tau), real_t(tau / weight),
-                             real_t(wt), *sizes)
+                for gsize, lsize, offset in launches:
+                    prog.tv_dual(x.queue, gsize, lsize, out.data, p.data, real_t(tau), real_t(tau / weight),
+                                 real_t(wt), *sizes, global_offset=offset)
         return out

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .device import c_type
+from .device import c_type, element_launches
 from .operator import RollingShutterOperator
 from .reduction import sum_sq_diff
 
@@ -94,7 +94,8 @@ class ADMM:
         self.hx = cla.empty(queue, op.range_shape, op.dtype)
         self.program = op.device.program(
             ["admm.cl"], REAL=c_type(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
-            NCH=op.K, PROJECTION_EXACT=int(projection == "exact"), TILE_W=op.vector_width)
+            NCH=op.K, PROJECTION_EXACT=int(projection == "exact"), **op.tile_defines)
+        self.voxels = element_launches(int(np.prod(shape)))     # exact grids: no bounds tests
         self.g_norm2 = sum_sq_diff(g, weights=self.valid)
         self.iteration = 0
         cl.enqueue_barrier(queue)
@@ -110,13 +111,16 @@ class ADMM:
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
         op = self.op
-        n = np.int32(int(np.prod(op.domain_shape)))
         update_dual = np.int32(self.eta > 0 and self.iteration > 0)
-        self.program.admm_dual(op.queue, (int(n),), None, self.theta.data, self.b.data, self.f.data, update_dual, n)
+        for gsize, lsize, offset in self.voxels:
+            self.program.admm_dual(op.queue, gsize, lsize, self.theta.data, self.b.data, self.f.data, update_dual,
+                                   global_offset=offset)
         self.program.admm_project(
             op.queue, *op.tile_grid(), self.f.data, self.g.data, *op._geometry(), self.inverse.data,
             op.dtype.type(self.eta), np.int32(op.T), np.int32(op.L), np.int32(op.mn))
-        self.program.admm_difference(op.queue, (int(n),), None, self.f.data, self.b.data, self.u.data, n)
+        for gsize, lsize, offset in self.voxels:
+            self.program.admm_difference(op.queue, gsize, lsize, self.f.data, self.b.data, self.u.data,
+                                         global_offset=offset)
         self.regularizer.denoise(self.u, self.weight, out=self.theta)
         self.iteration += 1
 

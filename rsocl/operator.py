@@ -72,7 +72,7 @@ class RollingShutterOperator:
         self.vector_width = VECTOR_WIDTH[self.dtype.name]
         self.program = self.device.program(
             ["operator.cl"], REAL=c_type(self.dtype), ACC=c_type(self.device.acc_dtype),
-            MASK_BINARY=int(rig.mask == "binary"), TILE_W=self.vector_width)
+            MASK_BINARY=int(rig.mask == "binary"), **self.tile_defines)
         self._psi = None
 
     @property
@@ -105,6 +105,11 @@ class RollingShutterOperator:
         import pyopencl.array as cla
 
         return cla.empty(self.queue, shape, self.dtype)
+
+    @property
+    def tile_defines(self):
+        """Program definitions of the tile kernels (``TILE_W``)."""
+        return {"TILE_W": self.vector_width}
 
     def tile_grid(self, channels=1):
         """Global and local sizes of a kernel with one work item per tile of pixels."""

@@ -16,7 +16,7 @@ def _denoise(device, x, weight, dtype, **options):
     return out.get()
 
 
-@pytest.mark.parametrize("shape", [(7, 13, 17), (1, 9, 6), (5, 1, 8), (4, 6, 1)])
+@pytest.mark.parametrize("shape", [(7, 13, 17), (1, 9, 6), (5, 1, 8), (4, 6, 1), (3, 5, 67), (2, 3, 130)])
 @pytest.mark.parametrize("iterations", [1, 2, 15])
 def test_3d_matches_skimage(device, dtype, rng, shape, iterations):
     x = rng.random(shape)
