@@ -20,7 +20,10 @@ __kernel void tv_primal(__global const real *img, __global const real *p, __glob
     size_t N = (size_t)T * m * n, mn = (size_t)m * n;
     size_t i = ((size_t)s * m + y) * n + x;
     real d = -(p[i] + p[N + i]);
-    real py = p[y > 0 ? i - n : i], px = p[N + (x > 0 ? i - 1 : i)];
+    /* y and s are the same in a whole work group (a row), so these selects are uniform; the
+     * x - 1 neighbour is read at i - 1 always (p[N - 1] when i = 0: in the buffer), which
+     * keeps the load a plain vector load; its value is dropped at x = 0. */
+    real py = p[y > 0 ? i - n : i], px = p[N + i - 1];
     d += y > 0 ? py : (real)0;
     d += x > 0 ? px : (real)0;
 #if TEMPORAL
@@ -41,7 +44,10 @@ __kernel void tv_dual(__global const real *out, __global real *p,
     size_t i = ((size_t)s * m + y) * n + x;
     real o = out[i];
     real gy = out[y < m - 1 ? i + n : i] - o;
-    real gx = out[x < n - 1 ? i + 1 : i] - o;
+    /* out[i + 1] is in the buffer except for the last voxel: read it plainly (a vector
+     * load) in every row but the last one, where the row is uniform. */
+    real right = (y < m - 1 || s < T - 1) ? out[i + 1] : out[x < n - 1 ? i + 1 : i];
+    real gx = x < n - 1 ? right - o : (real)0;
     real norm2 = gy * gy + gx * gx;
 #if TEMPORAL
     real gt = wt * (out[s < T - 1 ? i + mn : i] - o);
