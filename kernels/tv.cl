@@ -3,7 +3,8 @@
  * temporal weight. Layout x[T][m][n]; the dual p holds NP = 2 (+1 if TEMPORAL)
  * planes of T*m*n values: p[0] along y, p[1] along x, p[2] along t.
  * The host defines TEMPORAL 0|1. One work item per voxel, two kernels per
- * iteration (primal then dual), each reading its neighbours once. Needs common.cl. */
+ * iteration (primal then dual), each reading its neighbours once; the first iteration,
+ * from p = 0, is one kernel (tv_dual_first). Needs common.cl. */
 #ifndef TEMPORAL
 #define TEMPORAL 1
 #endif
@@ -34,10 +35,11 @@ __kernel void tv_primal(__global const real *img, __global const real *p, __glob
     out[i] = img[i] + d;
 }
 
-/* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|), in place.  global size (n, m, T).
+/* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|) at voxel (x, y, s); with
+ * from_zero, p is taken as 0 and not read (the first iteration, where out = img).
  * At the far edges the clamped neighbour is the voxel itself: the difference is 0. */
-__kernel void tv_dual(__global const real *out, __global real *p,
-                      real tau, real tau_over_weight, real wt, int T, int m, int n)
+inline void dual_update(__global const real *out, __global real *p, real tau, real tau_over_weight,
+                        real wt, int T, int m, int n, int from_zero)
 {
     int x = get_global_id(0), y = get_global_id(1), s = get_global_id(2);
     size_t N = (size_t)T * m * n, mn = (size_t)m * n;
@@ -54,9 +56,24 @@ __kernel void tv_dual(__global const real *out, __global real *p,
     norm2 += gt * gt;
 #endif
     real scale = (real)1 / ((real)1 + vector_friendly_sqrt(norm2) * tau_over_weight);
-    p[i] = (p[i] - tau * gy) * scale;
-    p[N + i] = (p[N + i] - tau * gx) * scale;
+    p[i] = ((from_zero ? (real)0 : p[i]) - tau * gy) * scale;
+    p[N + i] = ((from_zero ? (real)0 : p[N + i]) - tau * gx) * scale;
 #if TEMPORAL
-    p[2 * N + i] = (p[2 * N + i] - tau * gt) * scale;
+    p[2 * N + i] = ((from_zero ? (real)0 : p[2 * N + i]) - tau * gt) * scale;
 #endif
+}
+
+/* The dual step, in place.  global size (n, m, T) */
+__kernel void tv_dual(__global const real *out, __global real *p,
+                      real tau, real tau_over_weight, real wt, int T, int m, int n)
+{
+    dual_update(out, p, tau, tau_over_weight, wt, T, m, n, 0);
+}
+
+/* The first dual step from p = 0, where out = img + d(0) = img: it reads img and only
+ * writes p (no fill of p, no first primal step).  global size (n, m, T) */
+__kernel void tv_dual_first(__global const real *img, __global real *p,
+                            real tau, real tau_over_weight, real wt, int T, int m, int n)
+{
+    dual_update(img, p, tau, tau_over_weight, wt, T, m, n, 1);
 }

@@ -51,13 +51,19 @@ class TV(Regularizer):
         real_t = x.dtype.type
         sizes = (np.int32(T), np.int32(m), np.int32(n))
         launches = voxel_launches(T, m, n)          # exact grids: the kernels have no bounds test
-        cl.enqueue_fill_buffer(x.queue, p.data, real_t(0), 0, p.nbytes)
-        for i in range(self.iterations):
+
+        def each(kernel, *args):
             for gsize, lsize, offset in launches:
-                prog.tv_primal(x.queue, gsize, lsize, x.data, p.data, out.data, real_t(wt), *sizes,
-                               global_offset=offset)
+                kernel(x.queue, gsize, lsize, *args, *sizes, global_offset=offset)
+
+        steps = (real_t(tau), real_t(tau / weight), real_t(wt))
+        if self.iterations == 1:                    # out = x + d(0)
+            cl.enqueue_copy(x.queue, out.data, x.data)
+            return out
+        # iteration 0 from p = 0 (out = x): one kernel that only writes p
+        each(prog.tv_dual_first, x.data, p.data, *steps)
+        for i in range(1, self.iterations):
+            each(prog.tv_primal, x.data, p.data, out.data, real_t(wt))
             if i < self.iterations - 1:
-                for gsize, lsize, offset in launches:
-                    prog.tv_dual(x.queue, gsize, lsize, out.data, p.data, real_t(tau), real_t(tau / weight),
-                                 real_t(wt), *sizes, global_offset=offset)
+                each(prog.tv_dual, out.data, p.data, *steps)
         return out

@@ -70,3 +70,6 @@ def test_input_is_validated(device):
         TV().denoise(cla.zeros(device.queue, (2, 2), np.float32), 0.1)
     with pytest.raises(ValueError, match="weight"):
         TV().denoise(cla.zeros(device.queue, (2, 2, 2), np.float32), -1.0)
+    x = cla.zeros(device.queue, (2, 2, 2), np.float32)
+    with pytest.raises(ValueError, match="out must be another buffer than x"):
+        TV().denoise(x, 0.1, out=x)
