@@ -36,6 +36,8 @@ class TV(Regularizer):
         import pyopencl as cl
         import pyopencl.array as cla
 
+        if out.base_data.int_ptr == x.base_data.int_ptr:
+            raise ValueError("out must be another buffer than x (every TV iteration reads x)")
         T, m, n = x.shape
         temporal = int(self.temporal_weight > 0)
         prog = device_for_queue(x.queue).program(["tv.cl"], REAL=c_type(x.dtype), TEMPORAL=temporal)

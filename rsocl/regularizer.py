@@ -97,8 +97,9 @@ class Regularizer:
     def denoise(self, x, weight: float, out=None):
         """Denoise the device array ``x`` with strength ``weight`` (>= 0); returns a device array.
 
-        ``weight = 0`` returns a copy of ``x``. ``out`` (same shape and dtype, another
-        buffer than ``x``) is written and returned when given.
+        ``weight = 0`` returns a copy of ``x``. ``out`` (same shape and dtype) is
+        written and returned when given; whether it may be ``x`` itself is the
+        regularizer's to say.
         """
         import pyopencl.array as cla
 
@@ -115,8 +116,6 @@ class Regularizer:
             out = cla.empty_like(x)
         elif out.shape != x.shape or out.dtype != x.dtype:
             raise ValueError(f"{self.name}: out must match x ({x.shape}, {x.dtype}), got {out.shape}, {out.dtype}")
-        elif out.base_data.int_ptr == x.base_data.int_ptr:
-            raise ValueError(f"{self.name}: out must be another buffer than x (denoisers read x while writing out)")
         if weight == 0:
             import pyopencl as cl
 
