@@ -12,7 +12,7 @@ import numpy as np
 
 from .device import c_type, element_launches
 from .operator import RollingShutterOperator
-from .reduction import sum_sq_diff
+from .reduction import sum_sq_diff, sum_sq_diff_async
 
 __all__ = ["ADMM", "block_inverse"]
 
@@ -129,8 +129,26 @@ class ADMM:
 
         When ``g`` is all zero the absolute ``‖H theta‖`` is returned.
         """
+        return self.residual_async().result()
+
+    def residual_async(self) -> "PendingResidual":
+        """Enqueue :meth:`residual` of the current ``theta``; ``.result()`` waits for it.
+
+        The next :meth:`step` may be enqueued before the result is read: the device
+        works on it while the partial sums travel to the host.
+        """
         self.op.forward_into(self.theta, self.hx)
-        r2 = sum_sq_diff(self.g, self.hx, weights=self.valid)
-        if self.g_norm2 == 0:
+        return PendingResidual(sum_sq_diff_async(self.g, self.hx, weights=self.valid), self.g_norm2)
+
+
+class PendingResidual:
+    """A residual of :meth:`ADMM.residual_async` on its way to the host."""
+
+    def __init__(self, pending, g_norm2):
+        self._pending, self._g_norm2 = pending, g_norm2
+
+    def result(self) -> float:
+        r2 = self._pending.result()
+        if self._g_norm2 == 0:
             return float(np.sqrt(r2))
-        return float(np.sqrt(r2 / self.g_norm2))
+        return float(np.sqrt(r2 / self._g_norm2))

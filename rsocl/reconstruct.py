@@ -35,8 +35,8 @@ class Result:
         The estimate ``theta`` (same intensity units as the scene).
     history : dict of str -> ndarray
         Per iteration: ``residual`` (``‖g - H theta‖/‖g‖``), ``time`` (seconds since
-        the start, wall clock, synchronised with the device), and ``psnr`` (dB, when
-        a ground truth was given).
+        the start, wall clock, when the host has that iteration's residual: the device
+        has finished it), and ``psnr`` (dB, when a ground truth was given).
     rig : Rig
     params : dict
         Everything needed to repeat the run.
@@ -193,32 +193,51 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
 
         bar = tqdm(total=iterations, desc=f"ADMM-{reg.name}", unit="it", leave=False, mininterval=0.5,
                    disable=None)
+
+    def record(it, residual):
+        """Book iteration ``it``'s residual; True when the run should stop after it."""
+        if not math.isfinite(residual):
+            hint = (" The paper's diagonal step (projection='paper') is stable only when eta is large "
+                    f"against psi (max psi = {float(op.psi.max()):.3g}); use projection='exact' or raise eta."
+                    if projection == "paper" else " Check lam, eta and the data scale.")
+            raise FloatingPointError(f"ADMM diverged at iteration {it + 1}: the residual is {residual}.{hint}")
+        history["residual"].append(residual)
+        history["time"].append(time.perf_counter() - start)
+        if truth_dev is not None:
+            mse = (sum_sq_diff(solver.theta, truth_dev) + unsolved_sq) / truth.size
+            history["psnr"].append(10 * math.log10(data_range ** 2 / mse) if mse > 0 else math.inf)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(residual=f"{residual:.3g}", **({"psnr": f"{history['psnr'][-1]:.2f}"}
+                                                            if truth is not None else {}))
+        if callback is not None and callback(it, residual, solver.theta):
+            return True
+        if tol is not None and it > 0:
+            prev = history["residual"][-2]
+            if abs(prev - residual) <= tol * max(residual, np.finfo(float).tiny):
+                return True
+        return False
+
+    # With nothing to look at theta between iterations (no callback, no truth, no tol), the
+    # residual of iteration it is read while the device runs iteration it + 1: the host never
+    # waits on an idle device (measured: 30 % of the time at 50x50, 5 % at 128x128).
+    pipelined = callback is None and truth_dev is None and tol is None
     queue.finish()
     start = time.perf_counter()
     try:
+        pending = None
         for it in range(iterations):
             solver.step()
-            residual = solver.residual()
-            if not math.isfinite(residual):
-                hint = (" The paper's diagonal step (projection='paper') is stable only when eta is large "
-                        f"against psi (max psi = {float(op.psi.max()):.3g}); use projection='exact' or raise eta."
-                        if projection == "paper" else " Check lam, eta and the data scale.")
-                raise FloatingPointError(f"ADMM diverged at iteration {it + 1}: the residual is {residual}.{hint}")
-            history["residual"].append(residual)
-            history["time"].append(time.perf_counter() - start)
-            if truth_dev is not None:
-                mse = (sum_sq_diff(solver.theta, truth_dev) + unsolved_sq) / truth.size
-                history["psnr"].append(10 * math.log10(data_range ** 2 / mse) if mse > 0 else math.inf)
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(residual=f"{residual:.3g}", **({"psnr": f"{history['psnr'][-1]:.2f}"}
-                                                                if truth is not None else {}))
-            if callback is not None and callback(it, residual, solver.theta):
-                break
-            if tol is not None and it > 0:
-                prev = history["residual"][-2]
-                if abs(prev - residual) <= tol * max(residual, np.finfo(float).tiny):
+            current = solver.residual_async()
+            if not pipelined:
+                if record(it, current.result()):
                     break
+                continue
+            if pending is not None:
+                record(it - 1, pending.result())
+            pending = current
+        if pipelined and pending is not None:
+            record(iterations - 1, pending.result())
     finally:
         if bar is not None:
             bar.close()

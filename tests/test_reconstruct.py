@@ -128,3 +128,18 @@ def test_regularizer_recommendations_fill_unset_lam_and_eta(problem):
     assert res.params["lam"] == 0.05
     res = rsocl.reconstruct(g, rig, iterations=2)
     assert (res.params["lam"], res.params["eta"]) == (0.1, 0.2)
+
+
+def test_pipelined_residuals_equal_the_waited_ones(problem):
+    # Without callback, truth or tol, reconstruct reads each residual while the device runs
+    # the next iteration; the history must be the one of the run that waits every time.
+    rig, truth, g = problem
+    kw = dict(iterations=7, lam=0.05, eta=0.3, tv_iterations=3, dtype="float64")
+    fast = rsocl.reconstruct(g, rig, **kw)
+    seen = []
+    waited = rsocl.reconstruct(g, rig, callback=lambda it, r, theta: seen.append(it) and False, **kw)
+    assert seen == list(range(7))
+    assert len(fast.history["residual"]) == len(fast.history["time"]) == 7
+    np.testing.assert_array_equal(fast.history["residual"], waited.history["residual"])
+    np.testing.assert_array_equal(fast.datacube, waited.datacube)
+    assert np.all(np.diff(fast.history["time"]) >= 0)
