@@ -122,11 +122,14 @@ def _full_roi_psnr(point, cache, window, truth_ref):
     return psnr(full[window, y:y + h, x:x + w], truth_ref[window], data_range=1.0)
 
 
-def run_point(point: BenchPoint, truth_cache: dict | None = None) -> dict:
-    """Measure one point; returns its row (see :data:`COLUMNS`; ``_history`` holds the run's history).
+def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: bool = False) -> dict:
+    """Measure one point; returns its row (see :data:`COLUMNS`).
 
     ``truth_cache`` (a dict, reused across points) keeps scenes, snapshots, warm-up marks and
-    the full-ROI reconstructions the crops are compared with.
+    the full-ROI reconstructions the crops are compared with. The timed run is the one a
+    user makes (no ground truth, so no per-iteration PSNR to wait for); ``with_history``
+    adds an untimed run with the truth, whose history (PSNR per iteration) goes to
+    ``_history``.
     """
     from .reconstruct import reconstruct
 
@@ -151,7 +154,7 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None) -> dict:
     # that the datacube stays in [0, 1] (the scale rsocl's lam and eta assume, README)
     g_scaled = g * (ref.dt / rig.dt)
     kwargs = dict(regularizer=point.regularizer, lam=point.lam, eta=point.eta, tv_iterations=point.tv_iterations,
-                  device=point.device, dtype=point.dtype, truth=truth_own)
+                  device=point.device, dtype=point.dtype)
     warm = ("warm",) + tuple(v for f, v in asdict(point).items() if f not in ("scene", "iterations", "lam", "eta"))
     if warm not in cache:
         reconstruct(g_scaled, rig, iterations=1, **kwargs)
@@ -159,13 +162,16 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None) -> dict:
     start = time.perf_counter()
     result = reconstruct(g_scaled, rig, iterations=point.iterations, **kwargs)
     seconds = time.perf_counter() - start
+    history = None
+    if with_history:
+        history = reconstruct(g_scaled, rig, iterations=point.iterations, truth=truth_own, **kwargs).history
     estimate = result.datacube.astype(np.float64)[_reference_index(rig, ref)]
     psnr_value, mean_ssim, per = _metrics(estimate, truth_ref, window)
     if point.roi is None:
         cache[("cube", point)] = estimate
     memory = device_memory_bytes(rig, point.regularizer, point.dtype, device=point.device,
-                                 tv_iterations=point.tv_iterations, with_truth=True)
+                                 tv_iterations=point.tv_iterations, with_truth=False)
     return _row(point, rig, window, psnr=psnr_value, ssim_mean=mean_ssim, ssim_per_subframe=per, seconds=seconds,
                 seconds_per_iteration=float(result.history["time"][-1]) / result.iterations,
                 peak_device_memory_bytes=memory, device=result.params["device"],
-                psnr_full_roi=_full_roi_psnr(point, cache, window, truth_ref), _history=result.history)
+                psnr_full_roi=_full_roi_psnr(point, cache, window, truth_ref), _history=history)

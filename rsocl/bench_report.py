@@ -137,7 +137,8 @@ def markdown(result: BenchResult) -> str:
                        f"({abs(b - a) / min(a, b) * 100:.0f}% apart): read time differences smaller than that as noise")
         lines += [timing + ".", ""]
     lines += ["PSNR (dB, peak 1) and SSIM (mean over sub-frames) against the dt = t_r ground truth, over the "
-             "sub-frames some camera samples; seconds: the whole `reconstruct` call, compile excluded; "
+             "sub-frames some camera samples; seconds: the whole `reconstruct` call as a user makes it (no "
+             "ground truth on the device), compile excluded; "
              "ms/it: the ADMM loop alone; memory: the exact sum of the device buffers rsocl allocates "
              "(PoCL has no allocation counter). `interp3d`: per-pixel linear interpolation in time of the "
              "snapshots (no solver). T follows the capture (the 45° cameras, 5 to 8, read longer diagonals) "
