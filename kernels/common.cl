@@ -71,8 +71,8 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
  * max first + L) clipped to [0, T): every load and store is one contiguous vector, where
  * a pixel-per-work-item loop makes per-lane gathers (2-4x slower on PoCL, measured with
  * benchmarks/roofline.py). Lanes outside their own window get weight 0, so results equal
- * the scalar loops above. The host defines TILE_W (default: 32 bytes of real); the last, partial tile
- * takes the scalar loops. */
+ * the scalar loops above. The host defines TILE_W (default: 32 bytes of reals); the last,
+ * partial tile takes the scalar loops. */
 #ifndef TILE_W
 #if REAL_IS_DOUBLE
 #define TILE_W 4
