@@ -16,7 +16,8 @@ import time
 import numpy as np
 
 import rsocl
-from rsocl.device import element_launches, get_device, voxel_launches
+from rsocl.device import get_device
+from rsocl.launch import element_launches, voxel_launches
 
 
 FLUSH_SOURCE = """

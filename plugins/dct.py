@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device import c_type, device_for_queue, voxel_grid
+from rsocl.device import c_type, device_for_queue
+from rsocl.launch import voxel_grid
 from rsocl.regularizer import Option, Regularizer
 
 __all__ = ["DCT", "dct_matrix"]

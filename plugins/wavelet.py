@@ -25,7 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rsocl.device import device_for_queue, voxel_grid
+from rsocl.device import device_for_queue
+from rsocl.launch import voxel_grid
 from rsocl.regularizer import Option, Regularizer
 
 __all__ = ["Wavelet", "Plan", "WAVELETS", "filters", "axis_levels"]

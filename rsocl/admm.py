@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .device import c_type, element_launches
+from .device import c_type
+from .launch import element_launches
 from .operator import RollingShutterOperator
 from .reduction import sum_sq_diff, sum_sq_diff_async
 

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from . import validation as check
-from .device import c_type, get_device, tile_grid
+from .device import c_type, get_device
+from .launch import tile_grid
 from .rig import Rig
 
 __all__ = ["RollingShutterOperator"]
