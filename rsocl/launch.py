@@ -56,8 +56,8 @@ def voxel_launches(T: int, m: int, n: int):
 def tile_grid(pixels: int, width: int, channels: int = 1):
     """Global and local sizes for one work item per tile of ``width`` pixels (and channel).
 
-    The operator and ADMM kernels take ``width`` (``VW``) neighbouring pixels per work
-    item in explicit vectors; 64 tiles form a work group. The global size is padded and
+    The operator and ADMM kernels take ``width`` (their ``TILE_W``) neighbouring pixels per
+    work item in explicit vectors; 64 tiles form a work group. The global size is padded and
     kernels check bounds.
     """
     tiles = -(-int(pixels) // int(width))

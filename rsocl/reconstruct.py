@@ -232,11 +232,11 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
             if not pipelined:
                 if record(it, current.result()):
                     break
-                continue
-            if pending is not None:
-                record(it - 1, pending.result())
-            pending = current
-        if pipelined and pending is not None:
+            else:
+                if pending is not None:
+                    record(it - 1, pending.result())
+                pending = current
+        if pending is not None:                     # pipelined: the last iteration's residual
             record(iterations - 1, pending.result())
     finally:
         if bar is not None:
