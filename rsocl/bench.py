@@ -30,7 +30,7 @@ from .bench_analysis import SPEED_PICK_DB, pareto_front, picks  # noqa: F401
 from .bench_baseline import interp3d
 from .bench_measure import _device_of, run_point
 from .bench_memory import device_memory_bytes
-from .bench_point import BASELINE, US, BenchPoint, BenchResult
+from .bench_point import BASELINE, US, BenchPoint, BenchResult, on_iterations_line
 from .bench_report import (COLUMNS, _num, markdown, tradeoff_lines, write_csv, write_iterations_csv,  # noqa: F401
                            write_outputs)
 
@@ -216,9 +216,7 @@ def run_bench(default: BenchPoint, sweeps=None, *, quick=False, baseline=True, p
         for point, labels in bar:
             bar.set_postfix_str(_label(point, default))
             try:
-                # the PSNR-against-iterations plot takes its history from the default's knobs
-                on_line = point.regularizer != BASELINE and replace(point, iterations=default.iterations) == default
-                row = run_point(point, cache, with_history=on_line)
+                row = run_point(point, cache, with_history=on_iterations_line(point, default))
             except (KeyboardInterrupt, MemoryError):
                 raise
             except Exception as exc:

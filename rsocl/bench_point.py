@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-__all__ = ["BenchPoint", "BenchResult", "BASELINE", "US"]
+__all__ = ["BenchPoint", "BenchResult", "BASELINE", "US", "on_iterations_line"]
 
 US = 1e-6
 #: Name of the baseline's rows in the ``regularizer`` column.
@@ -109,6 +109,12 @@ def _scene_name(scene) -> str:
     return "builtin" if scene == "builtin" else Path(str(scene)).name
 
 
+def on_iterations_line(point, default) -> bool:
+    """Whether ``point`` differs from ``default`` in its iteration count at most: the points
+    whose PSNR history the iterations plot draws."""
+    return replace(point, iterations=default.iterations) == default
+
+
 @dataclass
 class BenchResult:
     """Rows of a run and what the writers need besides."""
@@ -129,7 +135,7 @@ class BenchResult:
         best = None
         for row in self.rows:
             point = row["_point"]
-            if row.get("_history") is None or replace(point, iterations=self.default.iterations) != self.default:
+            if row.get("_history") is None or not on_iterations_line(point, self.default):
                 continue
             if best is None or point.iterations > best["_point"].iterations:
                 best = row
