@@ -139,7 +139,7 @@ def main():
          lambda: op.adjoint_into(g, y)),
     ]
     print(f"device: {dev.name}; paper array {m}x{n}, T = {T}, {K} cameras, float32, "
-          f"{getattr(op, 'vector_width', 1)} pixels per work item in the operator; median of {args.repeats} round-robin launches, {args.caches} caches\n")
+          f"{op.vector_width} pixels per work item in the operator; median of {args.repeats} round-robin launches, {args.caches} caches\n")
     print("| kernel | bytes it must move | per voxel of the datacube | time (ms) | GB/s | vs copy "
           "| in 64-B lines | GB/s in lines | vs copy, in lines |")
     print("|---|---|---|---|---|---|---|---|---|")
