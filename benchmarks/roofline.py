@@ -115,6 +115,7 @@ def main():
     y = cla.empty_like(x)
     g = op.forward(x)
     p = cla.zeros(q, (3, T, m, n), np.float32)
+    xnext = cla.to_device(q, (np.arange(n) < n - 1).astype(np.float32))
     copy = dev.program(["reduce.cl"], REAL="float", ACC="double" if dev.has_fp64 else "float").copy
     tv = dev.program(["tv.cl"], REAL="float", TEMPORAL=1)
     voxels = voxel_launches(T, m, n)
@@ -130,8 +131,8 @@ def main():
         ("tv_primal (3-D)", (1 + 3 + 1) * N * f32, None,
          lambda: [tv.tv_primal(q, gs, ls, x.data, p.data, y.data, np.float32(1), *sizes, global_offset=off)
                   for gs, ls, off in voxels]),
-        ("tv_dual (3-D)", (1 + 3 + 3) * N * f32, None,
-         lambda: [tv.tv_dual(q, gs, ls, y.data, p.data, np.float32(1 / 6), np.float32(0.5), np.float32(1),
+        ("tv_dual (3-D)", (1 + 3 + 3) * N * f32 + n * f32, None,
+         lambda: [tv.tv_dual(q, gs, ls, y.data, p.data, xnext.data, np.float32(1 / 6), np.float32(0.5), np.float32(1),
                              *sizes, global_offset=off) for gs, ls, off in voxels]),
         ("forward H", samples * f32 + maps, lines + maps,
          lambda: op.forward_into(x, g)),

@@ -11,7 +11,13 @@
 
 /* Launch with an exact grid (rsocl.launch.voxel_launches): there is no bounds test, and
  * neighbours across an edge are read at a clamped index and discarded with a select,
- * because PoCL turns a per-work-item `if` into masked loads and stores (2x slower). */
+ * because PoCL turns a per-work-item `if` into masked loads and stores (2x slower).
+ * Selects on y and s are uniform in a work group (a row); along x, where a per-lane
+ * select costs PoCL a vector of 64-bit indices per row of 8 voxels, the kernels use:
+ *  - xnext[x] = 1 for x < n - 1, else 0 (n values): the dual multiplies the x difference
+ *    by it, a plain vector load and a multiply (10 % of the TV time, measured);
+ *  - the invariant p[1] = 0 at x = n - 1 (the x difference there is 0 from p = 0 on, so
+ *    every step keeps it 0): the primal reads p[1] at i - 1 with no select at x = 0. */
 
 /* out = img + d(p), d the (negative) divergence of p.  global size (n, m, T) */
 __kernel void tv_primal(__global const real *img, __global const real *p, __global real *out,
@@ -21,12 +27,12 @@ __kernel void tv_primal(__global const real *img, __global const real *p, __glob
     size_t N = (size_t)T * m * n, mn = (size_t)m * n;
     size_t i = ((size_t)s * m + y) * n + x;
     real d = -(p[i] + p[N + i]);
-    /* y and s are the same in a whole work group (a row), so these selects are uniform; the
-     * x - 1 neighbour is read at i - 1 always (p[N - 1] when i = 0: in the buffer), which
-     * keeps the load a plain vector load; its value is dropped at x = 0. */
-    real py = p[y > 0 ? i - n : i], px = p[N + i - 1];
+    /* The x - 1 neighbour is read at i - 1 always: at x = 0 that is p[1] at x = n - 1 of the
+     * row before, which is 0 (see above), or p[0] at the very last voxel (y = m - 1: 0 too)
+     * when i = 0. */
+    real py = p[y > 0 ? i - n : i];
     d += y > 0 ? py : (real)0;
-    d += x > 0 ? px : (real)0;
+    d += p[N + i - 1];
 #if TEMPORAL
     real pt = p[2 * N + (s > 0 ? i - mn : i)];
     d -= wt * p[2 * N + i];
@@ -38,8 +44,8 @@ __kernel void tv_primal(__global const real *img, __global const real *p, __glob
 /* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|) at voxel (x, y, s); with
  * from_zero, p is taken as 0 and not read (the first iteration, where out = img).
  * At the far edges the clamped neighbour is the voxel itself: the difference is 0. */
-inline void dual_update(__global const real *out, __global real *p, real tau, real tau_over_weight,
-                        real wt, int T, int m, int n, int from_zero)
+inline void dual_update(__global const real *out, __global real *p, __global const real *xnext,
+                        real tau, real tau_over_weight, real wt, int T, int m, int n, int from_zero)
 {
     int x = get_global_id(0), y = get_global_id(1), s = get_global_id(2);
     size_t N = (size_t)T * m * n, mn = (size_t)m * n;
@@ -49,7 +55,7 @@ inline void dual_update(__global const real *out, __global real *p, real tau, re
     /* out[i + 1] is in the buffer except for the last voxel: read it plainly (a vector
      * load) in every row but the last one, where the row is uniform. */
     real right = (y < m - 1 || s < T - 1) ? out[i + 1] : out[x < n - 1 ? i + 1 : i];
-    real gx = x < n - 1 ? right - o : (real)0;
+    real gx = (right - o) * xnext[x];            /* exactly 0 at x = n - 1 */
     real norm2 = gy * gy + gx * gx;
 #if TEMPORAL
     real gt = wt * (out[s < T - 1 ? i + mn : i] - o);
@@ -64,16 +70,16 @@ inline void dual_update(__global const real *out, __global real *p, real tau, re
 }
 
 /* The dual step, in place.  global size (n, m, T) */
-__kernel void tv_dual(__global const real *out, __global real *p,
+__kernel void tv_dual(__global const real *out, __global real *p, __global const real *xnext,
                       real tau, real tau_over_weight, real wt, int T, int m, int n)
 {
-    dual_update(out, p, tau, tau_over_weight, wt, T, m, n, 0);
+    dual_update(out, p, xnext, tau, tau_over_weight, wt, T, m, n, 0);
 }
 
 /* The first dual step from p = 0, where out = img + d(0) = img: it reads img and only
  * writes p (no fill of p, no first primal step).  global size (n, m, T) */
-__kernel void tv_dual_first(__global const real *img, __global real *p,
+__kernel void tv_dual_first(__global const real *img, __global real *p, __global const real *xnext,
                             real tau, real tau_over_weight, real wt, int T, int m, int n)
 {
-    dual_update(img, p, tau, tau_over_weight, wt, T, m, n, 1);
+    dual_update(img, p, xnext, tau, tau_over_weight, wt, T, m, n, 1);
 }
