@@ -84,9 +84,35 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
 #define RSOCL_CAT(a, b) RSOCL_CAT_(a, b)
 typedef RSOCL_CAT(REAL, TILE_W) realw;
 typedef RSOCL_CAT(int, TILE_W) intw;
-#define load_w(ptr) RSOCL_CAT(vload, TILE_W)(0, (ptr))        /* real or int tile */
-#define store_w(v, ptr) RSOCL_CAT(vstore, TILE_W)((v), 0, (ptr))
 #define convert_realw RSOCL_CAT(convert_, RSOCL_CAT(REAL, TILE_W))
+
+/* Tile loads and stores at any alignment, written element by element: LLVM merges them
+ * into one unaligned vector load or store, where PoCL 3.0 calls vload8/vstore8 as library
+ * functions (not inlined): the forward kernel ran 25-30 % faster this way (kernel time from
+ * OpenCL profiling events, warm caches, 128x128 paper array). */
+#if TILE_W == 2
+#define RSOCL_TILE(p) (p)[0], (p)[1]
+#define RSOCL_STORE(v, p) ((p)[0] = (v).s0, (p)[1] = (v).s1)
+#elif TILE_W == 4
+#define RSOCL_TILE(p) (p)[0], (p)[1], (p)[2], (p)[3]
+#define RSOCL_STORE(v, p) ((p)[0] = (v).s0, (p)[1] = (v).s1, (p)[2] = (v).s2, (p)[3] = (v).s3)
+#elif TILE_W == 8
+#define RSOCL_TILE(p) (p)[0], (p)[1], (p)[2], (p)[3], (p)[4], (p)[5], (p)[6], (p)[7]
+#define RSOCL_STORE(v, p) ((p)[0] = (v).s0, (p)[1] = (v).s1, (p)[2] = (v).s2, (p)[3] = (v).s3, \
+                           (p)[4] = (v).s4, (p)[5] = (v).s5, (p)[6] = (v).s6, (p)[7] = (v).s7)
+#elif TILE_W == 16
+#define RSOCL_TILE(p) (p)[0], (p)[1], (p)[2], (p)[3], (p)[4], (p)[5], (p)[6], (p)[7], \
+                      (p)[8], (p)[9], (p)[10], (p)[11], (p)[12], (p)[13], (p)[14], (p)[15]
+#define RSOCL_STORE(v, p) ((p)[0] = (v).s0, (p)[1] = (v).s1, (p)[2] = (v).s2, (p)[3] = (v).s3, \
+                           (p)[4] = (v).s4, (p)[5] = (v).s5, (p)[6] = (v).s6, (p)[7] = (v).s7, \
+                           (p)[8] = (v).s8, (p)[9] = (v).s9, (p)[10] = (v).sa, (p)[11] = (v).sb, \
+                           (p)[12] = (v).sc, (p)[13] = (v).sd, (p)[14] = (v).se, (p)[15] = (v).sf)
+#else
+#error "TILE_W must be 2, 4, 8 or 16"
+#endif
+inline realw load_w(__global const real *p) { return (realw)(RSOCL_TILE(p)); }
+inline intw load_iw(__global const int *p) { return (intw)(RSOCL_TILE(p)); }
+inline void store_w(realw v, __global real *p) { RSOCL_STORE(v, p); }
 
 /* Sub-frames [*lo, *hi) that cover the windows of the TILE_W pixels starting at first + q0. */
 inline void tile_span(__global const int *first, size_t q0, int T, int L, int *lo, int *hi)
@@ -123,7 +149,7 @@ inline realw window_dot_v(__global const real *f, __global const int *first, __g
 {
     int lo, hi;
     tile_span(first, q0, T, L, &lo, &hi);
-    realw start = convert_realw(load_w(first + q0)), fr = load_w(frac + q0);
+    realw start = convert_realw(load_iw(first + q0)), fr = load_w(frac + q0);
     realw acc = (realw)(real)0;
     for (int s = lo; s < hi; ++s)
         acc += shutter_weight_v((realw)(real)s - start, fr, (realw)len) * load_w(f + (size_t)s * mn + p0);
@@ -136,7 +162,7 @@ inline void window_scatter_v(__global real *f, __global const int *first, __glob
 {
     int lo, hi;
     tile_span(first, q0, T, L, &lo, &hi);
-    realw start = convert_realw(load_w(first + q0)), fr = load_w(frac + q0);
+    realw start = convert_realw(load_iw(first + q0)), fr = load_w(frac + q0);
     for (int s = lo; s < hi; ++s) {
         __global real *dst = f + (size_t)s * mn + p0;
         store_w(load_w(dst) + scale * shutter_weight_v((realw)(real)s - start, fr, (realw)len), dst);
