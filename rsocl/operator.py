@@ -12,7 +12,7 @@ import numpy as np
 
 from . import validation as check
 from .device import c_type, get_device
-from .launch import tile_grid
+from .launch import element_launches, tile_grid
 from .rig import Rig
 
 __all__ = ["RollingShutterOperator"]
@@ -131,7 +131,8 @@ class RollingShutterOperator:
         import pyopencl as cl
 
         if base is None:
-            cl.enqueue_fill_buffer(self.queue, out.data, self.dtype.type(0), 0, out.nbytes)
+            for gsize, lsize, offset in element_launches(out.size):
+                self.program.zero(self.queue, gsize, lsize, out.data, global_offset=offset)
         elif base is not out:
             cl.enqueue_copy(self.queue, out.data, base.data)
         self.program.adjoint_scatter(self.queue, *self.tile_grid(), g.data, out.data, *self._geometry(),
