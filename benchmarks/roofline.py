@@ -18,6 +18,7 @@ import numpy as np
 import rsocl
 from rsocl.device import get_device
 from rsocl.launch import element_launches, voxel_launches
+from rsocl_plugins.tv import GROUP as TV_GROUP
 
 
 FLUSH_SOURCE = """
@@ -118,7 +119,7 @@ def main():
     xnext = cla.to_device(q, (np.arange(n) < n - 1).astype(np.float32))
     copy = dev.program(["reduce.cl"], REAL="float", ACC="double" if dev.has_fp64 else "float").copy
     tv = dev.program(["tv.cl"], REAL="float", TEMPORAL=1)
-    voxels = voxel_launches(T, m, n)
+    voxels = voxel_launches(T, m, n, group=TV_GROUP)        # as the TV plugin launches them
     sizes = (np.int32(T), np.int32(m), np.int32(n))
     # sampled voxels per channel and pixel: the window loop reads only those
     first, last = rig.sampled_window()

@@ -14,9 +14,10 @@ def test_exact_launches_cover_the_extent_once(extent):
         covered.extend(range(offset, offset + size))
     assert covered == list(range(extent))
     assert len(launches) == 1 or launches[0][2] == 64        # a remainder launch only after full groups
-    # every voxel of a (T, m, n) grid exactly once, rows as work groups
+    # every voxel of a (T, m, n) grid exactly once: split rows, or blocks of whole rows
     for gsize, lsize, offset in launch.voxel_launches(3, 2, extent):
-        assert gsize[1:] == (2, 3) and lsize[1:] == (1, 1) and gsize[0] % lsize[0] == 0
+        assert gsize[1:] == (2, 3) and lsize[2] == 1 and gsize[0] % lsize[0] == 0
+        assert lsize[1] == 1 or lsize[0] == extent
 
 
 def test_exact_launches_rejects_an_empty_extent():
@@ -27,3 +28,20 @@ def test_exact_launches_rejects_an_empty_extent():
 def test_device_module_still_offers_the_grids():
     # plugins written against the first release import the grids from rsocl.device
     assert device.voxel_grid is launch.voxel_grid and device.exact_launches is launch.exact_launches
+
+
+@pytest.mark.parametrize("m, n, group", [(128, 128, 512), (64, 64, 512), (50, 50, 512), (53, 8, 512),
+                                         (7, 1, 512), (3, 700, 512), (3, 130, 64), (6, 64, 64)])
+def test_voxel_launches_take_blocks_of_whole_rows_when_they_fit(m, n, group):
+    T = 3
+    launches = launch.voxel_launches(T, m, n, group=group)
+    seen = set()
+    for (gx, gy, gt), (lx, ly, lt), (ox, oy, ot) in launches:
+        assert gx % lx == 0 and gy % ly == 0 and gt % lt == 0 and lx * ly * lt <= group
+        seen.update((x, y) for x in range(ox, ox + gx) for y in range(oy, oy + gy))
+        assert (gy, gt, oy, ot) == (m, T, 0, 0)
+    assert seen == {(x, y) for x in range(n) for y in range(m)}       # every voxel exactly once
+    if n <= group:
+        (_, (lx, ly, _), _), = launches
+        assert lx == n and m % ly == 0 and n * ly <= group
+        assert not [d for d in range(ly + 1, m + 1) if m % d == 0 and n * d <= group]   # the largest block

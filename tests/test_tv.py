@@ -73,3 +73,9 @@ def test_input_is_validated(device):
     x = cla.zeros(device.queue, (2, 2, 2), np.float32)
     with pytest.raises(ValueError, match="out must be another buffer than x"):
         TV().denoise(x, 0.1, out=x)
+
+
+def test_workspace_bytes_counts_the_dual_and_the_edge_weights():
+    # p: 3 planes in 3-D, 2 in 2-D; xnext: one value per column
+    assert TV().workspace_bytes((5, 7, 9), np.float32) == (3 * 5 * 7 * 9 + 9) * 4
+    assert TV(temporal_weight=0).workspace_bytes((5, 7, 9), np.float64) == (2 * 5 * 7 * 9 + 9) * 8
