@@ -17,8 +17,8 @@ import numpy as np
 
 import rsocl
 from rsocl.device import get_device
-from rsocl.launch import element_launches, voxel_launches
-from rsocl_plugins.tv import GROUP as TV_GROUP
+from rsocl.launch import element_launches
+from rsocl_plugins import tv as tv_plugin
 
 
 FLUSH_SOURCE = """
@@ -116,10 +116,10 @@ def main():
     y = cla.empty_like(x)
     g = op.forward(x)
     p = cla.zeros(q, (3, T, m, n), np.float32)
-    xnext = cla.to_device(q, (np.arange(n) < n - 1).astype(np.float32))
+    xnext = cla.to_device(q, tv_plugin.edge_weights(n, np.float32))
     copy = dev.program(["reduce.cl"], REAL="float", ACC="double" if dev.has_fp64 else "float").copy
     tv = dev.program(["tv.cl"], REAL="float", TEMPORAL=1)
-    voxels = voxel_launches(T, m, n, group=TV_GROUP)        # as the TV plugin launches them
+    voxels = tv_plugin.launches(tv, dev.device, T, m, n)        # as the TV plugin launches them
     sizes = (np.int32(T), np.int32(m), np.int32(n))
     # sampled voxels per channel and pixel: the window loop reads only those
     first, last = rig.sampled_window()

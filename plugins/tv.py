@@ -15,6 +15,22 @@ __all__ = ["TV"]
 GROUP = 512
 
 
+def edge_weights(n: int, dtype) -> np.ndarray:
+    """``xnext`` of ``tv.cl``: 1 where a column has a right neighbour (x < n - 1), else 0."""
+    return (np.arange(n) < n - 1).astype(dtype)
+
+
+def launches(prog, device, T: int, m: int, n: int):
+    """Exact launch grids of the TV kernels of ``prog`` (no bounds test in them), in work groups
+    of whole rows up to :data:`GROUP`, capped by what ``device`` and the kernels allow."""
+    import pyopencl as cl
+
+    group = min([GROUP, device.max_work_group_size] + [
+        k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)
+        for k in (prog.tv_primal, prog.tv_dual, prog.tv_dual_first)])
+    return voxel_launches(T, m, n, group=group)
+
+
 class TV(Regularizer):
     """Isotropic TV (Chambolle), as ``skimage.restoration.denoise_tv_chambolle`` with ``eps=0``.
 
@@ -49,24 +65,18 @@ class TV(Regularizer):
         planes = 3 if temporal else 2
         cache = self.__dict__.setdefault("_dual", {})
         key = (x.shape, x.dtype.str, planes, x.queue.int_ptr)
-        if key not in cache:
+        if key not in cache:                        # once per shape, dtype and queue
             cache.clear()
-            xnext = (np.arange(n) < n - 1).astype(x.dtype)     # 1 where x has a right neighbour
-            cache[key] = (cla.empty(x.queue, (planes,) + x.shape, x.dtype), cla.to_device(x.queue, xnext))
-        p, xnext = cache[key]
+            cache[key] = (cla.empty(x.queue, (planes,) + x.shape, x.dtype),
+                          cla.to_device(x.queue, edge_weights(n, x.dtype)), launches(prog, x.queue.device, T, m, n))
+        p, xnext, grids = cache[key]
         wt = float(self.temporal_weight) if temporal else 0.0
         tau = 1.0 / (2.0 * (2.0 + wt * wt))
         real_t = x.dtype.type
         sizes = (np.int32(T), np.int32(m), np.int32(n))
-        # exact grids (the kernels have no bounds test), in groups the device and kernels allow
-        dev = x.queue.device
-        group = min([GROUP, dev.max_work_group_size] + [
-            k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, dev)
-            for k in (prog.tv_primal, prog.tv_dual, prog.tv_dual_first)])
-        launches = voxel_launches(T, m, n, group=group)
 
         def each(kernel, *args):
-            for gsize, lsize, offset in launches:
+            for gsize, lsize, offset in grids:
                 kernel(x.queue, gsize, lsize, *args, *sizes, global_offset=offset)
 
         steps = (real_t(tau), real_t(tau / weight), real_t(wt))
