@@ -29,15 +29,13 @@
 #define NV 2
 #define CH (VW * NV)
 typedef DCT_CAT(REAL, VW) realv;
-#if VW == TILE_W
 /* common.cl's element-by-element tile access: one vector load or store, where PoCL 3.0
- * calls vload8/vstore8 out of line */
+ * calls vload8/vstore8 out of line. Its tiles have the default TILE_W, which is VW. */
+#if VW != TILE_W
+#error "dct.cl needs TILE_W == VW (the host must not set TILE_W for this program)"
+#endif
 #define VLOADW(i, p) load_w((p) + (size_t)(i) * VW)
 #define VSTOREW(v, i, p) store_w((v), (p) + (size_t)(i) * VW)
-#else
-#define VLOADW DCT_CAT(vload, VW)
-#define VSTOREW DCT_CAT(vstore, VW)
-#endif
 
 /* One pass along a strided axis (axis 1: y, stride n; axis 2: t, stride m*n) in
  * blocks of b: the coefficient o of row/sub-frame i for CH consecutive x.
