@@ -3,8 +3,8 @@
  *
  *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [skipped in GAP]
  *                                             f  = v = theta + b
- *   admm_project   (one work item per tile    r = g - H v,  z = (eta I + M)^-1 r  (exact)
- *                   of TILE_W pixels)                        | r / (eta + psi)    (paper, Eq. 15)
+ *   admm_project   (one work item per block   r = g - H v,  z = (eta I + M)^-1 r  (exact)
+ *                   of TILE_R x TILE_W px)                   | r / (eta + psi)    (paper, Eq. 15)
  *                                             f += Hᵀ z     (window loops only)
  *   admm_difference (one work item per voxel) u = f - b     (input of the denoiser)
  *
@@ -50,35 +50,45 @@ inline void project_pixel(__global real *f, __global const real *g,
     }
 }
 
-/* global size ceil(m*n / TILE_W): one work item per tile of TILE_W pixels (common.cl). */
+/* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R)): one work item per block of
+ * TILE_R x TILE_W pixels (common.cl); blocks cut by the ROI's edge take project_pixel. */
 __kernel void admm_project(__global real *f, __global const real *g,
                            __global const int *first, __global const real *frac,
                            __global const real *len, __global const real *gain,
-                           __global const real *inverse, real eta, int T, int L, int mn_)
+                           __global const real *inverse, real eta, int T, int L, int m_, int n_)
 {
-    size_t mn = (size_t)mn_;
-    size_t p0 = get_global_id(0) * (size_t)TILE_W;
-    if (p0 >= mn) return;
-    if (p0 + TILE_W > mn) {
-        for (size_t p = p0; p < mn; ++p)
-            project_pixel(f, g, first, frac, len, gain, inverse, eta, T, L, mn, p);
+    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n;
+    size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
+    if (x0 >= n || y0 >= m) return;
+    if (x0 + TILE_W > n || y0 + TILE_R > m) {
+        for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
+            for (size_t x = x0; x < x0 + TILE_W && x < n; ++x)
+                project_pixel(f, g, first, frac, len, gain, inverse, eta, T, L, mn, y * n + x);
         return;
     }
-    realw r[NCH];
+    size_t p0 = y0 * n + x0;
+    realw res[NCH][TILE_R];            /* r = g - H v, per channel and row of the block */
     for (int k = 0; k < NCH; ++k) {
         size_t q0 = (size_t)k * mn + p0;
-        r[k] = load_w(g + q0) - gain[k] * window_dot_v(f, first, frac, len[k], q0, T, L, mn, p0);
+        realw hv[TILE_R];
+        block_dot(f, first, frac, len[k], q0, T, L, mn, n, p0, hv);
+        for (int r = 0; r < TILE_R; ++r) res[k][r] = load_w(g + q0 + (size_t)r * n) - gain[k] * hv[r];
     }
     for (int k = 0; k < NCH; ++k) {
         size_t q0 = (size_t)k * mn + p0;
+        realw scale[TILE_R];
+        for (int r = 0; r < TILE_R; ++r) {
+            size_t pr = p0 + (size_t)r * n;
 #if PROJECTION_EXACT
-        realw z = (realw)(real)0;
-        for (int l = 0; l < NCH; ++l) z += load_w(inverse + ((size_t)k * NCH + l) * mn + p0) * r[l];
+            realw z = (realw)(real)0;
+            for (int l = 0; l < NCH; ++l) z += load_w(inverse + ((size_t)k * NCH + l) * mn + pr) * res[l][r];
 #else
-        realw d = eta + load_w(inverse + q0);     /* inverse holds psi here */
-        realw z = d > (realw)(real)0 ? r[k] / d : (realw)(real)0;
+            realw d = eta + load_w(inverse + (size_t)k * mn + pr);     /* inverse holds psi here */
+            realw z = d > (realw)(real)0 ? res[k][r] / d : (realw)(real)0;
 #endif
-        window_scatter_v(f, first, frac, len[k], q0, T, L, mn, p0, gain[k] * z);
+            scale[r] = gain[k] * z;
+        }
+        block_scatter(f, first, frac, len[k], q0, T, L, mn, n, p0, scale);
     }
 }
 

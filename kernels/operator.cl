@@ -1,27 +1,33 @@
 /* The row-timed shutter operator H (forward), its adjoint, and the diagonal and
  * per-pixel blocks of H Hᵀ. Layouts: f[T][m][n], g[K][m][n], first/frac[K][m][n],
- * len[K], gain[K]. Each work item handles one pixel (psi, gram) or one tile of TILE_W pixels
- * (forward, adjoint; see common.cl) and loops over the exposure window only: cost
+ * len[K], gain[K]. Each work item handles one pixel (psi, gram) or one block of TILE_R x TILE_W
+ * pixels (forward, adjoint; see common.cl) and loops over the exposure window only: cost
  * ~ K*m*n*L, never K*T*m*n. `first` counts from the first sub-frame solved for, so it may
  * be negative; T is the number of sub-frames solved for. Needs common.cl. */
 
-/* g[k, p] = gain[k] * sum_s w(k, s, p) f[s, p];   global size (ceil(m*n / TILE_W), K):
- * one work item per tile of TILE_W pixels of one channel. */
+/* g[k, p] = gain[k] * sum_s w(k, s, p) f[s, p];   global size (>= ceil(n / TILE_W),
+ * >= ceil(m / TILE_R), K): one work item per block of TILE_R x TILE_W pixels of one channel
+ * (common.cl); blocks cut by the ROI's edge take the scalar loop per pixel. */
 __kernel void forward(__global const real *f, __global real *g,
                       __global const int *first, __global const real *frac,
                       __global const real *len, __global const real *gain,
-                      int T, int L, int mn_)
+                      int T, int L, int m_, int n_)
 {
-    size_t k = get_global_id(1), mn = (size_t)mn_;
-    size_t p0 = get_global_id(0) * (size_t)TILE_W;
-    if (p0 >= mn) return;
-    size_t q0 = k * mn + p0;
-    if (p0 + TILE_W <= mn) {
-        store_w(gain[k] * window_dot_v(f, first, frac, len[k], q0, T, L, mn, p0), g + q0);
+    size_t k = get_global_id(2), m = (size_t)m_, n = (size_t)n_, mn = m * n;
+    size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
+    if (x0 >= n || y0 >= m) return;
+    if (x0 + TILE_W <= n && y0 + TILE_R <= m) {
+        size_t p0 = y0 * n + x0, q0 = k * mn + p0;
+        realw acc[TILE_R];
+        block_dot(f, first, frac, len[k], q0, T, L, mn, n, p0, acc);
+        for (int r = 0; r < TILE_R; ++r) store_w(gain[k] * acc[r], g + q0 + (size_t)r * n);
         return;
     }
-    for (size_t p = p0, q = q0; p < mn; ++p, ++q)
-        g[q] = gain[k] * window_dot(f, first[q], frac[q], len[k], T, L, mn, p);
+    for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
+        for (size_t x = x0; x < x0 + TILE_W && x < n; ++x) {
+            size_t p = y * n + x, q = k * mn + p;
+            g[q] = gain[k] * window_dot(f, first[q], frac[q], len[k], T, L, mn, p);
+        }
 }
 
 /* x = 0, one work item per element on an exact grid (rsocl.launch.element_launches): the
@@ -33,29 +39,35 @@ __kernel void zero(__global real *x)
 }
 
 /* f[s, p] += sum_k gain[k] w(k, s, p) g[k, p], over each channel's window only;
- * global size ceil(m*n / TILE_W): one work item per tile of TILE_W pixels, all channels
- * (tiles are disjoint, so there are no races). The host first sets f to 0 (Hᵀ g, kernel zero) or
- * to a base (base + Hᵀ g) with a copy: a per-pixel loop over the whole column runs 5x slower
- * on CPU devices. */
+ * global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R)): one work item per block of
+ * TILE_R x TILE_W pixels, all channels (blocks are disjoint, so there are no races). The host
+ * first sets f to 0 (Hᵀ g, kernel zero) or to a base (base + Hᵀ g) with a copy: a per-pixel
+ * loop over the whole column runs 5x slower on CPU devices. */
 __kernel void adjoint_scatter(__global const real *g, __global real *f,
                               __global const int *first, __global const real *frac,
                               __global const real *len, __global const real *gain,
-                              int K, int T, int L, int mn_)
+                              int K, int T, int L, int m_, int n_)
 {
-    size_t mn = (size_t)mn_;
-    size_t p0 = get_global_id(0) * (size_t)TILE_W;
-    if (p0 >= mn) return;
-    if (p0 + TILE_W <= mn) {
+    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n;
+    size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
+    if (x0 >= n || y0 >= m) return;
+    if (x0 + TILE_W <= n && y0 + TILE_R <= m) {
+        size_t p0 = y0 * n + x0;
         for (int k = 0; k < K; ++k) {
             size_t q0 = (size_t)k * mn + p0;
-            window_scatter_v(f, first, frac, len[k], q0, T, L, mn, p0, gain[k] * load_w(g + q0));
+            realw scale[TILE_R];
+            for (int r = 0; r < TILE_R; ++r) scale[r] = gain[k] * load_w(g + q0 + (size_t)r * n);
+            block_scatter(f, first, frac, len[k], q0, T, L, mn, n, p0, scale);
         }
         return;
     }
-    for (size_t p = p0; p < mn; ++p)
-        for (int k = 0; k < K; ++k) {
-            size_t q = (size_t)k * mn + p;
-            window_scatter(f, first[q], frac[q], len[k], T, L, mn, p, gain[k] * g[q]);
+    for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
+        for (size_t x = x0; x < x0 + TILE_W && x < n; ++x) {
+            size_t p = y * n + x;
+            for (int k = 0; k < K; ++k) {
+                size_t q = (size_t)k * mn + p;
+                window_scatter(f, first[q], frac[q], len[k], T, L, mn, p, gain[k] * g[q]);
+            }
         }
 }
 

@@ -62,13 +62,20 @@ def voxel_launches(T: int, m: int, n: int, group: int = 64):
     return [((size, m, T), (local, 1, 1), (offset, 0, 0)) for offset, size, local in exact_launches(n)]
 
 
-def tile_grid(pixels: int, width: int, channels: int = 1):
-    """Global and local sizes for one work item per tile of ``width`` pixels (and channel).
+def tile_grid(m: int, n: int, width: int, rows: int, channels: int = 1, group: int = 64):
+    """Global and local sizes for one work item per block of ``rows x width`` pixels (and channel).
 
-    The operator and ADMM kernels take ``width`` (their ``TILE_W``) neighbouring pixels per
-    work item in explicit vectors; 64 tiles form a work group. The global size is padded and
-    kernels check bounds.
+    The operator and ADMM kernels take a block of ``rows`` (their ``TILE_R``) rows of
+    ``width`` (their ``TILE_W``) neighbouring pixels per work item, in explicit vectors. A work
+    group is up to ``group`` blocks: up to ``group`` of one block row, or several whole block
+    rows. The global size is padded (less than one work group per dimension) and kernels check
+    bounds; blocks cut by the ROI's right or bottom edge take the kernels' per-pixel loops.
     """
-    tiles = -(-int(pixels) // int(width))
-    lx = min(64, tiles)
-    return ((-(-tiles // lx) * lx, int(channels)), (lx, 1))
+    m, n, width, rows, group = int(m), int(n), int(width), int(rows), int(group)
+    if min(m, n, width, rows, group) < 1:
+        raise ValueError(f"m, n, width, rows and group must be >= 1, got {m}, {n}, {width}, {rows}, {group}")
+    tiles, block_rows = -(-n // width), -(-m // rows)
+    lx = min(group, tiles)
+    groups_y = -(-block_rows // max(1, group // lx))          # as few groups as fit, of balanced size
+    ly = -(-block_rows // groups_y)
+    return ((-(-tiles // lx) * lx, groups_y * ly, int(channels)), (lx, ly, 1))

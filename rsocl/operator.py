@@ -19,6 +19,8 @@ __all__ = ["RollingShutterOperator"]
 
 #: Pixels per work item (one explicit vector of this many lanes): 32 bytes per load.
 VECTOR_WIDTH = {"float32": 8, "float64": 4}
+#: rows per work item of the forward, adjoint and ADMM projection kernels (``TILE_R``)
+BLOCK_ROWS = 4
 
 
 class RollingShutterOperator:
@@ -109,12 +111,17 @@ class RollingShutterOperator:
 
     @property
     def tile_defines(self):
-        """Program definitions of the tile kernels (``TILE_W``)."""
-        return {"TILE_W": self.vector_width}
+        """Program definitions of the block kernels (``TILE_W`` pixels by ``TILE_R`` rows)."""
+        return {"TILE_W": self.vector_width, "TILE_R": BLOCK_ROWS}
 
     def tile_grid(self, channels=1):
-        """Global and local sizes of a kernel with one work item per tile of pixels."""
-        return tile_grid(self.mn, self.vector_width, channels)
+        """Global and local sizes of a kernel with one work item per block of pixels."""
+        m, n = self.rig.shape
+        return tile_grid(m, n, self.vector_width, BLOCK_ROWS, channels)
+
+    def _shape_args(self):
+        """``(m, n)`` as kernel arguments."""
+        return tuple(np.int32(v) for v in self.rig.shape)
 
     def _geometry(self):
         return (self.first.data, self.frac.data, self.length.data, self.gain.data)
@@ -123,7 +130,7 @@ class RollingShutterOperator:
     def forward_into(self, f, out):
         """``out = H f`` for device arrays (no checks, no allocation)."""
         self.program.forward(self.queue, *self.tile_grid(self.K), f.data, out.data, *self._geometry(),
-                             np.int32(self.T), np.int32(self.L), np.int32(self.mn))
+                             np.int32(self.T), np.int32(self.L), *self._shape_args())
         return out
 
     def adjoint_into(self, g, out, base=None):
@@ -136,7 +143,7 @@ class RollingShutterOperator:
         elif base is not out:
             cl.enqueue_copy(self.queue, out.data, base.data)
         self.program.adjoint_scatter(self.queue, *self.tile_grid(), g.data, out.data, *self._geometry(),
-                                     np.int32(self.K), np.int32(self.T), np.int32(self.L), np.int32(self.mn))
+                                     np.int32(self.K), np.int32(self.T), np.int32(self.L), *self._shape_args())
         return out
 
     def forward(self, f):

@@ -45,3 +45,22 @@ def test_voxel_launches_take_blocks_of_whole_rows_when_they_fit(m, n, group):
         (_, (lx, ly, _), _), = launches
         assert lx == n and m % ly == 0 and n * ly <= group
         assert not [d for d in range(ly + 1, m + 1) if m % d == 0 and n * d <= group]   # the largest block
+
+
+@pytest.mark.parametrize("m, n, width, rows", [(128, 128, 8, 4), (50, 50, 8, 4), (13, 13, 4, 4), (3, 7, 8, 4),
+                                               (1, 1, 8, 4), (9, 1000, 8, 4)])
+def test_tile_grid_blocks_cover_every_pixel_once(m, n, width, rows):
+    (gx, gy, gk), (lx, ly, lk) = launch.tile_grid(m, n, width, rows, channels=3)
+    assert gx % lx == 0 and gy % ly == 0 and gk % lk == 0 and gk == 3 and lx * ly * lk <= 64
+    seen = []
+    for bx in range(gx):                     # each work item's block, clipped as the kernels clip it
+        for by in range(gy):
+            x0, y0 = bx * width, by * rows
+            seen += [(y, x) for y in range(y0, min(y0 + rows, m)) for x in range(x0, min(x0 + width, n))]
+    assert sorted(seen) == [(y, x) for y in range(m) for x in range(n)]
+    assert gy - ly < -(-m // rows) <= gy and gx - lx < -(-n // width) <= gx   # padding: less than one group
+
+
+def test_tile_grid_rejects_empty_shapes():
+    with pytest.raises(ValueError, match="m, n, width, rows and group must be >= 1"):
+        launch.tile_grid(0, 5, 8, 4)

@@ -120,11 +120,12 @@ def test_datacube_too_large_for_device_is_refused(device):
 
 
 @pytest.mark.parametrize("mask", ["exact", "binary"])
-@pytest.mark.parametrize("shape", [(16, 16), (13, 13), (3, 7)])
+@pytest.mark.parametrize("shape", [(16, 16), (13, 13), (3, 7), (10, 16), (8, 21)])
 def test_tiles_and_cut_windows_match_zero_padded_reference(shape, mask, dtype, device, rng):
-    # The kernels take VW pixels per work item (full tiles, and a scalar tail when m*n is
-    # not a multiple of VW); a sub-frame range cuts windows at both ends (first < 0, and
-    # windows running past T). Both must equal H on the zero-padded datacube.
+    # The kernels take blocks of 4 rows x VW pixels per work item; blocks cut by the right
+    # edge (8x21), the bottom edge (10x16), both (13x13) or smaller than a block (3x7) take the
+    # scalar loops. A sub-frame range cuts windows at both ends (first < 0, and windows
+    # running past T). All must equal H on the zero-padded datacube.
     rig = Rig([Camera(0, t_e=1.6e-4, t_r=3e-5), Camera(90, t_e=1.6e-4, t_r=3e-5, t_a=2e-5),
                Camera(45, t_e=1.6e-4, t_r=3e-5), Camera(200, t_e=0.5e-4, t_r=3e-5, gain=0.8)], shape, mask=mask)
     cut = slice(3, rig.T - 4)
