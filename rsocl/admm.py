@@ -117,7 +117,7 @@ class ADMM:
             self.program.admm_dual(op.queue, gsize, lsize, self.theta.data, self.b.data, self.f.data, update_dual,
                                    global_offset=offset)
         self.program.admm_project(
-            op.queue, *op.tile_grid(), self.f.data, self.g.data, *op._geometry(), self.inverse.data,
+            op.queue, *op.block_grid(), self.f.data, self.g.data, *op._geometry(), self.inverse.data,
             op.dtype.type(self.eta), np.int32(op.T), np.int32(op.L), *op._shape_args())
         for gsize, lsize, offset in self.voxels:
             self.program.admm_difference(op.queue, gsize, lsize, self.f.data, self.b.data, self.u.data,

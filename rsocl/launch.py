@@ -2,13 +2,13 @@
 
 Voxel-parallel kernels (TV, the ADMM's element-wise passes, the copy reference) run on exact
 grids with no bounds test (:func:`exact_launches`); the operator's tile kernels take one work
-item per tile of pixels (:func:`tile_grid`); :func:`voxel_grid` pads, for kernels that test
+item per block of pixels (:func:`block_grid`); :func:`voxel_grid` pads, for kernels that test
 their bounds.
 """
 
 from __future__ import annotations
 
-__all__ = ["voxel_grid", "exact_launches", "element_launches", "voxel_launches", "tile_grid"]
+__all__ = ["voxel_grid", "exact_launches", "element_launches", "voxel_launches", "tile_grid", "block_grid"]
 
 
 def voxel_grid(T: int, m: int, n: int):
@@ -62,7 +62,19 @@ def voxel_launches(T: int, m: int, n: int, group: int = 64):
     return [((size, m, T), (local, 1, 1), (offset, 0, 0)) for offset, size, local in exact_launches(n)]
 
 
-def tile_grid(m: int, n: int, width: int, rows: int, channels: int = 1, group: int = 64):
+def tile_grid(pixels: int, width: int, channels: int = 1):
+    """Global and local sizes for one work item per tile of ``width`` pixels (and channel).
+
+    Flat tiles of ``width`` neighbouring pixels (flat index), 64 tiles per work group; the
+    global size is padded and kernels check bounds. rsocl's own operator kernels now take
+    blocks of rows (:func:`block_grid`); this grid stays for plugins written against it.
+    """
+    tiles = -(-int(pixels) // int(width))
+    lx = min(64, tiles)
+    return ((-(-tiles // lx) * lx, int(channels)), (lx, 1))
+
+
+def block_grid(m: int, n: int, width: int, rows: int, channels: int = 1, group: int = 64):
     """Global and local sizes for one work item per block of ``rows x width`` pixels (and channel).
 
     The operator and ADMM kernels take a block of ``rows`` (their ``TILE_R``) rows of

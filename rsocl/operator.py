@@ -12,7 +12,7 @@ import numpy as np
 
 from . import validation as check
 from .device import c_type, get_device
-from .launch import element_launches, tile_grid
+from .launch import block_grid, element_launches
 from .rig import Rig
 
 __all__ = ["RollingShutterOperator"]
@@ -114,10 +114,10 @@ class RollingShutterOperator:
         """Program definitions of the block kernels (``TILE_W`` pixels by ``TILE_R`` rows)."""
         return {"TILE_W": self.vector_width, "TILE_R": BLOCK_ROWS}
 
-    def tile_grid(self, channels=1):
+    def block_grid(self, channels=1):
         """Global and local sizes of a kernel with one work item per block of pixels."""
         m, n = self.rig.shape
-        return tile_grid(m, n, self.vector_width, BLOCK_ROWS, channels)
+        return block_grid(m, n, self.vector_width, BLOCK_ROWS, channels)
 
     def _shape_args(self):
         """``(m, n)`` as kernel arguments."""
@@ -129,7 +129,7 @@ class RollingShutterOperator:
     # ------------------------------------------------------------------ H, Hᵀ
     def forward_into(self, f, out):
         """``out = H f`` for device arrays (no checks, no allocation)."""
-        self.program.forward(self.queue, *self.tile_grid(self.K), f.data, out.data, *self._geometry(),
+        self.program.forward(self.queue, *self.block_grid(self.K), f.data, out.data, *self._geometry(),
                              np.int32(self.T), np.int32(self.L), *self._shape_args())
         return out
 
@@ -142,7 +142,7 @@ class RollingShutterOperator:
                 self.program.zero(self.queue, gsize, lsize, out.data, global_offset=offset)
         elif base is not out:
             cl.enqueue_copy(self.queue, out.data, base.data)
-        self.program.adjoint_scatter(self.queue, *self.tile_grid(), g.data, out.data, *self._geometry(),
+        self.program.adjoint_scatter(self.queue, *self.block_grid(), g.data, out.data, *self._geometry(),
                                      np.int32(self.K), np.int32(self.T), np.int32(self.L), *self._shape_args())
         return out
 

@@ -49,8 +49,8 @@ def test_voxel_launches_take_blocks_of_whole_rows_when_they_fit(m, n, group):
 
 @pytest.mark.parametrize("m, n, width, rows", [(128, 128, 8, 4), (50, 50, 8, 4), (13, 13, 4, 4), (3, 7, 8, 4),
                                                (1, 1, 8, 4), (9, 1000, 8, 4)])
-def test_tile_grid_blocks_cover_every_pixel_once(m, n, width, rows):
-    (gx, gy, gk), (lx, ly, lk) = launch.tile_grid(m, n, width, rows, channels=3)
+def test_block_grid_blocks_cover_every_pixel_once(m, n, width, rows):
+    (gx, gy, gk), (lx, ly, lk) = launch.block_grid(m, n, width, rows, channels=3)
     assert gx % lx == 0 and gy % ly == 0 and gk % lk == 0 and gk == 3 and lx * ly * lk <= 64
     seen = []
     for bx in range(gx):                     # each work item's block, clipped as the kernels clip it
@@ -61,6 +61,12 @@ def test_tile_grid_blocks_cover_every_pixel_once(m, n, width, rows):
     assert gy - ly < -(-m // rows) <= gy and gx - lx < -(-n // width) <= gx   # padding: less than one group
 
 
-def test_tile_grid_rejects_empty_shapes():
+def test_block_grid_rejects_empty_shapes():
     with pytest.raises(ValueError, match="m, n, width, rows and group must be >= 1"):
-        launch.tile_grid(0, 5, 8, 4)
+        launch.block_grid(0, 5, 8, 4)
+
+
+@pytest.mark.parametrize("pixels, width", [(100, 8), (16384, 8), (3, 4)])
+def test_tile_grid_keeps_its_flat_tiles_for_plugins(pixels, width):
+    (gx, gk), (lx, lk) = launch.tile_grid(pixels, width, channels=2)
+    assert gk == 2 and gx % lx == 0 and lx <= 64 and gx - lx < -(-pixels // width) <= gx
