@@ -73,6 +73,8 @@ class RollingShutterOperator:
         self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype))
         #: pixels per work item of the forward, adjoint and ADMM projection kernels
         self.vector_width = VECTOR_WIDTH[self.dtype.name]
+        #: rows per work item of those kernels (each row a tile of ``vector_width`` pixels)
+        self.block_rows = BLOCK_ROWS
         self.program = self.device.program(
             ["operator.cl"], REAL=c_type(self.dtype), ACC=c_type(self.device.acc_dtype),
             MASK_BINARY=int(rig.mask == "binary"), **self.tile_defines)
@@ -112,12 +114,12 @@ class RollingShutterOperator:
     @property
     def tile_defines(self):
         """Program definitions of the block kernels (``TILE_W`` pixels by ``TILE_R`` rows)."""
-        return {"TILE_W": self.vector_width, "TILE_R": BLOCK_ROWS}
+        return {"TILE_W": self.vector_width, "TILE_R": self.block_rows}
 
     def block_grid(self, channels=1):
         """Global and local sizes of a kernel with one work item per block of pixels."""
         m, n = self.rig.shape
-        return block_grid(m, n, self.vector_width, BLOCK_ROWS, channels)
+        return block_grid(m, n, self.vector_width, self.block_rows, channels)
 
     def _shape_args(self):
         """``(m, n)`` as kernel arguments."""
