@@ -147,10 +147,12 @@ inline realw shutter_weight_v(realw j, realw frac, realw len)
  * The forward, adjoint and ADMM projection kernels give a work item one block: the tiles
  * at flat pixel p0 + r*n, r = 0 .. TILE_R - 1 (n: row length), of the channel at q0 = k*mn + p0.
  * The sub-frame loop is outermost, so each step reads or writes TILE_R tiles of one plane,
- * neighbours in memory: with TILE_R = 4 against single tiles, the adjoint ran 15-20 % and
- * the forward about 14 % faster from cold caches (128x128 and 256x256 paper arrays, PoCL 3.0;
- * benchmarks/roofline.py). Each row keeps its own window span, so it reads only its own
- * tiles' windows and sums in the same order as a tile alone. */
+ * neighbours in memory. With TILE_R = 4 against single tiles (PoCL 3.0, paper array, cold
+ * caches; docs/roofline.md): adjoint 6-20 % and forward 5-14 % faster per launch at 128x128,
+ * the ADMM projection 1.3-1.5x faster at 128x128 and 256x256, but 15-35 % slower at 50x50 with
+ * warm caches (more loop work per byte). 2 rows were slower than 1, 8 slower than 4. Each row
+ * keeps its own window span, so it reads only its own tiles' windows and sums in the same
+ * order as a tile alone. */
 #ifndef TILE_R
 #define TILE_R 4
 #endif
