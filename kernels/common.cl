@@ -157,16 +157,20 @@ inline realw shutter_weight_v(realw j, realw frac, realw len)
 #define TILE_R 4
 #endif
 
-/* Per-row spans [los[r], his[r]) of the block's tiles and their union [*lo, *hi). */
-inline void block_spans(__global const int *first, size_t q0, size_t n, int T, int L,
-                        int *los, int *his, int *lo, int *hi)
+/* The geometry of a block (channel at q0): per-row spans [los[r], his[r]) of its tiles' windows,
+ * their union [*lo, *hi), and each row's window starts and fractions as vectors. */
+inline void block_geometry(__global const int *first, __global const real *frac, size_t q0, size_t n,
+                           int T, int L, int *los, int *his, int *lo, int *hi, realw *start, realw *fr)
 {
     *lo = T;
     *hi = 0;
     for (int r = 0; r < TILE_R; ++r) {
-        tile_span(first, q0 + (size_t)r * n, T, L, &los[r], &his[r]);
+        size_t q = q0 + (size_t)r * n;
+        tile_span(first, q, T, L, &los[r], &his[r]);
         *lo = los[r] < *lo ? los[r] : *lo;
         *hi = his[r] > *hi ? his[r] : *hi;
+        start[r] = convert_realw(load_iw(first + q));
+        fr[r] = load_w(frac + q);
     }
 }
 
@@ -177,12 +181,8 @@ inline void block_dot(__global const real *f, __global const int *first, __globa
 {
     int los[TILE_R], his[TILE_R], lo, hi;
     realw start[TILE_R], fr[TILE_R];
-    block_spans(first, q0, n, T, L, los, his, &lo, &hi);
-    for (int r = 0; r < TILE_R; ++r) {
-        start[r] = convert_realw(load_iw(first + q0 + (size_t)r * n));
-        fr[r] = load_w(frac + q0 + (size_t)r * n);
-        acc[r] = (realw)(real)0;
-    }
+    block_geometry(first, frac, q0, n, T, L, los, his, &lo, &hi, start, fr);
+    for (int r = 0; r < TILE_R; ++r) acc[r] = (realw)(real)0;
     for (int s = lo; s < hi; ++s) {
         __global const real *fs = f + (size_t)s * mn + p0;
         for (int r = 0; r < TILE_R; ++r)
@@ -197,11 +197,7 @@ inline void block_scatter(__global real *f, __global const int *first, __global 
 {
     int los[TILE_R], his[TILE_R], lo, hi;
     realw start[TILE_R], fr[TILE_R];
-    block_spans(first, q0, n, T, L, los, his, &lo, &hi);
-    for (int r = 0; r < TILE_R; ++r) {
-        start[r] = convert_realw(load_iw(first + q0 + (size_t)r * n));
-        fr[r] = load_w(frac + q0 + (size_t)r * n);
-    }
+    block_geometry(first, frac, q0, n, T, L, los, his, &lo, &hi, start, fr);
     for (int s = lo; s < hi; ++s) {
         __global real *fs = f + (size_t)s * mn + p0;
         for (int r = 0; r < TILE_R; ++r)
