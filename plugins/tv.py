@@ -6,7 +6,6 @@ import numpy as np
 
 from rsocl.device import c_type, device_for_queue
 from rsocl.launch import voxel_launches
-from rsocl.preset import PresetKernel
 from rsocl.regularizer import Option, Regularizer
 
 __all__ = ["TV"]
@@ -68,25 +67,26 @@ class TV(Regularizer):
         key = (x.shape, x.dtype.str, planes, x.queue.int_ptr)
         if key not in cache:                        # once per shape, dtype and queue
             cache.clear()
-            grids = launches(prog, x.queue.device, T, m, n)
             cache[key] = (cla.empty(x.queue, (planes,) + x.shape, x.dtype),
-                          cla.to_device(x.queue, edge_weights(n, x.dtype)),
-                          # kernels of our own: their by-value arguments are set once (rsocl.preset)
-                          {name: PresetKernel(prog, name, grids) for name in ("tv_dual_first", "tv_primal", "tv_dual")})
-        p, xnext, kernels = cache[key]
+                          cla.to_device(x.queue, edge_weights(n, x.dtype)), launches(prog, x.queue.device, T, m, n))
+        p, xnext, grids = cache[key]
         wt = float(self.temporal_weight) if temporal else 0.0
         tau = 1.0 / (2.0 * (2.0 + wt * wt))
         real_t = x.dtype.type
         sizes = (np.int32(T), np.int32(m), np.int32(n))
+
+        def each(kernel, *args):
+            for gsize, lsize, offset in grids:
+                kernel(x.queue, gsize, lsize, *args, *sizes, global_offset=offset)
+
         steps = (real_t(tau), real_t(tau / weight), real_t(wt))
         if self.iterations == 1:                    # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
-        q = x.queue
         # iteration 0 from p = 0 (out = x): one kernel that only writes p
-        kernels["tv_dual_first"](q, x.data, p.data, xnext.data, *steps, *sizes)
+        each(prog.tv_dual_first, x.data, p.data, xnext.data, *steps)
         for i in range(1, self.iterations):
-            kernels["tv_primal"](q, x.data, p.data, out.data, real_t(wt), *sizes)
+            each(prog.tv_primal, x.data, p.data, out.data, real_t(wt))
             if i < self.iterations - 1:
-                kernels["tv_dual"](q, out.data, p.data, xnext.data, *steps, *sizes)
+                each(prog.tv_dual, out.data, p.data, xnext.data, *steps)
         return out

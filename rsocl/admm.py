@@ -13,7 +13,6 @@ import numpy as np
 from .device import c_type
 from .launch import element_launches
 from .operator import RollingShutterOperator
-from .preset import PresetKernel
 from .reduction import sum_sq_diff, sum_sq_diff_async
 
 __all__ = ["ADMM", "block_inverse"]
@@ -97,10 +96,7 @@ class ADMM:
         self.program = op.device.program(
             ["admm.cl"], REAL=c_type(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
             NCH=op.K, PROJECTION_EXACT=int(projection == "exact"), **op.tile_defines)
-        voxels = element_launches(int(np.prod(shape)))          # exact grids: no bounds tests
-        self._dual = PresetKernel(self.program, "admm_dual", voxels)
-        self._project = PresetKernel(self.program, "admm_project", [op.block_grid() + (None,)])
-        self._difference = PresetKernel(self.program, "admm_difference", voxels)
+        self.voxels = element_launches(int(np.prod(shape)))     # exact grids: no bounds tests
         self.g_norm2 = sum_sq_diff(g, weights=self.valid)
         self.iteration = 0
         cl.enqueue_barrier(queue)
@@ -117,10 +113,15 @@ class ADMM:
         """One ADMM iteration (enqueued; nothing is read back)."""
         op = self.op
         update_dual = np.int32(self.eta > 0 and self.iteration > 0)
-        self._dual(op.queue, self.theta.data, self.b.data, self.f.data, update_dual)
-        self._project(op.queue, self.f.data, self.g.data, *op._geometry(), self.inverse.data,
-                      op.dtype.type(self.eta), np.int32(op.T), np.int32(op.L), *op._shape_args())
-        self._difference(op.queue, self.f.data, self.b.data, self.u.data)
+        for gsize, lsize, offset in self.voxels:
+            self.program.admm_dual(op.queue, gsize, lsize, self.theta.data, self.b.data, self.f.data, update_dual,
+                                   global_offset=offset)
+        self.program.admm_project(
+            op.queue, *op.block_grid(), self.f.data, self.g.data, *op._geometry(), self.inverse.data,
+            op.dtype.type(self.eta), np.int32(op.T), np.int32(op.L), *op._shape_args())
+        for gsize, lsize, offset in self.voxels:
+            self.program.admm_difference(op.queue, gsize, lsize, self.f.data, self.b.data, self.u.data,
+                                         global_offset=offset)
         self.regularizer.denoise(self.u, self.weight, out=self.theta)
         self.iteration += 1
 

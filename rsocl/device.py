@@ -22,6 +22,7 @@ __all__ = ["Device", "get_device", "device_for_queue", "list_devices", "voxel_gr
 
 # launch grids live in rsocl.launch; re-exported here, where plugins have imported them from
 from .launch import element_launches, exact_launches, tile_grid, voxel_grid, voxel_launches  # noqa: E402
+from .kernel import Kernel  # noqa: E402
 
 INSTALL_HINT = ('install an OpenCL runtime, e.g. the CPU one that ships as a wheel: '
                 'pip install "rsocl[pocl]"')
@@ -184,7 +185,11 @@ def _build(context, files, defines):
 
 
 class Kernels:
-    """A built program whose kernels are created once and reused (``prog.forward(queue, ...)``)."""
+    """A built program whose kernels are created once and reused (``prog.forward(queue, ...)``).
+
+    Each is an :class:`rsocl.kernel.Kernel`: called like a ``pyopencl.Kernel``, it sets a by-value
+    argument only when its value changes (about 10 µs each on PoCL).
+    """
 
     def __init__(self, program):
         self.program = program
@@ -198,7 +203,7 @@ class Kernels:
             import pyopencl as cl
 
             try:
-                kernels[name] = cl.Kernel(self.program, name)
+                kernels[name] = Kernel(cl.Kernel(self.program, name))
             except cl.Error as exc:
                 raise AttributeError(f"no kernel {name!r} in this program") from exc
         return kernels[name]

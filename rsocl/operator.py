@@ -13,7 +13,6 @@ import numpy as np
 from . import validation as check
 from .device import c_type, get_device
 from .launch import block_grid, element_launches
-from .preset import PresetKernel
 from .rig import Rig
 
 __all__ = ["RollingShutterOperator"]
@@ -126,21 +125,14 @@ class RollingShutterOperator:
         """``(m, n)`` as kernel arguments."""
         return tuple(np.int32(v) for v in self.rig.shape)
 
-    def _kernel(self, name, launches):
-        """This operator's own :class:`~rsocl.preset.PresetKernel` ``name`` (made on first use)."""
-        kernels = self.__dict__.setdefault("_kernels", {})
-        if name not in kernels:
-            kernels[name] = PresetKernel(self.program, name, launches)
-        return kernels[name]
-
     def _geometry(self):
         return (self.first.data, self.frac.data, self.length.data, self.gain.data)
 
     # ------------------------------------------------------------------ H, Hᵀ
     def forward_into(self, f, out):
         """``out = H f`` for device arrays (no checks, no allocation)."""
-        self._kernel("forward", [self.block_grid(self.K) + (None,)])(
-            self.queue, f.data, out.data, *self._geometry(), np.int32(self.T), np.int32(self.L), *self._shape_args())
+        self.program.forward(self.queue, *self.block_grid(self.K), f.data, out.data, *self._geometry(),
+                             np.int32(self.T), np.int32(self.L), *self._shape_args())
         return out
 
     def adjoint_into(self, g, out, base=None):
@@ -148,12 +140,12 @@ class RollingShutterOperator:
         import pyopencl as cl
 
         if base is None:
-            self._kernel("zero", element_launches(out.size))(self.queue, out.data)
+            for gsize, lsize, offset in element_launches(out.size):
+                self.program.zero(self.queue, gsize, lsize, out.data, global_offset=offset)
         elif base is not out:
             cl.enqueue_copy(self.queue, out.data, base.data)
-        self._kernel("adjoint_scatter", [self.block_grid() + (None,)])(
-            self.queue, g.data, out.data, *self._geometry(), np.int32(self.K), np.int32(self.T), np.int32(self.L),
-            *self._shape_args())
+        self.program.adjoint_scatter(self.queue, *self.block_grid(), g.data, out.data, *self._geometry(),
+                                     np.int32(self.K), np.int32(self.T), np.int32(self.L), *self._shape_args())
         return out
 
     def forward(self, f):

@@ -1,0 +1,74 @@
+"""rsocl.kernel.Kernel: by-value arguments set only when they change, buffers on every call."""
+
+import numpy as np
+import pytest
+
+from rsocl.device import Kernels
+from rsocl.kernel import Kernel
+
+SOURCE = """
+__kernel void fill(__global float *x, float value, int add)
+{
+    x[get_global_id(0)] = value + (float)add;
+}
+"""
+
+
+@pytest.fixture()
+def program(device):
+    import pyopencl as cl
+
+    return Kernels(cl.Program(device.context, SOURCE).build())
+
+
+def _fill(kernel, queue, buf, value, add, **kw):
+    kernel(queue, buf.shape, None, buf.data, np.float32(value), np.int32(add), **kw)
+    return buf.get()
+
+
+def test_changed_values_are_set_and_unchanged_ones_kept(program, device):
+    import pyopencl.array as cla
+
+    q = device.queue
+    buf = cla.empty(q, 67, np.float32)
+    assert isinstance(program.fill, Kernel) and program.fill is program.fill
+    for value, add in [(1, 0), (2, 0), (2, 0), (2, 5), (1, 0), (1, 0), (np.nan, 0), (3, 0)]:
+        got = _fill(program.fill, q, buf, value, add)
+        np.testing.assert_array_equal(got, np.full(67, np.float32(value) + add, np.float32))
+
+
+def test_buffers_are_set_on_every_call(program, device):
+    import pyopencl.array as cla
+
+    q = device.queue
+    a, b = cla.zeros(q, 16, np.float32), cla.zeros(q, 16, np.float32)
+    _fill(program.fill, q, a, 3, 0)
+    np.testing.assert_array_equal(_fill(program.fill, q, b, 3, 0), np.full(16, 3, np.float32))
+    np.testing.assert_array_equal(a.get(), np.full(16, 3, np.float32))
+
+
+def test_set_arg_passes_through_and_keeps_the_record(program, device):
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    q = device.queue
+    buf = cla.empty(q, 8, np.float32)
+    fill = program.fill
+    _fill(fill, q, buf, 1, 0)
+    fill.set_args(buf.data, np.float32(4), np.int32(0))       # as a user of the raw API would
+    cl.enqueue_nd_range_kernel(q, fill.kernel, (8,), None)
+    np.testing.assert_array_equal(buf.get(), np.full(8, 4, np.float32))
+    np.testing.assert_array_equal(_fill(fill, q, buf, 1, 0), np.ones(8, np.float32))   # 1 again: set again
+
+
+def test_offsets_wait_for_and_attributes(program, device):
+    import pyopencl.array as cla
+
+    q = device.queue
+    buf = cla.zeros(q, 8, np.float32)
+    event = program.fill(q, (4,), None, buf.data, np.float32(2), np.int32(0), global_offset=(4,))
+    program.fill(q, (4,), None, buf.data, np.float32(2), np.int32(1), wait_for=[event])
+    np.testing.assert_array_equal(buf.get(), [3, 3, 3, 3, 2, 2, 2, 2])
+    assert program.fill.function_name == "fill" and "fill" in repr(program.fill)
+    with pytest.raises(AttributeError):
+        program.fill._private
