@@ -12,14 +12,21 @@ it set and sets only what changed. :class:`rsocl.device.Kernels` hands out these
 
 from __future__ import annotations
 
+import numpy as np
+
 __all__ = ["Kernel"]
+
+#: by-value arguments that can be remembered: they cannot change after they were passed (an array
+#: can, so arrays are set on every call)
+_IMMUTABLE = (np.generic, bytes, int, float)
 
 
 class Kernel:
     """Wraps a ``pyopencl.Kernel``; called like it: ``kernel(queue, global, local, *args, global_offset=)``.
 
-    Buffers (and ``None`` and local memory) are set on every call; a by-value argument is set when
-    its value or its type differs from the one this object set last. The record is exact as long
+    Buffers, local memory, ``None`` and NumPy arrays are set on every call; a by-value argument that
+    cannot change once passed (a NumPy scalar, ``bytes``) is set when its value or its type differs
+    from the one this object set last. The record is exact as long
     as every argument goes through this object: :meth:`set_arg` and :meth:`set_args` pass through
     and update it. Other attributes (``get_work_group_info``, ``function_name``, ...) are the
     wrapped kernel's.
@@ -33,9 +40,8 @@ class Kernel:
         self._values = {}
 
     def set_arg(self, index: int, value):
-        """Set argument ``index`` (a by-value one only if it changed)."""
-        cl = self._cl
-        if value is None or isinstance(value, (cl.MemoryObjectHolder, cl.LocalMemory)):
+        """Set argument ``index`` (an immutable by-value one only if it changed)."""
+        if not isinstance(value, _IMMUTABLE):       # buffers, local memory, None, arrays: always
             self.kernel.set_arg(index, value)
             self._values.pop(index, None)
             return

@@ -72,3 +72,20 @@ def test_offsets_wait_for_and_attributes(program, device):
     assert program.fill.function_name == "fill" and "fill" in repr(program.fill)
     with pytest.raises(AttributeError):
         program.fill._private
+
+
+def test_array_arguments_are_set_on_every_call(device):
+    # an array passed by value may be changed in place between calls: it must not be remembered
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    prog = Kernels(cl.Program(device.context, """
+        __kernel void put(__global float *x, float2 v) { x[0] = v.x; x[1] = v.y; }""").build())
+    q = device.queue
+    buf = cla.zeros(q, 2, np.float32)
+    v = np.array([1, 2], np.float32)
+    prog.put(q, (1,), None, buf.data, v)
+    np.testing.assert_array_equal(buf.get(), [1, 2])
+    v[:] = [5, 6]
+    prog.put(q, (1,), None, buf.data, v)
+    np.testing.assert_array_equal(buf.get(), [5, 6])
