@@ -153,12 +153,13 @@ class DCT(Regularizer):
             if axis == 0:
                 items = -(-n // b) * -(-b // chunk)
                 gsize, lsize = voxel_grid(T, m, items)
-                prog.dct_x(src.queue, gsize, lsize, cur.data, dst.data, tab.data, np.int32(b),
-                           off_full, off_part, *dims)
+                values = (np.int32(b), off_full, off_part, *dims)
+                # one kernel object per pass: its by-value arguments are set once (rsocl.kernel)
+                prog.instance("dct_x", values)(src.queue, gsize, lsize, cur.data, dst.data, tab.data, *values)
             else:
                 gsize, lsize = voxel_grid(T, m, -(-n // chunk))
-                prog.dct_strided(src.queue, gsize, lsize, cur.data, dst.data, tab.data, np.int32(axis),
-                                 np.int32(b), off_full, off_part, *dims)
+                values = (np.int32(axis), np.int32(b), off_full, off_part, *dims)
+                prog.instance("dct_strided", values)(src.queue, gsize, lsize, cur.data, dst.data, tab.data, *values)
             cur = dst
         return cur
 

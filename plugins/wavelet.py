@@ -214,12 +214,13 @@ class Wavelet(Regularizer):
         cl.enqueue_copy(queue, dst, src, byte_count=frames * plane, src_offset=t0 * plane, dst_offset=t0 * plane)
 
     @staticmethod
-    def _pass(kernel, queue, src, dst, axis, shape, t0, box):
+    def _pass(prog, name, queue, src, dst, axis, shape, t0, box):
         _, m, n = shape
         ct, cy, cx = box
         gsize, lsize = voxel_grid(ct, cy, cx)
-        kernel(queue, gsize, lsize, src, dst, np.int32(axis), np.int32(m), np.int32(n), np.int32(t0),
-               np.int32(ct), np.int32(cy), np.int32(cx))
+        values = tuple(np.int32(v) for v in (axis, m, n, t0, ct, cy, cx))
+        # one kernel object per pass: its by-value arguments are set once, not on every call
+        prog.instance(name, values)(queue, gsize, lsize, src, dst, *values)
 
     def _forward(self, prog, queue, src, bufs, shape, itemsize, levels, block):
         """Analysis of ``block`` of ``src`` over ``levels``; returns the index i of ``bufs``
@@ -237,13 +238,13 @@ class Wavelet(Regularizer):
             if level == 0:
                 s = src
                 for i, a in enumerate(axes):
-                    self._pass(prog.dwt_analysis, queue, s, bufs[i % 2], a, shape, t0, box)
+                    self._pass(prog, "dwt_analysis", queue, s, bufs[i % 2], a, shape, t0, box)
                     s = bufs[i % 2]
                 continue
             s = cur
             for i, a in enumerate(axes):
                 d = 1 - cur if i % 2 == 0 else cur
-                self._pass(prog.dwt_analysis, queue, bufs[s], bufs[d], a, shape, t0, box)
+                self._pass(prog, "dwt_analysis", queue, bufs[s], bufs[d], a, shape, t0, box)
                 s = d
             if s != cur:
                 self._copy_box(queue, bufs[cur], bufs[s], shape, t0, box, itemsize)
@@ -259,7 +260,7 @@ class Wavelet(Regularizer):
             s = cur
             for i, a in enumerate(reversed(axes)):
                 d = 1 - cur if i % 2 == 0 else cur
-                self._pass(prog.dwt_synthesis, queue, bufs[s], bufs[d], a, shape, t0, box)
+                self._pass(prog, "dwt_synthesis", queue, bufs[s], bufs[d], a, shape, t0, box)
                 s = d
             if level > 0 and s != cur:
                 self._copy_box(queue, bufs[cur], bufs[s], shape, t0, box, itemsize)
@@ -348,7 +349,7 @@ class Wavelet(Regularizer):
             t0, frames, _ = block
             at, ay, ax = self._box(block, x.shape, plan.levels)
             gsize, lsize = voxel_grid(frames, m, n)
-            prog.soft_threshold(queue, gsize, lsize, coeffs, x.dtype.type(weight), np.int32(m), np.int32(n),
-                                np.int32(t0), np.int32(frames), np.int32(at), np.int32(ay), np.int32(ax))
+            values = tuple(np.int32(v) for v in (m, n, t0, frames, at, ay, ax))
+            prog.instance("soft_threshold", values)(queue, gsize, lsize, coeffs, x.dtype.type(weight), *values)
         self._synthesise(prog, queue, plan, coeffs, other, out.data, x.shape, itemsize)
         return out

@@ -195,6 +195,27 @@ class Kernels:
         self.program = program
         self._kernels = {}
 
+    #: at most this many instances of :meth:`instance` are kept per program (the oldest go first)
+    MAX_INSTANCES = 256
+
+    def instance(self, name: str, key):
+        """A kernel object ``name`` of its own for ``key`` (any hashable), made once.
+
+        A kernel launched with a few recurring sets of by-value arguments (one per pass of a
+        multi-pass transform, say) sets each set once when every set has its own instance: pass
+        the by-value arguments themselves, or what determines them, as ``key``.
+        """
+        import pyopencl as cl
+
+        instances = self.__dict__.setdefault("_instances", {})
+        k = (name, key)
+        if k not in instances:
+            if len(instances) >= self.MAX_INSTANCES:
+                del instances[next(iter(instances))]
+            getattr(self, name)                             # the AttributeError of a missing kernel
+            instances[k] = Kernel(cl.Kernel(self.program, name))
+        return instances[k]
+
     def __getattr__(self, name):
         if name.startswith("_"):
             raise AttributeError(name)

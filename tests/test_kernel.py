@@ -89,3 +89,27 @@ def test_array_arguments_are_set_on_every_call(device):
     v[:] = [5, 6]
     prog.put(q, (1,), None, buf.data, v)
     np.testing.assert_array_equal(buf.get(), [5, 6])
+
+
+def test_instances_have_their_own_arguments(program, device):
+    import pyopencl.array as cla
+
+    q = device.queue
+    buf = cla.empty(q, 8, np.float32)
+    one, two = program.instance("fill", 1), program.instance("fill", 2)
+    assert one is program.instance("fill", 1) and one is not two and one is not program.fill
+    for _ in range(2):                       # alternate: neither may keep the other's value
+        np.testing.assert_array_equal(_fill(one, q, buf, 1, 0), np.ones(8, np.float32))
+        np.testing.assert_array_equal(_fill(two, q, buf, 2, 0), np.full(8, 2, np.float32))
+        np.testing.assert_array_equal(_fill(program.fill, q, buf, 7, 0), np.full(8, 7, np.float32))
+    with pytest.raises(AttributeError, match="no kernel 'nope'"):
+        program.instance("nope", 0)
+
+
+def test_instances_are_bounded(program, monkeypatch):
+    monkeypatch.setattr(Kernels, "MAX_INSTANCES", 3)
+    first = program.instance("fill", 0)
+    for key in range(1, 5):
+        program.instance("fill", key)
+    assert len(program._instances) == 3 and program.instance("fill", 4) is program.instance("fill", 4)
+    assert program.instance("fill", 0) is not first          # the oldest went first, and comes back anew
