@@ -205,28 +205,29 @@ class Kernels:
         multi-pass transform, say) sets each set once when every set has its own instance: pass
         the by-value arguments themselves, or what determines them, as ``key``.
         """
-        import pyopencl as cl
-
         instances = self.__dict__.setdefault("_instances", {})
         k = (name, key)
         if k not in instances:
+            kernel = self._create(name)
             if len(instances) >= self.MAX_INSTANCES:
                 del instances[next(iter(instances))]
-            getattr(self, name)                             # the AttributeError of a missing kernel
-            instances[k] = Kernel(cl.Kernel(self.program, name))
+            instances[k] = kernel
         return instances[k]
+
+    def _create(self, name: str) -> Kernel:
+        import pyopencl as cl
+
+        try:
+            return Kernel(cl.Kernel(self.program, name))
+        except cl.Error as exc:
+            raise AttributeError(f"no kernel {name!r} in this program") from exc
 
     def __getattr__(self, name):
         if name.startswith("_"):
             raise AttributeError(name)
         kernels = self.__dict__["_kernels"]
         if name not in kernels:
-            import pyopencl as cl
-
-            try:
-                kernels[name] = Kernel(cl.Kernel(self.program, name))
-            except cl.Error as exc:
-                raise AttributeError(f"no kernel {name!r} in this program") from exc
+            kernels[name] = self._create(name)
         return kernels[name]
 
 
