@@ -60,6 +60,9 @@ __kernel void read_all(__global const float16 *f, __global float *out)
 
 __kernel void nothing(__global float *out) { }
 """
+LINE_READ = "read of the windows' lines, in memory order"
+EVERY_LINE = "read of every line of the datacube, in order"
+LAUNCH_ONLY = "launch only (empty kernel)"
 
 
 def cache_flusher(context, queue, nbytes=64 << 20, per_item=64):
@@ -105,18 +108,13 @@ def timed(queue, launches, repeats, prepare):
     return [statistics.median(s) for s in samples]
 
 
-def cache_line_bytes(rig, itemsize, line=64):
-    """Bytes of the distinct cache lines of ``f[T, m, n]`` that the sampled windows touch.
+def touched_lines(rig, itemsize, line=64):
+    """Sorted indices of the ``line``-byte lines of ``f[T, m, n]`` that the sampled windows touch.
 
     A rotated camera's window runs across the planes of ``f``, so each plane it visits
     gives it a few neighbouring pixels of a row: memory moves whole lines, so the traffic
     the layout implies is larger than the sampled values.
     """
-    return touched_lines(rig, itemsize, line).size * line
-
-
-def touched_lines(rig, itemsize, line=64):
-    """Sorted indices of the ``line``-byte lines of ``f[T, m, n]`` that the sampled windows touch."""
     first, last = rig.sampled_window()
     mn = first.shape[1] * first.shape[2]
     pix = np.arange(mn)
@@ -205,9 +203,9 @@ def main():
          lambda: op.forward_into(x, g)),
         ("adjoint Hᵀ", N * f32 + 2 * samples * f32 + maps, N * f32 + 2 * lines + maps,
          lambda: op.adjoint_into(g, y)),
-        ("read of the windows' lines, in memory order", lines + touched.size * 4, lines, read_lines),
-        ("read of every line of the datacube, in order", N // 128 * 128 * f32, None, read_every_line),
-        ("launch only (empty kernel)", 0, None, launch_only),
+        (LINE_READ, lines + touched.size * 4, lines, read_lines),
+        (EVERY_LINE, N // 128 * 128 * f32, None, read_every_line),
+        (LAUNCH_ONLY, 0, None, launch_only),
     ]
     print(f"device: {dev.name}; paper array {m}x{n}, T = {T}, {K} cameras, float32, "
           f"blocks of {op.block_rows} rows x {op.vector_width} pixels per work item in the operator; "
@@ -233,12 +231,12 @@ def main():
             lines_cols = f"{line_bytes / 2**20:.1f} MiB | {lbw:.2f} | {lbw / copy_bw:.0%} |"
         print(f"| {name} | {nbytes / 2**20:.1f} MiB | {nbytes / N:.1f} B | {sec * 1e3:.3f} | {bw:.2f} | "
               f"{bw / copy_bw:.0%} | {lines_cols}", flush=True)
-    names = [row[0] for row in rows]
-    forward_s, lines_s = seconds[names.index("forward H")], seconds[names.index(rows[-3][0])]
-    launch_s, every_s = seconds[-1], seconds[-2]
+    second = {row[0]: sec for row, sec in zip(rows, seconds)}
+    forward_s, lines_s = second["forward H"], second[LINE_READ]
+    launch_s, every_s = second[LAUNCH_ONLY], second[EVERY_LINE]
     print(f"\nThe forward takes {forward_s / lines_s:.2f}x the time of a plain read of the same lines in memory "
           f"order ({forward_s * 1e3:.3f} against {lines_s * 1e3:.3f} ms). That read, with no arithmetic, reaches "
-          f"{rows[-3][1] / lines_s / 1e9 / copy_bw:.0%} of the copy's bandwidth: scattered lines cost more "
+          f"{(lines + touched.size * 4) / lines_s / 1e9 / copy_bw:.0%} of the copy's bandwidth: scattered lines cost more "
           f"per byte than a stream, so the windows' pattern, not the arithmetic, bounds the forward "
           f"(reading every line of the datacube in order took {every_s * 1e3:.3f} ms). A launch alone costs "
           f"{launch_s * 1e3:.3f} ms, included in every row.")
