@@ -81,7 +81,7 @@ def scan(log_path: str, stderr_path: str) -> int:
 
 
 def device() -> int:
-    from rsocl.device import get_device
+    from rsocl.device.context import get_device
 
     dev = get_device()
     print(f"rsocl device under the Oclgrind environment: {dev.name}")
@@ -96,7 +96,7 @@ def canary() -> int:
     import numpy as np
     import pyopencl as cl
 
-    from rsocl.device import get_device
+    from rsocl.device.context import get_device
 
     dev = get_device()
     assert "oclgrind" in dev.name.lower(), dev.name

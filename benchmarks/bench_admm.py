@@ -32,9 +32,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import rsocl  # noqa: E402
-from rsocl.device import get_device  # noqa: E402
-from rsocl.metrics import psnr  # noqa: E402
-from rsocl.scenes import builtin_scene, load_scene  # noqa: E402
+from rsocl.device.context import get_device  # noqa: E402
+from rsocl.analysis.metrics import psnr  # noqa: E402
+from rsocl.model.scenes import builtin_scene, load_scene  # noqa: E402
 
 from numpy_admm_tv import admm_tv  # noqa: E402
 
@@ -73,7 +73,7 @@ def scene_source(video: str):
     for path in candidates:
         if path.is_file():
             return path
-    print(f"note: video {video!r} not found (looked in {DATA}); using rsocl.scenes.builtin_scene instead",
+    print(f"note: video {video!r} not found (looked in {DATA}); using rsocl.model.scenes.builtin_scene instead",
           file=sys.stderr)
     return None
 
@@ -178,7 +178,7 @@ def main(argv=None):
 
     header = ["# ADMM-TV: rsocl vs plain NumPy + scikit-image", ""]
     header += machine(device_name)
-    header += [f"- scene: {source if source is not None else 'rsocl.scenes.builtin_scene'}; paper array, "
+    header += [f"- scene: {source if source is not None else 'rsocl.model.scenes.builtin_scene'}; paper array, "
                f"4 cameras, t_e = {T_E * 1e3:g} ms, t_r = {T_R * 1e6:g} us; lam = {args.lam:g}, "
                f"eta = {args.eta:g}, {args.tv_iterations} TV iterations, {args.iterations} ADMM iterations"
                + (f", best of {args.repeat} interleaved rounds" if args.repeat > 1 else ""),

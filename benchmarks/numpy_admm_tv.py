@@ -128,7 +128,7 @@ def admm_tv(g, rig, *, iterations, lam, eta, tv_iterations, dtype=np.float64, tr
 
 if __name__ == "__main__":
     import rsocl
-    from rsocl.scenes import builtin_scene
+    from rsocl.model.scenes import builtin_scene
 
     rig = rsocl.Rig.paper_array(4, (64, 64), 0.18e-3, 35e-6)
     truth = builtin_scene(rig.shape, rig.T, dtype=np.float64)

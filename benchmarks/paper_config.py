@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 import rsocl
-from rsocl.admm import ADMM
-from rsocl.scenes import builtin_scene, load_scene
+from rsocl.solver.admm import ADMM
+from rsocl.model.scenes import builtin_scene, load_scene
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 PAPER_FPS = 67.0
@@ -69,7 +69,7 @@ def main():
             rsocl.reconstruct(g, big, iterations=1, device=device, dtype=dtype)
             res = rsocl.reconstruct(g, big, iterations=args.iterations, truth=truth, device=device, dtype=dtype)
             op = rsocl.RollingShutterOperator(big, device=device, dtype=dtype)
-            reg = rsocl.plugins.load("rsocl.regularizers", "tv")()
+            reg = rsocl.common.registry.load("rsocl.regularizers", "tv")()
             mem = ADMM.buffers_bytes(op, "exact") + reg.workspace_bytes(op.domain_shape, op.dtype)
             row[dtype] = (res.history["psnr"][-1], res.history["time"][-1] / res.iterations * 1e3, mem / 2**20)
         if len(row) == 2:

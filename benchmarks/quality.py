@@ -3,7 +3,7 @@
 Reports, for Runner and Traffic at 64x64 (t_e = 180 µs, t_r = 35 µs, dt = t_r):
 the default settings (exact projection), the paper's diagonal projection (Eq. 15) at the
 paper's lam = 20, eta = 30 and at the best of a small sweep, and a lam/eta/tv_iterations
-sweep around the defaults, so the defaults in rsocl.reconstruct.DEFAULTS can be checked.
+sweep around the defaults, so the defaults in rsocl.solver.reconstruct.DEFAULTS can be checked.
 PSNR in dB with peak 1 (videos scaled to [0, 1]). Prints a Markdown table.
 
     python benchmarks/quality.py [--size 64] [--iterations 300] [--quick]
@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 
 import rsocl
-from rsocl.reconstruct import DEFAULTS
-from rsocl.scenes import load_scene
+from rsocl.solver.reconstruct import DEFAULTS
+from rsocl.model.scenes import load_scene
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 import rsocl
-from rsocl.device import get_device
-from rsocl.launch import element_launches
+from rsocl.device.context import get_device
+from rsocl.device.launch import element_launches
 from rsocl_plugins import tv as tv_plugin
 
 

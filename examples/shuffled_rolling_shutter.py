@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import rsocl
-from rsocl.visual import comparison_gif, datacube_montage
+from rsocl.analysis.visual import comparison_gif, datacube_montage
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "wine_shuffled_rs_real.npz"
 

@@ -16,7 +16,7 @@
 #endif
 
 /* admm_dual and admm_difference: one work item per voxel on an exact grid
- * (rsocl.launch.element_launches), so no bounds test (it costs masked stores on PoCL). */
+ * (rsocl.device.launch.element_launches), so no bounds test (it costs masked stores on PoCL). */
 __kernel void admm_dual(__global const real *theta, __global real *b, __global real *f, int update_dual)
 {
     size_t i = get_global_id(0);

@@ -30,7 +30,7 @@ __kernel void forward(__global const real *f, __global real *g,
         }
 }
 
-/* x = 0, one work item per element on an exact grid (rsocl.launch.element_launches): the
+/* x = 0, one work item per element on an exact grid (rsocl.device.launch.element_launches): the
  * start of Hᵀ g. clEnqueueFillBuffer took twice as long on PoCL 3.0 (1.1 ms against
  * 0.6 ms for 8.7 MB, kernel time from profiling events). */
 __kernel void zero(__global real *x)

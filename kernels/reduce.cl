@@ -25,7 +25,7 @@ __kernel void sum_sq_diff(__global const real *a, __global const real *b, __glob
     if (lid == 0) partials[get_group_id(0)] = scratch[0];
 }
 
-/* dst = src, one work item per element on an exact grid (rsocl.launch.element_launches,
+/* dst = src, one work item per element on an exact grid (rsocl.device.launch.element_launches,
  * no bounds test): the bandwidth reference of the benchmarks. */
 __kernel void copy(__global const real *src, __global real *dst)
 {

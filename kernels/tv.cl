@@ -9,7 +9,7 @@
 #define TEMPORAL 1
 #endif
 
-/* Launch with an exact grid (rsocl.launch.voxel_launches): there is no bounds test, and
+/* Launch with an exact grid (rsocl.device.launch.voxel_launches): there is no bounds test, and
  * neighbours across an edge are read at a clamped index and discarded with a select,
  * because PoCL turns a per-work-item `if` into masked loads and stores (2x slower).
  * Selects on y and s are uniform in a work group (a row); along x, where a per-lane

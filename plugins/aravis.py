@@ -26,19 +26,19 @@ Pixel formats
     uint16 (``bit_depth`` 12 / 16; the GenICam layout is little endian, converted to native
     order). Row padding reported by the buffer is removed. Packed formats (``Mono12p``,
     ``Mono12Packed``) and colour formats are not read. ``set_pixel_format`` raises
-    :class:`~rsocl.camera.CameraError` listing the device's formats when it lacks the one asked.
+    :class:`~rsocl.hardware.backend.CameraError` listing the device's formats when it lacks the one asked.
 
 Exposure
     ``ExposureTime`` (SFNC), else ``ExposureTimeAbs`` (older GigE cameras), both in µs;
     ``ExposureAuto`` is switched ``Off`` first when the device has it. A request outside the
-    feature's bounds raises :class:`~rsocl.camera.CameraError` (with the bounds in seconds);
+    feature's bounds raises :class:`~rsocl.hardware.backend.CameraError` (with the bounds in seconds);
     the value read back is returned, in seconds (devices round to their own increments).
 
 ROI
     ``OffsetX``/``OffsetY`` are zeroed, ``Width``/``Height`` set, then the offsets (so a
     shrink-and-move never exceeds the sensor on the way). Bounds and increments are checked
     first, and the region is read back: any difference raises
-    :class:`~rsocl.camera.CameraError`. Change the ROI or the pixel format with acquisition
+    :class:`~rsocl.hardware.backend.CameraError`. Change the ROI or the pixel format with acquisition
     stopped (the stream's buffers are sized at :meth:`start`).
 
 Trigger
@@ -63,13 +63,13 @@ Frames and timestamps
     (``[x, y, width, height]`` of the buffer), ``device_id``.
 
 Errors
-    No buffer in time -> :class:`~rsocl.camera.CameraTimeout`. A buffer whose status is not
+    No buffer in time -> :class:`~rsocl.hardware.backend.CameraTimeout`. A buffer whose status is not
     ``SUCCESS`` (``missing-packets``, ``timeout``, ``size-mismatch``...) is given back to
-    the stream and raises :class:`~rsocl.camera.CameraError` naming the status. The device's
+    the stream and raises :class:`~rsocl.hardware.backend.CameraError` naming the status. The device's
     ``control-lost`` signal (GigE heartbeat failed: cable, power, process gone), and Aravis
     errors ``NOT_CONNECTED``/``TIMEOUT``/``TRANSFER_ERROR`` on register access, raise
-    :class:`~rsocl.camera.CameraDisconnected` (then and for every later call; ``close()``
-    still works). Other Aravis errors are :class:`~rsocl.camera.CameraError` with Aravis'
+    :class:`~rsocl.hardware.backend.CameraDisconnected` (then and for every later call; ``close()``
+    still works). Other Aravis errors are :class:`~rsocl.hardware.backend.CameraError` with Aravis'
     message.
 
 Discovery
@@ -87,7 +87,7 @@ import time
 
 import numpy as np
 
-from rsocl.camera import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
+from rsocl.hardware.backend import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
 
 __all__ = ["AravisCamera", "PIXEL_FORMATS", "convert_buffer", "discover", "import_aravis"]
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device import c_type, device_for_queue
-from rsocl.launch import voxel_grid
-from rsocl.regularizer import Option, Regularizer
+from rsocl.device.context import c_type, device_for_queue
+from rsocl.device.launch import voxel_grid
+from rsocl.solver.regularizer import Option, Regularizer
 
 __all__ = ["DCT", "dct_matrix"]
 
@@ -154,7 +154,7 @@ class DCT(Regularizer):
                 items = -(-n // b) * -(-b // chunk)
                 gsize, lsize = voxel_grid(T, m, items)
                 values = (np.int32(b), off_full, off_part, *dims)
-                # one kernel object per pass: its by-value arguments are set once (rsocl.kernel)
+                # one kernel object per pass: its by-value arguments are set once (rsocl.device.kernel)
                 prog.instance("dct_x", values)(src.queue, gsize, lsize, cur.data, dst.data, tab.data, *values)
             else:
                 gsize, lsize = voxel_grid(T, m, -(-n // chunk))

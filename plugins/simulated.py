@@ -2,9 +2,9 @@
 
 A :class:`SimulatedCamera` is one rolling-shutter camera of MODEL.md looking at a
 scene. Each trigger renders one frame: the snapshot of a single-camera
-:class:`~rsocl.rig.Rig` (same ``angle`` or ``row_map``, ``t_e``, ``t_r``, ``t_a``,
+:class:`~rsocl.model.rig.Rig` (same ``angle`` or ``row_map``, ``t_e``, ``t_r``, ``t_a``,
 ``gain``, ``dt``, ``mask``), computed on the OpenCL device by
-:class:`~rsocl.operator.RollingShutterOperator`, then passed through a sensor
+:class:`~rsocl.model.operator.RollingShutterOperator`, then passed through a sensor
 model that applies only the effects that are asked for.
 
 Scene time
@@ -12,9 +12,9 @@ Scene time
 Set ``k`` (the ``k``-th trigger, from 0) sees ``scene_frames`` sub-frames of the
 scene starting at scene time ``k * scene_frames * dt``:
 
-- ``scene = "builtin"``: :func:`rsocl.scenes.builtin_scene` of ``scene_frames``
+- ``scene = "builtin"``: :func:`rsocl.model.scenes.builtin_scene` of ``scene_frames``
   sub-frames, regenerated with seed ``scene_seed + k`` for set ``k``;
-- ``scene = "<video path>"``: :func:`rsocl.scenes.load_scene` resamples the video
+- ``scene = "<video path>"``: :func:`rsocl.model.scenes.load_scene` resamples the video
   to ``scene_sets * scene_frames`` sub-frames; set ``k`` takes the block
   ``k mod scene_sets`` (the video wraps around);
 - ``scene = <array (F, m, n)>`` (Python callers): sub-frame ``s`` of set ``k`` is
@@ -23,7 +23,7 @@ scene starting at scene time ``k * scene_frames * dt``:
 Every camera of a rig that shares ``scene``, ``scene_seed``, ``scene_frames``
 and ``dt`` sees the same datacube, so their frames form one consistent capture;
 :meth:`SimulatedCamera.scene_truth` returns that datacube. The rig file fills
-these keys in from the rig (see :meth:`rsocl.rigfile.RigFile.backends`).
+these keys in from the rig (see :meth:`rsocl.files.rigfile.RigFile.backends`).
 
 Config keys (seconds, degrees)
 ------------------------------
@@ -65,9 +65,9 @@ actually used), ``full_scale`` (model value of the largest integer level, so
 ``image / (2**bit_depth - 1) * full_scale`` converts back to model units),
 ``exposure`` and ``registered = True`` (frames are on the reference grid).
 ``fail_after = N`` makes the ``N``-th :meth:`read` raise
-:class:`~rsocl.camera.CameraDisconnected` (and every later call, as a camera
+:class:`~rsocl.hardware.backend.CameraDisconnected` (and every later call, as a camera
 that went away). The simulated camera never waits: :meth:`read` with no
-pending trigger raises :class:`~rsocl.camera.CameraTimeout` at once.
+pending trigger raises :class:`~rsocl.hardware.backend.CameraTimeout` at once.
 """
 
 from __future__ import annotations
@@ -78,8 +78,8 @@ import os
 
 import numpy as np
 
-from rsocl import validation as check
-from rsocl.camera import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
+from rsocl.common import validation as check
+from rsocl.hardware.backend import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
 
 __all__ = ["SimulatedCamera"]
 
@@ -91,7 +91,7 @@ _SENSOR_KEYS = {"shot_noise_photons", "read_noise", "bit_depth", "saturation", "
 
 @functools.lru_cache(maxsize=16)
 def _builtin(shape, T, seed):
-    from rsocl.scenes import builtin_scene
+    from rsocl.model.scenes import builtin_scene
 
     cube = builtin_scene(shape, T, dtype=np.float64, seed=seed)
     cube.setflags(write=False)
@@ -226,13 +226,13 @@ class SimulatedCamera(CameraBackend):
 
     # ------------------------------------------------------------------ model
     def _rig(self, t_e, t_a):
-        from rsocl.rig import Camera, Rig
+        from rsocl.model.rig import Camera, Rig
 
         camera = Camera(self.angle, t_e=t_e, t_r=self.t_r, t_a=t_a, gain=self.gain, row_map=self.row_map)
         return Rig([camera], self.shape, dt=self.dt, mask=self.mask)
 
     def _operator(self, t_a):
-        from rsocl.operator import RollingShutterOperator
+        from rsocl.model.operator import RollingShutterOperator
 
         key = (self.t_e, t_a)
         op = self._operators.get(key)
@@ -260,7 +260,7 @@ class SimulatedCamera(CameraBackend):
         if self.scene == "builtin":
             return _builtin(self.shape, T, self.scene_seed + set_index)
         if self._video is None:
-            from rsocl.scenes import load_scene
+            from rsocl.model.scenes import load_scene
 
             self._video = load_scene(self.scene, self.shape, T * self.scene_sets).astype(np.float64)
         block = set_index % self.scene_sets
@@ -269,7 +269,7 @@ class SimulatedCamera(CameraBackend):
     def render(self, set_index: int, t_a: float | None = None) -> np.ndarray:
         """Noise-free model frame ``(m, n)`` float64 of set ``set_index`` with trigger offset ``t_a`` (s)."""
         if self._device is None:
-            from rsocl.device import get_device
+            from rsocl.device.context import get_device
 
             self._device = get_device(self.device_spec)
         op = self._operator(self.t_a if t_a is None else float(t_a))
@@ -311,7 +311,7 @@ class SimulatedCamera(CameraBackend):
             raise CameraDisconnected(f"{self.name}: simulated camera disconnected")
 
     def _open_device(self):
-        from rsocl.device import get_device
+        from rsocl.device.context import get_device
 
         self._gone = False
         self._device = get_device(self.device_spec)

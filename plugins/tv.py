@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device import c_type, device_for_queue
-from rsocl.launch import voxel_launches
-from rsocl.regularizer import Option, Regularizer
+from rsocl.device.context import c_type, device_for_queue
+from rsocl.device.launch import voxel_launches
+from rsocl.solver.regularizer import Option, Regularizer
 
 __all__ = ["TV"]
 
-#: Work items per work group of the TV kernels (blocks of whole rows, rsocl.launch.voxel_launches),
+#: Work items per work group of the TV kernels (blocks of whole rows, rsocl.device.launch.voxel_launches),
 #: at most: about 512 voxels ran 7-15 % faster than half rows of 64 on PoCL (64x64 to 128x128).
 GROUP = 512
 

@@ -45,7 +45,7 @@ Trigger
     returned may have started exposing before the call, and the delay between the call
     and the frame varies between 0 and about two frame periods, differently for each
     camera. For synchronised rolling-shutter capture use hardware-triggered cameras;
-    ``"line"`` (hardware trigger) raises :class:`~rsocl.camera.CameraError`.
+    ``"line"`` (hardware trigger) raises :class:`~rsocl.hardware.backend.CameraError`.
 
 Timestamps
     ``frame.timestamp`` is the driver's buffer timestamp (seconds; for most drivers
@@ -56,10 +56,10 @@ Timestamps
     ``host_time``, ``buffer_index``, ``exposure`` (seconds, last set value) and ``roi``.
 
 Errors
-    ``read`` waits with ``poll`` and raises :class:`~rsocl.camera.CameraTimeout` when no
+    ``read`` waits with ``poll`` and raises :class:`~rsocl.hardware.backend.CameraTimeout` when no
     frame completes in time; a device that vanished (``ENODEV``/``ENXIO``, e.g. unplugged)
-    raises :class:`~rsocl.camera.CameraDisconnected` (``close()`` still works; re-open to
-    use it again); everything else is a :class:`~rsocl.camera.CameraError`. Frames the
+    raises :class:`~rsocl.hardware.backend.CameraDisconnected` (``close()`` still works; re-open to
+    use it again); everything else is a :class:`~rsocl.hardware.backend.CameraError`. Frames the
     driver flags as corrupt (``V4L2_BUF_FLAG_ERROR``) or that are shorter than the format
     are skipped and counted in ``meta["skipped"]``.
 """
@@ -75,7 +75,7 @@ import time
 
 import numpy as np
 
-from rsocl.camera import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
+from rsocl.hardware.backend import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
 
 __all__ = ["V4L2Camera", "EXPOSURE_UNIT", "PIXEL_FORMATS"]
 

@@ -25,9 +25,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from rsocl.device import device_for_queue
-from rsocl.launch import voxel_grid
-from rsocl.regularizer import Option, Regularizer
+from rsocl.device.context import device_for_queue
+from rsocl.device.launch import voxel_grid
+from rsocl.solver.regularizer import Option, Regularizer
 
 __all__ = ["Wavelet", "Plan", "WAVELETS", "filters", "axis_levels"]
 

@@ -6,9 +6,9 @@ high-speed datacube with :func:`reconstruct` (ADMM on an OpenCL device).
 Conventions: ``../shared/MODEL.md`` of the project, summarised in the README.
 """
 
-from .operator import RollingShutterOperator
-from .reconstruct import Result, reconstruct
-from .rig import Camera, Rig
+from rsocl.model.operator import RollingShutterOperator
+from rsocl.solver.reconstruct import Result, reconstruct
+from rsocl.model.rig import Camera, Rig
 
 __version__ = "0.1.0"
 __all__ = ["Camera", "Rig", "RollingShutterOperator", "reconstruct", "Result", "__version__"]

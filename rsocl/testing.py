@@ -17,8 +17,8 @@ import contextlib
 
 import numpy as np
 
-from .device import get_device
-from .regularizer import Option, Regularizer
+from rsocl.device.context import get_device
+from rsocl.solver.regularizer import Option, Regularizer
 
 __all__ = ["check_regularizer", "no_host_transfers"]
 
@@ -55,14 +55,14 @@ def _instance(regularizer, options):
         return regularizer
     if isinstance(regularizer, type) and issubclass(regularizer, Regularizer):
         return regularizer(**(options or {}))
-    raise AssertionError(f"{regularizer!r} is not an rsocl.regularizer.Regularizer subclass or instance")
+    raise AssertionError(f"{regularizer!r} is not an rsocl.solver.regularizer.Regularizer subclass or instance")
 
 
 def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 10), weights=(0.05, 0.5),
                       pairs=4, seed=0):
     """Check the regularizer contract on ``device`` in every dtype it and the device support.
 
-    Properties checked: options declared as :class:`~rsocl.regularizer.Option` with a
+    Properties checked: options declared as :class:`~rsocl.solver.regularizer.Option` with a
     default; ``name`` set; the output is a device array of the input's shape and dtype
     with finite values; the input is not modified; ``out=`` is honoured; weight 0 is the
     identity; the map is non-expansive (``‖D(x) - D(y)‖ <= ‖x - y‖``) on random pairs;
@@ -73,7 +73,7 @@ def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 1
     reg = _instance(regularizer, options)
     assert isinstance(reg.name, str) and reg.name and reg.name != "base", "the regularizer needs a name"
     for key, opt in type(reg).options.items():
-        assert isinstance(opt, Option), f"option {key!r} must be declared as rsocl.regularizer.Option"
+        assert isinstance(opt, Option), f"option {key!r} must be declared as rsocl.solver.regularizer.Option"
     dev = get_device(device)
     rng = np.random.default_rng(seed)
     checked = []

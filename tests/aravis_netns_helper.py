@@ -109,7 +109,7 @@ def frame_facts(frame):
 def fake_checks(workdir):
     from gi.repository import Aravis  # noqa: F401  (import_aravis did require_version)
 
-    from rsocl.camera import CameraError, CameraTimeout
+    from rsocl.hardware.backend import CameraError, CameraTimeout
     from rsocl_plugins.aravis import AravisCamera, discover
 
     checks = Checks()
@@ -264,7 +264,7 @@ def write_rig(path, formats, interfaces):
 
 
 def gige_checks(workdir):
-    from rsocl.camera import CameraDisconnected, CameraTimeout
+    from rsocl.hardware.backend import CameraDisconnected, CameraTimeout
     from rsocl_plugins.aravis import AravisCamera, discover, import_aravis
 
     import_aravis()
@@ -317,11 +317,11 @@ def gige_checks(workdir):
 
         def c_capture(facts):
             try:
-                from rsocl.capture import capture_sets, load_raw
+                from rsocl.hardware.capture import capture_sets, load_raw
             except ImportError as exc:
-                facts["skipped"] = f"rsocl.capture not available: {exc}"
+                facts["skipped"] = f"rsocl.hardware.capture not available: {exc}"
                 return
-            from rsocl.io import load_capture
+            from rsocl.files.hdf5 import load_capture
 
             rig = workdir / "rig.toml"
             write_rig(rig, formats, interfaces)

@@ -17,7 +17,7 @@ SMALL = os.environ.get("RSOCL_TEST_SMALL") == "1"
 
 @pytest.fixture(scope="session")
 def device():
-    from rsocl.device import get_device
+    from rsocl.device.context import get_device
 
     return get_device()
 

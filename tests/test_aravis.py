@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rsocl.camera import CameraError
+from rsocl.hardware.backend import CameraError
 from rsocl_plugins.aravis import AravisCamera, convert_buffer
 
 HELPER = Path(__file__).with_name("aravis_netns_helper.py")
@@ -159,7 +159,7 @@ def test_missing_pygobject_is_a_clear_camera_error(monkeypatch):
 
 
 def test_entry_point():
-    from rsocl.plugins import load
+    from rsocl.common.registry import load
 
     assert load("rsocl.cameras", "aravis") is AravisCamera
     assert AravisCamera.pixel_formats == ("Mono8", "Mono12", "Mono16")

@@ -8,12 +8,12 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from rsocl import bench
-from rsocl.bench import (BASELINE, COLUMNS, BenchPoint, build_points, device_memory_bytes, interp3d, pareto_front,
+from rsocl.bench import run as bench
+from rsocl.bench.run import (BASELINE, COLUMNS, BenchPoint, build_points, device_memory_bytes, interp3d, pareto_front,
                          parse_sweep, run_bench, run_point, write_outputs)
-from rsocl.operator import RollingShutterOperator
-from rsocl.plan import crop_rig
-from rsocl.rig import Rig
+from rsocl.model.operator import RollingShutterOperator
+from rsocl.solver.plan import crop_rig
+from rsocl.model.rig import Rig
 
 FILES = ("bench.csv", "iterations.csv", "bench.md", "pareto.png", "cameras.png", "iterations.png")
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rsocl import Camera
-from rsocl import calibration as cal
+from rsocl.hardware import calibration as cal
 
 SHAPE = (48, 64)                       # reference ROI (m, n)
 SENSOR = (100, 110)                    # camera frames (rows, columns)
@@ -300,7 +300,7 @@ ANGLES = (0, 90, 180, 270)
 def _calibrate(argv):
     import argparse
 
-    from rsocl.calibrate_cli import add_calibrate_parser, cmd_calibrate
+    from rsocl.cli.calibrate import add_calibrate_parser, cmd_calibrate
 
     parser = argparse.ArgumentParser(prog="rsocl")
     add_calibrate_parser(parser.add_subparsers(dest="command", required=True))
@@ -313,7 +313,7 @@ def _calibrate(argv):
 def calibration_files(tmp_path, rng):
     """A 4-camera rig file (angles, t_r = 26 µs) and synthetic marker, flicker and flat-field files."""
     from rsocl import Rig
-    from rsocl.rigfile import RigFile, save_rigfile
+    from rsocl.files.rigfile import RigFile, save_rigfile
 
     rigfile = RigFile.from_rig(Rig.paper_array(4, shape=SHAPE, t_e=200e-6, t_r=T_R))
     rigfile.cameras[1]["roi"] = [6, 4, SENSOR[1], SENSOR[0]]            # camera 1 delivers a sensor ROI
@@ -335,7 +335,7 @@ def calibration_files(tmp_path, rng):
 def test_calibrate_writes_homographies_row_times_gains_and_png(calibration_files):
     import imageio.v3 as iio
 
-    from rsocl.rigfile import load_rigfile
+    from rsocl.files.rigfile import load_rigfile
 
     folder, truth, t_r, gains = calibration_files
     refs = [f"{x:g},{y:g}" for x, y in MARKERS]
@@ -356,7 +356,7 @@ def test_calibrate_writes_homographies_row_times_gains_and_png(calibration_files
 
 
 def test_calibrate_positions_with_nominal_angles_and_default_png(calibration_files):
-    from rsocl.rigfile import load_rigfile
+    from rsocl.files.rigfile import load_rigfile
 
     folder, truth, _, _ = calibration_files
     out = folder / "calibrated.toml"
@@ -386,7 +386,7 @@ def test_calibrate_refuses_a_row_time_mismatch_and_writes_nothing(calibration_fi
 
 
 def test_calibrate_reads_folders_and_given_marker_coordinates(calibration_files):
-    from rsocl.rigfile import load_rigfile
+    from rsocl.files.rigfile import load_rigfile
 
     folder, truth, _, gains = calibration_files
     flats = folder / "flats"

@@ -6,13 +6,14 @@ import h5py
 import numpy as np
 import pytest
 
-from rsocl import reconstruct, reference
-from rsocl.capture import CaptureFailed, add_capture_parser, capture_sets, cmd_capture, load_raw
-from rsocl.io import load_capture
-from rsocl.metrics import psnr
-from rsocl.rig import Rig
-from rsocl.rigfile import RigFile, save_rigfile
-from rsocl.scenes import builtin_scene
+from rsocl import reconstruct
+from rsocl.model import reference
+from rsocl.hardware.capture import CaptureFailed, add_capture_parser, capture_sets, cmd_capture, load_raw
+from rsocl.files.hdf5 import load_capture
+from rsocl.analysis.metrics import psnr
+from rsocl.model.rig import Rig
+from rsocl.files.rigfile import RigFile, save_rigfile
+from rsocl.model.scenes import builtin_scene
 from rsocl_plugins.simulated import SimulatedCamera
 
 SHAPE = (16, 16)
@@ -67,7 +68,7 @@ def test_capture_round_trip(tmp_path):
 
 
 def test_each_frame_is_written_before_the_next_is_requested(tmp_path, monkeypatch):
-    from rsocl import capture as capture_module
+    from rsocl.hardware import capture as capture_module
 
     log = []
     real_read, real_add = SimulatedCamera._read, capture_module._Writer.add_raw
@@ -168,7 +169,7 @@ def test_cmd_capture(tmp_path, capsys):
     assert args.func(args) == 0
     assert "wrote" in capsys.readouterr().out and load_raw(tmp_path / "c.h5").sets_complete == 2
     # and the capture file feeds 'rsocl reconstruct' as it is
-    from rsocl.cli import main
+    from rsocl.cli.main import main
 
     assert main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "r.h5"), "--iterations", "10",
                  "--quiet"]) == 0

@@ -6,8 +6,8 @@ import sys
 import numpy as np
 import pytest
 
-from rsocl.cli import main
-from rsocl.io import load_capture, load_reconstruction
+from rsocl.cli.main import main
+from rsocl.files.hdf5 import load_capture, load_reconstruction
 
 
 def test_info_paper_figures(capsys):

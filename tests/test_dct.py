@@ -180,7 +180,7 @@ def test_workspace_bytes(device):
 
 
 def test_registered_as_plugin():
-    from rsocl.plugins import load
+    from rsocl.common.registry import load
 
     assert load("rsocl.regularizers", "dct") is DCT
     assert DCT.name == "dct"

@@ -2,7 +2,7 @@
 
 import pytest
 
-from rsocl import device as devmod
+from rsocl.device import context as devmod
 
 
 def test_default_device_and_spec_forms(device):

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import rsocl
-from rsocl import reference as ref
-from rsocl.operator import RollingShutterOperator
+from rsocl.model import reference as ref
+from rsocl.model.operator import RollingShutterOperator
 
 
 def _scene(rig, seed=0):
@@ -152,7 +152,7 @@ def test_float32_and_float64_agree():
 def test_reduction_is_accurate_for_large_arrays(device):
     import pyopencl.array as cla
 
-    from rsocl.reduction import sum_sq_diff
+    from rsocl.device.reduction import sum_sq_diff
 
     n = 3_000_000
     x = np.full(n, 1.0 + 2.0 ** -12, np.float32)
@@ -219,5 +219,5 @@ def test_subframes_no_camera_samples_are_not_modelled(device):
     res = rsocl.reconstruct(g, rig, iterations=30, lam=0.01, truth=truth, dtype="float64")
     assert res.params["solved_subframes"] == [40, rig.T]
     assert not res.datacube[:40].any()
-    assert res.history["psnr"][-1] == pytest.approx(rsocl.metrics.psnr(res.datacube, truth), abs=1e-6)
+    assert res.history["psnr"][-1] == pytest.approx(rsocl.analysis.metrics.psnr(res.datacube, truth), abs=1e-6)
     assert res.history["residual"][-1] < 0.05

@@ -5,10 +5,10 @@ import h5py
 import numpy as np
 import pytest
 
-from rsocl.atomic import atomic_path
-from rsocl.io import (Capture, Reconstruction, load_capture, load_reconstruction, save_capture,
+from rsocl.files.atomic import atomic_path
+from rsocl.files.hdf5 import (Capture, Reconstruction, load_capture, load_reconstruction, save_capture,
                       save_reconstruction)
-from rsocl.rig import Camera, Rig
+from rsocl.model.rig import Camera, Rig
 
 SHAPE = (9, 7)
 

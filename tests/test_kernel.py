@@ -1,10 +1,10 @@
-"""rsocl.kernel.Kernel: by-value arguments set only when they change, buffers on every call."""
+"""rsocl.device.kernel.Kernel: by-value arguments set only when they change, buffers on every call."""
 
 import numpy as np
 import pytest
 
-from rsocl.device import Kernels
-from rsocl.kernel import Kernel
+from rsocl.device.context import Kernels
+from rsocl.device.kernel import Kernel
 
 SOURCE = """
 __kernel void fill(__global float *x, float value, int add)

@@ -2,7 +2,8 @@
 
 import pytest
 
-from rsocl import device, launch
+from rsocl import device
+from rsocl.device import launch
 
 
 @pytest.mark.parametrize("extent", [1, 2, 7, 8, 50, 64, 67, 128, 130, 131, 4099])

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from skimage.metrics import structural_similarity
 
-from rsocl.metrics import default_data_range, mse, psnr, ssim
+from rsocl.analysis.metrics import default_data_range, mse, psnr, ssim
 
 
 def _checker_noise(shape, sigma):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rsocl import Camera, RollingShutterOperator, Rig
-from rsocl import reference as ref
+from rsocl.model import reference as ref
 
 TOL = {"float32": 1e-5, "float64": 1e-12}
 

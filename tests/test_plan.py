@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 import rsocl
-from rsocl.cli import main
-from rsocl.plan import crop_rig, plan
+from rsocl.cli.main import main
+from rsocl.solver.plan import crop_rig, plan
 
 
 def test_crop_keeps_real_start_times():

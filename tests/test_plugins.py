@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import rsocl
-from rsocl import plugins
+from rsocl.common import registry as plugins
 from rsocl.testing import check_regularizer
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,7 +27,7 @@ def _fake_distribution(folder: Path, dist: str, entry: str, module: str, body: s
 
 
 def test_builtin_regularizers_are_listed_without_importing_them():
-    code = ("import sys, rsocl.plugins as p; names = sorted(p.available('rsocl.regularizers'));"
+    code = ("import sys, rsocl.common.registry as p; names = sorted(p.available('rsocl.regularizers'));"
             "print(names, any(m.startswith('rsocl_plugins.') for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     for name in BUILTIN:
@@ -46,7 +46,7 @@ def test_builtin_regularizers_conform(name, device):
 
 
 def test_conformance_check_catches_a_bad_regularizer(device):
-    from rsocl.regularizer import Regularizer
+    from rsocl.solver.regularizer import Regularizer
 
     class Doubling(Regularizer):
         name = "doubling"
@@ -124,7 +124,7 @@ def test_third_party_plugin_end_to_end(example_plugin_installed, tmp_path, devic
     run = _rsocl("reconstruct", str(cap), "--out", str(rec), "--regularizer", "shrink", "--reg-opt", "center=0.5",
                  "--iterations", "5", "--quiet")
     assert run.returncode == 0, run.stderr
-    from rsocl.io import load_reconstruction
+    from rsocl.files.hdf5 import load_reconstruction
 
     result = load_reconstruction(rec)
     assert result.params["regularizer"] == "shrink"

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import rsocl
-from rsocl import reference as ref
+from rsocl.model import reference as ref
 
 
 @pytest.fixture(scope="module")
@@ -44,14 +44,14 @@ def test_history_and_psnr_improve(problem):
     # the recorded residual is the real one
     r = np.linalg.norm(ref.forward(rig, res.datacube) - g) / np.linalg.norm(g)
     assert h["residual"][-1] == pytest.approx(r, rel=1e-3)
-    # and PSNR is rsocl.metrics.psnr of the returned datacube
-    assert h["psnr"][-1] == pytest.approx(rsocl.metrics.psnr(res.datacube, truth), abs=1e-3)
+    # and PSNR is rsocl.analysis.metrics.psnr of the returned datacube
+    assert h["psnr"][-1] == pytest.approx(rsocl.analysis.metrics.psnr(res.datacube, truth), abs=1e-3)
     assert res.params["regularizer"] == "tv" and res.params["projection"] == "exact"
     assert res.trimmed.shape[0] == rig.T_se
 
 
 def test_recovers_a_scene_better_than_backprojection():
-    from rsocl.scenes import builtin_scene
+    from rsocl.model.scenes import builtin_scene
 
     rig = rsocl.Rig.paper_array(4, (24, 24), t_e=0.18e-3, t_r=35e-6)
     truth = builtin_scene(rig.shape, rig.T)
@@ -59,7 +59,7 @@ def test_recovers_a_scene_better_than_backprojection():
     res = rsocl.reconstruct(g, rig, iterations=60, truth=truth)
     # a still image: each pixel's mean intensity over the exposure, repeated in time
     still = np.broadcast_to(g.mean(axis=0) / rig.exposure_subframes, truth.shape)
-    assert res.history["psnr"][-1] > rsocl.metrics.psnr(still, truth) + 3
+    assert res.history["psnr"][-1] > rsocl.analysis.metrics.psnr(still, truth) + 3
     assert res.history["psnr"][-1] > 18
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rsocl import Camera, Rig
-from rsocl.rig import PAPER_ANGLES
+from rsocl.model.rig import PAPER_ANGLES
 
 
 def test_paper_simulation_figures():

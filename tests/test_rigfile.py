@@ -6,8 +6,8 @@ import sys
 import numpy as np
 import pytest
 
-from rsocl.rig import Camera, Rig
-from rsocl.rigfile import RigFile, dumps_toml, load_rigfile, row_map_from_homography, save_rigfile
+from rsocl.model.rig import Camera, Rig
+from rsocl.files.rigfile import RigFile, dumps_toml, load_rigfile, row_map_from_homography, save_rigfile
 
 if sys.version_info >= (3, 11):
     import tomllib

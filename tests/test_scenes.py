@@ -6,7 +6,7 @@ import pytest
 from skimage.color import rgb2gray
 from skimage.transform import resize
 
-from rsocl.scenes import benchmark_protocol, builtin_scene, load_scene, load_video
+from rsocl.model.scenes import benchmark_protocol, builtin_scene, load_scene, load_video
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 

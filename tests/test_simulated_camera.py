@@ -3,10 +3,11 @@
 import numpy as np
 import pytest
 
-from rsocl import plugins, reference
-from rsocl.camera import CameraDisconnected, CameraError, CameraTimeout
-from rsocl.rig import Camera, Rig
-from rsocl.scenes import builtin_scene
+from rsocl.common import registry as plugins
+from rsocl.model import reference
+from rsocl.hardware.backend import CameraDisconnected, CameraError, CameraTimeout
+from rsocl.model.rig import Camera, Rig
+from rsocl.model.scenes import builtin_scene
 from rsocl_plugins.simulated import SimulatedCamera
 
 SHAPE = (12, 10)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from skimage.restoration import denoise_tv_chambolle
 
-from rsocl import reference as ref
+from rsocl.model import reference as ref
 from rsocl_plugins.tv import TV
 
 

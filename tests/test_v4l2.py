@@ -39,7 +39,7 @@ from unittest import mock
 import numpy as np
 import pytest
 
-from rsocl.camera import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
+from rsocl.hardware.backend import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
 from rsocl_plugins.v4l2 import EXPOSURE_UNIT, V4L2Camera, convert_frame
 
 _real_mmap = mmap_module.mmap
@@ -556,7 +556,7 @@ def test_bad_config(config):
 
 
 def test_entry_point():
-    from rsocl import plugins
+    from rsocl.common import registry as plugins
 
     names = plugins.available("rsocl.cameras")
     if "v4l2" not in names:

@@ -2,9 +2,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from rsocl import visual
-from rsocl.rig import Camera, Rig
-from rsocl.visual import channel_titles, comparison_gif, datacube_montage, snapshot_montage
+from rsocl.analysis import visual
+from rsocl.model.rig import Camera, Rig
+from rsocl.analysis.visual import channel_titles, comparison_gif, datacube_montage, snapshot_montage
 
 
 @pytest.fixture

@@ -275,14 +275,14 @@ def test_input_is_validated(device):
 
 
 def test_registered_as_plugin():
-    import rsocl.plugins
+    import rsocl.common.registry
 
-    assert rsocl.plugins.load("rsocl.regularizers", "wavelet") is Wavelet
+    assert rsocl.common.registry.load("rsocl.regularizers", "wavelet") is Wavelet
 
 
 def test_reconstruct_with_wavelet_improves_psnr():
     import rsocl
-    from rsocl import reference as ref
+    from rsocl.model import reference as ref
 
     rig = rsocl.Rig.paper_array(4, (16, 16), t_e=1e-4, t_r=3e-5)
     truth = np.clip(np.linspace(0, 1, 16)[None, None, :] + np.zeros((rig.T,) + rig.shape), 0, 1)

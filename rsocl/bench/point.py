@@ -1,0 +1,142 @@
+"""A point of ``rsocl bench``: every knob of one measurement (:class:`BenchPoint`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+__all__ = ["BenchPoint", "BenchResult", "BASELINE", "US", "on_iterations_line"]
+
+US = 1e-6
+#: Name of the baseline's rows in the ``regularizer`` column.
+BASELINE = "interp3d"
+
+
+@dataclass(frozen=True)
+class BenchPoint:
+    """Every knob of one measurement.
+
+    Attributes
+    ----------
+    scene : str
+        ``"builtin"`` or a video file (see :func:`rsocl.model.scenes.load_scene`).
+    cameras : int
+        1..8, the paper's angle order (0, 90, 180, 270, 45, 135, 225, 315 degrees).
+    shape : int
+        Side of the square reference grid the scene is resized to, pixels.
+    roi : int or None
+        Side of the centred crop that is reconstructed, pixels; None (or ``shape``): all.
+    dt_factor : float
+        Sub-frame duration in units of ``t_r`` (>= 1).
+    iterations, tv_iterations : int
+        ADMM iterations and inner denoiser iterations (None for a regularizer without an
+        ``iterations`` option, and for the baseline).
+    regularizer : str
+        Registry name, or :data:`BASELINE` for the 3-D interpolation.
+    dtype : str
+        ``"float32"`` or ``"float64"``.
+    device : str or None
+        OpenCL device spec (``"P:D"``); None: rsocl's choice.
+    lam, eta : float
+        ADMM weights (defaults of :func:`rsocl.solver.reconstruct`).
+    t_e, t_r : float
+        Exposure and row time of every camera, seconds.
+    """
+
+    scene: str = "builtin"
+    cameras: int = 4
+    shape: int = 64
+    roi: int | None = None
+    dt_factor: float = 1.0
+    iterations: int = 200
+    tv_iterations: int | None = 10
+    regularizer: str = "tv"
+    dtype: str = "float32"
+    device: str | None = None
+    lam: float = 0.1
+    eta: float = 0.2
+    t_e: float = 180e-6
+    t_r: float = 35e-6
+
+    def __post_init__(self):
+        from rsocl.common import validation as check
+
+        check.positive_int("cameras", self.cameras, maximum=8)
+        check.positive_int("shape", self.shape)
+        roi = self.roi
+        if roi is not None:
+            roi = check.positive_int("roi", roi)
+            if roi > self.shape:
+                raise ValueError(f"roi must be <= shape = {self.shape} pixels (a crop of the grid), got {roi}")
+        object.__setattr__(self, "roi", None if roi == self.shape else roi)
+        object.__setattr__(self, "dt_factor", float(check.positive("dt_factor", self.dt_factor)))
+        if self.dt_factor < 1 - 1e-9:
+            raise ValueError(f"dt_factor must be >= 1 (dt >= t_r), got {self.dt_factor!r}")
+        if self.regularizer != BASELINE:
+            check.positive_int("iterations", self.iterations)
+        if self.tv_iterations is not None:
+            check.positive_int("tv_iterations", self.tv_iterations)
+        check.positive("t_e", self.t_e, "seconds")
+        check.positive("t_r", self.t_r, "seconds")
+
+    @property
+    def roi_size(self) -> int:
+        return self.shape if self.roi is None else self.roi
+
+    @property
+    def is_baseline(self) -> bool:
+        return self.regularizer == BASELINE
+
+    def rig(self, dt_factor=None):
+        """The rig of this point (``dt_factor`` overrides the point's; 1 gives the reference grid)."""
+        from rsocl.solver.plan import crop_rig
+        from rsocl.model.rig import Rig
+
+        k = self.dt_factor if dt_factor is None else dt_factor
+        full = Rig.paper_array(self.cameras, (self.shape, self.shape), t_e=self.t_e, t_r=self.t_r,
+                               dt=k * self.t_r)
+        if self.roi is None:
+            return full
+        return crop_rig(full, self.crop_box())
+
+    def crop_box(self):
+        """``(y, x, height, width)`` of the centred ROI."""
+        offset = (self.shape - self.roi_size) // 2
+        return (offset, offset, self.roi_size, self.roi_size)
+
+
+def _scene_name(scene) -> str:
+    return "builtin" if scene == "builtin" else Path(str(scene)).name
+
+
+def on_iterations_line(point, default) -> bool:
+    """Whether ``point`` differs from ``default`` in its iteration count at most: the points
+    whose PSNR history the iterations plot draws."""
+    return replace(point, iterations=default.iterations) == default
+
+
+@dataclass
+class BenchResult:
+    """Rows of a run and what the writers need besides."""
+
+    rows: list
+    default: BenchPoint
+    notes: list = field(default_factory=list)
+    seconds: float = 0.0
+    device: str = ""
+    #: The default point's seconds measured at the start and again at the end of the run: a
+    #: gauge of the timing noise (other load on the machine).
+    timing_check: tuple | None = None
+    #: 1-minute load average at the start and at the end of the run (None where unavailable).
+    load: tuple | None = None
+
+    def history(self):
+        """History of the longest run whose knobs other than ``iterations`` are the default's."""
+        best = None
+        for row in self.rows:
+            point = row["_point"]
+            if row.get("_history") is None or not on_iterations_line(point, self.default):
+                continue
+            if best is None or point.iterations > best["_point"].iterations:
+                best = row
+        return None if best is None else best["_history"]

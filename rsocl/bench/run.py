@@ -1,0 +1,317 @@
+"""``rsocl bench``: what each setting buys in quality (PSNR, SSIM) and costs in time and memory.
+
+A *point* (:class:`BenchPoint`) fixes every knob: scene, number of cameras (the paper's angle
+order), ROI, sub-frame duration ``dt``, ADMM and inner denoiser iterations, regularizer, dtype
+and device. :func:`run_point` simulates the capture, reconstructs it and measures it; a sweep
+varies one knob at a time around a default point; :func:`write_outputs` writes ``bench.csv``,
+``iterations.csv``, ``bench.md`` and three PNG plots (:mod:`rsocl.bench.plots`).
+
+The pieces, one module each (all re-exported here):
+
+* :mod:`rsocl.bench.point`: :class:`BenchPoint`, the knobs of one measurement;
+* :mod:`rsocl.bench.measure`: :func:`run_point`, how a point is measured;
+* :mod:`rsocl.bench.baseline`: :func:`interp3d`, the baseline that needs no solver;
+* :mod:`rsocl.bench.memory`: :func:`device_memory_bytes`, the device memory of a run;
+* :mod:`rsocl.bench.analysis`: :func:`pareto_front` and :func:`picks`;
+* :mod:`rsocl.bench.report`: ``bench.csv``, ``iterations.csv``, ``bench.md``, and the plots of
+  :mod:`rsocl.bench.plots`;
+* this module: the sweeps (:func:`build_points`, :func:`run_bench`) and the command line.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import replace
+from pathlib import Path
+
+# the names of the former single module stay importable from here
+from rsocl.bench.analysis import SPEED_PICK_DB, pareto_front, picks  # noqa: F401
+from rsocl.bench.baseline import interp3d
+from rsocl.bench.measure import _device_of, run_point
+from rsocl.bench.memory import device_memory_bytes
+from rsocl.bench.point import BASELINE, US, BenchPoint, BenchResult, on_iterations_line
+from rsocl.bench.report import (COLUMNS, _num, markdown, tradeoff_lines, write_csv, write_iterations_csv,  # noqa: F401
+                           write_outputs)
+
+__all__ = ["BenchPoint", "BenchResult", "SWEEPS", "BASELINE", "run_point", "interp3d", "device_memory_bytes",
+           "build_points", "run_bench", "pareto_front", "markdown", "write_csv", "write_outputs",
+           "add_bench_parser", "cmd_bench"]
+
+
+# ---------------------------------------------------------------------- sweeps
+#: Sweep name -> the :class:`BenchPoint` field it varies.
+SWEEPS = {"cameras": "cameras", "iterations": "iterations", "tv_iterations": "tv_iterations",
+          "regularizer": "regularizer", "dtype": "dtype", "dt": "dt_factor", "roi": "roi", "device": "device"}
+#: Sweep values of the full run; iterations and roi as fractions of the default point's.
+FULL = {"cameras": [1, 2, 3, 4, 5, 6, 7, 8], "iterations": [0.125, 0.25, 0.5, 1.0, 1.5],
+        "tv_iterations": [2, 5, 10, 20], "dt": [1, 2, 3, 4], "roi": [0.5, 0.75, 1.0]}
+#: The ``--quick`` run: fewer values, the sweeps that show the trade.
+QUICK = {"cameras": [1, 2, 4, 8], "iterations": [0.1, 0.25, 0.5, 1.0], "tv_iterations": [2, 5, 10],
+         "dt": [1, 2, 4], "roi": [0.5, 0.75, 1.0], "regularizer": ["tv"]}
+
+
+def _canonical_device(spec):
+    """``"P:D"`` of the device ``spec`` selects (so one device is one point whatever its spelling)."""
+    from rsocl.device.context import list_devices
+
+    dev = _device_of(spec).device
+    for pi, di, _, d in list_devices():
+        if d == dev:
+            return f"{pi}:{di}"
+    return spec
+
+
+def _default_values(name, default: BenchPoint, quick: bool, notes: list):
+    from rsocl.device.context import list_devices
+    from rsocl.common.registry import available
+
+    table = QUICK if quick else FULL
+    if name in table:
+        values = table[name]
+        if name == "iterations":
+            return sorted({max(1, round(f * default.iterations)) for f in values})
+        if name == "roi":
+            return sorted({max(4, round(f * default.shape)) for f in values})
+        return list(values)
+    if name == "regularizer":
+        return list(available("rsocl.regularizers"))
+    if name == "dtype":
+        if _device_of(default.device).has_fp64:
+            return ["float32", "float64"]
+        notes.append(f"dtype: device {_device_of(default.device).name} has no fp64; float32 only")
+        return ["float32"]
+    if name == "device":
+        return [f"{pi}:{di}" for pi, di, _, _ in list_devices()]
+    if name == "tv_iterations":
+        return list(FULL["tv_iterations"])
+    raise ValueError(f"unknown sweep {name!r}; known: {sorted(SWEEPS)}")
+
+
+def parse_sweep(text: str):
+    """``"NAME"`` or ``"NAME=v1,v2,..."`` -> (name, values or None)."""
+    name, _, values = str(text).partition("=")
+    name = name.strip().replace("-", "_")
+    if name not in SWEEPS:
+        raise ValueError(f"--sweep must be one of {sorted(SWEEPS)} (optionally NAME=v1,v2,...), got {text!r}")
+    if not values.strip():
+        return name, None
+    kind = {"cameras": int, "iterations": int, "tv_iterations": int, "roi": int, "dt": float}.get(name, str)
+    try:
+        return name, [kind(v.strip()) for v in values.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"--sweep {name}: values must be {kind.__name__}s separated by commas, got {values!r}") \
+            from None
+
+
+def _regularizer_point(default: BenchPoint, name: str):
+    """The default point with regularizer ``name`` (inner iterations only where it has them)."""
+    from rsocl.common.registry import load
+
+    cls = load("rsocl.regularizers", name)
+    iterative = "iterations" in getattr(cls, "options", {})
+    return replace(default, regularizer=name, tv_iterations=default.tv_iterations if iterative else None)
+
+
+def build_points(default: BenchPoint, sweeps=None, *, quick=False, baseline=True):
+    """Points of the requested sweeps around ``default``, deduplicated, default first.
+
+    Parameters
+    ----------
+    sweeps : iterable of str or (name, values) or None
+        Sweep names (``"cameras"``) or ``"NAME=v1,v2"`` strings or ``(name, values)`` pairs;
+        None: every sweep (``--quick``: the quick set).
+    baseline : bool
+        Add an ``interp3d`` point for every capture (cameras, ROI) of the run.
+
+    Returns
+    -------
+    points : list of (BenchPoint, sweep labels)
+    notes : list of str
+        Values left out (a broken regularizer, a ROI larger than the grid, no fp64, ...).
+    """
+    notes = []
+    if sweeps is None:
+        sweeps = list(QUICK) if quick else list(SWEEPS)
+    requested = []
+    for item in sweeps:
+        name, values = parse_sweep(item) if isinstance(item, str) else (item[0], item[1])
+        requested.append((name, values if values is not None else _default_values(name, default, quick, notes)))
+    order, labels = [default], {default: ["default"]}
+
+    def add(point, label):
+        if point not in labels:
+            order.append(point)
+            labels[point] = []
+        if label not in labels[point]:
+            labels[point].append(label)
+
+    for name, values in requested:
+        knob = SWEEPS[name]
+        for value in values:
+            try:
+                if knob == "regularizer":
+                    point = _regularizer_point(default, value)
+                elif knob == "device":
+                    point = replace(default, device=_canonical_device(value))
+                else:
+                    point = replace(default, **{knob: value})
+            except Exception as exc:                      # a broken plugin, an out-of-range value
+                notes.append(f"{name}={value}: skipped ({type(exc).__name__}: {exc})")
+                continue
+            add(point, name)
+    if baseline:
+        for point in list(order):
+            base = replace(default, cameras=point.cameras, roi=point.roi, regularizer=BASELINE, iterations=0,
+                           tv_iterations=None, dtype="float64", dt_factor=1.0, device=default.device)
+            add(base, "baseline")
+    order.sort(key=lambda p: p.roi is not None)             # full-ROI runs first: the crops compare with them
+    return [(p, labels[p]) for p in order], notes
+
+
+def _label(point: BenchPoint, default: BenchPoint) -> str:
+    parts = [] if not point.is_baseline else [BASELINE]
+    if point.cameras != default.cameras:
+        parts.append(f"C={point.cameras}")
+    if point.roi_size != default.roi_size:
+        parts.append(f"ROI {point.roi_size}")
+    if point.is_baseline:
+        return " ".join(parts)
+    if point.regularizer != default.regularizer:
+        parts.append(point.regularizer)
+    if point.iterations != default.iterations:
+        parts.append(f"it={point.iterations}")
+    if point.tv_iterations != default.tv_iterations and point.regularizer == default.regularizer:
+        parts.append(f"inner={point.tv_iterations}")
+    if point.dtype != default.dtype:
+        parts.append(point.dtype)
+    if point.dt_factor != default.dt_factor:
+        parts.append(f"dt={point.dt_factor:g}t_r")
+    if point.device != default.device:
+        parts.append(f"dev {point.device}")
+    return " ".join(parts) or "default"
+
+
+def run_bench(default: BenchPoint, sweeps=None, *, quick=False, baseline=True, progress=True, cache=None,
+              repeat_default=True) -> BenchResult:
+    """Build the points (:func:`build_points`) and measure each (:func:`run_point`).
+
+    With ``repeat_default`` the default point is timed once more at the end
+    (:attr:`BenchResult.timing_check`), which shows how much the times drift with the
+    machine's other load.
+
+    A point that fails (a broken plugin, a dtype the regularizer lacks, a problem too large
+    for the device) is left out with a note; the others are measured.
+    """
+    from tqdm.auto import tqdm
+
+    start = time.perf_counter()
+    load_start = _load()
+    default = replace(default, device=_canonical_device(default.device))
+    points, notes = build_points(default, sweeps, quick=quick, baseline=baseline)
+    cache = {} if cache is None else cache
+    rows = []
+    bar = tqdm(points, desc="rsocl bench", unit="point", disable=None if progress else True, leave=False)
+    try:
+        for point, labels in bar:
+            bar.set_postfix_str(_label(point, default))
+            try:
+                row = run_point(point, cache, with_history=on_iterations_line(point, default))
+            except (KeyboardInterrupt, MemoryError):
+                raise
+            except Exception as exc:
+                notes.append(f"{_label(point, default)}: failed ({type(exc).__name__}: {exc})")
+                continue
+            row["sweep"] = "|".join(labels)
+            row["label"] = _label(point, default)
+            rows.append(row)
+    finally:
+        bar.close()
+    timing_check = None
+    first = next((r for r in rows if r["_point"] == default), None)
+    if repeat_default and first is not None and len(rows) > 1:
+        timing_check = (first["seconds"], run_point(default, cache)["seconds"])
+    device = _device_of(default.device).name
+    return BenchResult(rows, default, notes, time.perf_counter() - start, device, timing_check,
+                       (load_start, _load()))
+
+
+def _load():
+    try:
+        return os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return None
+
+
+# ---------------------------------------------------------------------- command line
+def add_bench_parser(subparsers):
+    """Add ``rsocl bench`` to the ``rsocl`` command's sub-parsers."""
+    import argparse
+
+    p = subparsers.add_parser(
+        "bench", help="sweep settings on a scene: PSNR/SSIM against seconds and memory; CSV, Markdown, plots",
+        description="Measure what each setting buys: sweeps one knob at a time around a default point "
+                    "(4 cameras, 64x64, 200 ADMM-TV iterations with 10 inner, float32, dt = t_r), with a "
+                    "3-D interpolation baseline; writes bench.csv, iterations.csv, bench.md, pareto.png, "
+                    "cameras.png and iterations.png.")
+    p.add_argument("--scene", default="builtin", help="'builtin' or a video file (.npz key 'video', .tif, .gif)")
+    p.add_argument("--sweep", action="append", default=None, metavar="NAME[=V1,V2,...]",
+                   help=f"sweep to run, repeatable: {', '.join(SWEEPS)} (default: all; --quick: "
+                        f"{', '.join(QUICK)})")
+    p.add_argument("--quick", action="store_true",
+                   help="32x32, 100 iterations, fewer values: about a minute on 2 CPU cores")
+    p.add_argument("--out", default="rsocl-bench", help="output folder (default ./rsocl-bench)")
+    p.add_argument("--device", default=None, help="OpenCL device for every point but the device sweep")
+    p.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs (default 180)")
+    p.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs (default 35)")
+    p.add_argument("--lam", type=float, default=None, help="regularization weight (default rsocl's)")
+    p.add_argument("--eta", type=float, default=None, help="ADMM penalty (default rsocl's)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no table, only the result line")
+    # testing and tuning knobs: the default point's grid side, cameras and iterations
+    p.add_argument("--shape", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--cameras", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--iterations", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--tv-iterations", type=int, default=None, help=argparse.SUPPRESS)
+    p.set_defaults(func=cmd_bench)
+    return p
+
+
+def default_point(args) -> BenchPoint:
+    """The default point of a ``rsocl bench`` command line."""
+    from rsocl.solver.reconstruct import DEFAULTS
+
+    scene = args.scene
+    if scene != "builtin" and not Path(scene).exists():
+        raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
+    quick = bool(args.quick)
+
+    def pick(value, fallback):
+        return fallback if value is None else value
+
+    return BenchPoint(
+        scene=scene, cameras=pick(args.cameras, 4), shape=pick(args.shape, 32 if quick else 64),
+        iterations=pick(args.iterations, 100 if quick else DEFAULTS["iterations"]),
+        tv_iterations=pick(args.tv_iterations, DEFAULTS["tv_iterations"]),
+        device=_canonical_device(args.device), lam=pick(args.lam, DEFAULTS["lam"]), eta=pick(args.eta, DEFAULTS["eta"]),
+        t_e=args.t_e_us * US, t_r=args.t_r_us * US)
+
+
+def cmd_bench(args) -> int:
+    """``rsocl bench``: run the sweeps and write the files."""
+    default = default_point(args)
+    sweeps = None if not args.sweep else [parse_sweep(s) for s in args.sweep]
+    result = run_bench(default, sweeps, quick=args.quick, progress=not args.quiet)
+    if not result.rows:
+        raise ValueError("no point could be measured: " + "; ".join(result.notes))
+    files = write_outputs(result, args.out)
+    if not args.quiet:
+        print(markdown(result))
+        print("wrote " + ", ".join(str(f) for f in files))
+    else:
+        speed, quality = picks(result)
+        text = f"{len(result.rows)} points in {result.seconds:.0f} s; wrote {Path(args.out) / 'bench.md'}"
+        if quality is not None:
+            text += (f"; quality: {quality['label']} {_num(quality['psnr'], '.2f')} dB; "
+                     f"speed: {speed['label']} {_num(speed['psnr'], '.2f')} dB in {speed['seconds']:.2f} s")
+        print(text)
+    return 0

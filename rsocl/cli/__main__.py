@@ -1,0 +1,7 @@
+"""``python -m rsocl.cli``: the same as the ``rsocl`` command."""
+
+import sys
+
+from rsocl.cli.main import main
+
+sys.exit(main())

@@ -1,0 +1,343 @@
+"""``rsocl calibrate``: measure homographies, row times and gains, and write them into a rig file.
+
+Wired into :mod:`rsocl.cli` with :func:`add_calibrate_parser`; the command is
+:func:`cmd_calibrate`. Every measurement is optional, but at least one is
+needed:
+
+* ``--frames``: one frame per camera of a target with marker dots -> each
+  camera's ``homography`` (replacing its ``angle`` or ``row_map_file``), and
+  a PNG of the registered markers (``--png``);
+* ``--flicker`` + ``--flicker-hz``: frames of a flickering light -> each
+  camera's ``t_r`` (the mean over its frames), checked against the rig
+  file first (``--tolerance``);
+* ``--flat``: flat-field frames -> each camera's ``gain`` relative to camera 0.
+
+Nothing is written unless every requested measurement succeeds; the rig file
+(and the PNG) are replaced atomically.
+
+File layouts (``FRAMES`` for ``--frames``, ``--flicker`` and ``--flat``):
+
+* ``.npz``: key ``frames`` holding a ``(C, rows, columns)`` array (or
+  ``(C, K, rows, columns)``: ``K`` frames per camera), or keys ``camera0``,
+  ``camera1``, ... one per camera (sizes may differ). For ``--frames`` an
+  optional key ``markers`` ``(C, N, 2)`` gives the markers' ``(x, y)`` in
+  each frame instead of detecting them, in the order of ``--markers-ref``;
+* ``.npy``: one array as for the ``frames`` key; for ``--flicker`` a single
+  2-D frame applies to every camera;
+* a folder: one file per camera (``.npy``, ``.png``, ``.tif``, ``.tiff``),
+  in name order.
+
+Frames are raw sensor images after the camera's ROI (``roi = [x, y, w, h]``
+in the rig file gives their offset on the sensor).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["add_calibrate_parser", "cmd_calibrate", "load_frames", "parse_points"]
+
+_IMAGE_SUFFIXES = (".npy", ".png", ".tif", ".tiff")
+
+
+# ---------------------------------------------------------------------- inputs
+def parse_points(tokens) -> np.ndarray:
+    """``["x,y", "x,y x,y", ...]`` -> ``(N, 2)`` float64 (points may also be separated by ';' or spaces)."""
+    points = []
+    for token in tokens:
+        for item in str(token).replace(";", " ").split():
+            parts = item.split(",")
+            try:
+                if len(parts) != 2:
+                    raise ValueError
+                points.append([float(parts[0]), float(parts[1])])
+            except ValueError:
+                raise ValueError(f"--markers-ref points must be 'x,y' pairs of numbers, got {item!r}") from None
+    if not points:
+        raise ValueError("--markers-ref needs at least 4 'x,y' points")
+    out = np.asarray(points, dtype=np.float64)
+    if not np.all(np.isfinite(out)):
+        raise ValueError("--markers-ref points must be finite")
+    return out
+
+
+def _read_image(path: Path) -> np.ndarray:
+    if path.suffix.lower() == ".npy":
+        return np.load(path, allow_pickle=False)
+    import imageio.v3 as iio
+
+    image = np.asarray(iio.imread(path))
+    if image.ndim == 3 and image.shape[-1] in (3, 4):      # colour image of a grey target
+        image = image[..., :3].mean(axis=-1)
+    return image
+
+
+def load_frames(path, what="--frames"):
+    """Read per-camera frames; returns ``(frames, extras)`` with ``extras`` the other .npz arrays.
+
+    ``frames`` is a list with one float64 array per camera: ``(rows, columns)``
+    or ``(K, rows, columns)``. A 2-D ``.npy`` gives a one-element list.
+    """
+    path = Path(os.fspath(path))
+    if not path.exists():
+        raise FileNotFoundError(f"{what}: {str(path)!r} does not exist")
+    extras = {}
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES and p.is_file())
+        if not files:
+            raise ValueError(f"{what}: folder {str(path)!r} holds no {', '.join(_IMAGE_SUFFIXES)} file")
+        frames = [_read_image(p) for p in files]
+    elif path.suffix.lower() == ".npz":
+        with np.load(path, allow_pickle=False) as data:
+            keys = list(data.keys())
+            if "frames" in keys:
+                frames = list(np.asarray(data["frames"]))
+            else:
+                cameras = sorted((k for k in keys if k.startswith("camera") and k[6:].isdigit()),
+                                 key=lambda k: int(k[6:]))
+                if not cameras:
+                    raise ValueError(f"{what}: {str(path)!r} has neither a 'frames' key nor 'camera0', "
+                                     f"'camera1', ... (keys: {keys})")
+                if [int(k[6:]) for k in cameras] != list(range(len(cameras))):
+                    raise ValueError(f"{what}: {str(path)!r} has keys {cameras}; expected camera0 .. "
+                                     f"camera{len(cameras) - 1}")
+                frames = [np.asarray(data[k]) for k in cameras]
+            extras = {k: np.asarray(data[k]) for k in keys if k != "frames" and not k.startswith("camera")}
+    elif path.suffix.lower() in _IMAGE_SUFFIXES:
+        array = _read_image(path)
+        frames = [array] if array.ndim == 2 else list(array)
+    else:
+        raise ValueError(f"{what}: {str(path)!r} must be a .npz, .npy or image file, or a folder of them")
+    out = []
+    for c, frame in enumerate(frames):
+        frame = np.asarray(frame)
+        if frame.dtype.kind not in "biuf" or frame.ndim not in (2, 3) or 0 in frame.shape:
+            raise ValueError(f"{what}: camera {c}: expected a real (rows, columns) frame or a (K, rows, columns) "
+                             f"stack, got {frame.dtype} array of shape {frame.shape}")
+        out.append(frame.astype(np.float64))
+    return out, extras
+
+
+def _one_frame(frame: np.ndarray) -> np.ndarray:
+    """A single frame: the mean of a stack (less noise), or the frame itself."""
+    return frame.mean(axis=0) if frame.ndim == 3 else frame
+
+
+def _per_camera(frames, C, what):
+    if len(frames) != C:
+        raise ValueError(f"{what}: the rig file has {C} cameras but {len(frames)} frame(s) were given")
+    return frames
+
+
+# ---------------------------------------------------------------------- parser
+def add_calibrate_parser(subparsers):
+    """Add the ``calibrate`` sub-command to an :mod:`argparse` sub-parsers object; returns its parser."""
+    p = subparsers.add_parser(
+        "calibrate", help="measure homographies, t_r and gains and write them into a rig file",
+        description="Measure each camera's registration (marker target), row time (flickering light) and "
+                    "photometric gain (flat field), and write them into the rig file.")
+    p.add_argument("--rig", required=True, help="rig file (.toml) to update")
+    p.add_argument("--out", default=None, help="write the updated rig file here instead (default: --rig)")
+    g = p.add_argument_group("registration (marker target)")
+    g.add_argument("--frames", default=None,
+                   help="one frame per camera of the marker target: .npz ('frames' or camera0..), .npy, or folder")
+    g.add_argument("--markers-ref", nargs="+", default=None, metavar="X,Y",
+                   help="marker positions on the reference grid, pixels (x = column, y = row); default: the "
+                        "markers found in camera 0's frame, which must then have the rig's shape. With "
+                        "--identify largest, list the large marker first. Negative values: "
+                        "--markers-ref='-3,5 60,5 ...'")
+    g.add_argument("--identify", choices=["position", "largest"], default="position",
+                   help="how markers are matched across rotated cameras: 'position' (clockwise from top-left, "
+                        "turned by each camera's nominal angle from the rig file) or 'largest' (the target "
+                        "has one larger marker; it comes first)")
+    g.add_argument("--polarity", choices=["bright", "dark"], default="bright", help="bright or dark dots")
+    g.add_argument("--threshold", type=float, default=None, help="dot/background threshold (default: automatic)")
+    g.add_argument("--png", default=None,
+                   help="overlay picture to write (default: <rig stem>-calibration.png next to the output)")
+    g = p.add_argument_group("row time (flickering light)")
+    g.add_argument("--flicker", default=None,
+                   help="frame(s) of an evenly lit scene under a flickering light: one 2-D .npy for all "
+                        "cameras, or one frame per camera")
+    g.add_argument("--flicker-hz", type=float, default=None,
+                   help="intensity flicker frequency, Hz (twice the mains frequency for lamps on AC)")
+    g.add_argument("--tolerance", type=float, default=0.01,
+                   help="largest accepted relative difference from the rig file's t_r (default 0.01)")
+    g.add_argument("--force", action="store_true", help="write a measured t_r even when it fails the check")
+    g = p.add_argument_group("photometric gain (flat field)")
+    g.add_argument("--flat", default=None, help="flat-field frame(s) per camera, same exposure for all")
+    g.add_argument("--dark", type=float, default=0.0, help="dark level subtracted from flat fields (default 0)")
+    p.add_argument("--quiet", action="store_true", help="print only errors")
+    p.set_defaults(func=cmd_calibrate)
+    return p
+
+
+# ---------------------------------------------------------------------- command
+def _say(args, *text):
+    if not getattr(args, "quiet", False):
+        print(*text, flush=True)
+
+
+def _nominal_angle(camera: dict, shape) -> float:
+    """The rotation the rig file states for a camera (angle, or implied by its homography), degrees."""
+    from rsocl.hardware.calibration import homography_angle
+
+    if camera.get("angle") is not None:
+        return float(camera["angle"])
+    if camera.get("homography") is not None:
+        return homography_angle(np.asarray(camera["homography"], dtype=np.float64), shape)
+    return 0.0
+
+
+def _origin(camera: dict):
+    roi = camera.get("roi")
+    return (float(roi[0]), float(roi[1])) if roi is not None else (0.0, 0.0)
+
+
+def _register(args, rigfile, updates):
+    """Registration of every camera; returns the overlay inputs."""
+    from rsocl.hardware.calibration import detect_markers, homography_angle, reference_outline, register_camera
+
+    frames, extras = load_frames(args.frames, "--frames")
+    C = len(rigfile.cameras)
+    frames = [_one_frame(f) for f in _per_camera(frames, C, "--frames")]
+    given = extras.get("markers")
+    if given is not None and (given.ndim != 3 or given.shape[0] != C or given.shape[2] != 2):
+        raise ValueError(f"--frames: 'markers' must have shape ({C}, N, 2), got {given.shape}")
+    reference = "largest" if args.identify == "largest" else None
+    options = {"polarity": args.polarity, "threshold": args.threshold}
+    if args.markers_ref is not None:
+        reference_points = parse_points(args.markers_ref)
+    else:
+        if tuple(frames[0].shape) != tuple(rigfile.shape):
+            raise ValueError(f"without --markers-ref, camera 0's frame is the reference grid and must have the "
+                             f"rig's shape {tuple(rigfile.shape)}, got {frames[0].shape}")
+        n = given.shape[1] if given is not None else 4
+        reference_points = given[0] if given is not None else \
+            detect_markers(frames[0], n, reference=reference, **options)
+        _say(args, "reference markers (camera 0): " + " ".join(f"{x:.2f},{y:.2f}" for x, y in reference_points))
+    if len(reference_points) < 4:
+        raise ValueError(f"a homography needs at least 4 markers, got {len(reference_points)}")
+    detected, reprojected, outlines, titles = [], [], [], []
+    for c, camera in enumerate(rigfile.cameras):
+        origin = np.asarray(_origin(camera))
+        angle = _nominal_angle(camera, rigfile.shape)
+        try:
+            registration = register_camera(
+                frames[c], reference_points, reference=reference, angle=angle, frame_origin=origin,
+                sensor_points=None if given is None else given[c] + origin, **options)
+        except ValueError as exc:
+            raise ValueError(f"camera {c}: {exc}") from None
+        H = registration.homography
+        rows = registration.row_map(rigfile.shape)
+        updates[c]["homography"] = H
+        detected.append(registration.sensor_points - origin)
+        reprojected.append(registration.reprojected - origin)
+        outlines.append(reference_outline(H, rigfile.shape, frame_origin=origin))
+        measured = angle + (homography_angle(H, rigfile.shape) - angle + 180.0) % 360.0 - 180.0   # nearest turn
+        name = camera.get("name")
+        titles.append(f"camera {c}" + (f" ({name})" if name else "") + f": {measured:.1f}°, "
+                      f"rms {registration.rms_error:.2f} px")
+        _say(args, f"camera {c}: homography from {len(reference_points)} markers, rms reprojection "
+                   f"{registration.rms_error:.3f} px, rotation {measured:.2f}° (rig file: {angle:g}°), "
+                   f"sensor rows 0..{rows.max():.2f} over the ROI")
+    return frames, detected, reprojected, outlines, titles
+
+
+def _row_times(args, rigfile, updates):
+    from rsocl.hardware.calibration import check_row_time, estimate_row_time
+
+    if args.flicker_hz is None:
+        raise ValueError("--flicker needs --flicker-hz (the light's intensity frequency, Hz)")
+    frames, _ = load_frames(args.flicker, "--flicker")
+    C = len(rigfile.cameras)
+    if len(frames) == 1 and C > 1 and frames[0].ndim == 2:
+        frames = frames * C
+    frames = _per_camera(frames, C, "--flicker")
+    problems = []
+    for c, camera in enumerate(rigfile.cameras):
+        try:
+            stack = frames[c] if frames[c].ndim == 3 else frames[c][None]
+            t_r = float(np.mean([estimate_row_time(frame, args.flicker_hz) for frame in stack]))
+        except ValueError as exc:
+            raise ValueError(f"camera {c}: {exc}") from None
+        message = check_row_time(t_r, camera["t_r"], args.tolerance, raise_error=False)
+        _say(args, f"camera {c}: {message}")
+        if message.startswith("t_r mismatch"):
+            problems.append(f"camera {c}: {message}")
+        updates[c]["t_r"] = t_r
+    if problems and not args.force:
+        raise ValueError("; ".join(problems) + " (nothing written; --force writes the measured values)")
+
+
+def _gains(args, rigfile, updates):
+    from rsocl.hardware.calibration import flat_field_gain
+
+    frames, _ = load_frames(args.flat, "--flat")
+    frames = _per_camera(frames, len(rigfile.cameras), "--flat")
+    gains = flat_field_gain(frames, dark=args.dark)
+    for c, gain in enumerate(gains):
+        updates[c]["gain"] = float(gain)
+    _say(args, "gains relative to camera 0: " + ", ".join(f"{g:.4f}" for g in gains))
+
+
+def _updated(rigfile, updates):
+    """A new RigFile with the measured values in place (checked as a whole)."""
+    from rsocl.files.rigfile import RigFile
+
+    cameras = []
+    old_t_r = min(camera["t_r"] for camera in rigfile.cameras)
+    for camera, update in zip(rigfile.cameras, updates):
+        camera = dict(camera)
+        if "homography" in update:
+            for key in ("angle", "row_map_file", "row_map"):
+                camera.pop(key, None)
+            camera["homography"] = np.asarray(update["homography"], dtype=np.float64).tolist()
+        for key in ("t_r", "gain"):
+            if key in update:
+                camera[key] = float(update[key])
+        cameras.append(camera)
+    dt = rigfile.dt
+    new_t_r = min(camera["t_r"] for camera in cameras)
+    if dt is not None and math.isclose(dt, old_t_r, rel_tol=1e-9):
+        dt = new_t_r                                   # dt was the row time: keep it so
+    try:
+        return RigFile(shape=rigfile.shape, cameras=cameras, dt=dt, mask=rigfile.mask, path=rigfile.path)
+    except ValueError as exc:
+        raise ValueError(f"the calibrated rig is not valid: {exc}") from None
+
+
+def cmd_calibrate(args) -> int:
+    """Run ``rsocl calibrate`` with parsed ``args`` (see :func:`add_calibrate_parser`); returns 0.
+
+    Raises ``ValueError`` / ``FileNotFoundError`` with a message naming the
+    option and camera at fault; nothing is written then.
+    """
+    from rsocl.hardware.calibration import marker_overlay_png
+    from rsocl.files.rigfile import load_rigfile, save_rigfile
+
+    if args.frames is None and args.flicker is None and args.flat is None:
+        raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
+    if args.flicker_hz is not None and args.flicker is None:
+        raise ValueError("--flicker-hz needs --flicker (frames of the flickering light)")
+    rigfile = load_rigfile(args.rig)
+    updates = [{} for _ in rigfile.cameras]
+    overlay = _register(args, rigfile, updates) if args.frames is not None else None
+    if args.flicker is not None:
+        _row_times(args, rigfile, updates)
+    if args.flat is not None:
+        _gains(args, rigfile, updates)
+    calibrated = _updated(rigfile, updates)
+    out = Path(args.out) if args.out else Path(args.rig)
+    written = []
+    if overlay is not None:
+        png = Path(args.png) if args.png else out.with_name(out.stem + "-calibration.png")
+        frames, detected, reprojected, outlines, titles = overlay
+        written.append(marker_overlay_png(png, frames, detected, reprojected, outlines=outlines, titles=titles))
+    written.insert(0, save_rigfile(out, calibrated))
+    rig = calibrated.rig()
+    _say(args, f"rig: {rig!r}\nwrote " + ", ".join(str(p) for p in written))
+    return 0

@@ -1,0 +1,402 @@
+"""HDF5 files for captures (snapshots + rig) and reconstructions (datacube + rig).
+
+One file per capture and per reconstruction, written atomically (see
+:mod:`rsocl.files.atomic`): a crash or error never leaves a partial file and never
+clobbers an existing one.
+
+Layout (format version 1)
+-------------------------
+Root attributes, both kinds:
+
+- ``rsocl_file``: ``"capture"`` or ``"reconstruction"``;
+- ``format_version``: ``1``;
+- ``rig``: JSON of :meth:`rsocl.model.rig.Rig.to_dict` in which each camera's
+  ``row_map`` array is replaced by ``{"dataset": "rig_row_maps/<camera index>"}``
+  (or ``null``); the row maps are float64 datasets at those paths;
+- human-readable copies (not read back): ``T``, ``T_se``, ``dt`` (seconds),
+  ``mask``, ``n_cameras``, ``n_channels``, ``shape``.
+
+Capture: dataset ``snapshots`` ``[K, m, n]``, optional ``truth`` ``[T, m, n]``,
+attribute ``meta`` (JSON object).
+
+Reconstruction: dataset ``datacube`` ``[T, m, n]``, optional ``truth`` (same
+shape), attribute ``params`` (JSON object), group ``history`` of 1-D datasets
+(insertion order kept).
+"""
+
+from __future__ import annotations
+
+import json
+import numbers
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rsocl.common import validation as check
+from rsocl.files.atomic import atomic_path
+from rsocl.model.rig import Rig
+
+__all__ = ["Capture", "Reconstruction", "save_capture", "load_capture",
+           "save_reconstruction", "load_reconstruction", "FORMAT_VERSION"]
+
+#: Version written to the ``format_version`` attribute; files with a larger
+#: version are refused.
+FORMAT_VERSION = 1
+
+_ROW_MAPS = "rig_row_maps"
+
+
+@dataclass(frozen=True)
+class Capture:
+    """A loaded capture file.
+
+    Attributes
+    ----------
+    snapshots : ndarray, shape (K, m, n)
+        One snapshot per channel, registered on the reference grid.
+    rig : Rig
+        The camera array that took them.
+    truth : ndarray, shape (T, m, n), or None
+        Ground-truth datacube (simulations only).
+    meta : dict
+        Free-form metadata stored with the capture.
+    """
+
+    snapshots: np.ndarray
+    rig: Rig
+    truth: np.ndarray | None
+    meta: dict
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """A loaded reconstruction file.
+
+    Attributes
+    ----------
+    datacube : ndarray, shape (T, m, n)
+        The reconstructed sub-frames.
+    rig : Rig
+        The camera array of the capture.
+    params : dict
+        Solver parameters (JSON data).
+    history : dict of str -> ndarray
+        Per-iteration traces (1-D arrays), e.g. residual or PSNR.
+    truth : ndarray, shape (T, m, n), or None
+        Ground truth, when known.
+    """
+
+    datacube: np.ndarray
+    rig: Rig
+    params: dict
+    history: dict
+    truth: np.ndarray | None
+
+
+# ---------------------------------------------------------------------- JSON
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+
+def _dumps(name: str, data) -> str:
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{name} must be a dict of str -> JSON-serialisable values, got {type(data).__name__}")
+    for key in data:
+        if not isinstance(key, str):
+            raise ValueError(f"{name} keys must be str, got {key!r}")
+    try:
+        return json.dumps(data, default=_json_default)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be JSON-serialisable (numbers, str, bool, None, lists, dicts, "
+                         f"NumPy scalars/arrays): {exc}") from None
+
+
+# ---------------------------------------------------------------------- rig
+def _write_rig(h5, rig: Rig) -> None:
+    """Store ``rig`` in the root of the open file ``h5`` (attributes + row-map datasets)."""
+    data = rig.to_dict()
+    for index, camera in enumerate(data["cameras"]):
+        row_map = camera.get("row_map")
+        if row_map is not None:
+            name = f"{_ROW_MAPS}/{index}"
+            h5.create_dataset(name, data=np.asarray(row_map, dtype=np.float64))
+            camera["row_map"] = {"dataset": name}
+    h5.attrs["rig"] = json.dumps(data, allow_nan=False)
+    h5.attrs["T"] = rig.T
+    h5.attrs["T_se"] = rig.T_se
+    h5.attrs["dt"] = rig.dt
+    h5.attrs["mask"] = rig.mask
+    h5.attrs["n_cameras"] = rig.C
+    h5.attrs["n_channels"] = rig.n_channels
+    h5.attrs["shape"] = np.asarray(rig.shape, dtype=np.int64)
+
+
+def _read_rig(h5, source: str) -> Rig:
+    try:
+        data = json.loads(_str_attr(h5, "rig", source))
+        for camera in data["cameras"]:
+            ref = camera.get("row_map")
+            if isinstance(ref, dict):
+                camera["row_map"] = np.asarray(h5[ref["dataset"]][()], dtype=np.float64)
+        return Rig.from_dict(data)
+    except (KeyError, TypeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{source}: the stored rig description is damaged ({exc!r})") from None
+
+
+# ---------------------------------------------------------------------- files
+def _str_attr(h5, name: str, source: str) -> str:
+    if name not in h5.attrs:
+        raise ValueError(f"{source}: attribute {name!r} is missing")
+    value = h5.attrs[name]
+    if isinstance(value, bytes):
+        value = value.decode("utf-8")
+    return str(value)
+
+
+def _write_header(h5, kind: str, rig: Rig) -> None:
+    h5.attrs["rsocl_file"] = kind
+    h5.attrs["format_version"] = FORMAT_VERSION
+    _write_rig(h5, rig)
+
+
+def _open_checked(path, kind: str):
+    """Open ``path`` read-only and check that it is an rsocl file of ``kind``."""
+    import h5py
+
+    path = Path(os.fspath(path))
+    if not path.exists():
+        raise FileNotFoundError(f"path: {kind} file {str(path)!r} does not exist")
+    try:
+        h5 = h5py.File(path, "r")
+    except OSError as exc:
+        raise ValueError(f"path: {str(path)!r} is not a readable HDF5 file ({exc})") from None
+    try:
+        found = h5.attrs.get("rsocl_file")
+        if isinstance(found, bytes):
+            found = found.decode("utf-8")
+        if found != kind:
+            what = "not an rsocl file" if found is None else f"an rsocl {found!r} file"
+            raise ValueError(f"path: {str(path)!r} is {what}, expected an rsocl {kind!r} file")
+        version = h5.attrs.get("format_version")
+        if version is None or not isinstance(version, numbers.Integral) or not 1 <= int(version) <= FORMAT_VERSION:
+            raise ValueError(f"path: {str(path)!r} has format_version {version!r}; this rsocl reads 1.."
+                             f"{FORMAT_VERSION}")
+    except BaseException:
+        h5.close()
+        raise
+    return h5
+
+
+def _cube(name: str, array, expected_shape=None, what="") -> np.ndarray:
+    array = check.finite_array(name, array)
+    if array.ndim != 3:
+        raise ValueError(f"{name} must be 3-D {what}, got shape {array.shape}")
+    if expected_shape is not None and array.shape != tuple(expected_shape):
+        raise ValueError(f"{name} must have shape {tuple(expected_shape)} {what}, got {array.shape}")
+    return array
+
+
+def _check_rig(rig) -> Rig:
+    if not isinstance(rig, Rig):
+        raise ValueError(f"rig must be an rsocl.model.rig.Rig, got {type(rig).__name__}")
+    return rig
+
+
+def _optional(h5, name):
+    return h5[name][()] if name in h5 else None
+
+
+# ---------------------------------------------------------------------- capture
+def save_capture(path, snapshots, rig, *, truth=None, attrs=None) -> Path:
+    """Write a capture (snapshots and the rig that took them) to one HDF5 file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination file (conventionally ``.h5``); its directory must exist.
+        An existing file is replaced only once the new one is complete.
+    snapshots : array_like, shape (K, m, n)
+        One registered snapshot per channel, ``K = rig.n_channels`` and
+        ``(m, n) = rig.shape``; stored in its own dtype.
+    rig : Rig
+        The camera array.
+    truth : array_like, shape (T, m, n), optional
+        Ground-truth datacube, ``T = rig.T`` (simulations).
+    attrs : dict of str -> JSON-serialisable, optional
+        Free-form metadata (e.g. noise level, scene name), stored as the JSON
+        attribute ``meta``. NumPy scalars and arrays become numbers and lists.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If a shape does not match the rig, an array is not finite, or
+        ``attrs`` is not a JSON-serialisable dict with str keys.
+    """
+    rig = _check_rig(rig)
+    m, n = rig.shape
+    snapshots = _cube("snapshots", snapshots, (rig.n_channels, m, n),
+                      "[K = rig.n_channels, m, n] = rig's channels and shape")
+    if truth is not None:
+        truth = _cube("truth", truth, (rig.T, m, n), "[T = rig.T, m, n]")
+    meta = _dumps("attrs", attrs)
+    path = Path(os.fspath(path))
+    import h5py
+
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as h5:
+            _write_header(h5, "capture", rig)
+            h5.attrs["meta"] = meta
+            h5.create_dataset("snapshots", data=snapshots)
+            if truth is not None:
+                h5.create_dataset("truth", data=truth)
+    return path
+
+
+def load_capture(path) -> Capture:
+    """Read a file written by :func:`save_capture`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The capture file.
+
+    Returns
+    -------
+    Capture
+        ``snapshots``, ``rig`` (equal to the saved one), ``truth`` (or None)
+        and ``meta``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not an rsocl capture file (another kind, not HDF5, or
+        a newer format version) or its content is damaged.
+    """
+    source = str(path)
+    with _open_checked(path, "capture") as h5:
+        rig = _read_rig(h5, source)
+        if "snapshots" not in h5:
+            raise ValueError(f"{source}: dataset 'snapshots' is missing")
+        return Capture(snapshots=h5["snapshots"][()], rig=rig, truth=_optional(h5, "truth"),
+                       meta=json.loads(_str_attr(h5, "meta", source)))
+
+
+# ---------------------------------------------------------------------- reconstruction
+def save_reconstruction(path, datacube, rig, *, params=None, history=None, truth=None) -> Path:
+    """Write a reconstruction (datacube, rig, solver parameters, traces) to one HDF5 file, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Destination file (conventionally ``.h5``); its directory must exist.
+    datacube : array_like, shape (T, m, n)
+        Reconstructed sub-frames: ``(m, n) = rig.shape`` and
+        ``1 <= T <= rig.T`` (all sub-frames, or a trimmed range such as the
+        ``rig.T_se`` kept ones).
+    rig : Rig
+        The camera array of the capture.
+    params : dict of str -> JSON-serialisable, optional
+        Solver parameters (e.g. ``lam``, ``eta``, iterations), JSON attribute.
+    history : dict of str -> 1-D array_like, optional
+        Per-iteration traces, stored as datasets ``history/<name>`` in the
+        given order. Names must be non-empty and contain no ``/``.
+    truth : array_like, optional
+        Ground truth with the same shape as ``datacube``.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        On shape mismatches, non-finite datacube/truth, bad history names or
+        non-1-D traces, or non-JSON ``params``.
+    """
+    rig = _check_rig(rig)
+    datacube = _cube("datacube", datacube, None, "[T, m, n]")
+    if datacube.shape[1:] != rig.shape or not 1 <= datacube.shape[0] <= rig.T:
+        raise ValueError(f"datacube must have shape [T, m, n] with (m, n) = rig.shape = {rig.shape} and "
+                         f"1 <= T <= rig.T = {rig.T}, got {datacube.shape}")
+    if truth is not None:
+        truth = _cube("truth", truth, datacube.shape, "(the datacube's shape)")
+    params_json = _dumps("params", params)
+    traces = {}
+    if history is not None:
+        if not isinstance(history, dict):
+            raise ValueError(f"history must be a dict of name -> 1-D array, got {type(history).__name__}")
+        for name, trace in history.items():
+            if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
+                raise ValueError(f"history names must be non-empty str without '/', got {name!r}")
+            trace = np.asarray(trace)
+            if trace.ndim != 1 or trace.dtype.kind not in "biuf":
+                raise ValueError(f"history[{name!r}] must be a 1-D real array, got shape {trace.shape} "
+                                 f"dtype {trace.dtype}")
+            traces[name] = trace
+    path = Path(os.fspath(path))
+    import h5py
+
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as h5:
+            _write_header(h5, "reconstruction", rig)
+            h5.attrs["params"] = params_json
+            h5.create_dataset("datacube", data=datacube)
+            if truth is not None:
+                h5.create_dataset("truth", data=truth)
+            group = h5.create_group("history", track_order=True)
+            for name, trace in traces.items():
+                group.create_dataset(name, data=trace)
+    return path
+
+
+def load_reconstruction(path) -> Reconstruction:
+    """Read a file written by :func:`save_reconstruction`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The reconstruction file.
+
+    Returns
+    -------
+    Reconstruction
+        ``datacube``, ``rig``, ``params``, ``history`` (in saved order) and
+        ``truth`` (or None).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If the file is not an rsocl reconstruction file or is damaged.
+    """
+    source = str(path)
+    with _open_checked(path, "reconstruction") as h5:
+        rig = _read_rig(h5, source)
+        if "datacube" not in h5:
+            raise ValueError(f"{source}: dataset 'datacube' is missing")
+        history = {}
+        if "history" in h5:
+            for name, dataset in h5["history"].items():
+                history[name] = dataset[()]
+        return Reconstruction(datacube=h5["datacube"][()], rig=rig,
+                              params=json.loads(_str_attr(h5, "params", source)),
+                              history=history, truth=_optional(h5, "truth"))

@@ -1,0 +1,11 @@
+"""Layer 2, the forward model: the rig and its row timing (:mod:`~rsocl.model.rig`), the row-timed
+shutter operator on the device (:mod:`~rsocl.model.operator`), its dense NumPy reference, test
+scenes and simulated snapshots. Conventions: the project's ``MODEL.md``.
+
+Imports :mod:`rsocl.common` and :mod:`rsocl.device`.
+"""
+
+from rsocl.model.operator import RollingShutterOperator
+from rsocl.model.rig import Camera, Rig
+
+__all__ = ["Camera", "Rig", "RollingShutterOperator"]

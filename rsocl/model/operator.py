@@ -1,0 +1,186 @@
+"""The matrix-free row-timed shutter operator ``H`` on an OpenCL device.
+
+``H`` maps a datacube ``f[T, m, n]`` to snapshots ``g[K, m, n]`` (MODEL.md,
+Eqs. 5-10). Nothing of size ``K×T×m×n`` is stored: each pixel's weights are
+computed on the fly from its exposure start (two ``(K, m, n)`` maps) and only
+its exposure window is visited.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rsocl.common import validation as check
+from rsocl.device.context import c_type, get_device
+from rsocl.device.launch import block_grid, element_launches
+from rsocl.model.rig import Rig
+
+__all__ = ["RollingShutterOperator"]
+
+#: Pixels per work item (one explicit vector of this many lanes): 32 bytes per load.
+VECTOR_WIDTH = {"float32": 8, "float64": 4}
+#: rows per work item of the forward, adjoint and ADMM projection kernels (``TILE_R``)
+BLOCK_ROWS = 4
+
+
+class RollingShutterOperator:
+    """``H`` and ``Hᵀ`` of a :class:`~rsocl.model.rig.Rig` on an OpenCL device.
+
+    Parameters
+    ----------
+    rig : Rig
+        The camera array.
+    device : str, Device or None
+        OpenCL device (see :func:`rsocl.device.get_device`).
+    dtype : {"float32", "float64"}
+        Arithmetic and storage type on the device.
+    subframes : slice or None
+        Model only these sub-frames (``step`` 1): the datacube is then
+        ``(stop - start, m, n)``. Default: all ``T``. Sub-frames outside must carry no
+        weight for the model to stay exact (see :meth:`Rig.sampled_range`).
+
+    Notes
+    -----
+    ``forward`` and ``adjoint`` accept NumPy arrays (and return NumPy arrays) or
+    ``pyopencl.array.Array`` (and return device arrays, with no host copy).
+    Their cost is about ``K*m*n*(t_e/dt + 1)`` weight evaluations.
+    """
+
+    def __init__(self, rig: Rig, device=None, dtype="float32", subframes=None):
+        import pyopencl.array as cla
+
+        if not isinstance(rig, Rig):
+            raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
+        self.rig = rig
+        self.device = get_device(device)
+        self.dtype = self.device.real_dtype(dtype)
+        self.queue = self.device.queue
+        m, n = rig.shape
+        subframes = slice(0, rig.T) if subframes is None else subframes
+        start, stop, step = subframes.indices(rig.T)
+        if step != 1 or stop <= start:
+            raise ValueError(f"subframes must be a non-empty slice of range({rig.T}) with step 1, got {subframes}")
+        self.subframes = slice(start, stop)
+        self.K, self.T, self.mn = rig.n_channels, stop - start, m * n
+        self.L = rig.window_length
+        itemsize = self.dtype.itemsize
+        self.device.check_fits(f"a datacube of T={self.T} x {m} x {n} in {self.dtype.name}",
+                               self.T * m * n * itemsize)
+        win = rig.windows
+        self.first = cla.to_device(self.queue, np.ascontiguousarray(win.index - start, dtype=np.int32))
+        self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype))
+        self.length = cla.to_device(self.queue, win.length.astype(self.dtype))
+        self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype))
+        #: pixels per work item of the forward, adjoint and ADMM projection kernels
+        self.vector_width = VECTOR_WIDTH[self.dtype.name]
+        #: rows per work item of those kernels (each row a tile of ``vector_width`` pixels)
+        self.block_rows = BLOCK_ROWS
+        self.program = self.device.program(
+            ["operator.cl"], REAL=c_type(self.dtype), ACC=c_type(self.device.acc_dtype),
+            MASK_BINARY=int(rig.mask == "binary"), **self.tile_defines)
+        self._psi = None
+
+    @property
+    def domain_shape(self):
+        """``(T, m, n)``."""
+        return (self.T,) + self.rig.shape
+
+    @property
+    def range_shape(self):
+        """``(K, m, n)``."""
+        return (self.K,) + self.rig.shape
+
+    # ------------------------------------------------------------------ helpers
+    def _to_device(self, x, shape, name):
+        import pyopencl.array as cla
+
+        if isinstance(x, cla.Array):
+            if x.shape != shape:
+                raise ValueError(f"{name} must have shape {shape}, got {x.shape}")
+            if x.dtype != self.dtype:
+                raise ValueError(f"{name} must have dtype {self.dtype.name} on the device, got {x.dtype}")
+            return x, True
+        x = check.finite_array(name, x)
+        if x.shape != shape:
+            raise ValueError(f"{name} must have shape {shape}, got {x.shape}")
+        return cla.to_device(self.queue, np.ascontiguousarray(x, dtype=self.dtype)), False
+
+    def empty(self, shape):
+        """An uninitialised device array of this operator's dtype."""
+        import pyopencl.array as cla
+
+        return cla.empty(self.queue, shape, self.dtype)
+
+    @property
+    def tile_defines(self):
+        """Program definitions of the block kernels (``TILE_W`` pixels by ``TILE_R`` rows)."""
+        return {"TILE_W": self.vector_width, "TILE_R": self.block_rows}
+
+    def block_grid(self, channels=1):
+        """Global and local sizes of a kernel with one work item per block of pixels."""
+        m, n = self.rig.shape
+        return block_grid(m, n, self.vector_width, self.block_rows, channels)
+
+    def _shape_args(self):
+        """``(m, n)`` as kernel arguments."""
+        return tuple(np.int32(v) for v in self.rig.shape)
+
+    def _geometry(self):
+        return (self.first.data, self.frac.data, self.length.data, self.gain.data)
+
+    # ------------------------------------------------------------------ H, Hᵀ
+    def forward_into(self, f, out):
+        """``out = H f`` for device arrays (no checks, no allocation)."""
+        self.program.forward(self.queue, *self.block_grid(self.K), f.data, out.data, *self._geometry(),
+                             np.int32(self.T), np.int32(self.L), *self._shape_args())
+        return out
+
+    def adjoint_into(self, g, out, base=None):
+        """``out = base + Hᵀ g`` (``base`` may be None) for device arrays."""
+        import pyopencl as cl
+
+        if base is None:
+            for gsize, lsize, offset in element_launches(out.size):
+                self.program.zero(self.queue, gsize, lsize, out.data, global_offset=offset)
+        elif base is not out:
+            cl.enqueue_copy(self.queue, out.data, base.data)
+        self.program.adjoint_scatter(self.queue, *self.block_grid(), g.data, out.data, *self._geometry(),
+                                     np.int32(self.K), np.int32(self.T), np.int32(self.L), *self._shape_args())
+        return out
+
+    def forward(self, f):
+        """Snapshots ``H f``: ``(T, m, n)`` -> ``(K, m, n)``."""
+        f_dev, on_device = self._to_device(f, self.domain_shape, "f")
+        out = self.forward_into(f_dev, self.empty(self.range_shape))
+        return out if on_device else out.get()
+
+    def adjoint(self, g):
+        """Back-projection ``Hᵀ g``: ``(K, m, n)`` -> ``(T, m, n)``."""
+        g_dev, on_device = self._to_device(g, self.range_shape, "g")
+        out = self.adjoint_into(g_dev, self.empty(self.domain_shape))
+        return out if on_device else out.get()
+
+    # ------------------------------------------------------------------ H Hᵀ
+    def psi_device(self):
+        """Diagonal of ``H Hᵀ`` on the device, ``(K, m, n)``."""
+        if self._psi is None:
+            out = self.empty(self.range_shape)
+            self.program.psi(self.queue, (self.mn, self.K), None, out.data, *self._geometry(),
+                             np.int32(self.T), np.int32(self.L), np.int32(self.mn))
+            self._psi = out
+        return self._psi
+
+    @property
+    def psi(self) -> np.ndarray:
+        """Diagonal of ``H Hᵀ``, ``(K, m, n)`` NumPy array (MODEL.md Eq. 16)."""
+        return self.psi_device().get()
+
+    def gram(self) -> np.ndarray:
+        """Per-pixel ``K×K`` blocks of ``H Hᵀ`` as a ``(m, n, K, K)`` NumPy array."""
+        out = self.empty((self.K, self.K) + self.rig.shape)
+        self.program.gram(self.queue, (self.mn,), None, out.data, *self._geometry(),
+                          np.int32(self.K), np.int32(self.T), np.int32(self.L), np.int32(self.mn))
+        return np.moveaxis(out.get(), (0, 1), (2, 3))
+
+    def __repr__(self):
+        return f"RollingShutterOperator({self.rig!r}, device={self.device.name!r}, dtype={self.dtype.name!r})"

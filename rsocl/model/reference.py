@@ -1,0 +1,120 @@
+"""NumPy reference of the forward model, its adjoint, TV and ADMM: the test oracle.
+
+Written for clarity, not speed: the shutter weights are built densely as a
+``(K, T, m, n)`` array straight from the definitions of ``MODEL.md``. The
+OpenCL code must agree with these functions to rounding.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rsocl.model.rig import Rig
+
+__all__ = ["weights", "forward", "adjoint", "psi", "gram", "tv_chambolle", "project", "admm"]
+
+
+def weights(rig: Rig) -> np.ndarray:
+    """Dense shutter weights ``w[k, s, y, x]`` (float64), without gains.
+
+    ``exact``: ``|[s, s+1) ∩ [start, end]|`` in units of ``dt``;
+    ``binary``: ``1`` if ``start <= s <= end`` (times in units of ``dt``).
+    """
+    win = rig.windows
+    start = (win.index + win.fraction)[:, None]
+    end = win.end[:, None]
+    s = np.arange(rig.T, dtype=np.float64)[None, :, None, None]
+    if rig.mask == "exact":
+        return np.clip(np.minimum(s + 1.0, end) - np.maximum(s, start), 0.0, None)
+    return ((s >= start) & (s <= end)).astype(np.float64)
+
+
+def _gained(rig: Rig) -> np.ndarray:
+    return weights(rig) * rig.windows.gain[:, None, None, None]
+
+
+def forward(rig: Rig, f: np.ndarray) -> np.ndarray:
+    """``g[k, y, x] = gain[k] * sum_s w[k, s, y, x] f[s, y, x]``; ``f`` is ``(T, m, n)``."""
+    return np.einsum("ksyx,syx->kyx", _gained(rig), np.asarray(f, dtype=np.float64))
+
+
+def adjoint(rig: Rig, g: np.ndarray) -> np.ndarray:
+    """``f[s, y, x] = sum_k gain[k] w[k, s, y, x] g[k, y, x]``; ``g`` is ``(K, m, n)``."""
+    return np.einsum("ksyx,kyx->syx", _gained(rig), np.asarray(g, dtype=np.float64))
+
+
+def psi(rig: Rig) -> np.ndarray:
+    """Diagonal of ``H Hᵀ``: ``gain[k]^2 sum_s w[k, s, y, x]^2``, ``(K, m, n)``."""
+    return np.sum(_gained(rig) ** 2, axis=1)
+
+
+def gram(rig: Rig) -> np.ndarray:
+    """Per-pixel blocks of ``H Hᵀ``, ``M[y, x, k, l]``, shape ``(m, n, K, K)``."""
+    w = _gained(rig)
+    return np.einsum("ksyx,lsyx->yxkl", w, w)
+
+
+def project(rig: Rig, v, g, eta: float, projection: str = "exact") -> np.ndarray:
+    """The ADMM data step ``f = v + Hᵀ (eta I + H Hᵀ)⁻¹ (g - H v)`` (MODEL.md Eq. 12).
+
+    ``projection="paper"`` uses the diagonal ``psi`` instead (Eq. 15). Singular
+    blocks (``eta = 0``) use the pseudo-inverse; nothing is divided by zero.
+    """
+    r = np.asarray(g, dtype=np.float64) - forward(rig, v)
+    if projection == "paper":
+        d = eta + psi(rig)
+        z = np.divide(r, d, out=np.zeros_like(r), where=d > 0)
+    else:
+        K = rig.n_channels
+        block = gram(rig) + eta * np.eye(K)
+        z = np.einsum("yxkl,lyx->kyx", np.linalg.pinv(block, hermitian=True), r)
+    return np.asarray(v, dtype=np.float64) + adjoint(rig, z)
+
+
+def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float = 1.0) -> np.ndarray:
+    """Chambolle's isotropic TV of a ``(T, m, n)`` array, as ``skimage.restoration.denoise_tv_chambolle``.
+
+    With ``temporal_weight = 1`` this is scikit-image's 3-D algorithm (``eps = 0``:
+    exactly ``iterations`` iterations); with ``0`` it is its 2-D algorithm on each
+    sub-frame. Other values scale the temporal finite difference, with the step
+    ``tau = 1 / (2 (2 + temporal_weight²))``.
+    """
+    image = np.asarray(image, dtype=np.float64)
+    if weight == 0:
+        return image.copy()
+    axis_weight = (float(temporal_weight), 1.0, 1.0)
+    tau = 1.0 / (2.0 * (2.0 + axis_weight[0] ** 2))
+    p = np.zeros((3,) + image.shape)
+    out = image
+    for i in range(iterations):
+        if i > 0:
+            d = -(axis_weight[0] * p[0] + p[1] + p[2])
+            d[1:] += axis_weight[0] * p[0, :-1]
+            d[:, 1:] += p[1, :, :-1]
+            d[:, :, 1:] += p[2, :, :, :-1]
+            out = image + d
+        g = np.zeros_like(p)
+        g[0, :-1] = axis_weight[0] * np.diff(out, axis=0)
+        g[1, :, :-1] = np.diff(out, axis=1)
+        g[2, :, :, :-1] = np.diff(out, axis=2)
+        norm = np.sqrt((g ** 2).sum(axis=0))
+        p = (p - tau * g) / (1.0 + norm * (tau / weight))
+    return out
+
+
+def admm(rig: Rig, g, *, iterations: int, lam: float, eta: float, tv_iterations: int,
+         temporal_weight: float = 1.0, projection: str = "exact", x0=None) -> np.ndarray:
+    """The ADMM-TV of MODEL.md with the reference pieces above; returns ``theta``.
+
+    ``eta = 0`` is GAP: the dual ``b`` stays zero and the TV weight is ``lam``.
+    """
+    theta = np.zeros((rig.T,) + rig.shape) if x0 is None else np.asarray(x0, dtype=np.float64).copy()
+    b = np.zeros_like(theta)
+    weight = lam / eta if eta > 0 else lam
+    for _ in range(iterations):
+        v = theta + b
+        f = project(rig, v, g, eta, projection)
+        theta = tv_chambolle(f - b, weight, tv_iterations, temporal_weight)
+        if eta > 0:
+            b = b - (f - theta)
+    return theta

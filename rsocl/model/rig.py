@@ -1,0 +1,375 @@
+"""Rolling-shutter cameras and the array (rig) they form.
+
+Conventions follow ``MODEL.md``: sub-frame ``s`` covers ``[s*dt, (s+1)*dt)``;
+the exposure of reference pixel ``(y, x)`` in frame ``k`` of a camera starts at
+``t_a + r(y, x)*t_r + k*t_d`` seconds and lasts ``t_e`` seconds, where
+``r(y, x)`` is the camera row (in rows, first row read is 0) that sees it.
+
+A *channel* is one snapshot: one frame of one camera. Single-frame rigs have
+one channel per camera; a camera with ``frames=F`` contributes ``F`` channels,
+camera-major.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from rsocl.common import validation as check
+
+__all__ = ["Camera", "Rig", "ExposureWindows", "PAPER_ANGLES"]
+
+#: The paper's camera order for arrays of 1..8 cameras (degrees).
+PAPER_ANGLES = (0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0)
+
+#: Relative tolerance under which a time, in units of ``dt``, is snapped to the
+#: nearest integer, so that e.g. ``t_e = 3*t_r`` gives window edges exactly on
+#: sub-frame boundaries despite binary floating point.
+SNAP = 1e-9
+
+
+def _snap(values):
+    values = np.asarray(values, dtype=np.float64)
+    nearest = np.rint(values)
+    return np.where(np.abs(values - nearest) <= SNAP * np.maximum(1.0, np.abs(values)), nearest, values)
+
+
+class Camera:
+    """One rolling-shutter camera of the array.
+
+    Parameters
+    ----------
+    angle : float
+        Rotation relative to the reference camera, degrees. ``0`` reads rows
+        top to bottom, ``90`` left to right, ``180`` bottom to top, ``270``
+        right to left. Ignored when ``row_map`` is given.
+    t_e : float
+        Exposure time of every row, seconds (> 0).
+    t_r : float
+        Readout time between consecutive rows, seconds (> 0).
+    t_a : float
+        Trigger offset of this camera, seconds (>= 0).
+    t_d : float or None
+        Frame period for multi-frame captures, seconds. Required when
+        ``frames > 1``.
+    gain : float
+        Photometric gain (> 0), dimensionless.
+    frames : int
+        Number of consecutive frames captured per trigger (>= 1).
+    row_map : array_like or None
+        Optional ``(m, n)`` map of the camera row, in rows, that reads each
+        reference pixel (from calibration, or a coded exposure design). Values
+        must be finite and >= 0; it replaces ``angle``.
+    """
+
+    def __init__(self, angle=0.0, t_e=None, t_r=None, t_a=0.0, t_d=None, gain=1.0, frames=1, row_map=None):
+        if t_e is None:
+            raise ValueError("t_e (exposure time, seconds) is required")
+        if t_r is None:
+            raise ValueError("t_r (row readout time, seconds) is required")
+        self.angle = check.finite("angle", angle)
+        self.t_e = check.positive("t_e", t_e, "seconds")
+        self.t_r = check.positive("t_r", t_r, "seconds")
+        self.t_a = check.non_negative("t_a", t_a, "seconds")
+        self.gain = check.positive("gain", gain)
+        self.frames = check.positive_int("frames", frames)
+        if t_d is not None:
+            t_d = check.positive("t_d", t_d, "seconds")
+        elif self.frames > 1:
+            raise ValueError(f"t_d (frame period, seconds) is required when frames > 1 (frames={self.frames})")
+        self.t_d = t_d
+        if row_map is not None:
+            row_map = check.finite_array("row_map", row_map).astype(np.float64)
+            if row_map.ndim != 2 or row_map.size == 0:
+                raise ValueError(f"row_map must be a non-empty 2-D array, got shape {row_map.shape}")
+            if row_map.min() < 0:
+                raise ValueError(f"row_map values must be >= 0 rows, got minimum {row_map.min()!r}")
+        self.row_map = row_map
+
+    def rows(self, shape) -> np.ndarray:
+        """Camera row ``r(y, x)`` (rows, float64, first row read is 0) for a ROI of ``shape``."""
+        m, n = shape
+        if self.row_map is not None:
+            if self.row_map.shape != (m, n):
+                raise ValueError(f"row_map has shape {self.row_map.shape}, the rig's shape is {(m, n)}")
+            return self.row_map.copy()
+        u = np.arange(m, dtype=np.float64)[:, None] - (m - 1) / 2.0
+        v = np.arange(n, dtype=np.float64)[None, :] - (n - 1) / 2.0
+        a = math.radians(self.angle)
+        r = u * math.cos(a) + v * math.sin(a)
+        r = r - r.min()
+        return _snap(r)
+
+    def to_dict(self) -> dict:
+        """Plain-data description (seconds, degrees); ``row_map`` stays an array."""
+        return {
+            "angle": self.angle, "t_e": self.t_e, "t_r": self.t_r, "t_a": self.t_a,
+            "t_d": self.t_d, "gain": self.gain, "frames": self.frames, "row_map": self.row_map,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Camera":
+        return cls(**data)
+
+    def __eq__(self, other):
+        if not isinstance(other, Camera):
+            return NotImplemented
+        a, b = self.to_dict(), other.to_dict()
+        ra, rb = a.pop("row_map"), b.pop("row_map")
+        if (ra is None) != (rb is None):
+            return False
+        return a == b and (ra is None or np.array_equal(ra, rb))
+
+    def __repr__(self):
+        where = "row_map" if self.row_map is not None else f"angle={self.angle:g}"
+        extra = f", frames={self.frames}, t_d={self.t_d:g}" if self.frames > 1 else ""
+        return (f"Camera({where}, t_e={self.t_e:g}, t_r={self.t_r:g}, t_a={self.t_a:g}, "
+                f"gain={self.gain:g}{extra})")
+
+
+@dataclass(frozen=True)
+class ExposureWindows:
+    """Per-channel, per-pixel exposure windows in units of ``dt``.
+
+    Attributes
+    ----------
+    index : ndarray of int32, shape (K, m, n)
+        ``floor(start/dt)``: the first sub-frame the window can touch.
+    fraction : ndarray of float64, shape (K, m, n)
+        ``start/dt - index``, in [0, 1).
+    length : ndarray of float64, shape (K,)
+        Exposure ``t_e/dt`` of each channel, in sub-frames.
+    gain : ndarray of float64, shape (K,)
+        Gain of each channel.
+    """
+
+    index: np.ndarray
+    fraction: np.ndarray
+    length: np.ndarray
+    gain: np.ndarray
+
+    @property
+    def end(self) -> np.ndarray:
+        """Window end in sub-frames, ``(K, m, n)`` float64."""
+        return self.index + self.fraction + self.length[:, None, None]
+
+
+class Rig:
+    """An array of rolling-shutter cameras sharing one reference ROI.
+
+    Parameters
+    ----------
+    cameras : sequence of Camera
+        The cameras, in channel order.
+    shape : (int, int)
+        ``(m, n)``: rows and columns of the common reference ROI, pixels.
+    dt : float or None
+        Sub-frame duration, seconds. Defaults to the smallest ``t_r``; must
+        not be smaller than any camera's ``t_r``.
+    mask : {"exact", "binary"}
+        Shutter weights: exact overlap fraction, or the paper's Eq. 4.
+    """
+
+    def __init__(self, cameras, shape, dt=None, mask="exact"):
+        cameras = list(cameras)
+        if not cameras:
+            raise ValueError("cameras must hold at least one Camera, got an empty list")
+        for i, cam in enumerate(cameras):
+            if not isinstance(cam, Camera):
+                raise ValueError(f"cameras[{i}] must be a Camera, got {type(cam).__name__}")
+        self.cameras = cameras
+        self.shape = check.grid_shape("shape", shape)
+        t_r_min = min(cam.t_r for cam in cameras)
+        if dt is None:
+            dt = t_r_min
+        dt = check.positive("dt", dt, "seconds")
+        if dt < t_r_min * (1 - SNAP):
+            raise ValueError(f"dt must be >= t_r = {t_r_min!r} s (the smallest row time), got {dt!r}")
+        self.dt = dt
+        self.mask = check.choice("mask", mask, {"exact", "binary"})
+        self._rows = [cam.rows(self.shape) for cam in cameras]
+        for i, (cam, r) in enumerate(zip(cameras, self._rows)):
+            rows_read = float(r.max()) + 1.0
+            if cam.frames > 1 and cam.t_d < rows_read * cam.t_r - cam.t_e:
+                raise ValueError(
+                    f"cameras[{i}].t_d must be >= rows*t_r - t_e = {rows_read:g}*{cam.t_r:g} - {cam.t_e:g} = "
+                    f"{rows_read * cam.t_r - cam.t_e:g} s in multi-frame mode, got {cam.t_d!r}")
+        self._windows = self._compute_windows()
+        ends = self._windows.end
+        self.T = int(math.ceil(float(_snap(ends.max()))))
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def paper_array(cls, n_cameras=4, shape=(50, 50), t_e=0.18e-3, t_r=35e-6, **kwargs) -> "Rig":
+        """The paper's array: ``n_cameras`` (1..8) at angles 0, 90, 180, 270, 45, 135, 225, 315.
+
+        ``t_e`` and ``t_r`` in seconds; other keywords (``dt``, ``mask``) go to :class:`Rig`.
+        """
+        n_cameras = check.positive_int("n_cameras", n_cameras, maximum=len(PAPER_ANGLES))
+        cams = [Camera(angle, t_e=t_e, t_r=t_r) for angle in PAPER_ANGLES[:n_cameras]]
+        return cls(cams, shape, **kwargs)
+
+    # ------------------------------------------------------------------ channels
+    @property
+    def channels(self) -> list:
+        """``(camera index, frame index)`` of each snapshot, camera-major."""
+        return [(c, k) for c, cam in enumerate(self.cameras) for k in range(cam.frames)]
+
+    @property
+    def n_channels(self) -> int:
+        """Number of snapshots ``K`` (cameras times frames)."""
+        return sum(cam.frames for cam in self.cameras)
+
+    @property
+    def C(self) -> int:
+        """Number of cameras."""
+        return len(self.cameras)
+
+    # ------------------------------------------------------------------ timing
+    def start_times(self) -> np.ndarray:
+        """Exposure start of every channel and pixel, seconds, ``(K, m, n)`` float64."""
+        out = np.empty((self.n_channels,) + self.shape)
+        for i, (c, k) in enumerate(self.channels):
+            cam = self.cameras[c]
+            out[i] = cam.t_a + self._rows[c] * cam.t_r + k * (cam.t_d or 0.0)
+        return out
+
+    def row_map(self, camera: int) -> np.ndarray:
+        """Row map ``r(y, x)`` of camera ``camera``, rows."""
+        return self._rows[camera].copy()
+
+    def _compute_windows(self) -> ExposureWindows:
+        start = _snap(self.start_times() / self.dt)
+        index = np.floor(start)
+        fraction = start - index
+        length = np.array([self.cameras[c].t_e / self.dt for c, _ in self.channels])
+        gain = np.array([self.cameras[c].gain for c, _ in self.channels])
+        if index.max() >= 2**31 - 1:
+            raise ValueError(f"exposure starts {index.max():.3g} sub-frames after t=0; reduce t_a/t_d or raise dt")
+        return ExposureWindows(index.astype(np.int32), fraction, _snap(length), gain)
+
+    @property
+    def windows(self) -> ExposureWindows:
+        """Exposure windows in units of ``dt`` (see :class:`ExposureWindows`)."""
+        return self._windows
+
+    @property
+    def window_length(self) -> int:
+        """Longest per-pixel loop a kernel runs: ``ceil(max t_e/dt) + 1`` sub-frames."""
+        return int(math.ceil(float(self._windows.length.max()))) + 1
+
+    def sampled_window(self):
+        """First and last sub-frame with a non-zero weight, per channel and pixel.
+
+        Returns
+        -------
+        first, last : ndarray of int, shape (K, m, n)
+            Inclusive sub-frame indices (clipped to ``[0, T-1]``).
+        """
+        w = self._windows
+        start = w.index + w.fraction
+        end = w.end
+        if self.mask == "exact":
+            first = np.floor(start)
+            last = np.ceil(end) - 1
+        else:
+            first = np.ceil(start)
+            last = np.floor(end)
+        first = np.clip(first, 0, self.T - 1).astype(np.int64)
+        last = np.clip(last, 0, self.T - 1).astype(np.int64)
+        return first, last
+
+    def sampled_range(self) -> slice:
+        """Sub-frames some camera samples at some pixel: ``slice(first, last + 1)``.
+
+        Sub-frames outside it carry no information; the solver leaves them out.
+        """
+        first, last = self.sampled_window()
+        return slice(int(first.min()), int(last.max()) + 1)
+
+    @property
+    def N_s(self) -> int:
+        """Sub-frames one exposure spans under the paper's rule, ``ceil(t_e/t_r)`` (largest over cameras)."""
+        return max(int(math.ceil(float(_snap(cam.t_e / cam.t_r)))) for cam in self.cameras)
+
+    @property
+    def exposure_subframes(self) -> float:
+        """Exposure in sub-frames, ``t_e/dt`` (largest over cameras); the exact rule's N_s."""
+        return float(self._windows.length.max())
+
+    def cameras_per_subframe(self) -> np.ndarray:
+        """How many cameras sample each sub-frame at some pixel, ``(T,)`` int."""
+        first, last = self.sampled_window()
+        counts = np.zeros(self.T, dtype=np.int64)
+        for c in range(self.C):
+            seen = np.zeros(self.T + 1, dtype=np.int64)
+            for i, (cc, _) in enumerate(self.channels):
+                if cc != c:
+                    continue
+                np.add.at(seen, first[i].ravel(), 1)
+                np.add.at(seen, last[i].ravel() + 1, -1)
+            counts += (np.cumsum(seen)[: self.T] > 0)
+        return counts
+
+    @property
+    def min_cameras(self) -> int:
+        """Trimming threshold: a sub-frame needs at least ``ceil(C/2)`` cameras to be kept."""
+        return max(1, math.ceil(self.C / 2))
+
+    def kept_subframes(self) -> slice:
+        """The sub-frames kept after trimming (``T_se`` of them).
+
+        Rule: drop the leading and trailing sub-frames that fewer than
+        :attr:`min_cameras` cameras sample (at any pixel); interior ones are kept.
+        """
+        ok = np.nonzero(self.cameras_per_subframe() >= self.min_cameras)[0]
+        if ok.size == 0:
+            return slice(0, 0)
+        return slice(int(ok[0]), int(ok[-1]) + 1)
+
+    @property
+    def T_se(self) -> int:
+        """Sub-frames kept after trimming (see :meth:`kept_subframes`)."""
+        kept = self.kept_subframes()
+        return kept.stop - kept.start
+
+    @property
+    def compression_ratio(self) -> float:
+        """``T_se / K``: reconstructed sub-frames per snapshot."""
+        return self.T_se / self.n_channels
+
+    @property
+    def subframe_rate(self) -> float:
+        """Sub-frames per second, ``1/dt`` (Hz)."""
+        return 1.0 / self.dt
+
+    def effective_fps(self, camera_fps: float) -> float:
+        """Effective frame rate, ``camera_fps * T_se`` (Hz), for cameras running at ``camera_fps``."""
+        return check.positive("camera_fps", camera_fps, "Hz") * self.T_se
+
+    def datacube_bytes(self, itemsize: int = 4) -> int:
+        """Bytes of one ``(T, m, n)`` datacube at ``itemsize`` bytes per value."""
+        return self.T * self.shape[0] * self.shape[1] * itemsize
+
+    # ------------------------------------------------------------------ files
+    def to_dict(self) -> dict:
+        """Plain-data description; see :meth:`from_dict`."""
+        return {"shape": list(self.shape), "dt": self.dt, "mask": self.mask,
+                "cameras": [cam.to_dict() for cam in self.cameras]}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Rig":
+        cams = [Camera.from_dict(dict(c)) for c in data["cameras"]]
+        return cls(cams, tuple(data["shape"]), dt=data["dt"], mask=data["mask"])
+
+    def __eq__(self, other):
+        if not isinstance(other, Rig):
+            return NotImplemented
+        return (self.shape == other.shape and self.dt == other.dt and self.mask == other.mask
+                and self.cameras == other.cameras)
+
+    def __repr__(self):
+        return (f"Rig({self.C} cameras, shape={self.shape}, dt={self.dt:g} s, mask={self.mask!r}, "
+                f"T={self.T}, T_se={self.T_se})")

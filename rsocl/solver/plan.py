@@ -1,0 +1,157 @@
+"""Size a reconstruction to the scene before running it: ``dt``, ROI, ``T_se``, memory, time.
+
+What the user knows of the scene decides how much of the datacube is worth
+modelling:
+
+* the **ROI of the motion** crops the reference grid; the cropped cameras keep
+  their real row times (the crop's row map is the full one, cut), so the
+  sub-frames nobody samples inside the crop drop out as well;
+* the **largest speed** (pixels per second) bounds the sub-frame: an object
+  should move at most ``blur_pixels`` (default 1) within one, so
+  ``dt <= blur_pixels / speed``;
+* the **frame rate wanted** bounds it too: ``dt <= 1 / fps``.
+
+The coarsest ``dt`` (a whole multiple of ``t_r``) within both bounds gives the
+fewest sub-frames that still resolve the motion.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rsocl.common import validation as check
+from rsocl.model.rig import Camera, Rig
+
+__all__ = ["Plan", "Estimate", "plan", "crop_rig", "estimate", "format_plan"]
+
+
+@dataclass
+class Estimate:
+    """Cost of reconstructing one rig: sub-frames, device memory (bytes), seconds."""
+
+    rig: Rig
+    subframes: int
+    memory_bytes: int
+    seconds_per_iteration: float | None
+    iterations: int
+
+    @property
+    def seconds(self) -> float | None:
+        return None if self.seconds_per_iteration is None else self.seconds_per_iteration * self.iterations
+
+
+@dataclass
+class Plan:
+    """The proposal of :func:`plan` beside the unplanned problem."""
+
+    full: Estimate
+    proposed: Estimate
+    dt: float
+    roi: tuple
+    notes: list = field(default_factory=list)
+
+
+def crop_rig(rig: Rig, roi, dt=None) -> Rig:
+    """The rig restricted to ``roi = (y, x, height, width)`` of its reference grid, pixels.
+
+    Each camera's row map is cut from the full one (not re-zeroed), so exposure
+    start times are those of the full sensor readout.
+    """
+    y, x, h, w = (int(v) for v in roi)
+    m, n = rig.shape
+    if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
+        raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
+    cams = []
+    for c, cam in enumerate(rig.cameras):
+        d = cam.to_dict()
+        d["row_map"] = rig.row_map(c)[y:y + h, x:x + w]
+        cams.append(Camera(**d))
+    return Rig(cams, (h, w), dt=rig.dt if dt is None else dt, mask=rig.mask)
+
+
+def estimate(rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", device=None,
+             measure=True, projection="exact") -> Estimate:
+    """Memory (from the buffer sizes) and, when ``measure``, time per iteration (3 timed iterations)."""
+    from rsocl.solver.admm import ADMM
+    from rsocl.model.operator import RollingShutterOperator
+    from rsocl.common.registry import load
+    from rsocl.solver.reconstruct import reconstruct
+
+    solved = rig.sampled_range()
+    op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=solved)
+    reg = load("rsocl.regularizers", regularizer)()
+    memory = ADMM.buffers_bytes(op, projection) + reg.workspace_bytes(op.domain_shape, op.dtype)
+    per_iteration = None
+    if measure:
+        op.device.check_fits("the planned reconstruction", int(np.prod(op.domain_shape)) * op.dtype.itemsize,
+                             total_bytes=memory)
+        g = np.zeros(op.range_shape)
+        reconstruct(g, rig, regularizer=regularizer, iterations=1, device=device, dtype=dtype)  # compile
+        result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=device, dtype=dtype)
+        per_iteration = result.history["time"][-1] / 3
+    return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations)
+
+
+def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iterations=200, regularizer="tv",
+         dtype="float32", device=None, measure=True) -> Plan:
+    """Propose ``dt`` and ROI for ``rig`` and a scene; estimate both problems' cost.
+
+    Parameters
+    ----------
+    roi : (y, x, height, width) or None
+        Where the motion is, reference pixels; None keeps the whole grid.
+    speed : float or None
+        Largest image speed in the scene, pixels per second.
+    fps : float or None
+        Sub-frame rate wanted, Hz.
+    blur_pixels : float
+        Motion allowed within one sub-frame, pixels.
+    """
+    notes = []
+    t_r = max(cam.t_r for cam in rig.cameras)
+    bound = math.inf
+    if speed is not None:
+        speed = check.positive("speed", speed, "pixels/s")
+        blur_pixels = check.positive("blur_pixels", blur_pixels, "pixels")
+        bound = min(bound, blur_pixels / speed)
+        notes.append(f"speed {speed:g} px/s with {blur_pixels:g} px per sub-frame: dt <= {blur_pixels / speed * 1e6:.1f} µs")
+    if fps is not None:
+        fps = check.positive("fps", fps, "Hz")
+        bound = min(bound, 1.0 / fps)
+        notes.append(f"{fps:g} sub-frames/s wanted: dt <= {1e6 / fps:.1f} µs")
+    if math.isinf(bound):
+        k = max(1, round(rig.dt / t_r))
+        notes.append("no speed or frame rate given: dt kept")
+    else:
+        k = max(1, math.floor(bound / t_r * (1 + 1e-9)))
+        if bound < t_r:
+            notes.append(f"the motion needs dt <= {bound * 1e6:.2f} µs, below t_r = {t_r * 1e6:.2f} µs: "
+                         f"dt = t_r, with {t_r / bound:.1f}x the blur asked for")
+    dt = k * t_r
+    roi = (0, 0) + rig.shape if roi is None else tuple(int(v) for v in roi)
+    proposed = crop_rig(rig, roi, dt=dt)
+    kwargs = dict(iterations=iterations, regularizer=regularizer, dtype=dtype, device=device)
+    full = estimate(rig, measure=measure, **kwargs)
+    new = estimate(proposed, measure=measure, **kwargs)
+    return Plan(full, new, dt, roi, notes)
+
+
+def format_plan(p: Plan) -> str:
+    """A small table: the unplanned problem beside the proposal."""
+    def col(e: Estimate):
+        secs = "-" if e.seconds is None else f"{e.seconds_per_iteration * 1e3:.1f} ms x {e.iterations} = {e.seconds:.1f} s"
+        return [f"{e.rig.shape[0]} x {e.rig.shape[1]}", f"{e.rig.dt * 1e6:g} µs", f"{e.rig.T}",
+                f"{e.subframes}", f"{e.rig.T_se}", f"{e.rig.compression_ratio:.1f}x",
+                f"{e.memory_bytes / 2**20:.1f} MiB", secs]
+    rows = ["ROI", "dt", "T", "sub-frames solved", "T_se", "compression", "device memory", "time"]
+    a, b = col(p.full), col(p.proposed)
+    width = max(len(r) for r in rows)
+    wa = max(len(v) for v in a + ["as given"])
+    lines = [f"{'':<{width}}  {'as given':<{wa}}  proposed"]
+    lines += [f"{r:<{width}}  {x:<{wa}}  {y}" for r, x, y in zip(rows, a, b)]
+    lines.append(f"proposed ROI (y, x, height, width): {p.roi}")
+    lines += [f"note: {n}" for n in p.notes]
+    return "\n".join(lines)
