@@ -20,11 +20,11 @@ def device_memory_bytes(rig, regularizer="tv", dtype="float32", *, device=None, 
     """
     from rsocl.solver.admm import ADMM
     from rsocl.model.operator import RollingShutterOperator
-    from rsocl.solver.reconstruct import _regularizer
+    from rsocl.solver.reconstruct import make_regularizer
 
     solved = rig.sampled_range()
     op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=solved)
-    reg = _regularizer(regularizer, None, tv_iterations)
+    reg = make_regularizer(regularizer, None, tv_iterations)
     item = op.dtype.itemsize
     kmn = op.K * op.mn
     cube = op.T * op.mn * item
