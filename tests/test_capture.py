@@ -8,7 +8,8 @@ import pytest
 
 from rsocl import reconstruct
 from rsocl.model import reference
-from rsocl.hardware.capture import CaptureFailed, add_capture_parser, capture_sets, cmd_capture, load_raw
+from rsocl.cli.capture import add_parser as add_capture_parser, cmd_capture
+from rsocl.hardware.capture import CaptureFailed, capture_sets, load_raw
 from rsocl.files.hdf5 import load_capture
 from rsocl.analysis.metrics import psnr
 from rsocl.model.rig import Rig

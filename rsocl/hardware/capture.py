@@ -1,4 +1,4 @@
-"""``rsocl capture``: synchronized sets from the cameras of a rig file, written frame by frame.
+"""Synchronized sets from the cameras of a rig file, written frame by frame (``rsocl capture``).
 
 :func:`capture_sets` opens every camera of a :class:`~rsocl.files.rigfile.RigFile`
 through its ``rsocl.cameras`` plugin, sets exposure (``t_e``), ROI, pixel format
@@ -55,7 +55,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,7 +65,7 @@ from rsocl.common import validation as check
 from rsocl.files.atomic import output_path
 from rsocl.files.rigfile import RigFile, load_rigfile
 
-__all__ = ["capture_sets", "CaptureFailed", "load_raw", "RawCapture", "add_capture_parser", "cmd_capture"]
+__all__ = ["capture_sets", "CaptureFailed", "load_raw", "RawCapture"]
 
 PARTIAL_SUFFIX = ".partial"
 
@@ -490,40 +489,3 @@ def load_raw(path) -> RawCapture:
                           snapshot_sets=h5["snapshot_sets"][()] if "snapshot_sets" in h5 else None,
                           status=status, sets_complete=int(h5.attrs.get("sets_complete", 0)), failure=failure,
                           meta=json.loads(_str_attr(h5, "meta", str(path))))
-
-
-# ---------------------------------------------------------------------- CLI
-def add_capture_parser(subparsers):
-    """Add the ``capture`` sub-command to an ``argparse`` sub-parsers object; returns its parser."""
-    p = subparsers.add_parser(
-        "capture", help="rig file (TOML) -> capture file (HDF5): synchronized sets from the cameras",
-        description="Capture synchronized sets from the cameras of a rig file. Each raw frame is written "
-                    "before the next is requested, to OUT.partial, renamed to OUT at the end; if a camera "
-                    "fails, OUT keeps everything captured and records the failure, and the exit status is 1.")
-    p.add_argument("--rig", required=True, help="TOML rig file (seconds, degrees)")
-    p.add_argument("--out", required=True, help="capture file to write (.h5)")
-    p.add_argument("--sets", type=int, default=1, help="number of synchronized sets (default 1)")
-    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for each frame (default 2)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar, only errors")
-    p.set_defaults(func=cmd_capture)
-    return p
-
-
-def cmd_capture(args) -> int:
-    """Run ``rsocl capture``: 0 on success, 1 when a camera failed (the file records it).
-
-    Bad arguments or rig files raise ValueError / FileNotFoundError (the CLI's exit status 2).
-    """
-    quiet = bool(getattr(args, "quiet", False))
-    try:
-        path = capture_sets(args.rig, args.out, sets=args.sets, timeout=args.timeout, progress=not quiet)
-    except CaptureFailed as exc:
-        print(f"rsocl capture: error: {exc}", file=sys.stderr)
-        return 1
-    if not quiet:
-        from rsocl.files.hdf5 import load_capture
-
-        rig = load_capture(path).rig
-        print(f"wrote {path}: {args.sets} set(s) from {rig.C} camera(s), {rig.shape[0]}x{rig.shape[1]}, "
-              f"T = {rig.T} sub-frames", flush=True)
-    return 0
