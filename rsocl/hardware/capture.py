@@ -97,11 +97,11 @@ class CaptureFailed(RuntimeError):
 
 
 def _json(data) -> str:
-    from rsocl.files.hdf5 import _json_default
+    from rsocl.files.hdf5_header import json_default
 
     def default(value):
         try:
-            return _json_default(value)
+            return json_default(value)
         except TypeError:
             return repr(value)
 
@@ -119,7 +119,7 @@ class _Writer:
     def __init__(self, partial: Path, rig, rigfile: RigFile, labels, sets: int, timeout: float):
         import h5py
 
-        from rsocl.files.hdf5 import _write_header
+        from rsocl.files.hdf5_header import write_header
 
         self.partial = partial
         self.rig = rig
@@ -127,15 +127,15 @@ class _Writer:
         self.K = rig.n_channels
         self.h5 = h5py.File(partial, "w")
         try:
-            self._start(rig, rigfile, labels, sets, timeout, _write_header)
+            self._start(rig, rigfile, labels, sets, timeout, write_header)
         except BaseException:
             self.h5.close()
             with contextlib.suppress(OSError):
                 partial.unlink()
             raise
 
-    def _start(self, rig, rigfile, labels, sets, timeout, _write_header):
-        _write_header(self.h5, "capture", rig)
+    def _start(self, rig, rigfile, labels, sets, timeout, write_header):
+        write_header(self.h5, "capture", rig)
         self.sets_complete = 0
         self.pending = {}
         self.meta = {
@@ -466,9 +466,9 @@ class RawCapture:
 
 def load_raw(path) -> RawCapture:
     """Read the raw frames, their metadata and the capture status of a capture file (or its ``.partial``)."""
-    from rsocl.files.hdf5 import _open_checked, _str_attr
+    from rsocl.files.hdf5_header import open_checked, str_attr
 
-    with _open_checked(path, "capture") as h5:
+    with open_checked(path, "capture") as h5:
         n_cameras = int(h5.attrs["n_cameras"])
         frames, sets, stamps, metas = [], [], [], []
         for i in range(n_cameras):
@@ -483,9 +483,9 @@ def load_raw(path) -> RawCapture:
                 sets.append(np.zeros(0, dtype=np.int64))
                 stamps.append(np.zeros(0))
                 metas.append([])
-        failure = json.loads(_str_attr(h5, "failure", str(path))) if "failure" in h5.attrs else None
-        status = _str_attr(h5, "capture_status", str(path)) if "capture_status" in h5.attrs else "unknown"
+        failure = json.loads(str_attr(h5, "failure", str(path))) if "failure" in h5.attrs else None
+        status = str_attr(h5, "capture_status", str(path)) if "capture_status" in h5.attrs else "unknown"
         return RawCapture(frames=frames, sets=sets, timestamps=stamps, frame_meta=metas,
                           snapshot_sets=h5["snapshot_sets"][()] if "snapshot_sets" in h5 else None,
                           status=status, sets_complete=int(h5.attrs.get("sets_complete", 0)), failure=failure,
-                          meta=json.loads(_str_attr(h5, "meta", str(path))))
+                          meta=json.loads(str_attr(h5, "meta", str(path))))
