@@ -9,7 +9,7 @@ import pytest
 from rsocl import reconstruct
 from rsocl.model import reference
 from rsocl.cli.capture import add_parser as add_capture_parser, cmd_capture
-from rsocl.hardware.capture import CaptureFailed, capture_sets, load_raw
+from rsocl.hardware.capture_file import CaptureFailed, capture_sets, load_raw
 from rsocl.files.hdf5 import load_capture
 from rsocl.analysis.metrics import psnr
 from rsocl.model.rig import Rig
@@ -69,7 +69,7 @@ def test_capture_round_trip(tmp_path):
 
 
 def test_each_frame_is_written_before_the_next_is_requested(tmp_path, monkeypatch):
-    from rsocl.hardware import capture as capture_module
+    from rsocl.hardware import capture_file as capture_module
 
     log = []
     real_read, real_add = SimulatedCamera._read, capture_module._Writer.add_raw
