@@ -317,9 +317,10 @@ def gige_checks(workdir):
 
         def c_capture(facts):
             try:
-                from rsocl.hardware.capture_file import capture_sets, load_raw
+                from rsocl.hardware.capture import capture_sets
+                from rsocl.hardware.capture_file import load_raw
             except ImportError as exc:
-                facts["skipped"] = f"rsocl.hardware.capture_file not available: {exc}"
+                facts["skipped"] = f"rsocl.hardware.capture not available: {exc}"
                 return
             from rsocl.files.hdf5 import load_capture
 

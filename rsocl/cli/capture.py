@@ -24,11 +24,11 @@ def add_parser(subparsers):
 
 
 def cmd_capture(args) -> int:
-    """Run :func:`~rsocl.hardware.capture_file.capture_sets`: 0 on success, 1 when a camera failed (the file records it).
+    """Run :func:`~rsocl.hardware.capture.capture_sets`: 0 on success, 1 when a camera failed (the file records it).
 
     Bad arguments or rig files raise ValueError / FileNotFoundError (the CLI's exit status 2).
     """
-    from rsocl.hardware.capture_file import CaptureFailed, capture_sets
+    from rsocl.hardware.capture import CaptureFailed, capture_sets
 
     quiet = bool(getattr(args, "quiet", False))
     try:

@@ -1,20 +1,7 @@
-"""Synchronized sets from the cameras of a rig file, written frame by frame (``rsocl capture``).
+"""The file :func:`rsocl.hardware.capture.capture_sets` writes: raw frames as they arrive, registered sets.
 
-:func:`capture_sets` opens every camera of a :class:`~rsocl.files.rigfile.RigFile`
-through its ``rsocl.cameras`` plugin, sets exposure (``t_e``), ROI, pixel format
-and software trigger, then for each set fires all triggers back to back and
-reads one frame per camera. Every raw frame is written to the file and flushed
-before the next frame is requested, so whatever happens later, everything
-already captured is on disk.
-
-Files and atomicity
--------------------
-The capture is written incrementally to ``<out>.partial`` and renamed to
-``<out>`` when the run ends, successfully **or not**: a failed run still gives
-``<out>``, holding the frames captured before the failure and the failure
-itself. A ``<out>.partial`` left behind means the process itself died (power
-loss, ``kill -9``); it is a readable HDF5 file up to the last flush. An existing
-``<out>`` is replaced only at the end of the run.
+:class:`CaptureWriter` writes it (to ``<out>.partial``, flushed after every frame);
+:func:`publish` renames it to ``<out>``; :func:`load_raw` reads the raw side back.
 
 Layout
 ------
@@ -37,17 +24,6 @@ first set is complete, plus:
   ``failure`` (JSON ``{"camera", "set", "phase", "type", "error"}``; ``set`` is
   null for failures while opening or configuring). The same status, failure and
   per-camera settings are in ``meta``.
-
-Registration and units
-----------------------
-Frames from the ``simulated`` backend (``frame.meta["registered"]``) are on the
-reference grid already. Other frames are warped onto it with the camera's
-``homography`` from the rig file (:func:`rsocl.hardware.calibration.warp_to_reference`,
-bilinear, 0 outside the sensor; the ROI origin is subtracted) or, without one, taken as registered (their shape
-must then equal the rig's). Integer frames are converted to model units as
-``image / (2**bit_depth - 1) * full_scale`` with ``full_scale`` from
-``frame.meta["full_scale"]`` when the backend reports it, else ``t_e/dt``
-(a white scene at unit gain fills the sensor); float frames are taken as they are.
 """
 
 from __future__ import annotations
@@ -61,41 +37,15 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.common import validation as check
-from rsocl.files.atomic import output_path
-from rsocl.files.rigfile import RigFile, load_rigfile
+from rsocl.files.rigfile import RigFile
 
-__all__ = ["capture_sets", "CaptureFailed", "load_raw", "RawCapture"]
+__all__ = ["CaptureWriter", "publish", "RawCapture", "load_raw", "PARTIAL_SUFFIX"]
 
+#: Suffix of the file being written; renamed to the capture file's name at the end of the run.
 PARTIAL_SUFFIX = ".partial"
 
 
-class CaptureFailed(RuntimeError):
-    """A capture stopped early. The file at :attr:`path` holds what was captured and the failure.
-
-    Attributes
-    ----------
-    path : Path
-        The capture file (complete up to the failure).
-    camera : int or None
-        Index of the camera that failed (None if not camera-specific).
-    set_index : int or None
-        The set being captured (None while opening or configuring).
-    phase : str
-        ``"open"``, ``"configure"``, ``"start"``, ``"trigger"``, ``"read"``, ``"write"`` or ``"register"``.
-    sets_complete : int
-        Complete sets in the file.
-    """
-
-    def __init__(self, message, *, path, camera, set_index, phase, sets_complete):
-        super().__init__(message)
-        self.path = path
-        self.camera = camera
-        self.set_index = set_index
-        self.phase = phase
-        self.sets_complete = sets_complete
-
-
+# ---------------------------------------------------------------------- writing
 def _json(data) -> str:
     from rsocl.files.hdf5_header import json_default
 
@@ -112,8 +62,7 @@ def _now() -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%S%z")
 
 
-# ---------------------------------------------------------------------- the file
-class _Writer:
+class CaptureWriter:
     """The capture file being written (``<out>.partial``), opened once."""
 
     def __init__(self, partial: Path, rig, rigfile: RigFile, labels, sets: int, timeout: float):
@@ -123,7 +72,6 @@ class _Writer:
 
         self.partial = partial
         self.rig = rig
-        self.rigfile = rigfile
         self.K = rig.n_channels
         self.h5 = h5py.File(partial, "w")
         try:
@@ -201,31 +149,6 @@ class _Writer:
         self.h5.flush()
 
     # ------------------------------------------------------------------ registered sets
-    def register(self, index: int, frame) -> np.ndarray:
-        """Frame of camera ``index`` on the reference grid, model units, float64 ``(m, n)``."""
-        cam = self.rigfile.cameras[index]
-        image = np.asarray(frame.image)
-        if image.dtype.kind in "biu":
-            levels = 2 ** int(frame.bit_depth) - 1
-            full_scale = frame.meta.get("full_scale")
-            if full_scale is None:
-                full_scale = cam["t_e"] / self.rig.dt
-            value = image.astype(np.float64) * (float(full_scale) / levels)
-        else:
-            value = image.astype(np.float64)
-        H = self.rigfile.homography(index)
-        if H is not None and not frame.meta.get("registered", False):
-            from rsocl.hardware.calibration import warp_to_reference
-
-            origin = tuple(cam["roi"][:2]) if cam.get("roi") else (0, 0)
-            value = warp_to_reference(value, H, self.rig.shape, frame_origin=origin, order=1, cval=0.0)
-        if value.shape != self.rig.shape:
-            raise ValueError(f"camera {index}: frame shape {value.shape} is not the rig's shape {self.rig.shape} "
-                             "and the rig file gives no homography to register it")
-        if not np.all(np.isfinite(value)):
-            raise ValueError(f"camera {index}: frame has NaN or inf values")
-        return value
-
     def add_registered(self, index: int, value: np.ndarray) -> None:
         self.pending[index] = value
 
@@ -279,7 +202,7 @@ class _Writer:
         self.h5.close()
 
 
-def _publish(partial: Path, out: Path) -> None:
+def publish(partial: Path, out: Path) -> None:
     """fsync ``partial`` and rename it to ``out`` (atomic on one file system)."""
     from rsocl.files.atomic import _default_mode, _fsync_directory, _fsync_file
 
@@ -290,146 +213,7 @@ def _publish(partial: Path, out: Path) -> None:
     _fsync_directory(out.parent if str(out.parent) else Path("."))
 
 
-# ---------------------------------------------------------------------- capture
-def _label(index, backend, config):
-    address = config.get("address")
-    return f"camera {index} ({backend}{' ' + str(address) if address is not None else ''})"
-
-
-def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path:
-    """Capture ``sets`` synchronized sets from the cameras of ``rigfile`` into the capture file ``out_path``.
-
-    Parameters
-    ----------
-    rigfile : RigFile, str or os.PathLike
-        The rig (a :class:`~rsocl.files.rigfile.RigFile` or the path of a TOML rig file).
-    out_path : str or os.PathLike
-        Capture file to write (``.h5``); its directory must exist. Written as
-        ``<out_path>.partial`` during the run, renamed at the end (see the module docstring).
-    sets : int
-        Number of sets (one frame per camera each), >= 1.
-    timeout : float
-        Seconds to wait for each frame (> 0).
-    progress : bool
-        Show a progress bar (tqdm).
-
-    Returns
-    -------
-    pathlib.Path
-        ``out_path``, a complete capture file.
-
-    Raises
-    ------
-    CaptureFailed
-        A camera (or the registration of its frame) failed: ``out_path`` holds
-        everything captured before and the failure (camera, set, error).
-    ValueError, FileNotFoundError
-        Bad arguments, rig file, unknown backend or camera config; nothing is written.
-    KeyboardInterrupt
-        Re-raised after the file is closed with status ``"interrupted"``.
-    """
-    from rsocl.common.registry import load
-
-    if not isinstance(rigfile, RigFile):
-        rigfile = load_rigfile(rigfile)
-    sets = check.positive_int("sets", sets)
-    timeout = check.positive("timeout", timeout, "seconds")
-    rig = rigfile.rig()
-    for i, cam in enumerate(rig.cameras):
-        if cam.frames != 1:
-            raise ValueError(f"camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger")
-    out = output_path(out_path, "out")
-    partial = out.with_name(out.name + PARTIAL_SUFFIX)
-
-    backends = rigfile.backends()
-    labels = [_label(i, b, c) for i, (b, c) in enumerate(backends)]
-    cameras = [load("rsocl.cameras", b)(c, name=label) for (b, c), label in zip(backends, labels)]
-
-    writer = _Writer(partial, rig, rigfile, labels, sets, timeout)
-    where = {"camera": None, "set": None, "phase": "open"}
-    failure = None
-    interrupted = None
-    try:
-        try:
-            _run(cameras, rigfile, writer, sets, timeout, progress, where)
-        except Exception as exc:
-            failure = dict(where, type=type(exc).__name__, error=str(exc))
-        except BaseException as exc:  # KeyboardInterrupt, SystemExit: record, then let it through
-            failure = dict(where, type=type(exc).__name__, error=str(exc) or type(exc).__name__)
-            interrupted = exc
-        for i, cam in enumerate(cameras):
-            for step in (cam.stop, cam.close):
-                try:
-                    step()
-                except Exception as exc:  # closing must reach every camera
-                    writer.warn(f"camera {i}: {step.__name__} failed: {type(exc).__name__}: {exc}")
-        status = "complete" if failure is None else ("interrupted" if interrupted is not None else "failed")
-        writer.finish(status, failure)
-    finally:
-        writer.close()
-    _publish(partial, out)
-    if interrupted is not None:
-        raise interrupted
-    if failure is not None:
-        who = "" if failure["camera"] is None else f"{labels[failure['camera']]}: "
-        when = "before the first set" if failure["set"] is None else f"in set {failure['set']}"
-        raise CaptureFailed(
-            f"{who}{failure['phase']} failed {when}: {failure['type']}: {failure['error']} "
-            f"({writer.sets_complete} complete set(s) and the failure are in {out})",
-            path=out, camera=failure["camera"], set_index=failure["set"], phase=failure["phase"],
-            sets_complete=writer.sets_complete)
-    return out
-
-
-def _run(cameras, rigfile, writer, sets, timeout, progress, where):
-    from tqdm import tqdm
-
-    def at(camera, set_index, phase):
-        where.update(camera=camera, set=set_index, phase=phase)
-
-    for i, cam in enumerate(cameras):
-        at(i, None, "open")
-        cam.open()
-    for i, cam in enumerate(cameras):
-        at(i, None, "configure")
-        spec = rigfile.cameras[i]
-        exposure = cam.set_exposure(spec["t_e"])
-        if abs(exposure - spec["t_e"]) > 1e-3 * spec["t_e"]:
-            writer.warn(f"camera {i}: exposure is {exposure!r} s, the rig file says t_e = {spec['t_e']!r} s")
-        settings = {"exposure": exposure}
-        if spec.get("roi"):
-            cam.set_roi(*spec["roi"])
-            settings["roi"] = list(spec["roi"])
-        if spec.get("pixel_format"):
-            cam.set_pixel_format(spec["pixel_format"])
-            settings["pixel_format"] = spec["pixel_format"]
-        cam.set_trigger("software")
-        readout = cam.readout_time
-        settings["readout_time"] = readout
-        if readout is not None and abs(readout - spec["t_r"]) > 1e-3 * spec["t_r"]:
-            writer.warn(f"camera {i}: the device reports t_r = {readout!r} s, the rig file says {spec['t_r']!r} s")
-        writer.camera_settings(i, **settings)
-    for i, cam in enumerate(cameras):
-        at(i, None, "start")
-        cam.start()
-    with tqdm(total=sets, unit="set", desc="capture", disable=not progress) as bar:
-        for j in range(sets):
-            for i, cam in enumerate(cameras):   # fire all triggers back to back
-                at(i, j, "trigger")
-                cam.trigger()
-            for i, cam in enumerate(cameras):
-                at(i, j, "read")
-                frame = cam.read(timeout)
-                at(i, j, "write")
-                writer.add_raw(i, j, frame, cam)
-                at(i, j, "register")
-                writer.add_registered(i, writer.register(i, frame))
-            at(None, j, "write")
-            writer.complete_set(j, cameras)
-            bar.update(1)
-
-
-# ---------------------------------------------------------------------- reading raw frames
+# ---------------------------------------------------------------------- reading
 @dataclass(frozen=True)
 class RawCapture:
     """The raw side of a file written by :func:`capture_sets`.
