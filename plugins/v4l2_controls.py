@@ -1,4 +1,4 @@
-"""Exposure and ROI of a ``v4l2`` camera: :class:`V4L2Controls`, mixed into :class:`~rsocl_plugins.v4l2.V4L2Camera`.
+"""Exposure and ROI of a ``v4l2`` camera: :class:`V4L2Controls`, a mixin of :class:`~rsocl_plugins.v4l2.V4L2Camera`.
 
 Exposure
     ``set_exposure(seconds)`` sets ``auto_exposure`` to manual (when the device has that

@@ -1,4 +1,4 @@
-"""mmap streaming I/O of a ``v4l2`` camera: :class:`V4L2Stream`, mixed into :class:`~rsocl_plugins.v4l2.V4L2Camera`.
+"""mmap streaming I/O of a ``v4l2`` camera: :class:`V4L2Stream`, a mixin of :class:`~rsocl_plugins.v4l2.V4L2Camera`.
 
 ``start`` queues ``buffers`` mmap buffers in the driver and turns streaming on; ``read`` waits
 with ``poll``, dequeues a completed buffer, copies the image out and queues the buffer again.
