@@ -300,7 +300,7 @@ def _updated(rigfile, updates):
     dt = rigfile.dt
     new_t_r = min(camera["t_r"] for camera in cameras)
     if dt is not None and math.isclose(dt, old_t_r, rel_tol=1e-9):
-        dt = new_t_r                                   # dt was the row time: keep it so
+        dt = new_t_r                                   # a dt equal to the row time follows the measured one
     try:
         return RigFile(shape=rigfile.shape, cameras=cameras, dt=dt, mask=rigfile.mask, path=rigfile.path)
     except ValueError as exc:
