@@ -138,7 +138,12 @@ def cmd_simulate(args):
 def cmd_reconstruct(args):
     from rsocl.files.hdf5 import load_capture, save_reconstruction
     from rsocl.analysis.visual import comparison_gif
+    from rsocl.cli.tiling import check_outputs, reconstruct_tiled_if_needed
 
+    check_outputs(args)
+    code = reconstruct_tiled_if_needed(args, lambda *text: _say(args, *text), _reg_options(args.reg_opt))
+    if code is not None:
+        return code
     capture = load_capture(args.capture)
     truth = capture.truth if not args.no_truth else None
     result = _run_reconstruction(args, capture.snapshots, capture.rig, truth)
@@ -184,6 +189,9 @@ def cmd_plan(args):
     p = plan(rig, roi=args.roi, speed=args.speed, fps=args.fps, blur_pixels=args.blur, iterations=args.iterations,
              regularizer=args.regularizer, dtype=args.dtype, device=args.device, measure=not args.no_measure)
     print(format_plan(p))
+    from rsocl.cli.tiling import print_plan_tiling
+
+    print_plan_tiling(args, p)
     return 0
 
 
@@ -252,11 +260,14 @@ def build_parser():
 
     p = sub.add_parser("reconstruct", help="capture file -> reconstruction file and GIF")
     p.add_argument("capture", help="capture file (.h5) from 'rsocl simulate' or 'rsocl capture'")
-    p.add_argument("--out", required=True, help="reconstruction file to write (.h5)")
-    p.add_argument("--gif", default=None, help="GIF to write (default: next to --out)")
+    p.add_argument("--out", required=True, help="reconstruction file to write (.h5), or a Zarr store (.zarr)")
+    p.add_argument("--gif", default=None, help="GIF to write (default: next to an .h5 --out)")
     p.add_argument("--no-truth", action="store_true", help="ignore a ground truth stored in the capture")
     _add_solver_args(p)
     _add_device_args(p)
+    from rsocl.cli.tiling import add_reconstruct_tiling_args
+
+    add_reconstruct_tiling_args(p)
     p.set_defaults(func=cmd_reconstruct)
 
     p = sub.add_parser("info", help="T, N_s, T_se, compression ratio and effective fps of a rig")
@@ -276,6 +287,9 @@ def build_parser():
     p.add_argument("--regularizer", default="tv")
     p.add_argument("--no-measure", action="store_true", help="memory only; do not time 3 iterations")
     _add_device_args(p)
+    from rsocl.cli.tiling import add_plan_tiling_args
+
+    add_plan_tiling_args(p)
     p.set_defaults(func=cmd_plan)
 
     from rsocl.bench.run import add_bench_parser
