@@ -72,8 +72,9 @@ def _wants_tiles(args, capture) -> bool:
     return device_limit(get_device(args.device), largest, total) is not None
 
 
-def reconstruct_tiled_if_needed(args, say, reg_options):
+def reconstruct_tiled_if_needed(args):
     """Run ``rsocl reconstruct`` tiled when it should be (see the module); the exit code, or None."""
+    from rsocl.cli.options import reg_options, say
     from rsocl.scale.inputs import CaptureSets
 
     capture = CaptureSets(args.capture, all_sets=args.sets)
@@ -86,13 +87,13 @@ def reconstruct_tiled_if_needed(args, say, reg_options):
     if tile is None:
         tile = propose_tiling(capture.rig, halo=args.halo, regularizer=args.regularizer, dtype=args.dtype,
                               projection=args.projection, device=args.device, measure=False).tile
-        say(f"tiles of {tile[0]} x {tile[1]} pixels (proposed for this device; --tile H W to choose)")
+        say(args, f"tiles of {tile[0]} x {tile[1]} pixels (proposed for this device; --tile H W to choose)")
     zarr_out = _is_zarr(args.out)
     try:
         result = reconstruct_tiled(
             capture, capture.rig, args.regularizer, tile=tile, halo=args.halo, iterations=args.iterations,
             lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations, projection=args.projection,
-            device=args.device, dtype=args.dtype, regularizer_options=reg_options,
+            device=args.device, dtype=args.dtype, regularizer_options=reg_options(args.reg_opt),
             out=args.out if zarr_out else None, scheduler=args.scheduler, workers=args.workers,
             retries=args.retries, progress=not args.quiet)
     except TilesFailed as exc:
@@ -108,7 +109,7 @@ def reconstruct_tiled_if_needed(args, say, reg_options):
         text = f"PSNR {psnr(result.datacube, truth):.2f} dB, " + text
     print(text, flush=True)
     if zarr_out:
-        say(f"wrote {args.out}")
+        say(args, f"wrote {args.out}")
         return 0
     from rsocl.analysis.visual import comparison_gif
     from rsocl.files.hdf5 import save_reconstruction
@@ -119,7 +120,7 @@ def reconstruct_tiled_if_needed(args, say, reg_options):
                         truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     comparison_gif(gif, truth, result.datacube)
-    say(f"wrote {args.out} and {gif}")
+    say(args, f"wrote {args.out} and {gif}")
     return 0
 
 
