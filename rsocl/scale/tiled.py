@@ -155,14 +155,14 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
     settings = TileSettings(regularizer, dict(regularizer_options or {}), checked.iterations, checked.lam,
                             checked.eta, checked.tv_iterations, checked.projection, str(np.dtype(dtype)),
                             saturation, device)
-    digest, saturated = scan(source, saturation)
     span = rig.sampled_range()
     params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
               "lam": checked.lam, "eta": checked.eta, "projection": checked.projection, "dtype": settings.dtype,
-              "device": device, "tol": None, "saturation": saturation, "saturated_pixels": saturated,
+              "device": device, "tol": None, "saturation": saturation, "saturated_pixels": 0,
               "solved_subframes": [span.start, span.stop], "tile": list(grid.tile), "halo": grid.halo}
-    with engine:
+    with engine:                        # a cluster is reached (or started) before the input is read
         began = time.perf_counter()
+        digest, params["saturated_pixels"] = scan(source, saturation)
         done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)
         if store is not None:
             from rsocl.scale.store import StoreSpec, prepare_store
