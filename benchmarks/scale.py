@@ -19,6 +19,9 @@ date, commit and command that measured them, and docs/scale.md is written from a
 * the N-device table is computed from the sensor run's measured per-tile times.
 
     python benchmarks/scale.py [--parts seams sensor cluster] [--iterations 50] [--sensor-iterations 20]
+
+Parts run one by one (``--parts sensor`` alone for its peak RSS) each add their numbers to the
+results file; ``--parts`` with no part writes the page from the numbers kept.
 """
 
 from __future__ import annotations
@@ -265,27 +268,38 @@ def _stamp(part):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--parts", nargs="+", choices=["seams", "sensor", "cluster"],
+    parser.add_argument("--parts", nargs="*", choices=["seams", "sensor", "cluster"],
                         default=["seams", "sensor", "cluster"])
     parser.add_argument("--iterations", type=int, default=50, help="seams and cluster parts (default 50)")
     parser.add_argument("--sensor-iterations", type=int, default=20, help="whole-sensor part (default 20)")
     parser.add_argument("--sets", type=int, default=16, help="sets of the cluster part (default 16)")
     parser.add_argument("--rounds", type=int, default=2, help="alternating rounds of the cluster part (default 2)")
     parser.add_argument("--sensor-shape", type=int, nargs=2, default=[1024, 1280], help="(default 1024 1280)")
+    parser.add_argument("--results", default=str(RESULTS),
+                        help="JSON file the parts' numbers are kept in (default docs/scale.json, which also "
+                             "writes docs/scale.md)")
+    parser.add_argument("--merge", nargs="*", default=[], help="results files of other runs to add first")
     parser.add_argument("--workdir", default=None, help="where the sensor's capture and store go (default: a temp dir)")
     args = parser.parse_args(argv)
     argv = sys.argv if argv is None else [sys.argv[0]] + list(argv)
-    results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    results_path = Path(args.results)
     for name in args.parts:
         print(f"--- {name}", flush=True)
-        part = globals()[f"part_{name}"](args)
-        part.update(_measured=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-                    _commit=git_revision(), _command=" ".join(["python", "benchmarks/scale.py"] + argv[1:]))
-        results[name] = part
+        stamp = dict(_measured=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+                     _commit=git_revision(), _command=" ".join(["python", "benchmarks/scale.py"] + argv[1:]))
+        part = {**globals()[f"part_{name}"](args), **stamp}
         print(json.dumps({k: v for k, v in part.items() if k not in ("tile_seconds", "modelled_subframes")},
                          indent=1), flush=True)
-        RESULTS.write_text(json.dumps(results, indent=1) + "\n")
-    write_page(DOCS / "scale.md", page(results, argv))
+        results = json.loads(results_path.read_text()) if results_path.exists() else {}
+        results[name] = part
+        results_path.write_text(json.dumps(results, indent=1) + "\n")
+    for extra in args.merge:
+        results = json.loads(results_path.read_text()) if results_path.exists() else {}
+        results.update(json.loads(Path(extra).read_text()))
+        results_path.write_text(json.dumps(results, indent=1) + "\n")
+    if args.results == str(RESULTS):
+        results = json.loads(results_path.read_text()) if results_path.exists() else {}
+        write_page(DOCS / "scale.md", page(results, argv))
 
 
 if __name__ == "__main__":
