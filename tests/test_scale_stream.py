@@ -47,3 +47,20 @@ def test_a_stream_of_windows_matches_the_whole_capture():
     one = reconstruct_stream(g, rig, window=3, overlap=0, iterations=20, tile=(10, 12), halo=4)
     np.testing.assert_array_equal(one.datacube, reconstruct_tiled(g, rig, tile=(10, 12), halo=4,
                                                                   iterations=20).datacube)
+
+
+def test_rsocl_reconstruct_window(tmp_path, capsys):
+    from rsocl.cli.main import main
+    from rsocl.files.hdf5 import load_reconstruction, save_capture
+
+    rig = _rig(frames=3, shape=(16, 16))
+    truth = builtin_scene(rig.shape, rig.T, seed=2)
+    save_capture(tmp_path / "cap.h5", rsocl.RollingShutterOperator(rig).forward(truth), rig, truth=truth)
+    out = tmp_path / "stream.h5"
+    assert main(["reconstruct", str(tmp_path / "cap.h5"), "--out", str(out), "--window", "2", "--iterations", "5",
+                 "--quiet"]) == 0
+    assert "2 window(s) of 2 frame(s)" in capsys.readouterr().out
+    back = load_reconstruction(out)
+    assert back.datacube.shape == (rig.T,) + rig.shape and back.params["windows"] == [[0, 2], [1, 3]]
+    assert main(["reconstruct", str(tmp_path / "cap.h5"), "--out", str(tmp_path / "s.zarr"), "--window", "2"]) == 2
+    assert "--window: a stream of frame windows is written to an HDF5 file" in capsys.readouterr().err

@@ -39,12 +39,19 @@ def add_reconstruct_tiling_args(p):
     g.add_argument("--workers", type=int, default=None, metavar="N",
                    help="start a local cluster of N worker processes (each its own OpenCL context)")
     g.add_argument("--retries", type=int, default=2, help="extra attempts of a failing tile (default 2)")
+    g.add_argument("--window", type=int, default=None, metavar="F",
+                   help="multi-frame capture (frames, t_d): reconstruct it as a stream of windows of F frames")
+    g.add_argument("--overlap", type=int, default=1, metavar="V",
+                   help="frames shared by consecutive windows (default 1; 0 when the readout has gaps)")
 
 
 def check_outputs(args) -> None:
     """Check ``--out`` (and ``--gif``) before anything is computed; errors name the option."""
     from rsocl.files.atomic import output_path
 
+    if args.window is not None and (_is_zarr(args.out) or args.sets):
+        raise ValueError("--window: a stream of frame windows is written to an HDF5 file (--out NAME.h5), "
+                         "one set at a time")
     if _is_zarr(args.out):
         from rsocl.scale.store import check_store_path, require_zarr
 
@@ -78,6 +85,8 @@ def reconstruct_tiled_if_needed(args):
     from rsocl.scale.inputs import CaptureSets
 
     capture = CaptureSets(args.capture, all_sets=args.sets)
+    if args.window is not None:
+        return _stream(args, capture)
     if not _wants_tiles(args, capture):
         return None
     from rsocl.scale.proposal import propose_tiling
@@ -120,6 +129,36 @@ def reconstruct_tiled_if_needed(args):
                         truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     comparison_gif(gif, truth, result.datacube)
+    say(args, f"wrote {args.out} and {gif}")
+    return 0
+
+
+def _stream(args, capture):
+    """``--window``: the capture as a stream of overlapping frame windows, into an HDF5 file."""
+    from rsocl.analysis.visual import comparison_gif
+    from rsocl.cli.options import reg_options, say
+    from rsocl.files.hdf5 import load_capture, save_reconstruction
+    from rsocl.scale.stream import reconstruct_stream
+
+    loaded = load_capture(args.capture)
+    stream = reconstruct_stream(
+        loaded.snapshots, loaded.rig, window=args.window, overlap=args.overlap, tile=args.tile, halo=args.halo,
+        regularizer=args.regularizer, iterations=args.iterations, lam=args.lam, eta=args.eta,
+        tv_iterations=args.tv_iterations, projection=args.projection, device=args.device, dtype=args.dtype,
+        regularizer_options=reg_options(args.reg_opt), scheduler=args.scheduler, retries=args.retries,
+        progress=not args.quiet)
+    truth = None if args.no_truth else loaded.truth
+    text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
+    if truth is not None:
+        from rsocl.analysis.metrics import psnr
+
+        text = f"PSNR {psnr(stream.datacube, truth):.2f} dB, " + text
+    print(text, flush=True)
+    params = dict(stream.results[0].params, window=args.window, overlap=args.overlap,
+                  windows=[list(w) for w in stream.windows])
+    save_reconstruction(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
+    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
+    comparison_gif(gif, truth, stream.datacube)
     say(args, f"wrote {args.out} and {gif}")
     return 0
 
