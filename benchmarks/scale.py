@@ -29,7 +29,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import math
+import os
 import resource
 import sys
 import tempfile
@@ -263,7 +263,8 @@ def page(results, argv):
 
 
 def _stamp(part):
-    return f"_measured {part['_measured']} at commit {part['_commit']}: `{part['_command']}`_\n"
+    load = f" (load average at start {part['_load']})" if part.get("_load") else ""
+    return f"_measured {part['_measured']}{load} at commit {part['_commit']}: `{part['_command']}`_\n"
 
 
 def main(argv=None):
@@ -286,7 +287,7 @@ def main(argv=None):
     for name in args.parts:
         print(f"--- {name}", flush=True)
         stamp = dict(_measured=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-                     _commit=git_revision(), _command=" ".join(["python", "benchmarks/scale.py"] + argv[1:]))
+                     _load=", ".join(f"{x:.2f}" for x in os.getloadavg()), _commit=git_revision(), _command=" ".join(["python", "benchmarks/scale.py"] + argv[1:]))
         part = {**globals()[f"part_{name}"](args), **stamp}
         print(json.dumps({k: v for k, v in part.items() if k not in ("tile_seconds", "modelled_subframes")},
                          indent=1), flush=True)

@@ -162,3 +162,21 @@ def test_an_unreachable_scheduler_is_an_error_before_anything_runs(monkeypatch, 
     monkeypatch.setenv("RSOCL_SCHEDULER", "tcp://127.0.0.1:9")
     with pytest.raises(ValueError, match="cannot reach"):
         reconstruct_tiled(g, rig, tile=(8, 8))
+
+
+def test_rsocl_reconstruct_on_the_cluster_of_rsocl_scheduler_and_on_its_own_workers(cluster, tmp_path, monkeypatch,
+                                                                                      capsys):
+    from rsocl.cli.main import main
+    from rsocl.files.hdf5 import save_capture
+
+    rig, g = _problem((18, 20))
+    save_capture(tmp_path / "cap.h5", g, rig)
+    expected = reconstruct_tiled(g, rig, tile=(9, 10), halo=3, iterations=3).datacube
+    args = ["reconstruct", str(tmp_path / "cap.h5"), "--tile", "9", "10", "--halo", "3", "--iterations", "3", "--quiet"]
+    monkeypatch.setenv("RSOCL_SCHEDULER", cluster[0].scheduler_address)
+    assert main(args + ["--out", str(tmp_path / "env.zarr")]) == 0
+    monkeypatch.delenv("RSOCL_SCHEDULER")
+    assert main(args + ["--out", str(tmp_path / "own.zarr"), "--workers", "1"]) == 0
+    for name in ("env.zarr", "own.zarr"):
+        np.testing.assert_array_equal(load_store(tmp_path / name).datacube[...], expected)
+    assert "4 tile task(s)" in capsys.readouterr().out
