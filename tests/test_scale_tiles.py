@@ -74,12 +74,16 @@ def test_tiled_matches_untiled(angles, shape, tile):
     tiled = result.datacube
     assert tiled.shape == untiled.shape and tiled.dtype == untiled.dtype
     assert len(result.pieces) == len(tile_grid(shape, tile, 12)) and not result.failures
-    # where a tile models the sub-frames, it is the untiled reconstruction up to the halo's crop; the
-    # largest differences sit in the last sub-frames a tile models, which few of its pixels sample
+    # where a tile models the sub-frames, it is the untiled reconstruction up to the halo's crop; away
+    # from the first and last sub-frames a tile models (which few of its pixels sample: within one
+    # exposure, window_length sub-frames, of an end that is not the capture's) the difference is small
+    span, edge = rig.sampled_range(), rig.window_length
     for piece in result.pieces:
         rows, cols = tile_grid(shape, tile, 12)[piece.index].core_slices
         diff = np.abs(tiled[piece.start:piece.stop, rows, cols] - untiled[piece.start:piece.stop, rows, cols])
-        assert np.quantile(diff, 0.99) < 2e-2 and diff.max() < 0.1, (piece.index, diff.max())
+        lo = edge if piece.start > span.start else 0
+        hi = diff.shape[0] - (edge if piece.stop < span.stop else 0)
+        assert diff[lo:hi].max() < 3e-2 and diff.max() < 0.1, (piece.index, diff[lo:hi].max(), diff.max())
     from rsocl.analysis.metrics import psnr
 
     assert psnr(tiled, truth) > psnr(untiled, truth) - 0.1
