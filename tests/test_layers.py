@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1] / "rsocl"
 
 #: bottom to top; the package's face (rsocl/__init__.py) and rsocl.testing sit above all
-LAYERS = ["common", "device", "model", "files", "analysis", "solver", "hardware", "bench", "cli"]
+LAYERS = ["common", "device", "model", "files", "analysis", "solver", "scale", "hardware", "bench", "cli"]
 FACES = {"rsocl", "rsocl.testing"}
 
 

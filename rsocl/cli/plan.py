@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from rsocl.cli.options import add_device_args, add_rig_args, rig_from
+from rsocl.cli.tiling import add_plan_tiling_args, print_plan_tiling
 
 __all__ = ["add_parser", "cmd_plan"]
 
@@ -20,16 +21,18 @@ def add_parser(subparsers):
     p.add_argument("--regularizer", default="tv")
     p.add_argument("--no-measure", action="store_true", help="memory only; do not time 3 iterations")
     add_device_args(p)
+    add_plan_tiling_args(p)
     p.set_defaults(func=cmd_plan)
     return p
 
 
 def cmd_plan(args) -> int:
-    """Print the plan of :func:`rsocl.solver.plan.plan`; returns 0."""
+    """Print the plan of :func:`rsocl.solver.plan.plan` (and a tiling when it does not fit); returns 0."""
     from rsocl.solver.plan import format_plan, plan
 
     rig = rig_from(args)
     p = plan(rig, roi=args.roi, speed=args.speed, fps=args.fps, blur_pixels=args.blur, iterations=args.iterations,
              regularizer=args.regularizer, dtype=args.dtype, device=args.device, measure=not args.no_measure)
     print(format_plan(p))
+    print_plan_tiling(args, p)
     return 0

@@ -1,10 +1,12 @@
-"""``rsocl reconstruct``: a capture file -> a reconstruction file and a GIF."""
+"""``rsocl reconstruct``: a capture file -> a reconstruction file and a GIF, or tiles (and sets) on
+Dask into a Zarr store (:mod:`rsocl.cli.tiling`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from rsocl.cli.options import add_device_args, add_solver_args, quality_line, run_reconstruction, say
+from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
 __all__ = ["add_parser", "cmd_reconstruct"]
 
@@ -13,19 +15,28 @@ def add_parser(subparsers):
     """Add ``reconstruct`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser("reconstruct", help="capture file -> reconstruction file and GIF")
     p.add_argument("capture", help="capture file (.h5) from 'rsocl simulate' or 'rsocl capture'")
-    p.add_argument("--out", required=True, help="reconstruction file to write (.h5)")
-    p.add_argument("--gif", default=None, help="GIF to write (default: next to --out)")
+    p.add_argument("--out", required=True, help="reconstruction file to write (.h5), or a Zarr store (.zarr)")
+    p.add_argument("--gif", default=None, help="GIF to write (default: next to an .h5 --out)")
     p.add_argument("--no-truth", action="store_true", help="ignore a ground truth stored in the capture")
     add_solver_args(p)
     add_device_args(p)
+    add_reconstruct_tiling_args(p)
     p.set_defaults(func=cmd_reconstruct)
     return p
 
 
 def cmd_reconstruct(args) -> int:
-    """Reconstruct the capture, print the quality line, write ``--out`` and the GIF; returns 0."""
+    """Reconstruct the capture, print the quality line, write ``--out`` and the GIF; returns 0.
+
+    The output paths are checked first; tiles (and sets) run on Dask when asked or needed.
+    """
     from rsocl.analysis.visual import comparison_gif
     from rsocl.files.hdf5 import load_capture, save_reconstruction
+
+    check_outputs(args)
+    code = reconstruct_tiled_if_needed(args)
+    if code is not None:
+        return code
 
     capture = load_capture(args.capture)
     truth = capture.truth if not args.no_truth else None

@@ -140,16 +140,21 @@ class Device:
                              "use dtype='float32' or another device")
         return dt
 
-    def check_fits(self, what: str, nbytes: int, total_bytes: int | None = None):
-        """Raise a ``ValueError`` with the numbers when a buffer (or all of them) would not fit."""
+    def check_fits(self, what: str, nbytes: int, total_bytes: int | None = None, dtype=None):
+        """Raise a ``ValueError`` with the numbers when a buffer (or all of them) would not fit.
+
+        ``dtype`` (the buffers' type) adds the hint to use float32 when it is float64.
+        """
+        hint = "reduce the ROI (shape), raise dt"
+        if dtype is not None and np.dtype(dtype) == np.float64:
+            hint += ", use float32"
+        hint += ", or split it into tiles (rsocl plan proposes them; rsocl reconstruct --tile H W)"
         if nbytes > self.max_alloc_bytes:
             raise ValueError(f"{what} needs a buffer of {nbytes / 2**20:.1f} MiB, above the device's "
-                             f"largest allocation of {self.max_alloc_bytes / 2**20:.1f} MiB ({self.name}); "
-                             "reduce the ROI (shape), raise dt, or use float32")
+                             f"largest allocation of {self.max_alloc_bytes / 2**20:.1f} MiB ({self.name}); {hint}")
         if total_bytes is not None and total_bytes > self.global_mem_bytes:
             raise ValueError(f"{what} needs {total_bytes / 2**20:.1f} MiB of device memory in all, above the "
-                             f"device's {self.global_mem_bytes / 2**20:.1f} MiB ({self.name}); "
-                             "reduce the ROI (shape), raise dt, or use float32")
+                             f"device's {self.global_mem_bytes / 2**20:.1f} MiB ({self.name}); {hint}")
 
     def program(self, files, **defines):
         """Build (once per device and definitions) the program made of ``common.cl`` + ``files``."""

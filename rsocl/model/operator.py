@@ -65,7 +65,7 @@ class RollingShutterOperator:
         self.L = rig.window_length
         itemsize = self.dtype.itemsize
         self.device.check_fits(f"a datacube of T={self.T} x {m} x {n} in {self.dtype.name}",
-                               self.T * m * n * itemsize)
+                               self.T * m * n * itemsize, dtype=self.dtype)
         win = rig.windows
         self.first = cla.to_device(self.queue, np.ascontiguousarray(win.index - start, dtype=np.int32))
         self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype))

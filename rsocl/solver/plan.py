@@ -25,18 +25,24 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.model.rig import Camera, Rig
 
-__all__ = ["Plan", "Estimate", "plan", "crop_rig", "estimate", "format_plan"]
+__all__ = ["Plan", "Estimate", "plan", "crop_rig", "estimate", "memory_need", "device_limit", "format_plan"]
 
 
 @dataclass
 class Estimate:
-    """Cost of reconstructing one rig: sub-frames, device memory (bytes), seconds."""
+    """Cost of reconstructing one rig: sub-frames, device memory (bytes), seconds.
+
+    ``fits`` is False when the largest buffer or the total exceeds the device (``limit`` says
+    which); the time is then not measured.
+    """
 
     rig: Rig
     subframes: int
     memory_bytes: int
     seconds_per_iteration: float | None
     iterations: int
+    fits: bool = True
+    limit: str | None = None
 
     @property
     def seconds(self) -> float | None:
@@ -72,27 +78,56 @@ def crop_rig(rig: Rig, roi, dt=None) -> Rig:
     return Rig(cams, (h, w), dt=rig.dt if dt is None else dt, mask=rig.mask)
 
 
-def estimate(rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", device=None,
-             measure=True, projection="exact") -> Estimate:
-    """Memory (from the buffer sizes) and, when ``measure``, time per iteration (3 timed iterations)."""
-    from rsocl.solver.admm import ADMM
-    from rsocl.model.operator import RollingShutterOperator
+def memory_need(rig: Rig, *, regularizer="tv", dtype="float32", projection="exact") -> tuple:
+    """``(largest buffer, total)`` device bytes of reconstructing ``rig``'s sampled sub-frames.
+
+    From the shapes alone (nothing is allocated): the datacube over
+    :meth:`Rig.sampled_range`, the solver's arrays (:meth:`ADMM.buffers_bytes`) and the
+    regularizer's workspace.
+    """
+    from types import SimpleNamespace
+
     from rsocl.common.registry import load
-    from rsocl.solver.reconstruct import reconstruct
+    from rsocl.solver.admm import ADMM
 
     solved = rig.sampled_range()
-    op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=solved)
-    reg = load("rsocl.regularizers", regularizer)()
-    memory = ADMM.buffers_bytes(op, projection) + reg.workspace_bytes(op.domain_shape, op.dtype)
+    dtype = np.dtype(dtype)
+    domain = (solved.stop - solved.start,) + rig.shape
+    shapes = SimpleNamespace(domain_shape=domain, range_shape=(rig.n_channels,) + rig.shape, dtype=dtype,
+                             K=rig.n_channels)
+    reg = load("rsocl.regularizers", regularizer)() if isinstance(regularizer, str) else regularizer
+    cube = int(np.prod(domain)) * dtype.itemsize
+    return cube, ADMM.buffers_bytes(shapes, projection) + reg.workspace_bytes(domain, dtype)
+
+
+def device_limit(device, largest: int, total: int) -> str | None:
+    """Why buffers of ``largest`` and ``total`` bytes do not fit ``device`` (None when they fit)."""
+    if largest > device.max_alloc_bytes:
+        return (f"a buffer of {largest / 2**20:.1f} MiB, above the device's largest allocation of "
+                f"{device.max_alloc_bytes / 2**20:.1f} MiB")
+    if total > device.global_mem_bytes:
+        return f"{total / 2**20:.1f} MiB in all, above the device's {device.global_mem_bytes / 2**20:.1f} MiB"
+    return None
+
+
+def estimate(rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", device=None,
+             measure=True, projection="exact") -> Estimate:
+    """Memory (from the buffer sizes) and, when ``measure`` and it fits, time per iteration (3 timed iterations)."""
+    from rsocl.device.context import get_device
+    from rsocl.solver.reconstruct import reconstruct
+
+    dev = get_device(device)
+    dev.real_dtype(dtype)
+    solved = rig.sampled_range()
+    largest, memory = memory_need(rig, regularizer=regularizer, dtype=dtype, projection=projection)
+    limit = device_limit(dev, largest, memory)
     per_iteration = None
-    if measure:
-        op.device.check_fits("the planned reconstruction", int(np.prod(op.domain_shape)) * op.dtype.itemsize,
-                             total_bytes=memory)
-        g = np.zeros(op.range_shape)
-        reconstruct(g, rig, regularizer=regularizer, iterations=1, device=device, dtype=dtype)  # compile
-        result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=device, dtype=dtype)
+    if measure and limit is None:
+        g = np.zeros((rig.n_channels,) + rig.shape)
+        reconstruct(g, rig, regularizer=regularizer, iterations=1, device=dev, dtype=dtype)  # compile
+        result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=dev, dtype=dtype)
         per_iteration = result.history["time"][-1] / 3
-    return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations)
+    return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations, limit is None, limit)
 
 
 def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iterations=200, regularizer="tv",
@@ -143,6 +178,8 @@ def format_plan(p: Plan) -> str:
     """A small table: the unplanned problem beside the proposal."""
     def col(e: Estimate):
         secs = "-" if e.seconds is None else f"{e.seconds_per_iteration * 1e3:.1f} ms x {e.iterations} = {e.seconds:.1f} s"
+        if not e.fits:
+            secs = "does not fit the device: tile it"
         return [f"{e.rig.shape[0]} x {e.rig.shape[1]}", f"{e.rig.dt * 1e6:g} µs", f"{e.rig.T}",
                 f"{e.subframes}", f"{e.rig.T_se}", f"{e.rig.compression_ratio:.1f}x",
                 f"{e.memory_bytes / 2**20:.1f} MiB", secs]
@@ -154,4 +191,6 @@ def format_plan(p: Plan) -> str:
     lines += [f"{r:<{width}}  {x:<{wa}}  {y}" for r, x, y in zip(rows, a, b)]
     lines.append(f"proposed ROI (y, x, height, width): {p.roi}")
     lines += [f"note: {n}" for n in p.notes]
+    lines += [f"note: the {label} problem does not fit one device: it needs {e.limit}"
+              for label, e in (("given", p.full), ("proposed", p.proposed)) if not e.fits]
     return "\n".join(lines)

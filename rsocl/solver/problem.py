@@ -142,7 +142,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     if problem.truth is not None:
         need += cube_bytes
     op.device.check_fits(f"ADMM with {reg.name} on T={op.T} x {rig.shape[0]} x {rig.shape[1]} "
-                         f"({op.dtype.name})", cube_bytes, total_bytes=need)
+                         f"({op.dtype.name})", cube_bytes, total_bytes=need, dtype=op.dtype)
 
     def upload(array):
         return cla.to_device(op.queue, np.ascontiguousarray(array, dtype=op.dtype))

@@ -1,0 +1,194 @@
+"""Tiles, sets, Dask and Zarr for ``rsocl reconstruct`` and ``rsocl plan`` (arguments and commands).
+
+``rsocl reconstruct`` runs tiled when asked (``--tile``, ``--sets``, ``--scheduler``/``RSOCL_SCHEDULER``,
+``--workers``, an ``--out`` ending in ``.zarr``) or when the capture does not fit the device in
+one piece (then with the tile ``rsocl plan`` would propose). ``rsocl plan`` prints a tiling
+proposal when the problem does not fit one device, or for ``--tile``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["add_reconstruct_tiling_args", "check_outputs", "reconstruct_tiled_if_needed", "add_plan_tiling_args",
+           "print_plan_tiling"]
+
+
+def _is_zarr(path) -> bool:
+    return str(path).rstrip("/").lower().endswith(".zarr")
+
+
+# ---------------------------------------------------------------------- reconstruct
+def add_reconstruct_tiling_args(p):
+    from rsocl.scale.tiles import DEFAULT_HALO
+
+    g = p.add_argument_group("tiles, sets and Dask (pip install 'rsocl[dask]' for clusters and Zarr stores)")
+    g.add_argument("--tile", type=int, nargs=2, metavar=("H", "W"), default=None,
+                   help="reconstruct in tiles of H x W reference pixels (default: one piece when it fits the "
+                        "device, else the tile 'rsocl plan' proposes)")
+    g.add_argument("--halo", type=int, default=DEFAULT_HALO,
+                   help=f"pixels added on every side of a tile, cropped off after (default {DEFAULT_HALO})")
+    g.add_argument("--sets", action="store_true",
+                   help="reconstruct every set of the capture (snapshot_sets) into a [S, T, m, n] Zarr array")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the tiles on a running dask.distributed scheduler (default: RSOCL_SCHEDULER, else "
+                        "Dask's local scheduler); its workers must see the capture and --out paths")
+    g.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="start a local cluster of N worker processes (each its own OpenCL context)")
+    g.add_argument("--retries", type=int, default=2, help="extra attempts of a failing tile (default 2)")
+    g.add_argument("--window", type=int, default=None, metavar="F",
+                   help="multi-frame capture (frames, t_d): reconstruct it as a stream of windows of F frames")
+    g.add_argument("--overlap", type=int, default=1, metavar="V",
+                   help="frames shared by consecutive windows (default 1; 0 when the readout has gaps)")
+
+
+def check_outputs(args) -> None:
+    """Check ``--out`` (and ``--gif``) before anything is computed; errors name the option."""
+    from rsocl.files.atomic import output_path
+
+    if args.window is not None and (_is_zarr(args.out) or args.sets):
+        raise ValueError("--window: a stream of frame windows is written to an HDF5 file (--out NAME.h5), "
+                         "one set at a time")
+    if _is_zarr(args.out):
+        from rsocl.scale.store import check_store_path, require_zarr
+
+        require_zarr("--out")
+        check_store_path(args.out, "--out")
+        if args.gif:
+            raise ValueError("--gif: a GIF is written next to an HDF5 result only, not for a Zarr store")
+        return
+    if args.sets:
+        raise ValueError(f"--out: every set (--sets) goes to a Zarr store (--out NAME.zarr), got {args.out!r}")
+    output_path(args.out, "--out")
+    output_path(Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif"), "--gif")
+
+
+def _wants_tiles(args, capture) -> bool:
+    from rsocl.device.context import get_device
+    from rsocl.scale.runner import SCHEDULER_ENV
+    from rsocl.solver.plan import device_limit, memory_need
+
+    if (args.tile or args.sets or args.workers is not None or args.scheduler or os.environ.get(SCHEDULER_ENV)
+            or _is_zarr(args.out)):
+        return True
+    largest, total = memory_need(capture.rig, regularizer=args.regularizer, dtype=args.dtype,
+                                 projection=args.projection)
+    return device_limit(get_device(args.device), largest, total) is not None
+
+
+def reconstruct_tiled_if_needed(args):
+    """Run ``rsocl reconstruct`` tiled when it should be (see the module); the exit code, or None."""
+    from rsocl.cli.options import reg_options, say
+    from rsocl.scale.inputs import CaptureSets
+
+    capture = CaptureSets(args.capture, all_sets=args.sets)
+    if args.window is not None:
+        return _stream(args, capture)
+    if not _wants_tiles(args, capture):
+        return None
+    from rsocl.scale.proposal import propose_tiling
+    from rsocl.scale.tiled import TilesFailed, reconstruct_tiled
+
+    tile = args.tile
+    if tile is None:
+        tile = propose_tiling(capture.rig, halo=args.halo, regularizer=args.regularizer, dtype=args.dtype,
+                              projection=args.projection, device=args.device, measure=False).tile
+        say(args, f"tiles of {tile[0]} x {tile[1]} pixels (proposed for this device; --tile H W to choose)")
+    zarr_out = _is_zarr(args.out)
+    try:
+        result = reconstruct_tiled(
+            capture, capture.rig, args.regularizer, tile=tile, halo=args.halo, iterations=args.iterations,
+            lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations, projection=args.projection,
+            device=args.device, dtype=args.dtype, regularizer_options=reg_options(args.reg_opt),
+            out=args.out if zarr_out else None, scheduler=args.scheduler, workers=args.workers,
+            retries=args.retries, progress=not args.quiet)
+    except TilesFailed as exc:
+        print(f"rsocl reconstruct: error: {exc}", flush=True)
+        return 1
+    ran = len(result.pieces)
+    kept = f", {result.skipped} already in the store" if result.skipped else ""
+    text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
+    truth = None if args.no_truth or args.sets else capture.truth()
+    if truth is not None and not zarr_out:
+        from rsocl.analysis.metrics import psnr
+
+        text = f"PSNR {psnr(result.datacube, truth):.2f} dB, " + text
+    print(text, flush=True)
+    if zarr_out:
+        say(args, f"wrote {args.out}")
+        return 0
+    from rsocl.analysis.visual import comparison_gif
+    from rsocl.files.hdf5 import save_reconstruction
+
+    history = {"tile_seconds": np.array([p.seconds for p in result.pieces]),
+               "tile_residual": np.array([p.residual for p in result.pieces])}
+    save_reconstruction(args.out, result.datacube, capture.rig, params=result.params, history=history,
+                        truth=truth)
+    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
+    comparison_gif(gif, truth, result.datacube)
+    say(args, f"wrote {args.out} and {gif}")
+    return 0
+
+
+def _stream(args, capture):
+    """``--window``: the capture as a stream of overlapping frame windows, into an HDF5 file."""
+    from rsocl.analysis.visual import comparison_gif
+    from rsocl.cli.options import reg_options, say
+    from rsocl.files.hdf5 import load_capture, save_reconstruction
+    from rsocl.scale.stream import reconstruct_stream
+
+    loaded = load_capture(args.capture)
+    stream = reconstruct_stream(
+        loaded.snapshots, loaded.rig, window=args.window, overlap=args.overlap, tile=args.tile, halo=args.halo,
+        regularizer=args.regularizer, iterations=args.iterations, lam=args.lam, eta=args.eta,
+        tv_iterations=args.tv_iterations, projection=args.projection, device=args.device, dtype=args.dtype,
+        regularizer_options=reg_options(args.reg_opt), scheduler=args.scheduler, retries=args.retries,
+        progress=not args.quiet)
+    truth = None if args.no_truth else loaded.truth
+    text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
+    if truth is not None:
+        from rsocl.analysis.metrics import psnr
+
+        text = f"PSNR {psnr(stream.datacube, truth):.2f} dB, " + text
+    print(text, flush=True)
+    params = dict(stream.results[0].params, window=args.window, overlap=args.overlap,
+                  windows=[list(w) for w in stream.windows])
+    save_reconstruction(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
+    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
+    comparison_gif(gif, truth, stream.datacube)
+    say(args, f"wrote {args.out} and {gif}")
+    return 0
+
+
+# ---------------------------------------------------------------------- plan
+def add_plan_tiling_args(p):
+    from rsocl.scale.tiles import DEFAULT_HALO
+
+    g = p.add_argument_group("tiling (proposed when the problem does not fit one device)")
+    g.add_argument("--tile", type=int, nargs=2, metavar=("H", "W"), default=None, help="cost this tile instead")
+    g.add_argument("--halo", type=int, default=DEFAULT_HALO, help=f"halo, pixels (default {DEFAULT_HALO})")
+    g.add_argument("--sets", type=int, default=1, help="sets to reconstruct (default 1)")
+    g.add_argument("--memory-mib", type=float, default=None,
+                   help="device memory one task may use, MiB (default: half the device's)")
+
+
+def print_plan_tiling(args, p) -> None:
+    """After ``rsocl plan``'s table: the tiling, when the proposal does not fit or ``--tile`` asks."""
+    from rsocl.scale.proposal import format_tiling, propose_tiling
+
+    if args.tile is None and p.proposed.fits and args.sets == 1:
+        return
+    if args.sets < 1:
+        raise ValueError(f"--sets must be >= 1, got {args.sets}")
+    budget = None
+    if args.memory_mib is not None:
+        if not args.memory_mib > 0:
+            raise ValueError(f"--memory-mib must be > 0, got {args.memory_mib}")
+        budget = int(args.memory_mib * 2**20)
+    tiling = propose_tiling(p.proposed.rig, tile=args.tile, halo=args.halo, sets=args.sets,
+                            iterations=args.iterations, regularizer=args.regularizer, dtype=args.dtype,
+                            device=args.device, budget_bytes=budget, measure=not args.no_measure)
+    print(format_tiling(tiling))

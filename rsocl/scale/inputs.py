@@ -1,0 +1,138 @@
+"""The snapshots of a tiled reconstruction: arrays in memory, or a capture file read tile by tile.
+
+Either source hands each task only its tile's block (:meth:`block`), gives the SHA-256 digest
+of all its snapshots (a store records it, so that a resumed run is known to have the same
+input) and counts the saturated pixels.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from rsocl.common import validation as check
+from rsocl.model.rig import Rig
+from rsocl.scale.work import FileBlock
+
+__all__ = ["ArraySets", "CaptureSets", "scan"]
+
+
+def _digest_update(digest, array) -> None:
+    array = np.ascontiguousarray(array, dtype=np.float64)
+    digest.update(str(array.shape).encode())
+    digest.update(array.tobytes())
+
+
+class ArraySets:
+    """Snapshots ``(K, m, n)`` (one set) or ``(S, K, m, n)`` (``S`` sets) in memory.
+
+    ``n_sets`` is None for one set given as ``(K, m, n)``.
+    """
+
+    def __init__(self, g, rig: Rig, name="g"):
+        g = check.finite_array(name, g)
+        expected = (rig.n_channels,) + rig.shape
+        if g.shape == expected:
+            self.n_sets = None
+        elif g.ndim == 4 and g.shape[1:] == expected and g.shape[0] >= 1:
+            self.n_sets = g.shape[0]
+        else:
+            raise ValueError(f"{name} must have shape (K, m, n) = {expected} or (S, K, m, n) with S >= 1 sets "
+                             f"for this rig, got {g.shape}")
+        self.g, self.rig = g, rig
+
+    def sets(self):
+        """``(set index or None, snapshots (K, m, n))`` for every set."""
+        if self.n_sets is None:
+            yield None, self.g
+        else:
+            yield from enumerate(self.g)
+
+    def block(self, set_index, tile):
+        rows, cols = tile.outer_slices
+        g = self.g if set_index is None else self.g[set_index]
+        return np.ascontiguousarray(g[:, rows, cols])
+
+
+
+class CaptureSets:
+    """A capture file (:mod:`rsocl.files.hdf5`, format 1) whose snapshots each task reads itself.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The capture file (HDF5), on storage every worker can read.
+    all_sets : bool
+        Every set of ``snapshot_sets`` ``(S, K, m, n)`` (a capture of several sets) instead of
+        the first set, ``snapshots`` ``(K, m, n)``.
+    """
+
+    def __init__(self, path, all_sets=False, name="capture"):
+        import h5py
+
+        self.path = Path(os.fspath(path))
+        if not self.path.is_file():
+            raise FileNotFoundError(f"{name}: capture file {str(self.path)!r} does not exist")
+        try:
+            h5 = h5py.File(self.path, "r")
+        except OSError as exc:
+            raise ValueError(f"{name}: {str(self.path)!r} is not a readable HDF5 file ({exc})") from None
+        with h5:
+            kind = h5.attrs.get("rsocl_file")
+            kind = kind.decode() if isinstance(kind, bytes) else kind
+            if kind != "capture":
+                raise ValueError(f"{name}: {str(self.path)!r} is not an rsocl capture file")
+            data = json.loads(h5.attrs["rig"])
+            for camera in data["cameras"]:
+                ref = camera.get("row_map")
+                if isinstance(ref, dict):
+                    camera["row_map"] = np.asarray(h5[ref["dataset"]][()], dtype=np.float64)
+            self.rig = Rig.from_dict(data)
+            self.dataset = "snapshot_sets" if all_sets else "snapshots"
+            if self.dataset not in h5:
+                hint = " (it holds one set: leave out --sets)" if all_sets else ""
+                raise ValueError(f"{name}: {str(self.path)!r} has no dataset {self.dataset!r}{hint}")
+            shape = h5[self.dataset].shape
+            self.has_truth = "truth" in h5
+        expected = (self.rig.n_channels,) + self.rig.shape
+        if shape[-3:] != expected:
+            raise ValueError(f"{name}: {self.dataset} has shape {shape}, the rig needs (..., {expected})")
+        self.n_sets = shape[0] if all_sets else None
+
+    def sets(self):
+        import h5py
+
+        with h5py.File(self.path, "r") as h5:
+            data = h5[self.dataset]
+            if self.n_sets is None:
+                yield None, data[()]
+            else:
+                for s in range(self.n_sets):
+                    yield s, data[s]
+
+    def block(self, set_index, tile):
+        return FileBlock(str(self.path.resolve()), self.dataset, set_index)
+
+    def truth(self):
+        """The capture's ground truth ``(T, m, n)`` (set 0), or None."""
+        import h5py
+
+        if not self.has_truth:
+            return None
+        with h5py.File(self.path, "r") as h5:
+            return h5["truth"][()]
+
+
+
+def scan(source, saturation=None) -> tuple:
+    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count)``."""
+    digest, saturated = hashlib.sha256(), 0
+    for _, g in source.sets():
+        _digest_update(digest, g)
+        if saturation is not None:
+            saturated += int(np.count_nonzero(g >= saturation))
+    return digest.hexdigest(), saturated

@@ -1,0 +1,218 @@
+"""Running tile tasks: on Dask's local scheduler, on a dask.distributed cluster, or in this process.
+
+* Default: Dask's local (threaded) scheduler, nothing to start. It runs one task at a time:
+  this process has one device, each task keeps it busy (a kernel uses every compute unit), and
+  two solvers must not launch on one device at once.
+* ``scheduler="ADDRESS"`` (or the ``RSOCL_SCHEDULER`` environment variable): a running
+  ``dask.distributed`` scheduler. It is connected to before anything is computed; an
+  unreachable address is a ValueError naming ``scheduler``. Its workers must be able to import
+  rsocl and, for file inputs and Zarr output, see the same paths.
+* ``workers=N``: a ``LocalCluster`` of ``N`` worker processes (one thread each) on 127.0.0.1,
+  closed at the end.
+* Without Dask installed, the tasks run in this process, one after another.
+
+A task that raises is retried (``retries`` more times: Dask's own retries on a cluster, a loop
+here otherwise); a task still failing is reported as a :class:`Failure` with its tile, set and
+cause, and the other tasks' results are kept. A cluster worker that dies (killed, out of
+memory) has its task run again on another worker by Dask.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import uuid
+from dataclasses import dataclass
+
+from rsocl.common import validation as check
+from rsocl.scale.work import solve_tile
+
+__all__ = ["SCHEDULER_ENV", "Failure", "Engine", "have_dask", "non_negative_int"]
+
+#: Environment variable read when no ``scheduler`` is given.
+SCHEDULER_ENV = "RSOCL_SCHEDULER"
+#: Seconds allowed to reach a scheduler.
+CONNECT_TIMEOUT = 10
+
+
+def have_dask() -> bool:
+    """Whether ``dask`` and ``distributed`` are importable."""
+    try:
+        import dask  # noqa: F401
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A task that failed on every attempt: ``label`` names its tile and set, ``cause`` the last error."""
+
+    set_index: int | None
+    index: tuple
+    label: str
+    attempts: int
+    cause: str
+
+    def __str__(self):
+        return f"{self.label} failed after {self.attempts} attempt(s): {self.cause}"
+
+
+def _cause(exc) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
+def _attempts(job, payload, settings, retries):
+    """``solve_tile`` tried up to ``retries + 1`` times: the Piece, or a Failure."""
+    for attempt in range(retries + 1):
+        try:
+            return solve_tile(job, payload, settings)
+        except Exception as exc:  # noqa: BLE001 - any cause is reported with the tile
+            last = exc
+    return Failure(job.set_index, job.tile.index, job.label, retries + 1, _cause(last))
+
+
+class Engine:
+    """Where the tasks run; a context manager that starts (and stops) what it needs.
+
+    Parameters
+    ----------
+    scheduler : str or None
+        Address of a running ``dask.distributed`` scheduler (``tcp://host:port``); None reads
+        ``RSOCL_SCHEDULER``, and an empty value means none.
+    workers : int or None
+        Start a ``LocalCluster`` of this many worker processes (>= 1) on 127.0.0.1.
+    """
+
+    def __init__(self, scheduler=None, workers=None):
+        if scheduler is None:
+            scheduler = os.environ.get(SCHEDULER_ENV) or None
+        if workers is not None:
+            workers = check.positive_int("workers", workers)
+        if scheduler is not None and workers is not None:
+            raise ValueError(f"give scheduler (a running cluster, here {scheduler!r}) or workers (a local "
+                             f"cluster of {workers}), not both")
+        if (scheduler is not None or workers is not None) and not have_dask():
+            what = "scheduler" if scheduler is not None else "workers"
+            raise ValueError(f"{what}: running on a Dask cluster needs dask[distributed]: "
+                             "pip install 'rsocl[dask]'")
+        self.scheduler, self.workers = scheduler, workers
+        self.mode = "distributed" if scheduler or workers else ("local" if have_dask() else "process")
+        self.client = self.cluster = None
+
+    # ------------------------------------------------------------------ start / stop
+    def __enter__(self):
+        if self.mode != "distributed":
+            return self
+        from distributed import Client, LocalCluster
+
+        if self.workers is not None:
+            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                        host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            self.client = Client(self.cluster)
+        else:
+            try:
+                self.client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s")
+            except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError on a bad address
+                raise ValueError(f"scheduler: cannot reach a dask.distributed scheduler at {self.scheduler!r} "
+                                 f"({_cause(exc)}); start one (dask scheduler) or leave scheduler unset "
+                                 "for the local scheduler") from None
+        return self
+
+    def __exit__(self, *exc):
+        if self.client is not None:
+            self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+        self.client = self.cluster = None
+        return False
+
+    @property
+    def description(self) -> str:
+        if self.mode == "process":
+            return "this process"
+        if self.mode == "local":
+            return "Dask's local scheduler"
+        if self.workers is not None:
+            return f"a LocalCluster of {self.workers} worker processes"
+        return f"the dask.distributed scheduler at {self.scheduler}"
+
+    # ------------------------------------------------------------------ running
+    def run(self, jobs, payload, settings, *, retries=2, progress=False, desc="tiles"):
+        """Run every job; ``(pieces, failures)`` in completion order."""
+        retries = non_negative_int("retries", retries)
+        bar = None
+        if progress:
+            from tqdm.auto import tqdm
+
+            bar = tqdm(total=len(jobs), desc=desc, unit="task", disable=None)
+        try:
+            if self.mode == "distributed":
+                return self._run_distributed(jobs, payload, settings, retries, bar)
+            if self.mode == "local":
+                return self._run_local(jobs, payload, settings, retries, bar)
+            return self._split(_tick(bar, _attempts(job, payload, settings, retries)) for job in jobs)
+        finally:
+            if bar is not None:
+                bar.close()
+
+    @staticmethod
+    def _split(outcomes):
+        pieces, failures = [], []
+        for outcome in outcomes:
+            (failures if isinstance(outcome, Failure) else pieces).append(outcome)
+        return pieces, failures
+
+    def _run_local(self, jobs, payload, settings, retries, bar):
+        import dask
+        from dask.callbacks import Callback
+
+        token = uuid.uuid4().hex[:8]
+        tasks = [dask.delayed(_attempts, pure=False)(job, payload, settings, retries,
+                                                     dask_key_name=f"rsocl-tile-{token}-{i}")
+                 for i, job in enumerate(jobs)]
+
+        class Bar(Callback):
+            def _posttask(self, key, result, dsk, state, worker_id):
+                if bar is not None and str(key).startswith("rsocl-tile-"):
+                    bar.update(1)
+
+        with Bar():
+            outcomes = dask.compute(*tasks, scheduler="threads", num_workers=1)
+        return self._split(outcomes)
+
+    def _run_distributed(self, jobs, payload, settings, retries, bar):
+        from distributed import as_completed
+
+        client = self.client
+        shared = client.scatter(payload, broadcast=True, hash=False)
+        token = uuid.uuid4().hex[:8]
+        futures = {client.submit(solve_tile, job, shared, settings, key=f"rsocl-tile-{token}-{i}",
+                                 retries=retries, pure=False): job for i, job in enumerate(jobs)}
+        pieces, failures = [], []
+        for future in as_completed(futures):
+            job = futures[future]
+            try:
+                pieces.append(future.result())
+            except Exception as exc:  # noqa: BLE001 - reported with the tile
+                failures.append(Failure(job.set_index, job.tile.index, job.label, retries + 1, _cause(exc)))
+            _tick(bar, None)
+        return pieces, failures
+
+
+def _tick(bar, value):
+    if bar is not None:
+        bar.update(1)
+    return value
+
+
+def non_negative_int(name, value) -> int:
+    """``value`` as an int >= 0; ValueError naming ``name``."""
+    try:
+        ok = int(value) == float(value) and int(value) >= 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must be a whole number >= 0, got {value!r}")
+    return int(value)

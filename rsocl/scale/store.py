@@ -1,0 +1,210 @@
+"""A tiled reconstruction in a Zarr store: chunks owned by tiles, completion marks, resuming.
+
+Layout (a Zarr v3 group)
+------------------------
+- array ``datacube``: ``[T, m, n]`` (one set) or ``[S, T, m, n]`` (``S`` sets), float32 or
+  float64, fill 0; chunks ``(tc, H, W)`` (``(1, tc, H, W)``) where ``(H, W)`` is the tile, so
+  every chunk belongs to one tile, and ``tc`` sub-frames make a chunk of about
+  :data:`CHUNK_BYTES`;
+- array ``tiles``: ``[S, ny, nx, 6]`` float64 (``S = 1`` for one set), one chunk per tile:
+  ``done`` (1 once the tile's data are written, else 0), the first and one-past-last solved
+  sub-frame, seconds, iterations and final residual of the tile's run;
+- arrays ``rig_row_maps/<camera>`` for cameras with a row map;
+- the attributes of an HDF5 reconstruction file (:mod:`rsocl.files.hdf5`): ``rsocl_file =
+  "reconstruction"``, ``format_version``, ``rig`` (JSON; row maps referenced as
+  ``{"dataset": "rig_row_maps/<camera>"}``), ``params`` (JSON), and the readable copies ``T``,
+  ``T_se``, ``dt``, ``mask``, ``n_cameras``, ``n_channels``, ``shape``; plus ``tiling`` (JSON:
+  tile, halo, grid, sets) and ``input_digest`` (SHA-256 of the snapshots).
+
+A task writes its tile's chunks of ``datacube`` (the sub-frames the capture samples; chunks
+outside them are never written and read as 0), then the tile's chunk of ``tiles`` (each chunk
+file is written to a temporary name and renamed): a tile reads as done only once its data are
+complete. Running the same reconstruction on an existing store redoes only the tiles not
+done; a store of another reconstruction (different rig, settings, tiling or snapshots) is
+refused.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rsocl.files.hdf5 import FORMAT_VERSION
+from rsocl.model.rig import Rig
+from rsocl.scale.tiles import expand
+
+__all__ = ["CHUNK_BYTES", "require_zarr", "check_store_path", "StoreSpec", "prepare_store", "write_piece",
+           "load_store", "StoredReconstruction"]
+
+#: Target size of one chunk of ``datacube``, bytes.
+CHUNK_BYTES = 4 * 2**20
+_ROW_MAPS = "rig_row_maps"
+#: columns of the ``tiles`` array
+TILE_FIELDS = ("done", "start", "stop", "seconds", "iterations", "residual")
+#: attributes that must match for a store to be resumed
+_IDENTITY = ("rsocl_file", "rig", "tiling", "input_digest", "dtype")
+
+
+def require_zarr(name="out"):
+    """The ``zarr`` module (v3); ValueError naming ``name`` when it is missing."""
+    try:
+        import zarr
+    except ImportError:
+        raise ValueError(f"{name}: writing a Zarr store needs zarr >= 3 (Python >= 3.11): "
+                         "pip install 'rsocl[dask]'") from None
+    if int(zarr.__version__.split(".")[0]) < 3:
+        raise ValueError(f"{name}: rsocl writes Zarr v3 stores with zarr >= 3, found zarr {zarr.__version__}")
+    return zarr
+
+
+def check_store_path(path, name="out") -> Path:
+    """``path`` as a Path whose folder exists and which is not a plain file; errors name ``name``."""
+    path = Path(os.fspath(path))
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise FileNotFoundError(f"{name}: directory {str(parent)!r} does not exist (writing {str(path)!r})")
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{name}: {str(path)!r} is a file, not a Zarr store (a folder)")
+    return path
+
+
+@dataclass(frozen=True)
+class StoreSpec:
+    """What a store holds: the rig, the grid of tiles, the sets, the parameters and the input's digest."""
+
+    rig: Rig
+    tile: tuple
+    halo: int
+    grid: tuple
+    sets: int | None
+    dtype: str
+    params: dict
+    input_digest: str
+
+    @property
+    def prefix_shape(self) -> tuple:
+        return () if self.sets is None else (self.sets,)
+
+    def chunks(self) -> tuple:
+        h, w = self.tile
+        itemsize = np.dtype(self.dtype).itemsize
+        tc = int(min(self.rig.T, max(1, CHUNK_BYTES // (h * w * itemsize))))
+        return tuple(1 for _ in self.prefix_shape) + (tc, h, w)
+
+    def attributes(self) -> dict:
+        rig = self.rig
+        data = rig.to_dict()
+        for index, camera in enumerate(data["cameras"]):
+            if camera.get("row_map") is not None:
+                camera["row_map"] = {"dataset": f"{_ROW_MAPS}/{index}"}
+        tiling = {"tile": list(self.tile), "halo": self.halo, "grid": list(self.grid), "sets": self.sets}
+        return {"rsocl_file": "reconstruction", "format_version": FORMAT_VERSION,
+                "rig": json.dumps(data, allow_nan=False), "T": rig.T, "T_se": rig.T_se, "dt": rig.dt,
+                "mask": rig.mask, "n_cameras": rig.C, "n_channels": rig.n_channels, "shape": list(rig.shape),
+                "params": json.dumps(self.params), "tiling": json.dumps(tiling), "input_digest": self.input_digest,
+                "dtype": self.dtype}
+
+
+def prepare_store(path, spec: StoreSpec, name="out") -> np.ndarray:
+    """Create the store at ``path``, or open the one there for the same reconstruction.
+
+    Returns the ``done`` marks, ``(S, ny, nx)`` bool (``S = 1`` for one set). Raises
+    ValueError naming ``name`` when ``path`` holds something else.
+    """
+    zarr = require_zarr(name)
+    path = check_store_path(path, name)
+    attrs = spec.attributes()
+    marks = (spec.sets or 1,) + tuple(spec.grid)
+    if path.exists() and any(path.iterdir()):
+        try:
+            group = zarr.open_group(str(path), mode="r+")
+        except Exception as exc:
+            raise ValueError(f"{name}: {str(path)!r} exists and is not a Zarr store ({exc})") from None
+        found = dict(group.attrs)
+        if found.get("rsocl_file") != "reconstruction":
+            raise ValueError(f"{name}: {str(path)!r} is not an rsocl reconstruction store; choose another path")
+        differ = [key for key in _IDENTITY if found.get(key) != attrs[key]]
+        old_params, new_params = json.loads(found.get("params", "{}")), spec.params
+        differ += [f"params.{k}" for k in sorted(set(old_params) | set(new_params))
+                   if k != "device" and old_params.get(k) != new_params.get(k)]
+        if differ:
+            raise ValueError(f"{name}: {str(path)!r} holds another reconstruction (it differs in "
+                             f"{', '.join(differ)}); remove it or choose another path")
+        return np.asarray(group["tiles"][..., 0]) > 0
+    group = zarr.open_group(str(path), mode="w")
+    shape = spec.prefix_shape + (spec.rig.T,) + spec.rig.shape
+    group.create_array("datacube", shape=shape, chunks=spec.chunks(), dtype=spec.dtype, fill_value=0)
+    group.create_array("tiles", shape=marks + (len(TILE_FIELDS),), chunks=(1, 1, 1, len(TILE_FIELDS)),
+                       dtype="float64", fill_value=0)
+    for index, camera in enumerate(spec.rig.cameras):
+        if camera.row_map is not None:
+            group.create_array(f"{_ROW_MAPS}/{index}", data=spec.rig.row_map(index))
+    group.attrs.update(attrs)            # last: a store with attributes has all its arrays
+    return np.zeros(marks, dtype=bool)
+
+
+_OPEN: dict = {}
+
+
+def _arrays(path: str):
+    if path not in _OPEN:
+        zarr = require_zarr()
+        group = zarr.open_group(path, mode="r+")
+        _OPEN.clear()
+        _OPEN[path] = (group["datacube"], group["tiles"])
+    return _OPEN[path]
+
+
+def write_piece(path: str, tile, piece, span: tuple) -> None:
+    """Write a solved tile's chunks over the sampled sub-frames ``span`` (:func:`expand`), then
+    mark it done (run by the task itself)."""
+    datacube, marks = _arrays(path)
+    prefix = () if piece.set_index is None else (piece.set_index,)
+    tc = datacube.chunks[len(prefix)]
+    T = datacube.shape[len(prefix)]
+    lo, hi = (span[0] // tc) * tc, min(T, -(-span[1] // tc) * tc)
+    rows, cols = tile.core_slices
+    block = expand(np.asarray(piece.block, dtype=datacube.dtype), piece.start, lo, hi, span)
+    datacube[prefix + (slice(lo, hi), rows, cols)] = block
+    s = piece.set_index or 0
+    marks[(s,) + tuple(tile.index)] = np.array([1, piece.start, piece.stop, piece.seconds, piece.iterations,
+                                                piece.residual], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class StoredReconstruction:
+    """A store read back: ``datacube`` (a Zarr array, read lazily), ``rig``, ``params``, ``tiling``,
+    ``tiles`` (``(S, ny, nx, 6)`` float64, columns :data:`TILE_FIELDS`)."""
+
+    datacube: object
+    rig: Rig
+    params: dict
+    tiling: dict
+    tiles: np.ndarray
+
+    @property
+    def complete(self) -> bool:
+        return bool(np.all(self.tiles[..., 0] > 0))
+
+
+def load_store(path) -> StoredReconstruction:
+    """Open a store written by :func:`prepare_store` and :func:`write_piece`."""
+    zarr = require_zarr("path")
+    path = Path(os.fspath(path))
+    if not path.is_dir():
+        raise FileNotFoundError(f"path: Zarr store {str(path)!r} does not exist")
+    group = zarr.open_group(str(path), mode="r")
+    attrs = dict(group.attrs)
+    if attrs.get("rsocl_file") != "reconstruction":
+        raise ValueError(f"path: {str(path)!r} is not an rsocl reconstruction store")
+    data = json.loads(attrs["rig"])
+    for camera in data["cameras"]:
+        ref = camera.get("row_map")
+        if isinstance(ref, dict):
+            camera["row_map"] = np.asarray(group[ref["dataset"]][...], dtype=np.float64)
+    return StoredReconstruction(group["datacube"], Rig.from_dict(data), json.loads(attrs["params"]),
+                                json.loads(attrs["tiling"]), np.asarray(group["tiles"][...]))

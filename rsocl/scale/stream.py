@@ -1,0 +1,131 @@
+"""A multi-frame capture (cameras with ``frames`` > 1, period ``t_d``) as a stream of overlapping time windows.
+
+Window ``w`` holds frames ``k0 .. k0 + window - 1`` of every camera (``k0 = w * (window - overlap)``):
+its rig is the capture's rig with each camera's trigger offset moved to ``t_a + k0*t_d`` and
+``window`` frames, so every exposure keeps its absolute start ``t_a + r*t_r + k*t_d`` and the
+window's sub-frames are those of the whole capture (time 0 is the same). Each window is an
+ordinary (tiled) reconstruction that models only the sub-frames its exposures touch
+(:meth:`rsocl.model.rig.Rig.sampled_range`), so the memory of a window does not grow with the
+length of the capture. Where windows overlap (readout continuous: ``t_d`` close to the
+readout time, so consecutive frames' exposures abut), each sub-frame is taken from the window
+it lies deepest inside (farthest from that window's first and last modelled sub-frame), where
+both neighbouring frames constrain it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rsocl.common import validation as check
+from rsocl.model.rig import Camera, Rig
+
+__all__ = ["frame_windows", "window_rig", "window_channels", "reconstruct_stream", "StreamResult"]
+
+
+def _frames(rig: Rig) -> int:
+    counts = {cam.frames for cam in rig.cameras}
+    if len(counts) != 1:
+        raise ValueError(f"rig: every camera must capture the same number of frames for a stream, got "
+                         f"{[cam.frames for cam in rig.cameras]}")
+    return counts.pop()
+
+
+def frame_windows(frames: int, window: int, overlap: int) -> list:
+    """``[(k0, k1), ...]``: frames ``k0..k1-1`` of each window, covering ``0..frames-1``.
+
+    ``1 <= window <= frames`` and ``0 <= overlap < window`` (ValueErrors name them); the last
+    window ends at the last frame (it may overlap its neighbour by more).
+    """
+    window = check.positive_int("window", window, maximum=frames)
+    try:
+        ok = int(overlap) == float(overlap) and 0 <= int(overlap) < window
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"overlap must be a whole number of frames in [0, window - 1 = {window - 1}], got {overlap!r}")
+    step = window - int(overlap)
+    starts = list(range(0, max(frames - window, 0) + 1, step))
+    if starts[-1] + window < frames:
+        starts.append(frames - window)
+    return [(k0, k0 + window) for k0 in starts]
+
+
+def window_rig(rig: Rig, k0: int, k1: int) -> Rig:
+    """The rig of frames ``k0..k1-1`` of every camera, on the capture's sub-frame grid (same ``dt``)."""
+    cams = []
+    for cam in rig.cameras:
+        data = cam.to_dict()
+        data.update(t_a=cam.t_a + k0 * (cam.t_d or 0.0), frames=k1 - k0)
+        cams.append(Camera.from_dict(data))
+    return Rig(cams, rig.shape, dt=rig.dt, mask=rig.mask)
+
+
+def window_channels(rig: Rig, k0: int, k1: int) -> list:
+    """Indices of the snapshots (camera-major channels) of frames ``k0..k1-1``."""
+    return [i for i, (_, k) in enumerate(rig.channels) if k0 <= k < k1]
+
+
+@dataclass
+class StreamResult:
+    """A stream: ``datacube`` ``(T, m, n)`` on the capture's sub-frame grid; ``windows`` ``[(k0, k1)]``;
+    ``spans`` the sub-frames each window modelled; ``owner[s]`` the window sub-frame ``s`` comes from
+    (-1 where no exposure reaches); ``results`` each window's :class:`rsocl.scale.TiledResult`."""
+
+    datacube: np.ndarray
+    rig: Rig
+    windows: list
+    spans: list
+    owner: np.ndarray
+    results: list = field(default_factory=list)
+
+
+def reconstruct_stream(snapshots, rig: Rig, *, window=2, overlap=1, tile=None, progress=False, **kwargs):
+    """Reconstruct a multi-frame capture window by window (each window tiled and run as Dask tasks).
+
+    Parameters
+    ----------
+    snapshots : array_like, shape (K, m, n)
+        Every camera's frames, camera-major (``rig.channels``).
+    rig : Rig
+        Cameras with the same ``frames`` (>= 1) each.
+    window : int
+        Frames per window, ``1..frames``.
+    overlap : int
+        Frames shared by consecutive windows, ``0..window-1`` (1 when the readout is continuous).
+    tile : (int, int) or None
+        Tile of each window (None: the whole grid, one task per window).
+    **kwargs
+        As :func:`rsocl.scale.reconstruct_tiled` (``halo``, ``iterations``, ``scheduler``, ...).
+    """
+    from rsocl.scale.tiled import reconstruct_tiled
+
+    if not isinstance(rig, Rig):
+        raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
+    g = check.finite_array("g", snapshots)
+    if g.shape != (rig.n_channels,) + rig.shape:
+        raise ValueError(f"g must have shape (K, m, n) = {(rig.n_channels,) + rig.shape}, got {g.shape}")
+    windows = frame_windows(_frames(rig), window, overlap)
+    rigs = [window_rig(rig, k0, k1) for k0, k1 in windows]
+    spans = [r.sampled_range() for r in rigs]
+    T = rig.T
+    depth = np.full((len(windows), T), -1, dtype=np.int64)
+    for w, span in enumerate(spans):
+        s = np.arange(span.start, span.stop)
+        depth[w, span.start:span.stop] = np.minimum(s - span.start, span.stop - 1 - s)
+    owner = np.where(depth.max(axis=0) >= 0, depth.argmax(axis=0), -1)
+    tile = rig.shape if tile is None else tile
+    datacube, results = None, []
+    for w, ((k0, k1), sub) in enumerate(zip(windows, rigs)):
+        if progress:
+            print(f"window {w + 1}/{len(windows)}: frames {k0}..{k1 - 1}, sub-frames {spans[w].start}.."
+                  f"{spans[w].stop - 1}", flush=True)
+        result = reconstruct_tiled(g[window_channels(rig, k0, k1)], sub, tile=tile, progress=progress, **kwargs)
+        results.append(result)
+        cube = np.asarray(result.datacube)
+        if datacube is None:
+            datacube = np.zeros((T,) + rig.shape, dtype=cube.dtype)
+        mine = np.nonzero(owner[:cube.shape[0]] == w)[0]
+        datacube[mine] = cube[mine]
+    return StreamResult(datacube, rig, windows, [(s.start, s.stop) for s in spans], owner, results)

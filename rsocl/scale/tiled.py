@@ -1,0 +1,194 @@
+"""``reconstruct_tiled``: a reconstruction split into tiles (and sets), run as Dask tasks.
+
+Every input is checked before anything is computed: the snapshots against the rig, the solver
+settings (``lam``/``eta`` settled once, from the regularizer's recommendation, for every tile),
+the tile and halo, the output path, and the scheduler (connected to first).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rsocl.model.rig import Rig
+from rsocl.scale.inputs import ArraySets, CaptureSets, scan
+from rsocl.scale.runner import Engine
+from rsocl.scale.tiles import DEFAULT_HALO, check_halo, place, tile_grid, tile_rig
+from rsocl.scale.work import Job, RigPayload, TileSettings
+from rsocl.solver.plan import device_limit, memory_need
+from rsocl.solver.problem import check_settings
+from rsocl.solver.reconstruct import make_regularizer
+
+__all__ = ["reconstruct_tiled", "TiledResult", "TilesFailed"]
+
+
+@dataclass
+class TiledResult:
+    """A tiled reconstruction.
+
+    Attributes
+    ----------
+    datacube : ndarray or zarr.Array
+        ``(T, m, n)``, or ``(S, T, m, n)`` for ``S`` sets; a Zarr array when written to a store.
+    rig : Rig
+    params : dict
+        The settings every tile ran with, the tile and halo.
+    pieces : list of rsocl.scale.work.Piece
+        The tasks run now (blocks dropped), with their sub-frames, seconds and residual.
+    skipped : int
+        Tasks already done in the store, not run again.
+    failures : list of rsocl.scale.runner.Failure
+    seconds : float
+        Wall-clock time of the run, seconds.
+    store : Path or None
+    """
+
+    datacube: object
+    rig: Rig
+    params: dict
+    pieces: list = field(default_factory=list)
+    skipped: int = 0
+    failures: list = field(default_factory=list)
+    seconds: float = 0.0
+    store: Path | None = None
+
+    @property
+    def trimmed(self):
+        """The ``T_se`` sub-frames kept by the rig's trimming rule (one set)."""
+        return self.datacube[self.rig.kept_subframes()]
+
+
+class TilesFailed(RuntimeError):
+    """Some tasks failed on every attempt; ``result`` holds the others (and ``failures``)."""
+
+    def __init__(self, result: TiledResult):
+        self.result = result
+        kept = len(result.pieces) + result.skipped
+        where = f" in {result.store} (run again to redo only the failed ones)" if result.store else ""
+        lines = [str(f) for f in result.failures]
+        super().__init__(f"{len(lines)} task(s) failed, {kept} kept{where}:\n  " + "\n  ".join(lines))
+
+
+def _source(snapshots, rig):
+    if isinstance(snapshots, CaptureSets):
+        if snapshots.rig != rig:
+            raise ValueError("rig must be the capture file's rig (CaptureSets.rig)")
+        return snapshots
+    return ArraySets(snapshots, rig)
+
+
+def _check_tile_memory(rig, grid, reg, dtype, projection, device):
+    """ValueError naming ``tile`` when the largest tile would not fit this process's device."""
+    from rsocl.device.context import get_device
+
+    dev = get_device(device)
+    dev.real_dtype(dtype)
+    worst = max(grid, key=lambda t: t.outer_shape[0] * t.outer_shape[1])
+    largest, total = memory_need(tile_rig(rig, worst), regularizer=reg, dtype=dtype, projection=projection)
+    limit = device_limit(dev, largest, total)
+    if limit is not None:
+        h, w = worst.outer_shape
+        raise ValueError(f"tile: a tile of {grid.tile[0]}x{grid.tile[1]} ({h}x{w} with the halo) needs {limit} "
+                         f"({dev.name}); choose a smaller tile (rsocl plan proposes one)")
+
+
+def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAULT_HALO, iterations=None,
+                      lam=None, eta=None, tv_iterations=None, projection="exact", device=None, dtype="float32",
+                      regularizer_options=None, saturation=None, out=None, scheduler=None, workers=None,
+                      retries=2, progress=False) -> TiledResult:
+    """Reconstruct ``snapshots`` tile by tile (and set by set) as tasks of a Dask graph.
+
+    Parameters
+    ----------
+    snapshots : array_like or CaptureSets
+        ``(K, m, n)`` (one set), ``(S, K, m, n)`` (``S`` sets) or a capture file read by the
+        tasks themselves (:class:`rsocl.scale.inputs.CaptureSets`).
+    rig : Rig
+    regularizer : str
+        Registry name (tasks build their own instance).
+    tile : (int, int)
+        Core of a tile, ``(H, W)`` pixels: ``1 <= H <= m``, ``1 <= W <= n``.
+    halo : int
+        Pixels added on every side of a tile and cropped off after (default 16).
+    iterations, lam, eta, tv_iterations, projection, dtype, regularizer_options, saturation
+        As :func:`rsocl.reconstruct`, for every tile.
+    device : str or None
+        OpenCL device spec for every task; None lets each worker choose (:func:`worker_device`).
+    out : str, os.PathLike or None
+        Zarr store to write (each task writes its own chunks; an existing store of the same
+        reconstruction is resumed). None: the datacube is assembled in memory.
+    scheduler, workers
+        See :class:`rsocl.scale.runner.Engine`.
+    retries : int
+        Extra attempts of a failing task (>= 0).
+    progress : bool
+        A progress bar over the tasks.
+
+    Raises
+    ------
+    TilesFailed
+        When tasks still fail after their retries; the other tiles are kept (in the store).
+    """
+    if not isinstance(rig, Rig):
+        raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
+    source = _source(snapshots, rig)
+    if not isinstance(regularizer, str):
+        raise ValueError(f"regularizer must be a registry name for a tiled reconstruction (each task builds its "
+                         f"own), got {regularizer!r}")
+    checked = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
+                             projection=projection)
+    reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
+    checked = checked.settled_for(reg, dtype)
+    grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
+    engine = Engine(scheduler, workers)
+    store = None
+    if out is not None:
+        from rsocl.scale.store import check_store_path, require_zarr
+
+        require_zarr("out")
+        store = check_store_path(out, "out")
+    if engine.mode != "distributed":
+        _check_tile_memory(rig, grid, reg, dtype, checked.projection, device)
+    settings = TileSettings(regularizer, dict(regularizer_options or {}), checked.iterations, checked.lam,
+                            checked.eta, checked.tv_iterations, checked.projection, str(np.dtype(dtype)),
+                            saturation, device)
+    span = rig.sampled_range()
+    params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
+              "lam": checked.lam, "eta": checked.eta, "projection": checked.projection, "dtype": settings.dtype,
+              "device": device, "tol": None, "saturation": saturation, "saturated_pixels": 0,
+              "solved_subframes": [span.start, span.stop], "tile": list(grid.tile), "halo": grid.halo}
+    with engine:                        # a cluster is reached (or started) before the input is read
+        began = time.perf_counter()
+        digest, params["saturated_pixels"] = scan(source, saturation)
+        done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)
+        if store is not None:
+            from rsocl.scale.store import StoreSpec, prepare_store
+
+            spec = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, settings.dtype, params, digest)
+            done = prepare_store(store, spec)
+        sets = [None] if source.n_sets is None else list(range(source.n_sets))
+        jobs = [Job(s, t, source.block(s, t), (span.start, span.stop), None if store is None else str(store))
+                for s in sets for t in grid if not done[(s or 0,) + t.index]]
+        payload = RigPayload.of(rig)
+        pieces, failures = engine.run(jobs, payload, settings, retries=retries, progress=progress,
+                                      desc="tiles" if source.n_sets is None else "tiles x sets")
+        seconds = time.perf_counter() - began
+    if store is not None:
+        from rsocl.scale.store import load_store
+
+        datacube = load_store(store).datacube
+    else:
+        cube = (rig.T,) + rig.shape
+        datacube = np.zeros(((source.n_sets,) if source.n_sets else ()) + cube, dtype=settings.dtype)
+        tiles = {t.index: t for t in grid}
+        for piece in pieces:
+            target = datacube if piece.set_index is None else datacube[piece.set_index]
+            place(target, tiles[piece.index], piece.start, piece.block, (span.start, span.stop))
+            piece.block = None
+    result = TiledResult(datacube, rig, params, pieces, int(done.sum()), failures, seconds, store)
+    if failures:
+        raise TilesFailed(result)
+    return result

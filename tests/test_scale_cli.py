@@ -1,0 +1,88 @@
+"""``rsocl reconstruct`` with tiles, sets and Zarr stores; outputs and the scheduler checked first."""
+
+import re
+
+import h5py
+import numpy as np
+import pytest
+
+import rsocl
+from rsocl.cli.main import main
+from rsocl.files.hdf5 import load_reconstruction, save_capture
+from rsocl.model.scenes import builtin_scene
+from rsocl.scale import reconstruct_tiled, tiled as tiled_module
+
+zarr = pytest.importorskip("zarr")
+
+
+@pytest.fixture
+def capture(tmp_path):
+    """A capture file of a 20x26 paper array with its truth and 3 sets (``snapshot_sets``)."""
+    rig = rsocl.Rig.paper_array(4, (20, 26), t_e=1.8e-4, t_r=3.5e-5)
+    op = rsocl.RollingShutterOperator(rig)
+    truths = [builtin_scene(rig.shape, rig.T, seed=s) for s in range(3)]
+    sets = np.stack([op.forward(t) for t in truths])
+    path = tmp_path / "cap.h5"
+    save_capture(path, sets[0], rig, truth=truths[0])
+    with h5py.File(path, "r+") as h5:
+        h5["snapshot_sets"] = sets
+    return path, rig, sets
+
+
+def test_reconstruct_into_a_zarr_store_by_tiles(capture, tmp_path, capsys):
+    path, rig, sets = capture
+    out = tmp_path / "rec.zarr"
+    args = ["reconstruct", str(path), "--out", str(out), "--tile", "10", "13", "--halo", "4", "--iterations", "5"]
+    assert main(args) == 0
+    assert "4 tile task(s)" in capsys.readouterr().out
+    group = zarr.open_group(str(out), mode="r")
+    assert group["datacube"].shape == (rig.T,) + rig.shape and group["datacube"].chunks[1:] == (10, 13)
+    assert group.attrs["rsocl_file"] == "reconstruction" and group.attrs["T"] == rig.T
+    expected = reconstruct_tiled(sets[0], rig, tile=(10, 13), halo=4, iterations=5).datacube
+    np.testing.assert_array_equal(group["datacube"][...], expected)
+    assert main(args) == 0                     # the same command on a complete store redoes nothing
+    assert "0 tile task(s) in" in capsys.readouterr().out.replace(", 4 already in the store", "")
+
+
+def test_every_set_into_one_store(capture, tmp_path):
+    path, rig, sets = capture
+    out = tmp_path / "sets.zarr"
+    assert main(["reconstruct", str(path), "--out", str(out), "--sets", "--tile", "20", "26", "--halo", "0",
+                 "--iterations", "4", "--quiet"]) == 0
+    cube = zarr.open_group(str(out), mode="r")["datacube"]
+    assert cube.shape == (3, rig.T) + rig.shape
+    for s in range(3):
+        np.testing.assert_array_equal(cube[s], rsocl.reconstruct(sets[s], rig, iterations=4).datacube)
+
+
+def test_tiles_into_an_hdf5_file(capture, tmp_path):
+    path, rig, _ = capture
+    out = tmp_path / "rec.h5"
+    assert main(["reconstruct", str(path), "--out", str(out), "--tile", "10", "26", "--iterations", "3",
+                 "--quiet"]) == 0
+    assert load_reconstruction(out).datacube.shape == (rig.T,) + rig.shape and out.with_suffix(".gif").is_file()
+
+
+@pytest.mark.parametrize("extra, match", [
+    (["--out", "{tmp}/missing/rec.zarr"], "--out: directory .*missing.* does not exist"),
+    (["--out", "{tmp}/missing/rec.h5"], "--out"),
+    (["--out", "{tmp}/rec.h5", "--sets"], r"--out: every set \(--sets\) goes to a Zarr store"),
+    (["--out", "{tmp}/rec.zarr", "--scheduler", "tcp://127.0.0.1:9"], "scheduler: cannot reach"),
+    (["--out", "{tmp}/rec.zarr", "--workers", "0"], "workers must be"),
+    (["--out", "{tmp}/rec.zarr", "--tile", "0", "4"], r"tile must be \(H, W\)"),
+])
+def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, tmp_path, monkeypatch, capsys,
+                                                                       extra, match):
+    from rsocl.scale import runner
+
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT", 1)
+    calls = []
+    monkeypatch.setattr(runner, "solve_tile", lambda *a: calls.append(a))
+    monkeypatch.setattr(tiled_module, "scan", lambda *a: calls.append(a))
+    monkeypatch.setattr("rsocl.cli.reconstruct.run_reconstruction", lambda *a: calls.append(a))
+    path = capture[0]
+    argv = ["reconstruct", str(path), "--iterations", "2"] + [e.replace("{tmp}", str(tmp_path)) for e in extra]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert re.search(match, err), err
+    assert not calls

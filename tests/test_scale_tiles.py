@@ -1,0 +1,170 @@
+"""Tiles: geometry, exact row times of a tile's rig, tiled against untiled, bad input, faults, plan.
+
+Runs in this process (no cluster): Dask's local scheduler when Dask is installed, else the
+in-process loop; both are exercised.
+"""
+
+import numpy as np
+import pytest
+
+import rsocl
+from rsocl.model.rig import Camera, Rig
+from rsocl.model.scenes import builtin_scene
+from rsocl.scale import reconstruct_tiled, tile_grid
+from rsocl.scale import runner as runner_module
+from rsocl.scale.tiled import TilesFailed
+from rsocl.scale.tiles import expand, tile_rig
+
+ITER = 25
+
+
+def _problem(rig, seed=0):
+    truth = builtin_scene(rig.shape, rig.T, seed=seed)
+    return rsocl.RollingShutterOperator(rig).forward(truth), truth
+
+
+def test_tiles_partition_the_grid_and_halos_are_clipped():
+    grid = tile_grid((37, 45), (16, 20), 5)
+    assert grid.grid == (3, 3) and len(grid) == 9
+    owner = np.zeros((37, 45), dtype=int)
+    for t in grid:
+        rows, cols = t.core_slices
+        owner[rows, cols] += 1
+        oy0, oy1, ox0, ox1 = t.outer
+        y0, y1, x0, x1 = t.core
+        assert oy0 == max(0, y0 - 5) and oy1 == min(37, y1 + 5) and ox0 == max(0, x0 - 5) and ox1 == min(45, x1 + 5)
+        inner = t.inner_slices
+        assert inner[0].stop - inner[0].start == y1 - y0 and inner[1].stop - inner[1].start == x1 - x0
+    assert np.all(owner == 1)
+    assert grid[2, 2].core == (32, 37, 40, 45)
+
+
+def test_a_tile_rig_keeps_every_pixel_s_row_times():
+    cams = [Camera(a, t_e=1.8e-4, t_r=3.5e-5, t_a=t_a) for a, t_a in ((0, 0.0), (90, 1e-5), (30, 0.0), (250, 2e-5))]
+    rig = Rig(cams, (33, 41))
+    for t in tile_grid(rig.shape, (12, 15), 4):
+        sub = tile_rig(rig, t)
+        rows, cols = t.outer_slices
+        np.testing.assert_array_equal(sub.start_times(), rig.start_times()[:, rows, cols])
+        np.testing.assert_array_equal(sub.windows.index, rig.windows.index[:, rows, cols])
+        solved = sub.sampled_range()
+        assert rig.sampled_range().start <= solved.start < solved.stop <= rig.sampled_range().stop
+
+
+def test_expand_holds_the_first_and_last_modelled_subframe():
+    block = np.arange(3 * 2 * 2, dtype=np.float32).reshape(3, 2, 2) + 1
+    out = expand(block, 4, 0, 10, (2, 9))
+    np.testing.assert_array_equal(out[4:7], block)
+    assert np.all(out[:2] == 0) and np.all(out[9:] == 0)
+    np.testing.assert_array_equal(out[2], block[0])
+    np.testing.assert_array_equal(out[3], block[0])
+    np.testing.assert_array_equal(out[7], block[-1])
+    np.testing.assert_array_equal(out[8], block[-1])
+
+
+@pytest.mark.parametrize("angles, shape, tile", [
+    ((0, 90, 180, 270), (37, 45), (16, 20)),          # odd sizes, uneven last tiles
+    ((0, 45, 135, 250), (34, 39), (17, 13)),          # oblique angles
+])
+def test_tiled_matches_untiled(angles, shape, tile):
+    rig = Rig([Camera(a, t_e=1.8e-4, t_r=3.5e-5) for a in angles], shape)
+    g, truth = _problem(rig)
+    untiled = rsocl.reconstruct(g, rig, iterations=ITER).datacube
+    result = reconstruct_tiled(g, rig, tile=tile, halo=12, iterations=ITER)
+    tiled = result.datacube
+    assert tiled.shape == untiled.shape and tiled.dtype == untiled.dtype
+    assert len(result.pieces) == len(tile_grid(shape, tile, 12)) and not result.failures
+    # where a tile models the sub-frames, it is the untiled reconstruction up to the halo's crop; away
+    # from the first and last sub-frames a tile models (which few of its pixels sample: within one
+    # exposure, window_length sub-frames, of an end that is not the capture's) the difference is small
+    span, edge = rig.sampled_range(), rig.window_length
+    for piece in result.pieces:
+        rows, cols = tile_grid(shape, tile, 12)[piece.index].core_slices
+        diff = np.abs(tiled[piece.start:piece.stop, rows, cols] - untiled[piece.start:piece.stop, rows, cols])
+        lo = edge if piece.start > span.start else 0
+        hi = diff.shape[0] - (edge if piece.stop < span.stop else 0)
+        assert diff[lo:hi].max() < 3e-2 and diff.max() < 0.1, (piece.index, diff[lo:hi].max(), diff.max())
+    from rsocl.analysis.metrics import psnr
+
+    assert psnr(tiled, truth) > psnr(untiled, truth) - 0.1
+    # the settings of the whole capture, once for every tile
+    assert result.params["lam"] == 0.1 and result.params["eta"] == 0.2 and result.params["tile"] == list(tile)
+
+
+def test_one_tile_covering_the_grid_is_the_untiled_reconstruction():
+    rig = rsocl.Rig.paper_array(4, (24, 28), t_e=1.8e-4, t_r=3.5e-5)
+    g, _ = _problem(rig)
+    untiled = rsocl.reconstruct(g, rig, iterations=ITER).datacube
+    np.testing.assert_array_equal(reconstruct_tiled(g, rig, tile=(24, 28), halo=0, iterations=ITER).datacube,
+                                  untiled)
+
+
+def test_sets_and_the_in_process_loop_give_the_same_numbers(monkeypatch):
+    rig = rsocl.Rig.paper_array(4, (24, 30), t_e=1.8e-4, t_r=3.5e-5)
+    sets = np.stack([_problem(rig, seed=s)[0] for s in range(3)])
+    kwargs = dict(tile=(12, 16), halo=8, iterations=10)
+    local = reconstruct_tiled(sets, rig, **kwargs)
+    assert local.datacube.shape == (3, rig.T) + rig.shape
+    for s in range(3):
+        np.testing.assert_array_equal(local.datacube[s], reconstruct_tiled(sets[s], rig, **kwargs).datacube)
+    monkeypatch.setattr(runner_module, "have_dask", lambda: False)
+    assert runner_module.Engine().mode == "process"
+    np.testing.assert_array_equal(reconstruct_tiled(sets, rig, **kwargs).datacube, local.datacube)
+
+
+def test_a_failing_tile_is_retried_then_reported_and_the_others_are_kept():
+    rig = rsocl.Rig.paper_array(4, (32, 32), t_e=1.8e-4, t_r=3.5e-5)
+    g, _ = _problem(rig)
+    g = g.copy()
+    g[:, :20, :20] = 1e6          # tile (0, 0) with its halo: every pixel saturated, nothing to fit
+    with pytest.raises(TilesFailed) as info:
+        reconstruct_tiled(g, rig, tile=(16, 16), halo=4, iterations=5, saturation=1e5, retries=1)
+    exc = info.value
+    assert "tile (0, 0) (rows 0..15, columns 0..15) failed after 2 attempt(s)" in str(exc)
+    assert "every snapshot pixel is >= saturation" in str(exc) and "3 kept" in str(exc)
+    result = exc.result
+    assert [f.index for f in result.failures] == [(0, 0)]
+    assert sorted(p.index for p in result.pieces) == [(0, 1), (1, 0), (1, 1)]
+    assert np.all(result.datacube[:, :16, :16] == 0) and np.any(result.datacube[:, 16:, 16:] != 0)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(tile=(0, 8)), r"tile must be \(H, W\) pixels with 1 <= H <= m = 20 and 1 <= W <= n = 24"),
+    (dict(tile=(8, 25)), r"tile must be .* 1 <= W <= n = 24, got \(8, 25\)"),
+    (dict(tile=(8, 8), halo=-1), r"halo must be a whole number of pixels in \[0, 24\]"),
+    (dict(tile=(8, 8), workers=0), "workers must be"),
+    (dict(tile=(8, 8), retries=-1), "retries must be a whole number >= 0"),
+    (dict(tile=(8, 8), regularizer="nope"), "nope"),
+    (dict(tile=(8, 8), lam=-1), "lam must be"),
+])
+def test_bad_input_names_the_parameter(kwargs, match):
+    rig = rsocl.Rig.paper_array(4, (20, 24), t_e=1.8e-4, t_r=3.5e-5)
+    g = np.zeros((4, 20, 24))
+    if kwargs.get("retries") is not None:
+        kwargs["iterations"] = 1
+    with pytest.raises(ValueError, match=match):
+        reconstruct_tiled(g, rig, **kwargs)
+    with pytest.raises(ValueError, match=r"g must have shape \(K, m, n\) = \(4, 20, 24\) or \(S, K, m, n\)"):
+        reconstruct_tiled(np.zeros((3, 20, 24)), rig, tile=(8, 8))
+
+
+def test_the_fits_message_suggests_float32_only_for_float64(device):
+    with pytest.raises(ValueError) as info:
+        device.check_fits("x", device.max_alloc_bytes + 1, dtype="float32")
+    assert "float32" not in str(info.value) and "tiles" in str(info.value)
+    with pytest.raises(ValueError, match="use float32"):
+        device.check_fits("x", device.max_alloc_bytes + 1, dtype="float64")
+
+
+def test_plan_proposes_a_tiling_for_the_whole_sensor(capsys):
+    from rsocl.cli.main import main
+
+    assert main(["plan", "--shape", "1024", "1280", "--t-r-us", "26", "--no-measure"]) == 0
+    out = capsys.readouterr().out
+    assert "does not fit the device: tile it" in out and "use float32" not in out
+    assert "tiling:" in out and "tasks" in out and "per-task device memory" in out
+    assert main(["plan", "--shape", "64", "64", "--tile", "32", "32", "--sets", "3", "--iterations", "4"]) == 0
+    out = capsys.readouterr().out
+    assert "2 x 2 tiles x 3 sets = 12 tasks" in out and "ms/iteration measured on the largest tile" in out
+    assert main(["plan", "--shape", "64", "64", "--tile", "65", "32", "--no-measure"]) == 2
+    assert "tile must be (H, W)" in capsys.readouterr().err
