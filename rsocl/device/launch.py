@@ -8,7 +8,8 @@ their bounds.
 
 from __future__ import annotations
 
-__all__ = ["voxel_grid", "exact_launches", "element_launches", "voxel_launches", "tile_grid", "block_grid"]
+__all__ = ["voxel_grid", "exact_launches", "element_launches", "batch_launches", "voxel_launches", "tile_grid",
+           "block_grid"]
 
 
 def voxel_grid(T: int, m: int, n: int):
@@ -43,6 +44,14 @@ def exact_launches(extent: int, group: int = 64):
 def element_launches(count: int):
     """:func:`exact_launches` as ``(global, local, offset)`` of a 1-D kernel over ``count`` items."""
     return [((size,), (local,), (offset,)) for offset, size, local in exact_launches(count)]
+
+
+def batch_launches(count: int, sets: int):
+    """:func:`element_launches` of a 2-D kernel: ``count`` items of each of ``sets`` sets (dimension 1)."""
+    sets = int(sets)
+    if sets < 1:
+        raise ValueError(f"sets must be >= 1, got {sets}")
+    return [((size, sets), (local, 1), (offset, 0)) for offset, size, local in exact_launches(count)]
 
 
 def voxel_launches(T: int, m: int, n: int, group: int = 64):
