@@ -127,6 +127,39 @@ class Device:
         """Device memory, bytes (``CL_DEVICE_GLOBAL_MEM_SIZE``)."""
         return int(self.device.global_mem_size)
 
+    @property
+    def max_work_group_size(self) -> int:
+        """Most work items in a work group (``CL_DEVICE_MAX_WORK_GROUP_SIZE``)."""
+        return int(self.device.max_work_group_size)
+
+    @property
+    def max_work_item_sizes(self) -> tuple:
+        """Most work items of a work group along each dimension (``CL_DEVICE_MAX_WORK_ITEM_SIZES``)."""
+        return tuple(int(v) for v in self.device.max_work_item_sizes)
+
+    @property
+    def local_mem_bytes(self) -> int:
+        """Local memory of a work group, bytes (``CL_DEVICE_LOCAL_MEM_SIZE``)."""
+        return int(self.device.local_mem_size)
+
+    def group_limit(self, *kernels, cap: int | None = None) -> int:
+        """Most work items per work group for every one of ``kernels`` on this device (and ``cap``).
+
+        The device's maximum, and each kernel's own (``CL_KERNEL_WORK_GROUP_SIZE``: a GPU lowers it
+        for a kernel that needs many registers). Kernels are ``pyopencl.Kernel`` or
+        :class:`rsocl.device.kernel.Kernel`.
+        """
+        import pyopencl as cl
+
+        known = self.__dict__.setdefault("_kernel_groups", {})
+        sizes = [self.max_work_group_size] + ([] if cap is None else [int(cap)])
+        for kernel in kernels:
+            key = (kernel.int_ptr, kernel.function_name)
+            if key not in known:
+                known[key] = int(kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.device))
+            sizes.append(known[key])
+        return max(1, min(sizes))
+
     def real_dtype(self, dtype) -> np.dtype:
         """Validate ``dtype`` (``"float32"`` or ``"float64"``) for this device."""
         try:

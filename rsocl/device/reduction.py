@@ -59,7 +59,7 @@ def sum_sq_diff_async(a, b=None, weights=None, sets=None) -> PendingSum:
     dev = device_for_queue(a.queue)
     acc = dev.acc_dtype
     prog = dev.program(["reduce.cl"], REAL=c_type(a.dtype), ACC=c_type(acc))
-    local = min(LOCAL_SIZE, 1 << (int(dev.device.max_work_group_size).bit_length() - 1))
+    local = 1 << (dev.group_limit(prog.sum_sq_diff, cap=LOCAL_SIZE).bit_length() - 1)    # a power of two
     groups = max(1, min(max(1, MAX_GROUPS // count), -(-per_set // local)))
     partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, count * groups * acc.itemsize)
     prog.sum_sq_diff(a.queue, (groups * local, count), (local, 1), a.data, None if b is None else b.data,

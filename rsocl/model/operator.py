@@ -119,10 +119,20 @@ class RollingShutterOperator:
         """Program definitions of the block kernels (``TILE_W`` pixels by ``TILE_R`` rows)."""
         return {"TILE_W": self.vector_width, "TILE_R": self.block_rows}
 
-    def block_grid(self, channels=1):
-        """Global and local sizes of a kernel with one work item per block of pixels (and channel)."""
+    def block_grid(self, channels=1, kernels=()):
+        """Global and local sizes of a kernel with one work item per block of pixels (and channel).
+
+        Work groups stay within the device's limits and those of this operator's block kernels and
+        of ``kernels`` (others launched on the same grid).
+        """
         m, n = self.rig.shape
-        return block_grid(m, n, self.vector_width, self.block_rows, channels)
+        group = self.device.group_limit(self.program.forward, self.program.adjoint_scatter, *kernels, cap=64)
+        return block_grid(m, n, self.vector_width, self.block_rows, channels, group=group,
+                          max_items=self.device.max_work_item_sizes)
+
+    def element_launches(self, count, kernel):
+        """:func:`rsocl.device.launch.element_launches` within the device's and ``kernel``'s limits."""
+        return element_launches(count, self.device.group_limit(kernel, cap=64))
 
     def sets_of(self, array, per_set) -> int:
         """How many sets a device array holds: its size over ``per_set`` (a domain or range shape)."""
@@ -148,7 +158,7 @@ class RollingShutterOperator:
         import pyopencl as cl
 
         if base is None:
-            for gsize, lsize, offset in element_launches(out.size):
+            for gsize, lsize, offset in self.element_launches(out.size, self.program.zero):
                 self.program.zero(self.queue, gsize, lsize, out.data, global_offset=offset)
         elif base is not out:
             cl.enqueue_copy(self.queue, out.data, base.data)

@@ -119,8 +119,10 @@ class ADMM:
             ["admm.cl"], REAL=c_type(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
             NCH=op.K, PROJECTION_EXACT=int(projection == "exact"), **op.tile_defines)
         self.per_set = int(np.prod(op.domain_shape))
-        self.voxels = batch_launches(self.per_set, self.sets)      # exact grids: no bounds tests
-        self.elements = element_launches(self.sets * self.per_set)
+        dev, prog = op.device, self.program                       # exact grids: no bounds tests
+        self.voxels = batch_launches(self.per_set, self.sets, dev.group_limit(prog.admm_dual, cap=64))
+        self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
+        self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project,))
         self.fused = bool(getattr(regularizer, "fuses_dual", False))
         self.g_norm2 = sum_sq_diff(g, weights=self.valid, sets=self.sets if self.batched else None)
         self.iteration = 0
@@ -180,7 +182,7 @@ class ADMM:
                 self.program.admm_dual(queue, gsize, lsize, self.theta.data, self.b.data, self.f.data,
                                        self.dual_on.data, update, np.int32(self.per_set), global_offset=offset)
         self.program.admm_project(
-            queue, *op.block_grid(self.sets), self.f.data, self.g.data, *op._geometry(), self.inverse.data,
+            queue, *self.blocks, self.f.data, self.g.data, *op._geometry(), self.inverse.data,
             self.eta_device.data, np.int32(self.own_inverse), self.b.data, self.u.data, np.int32(self.fused),
             np.int32(op.T), np.int32(op.L), *op._shape_args())
         if self.fused:
