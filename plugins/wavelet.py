@@ -21,71 +21,15 @@ denoiser stays an exact prox. See :meth:`Wavelet.plan`.
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 
 from rsocl.device.context import device_for_queue
 from rsocl.device.launch import voxel_grid
 from rsocl.solver.regularizer import Option, Regularizer
+from rsocl_plugins.wavelet_filters import MODES, WAVELETS, Plan, axis_levels, filters
+from rsocl_plugins.wavelet_passes import analysis_levels, approximation_box, copy_frames, synthesis_levels
 
 __all__ = ["Wavelet", "Plan", "WAVELETS", "filters", "axis_levels"]
-
-# Decomposition filters of PyWavelets (pywt.Wavelet(name).dec_lo / dec_hi, PyWavelets 1.8),
-# written as the shortest decimals that round-trip to the same doubles. The
-# reconstruction filters are their reverses (rec_lo = dec_lo[::-1], rec_hi = dec_hi[::-1]).
-WAVELETS = {
-    "haar": {
-        "dec_lo": (0.7071067811865476, 0.7071067811865476),
-        "dec_hi": (-0.7071067811865476, 0.7071067811865476),
-    },
-    "db2": {
-        "dec_lo": (-0.12940952255126037, 0.2241438680420134, 0.8365163037378079, 0.48296291314453416),
-        "dec_hi": (-0.48296291314453416, 0.8365163037378079, -0.2241438680420134, -0.12940952255126037),
-    },
-    "db4": {
-        "dec_lo": (-0.010597401785069032, 0.0328830116668852, 0.030841381835560764, -0.18703481171909309,
-                   -0.027983769416859854, 0.6308807679298589, 0.7148465705529157, 0.2303778133088965),
-        "dec_hi": (-0.2303778133088965, 0.7148465705529157, -0.6308807679298589, -0.027983769416859854,
-                   0.18703481171909309, 0.030841381835560764, -0.0328830116668852, -0.010597401785069032),
-    },
-}
-MODES = {"2d": (1, 2), "3d": (0, 1, 2)}
-
-
-def filters(name: str) -> dict:
-    """``dec_lo``, ``dec_hi``, ``rec_lo``, ``rec_hi`` of wavelet ``name`` as float64 arrays."""
-    if name not in WAVELETS:
-        raise ValueError(f"unknown wavelet {name!r}; known: {sorted(WAVELETS)}")
-    lo = np.array(WAVELETS[name]["dec_lo"], dtype=np.float64)
-    hi = np.array(WAVELETS[name]["dec_hi"], dtype=np.float64)
-    return {"dec_lo": lo, "dec_hi": hi, "rec_lo": lo[::-1].copy(), "rec_hi": hi[::-1].copy()}
-
-
-def axis_levels(length: int, filter_length: int) -> int:
-    """Most levels an axis of ``length`` takes: ``length`` divisible by ``2**L`` and the
-    signal entering the coarsest level, ``length / 2**(L-1)``, at least ``filter_length`` long."""
-    levels = 0
-    while length % (2 ** (levels + 1)) == 0 and length // 2 ** levels >= filter_length:
-        levels += 1
-    return levels
-
-
-class Plan(NamedTuple):
-    """How a ``(T, m, n)`` array is transformed.
-
-    levels : int
-        Decomposition levels, the same for every transformed axis (0: identity).
-    axes : tuple of int
-        Axes transformed in the first block (0: t, 1: y, 2: x).
-    blocks : tuple of (t0, frames, axes)
-        Blocks of consecutive sub-frames ``[t0, t0 + frames)``, each transformed
-        on its own along its axes (a single block unless the time axis is split).
-    """
-
-    levels: int
-    axes: tuple
-    blocks: tuple
 
 
 class Wavelet(Regularizer):
@@ -187,85 +131,6 @@ class Wavelet(Regularizer):
             cache[key] = cla.empty(x.queue, x.shape, x.dtype)
         return cache[key]
 
-    @staticmethod
-    def _box(block, shape, level):
-        """Approximation box ``(ct, cy, cx)`` of ``block`` after ``level`` levels."""
-        _, frames, axes = block
-        sizes = (frames, int(shape[1]), int(shape[2]))
-        return tuple(s >> level if a in axes else s for a, s in enumerate(sizes))
-
-    @staticmethod
-    def _copy_box(queue, dst, src, shape, t0, box, itemsize):
-        """Copy the sub-box ``[t0, t0 + ct) x [0, cy) x [0, cx)`` from ``src`` to ``dst``."""
-        import pyopencl as cl
-
-        _, m, n = shape
-        ct, cy, cx = box
-        pitches = (n * itemsize, m * n * itemsize)
-        cl.enqueue_copy(queue, dst, src, src_origin=(0, 0, t0), dst_origin=(0, 0, t0),
-                        region=(cx * itemsize, cy, ct), src_pitches=pitches, dst_pitches=pitches)
-
-    @staticmethod
-    def _copy_frames(queue, dst, src, shape, block, itemsize):
-        import pyopencl as cl
-
-        t0, frames, _ = block
-        plane = int(shape[1]) * int(shape[2]) * itemsize
-        cl.enqueue_copy(queue, dst, src, byte_count=frames * plane, src_offset=t0 * plane, dst_offset=t0 * plane)
-
-    @staticmethod
-    def _pass(prog, name, queue, src, dst, axis, shape, t0, box):
-        _, m, n = shape
-        ct, cy, cx = box
-        gsize, lsize = voxel_grid(ct, cy, cx)
-        values = tuple(np.int32(v) for v in (axis, m, n, t0, ct, cy, cx))
-        # one kernel object per pass: its by-value arguments are set once, not on every call
-        prog.instance(name, values)(queue, gsize, lsize, src, dst, *values)
-
-    def _forward(self, prog, queue, src, bufs, shape, itemsize, levels, block):
-        """Analysis of ``block`` of ``src`` over ``levels``; returns the index i of ``bufs``
-        holding its coefficients, ``(len(axes) - 1) % 2``.
-
-        Level 0 ping-pongs ``src -> bufs[0] -> bufs[1] -> ...``; deeper levels work
-        on the shrinking approximation box and keep the result in ``bufs[i]`` (a
-        box copy when the number of axes is odd). ``src`` is only read, and
-        nothing outside the block is written.
-        """
-        t0, _, axes = block
-        cur = (len(axes) - 1) % 2
-        for level in range(levels):
-            box = self._box(block, shape, level)
-            if level == 0:
-                s = src
-                for i, a in enumerate(axes):
-                    self._pass(prog, "dwt_analysis", queue, s, bufs[i % 2], a, shape, t0, box)
-                    s = bufs[i % 2]
-                continue
-            s = cur
-            for i, a in enumerate(axes):
-                d = 1 - cur if i % 2 == 0 else cur
-                self._pass(prog, "dwt_analysis", queue, bufs[s], bufs[d], a, shape, t0, box)
-                s = d
-            if s != cur:
-                self._copy_box(queue, bufs[cur], bufs[s], shape, t0, box, itemsize)
-        return cur
-
-    def _inverse(self, prog, queue, bufs, cur, shape, itemsize, levels, block):
-        """Synthesis of ``block`` from the coefficients in ``bufs[cur]`` (overwritten); returns
-        the index of the buffer holding the result: ``cur`` for an even number of axes, else ``1 - cur``."""
-        t0, _, axes = block
-        s = cur
-        for level in reversed(range(levels)):
-            box = self._box(block, shape, level)
-            s = cur
-            for i, a in enumerate(reversed(axes)):
-                d = 1 - cur if i % 2 == 0 else cur
-                self._pass(prog, "dwt_synthesis", queue, bufs[s], bufs[d], a, shape, t0, box)
-                s = d
-            if level > 0 and s != cur:
-                self._copy_box(queue, bufs[cur], bufs[s], shape, t0, box, itemsize)
-        return s
-
     def _check(self, x, out):
         import pyopencl.array as cla
 
@@ -290,20 +155,20 @@ class Wavelet(Regularizer):
         prog = self._program(x.queue, x.dtype)
         for block in plan.blocks:
             if not block[2]:
-                self._copy_frames(x.queue, coeffs, x.data, x.shape, block, x.dtype.itemsize)
+                copy_frames(x.queue, coeffs, x.data, x.shape, block, x.dtype.itemsize)
                 continue
             bufs = [coeffs, other] if len(block[2]) % 2 else [other, coeffs]
-            self._forward(prog, x.queue, x.data, bufs, x.shape, x.dtype.itemsize, plan.levels, block)
+            analysis_levels(prog, x.queue, x.data, bufs, x.shape, x.dtype.itemsize, plan.levels, block)
         return plan
 
     def _synthesise(self, prog, queue, plan, coeffs, other, out, shape, itemsize):
         """Inverse of the coefficients in ``coeffs`` (overwritten) into ``out``, which is
         ``coeffs`` or ``other``; a block whose result lands in the other one is copied."""
         for block in plan.blocks:
-            res = self._inverse(prog, queue, [coeffs, other], 0, shape, itemsize, plan.levels, block) \
+            res = synthesis_levels(prog, queue, [coeffs, other], 0, shape, itemsize, plan.levels, block) \
                 if block[2] else 0
             if [coeffs, other][res] is not out:
-                self._copy_frames(queue, out, [coeffs, other][res], shape, block, itemsize)
+                copy_frames(queue, out, [coeffs, other][res], shape, block, itemsize)
 
     def transform(self, x, out=None):
         """Forward transform of the device array ``x`` (T, m, n): the coefficients of each
@@ -347,7 +212,7 @@ class Wavelet(Regularizer):
             if not block[2]:
                 continue
             t0, frames, _ = block
-            at, ay, ax = self._box(block, x.shape, plan.levels)
+            at, ay, ax = approximation_box(block, x.shape, plan.levels)
             gsize, lsize = voxel_grid(frames, m, n)
             values = tuple(np.int32(v) for v in (m, n, t0, frames, at, ay, ax))
             prog.instance("soft_threshold", values)(queue, gsize, lsize, coeffs, x.dtype.type(weight), *values)

@@ -77,8 +77,8 @@ def tile_grid(pixels: int, width: int, channels: int = 1):
     """Global and local sizes for one work item per tile of ``width`` pixels (and channel).
 
     Flat tiles of ``width`` neighbouring pixels (flat index), 64 tiles per work group; the
-    global size is padded and kernels check bounds. rsocl's own operator kernels now take
-    blocks of rows (:func:`block_grid`); this grid stays for plugins written against it.
+    global size is padded and kernels check bounds. rsocl's own operator kernels take blocks
+    of rows (:func:`block_grid`); this grid serves plugins that work on flat tiles.
     """
     tiles = -(-int(pixels) // int(width))
     lx = min(64, tiles)
