@@ -16,8 +16,9 @@
  * x = gx*AX, y = gy*AY, t = (gz % tiles_t)*AT of set gz / tiles_t. `local` holds 5 arrays (img,
  * p0, p1, p2, out; 4 without TEMPORAL) of `cap` values, one guard value before each and one after
  * the last, so that the read of a left (right) neighbour at the region's first (last) voxel stays
- * inside local memory (the value is discarded). The loops over a region's planes and rows have a barrier in every step: CPU
- * compilers (PoCL) then loop over the work items innermost and vectorise along x.
+ * inside local memory (the value is discarded). Each work item takes the voxels x = xb + lx,
+ * y = yb + ly of every block of LX x LY of a phase (load, primal, dual step, write); one barrier
+ * separates the phases.
  *
  * mode: bit 0 = p starts at 0 (pin is not read), bit 1 = final (write out = img + d(p), not p),
  * bit 2 = also the ADMM's next dual update from u = img and theta = out: b = theta - u and
@@ -104,8 +105,8 @@ __kernel void tv_fused(__global const real *img, __global const real *pin, __glo
                     P2[li] = p_zero ? (real)0 : pin[2 * N + gi];
 #endif
                 }
-                barrier(CLK_LOCAL_MEM_FENCE);
             }
+    barrier(CLK_LOCAL_MEM_FENCE);
 
     box_t v = r;                                 /* where p is correct */
     for (int j = 0; j < updates; ++j) {
@@ -124,9 +125,9 @@ __kernel void tv_fused(__global const real *img, __global const real *pin, __glo
                             int li = ((t - r.t0) * RY + (y - r.y0)) * RX + (x - r.x0);
                             OUT[li] = fused_primal(IMG, P0, P1, P2, li, x, y, t, RX, RXY, wt);
                         }
-                        barrier(CLK_LOCAL_MEM_FENCE);
                     }
         }
+        barrier(CLK_LOCAL_MEM_FENCE);
         __local const real *SRC = from_img ? IMG : OUT;
         /* ---- the dual step where the upper neighbours' out is correct (as tv.cl's dual_update) ---- */
         v.x1 -= v.x1 < n; v.y1 -= v.y1 < m;
@@ -155,8 +156,8 @@ __kernel void tv_fused(__global const real *img, __global const real *pin, __glo
                         P2[li] = (P2[li] - tau * gt) * scale;
 #endif
                     }
-                    barrier(CLK_LOCAL_MEM_FENCE);
                 }
+        barrier(CLK_LOCAL_MEM_FENCE);
     }
 
     /* ---- write the interior: p, or the final out (and the ADMM's dual update) ---- */
@@ -188,7 +189,6 @@ __kernel void tv_fused(__global const real *img, __global const real *pin, __glo
 #endif
                     }
                 }
-                barrier(CLK_LOCAL_MEM_FENCE);
             }
 }
 
