@@ -15,7 +15,8 @@ __all__ = ["TV"]
 #: at most: about 512 voxels ran 7-15 % faster than half rows of 64 on PoCL (64x64 to 128x128).
 GROUP = 512
 
-#: Default of the ``fused`` option (most Chambolle iterations per launch on tiles in local memory).
+#: Default of the ``fused`` option (most Chambolle iterations per launch on tiles in local memory):
+#: the plain path, the faster one on PoCL (see :class:`TV`).
 FUSED = 0
 
 
@@ -48,7 +49,12 @@ class TV(Regularizer):
     (:mod:`rsocl_plugins.tv_fused`; same arithmetic, results equal to float rounding) and lets
     the ADMM fold its dual update into the last launch; ``fused = 0`` is the plain path, two
     launches per iteration. A device whose local memory is too small for tiles that save bytes
-    takes the plain path whatever ``fused`` says.
+    takes the plain path whatever ``fused`` says. Tiles and work groups follow the device's
+    ``CL_DEVICE_LOCAL_MEM_SIZE``, ``CL_DEVICE_MAX_WORK_GROUP_SIZE``, ``CL_DEVICE_MAX_WORK_ITEM_SIZES``
+    and the kernel's own limits. The fused path moves a quarter of the plain path's bytes on PoCL's
+    512 KiB of local memory and about 60 % with 48 KiB (``benchmarks/roofline.py``, counted), but on
+    PoCL (2 CPU cores, 64x64) a TV call takes 22-43x the plain path's time (the work-item loops do
+    not vectorise), so the default is the plain path; it has not been measured on a GPU.
     """
 
     name = "tv"

@@ -4,7 +4,7 @@
 buffer); :func:`reconstruct_sets` reconstructs ``S`` sets ``(S, K, m, n)`` in batches of that size
 with :func:`rsocl.solver.reconstruct.reconstruct` and returns one batch :class:`Result` of all of
 them. On PoCL (2 CPU cores) a batch serves the paper configuration with several times the sets
-per second of one set at a time (``benchmarks/paper_config.py``, ``docs/batching.md``).
+per second of one set at a time (``benchmarks/paper_config.py``, ``docs/paper_config.md``).
 """
 
 from __future__ import annotations
