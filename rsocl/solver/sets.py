@@ -3,8 +3,9 @@
 :func:`batch_size` is the largest batch whose arrays fit the device's memory (and its largest
 buffer); :func:`reconstruct_sets` reconstructs ``S`` sets ``(S, K, m, n)`` in batches of that size
 with :func:`rsocl.solver.reconstruct.reconstruct` and returns one batch :class:`Result` of all of
-them. On PoCL (2 CPU cores) a batch serves the paper configuration with several times the sets
-per second of one set at a time (``benchmarks/paper_config.py``, ``docs/paper_config.md``).
+them. A batch fills a device that one set leaves idle (a GPU); on PoCL with 2 CPU cores one set of
+the paper configuration already keeps both cores busy, and a batch of 16 ran at 0.7-1.1x the sets per
+second of one set at a time (``benchmarks/paper_config.py``, ``docs/paper_config.md``).
 """
 
 from __future__ import annotations
@@ -19,9 +20,8 @@ from rsocl.solver.result import Result
 
 __all__ = ["batch_size", "reconstruct_sets", "MAX_BATCH"]
 
-#: The largest batch :func:`batch_size` proposes unless told otherwise: past about 16 sets of the
-#: paper configuration the sets per second stop growing on PoCL (``benchmarks/paper_config.py``),
-#: and a larger batch only delays the first results.
+#: The largest batch :func:`batch_size` proposes unless told otherwise: a larger batch delays the
+#: first results, and 32 sets of the paper configuration (4.4 M voxels) fill a large GPU.
 MAX_BATCH = 32
 
 
