@@ -21,7 +21,7 @@ from rsocl.solver.result import Result
 __all__ = ["batch_size", "reconstruct_sets", "MAX_BATCH"]
 
 #: The largest batch :func:`batch_size` proposes unless told otherwise: a larger batch delays the
-#: first results, and 32 sets of the paper configuration (4.4 M voxels) fill a large GPU.
+#: first results; 32 sets of the paper configuration are 4.4 M voxels per launch.
 MAX_BATCH = 32
 
 
