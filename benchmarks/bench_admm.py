@@ -68,6 +68,8 @@ def parse_args(argv=None):
     p.add_argument("--repeat", type=int, default=1,
                    help="rounds: each runs every implementation once, in turn; the table keeps each one's "
                         "fastest, the summary also gives the ratio round by round")
+    p.add_argument("--torch-threads", type=int, default=None,
+                   help="threads of the PyTorch peer (default: PyTorch's own, the machine's cores)")
     p.add_argument("--out", type=Path, default=DOCS / "bench_admm.md", help="the Markdown page to write")
     return p.parse_args(argv)
 
@@ -107,9 +109,9 @@ def run_rsocl(g, rig, truth, dtype, params, device):
     return result.history["time"][-1] / params["iterations"], psnr(result.datacube, truth, data_range=1.0)
 
 
-def run_torch(g, rig, truth, params):
-    """One run of the PyTorch peer in float32: (seconds per iteration, PSNR in dB)."""
-    theta, _, seconds = torch_admm_tv(g, rig, dtype=torch.float32, **params)
+def run_torch(g, rig, truth, params, threads):
+    """One run of the PyTorch peer in float32 on ``threads`` threads: (seconds per iteration, PSNR in dB)."""
+    theta, _, seconds = torch_admm_tv(g, rig, dtype=torch.float32, threads=threads, **params)
     return seconds, psnr(theta, truth, data_range=1.0)
 
 
@@ -117,7 +119,7 @@ IMPLEMENTATIONS = (("baseline", "float64"), ("baseline", "float32"), ("rsocl", "
     (("torch", "float32"),) if torch is not None else ())
 
 
-def timed_rounds(g, rig, truth, params, device, repeat):
+def timed_rounds(g, rig, truth, params, device, repeat, torch_threads=None):
     """``repeat`` rounds, each running every implementation once, in turn.
 
     Interleaving exposes the four to the same machine drift (this VM's speed changes by up
@@ -133,7 +135,7 @@ def timed_rounds(g, rig, truth, params, device, repeat):
             if impl == "baseline":
                 out = run_baseline(g, rig, truth, np.dtype(dtype).type, params)
             elif impl == "torch":
-                out = run_torch(g, rig, truth, params)
+                out = run_torch(g, rig, truth, params, torch_threads)
             else:
                 out = run_rsocl(g, rig, truth, dtype, params, device)
             runs[impl, dtype].append(out)
@@ -193,7 +195,7 @@ def main(argv=None):
         g = rsocl.RollingShutterOperator(rig, device=args.device, dtype="float64").forward(truth)
         print(f"{side}x{side}: T = {rig.T} sub-frames ...", file=sys.stderr, flush=True)
 
-        rounds = timed_rounds(g, rig, truth, params, args.device, args.repeat)
+        rounds = timed_rounds(g, rig, truth, params, args.device, args.repeat, args.torch_threads)
         runs = {key: (min(sec for sec, _ in values), values[-1][1]) for key, values in rounds.items()}
 
         base64, base32 = runs["baseline", "float64"], runs["baseline", "float32"]
