@@ -53,9 +53,8 @@ class TV(Regularizer):
     ``CL_DEVICE_LOCAL_MEM_SIZE``, ``CL_DEVICE_MAX_WORK_GROUP_SIZE``, ``CL_DEVICE_MAX_WORK_ITEM_SIZES``
     and the kernel's own limits. The fused path moves a quarter of the plain path's bytes on PoCL's
     512 KiB of local memory and about 60 % with 48 KiB (counted), but on PoCL (2 CPU cores) a TV
-    call takes 26-166x the plain path's time (the work-item loops do not vectorise;
-    ``benchmarks/tv_fused.py``, ``docs/tv_fused.md``), so the default is the plain path. It has
-    not been measured on a GPU.
+    call takes 26-166x the plain path's time (``benchmarks/tv_fused.py``, ``docs/tv_fused.md``),
+    so the default is the plain path. It has not been measured on a GPU.
     """
 
     name = "tv"
