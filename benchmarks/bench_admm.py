@@ -1,4 +1,4 @@
-"""Time rsocl's ADMM-TV against the plain NumPy + scikit-image baseline, in one run.
+"""Time rsocl's ADMM-TV against the plain NumPy + scikit-image baseline and a PyTorch peer, in one run.
 
 For each ROI size the paper's 4-camera array (angles 0, 90, 180, 270; t_e = 0.18 ms,
 t_r = 35 us) films a benchmark video (MODEL.md's protocol: resized, resampled to T
@@ -7,6 +7,7 @@ Four reconstructions then run with the same parameters and iteration count:
 
     baseline float64  (numpy_admm_tv.py, a user's default dtype)
     baseline float32
+    torch    float32  (torch_admm_tv.py: the same algorithm in plain PyTorch, CPU; when torch is installed)
     rsocl    float32  (OpenCL; one warm-up run first, excluded from the timing)
     rsocl    float64
 
@@ -35,6 +36,12 @@ from rsocl.analysis.metrics import psnr  # noqa: E402
 from rsocl.model.scenes import builtin_scene, load_scene  # noqa: E402
 
 from numpy_admm_tv import admm_tv  # noqa: E402
+
+try:
+    import torch
+    from torch_admm_tv import admm_tv as torch_admm_tv
+except ImportError:                          # the PyTorch peer is optional
+    torch = None
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -61,6 +68,8 @@ def parse_args(argv=None):
     p.add_argument("--repeat", type=int, default=1,
                    help="rounds: each runs every implementation once, in turn; the table keeps each one's "
                         "fastest, the summary also gives the ratio round by round")
+    p.add_argument("--torch-threads", type=int, default=None,
+                   help="threads of the PyTorch peer (default: PyTorch's own, the machine's cores)")
     p.add_argument("--out", type=Path, default=DOCS / "bench_admm.md", help="the Markdown page to write")
     return p.parse_args(argv)
 
@@ -100,10 +109,17 @@ def run_rsocl(g, rig, truth, dtype, params, device):
     return result.history["time"][-1] / params["iterations"], psnr(result.datacube, truth, data_range=1.0)
 
 
-IMPLEMENTATIONS = (("baseline", "float64"), ("baseline", "float32"), ("rsocl", "float32"), ("rsocl", "float64"))
+def run_torch(g, rig, truth, params, threads):
+    """One run of the PyTorch peer in float32 on ``threads`` threads: (seconds per iteration, PSNR in dB)."""
+    theta, _, seconds = torch_admm_tv(g, rig, dtype=torch.float32, threads=threads, **params)
+    return seconds, psnr(theta, truth, data_range=1.0)
 
 
-def timed_rounds(g, rig, truth, params, device, repeat):
+IMPLEMENTATIONS = (("baseline", "float64"), ("baseline", "float32"), ("rsocl", "float32"), ("rsocl", "float64")) + (
+    (("torch", "float32"),) if torch is not None else ())
+
+
+def timed_rounds(g, rig, truth, params, device, repeat, torch_threads=None):
     """``repeat`` rounds, each running every implementation once, in turn.
 
     Interleaving exposes the four to the same machine drift (this VM's speed changes by up
@@ -118,6 +134,8 @@ def timed_rounds(g, rig, truth, params, device, repeat):
             t0 = time.perf_counter()
             if impl == "baseline":
                 out = run_baseline(g, rig, truth, np.dtype(dtype).type, params)
+            elif impl == "torch":
+                out = run_torch(g, rig, truth, params, torch_threads)
             else:
                 out = run_rsocl(g, rig, truth, dtype, params, device)
             runs[impl, dtype].append(out)
@@ -177,12 +195,12 @@ def main(argv=None):
         g = rsocl.RollingShutterOperator(rig, device=args.device, dtype="float64").forward(truth)
         print(f"{side}x{side}: T = {rig.T} sub-frames ...", file=sys.stderr, flush=True)
 
-        rounds = timed_rounds(g, rig, truth, params, args.device, args.repeat)
+        rounds = timed_rounds(g, rig, truth, params, args.device, args.repeat, args.torch_threads)
         runs = {key: (min(sec for sec, _ in values), values[-1][1]) for key, values in rounds.items()}
 
         base64, base32 = runs["baseline", "float64"], runs["baseline", "float32"]
         for (impl, dtype), (sec, db) in runs.items():
-            same = runs["baseline", dtype]
+            same = runs["baseline", dtype if impl != "torch" else "float32"]
             rows.append([f"{side}×{side}", str(rig.T), impl, dtype, f"{sec:.4g}", f"{db:.3f}",
                          f"{base64[0] / sec:.1f}×", f"{base32[0] / sec:.1f}×", signed(db - same[1])])
 
@@ -198,6 +216,10 @@ def main(argv=None):
         diff = db - base64[1]
         checks.append(f"rsocl float32 vs baseline float64 (a user's default): {base64[0] / sec:.1f}× "
                       f"(ΔPSNR {signed(diff)} dB)")
+        if ("torch", "float32") in runs:
+            checks.append(f"rsocl float32 vs PyTorch float32 ({torch.get_num_threads()} threads): "
+                          f"{round_ratios(rounds, ('rsocl', 'float32'), ('torch', 'float32'))} round by round "
+                          f"(ΔPSNR {signed(db - runs['torch', 'float32'][1])} dB)")
         summary.append(f"- {side}×{side}: " + "; ".join(checks))
 
     widths = [max(len(c), *(len(r[i]) for r in rows)) for i, c in enumerate(columns)]

@@ -2,14 +2,16 @@
 
 1. Paper array (4 cameras, 50x50, t_e = 180 µs, t_r = 35 µs), 200 ADMM-TV iterations:
    seconds per reconstructed set (compile excluded; the operator and solver set-up included)
-   and how many sets per second that is against the paper cameras' 67 fps.
+   and how many sets per second that is against the paper cameras' 67 fps; then sets per second
+   with batches of ``--batch`` sets against the one-set-at-a-time loop, in alternating rounds.
 2. float32 against float64 at equal settings on the shared videos (64x64, default settings):
    PSNR of both, their difference (target: within 0.05 dB), time per iteration and device
    memory of each.
 
 Writes docs/paper_config.md (``--out``) with the machine, commit and date it was measured on.
 
-    python benchmarks/paper_config.py [--sets 3] [--device SPEC] [--out docs/paper_config.md]
+    python benchmarks/paper_config.py [--sets 3] [--batch 16] [--rounds 3] [--device SPEC]
+        [--out docs/paper_config.md]
 """
 
 from __future__ import annotations
@@ -54,6 +56,50 @@ def paper_configuration(device, sets, iterations):
             f"- each set is {rig.T} sub-frames: {rig.T / per_set:.0f} reconstructed sub-frames/s", ""]
 
 
+def batches(device, batch, rounds, iterations):
+    """Markdown lines: sets per second with batches of ``batch`` sets against one set at a time.
+
+    Each round reconstructs the same ``batch`` sets both ways (which goes first alternates);
+    the ratio is taken within each round.
+    """
+    rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
+    op = rsocl.RollingShutterOperator(rig, device=device)
+    g = np.stack([op.forward(builtin_scene(rig.shape, rig.T, seed=100 + s)) for s in range(batch)])
+    rsocl.reconstruct(g, rig, iterations=2, device=device)                    # compile once
+    rsocl.reconstruct(g[0], rig, iterations=2, device=device)
+
+    def batched():
+        return rsocl.reconstruct(g, rig, iterations=iterations, device=device).datacube
+
+    def loop():
+        return np.stack([rsocl.reconstruct(one, rig, iterations=iterations, device=device).datacube for one in g])
+
+    rates = {"batch": [], "loop": []}
+    worst = 0.0
+    for r in range(rounds):
+        results = {}
+        for name in (("batch", "loop") if r % 2 == 0 else ("loop", "batch")):
+            t0 = time.perf_counter()
+            results[name] = batched() if name == "batch" else loop()
+            rates[name].append(batch / (time.perf_counter() - t0))
+        worst = max(worst, float(np.abs(results["batch"] - results["loop"]).max() / np.abs(results["loop"]).max()))
+    ratio = [b / s for b, s in zip(rates["batch"], rates["loop"])]
+    med = {k: float(np.median(v)) for k, v in rates.items()}
+    return [f"## Batches: {batch} sets per `rsocl.reconstruct` call against one set per call", "",
+            f"The same {batch} sets of the paper configuration ({iterations} iterations, float32) reconstructed "
+            f"as one batch `(B, K, m, n)` and one set at a time, in {rounds} alternating rounds "
+            "(set-up included, compilation excluded).", "",
+            "| | sets/s (median) | range over rounds | s per set |", "|---|---|---|---|",
+            f"| batch of {batch} | {med['batch']:.2f} | {min(rates['batch']):.2f}-{max(rates['batch']):.2f} | "
+            f"{1 / med['batch']:.3f} |",
+            f"| one at a time | {med['loop']:.2f} | {min(rates['loop']):.2f}-{max(rates['loop']):.2f} | "
+            f"{1 / med['loop']:.3f} |", "",
+            f"- batch / loop: {np.median(ratio):.2f}× (median of the rounds' ratios, "
+            f"{min(ratio):.2f}-{max(ratio):.2f}×)",
+            f"- largest difference between a set's batched and single-set result: {worst:.1e} of the largest value",
+            ""]
+
+
 def precision(device, iterations):
     """Markdown lines: float32 against float64 on the shared videos (64x64, default settings)."""
     lines = ["## float32 against float64 (64x64 paper array, default settings)", "",
@@ -88,16 +134,21 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sets", type=int, default=3, help="sets timed in the paper configuration")
     parser.add_argument("--iterations", type=int, default=200)
+    parser.add_argument("--batch", type=int, default=16, help="sets per batch in the batch comparison")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating rounds of the batch comparison")
+    parser.add_argument("--skip-precision", action="store_true", help="leave out the float32/float64 section")
     parser.add_argument("--device", default=None)
     parser.add_argument("--out", type=Path, default=DOCS / "paper_config.md", help="the Markdown page to write")
     args = parser.parse_args(argv)
-    if args.sets < 1 or args.iterations < 1:
-        raise SystemExit("--sets and --iterations must be >= 1")
+    if min(args.sets, args.iterations, args.batch, args.rounds) < 1:
+        raise SystemExit("--sets, --iterations, --batch and --rounds must be >= 1")
     device = rsocl.device.get_device(args.device)
     page = header_lines("The paper's configuration, and float32 against float64", device,
                         None if argv is None else [__file__, *argv])
     page += paper_configuration(device, args.sets, args.iterations)
-    page += precision(device, args.iterations)
+    page += batches(device, args.batch, args.rounds, args.iterations)
+    if not args.skip_precision:
+        page += precision(device, args.iterations)
     print("\n".join(page))
     write_page(args.out, page)
 

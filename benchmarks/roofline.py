@@ -3,7 +3,8 @@
 For each kernel: the bytes it must move (each value read or written once, neighbours
 from cache), the time per launch (median of round-robin repeats, from cold and from warm
 caches), the bandwidth that makes, and its ratio to the copy kernel's bandwidth, over
-``--runs`` runs. Paper array, 128x128 by default, float32. Writes docs/roofline.md.
+``--runs`` runs; then the TV's bytes per voxel-iteration, plain against fused, counted. Paper
+array, 128x128 by default, float32. Writes docs/roofline.md.
 
     python benchmarks/roofline.py [--size 128] [--repeats 60] [--runs 3] [--caches cold warm]
                                   [--device SPEC] [--out docs/roofline.md]
@@ -22,7 +23,7 @@ import numpy as np
 import rsocl
 from rsocl.device.context import get_device
 from rsocl.device.launch import element_launches
-from rsocl_plugins import tv as tv_plugin
+from rsocl_plugins import tv as tv_plugin, tv_fused
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import DOCS, header_lines, write_page  # noqa: E402
@@ -182,8 +183,9 @@ def kernel_rows(dev, rig):
     xnext = cla.to_device(q, tv_plugin.edge_weights(n, np.float32))
     copy = dev.program(["reduce.cl"], REAL="float", ACC="double" if dev.has_fp64 else "float").copy
     tv = dev.program(["tv.cl"], REAL="float", TEMPORAL=1)
-    voxels = tv_plugin.launches(tv, dev.device, T, m, n)        # as the TV plugin launches them
-    sizes = (np.int32(T), np.int32(m), np.int32(n))
+    voxels = tv_plugin.launches(tv, dev, T, m, n)               # as the TV plugin launches them
+    sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(1))
+    steps = cla.to_device(q, np.array([1 / 6, 0.5], np.float32))     # tau and tau / weight of the one set
     # sampled voxels per channel and pixel: the window loop reads only those
     first, last = rig.sampled_window()
     samples = int(np.sum(last - first + 1))
@@ -198,7 +200,7 @@ def kernel_rows(dev, rig):
          lambda: [tv.tv_primal(q, gs, ls, x.data, p.data, y.data, np.float32(1), *sizes, global_offset=off)
                   for gs, ls, off in voxels]),
         ("tv_dual (3-D)", (1 + 3 + 3) * N * f32 + n * f32, None,
-         lambda: [tv.tv_dual(q, gs, ls, y.data, p.data, xnext.data, np.float32(1 / 6), np.float32(0.5), np.float32(1),
+         lambda: [tv.tv_dual(q, gs, ls, y.data, p.data, xnext.data, steps.data, np.float32(1),
                              *sizes, global_offset=off) for gs, ls, off in voxels]),
         (FORWARD, samples * f32 + maps, lines + maps, lambda: op.forward_into(x, g)),
         (ADJOINT, N * f32 + 2 * samples * f32 + maps, N * f32 + 2 * lines + maps, lambda: op.adjoint_into(g, y)),
@@ -340,6 +342,27 @@ def explain(rows, measured, rig, op, args):
     return out
 
 
+def tv_bytes(dev, rig, iterations=10, per_launch=(3, 5, 9)):
+    """Markdown lines: bytes per voxel and TV iteration, plain path against fused (counted, not timed)."""
+    shape, plain = (1, rig.T) + rig.shape, tv_fused.plain_values(iterations, True)
+    out = [f"## Bytes per voxel and TV iteration (counted; {iterations} iterations per call, float32, 3-D)", "",
+           "Values read or written in global memory per iteration (`rsocl_plugins.tv_fused`, halos counted); `+ dual`: "
+           "with the ADMM's dual update (a pass of 4 values when plain, 2 writes in the last fused launch).", "",
+           "| path | device limits | tile (x, y, t) | launches | B/voxel-iteration | + dual | vs plain |",
+           "|---|---|---|---|---|---|---|", f"| plain (`fused = 0`) | any | | {2 * iterations - 1} | "
+           f"{plain * 4 / iterations:.1f} | {(plain + 4) * 4 / iterations:.1f} | 100 % |"]
+    for limits, local, group in ((f"this device ({dev.local_mem_bytes // 1024} KiB)", dev.local_mem_bytes,
+                                  dev.max_work_group_size), ("48 KiB, 1024 work items", 48 << 10, 1024)):
+        for k in per_launch:
+            plan = tv_fused.plan(shape, 4, iterations, k, True, local_bytes=local, group=group,
+                                 max_items=(1024, 1024, 64))
+            out.append(f"| `fused = {k}` | {limits} | plain path: no tile saves bytes | | | | |" if plan is None else
+                       f"| `fused = {k}` | {limits} | {plan.tile} | {len(plan.launches)} | "
+                       f"{plan.values() * 4 / iterations:.1f} | {plan.values(dual=True) * 4 / iterations:.1f} | "
+                       f"{100 * plan.values(dual=True) / (plain + 4):.0f} % |")
+    return out + [""]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=128, help="ROI side, pixels")
@@ -368,6 +391,7 @@ def main(argv=None):
     page = header_lines("Roofline: rsocl's kernels against a copy kernel", dev, argv=None if argv is None
                         else [__file__] + list(argv))
     page += explain(rows, measured, rig, op, args)
+    page += tv_bytes(dev, rig)
     print("\n".join(page))
     write_page(args.out, page)
 

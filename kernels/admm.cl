@@ -1,13 +1,17 @@
-/* The ADMM data step of MODEL.md in three launches. Needs common.cl; the host
- * defines NCH (channels) and PROJECTION_EXACT 0|1.
+/* The ADMM data step of MODEL.md. Needs common.cl; the host defines NCH (channels) and
+ * PROJECTION_EXACT 0|1.
  *
- *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [skipped in GAP]
+ *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [sets with eta > 0]
  *                                             f  = v = theta + b
  *   admm_project   (one work item per block   r = g - H v,  z = (eta I + M)^-1 r  (exact)
  *                   of TILE_R x TILE_W px)                   | r / (eta + psi)    (paper, Eq. 15)
  *                                             f += Hᵀ z     (window loops only)
+ *                                             [difference = 1: then u = f - b over the block's column]
  *   admm_difference (one work item per voxel) u = f - b     (input of the denoiser)
  *
+ * A batch of sets lies end to end (theta, b, f, u: [B][T][m][n]; g: [B][K][m][n]); every kernel
+ * takes the whole batch in one launch, the set as the last grid dimension. Per set: eta, and
+ * whether the dual is updated (eta > 0); the inverse blocks are shared, or one per set.
  * Voxel-parallel passes keep neighbouring work items on neighbouring addresses, which
  * CPU vectorisers need (a per-pixel loop over the whole column takes 5x the time on PoCL).
  */
@@ -15,13 +19,15 @@
 #define PROJECTION_EXACT 1
 #endif
 
-/* admm_dual and admm_difference: one work item per voxel on an exact grid
- * (rsocl.device.launch.element_launches), so no bounds test (it costs masked stores on PoCL). */
-__kernel void admm_dual(__global const real *theta, __global real *b, __global real *f, int update_dual)
+/* admm_dual: global size (per-set voxels, sets) on an exact grid (rsocl.device.launch.batch_launches),
+ * so no bounds test (it costs masked stores on PoCL). dual[set] = 1 where that set's eta > 0;
+ * update_dual = 0 at the first iteration. */
+__kernel void admm_dual(__global const real *theta, __global real *b, __global real *f,
+                        __global const int *dual, int update_dual, int per_set)
 {
-    size_t i = get_global_id(0);
+    size_t set = get_global_id(1), i = set * (size_t)per_set + get_global_id(0);
     real th = theta[i];
-    real bn = update_dual ? b[i] - (f[i] - th) : b[i];
+    real bn = (update_dual && dual[set]) ? b[i] - (f[i] - th) : b[i];
     b[i] = bn;
     f[i] = th + bn;
 }
@@ -50,20 +56,53 @@ inline void project_pixel(__global real *f, __global const real *g,
     }
 }
 
-/* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R)): one work item per block of
- * TILE_R x TILE_W pixels (common.cl); blocks cut by the ROI's edge take project_pixel. */
-__kernel void admm_project(__global real *f, __global const real *g,
+/* u = f - b over sub-frames 0 .. T-1 of TILE_R rows of `width` pixels from p0 (row length n). */
+inline void column_difference(__global const real *f, __global const real *b, __global real *u,
+                              int T, size_t mn, size_t n, size_t p0, size_t rows, size_t width)
+{
+    for (int s = 0; s < T; ++s)
+        for (size_t r = 0; r < rows; ++r) {
+            size_t i = (size_t)s * mn + p0 + r * n;
+            if (width == TILE_W) {
+                store_w(load_w(f + i) - load_w(b + i), u + i);
+            } else {
+                for (size_t x = 0; x < width; ++x) u[i + x] = f[i + x] - b[i + x];
+            }
+        }
+}
+
+/* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R), sets): one work item per block of
+ * TILE_R x TILE_W pixels of one set (common.cl); blocks cut by the ROI's edge take project_pixel.
+ * eta[set]; the inverse of set s starts at s * own_inverse * (its size per set). With difference = 1
+ * the work item then writes u = f - b over its block's whole column (the admm_difference pass,
+ * while the block is in cache). */
+__kernel void admm_project(__global real *f_all, __global const real *g_all,
                            __global const int *first, __global const real *frac,
                            __global const real *len, __global const real *gain,
-                           __global const real *inverse, real eta, int T, int L, int m_, int n_)
+                           __global const real *inverse_all, __global const real *etas, int own_inverse,
+                           __global const real *b_all, __global real *u_all, int difference,
+                           int T, int L, int m_, int n_)
 {
-    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n;
+    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2);
     size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
     if (x0 >= n || y0 >= m) return;
+    size_t cube = (size_t)T * mn;
+    __global real *f = f_all + set * cube;
+    __global const real *g = g_all + set * (size_t)NCH * mn;
+#if PROJECTION_EXACT
+    __global const real *inverse = inverse_all + set * (size_t)own_inverse * NCH * NCH * mn;
+#else
+    __global const real *inverse = inverse_all + set * (size_t)own_inverse * NCH * mn;
+#endif
+    real eta = etas[set];
     if (x0 + TILE_W > n || y0 + TILE_R > m) {
         for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
             for (size_t x = x0; x < x0 + TILE_W && x < n; ++x)
                 project_pixel(f, g, first, frac, len, gain, inverse, eta, T, L, mn, y * n + x);
+        if (difference) {
+            size_t rows = m - y0 < TILE_R ? m - y0 : TILE_R, width = n - x0 < TILE_W ? n - x0 : TILE_W;
+            column_difference(f, b_all + set * cube, u_all + set * cube, T, mn, n, y0 * n + x0, rows, width);
+        }
         return;
     }
     size_t p0 = y0 * n + x0;
@@ -90,6 +129,8 @@ __kernel void admm_project(__global real *f, __global const real *g,
         }
         block_scatter(f, first, frac, len[k], q0, T, L, mn, n, p0, scale);
     }
+    if (difference)
+        column_difference(f, b_all + set * cube, u_all + set * cube, T, mn, n, p0, TILE_R, TILE_W);
 }
 
 __kernel void admm_difference(__global const real *f, __global const real *b, __global real *u)

@@ -1,21 +1,26 @@
 /* The row-timed shutter operator H (forward), its adjoint, and the diagonal and
- * per-pixel blocks of H Hᵀ. Layouts: f[T][m][n], g[K][m][n], first/frac[K][m][n],
+ * per-pixel blocks of H Hᵀ. Layouts: f[T][m][n], g[K][m][n] (a batch: f[B][T][m][n], g[B][K][m][n]),
+ * first/frac[K][m][n],
  * len[K], gain[K]. Each work item handles one pixel (psi, gram) or one block of TILE_R x TILE_W
  * pixels (forward, adjoint; see common.cl) and loops over the exposure window only: cost
  * ~ K*m*n*L, never K*T*m*n. `first` counts from the first sub-frame solved for, so it may
  * be negative; T is the number of sub-frames solved for. Needs common.cl. */
 
 /* g[k, p] = gain[k] * sum_s w(k, s, p) f[s, p];   global size (>= ceil(n / TILE_W),
- * >= ceil(m / TILE_R), K): one work item per block of TILE_R x TILE_W pixels of one channel
- * (common.cl); blocks cut by the ROI's edge take the scalar loop per pixel. */
-__kernel void forward(__global const real *f, __global real *g,
+ * >= ceil(m / TILE_R), sets * K): one work item per block of TILE_R x TILE_W pixels of one channel
+ * of one set (common.cl); blocks cut by the ROI's edge take the scalar loop per pixel. A batch of
+ * sets lies end to end: f[set][T][m][n], g[set][K][m][n]; the geometry is every set's. */
+__kernel void forward(__global const real *f_all, __global real *g_all,
                       __global const int *first, __global const real *frac,
                       __global const real *len, __global const real *gain,
-                      int T, int L, int m_, int n_)
+                      int K, int T, int L, int m_, int n_)
 {
-    size_t k = get_global_id(2), m = (size_t)m_, n = (size_t)n_, mn = m * n;
+    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n;
+    size_t kk = get_global_id(2), set = kk / (size_t)K, k = kk - set * (size_t)K;
     size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
     if (x0 >= n || y0 >= m) return;
+    __global const real *f = f_all + set * (size_t)T * mn;
+    __global real *g = g_all + set * (size_t)K * mn;
     if (x0 + TILE_W <= n && y0 + TILE_R <= m) {
         size_t p0 = y0 * n + x0, q0 = k * mn + p0;
         realw acc[TILE_R];
@@ -39,18 +44,20 @@ __kernel void zero(__global real *x)
 }
 
 /* f[s, p] += sum_k gain[k] w(k, s, p) g[k, p], over each channel's window only;
- * global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R)): one work item per block of
- * TILE_R x TILE_W pixels, all channels (blocks are disjoint, so there are no races). The host
- * first sets f to 0 (Hᵀ g, kernel zero) or to a base (base + Hᵀ g) with a copy: a per-pixel
- * loop over the whole column takes 5x the time on CPU devices. */
-__kernel void adjoint_scatter(__global const real *g, __global real *f,
+ * global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R), sets): one work item per block of
+ * TILE_R x TILE_W pixels of one set, all channels (blocks are disjoint, so there are no races). The
+ * host first sets f to 0 (Hᵀ g, kernel zero) or to a base (base + Hᵀ g) with a copy: a per-pixel
+ * loop over the whole column takes 5x the time on CPU devices. Batches as in forward. */
+__kernel void adjoint_scatter(__global const real *g_all, __global real *f_all,
                               __global const int *first, __global const real *frac,
                               __global const real *len, __global const real *gain,
                               int K, int T, int L, int m_, int n_)
 {
-    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n;
+    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2);
     size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
     if (x0 >= n || y0 >= m) return;
+    __global const real *g = g_all + set * (size_t)K * mn;
+    __global real *f = f_all + set * (size_t)T * mn;
     if (x0 + TILE_W <= n && y0 + TILE_R <= m) {
         size_t p0 = y0 * n + x0;
         for (int k = 0; k < K; ++k) {

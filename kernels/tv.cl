@@ -1,7 +1,10 @@
 /* Chambolle's isotropic total-variation denoiser (the algorithm of
  * skimage.restoration.denoise_tv_chambolle), 2-D per sub-frame or 3-D with a
- * temporal weight. Layout x[T][m][n]; the dual p holds NP = 2 (+1 if TEMPORAL)
- * planes of T*m*n values: p[0] along y, p[1] along x, p[2] along t.
+ * temporal weight. Layout x[B][T][m][n]: a batch of B sets end to end (B = 1: one set), each
+ * denoised on its own (no temporal difference across a set boundary), with its own step
+ * lengths steps[2 set] = tau, steps[2 set + 1] = tau / weight (both 0 for weight 0: p stays 0,
+ * the output is the input). The dual p holds NP = 2 (+1 if TEMPORAL) planes of N = B*T*m*n
+ * values: p[0] along y, p[1] along x, p[2] along t.
  * The host defines TEMPORAL 0|1. One work item per voxel, two kernels per
  * iteration (primal then dual), each reading its neighbours once; the first iteration,
  * from p = 0, is one kernel (tv_dual_first). Needs common.cl. */
@@ -9,7 +12,8 @@
 #define TEMPORAL 1
 #endif
 
-/* Launch with an exact grid (rsocl.device.launch.voxel_launches): there is no bounds test, and
+/* Launch with an exact grid (rsocl.device.launch.voxel_launches over (B*T, m, n): the set and its
+ * sub-frame are get_global_id(2) / T and % T, uniform in a work group): there is no bounds test, and
  * neighbours across an edge are read at a clamped index and discarded with a select,
  * because PoCL turns a per-work-item `if` into masked loads and stores (2x the time).
  * Selects on y and s are uniform in a work group (a row); along x, where a per-lane
@@ -19,13 +23,14 @@
  *  - the invariant p[1] = 0 at x = n - 1 (the x difference there is 0 from p = 0 on, so
  *    every step keeps it 0): the primal reads p[1] at i - 1 with no select at x = 0. */
 
-/* out = img + d(p), d the (negative) divergence of p.  global size (n, m, T) */
+/* out = img + d(p), d the (negative) divergence of p.  global size (n, m, B*T) */
 __kernel void tv_primal(__global const real *img, __global const real *p, __global real *out,
-                        real wt, int T, int m, int n)
+                        real wt, int T, int m, int n, int sets)
 {
-    int x = get_global_id(0), y = get_global_id(1), s = get_global_id(2);
-    size_t N = (size_t)T * m * n, mn = (size_t)m * n;
-    size_t i = ((size_t)s * m + y) * n + x;
+    int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
+    int s = st - st / T * T;
+    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
+    size_t i = ((size_t)st * m + y) * n + x;
     real d = -(p[i] + p[N + i]);
     /* The x - 1 neighbour is read at i - 1 always: at x = 0 that is p[1] at x = n - 1 of the
      * row before, which is 0 (see above), or p[0] at the very last voxel (y = m - 1: 0 too)
@@ -41,20 +46,22 @@ __kernel void tv_primal(__global const real *img, __global const real *p, __glob
     out[i] = img[i] + d;
 }
 
-/* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|) at voxel (x, y, s); with
+/* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|) at voxel (x, y, s) of its set; with
  * from_zero, p is taken as 0 and not read (the first iteration, where out = img).
  * At the far edges the clamped neighbour is the voxel itself: the difference is 0. */
 inline void dual_update(__global const real *out, __global real *p, __global const real *xnext,
-                        real tau, real tau_over_weight, real wt, int T, int m, int n, int from_zero)
+                        __global const real *steps, real wt, int T, int m, int n, int sets, int from_zero)
 {
-    int x = get_global_id(0), y = get_global_id(1), s = get_global_id(2);
-    size_t N = (size_t)T * m * n, mn = (size_t)m * n;
-    size_t i = ((size_t)s * m + y) * n + x;
+    int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
+    int set = st / T, s = st - set * T;
+    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
+    size_t i = ((size_t)st * m + y) * n + x;
+    real tau = steps[2 * set], tau_over_weight = steps[2 * set + 1];
     real o = out[i];
     real gy = out[y < m - 1 ? i + n : i] - o;
     /* out[i + 1] is in the buffer except for the last voxel: read it plainly (a vector
      * load) in every row but the last one, where the row is uniform. */
-    real right = (y < m - 1 || s < T - 1) ? out[i + 1] : out[x < n - 1 ? i + 1 : i];
+    real right = (y < m - 1 || st < sets * T - 1) ? out[i + 1] : out[x < n - 1 ? i + 1 : i];
     real gx = (right - o) * xnext[x];            /* exactly 0 at x = n - 1 */
     real norm2 = gy * gy + gx * gx;
 #if TEMPORAL
@@ -69,17 +76,17 @@ inline void dual_update(__global const real *out, __global real *p, __global con
 #endif
 }
 
-/* The dual step, in place.  global size (n, m, T) */
+/* The dual step, in place.  global size (n, m, B*T) */
 __kernel void tv_dual(__global const real *out, __global real *p, __global const real *xnext,
-                      real tau, real tau_over_weight, real wt, int T, int m, int n)
+                      __global const real *steps, real wt, int T, int m, int n, int sets)
 {
-    dual_update(out, p, xnext, tau, tau_over_weight, wt, T, m, n, 0);
+    dual_update(out, p, xnext, steps, wt, T, m, n, sets, 0);
 }
 
 /* The first dual step from p = 0, where out = img + d(0) = img: it reads img and only
- * writes p (no fill of p, no first primal step).  global size (n, m, T) */
+ * writes p (no fill of p, no first primal step).  global size (n, m, B*T) */
 __kernel void tv_dual_first(__global const real *img, __global real *p, __global const real *xnext,
-                            real tau, real tau_over_weight, real wt, int T, int m, int n)
+                            __global const real *steps, real wt, int T, int m, int n, int sets)
 {
-    dual_update(img, p, xnext, tau, tau_over_weight, wt, T, m, n, 1);
+    dual_update(img, p, xnext, steps, wt, T, m, n, sets, 1);
 }

@@ -5,14 +5,19 @@ from __future__ import annotations
 import numpy as np
 
 from rsocl.device.context import c_type, device_for_queue
-from rsocl.device.launch import voxel_launches
+from rsocl.device.launch import batch_launches, voxel_launches
 from rsocl.solver.regularizer import Option, Regularizer
+from rsocl_plugins import tv_fused
 
 __all__ = ["TV"]
 
 #: Work items per work group of the TV kernels (blocks of whole rows, rsocl.device.launch.voxel_launches),
 #: at most: about 512 voxels ran 7-15 % faster than half rows of 64 on PoCL (64x64 to 128x128).
 GROUP = 512
+
+#: Default of the ``fused`` option (most Chambolle iterations per launch on tiles in local memory):
+#: the plain path, the faster one on PoCL (see :class:`TV`).
+FUSED = 0
 
 
 def edge_weights(n: int, dtype) -> np.ndarray:
@@ -22,13 +27,9 @@ def edge_weights(n: int, dtype) -> np.ndarray:
 
 def launches(prog, device, T: int, m: int, n: int):
     """Exact launch grids of the TV kernels of ``prog`` (no bounds test in them), in work groups
-    of whole rows up to :data:`GROUP`, capped by what ``device`` and the kernels allow."""
-    import pyopencl as cl
-
-    group = min([GROUP, device.max_work_group_size] + [
-        k.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)
-        for k in (prog.tv_primal, prog.tv_dual, prog.tv_dual_first)])
-    return voxel_launches(T, m, n, group=group)
+    of whole rows up to :data:`GROUP`, capped by what ``device`` (an rsocl Device) and the kernels allow."""
+    group = device.group_limit(prog.tv_primal, prog.tv_dual, prog.tv_dual_first, cap=GROUP)
+    return voxel_launches(T, m, n, group=group, max_x=device.max_work_item_sizes[0])
 
 
 class TV(Regularizer):
@@ -40,53 +41,186 @@ class TV(Regularizer):
     dB): Runner 19.80 / 22.61 / 23.67 and Traffic 16.90 / 18.57 / 18.58 for weights
     1 / 3 / 5, while on the fast built-in scene (1.4 px per sub-frame) 1 is best
     (18.2 / 17.7 / 17.1): 3 keeps most of the gain on real videos.
+
+    A batch ``(B, T, m, n)`` is denoised in the same launches as one set, each set on its own
+    (no temporal difference across a set boundary) with its own weight.
+
+    ``fused = k > 0`` runs up to ``k`` iterations per launch on tiles held in local memory
+    (:mod:`rsocl_plugins.tv_fused`; same arithmetic, results equal to float rounding) and lets
+    the ADMM fold its dual update into the last launch; ``fused = 0`` is the plain path, two
+    launches per iteration. A device whose local memory is too small for tiles that save bytes
+    takes the plain path whatever ``fused`` says. Tiles and work groups follow the device's
+    ``CL_DEVICE_LOCAL_MEM_SIZE``, ``CL_DEVICE_MAX_WORK_GROUP_SIZE``, ``CL_DEVICE_MAX_WORK_ITEM_SIZES``
+    and the kernel's own limits. The fused path moves a quarter of the plain path's bytes on PoCL's
+    512 KiB of local memory and about 60 % with 48 KiB (counted), but on PoCL (2 CPU cores) a TV
+    call takes 26-166x the plain path's time (``benchmarks/tv_fused.py``, ``docs/tv_fused.md``),
+    so the default is the plain path. It has not been measured on a GPU.
     """
 
     name = "tv"
+    batched = True
     options = {
         "iterations": Option(10, "iterations", "Chambolle iterations per denoising call", 1, 100000),
         "temporal_weight": Option(3.0, "", "weight of the temporal difference (0: 2-D per sub-frame, "
                                            "1: scikit-image's 3-D TV)", 0, 1e3),
+        "fused": Option(FUSED, "iterations", "most Chambolle iterations per launch on tiles in local memory "
+                                             "(0: the plain path, two launches per iteration)", 0, 1000),
     }
 
+    @property
+    def fuses_dual(self) -> bool:
+        return self.fused > 0
+
+    @property
+    def planes(self) -> int:
+        return 3 if self.temporal_weight > 0 else 2
+
     def workspace_bytes(self, shape, dtype) -> int:
-        planes = 3 if self.temporal_weight > 0 else 2          # the dual p, and xnext (n values)
-        return (planes * int(np.prod(shape)) + int(shape[-1])) * np.dtype(dtype).itemsize
+        # the dual p (planes of the input's size; two copies on the fused path, which reads one and
+        # writes the other) and xnext (n values)
+        copies = 2 if self.fused > 0 else 1
+        return (copies * self.planes * int(np.prod(shape)) + int(shape[-1])) * np.dtype(dtype).itemsize
+
+    def _steps(self, queue, weights, dtype):
+        """The per-set ``(tau, tau / weight)`` of ``tv.cl`` on the device (``(0, 0)`` for weight 0)."""
+        import pyopencl.array as cla
+
+        wt = float(self.temporal_weight) if self.temporal_weight > 0 else 0.0
+        tau = 1.0 / (2.0 * (2.0 + wt * wt))
+        cache = self.__dict__.setdefault("_step_cache", {})
+        key = (np.asarray(weights, np.float64).tobytes(), np.dtype(dtype).str, queue.int_ptr)
+        if key not in cache:
+            if len(cache) > 8:
+                cache.clear()
+            w = np.asarray(weights, dtype=np.float64)
+            on = w > 0
+            steps = np.stack([np.where(on, tau, 0.0), np.where(on, tau / np.where(on, w, 1.0), 0.0)], axis=1)
+            cache[key] = cla.to_device(queue, steps.astype(dtype).ravel())
+        return cache[key]
+
+    def _program(self, x, name):
+        temporal = int(self.temporal_weight > 0)
+        return device_for_queue(x.queue).program([name], REAL=c_type(x.dtype), TEMPORAL=temporal)
+
+    def fused_plan(self, x):
+        """The :class:`~rsocl_plugins.tv_fused.FusedPlan` for device array ``x`` (None: the plain path)."""
+        import pyopencl as cl
+
+        cache = self.__dict__.setdefault("_plans", {})
+        dev = device_for_queue(x.queue)
+        limits = (dev.local_mem_bytes, dev.max_work_group_size, dev.max_work_item_sizes)
+        key = (x.shape, x.dtype.str, x.queue.int_ptr, self.iterations, self.fused, self.planes, limits)
+        if key not in cache:
+            kernel = self._program(x, "tv_fused.cl").tv_fused
+            reserved = int(kernel.get_work_group_info(cl.kernel_work_group_info.LOCAL_MEM_SIZE, dev.device))
+            shape = x.shape if x.ndim == 4 else (1,) + x.shape
+            cache[key] = tv_fused.plan(shape, x.dtype.itemsize, self.iterations, self.fused, self.planes == 3,
+                                       local_bytes=dev.local_mem_bytes - reserved,
+                                       group=dev.group_limit(kernel), max_items=dev.max_work_item_sizes)
+        return cache[key]
+
+    def _buffers(self, x, copies):
+        """The dual p (``copies`` of it) and xnext, once per shape, dtype and queue."""
+        import pyopencl.array as cla
+
+        cache = self.__dict__.setdefault("_dual", {})
+        key = (x.shape, x.dtype.str, self.planes, copies, x.queue.int_ptr)
+        if key not in cache:
+            cache.clear()
+            cache[key] = ([cla.empty(x.queue, (self.planes,) + x.shape, x.dtype) for _ in range(copies)],
+                          cla.to_device(x.queue, edge_weights(x.shape[-1], x.dtype)))
+        return cache[key]
 
     def _denoise(self, x, weight, out):
+        return self._run(x, weight, out, None)
+
+    def denoise_and_update(self, u, weight, theta, b, f, dual):
+        """``theta = denoise(u, weight)``, then the ADMM's next dual update: ``b = theta - u`` and
+        ``f = theta + b`` in the sets where ``dual`` (a device int array, one per set) is set, else
+        ``f = theta``. On the fused path that is the last launch's work; otherwise one more pass."""
+        weights = self.check_weights(weight, u.shape[0] if u.ndim == 4 else None)
+        for name, array in (("theta", theta), ("b", b), ("f", f)):
+            if array.shape != u.shape or array.dtype != u.dtype:
+                raise ValueError(f"{self.name}: {name} must match u ({u.shape}, {u.dtype}), got {array.shape}")
+        return self._run(u, weights if u.ndim == 4 else float(weights[0]), theta, (b, f, dual))
+
+    def _run(self, x, weight, out, dual):
         import pyopencl as cl
-        import pyopencl.array as cla
 
         if out.base_data.int_ptr == x.base_data.int_ptr:
             raise ValueError("out must be another buffer than x (every TV iteration reads x)")
-        T, m, n = x.shape
-        temporal = int(self.temporal_weight > 0)
-        prog = device_for_queue(x.queue).program(["tv.cl"], REAL=c_type(x.dtype), TEMPORAL=temporal)
-        planes = 3 if temporal else 2
-        cache = self.__dict__.setdefault("_dual", {})
-        key = (x.shape, x.dtype.str, planes, x.queue.int_ptr)
-        if key not in cache:                        # once per shape, dtype and queue
-            cache.clear()
-            cache[key] = (cla.empty(x.queue, (planes,) + x.shape, x.dtype),
-                          cla.to_device(x.queue, edge_weights(n, x.dtype)), launches(prog, x.queue.device, T, m, n))
-        p, xnext, grids = cache[key]
-        wt = float(self.temporal_weight) if temporal else 0.0
-        tau = 1.0 / (2.0 * (2.0 + wt * wt))
-        real_t = x.dtype.type
-        sizes = (np.int32(T), np.int32(m), np.int32(n))
+        sets = x.shape[0] if x.ndim == 4 else 1
+        steps = self._steps(x.queue, np.broadcast_to(weight, (sets,)), x.dtype)
+        plan = self.fused_plan(x) if self.fused > 0 else None
+        if plan is not None:
+            return self._run_fused(x, steps, out, dual, plan)
+        self._run_plain(x, steps, out)
+        if dual is not None:
+            b, f, on = dual
+            prog = self._program(x, "tv_fused.cl")
+            per_set = x.size // sets
+            dev = device_for_queue(x.queue)
+            for gsize, lsize, offset in batch_launches(per_set, sets, dev.group_limit(prog.dual_from_u, cap=64)):
+                prog.dual_from_u(x.queue, gsize, lsize, out.data, x.data, b.data, f.data, on.data, np.int32(per_set),
+                                 global_offset=offset)
+        return out
+
+    def _run_plain(self, x, steps, out):
+        import pyopencl as cl
+
+        sets = x.shape[0] if x.ndim == 4 else 1
+        T, m, n = x.shape[-3:]
+        prog = self._program(x, "tv.cl")
+        (p,), xnext = self._buffers(x, 1)
+        grids = self.__dict__.setdefault("_grids", {})
+        key = (x.shape, x.queue.int_ptr, device_for_queue(x.queue).max_work_group_size)
+        if key not in grids:
+            grids.clear()
+            grids[key] = launches(prog, device_for_queue(x.queue), sets * T, m, n)
+        wt = x.dtype.type(self.temporal_weight if self.planes == 3 else 0.0)
+        sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(sets))
 
         def each(kernel, *args):
-            for gsize, lsize, offset in grids:
+            for gsize, lsize, offset in grids[key]:
                 kernel(x.queue, gsize, lsize, *args, *sizes, global_offset=offset)
 
-        steps = (real_t(tau), real_t(tau / weight), real_t(wt))
         if self.iterations == 1:                    # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
         # iteration 0 from p = 0 (out = x): one kernel that only writes p
-        each(prog.tv_dual_first, x.data, p.data, xnext.data, *steps)
+        each(prog.tv_dual_first, x.data, p.data, xnext.data, steps.data, wt)
         for i in range(1, self.iterations):
-            each(prog.tv_primal, x.data, p.data, out.data, real_t(wt))
+            each(prog.tv_primal, x.data, p.data, out.data, wt)
             if i < self.iterations - 1:
-                each(prog.tv_dual, out.data, p.data, xnext.data, *steps)
+                each(prog.tv_dual, out.data, p.data, xnext.data, steps.data, wt)
         return out
+
+    def _run_fused(self, x, steps, out, dual, plan):
+        import pyopencl as cl
+
+        sets, T, m, n = plan.shape
+        prog = self._program(x, "tv_fused.cl")
+        buffers, _ = self._buffers(x, max(1, plan.p_buffers()))
+        b, f, on = dual if dual is not None else (out, out, self._no_dual(x.queue))
+        local = cl.LocalMemory(plan.local_values() * x.dtype.itemsize)
+        gsize, lsize = plan.grid()
+        wt = x.dtype.type(self.temporal_weight if self.planes == 3 else 0.0)
+        for i, launch in enumerate(plan.launches):
+            (below, above), (t_below, t_above) = launch.halos(plan.temporal)
+            p_in, p_out = buffers[(i - 1) % len(buffers)], buffers[i % len(buffers)]
+            mode = launch.mode | (4 if dual is not None and launch.final else 0)
+            kernel = prog.instance("tv_fused", i)
+            kernel(x.queue, gsize, lsize, x.data, p_in.data, p_out.data, out.data, b.data, f.data, on.data,
+                   steps.data, wt, *(np.int32(v) for v in (
+                       T, m, n, sets, plan.tiles_t(), *plan.tile, below, above, t_below, t_above,
+                       launch.updates, mode, plan.cap)), local)
+        return out
+
+    def _no_dual(self, queue):
+        """A one-value int array for ``tv_fused``'s ``dual`` argument when there is no ADMM update."""
+        import pyopencl.array as cla
+
+        cache = self.__dict__.setdefault("_zero", {})
+        if queue.int_ptr not in cache:
+            cache[queue.int_ptr] = cla.zeros(queue, 1, np.int32)
+        return cache[queue.int_ptr]

@@ -45,6 +45,7 @@ def test_single_point_row():
     K, (m, n), T = 4, rig.shape, rig.T
     by_hand = 4 * K * m * n + 4 * K * m * n + 2 * K * 4 + 4 * K * m * n           # geometry + snapshots
     by_hand += 4 * (4 * T * m * n) + 2 * 4 * K * m * n + 4 * K * K * m * n       # theta b f u, H theta, inverse
+    by_hand += 16                                                               # per-set eta and dual switch
     by_hand += 3 * 4 * T * m * n + 4 * n                                        # TV workspace
     # the timed run is a user's run, without the ground truth on the device
     assert row["peak_device_memory_bytes"] == by_hand == device_memory_bytes(rig, "tv", "float32", with_truth=False)

@@ -1,23 +1,29 @@
-"""``rsocl reconstruct``: a capture file -> a reconstruction file and a GIF, or tiles (and sets) on
-Dask into a Zarr store (:mod:`rsocl.cli.tiling`)."""
+"""``rsocl reconstruct``: a capture file -> a reconstruction file and a GIF (one file per set of a
+multi-set capture, the sets in batches sized to the device), or tiles (and sets) on Dask into a
+Zarr store (:mod:`rsocl.cli.tiling`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from rsocl.cli.options import add_device_args, add_solver_args, quality_line, run_reconstruction, say
+from rsocl.cli.options import add_device_args, add_solver_args, quality_line, reg_options, run_reconstruction, say
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
-__all__ = ["add_parser", "cmd_reconstruct"]
+__all__ = ["add_parser", "cmd_reconstruct", "set_path"]
 
 
 def add_parser(subparsers):
     """Add ``reconstruct`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser("reconstruct", help="capture file -> reconstruction file and GIF")
     p.add_argument("capture", help="capture file (.h5) from 'rsocl simulate' or 'rsocl capture'")
-    p.add_argument("--out", required=True, help="reconstruction file to write (.h5), or a Zarr store (.zarr)")
-    p.add_argument("--gif", default=None, help="GIF to write (default: next to an .h5 --out)")
+    p.add_argument("--out", required=True,
+                   help="reconstruction file to write (.h5; a capture of several sets writes one per set, "
+                        "OUT with '-setNNN' before the suffix), or a Zarr store (.zarr)")
+    p.add_argument("--gif", default=None, help="GIF to write (default: next to an .h5 --out; of set 0)")
     p.add_argument("--no-truth", action="store_true", help="ignore a ground truth stored in the capture")
+    p.add_argument("--first-set-only", action="store_true", help="of a capture of several sets, set 0 only")
+    p.add_argument("--batch", type=int, default=None,
+                   help="sets reconstructed together in one batch (default: as many as fit the device, up to 32)")
     add_solver_args(p)
     add_device_args(p)
     add_reconstruct_tiling_args(p)
@@ -25,13 +31,19 @@ def add_parser(subparsers):
     return p
 
 
+def set_path(out: Path, index: int) -> Path:
+    """The reconstruction file of set ``index`` of a multi-set capture: ``out`` with ``-setNNN`` before the suffix."""
+    return out.with_name(f"{out.stem}-set{index:03d}{out.suffix}")
+
+
 def cmd_reconstruct(args) -> int:
-    """Reconstruct the capture, print the quality line, write ``--out`` and the GIF; returns 0.
+    """Reconstruct the capture (every set of a multi-set capture, in batches sized to the device), print the
+    quality line of each set, write the reconstruction file(s) and the GIF; returns 0.
 
     The output paths are checked first; tiles (and sets) run on Dask when asked or needed.
     """
     from rsocl.analysis.visual import comparison_gif
-    from rsocl.files.hdf5 import load_capture, save_reconstruction
+    from rsocl.files.hdf5 import load_capture, load_snapshot_sets, save_reconstruction
 
     check_outputs(args)
     code = reconstruct_tiled_if_needed(args)
@@ -40,12 +52,38 @@ def cmd_reconstruct(args) -> int:
 
     capture = load_capture(args.capture)
     truth = capture.truth if not args.no_truth else None
-    result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
-    print(quality_line(result, truth))
+    sets = None if args.first_set_only else load_snapshot_sets(args.capture)
     out = Path(args.out)
-    save_reconstruction(out, result.datacube, capture.rig, params=result.params, history=result.history,
-                        truth=capture.truth)
     gif = Path(args.gif) if args.gif else out.with_suffix(".gif")
-    comparison_gif(gif, truth, result.datacube)
-    say(args, f"wrote {out} and {gif}")
+    if sets is None or sets.shape[0] == 1:
+        result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
+        print(quality_line(result, truth))
+        save_reconstruction(out, result.datacube, capture.rig, params=result.params, history=result.history,
+                            truth=capture.truth)
+        comparison_gif(gif, truth, result.datacube)
+        say(args, f"wrote {out} and {gif}")
+        return 0
+    batch = _reconstruct_sets(args, sets, capture.rig)
+    say(args, f"{sets.shape[0]} sets in batches of {batch.params['batch']}")
+    for i in range(batch.batch):
+        one = batch.set(i)
+        known = truth if i == 0 else None              # the capture's truth is set 0's datacube
+        print(f"set {i}: " + quality_line(one, known))
+        save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history,
+                            truth=capture.truth if i == 0 else None)
+    comparison_gif(gif, truth, batch.set(0).datacube)
+    say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)} and {gif}")
     return 0
+
+
+def _reconstruct_sets(args, sets, rig):
+    """:func:`rsocl.solver.sets.reconstruct_sets` of every set with the solver and device arguments."""
+    from rsocl.solver.sets import reconstruct_sets
+
+    if args.batch is not None and args.batch < 1:
+        raise ValueError(f"--batch must be >= 1, got {args.batch}")
+    return reconstruct_sets(sets, rig, batch=args.batch, regularizer=args.regularizer,
+                            regularizer_options=reg_options(args.reg_opt), iterations=args.iterations,
+                            lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
+                            projection=args.projection, device=args.device, dtype=args.dtype,
+                            progress=not args.quiet)

@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import functools
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 
 import numpy as np
 
+from rsocl.common.validation import positive_int as check_positive
 from rsocl.device.kernel import Kernel
 
 __all__ = ["Device", "Kernels", "get_device", "device_for_queue", "list_devices", "c_type", "kernel_source",
@@ -98,11 +99,39 @@ class Device:
     context, queue, device : pyopencl objects
     has_fp64 : bool
         Whether the device supports ``cl_khr_fp64``.
+    limits : dict
+        Lower limits than the device reports, to run as a smaller device would (see :meth:`limited`).
     """
 
     context: object
     queue: object
     device: object
+    limits: dict = field(default_factory=dict)
+
+    def limited(self, *, fp64=None, max_work_group_size=None, local_mem_bytes=None,
+                max_work_item_sizes=None) -> "Device":
+        """This device as one with lower limits would present itself: its own queue and program cache.
+
+        ``fp64=False`` hides ``cl_khr_fp64``; the sizes (work items, bytes) cap what the device
+        reports. Every launch-size and local-memory decision of rsocl then follows the lower limits,
+        as on a GPU that has them; the kernels still run on this device.
+        """
+        limits = dict(self.limits)
+        given = {"fp64": fp64, "max_work_group_size": max_work_group_size, "local_mem_bytes": local_mem_bytes,
+                 "max_work_item_sizes": max_work_item_sizes}
+        for name, value in given.items():
+            if value is None:
+                continue
+            if name == "fp64":
+                limits[name] = bool(value)
+            elif name == "max_work_item_sizes":
+                limits[name] = tuple(check_positive(name, v) for v in value)
+            else:
+                limits[name] = check_positive(name, value)
+        cl = _cl()
+        found = Device(self.context, cl.CommandQueue(self.context, self.device), self.device, limits)
+        _BY_QUEUE[found.queue.int_ptr] = found
+        return found
 
     @property
     def name(self) -> str:
@@ -110,6 +139,8 @@ class Device:
 
     @property
     def has_fp64(self) -> bool:
+        if self.limits.get("fp64") is False:
+            return False
         return "cl_khr_fp64" in self.device.extensions or bool(getattr(self.device, "double_fp_config", 0))
 
     @property
@@ -126,6 +157,41 @@ class Device:
     def global_mem_bytes(self) -> int:
         """Device memory, bytes (``CL_DEVICE_GLOBAL_MEM_SIZE``)."""
         return int(self.device.global_mem_size)
+
+    @property
+    def max_work_group_size(self) -> int:
+        """Most work items in a work group (``CL_DEVICE_MAX_WORK_GROUP_SIZE``)."""
+        return min(int(self.device.max_work_group_size), self.limits.get("max_work_group_size", 1 << 62))
+
+    @property
+    def max_work_item_sizes(self) -> tuple:
+        """Most work items of a work group along each dimension (``CL_DEVICE_MAX_WORK_ITEM_SIZES``)."""
+        own = self.limits.get("max_work_item_sizes", ())
+        return tuple(min(int(v), own[i]) if i < len(own) else int(v)
+                     for i, v in enumerate(self.device.max_work_item_sizes))
+
+    @property
+    def local_mem_bytes(self) -> int:
+        """Local memory of a work group, bytes (``CL_DEVICE_LOCAL_MEM_SIZE``)."""
+        return min(int(self.device.local_mem_size), self.limits.get("local_mem_bytes", 1 << 62))
+
+    def group_limit(self, *kernels, cap: int | None = None) -> int:
+        """Most work items per work group for every one of ``kernels`` on this device (and ``cap``).
+
+        The device's maximum, and each kernel's own (``CL_KERNEL_WORK_GROUP_SIZE``: a GPU lowers it
+        for a kernel that needs many registers). Kernels are ``pyopencl.Kernel`` or
+        :class:`rsocl.device.kernel.Kernel`.
+        """
+        import pyopencl as cl
+
+        known = self.__dict__.setdefault("_kernel_groups", {})
+        sizes = [self.max_work_group_size] + ([] if cap is None else [int(cap)])
+        for kernel in kernels:
+            key = (kernel.int_ptr, kernel.function_name)
+            if key not in known:
+                known[key] = int(kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, self.device))
+            sizes.append(known[key])
+        return max(1, min(sizes))
 
     def real_dtype(self, dtype) -> np.dtype:
         """Validate ``dtype`` (``"float32"`` or ``"float64"``) for this device."""
@@ -159,6 +225,8 @@ class Device:
     def program(self, files, **defines):
         """Build (once per device and definitions) the program made of ``common.cl`` + ``files``."""
         key = (tuple(files), tuple(sorted(defines.items())))
+        if self.limits.get("fp64") is False and "double" in defines.values():
+            raise ValueError(f"dtype='float64' needs cl_khr_fp64, which device {self.name!r} does not support")
         cache = self.__dict__.setdefault("_programs", {})
         if key not in cache:
             cache[key] = _build(self.context, key[0], key[1])

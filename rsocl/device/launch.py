@@ -8,7 +8,8 @@ their bounds.
 
 from __future__ import annotations
 
-__all__ = ["voxel_grid", "exact_launches", "element_launches", "voxel_launches", "tile_grid", "block_grid"]
+__all__ = ["voxel_grid", "exact_launches", "element_launches", "batch_launches", "voxel_launches", "tile_grid",
+           "block_grid"]
 
 
 def voxel_grid(T: int, m: int, n: int):
@@ -40,12 +41,20 @@ def exact_launches(extent: int, group: int = 64):
     return [(0, main, group), (main, extent - main, extent - main)]
 
 
-def element_launches(count: int):
+def element_launches(count: int, group: int = 64):
     """:func:`exact_launches` as ``(global, local, offset)`` of a 1-D kernel over ``count`` items."""
-    return [((size,), (local,), (offset,)) for offset, size, local in exact_launches(count)]
+    return [((size,), (local,), (offset,)) for offset, size, local in exact_launches(count, group)]
 
 
-def voxel_launches(T: int, m: int, n: int, group: int = 64):
+def batch_launches(count: int, sets: int, group: int = 64):
+    """:func:`element_launches` of a 2-D kernel: ``count`` items of each of ``sets`` sets (dimension 1)."""
+    sets = int(sets)
+    if sets < 1:
+        raise ValueError(f"sets must be >= 1, got {sets}")
+    return [((size, sets), (local, 1), (offset, 0)) for offset, size, local in exact_launches(count, group)]
+
+
+def voxel_launches(T: int, m: int, n: int, group: int = 64, max_x: int | None = None):
     """``(global, local, offset)`` launches, one work item per voxel of ``(T, m, n)``, no padding.
 
     When a whole row fits in ``group`` work items, a work group is a block of whole rows,
@@ -53,13 +62,15 @@ def voxel_launches(T: int, m: int, n: int, group: int = 64):
     one launch, whatever ``n``. PoCL vectorises along the row; the TV kernels ran 7-15 % faster
     with blocks of about 512 voxels than with half rows of 64 (64x64 to 128x128, measured with
     OpenCL profiling). Otherwise rows are split as :func:`exact_launches` says. ``group`` must
-    not exceed what the device and kernel allow.
+    not exceed what the device and kernel allow, nor ``max_x`` the device's work items along
+    dimension 0 (``CL_DEVICE_MAX_WORK_ITEM_SIZES[0]``; None: no other limit than ``group``).
     """
     T, m, n, group = int(T), int(m), int(n), int(group)
-    if n <= group:
+    row = group if max_x is None else min(group, int(max_x))
+    if n <= row:
         rows = next(d for d in range(min(m, group // n), 0, -1) if m % d == 0)
         return [((n, m, T), (n, rows, 1), (0, 0, 0))]
-    return [((size, m, T), (local, 1, 1), (offset, 0, 0)) for offset, size, local in exact_launches(n)]
+    return [((size, m, T), (local, 1, 1), (offset, 0, 0)) for offset, size, local in exact_launches(n, row)]
 
 
 def tile_grid(pixels: int, width: int, channels: int = 1):
@@ -74,7 +85,7 @@ def tile_grid(pixels: int, width: int, channels: int = 1):
     return ((-(-tiles // lx) * lx, int(channels)), (lx, 1))
 
 
-def block_grid(m: int, n: int, width: int, rows: int, channels: int = 1, group: int = 64):
+def block_grid(m: int, n: int, width: int, rows: int, channels: int = 1, group: int = 64, max_items=None):
     """Global and local sizes for one work item per block of ``rows x width`` pixels (and channel).
 
     The operator and ADMM kernels take a block of ``rows`` (their ``TILE_R``) rows of
@@ -82,12 +93,14 @@ def block_grid(m: int, n: int, width: int, rows: int, channels: int = 1, group: 
     group is up to ``group`` blocks: up to ``group`` of one block row, or several whole block
     rows. The global size is padded (less than one work group per dimension) and kernels check
     bounds; blocks cut by the ROI's right or bottom edge take the kernels' per-pixel loops.
+    ``max_items``: the device's most work items along dimensions 0 and 1 (None: ``group``).
     """
     m, n, width, rows, group = int(m), int(n), int(width), int(rows), int(group)
     if min(m, n, width, rows, group) < 1:
         raise ValueError(f"m, n, width, rows and group must be >= 1, got {m}, {n}, {width}, {rows}, {group}")
+    max_x, max_y = (group, group) if max_items is None else (int(max_items[0]), int(max_items[1]))
     tiles, block_rows = -(-n // width), -(-m // rows)
-    lx = min(group, tiles)
-    groups_y = -(-block_rows // max(1, group // lx))          # as few groups as fit, of balanced size
+    lx = min(group, tiles, max_x)
+    groups_y = -(-block_rows // max(1, min(group // lx, max_y)))    # as few groups as fit, of balanced size
     ly = -(-block_rows // groups_y)
     return ((-(-tiles // lx) * lx, groups_y * ly, int(channels)), (lx, ly, 1))

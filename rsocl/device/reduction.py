@@ -4,7 +4,8 @@ Each work item adds a strided slice with Kahan compensation in the widest type
 the device has (double where ``cl_khr_fp64`` exists), work groups reduce in
 local memory, and the host adds the few hundred partials with ``math.fsum``.
 Only the partials cross to the host, and :func:`sum_sq_diff_async` lets the host go on
-enqueuing work while they do.
+enqueuing work while they do. With ``sets=B`` the arrays are ``B`` sets end to end and one launch
+gives each set its own sum.
 """
 
 from __future__ import annotations
@@ -28,18 +29,20 @@ class PendingSum:
     is free to enqueue more work, so the device never idles on a read-back.
     """
 
-    def __init__(self, host, event):
-        self._host, self._event, self._value = host, event, None
+    def __init__(self, host, event, sets=None):
+        self._host, self._event, self._value, self._sets = host, event, None, sets
 
-    def result(self) -> float:
-        """The sum, as a Python float (waits for the device the first time)."""
+    def result(self):
+        """The sum, as a Python float, or one per set (float64 array) for ``sets=B`` (waits the first time)."""
         if self._value is None:
             self._event.wait()
-            self._value = math.fsum(self._host.astype(np.float64).tolist())
+            rows = self._host.astype(np.float64).reshape(self._sets or 1, -1)
+            sums = [math.fsum(row.tolist()) for row in rows]
+            self._value = sums[0] if self._sets is None else np.array(sums)
         return self._value
 
 
-def sum_sq_diff_async(a, b=None, weights=None) -> PendingSum:
+def sum_sq_diff_async(a, b=None, weights=None, sets=None) -> PendingSum:
     """:func:`sum_sq_diff` without waiting: enqueue it and return a :class:`PendingSum`.
 
     Each call has its own partials buffer, so several may be in flight at once.
@@ -49,23 +52,28 @@ def sum_sq_diff_async(a, b=None, weights=None) -> PendingSum:
     for name, other in (("b", b), ("weights", weights)):
         if other is not None and (other.shape != a.shape or other.dtype != a.dtype):
             raise ValueError(f"{name} must match a ({a.shape}, {a.dtype}), got {other.shape}, {other.dtype}")
+    count = 1 if sets is None else int(sets)
+    if count < 1 or a.size % count:
+        raise ValueError(f"sets must be >= 1 and divide the {a.size} elements of a, got {sets!r}")
+    per_set = a.size // count
     dev = device_for_queue(a.queue)
     acc = dev.acc_dtype
     prog = dev.program(["reduce.cl"], REAL=c_type(a.dtype), ACC=c_type(acc))
-    local = min(LOCAL_SIZE, 1 << (int(dev.device.max_work_group_size).bit_length() - 1))
-    groups = max(1, min(MAX_GROUPS, -(-a.size // local)))
-    partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, groups * acc.itemsize)
-    prog.sum_sq_diff(a.queue, (groups * local,), (local,), a.data, None if b is None else b.data,
+    local = 1 << (dev.group_limit(prog.sum_sq_diff, cap=LOCAL_SIZE).bit_length() - 1)    # a power of two
+    groups = max(1, min(max(1, MAX_GROUPS // count), -(-per_set // local)))
+    partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, count * groups * acc.itemsize)
+    prog.sum_sq_diff(a.queue, (groups * local, count), (local, 1), a.data, None if b is None else b.data,
                      None if weights is None else weights.data, partials,
-                     cl.LocalMemory(local * acc.itemsize), np.int32(a.size))
-    host = np.empty(groups, acc)
+                     cl.LocalMemory(local * acc.itemsize), np.int32(per_set))
+    host = np.empty(count * groups, acc)
     event = cl.enqueue_copy(a.queue, host, partials, is_blocking=False)
-    return PendingSum(host, event)
+    return PendingSum(host, event, sets)
 
 
-def sum_sq_diff(a, b=None, weights=None) -> float:
+def sum_sq_diff(a, b=None, weights=None, sets=None):
     """``sum(weights * (a - b)**2)`` of device arrays, as a Python float.
 
-    ``b`` None: ``a**2``; ``weights`` None: all ones.
+    ``b`` None: ``a**2``; ``weights`` None: all ones. ``sets=B``: the arrays hold ``B`` sets end to
+    end (a leading batch axis); the result is then one sum per set, a float64 array of ``B``.
     """
-    return sum_sq_diff_async(a, b, weights).result()
+    return sum_sq_diff_async(a, b, weights, sets).result()

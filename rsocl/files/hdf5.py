@@ -31,7 +31,7 @@ from rsocl.files.atomic import atomic_path
 from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, open_checked, read_rig, str_attr, write_header
 from rsocl.model.rig import Rig
 
-__all__ = ["Capture", "Reconstruction", "save_capture", "load_capture",
+__all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_snapshot_sets",
            "save_reconstruction", "load_reconstruction", "FORMAT_VERSION"]
 
 
@@ -182,6 +182,21 @@ def load_capture(path) -> Capture:
             raise ValueError(f"{source}: dataset 'snapshots' is missing")
         return Capture(snapshots=h5["snapshots"][()], rig=rig, truth=_optional(h5, "truth"),
                        meta=json.loads(str_attr(h5, "meta", source)))
+
+
+def load_snapshot_sets(path) -> np.ndarray | None:
+    """Every registered set ``(S, K, m, n)`` of a multi-set capture (dataset ``snapshot_sets``), or None.
+
+    Captures of ``rsocl capture`` hold one set per trigger; :func:`load_capture` reads set 0 only.
+    """
+    source = str(path)
+    with open_checked(path, "capture") as h5:
+        if "snapshot_sets" not in h5:
+            return None
+        sets = h5["snapshot_sets"][()]
+    if sets.ndim != 4 or sets.shape[0] < 1 or not np.all(np.isfinite(sets)):
+        raise ValueError(f"{source}: dataset 'snapshot_sets' must be finite (S >= 1, K, m, n), got {sets.shape}")
+    return sets
 
 
 # ---------------------------------------------------------------------- reconstruction

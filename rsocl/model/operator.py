@@ -42,7 +42,8 @@ class RollingShutterOperator:
     Notes
     -----
     ``forward`` and ``adjoint`` accept NumPy arrays (and return NumPy arrays) or
-    ``pyopencl.array.Array`` (and return device arrays, with no host copy).
+    ``pyopencl.array.Array`` (and return device arrays, with no host copy). A leading batch
+    axis (``(B, T, m, n)`` -> ``(B, K, m, n)`` and back) runs ``B`` sets in one launch.
     Their cost is about ``K*m*n*(t_e/dt + 1)`` weight evaluations.
     """
 
@@ -92,17 +93,19 @@ class RollingShutterOperator:
 
     # ------------------------------------------------------------------ helpers
     def _to_device(self, x, shape, name):
+        """``x`` on the device and whether it was there; ``shape`` or a batch of it (a leading axis)."""
         import pyopencl.array as cla
 
-        if isinstance(x, cla.Array):
-            if x.shape != shape:
-                raise ValueError(f"{name} must have shape {shape}, got {x.shape}")
+        on_device = isinstance(x, cla.Array)
+        if not on_device:
+            x = check.finite_array(name, x)
+        if x.shape[-3:] != shape or x.ndim not in (3, 4) or (x.ndim == 4 and x.shape[0] < 1):
+            raise ValueError(f"{name} must have shape {shape} or (B, {', '.join(map(str, shape))}) for a batch "
+                             f"of B >= 1 sets, got {x.shape}")
+        if on_device:
             if x.dtype != self.dtype:
                 raise ValueError(f"{name} must have dtype {self.dtype.name} on the device, got {x.dtype}")
             return x, True
-        x = check.finite_array(name, x)
-        if x.shape != shape:
-            raise ValueError(f"{name} must have shape {shape}, got {x.shape}")
         return cla.to_device(self.queue, np.ascontiguousarray(x, dtype=self.dtype)), False
 
     def empty(self, shape):
@@ -116,10 +119,24 @@ class RollingShutterOperator:
         """Program definitions of the block kernels (``TILE_W`` pixels by ``TILE_R`` rows)."""
         return {"TILE_W": self.vector_width, "TILE_R": self.block_rows}
 
-    def block_grid(self, channels=1):
-        """Global and local sizes of a kernel with one work item per block of pixels."""
+    def block_grid(self, channels=1, kernels=()):
+        """Global and local sizes of a kernel with one work item per block of pixels (and channel).
+
+        Work groups stay within the device's limits and those of this operator's block kernels and
+        of ``kernels`` (others launched on the same grid).
+        """
         m, n = self.rig.shape
-        return block_grid(m, n, self.vector_width, self.block_rows, channels)
+        group = self.device.group_limit(self.program.forward, self.program.adjoint_scatter, *kernels, cap=64)
+        return block_grid(m, n, self.vector_width, self.block_rows, channels, group=group,
+                          max_items=self.device.max_work_item_sizes)
+
+    def element_launches(self, count, kernel):
+        """:func:`rsocl.device.launch.element_launches` within the device's and ``kernel``'s limits."""
+        return element_launches(count, self.device.group_limit(kernel, cap=64))
+
+    def sets_of(self, array, per_set) -> int:
+        """How many sets a device array holds: its size over ``per_set`` (a domain or range shape)."""
+        return array.size // int(np.prod(per_set))
 
     def _shape_args(self):
         """``(m, n)`` as kernel arguments."""
@@ -130,34 +147,36 @@ class RollingShutterOperator:
 
     # ------------------------------------------------------------------ H, Hᵀ
     def forward_into(self, f, out):
-        """``out = H f`` for device arrays (no checks, no allocation)."""
-        self.program.forward(self.queue, *self.block_grid(self.K), f.data, out.data, *self._geometry(),
-                             np.int32(self.T), np.int32(self.L), *self._shape_args())
+        """``out = H f`` for device arrays (no checks, no allocation); a batch in one launch."""
+        sets = self.sets_of(f, self.domain_shape)
+        self.program.forward(self.queue, *self.block_grid(self.K * sets), f.data, out.data, *self._geometry(),
+                             np.int32(self.K), np.int32(self.T), np.int32(self.L), *self._shape_args())
         return out
 
     def adjoint_into(self, g, out, base=None):
-        """``out = base + Hᵀ g`` (``base`` may be None) for device arrays."""
+        """``out = base + Hᵀ g`` (``base`` may be None) for device arrays; a batch in one launch."""
         import pyopencl as cl
 
         if base is None:
-            for gsize, lsize, offset in element_launches(out.size):
+            for gsize, lsize, offset in self.element_launches(out.size, self.program.zero):
                 self.program.zero(self.queue, gsize, lsize, out.data, global_offset=offset)
         elif base is not out:
             cl.enqueue_copy(self.queue, out.data, base.data)
-        self.program.adjoint_scatter(self.queue, *self.block_grid(), g.data, out.data, *self._geometry(),
-                                     np.int32(self.K), np.int32(self.T), np.int32(self.L), *self._shape_args())
+        self.program.adjoint_scatter(self.queue, *self.block_grid(self.sets_of(g, self.range_shape)), g.data,
+                                     out.data, *self._geometry(), np.int32(self.K), np.int32(self.T),
+                                     np.int32(self.L), *self._shape_args())
         return out
 
     def forward(self, f):
-        """Snapshots ``H f``: ``(T, m, n)`` -> ``(K, m, n)``."""
+        """Snapshots ``H f``: ``(T, m, n)`` -> ``(K, m, n)`` (or a batch, ``(B, T, m, n)`` -> ``(B, K, m, n)``)."""
         f_dev, on_device = self._to_device(f, self.domain_shape, "f")
-        out = self.forward_into(f_dev, self.empty(self.range_shape))
+        out = self.forward_into(f_dev, self.empty(f_dev.shape[:-3] + self.range_shape))
         return out if on_device else out.get()
 
     def adjoint(self, g):
-        """Back-projection ``Hᵀ g``: ``(K, m, n)`` -> ``(T, m, n)``."""
+        """Back-projection ``Hᵀ g``: ``(K, m, n)`` -> ``(T, m, n)`` (or a batch, with a leading axis)."""
         g_dev, on_device = self._to_device(g, self.range_shape, "g")
-        out = self.adjoint_into(g_dev, self.empty(self.domain_shape))
+        out = self.adjoint_into(g_dev, self.empty(g_dev.shape[:-3] + self.domain_shape))
         return out if on_device else out.get()
 
     # ------------------------------------------------------------------ H Hᵀ

@@ -2,8 +2,10 @@
 
 One iteration is the data step in three launches (``admm_dual``: dual update and
 ``v = theta + b``; ``admm_project``: ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)`` per pixel;
-``admm_difference``: ``u = f - b``) and the regularizer's ``theta = denoise(u, lam/eta)``. Nothing
-crosses to the host but the few partial sums of the history.
+``admm_difference``: ``u = f - b``) and the regularizer's ``theta = denoise(u, lam/eta)``; a
+regularizer with a fused path takes the first and last of them into its own and the projection's
+launches. A batch of sets runs every launch once for all of them. Nothing crosses to the host but
+the few partial sums of the history.
 """
 
 from __future__ import annotations
@@ -11,11 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from rsocl.device.context import c_type
-from rsocl.device.launch import element_launches
+from rsocl.device.launch import batch_launches, element_launches
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.device.reduction import sum_sq_diff, sum_sq_diff_async
 
-__all__ = ["ADMM", "block_inverse"]
+__all__ = ["ADMM", "block_inverse", "state_bytes"]
 
 
 #: Eigenvalues of ``eta I + M`` below this fraction of the largest one (per pixel) are
@@ -42,6 +44,26 @@ def block_inverse(gram: np.ndarray, eta: float) -> np.ndarray:
     return np.einsum("...ij,...j,...kj->...ik", vec, inv, vec)
 
 
+def state_bytes(cube, K: int, dtype, projection: str, sets: int = 1, own_inverse: bool = False) -> int:
+    """Device memory of :class:`ADMM`'s own arrays, bytes: theta, b, f, u (``cube`` each), H·theta and the
+    per-set values of each of ``sets`` sets, and the inverse blocks (one set of them, or one per set)."""
+    itemsize = np.dtype(dtype).itemsize
+    per_cube = int(np.prod(cube)) * itemsize
+    snap = K * int(np.prod(cube[1:])) * itemsize
+    inverse = snap * K if projection == "exact" else snap
+    return sets * (4 * per_cube + 2 * snap + 16) + inverse * (sets if own_inverse else 1)
+
+
+def _per_set(name, value, sets):
+    """``value`` as a float64 array of ``sets`` values (a number is every set's)."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0:
+        return np.full(sets, float(arr))
+    if arr.shape != (sets,):
+        raise ValueError(f"{name} must be a number or one value per set ({sets}), got shape {arr.shape}")
+    return arr.copy()
+
+
 class ADMM:
     """ADMM state on the device; :meth:`step` runs one iteration.
 
@@ -49,16 +71,23 @@ class ADMM:
     ----------
     op : RollingShutterOperator
     g : pyopencl.array.Array
-        Snapshots ``(K, m, n)`` on the device.
+        Snapshots ``(K, m, n)`` on the device, or a batch of ``B`` sets ``(B, K, m, n)``: every
+        kernel then serves the whole batch in one launch, and the state has a leading batch axis.
     regularizer : rsocl.solver.regularizer.Regularizer
-    lam, eta : float
-        Regularization and penalty (``eta = 0``: GAP, no dual variable; denoiser weight ``lam``).
+    lam, eta : float or sequence of float
+        Regularization and penalty (``eta = 0``: GAP, no dual variable; denoiser weight ``lam``);
+        for a batch, one number for every set or one per set.
     projection : {"exact", "paper"}
     x0 : pyopencl.array.Array or None
-        Initial ``theta``; zeros when None.
-    valid : ndarray of bool, shape (K, m, n), or None
+        Initial ``theta`` (the state's shape); zeros when None.
+    valid : ndarray of bool, shape of ``g``, or None
         Snapshot pixels that enter the data term; the others (e.g. saturated ones)
         are left out: their rows of ``H`` are dropped from the projection.
+
+    When the regularizer has a fused path (``regularizer.fuses_dual``: the TV with ``fused > 0``),
+    the projection also writes the denoiser's input ``u = f - b`` and the denoiser's last launch
+    makes the next iteration's dual update (``b = theta - u``, ``f = theta + b``): no separate
+    passes for either after the first iteration.
     """
 
     def __init__(self, op: RollingShutterOperator, g, regularizer, *, lam, eta, projection="exact", x0=None,
@@ -66,69 +95,108 @@ class ADMM:
         import pyopencl as cl
         import pyopencl.array as cla
 
-        self.op, self.g, self.regularizer = op, g, regularizer
-        self.lam, self.eta, self.projection = float(lam), float(eta), projection
-        self.weight = self.lam / self.eta if self.eta > 0 else self.lam
-        queue, shape = op.queue, op.domain_shape
+        self.op, self.g, self.regularizer, self.projection = op, g, regularizer, projection
+        self.batched = g.ndim == 4
+        self.sets = op.sets_of(g, op.range_shape)
+        self.lams, self.etas = _per_set("lam", lam, self.sets), _per_set("eta", eta, self.sets)
+        self.weights = np.where(self.etas > 0, self.lams / np.where(self.etas > 0, self.etas, 1.0), self.lams)
+        queue = op.queue
+        batch = (self.sets,) if self.batched else ()
+        shape = batch + op.domain_shape
         self.valid = None
         if valid is not None and not np.all(valid):
             self.valid = cla.to_device(queue, np.ascontiguousarray(valid, dtype=op.dtype))
-        if projection == "exact":
-            gram = op.gram()
-            if self.valid is not None:
-                keep = np.moveaxis(np.asarray(valid, dtype=np.float64), 0, -1)      # (m, n, K)
-                mask = keep[..., :, None] * keep[..., None, :]
-                inverse = block_inverse(gram * mask, self.eta) * mask
-            else:
-                inverse = block_inverse(gram, self.eta)
-            inverse = np.moveaxis(inverse, (2, 3), (0, 1))
-            self.inverse = cla.to_device(queue, np.ascontiguousarray(inverse, dtype=op.dtype))
-        elif self.valid is not None:
-            psi = np.where(valid, op.psi, np.inf)    # r / (eta + inf) = 0: left out
-            self.inverse = cla.to_device(queue, np.ascontiguousarray(psi, dtype=op.dtype))
-        else:
-            self.inverse = op.psi_device()
+        self.own_inverse, inverse = self._inverses(op, projection, valid, batch)
+        self.inverse = cla.to_device(queue, np.ascontiguousarray(inverse, dtype=op.dtype))
+        self.eta_device = cla.to_device(queue, self.etas.astype(op.dtype))
+        self.dual_on = cla.to_device(queue, (self.etas > 0).astype(np.int32))
         self.theta = cla.zeros(queue, shape, op.dtype) if x0 is None else x0.copy()
         self.b = cla.zeros(queue, shape, op.dtype)
         self.f = self.theta.copy()
         self.u = cla.empty(queue, shape, op.dtype)
-        self.hx = cla.empty(queue, op.range_shape, op.dtype)
+        self.hx = cla.empty(queue, batch + op.range_shape, op.dtype)
         self.program = op.device.program(
             ["admm.cl"], REAL=c_type(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
             NCH=op.K, PROJECTION_EXACT=int(projection == "exact"), **op.tile_defines)
-        self.voxels = element_launches(int(np.prod(shape)))     # exact grids: no bounds tests
-        self.g_norm2 = sum_sq_diff(g, weights=self.valid)
+        self.per_set = int(np.prod(op.domain_shape))
+        dev, prog = op.device, self.program                       # exact grids: no bounds tests
+        self.voxels = batch_launches(self.per_set, self.sets, dev.group_limit(prog.admm_dual, cap=64))
+        self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
+        self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project,))
+        self.fused = bool(getattr(regularizer, "fuses_dual", False))
+        self.g_norm2 = sum_sq_diff(g, weights=self.valid, sets=self.sets if self.batched else None)
         self.iteration = 0
         cl.enqueue_barrier(queue)
 
+    @property
+    def lam(self):
+        """``lam``: a float, or one per set (array) for a batch."""
+        return self.lams if self.batched else float(self.lams[0])
+
+    @property
+    def eta(self):
+        """``eta``: a float, or one per set (array) for a batch."""
+        return self.etas if self.batched else float(self.etas[0])
+
+    @property
+    def weight(self):
+        """The denoiser's weight ``lam / eta`` (``lam`` where ``eta = 0``): a float, or one per set."""
+        return self.weights if self.batched else float(self.weights[0])
+
+    def _inverses(self, op, projection, valid, batch):
+        """Whether every set has its own inverse blocks, and the blocks (``(K, K, m, n)`` or ``(K, m, n)``
+        per set): one set of blocks serves the batch unless ``eta`` or the valid pixels differ."""
+        sets = self.sets
+        valid = None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool).reshape((-1,) + op.range_shape)
+        own = (valid is not None and sets > 1 and not (valid == valid[:1]).all()) or (
+            projection == "exact" and len(set(self.etas)) > 1)
+        count = sets if own else 1
+        if projection == "paper":
+            psi = op.psi
+            blocks = [psi if valid is None else np.where(valid[i if own else 0], psi, np.inf)  # r/(eta+inf) = 0
+                      for i in range(count)]
+        else:
+            gram = op.gram()
+            blocks = []
+            for i in range(count):
+                if valid is None:
+                    inverse = block_inverse(gram, self.etas[i])
+                else:
+                    keep = np.moveaxis(valid[i if own else 0].astype(np.float64), 0, -1)      # (m, n, K)
+                    mask = keep[..., :, None] * keep[..., None, :]
+                    inverse = block_inverse(gram * mask, self.etas[i]) * mask
+                blocks.append(np.moveaxis(inverse, (2, 3), (0, 1)))
+        return int(own), np.stack(blocks) if own else blocks[0]
+
     @staticmethod
-    def buffers_bytes(op: RollingShutterOperator, projection: str) -> int:
-        """Device memory of the solver's own arrays (theta, b, f, u, H·theta, inverse blocks), bytes."""
-        cube = int(np.prod(op.domain_shape)) * op.dtype.itemsize
-        snap = int(np.prod(op.range_shape)) * op.dtype.itemsize
-        inverse = snap * op.K if projection == "exact" else snap
-        return 4 * cube + 2 * snap + inverse
+    def buffers_bytes(op: RollingShutterOperator, projection: str, sets: int = 1, own_inverse: bool = False) -> int:
+        """Device memory of the solver's own arrays for ``sets`` sets, bytes (:func:`state_bytes`)."""
+        return state_bytes(op.domain_shape, op.K, op.dtype, projection, sets, own_inverse)
 
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
-        op = self.op
-        update_dual = np.int32(self.eta > 0 and self.iteration > 0)
-        for gsize, lsize, offset in self.voxels:
-            self.program.admm_dual(op.queue, gsize, lsize, self.theta.data, self.b.data, self.f.data, update_dual,
-                                   global_offset=offset)
+        op, queue = self.op, self.op.queue
+        if not (self.fused and self.iteration > 0):           # else the denoiser made the dual update
+            update = np.int32(self.iteration > 0)
+            for gsize, lsize, offset in self.voxels:
+                self.program.admm_dual(queue, gsize, lsize, self.theta.data, self.b.data, self.f.data,
+                                       self.dual_on.data, update, np.int32(self.per_set), global_offset=offset)
         self.program.admm_project(
-            op.queue, *op.block_grid(), self.f.data, self.g.data, *op._geometry(), self.inverse.data,
-            op.dtype.type(self.eta), np.int32(op.T), np.int32(op.L), *op._shape_args())
-        for gsize, lsize, offset in self.voxels:
-            self.program.admm_difference(op.queue, gsize, lsize, self.f.data, self.b.data, self.u.data,
-                                         global_offset=offset)
-        self.regularizer.denoise(self.u, self.weight, out=self.theta)
+            queue, *self.blocks, self.f.data, self.g.data, *op._geometry(), self.inverse.data,
+            self.eta_device.data, np.int32(self.own_inverse), self.b.data, self.u.data, np.int32(self.fused),
+            np.int32(op.T), np.int32(op.L), *op._shape_args())
+        if self.fused:
+            self.regularizer.denoise_and_update(self.u, self.weight, self.theta, self.b, self.f, self.dual_on)
+        else:
+            for gsize, lsize, offset in self.elements:
+                self.program.admm_difference(queue, gsize, lsize, self.f.data, self.b.data, self.u.data,
+                                             global_offset=offset)
+            self.regularizer.denoise(self.u, self.weight, out=self.theta)
         self.iteration += 1
 
-    def residual(self) -> float:
-        """Relative data residual ``‖g - H theta‖ / ‖g‖`` over the valid snapshot pixels.
-
-        When ``g`` is all zero the absolute ``‖H theta‖`` is returned.
+    def residual(self):
+        """Relative data residual ``‖g - H theta‖ / ‖g‖`` over the valid snapshot pixels (one per set
+        for a batch). When ``g`` (of a set) is all zero the absolute ``‖H theta‖`` is returned.
         """
         return self.residual_async().result()
 
@@ -139,7 +207,8 @@ class ADMM:
         works on it while the partial sums travel to the host.
         """
         self.op.forward_into(self.theta, self.hx)
-        return PendingResidual(sum_sq_diff_async(self.g, self.hx, weights=self.valid), self.g_norm2)
+        sets = self.sets if self.batched else None
+        return PendingResidual(sum_sq_diff_async(self.g, self.hx, weights=self.valid, sets=sets), self.g_norm2)
 
 
 class PendingResidual:
@@ -148,8 +217,10 @@ class PendingResidual:
     def __init__(self, pending, g_norm2):
         self._pending, self._g_norm2 = pending, g_norm2
 
-    def result(self) -> float:
+    def result(self):
+        """The residual: a float, or one per set (float64 array) for a batch."""
         r2 = self._pending.result()
-        if self._g_norm2 == 0:
-            return float(np.sqrt(r2))
-        return float(np.sqrt(r2 / self._g_norm2))
+        if np.ndim(r2) == 0:
+            return float(np.sqrt(r2 / self._g_norm2)) if self._g_norm2 != 0 else float(np.sqrt(r2))
+        g2 = np.asarray(self._g_norm2)
+        return np.sqrt(np.where(g2 > 0, r2 / np.where(g2 > 0, g2, 1.0), r2))

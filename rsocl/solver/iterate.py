@@ -2,7 +2,8 @@
 
 :func:`run_iterations` books each iteration's residual (and PSNR with a ground truth) in a
 history, drives the progress bar, the callback and the ``tol`` stop; :func:`collect` reads the
-estimate back and assembles the :class:`~rsocl.solver.result.Result`.
+estimate back and assembles the :class:`~rsocl.solver.result.Result`. For a batch of sets every
+record is one value per set, and ``tol`` stops the batch when every set has met it.
 """
 
 from __future__ import annotations
@@ -36,27 +37,40 @@ class _History:
                     f"against psi (max psi = {psi:.3g}); use projection='exact' or raise eta.")
         else:
             hint = " Check lam, eta and the data scale."
+        if np.ndim(residual):
+            bad = np.flatnonzero(~np.isfinite(residual)).tolist()
+            return FloatingPointError(f"ADMM diverged at iteration {it + 1} in set(s) {bad}: the residuals are "
+                                      f"{np.asarray(residual)[bad].tolist()}.{hint}")
         return FloatingPointError(f"ADMM diverged at iteration {it + 1}: the residual is {residual}.{hint}")
 
+    def _psnr(self):
+        staged, solver = self.staged, self.solver
+        sets = solver.sets if solver.batched else None
+        mse = (sum_sq_diff(solver.theta, staged.truth, sets=sets) + staged.unsolved_sq) / self.total_size
+        with np.errstate(divide="ignore"):
+            db = 10 * np.log10(np.asarray(staged.data_range, dtype=np.float64) ** 2 / np.asarray(mse))
+        return np.where(np.asarray(mse) > 0, db, math.inf) if sets else (float(db) if mse > 0 else math.inf)
+
     def record(self, it, residual) -> bool:
-        """Book iteration ``it``'s residual; True when the run should stop after it."""
-        if not math.isfinite(residual):
+        """Book iteration ``it``'s residual (one per set for a batch); True when the run should stop after it."""
+        if not np.all(np.isfinite(residual)):
             raise self._diverged(it, residual)
-        values, staged, settings = self.values, self.staged, self.settings
+        values, settings = self.values, self.settings
         values["residual"].append(residual)
-        values["time"].append(time.perf_counter() - self.start)
-        if staged.truth is not None:
-            mse = (sum_sq_diff(self.solver.theta, staged.truth) + staged.unsolved_sq) / self.total_size
-            values["psnr"].append(10 * math.log10(staged.data_range ** 2 / mse) if mse > 0 else math.inf)
+        elapsed = time.perf_counter() - self.start
+        values["time"].append(np.full(np.shape(residual), elapsed) if np.ndim(residual) else elapsed)
+        if self.staged.truth is not None:
+            values["psnr"].append(self._psnr())
         if self.bar is not None:
             self.bar.update(1)
-            extra = {"psnr": f"{values['psnr'][-1]:.2f}"} if "psnr" in values else {}
-            self.bar.set_postfix(residual=f"{residual:.3g}", **extra)
+            extra = {"psnr": f"{np.min(values['psnr'][-1]):.2f}"} if "psnr" in values else {}
+            self.bar.set_postfix(residual=f"{np.max(residual):.3g}", **extra)
         if settings.callback is not None and settings.callback(it, residual, self.solver.theta):
             return True
         if settings.tol is not None and it > 0:
-            prev = values["residual"][-2]
-            if abs(prev - residual) <= settings.tol * max(residual, np.finfo(float).tiny):
+            prev = np.asarray(values["residual"][-2])
+            change = np.abs(prev - residual)
+            if np.all(change <= settings.tol * np.maximum(residual, np.finfo(float).tiny)):
                 return True
         return False
 
@@ -76,6 +90,8 @@ def run_iterations(solver, staged, settings, *, progress=False) -> dict:
                    mininterval=0.5, disable=None)
     rig = staged.op.rig
     history = _History(solver, staged, settings, rig.T * rig.shape[0] * rig.shape[1], bar)
+    if solver.batched and bar is not None:
+        bar.set_description(f"ADMM-{solver.regularizer.name}, {solver.sets} sets")
     pipelined = settings.callback is None and staged.truth is None and settings.tol is None
     staged.op.queue.finish()
     history.start = time.perf_counter()
@@ -102,15 +118,27 @@ def run_iterations(solver, staged, settings, *, progress=False) -> dict:
 def collect(solver, staged, problem, settings, reg, history) -> Result:
     """The datacube (unsolved sub-frames zero), checked finite, with the run's parameters."""
     op, solved, rig = staged.op, staged.solved, problem.rig
-    datacube = np.zeros((rig.T,) + rig.shape, dtype=op.dtype)
-    datacube[solved] = solver.theta.get()
-    if not np.all(np.isfinite(datacube)):
-        raise FloatingPointError("the reconstruction produced NaN or inf; check lam/eta and the data scale")
+    batch = () if problem.batch is None else (problem.batch,)
+    datacube = np.zeros(batch + (rig.T,) + rig.shape, dtype=op.dtype)
+    datacube[..., solved, :, :] = solver.theta.get()
+    finite = np.isfinite(datacube).reshape(problem.batch or 1, -1).all(axis=1)
+    if not finite.all():
+        where = "" if not batch else f" in set(s) {np.flatnonzero(~finite).tolist()}"
+        raise FloatingPointError(f"the reconstruction produced NaN or inf{where}; check lam/eta and the data scale")
     valid = problem.valid
+    sets = problem.batch or 1
+    saturated = np.zeros(sets, int) if valid is None else (~valid).reshape(sets, -1).sum(axis=1)
     params = {"regularizer": reg.name, "regularizer_options": dict(reg.values), "iterations": settings.iterations,
-              "lam": settings.lam, "eta": settings.eta, "projection": settings.projection,
+              "lam": _plain(solver.lam), "eta": _plain(solver.eta), "projection": settings.projection,
               "dtype": op.dtype.name, "device": op.device.name, "tol": settings.tol,
               "saturation": problem.saturation,
-              "saturated_pixels": 0 if valid is None else int(valid.size - valid.sum()),
+              "saturated_pixels": saturated.tolist() if batch else int(saturated.sum()),
               "solved_subframes": [solved.start, solved.stop]}
+    if batch:
+        params["sets"] = problem.batch
     return Result(datacube, history, rig, params)
+
+
+def _plain(value):
+    """A float, or a list of floats (one per set): what the parameters of a result hold."""
+    return value.tolist() if isinstance(value, np.ndarray) else value

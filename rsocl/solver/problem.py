@@ -16,6 +16,7 @@ from rsocl.common import validation as check
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import ADMM
+from rsocl.solver.batch import match_batch, memory_bytes, per_set_value
 
 __all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_settings", "stage_on_device"]
 
@@ -30,7 +31,8 @@ class Problem:
     """Checked host arrays: snapshots ``g`` ``(K, m, n)``, the rig, and the optional extras.
 
     ``valid`` marks the snapshot pixels that enter the data term (None: all of them);
-    ``x0`` and ``truth`` are ``(T, m, n)`` or None.
+    ``x0`` and ``truth`` are ``(T, m, n)`` or None. A batch of ``batch`` sets has a leading
+    axis of that length on ``g``, ``valid``, ``x0`` and ``truth`` (``batch`` is None for one set).
     """
 
     g: np.ndarray
@@ -39,6 +41,7 @@ class Problem:
     x0: np.ndarray | None = None
     truth: np.ndarray | None = None
     saturation: float | None = None
+    batch: int | None = None
 
 
 @dataclass(frozen=True)
@@ -65,43 +68,63 @@ class Settings:
         return replace(self, lam=recommended["lam"] if self.lam is None else self.lam,
                        eta=recommended["eta"] if self.eta is None else self.eta)
 
+    def for_batch(self, batch) -> "Settings":
+        """These settings for a problem of ``batch`` sets (None: one set); per-set values are checked
+        against the count (a ValueError naming the parameter)."""
+        for name in ("lam", "eta"):
+            match_batch(name, getattr(self, name), batch)
+        return self
 
-def _cube(name, value, shape):
+
+def _cube(name, value, shape, batch=None):
+    """``value`` checked as a ``(T, m, n)`` cube; for a batch also ``(B, T, m, n)`` (a single cube is every set's)."""
     if value is None:
         return None
     value = check.finite_array(name, value)
+    if batch is not None and value.shape == (batch,) + shape:
+        return value
     if value.shape != shape:
-        raise ValueError(f"{name} must have shape (T, m, n) = {shape}, got {value.shape}")
-    return value
+        extra = "" if batch is None else f" or (B, T, m, n) = {(batch,) + shape} for this batch"
+        raise ValueError(f"{name} must have shape (T, m, n) = {shape}{extra}, got {value.shape}")
+    return value if batch is None else np.broadcast_to(value, (batch,) + shape)
 
 
 def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
-    """Validate the snapshots and the arrays that go with them against ``rig``."""
+    """Validate the snapshots and the arrays that go with them against ``rig``.
+
+    ``g`` is ``(K, m, n)``, or ``(B, K, m, n)`` for a batch of ``B`` sets of the same rig.
+    """
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     g = check.finite_array("g", g)
     expected = (rig.n_channels,) + rig.shape
-    if g.shape != expected:
-        raise ValueError(f"g must have shape (K, m, n) = {expected} for this rig, got {g.shape}")
+    batch = g.shape[0] if g.ndim == 4 and g.shape[1:] == expected else None
+    if g.shape != expected and (batch is None or batch < 1):
+        raise ValueError(f"g must have shape (K, m, n) = {expected} for this rig, or (B, K, m, n) = "
+                         f"(B, {', '.join(map(str, expected))}) for a batch of B >= 1 sets, got {g.shape}")
     valid = None
     if saturation is not None:
         saturation = check.positive("saturation", saturation, "(snapshot units)")
         valid = g < saturation
-        if not valid.any():
-            raise ValueError(f"every snapshot pixel is >= saturation = {saturation!r}: nothing left to fit")
+        empty = ~valid.reshape(batch or 1, -1).any(axis=1)
+        if empty.any():
+            which = "" if batch is None else f" of set(s) {np.flatnonzero(empty).tolist()}"
+            raise ValueError(f"every snapshot pixel{which} is >= saturation = {saturation!r}: nothing left to fit")
     cube = (rig.T,) + rig.shape
-    return Problem(g, rig, valid, _cube("x0", x0, cube), _cube("truth", truth, cube), saturation)
+    return Problem(g, rig, valid, _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch), saturation,
+                   batch)
 
 
 def check_settings(*, iterations=None, lam=None, eta=None, tv_iterations=None, projection="exact", tol=None,
                    callback=None) -> Settings:
-    """Validate the solver settings (None keeps a default)."""
+    """Validate the solver settings (None keeps a default); ``lam``/``eta`` may give one value per set
+    (see :func:`rsocl.solver.batch.per_set_value`; :meth:`Settings.for_batch` checks the count)."""
     if callback is not None and not callable(callback):
         raise ValueError(f"callback must be callable, got {callback!r}")
     return Settings(
         iterations=check.positive_int("iterations", DEFAULTS["iterations"] if iterations is None else iterations),
-        lam=None if lam is None else check.non_negative("lam", lam),
-        eta=None if eta is None else check.non_negative("eta", eta),
+        lam=None if lam is None else per_set_value("lam", lam),
+        eta=None if eta is None else per_set_value("eta", eta),
         tv_iterations=None if tv_iterations is None else check.positive_int("tv_iterations", tv_iterations),
         projection=check.choice("projection", projection, {"exact", "paper"}),
         tol=None if tol is None else check.non_negative("tol", tol),
@@ -113,7 +136,7 @@ class Staged:
     """A problem on the device: the operator over the ``solved`` sub-frames and its arrays.
 
     ``truth``, ``data_range`` and ``unsolved_sq`` (the squared error of the sub-frames left
-    at zero) are set only when a ground truth was given.
+    at zero) are set only when a ground truth was given; for a batch they are one per set.
     """
 
     op: RollingShutterOperator
@@ -136,22 +159,29 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     rig = problem.rig
     solved = rig.sampled_range()
     op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=solved)
-    solved_cube = (op.T,) + rig.shape
-    cube_bytes = int(np.prod(solved_cube)) * op.dtype.itemsize
-    need = ADMM.buffers_bytes(op, settings.projection) + reg.workspace_bytes(solved_cube, op.dtype)
-    if problem.truth is not None:
-        need += cube_bytes
-    op.device.check_fits(f"ADMM with {reg.name} on T={op.T} x {rig.shape[0]} x {rig.shape[1]} "
-                         f"({op.dtype.name})", cube_bytes, total_bytes=need, dtype=op.dtype)
+    sets = problem.batch or 1
+    valid = problem.valid
+    own = (isinstance(settings.eta, tuple) and len(set(settings.eta)) > 1) or (
+        valid is not None and sets > 1 and not (valid == valid[:1]).all())
+    largest, need = memory_bytes(op, reg, settings.projection, sets, truth=problem.truth is not None,
+                                 own_inverse=own)
+    batch = "" if problem.batch is None else f"{sets} sets of "
+    op.device.check_fits(f"ADMM with {reg.name} on {batch}T={op.T} x {rig.shape[0]} x {rig.shape[1]} "
+                         f"({op.dtype.name})", largest, total_bytes=need, dtype=op.dtype)
 
     def upload(array):
         return cla.to_device(op.queue, np.ascontiguousarray(array, dtype=op.dtype))
 
-    staged = Staged(op, solved, upload(problem.g), None if problem.x0 is None else upload(problem.x0[solved]))
+    cut = (Ellipsis, solved, slice(None), slice(None))
+    staged = Staged(op, solved, upload(problem.g), None if problem.x0 is None else upload(problem.x0[cut]))
     truth = problem.truth
     if truth is not None:
-        staged.truth = upload(truth[solved])
-        staged.data_range = default_data_range(truth)
-        staged.unsolved_sq = sum(float(np.sum(part.astype(np.float64) ** 2))
-                                 for part in (truth[:solved.start], truth[solved.stop:]))
+        staged.truth = upload(truth[cut])
+        outside = (Ellipsis, np.r_[0:solved.start, solved.stop:rig.T], slice(None), slice(None))
+        unsolved = np.sum(truth[outside].astype(np.float64) ** 2, axis=(-3, -2, -1))
+        if problem.batch is None:
+            staged.data_range, staged.unsolved_sq = default_data_range(truth), float(unsolved)
+        else:
+            staged.data_range = np.array([default_data_range(t) for t in truth])
+            staged.unsolved_sq = unsolved
     return staged

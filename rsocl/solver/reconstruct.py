@@ -37,9 +37,14 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
                 truth=None, regularizer_options=None, saturation=None, progress=False) -> Result:
     """Reconstruct the ``(T, m, n)`` datacube from snapshots ``g`` ``(K, m, n)`` with ADMM.
 
+    A batch of ``B`` sets of the same rig, ``g`` of shape ``(B, K, m, n)``, is reconstructed in one
+    run: every kernel launch serves the whole batch, each set is solved as if alone (same result to
+    float rounding), and the result's datacube is ``(B, T, m, n)`` (see :class:`Result`;
+    :func:`rsocl.solver.sets.reconstruct_sets` sizes batches to the device).
+
     Parameters
     ----------
-    g : array_like, shape (K, m, n)
+    g : array_like, shape (K, m, n) or (B, K, m, n)
         Snapshots registered on the reference grid, in the units of the forward
         model (a scene in [0, 1] gives snapshots in [0, t_e/dt]).
     rig : Rig
@@ -47,11 +52,12 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         Registry name (``"tv"``) or an instance.
     iterations : int
         ADMM iterations (default 200).
-    lam : float
+    lam : float or sequence of float
         Regularization strength, >= 0 (default: the regularizer's ``recommended`` value,
-        else 0.1, for data in [0, 1]).
-    eta : float
-        ADMM penalty, >= 0 (default likewise, else 0.2); ``0`` runs GAP (denoiser weight ``lam``).
+        else 0.1, for data in [0, 1]); for a batch, one number or one per set.
+    eta : float or sequence of float
+        ADMM penalty, >= 0 (default likewise, else 0.2); ``0`` runs GAP (denoiser weight ``lam``);
+        for a batch, one number or one per set.
     tv_iterations : int
         Inner iterations of an iterative denoiser (default: the regularizer's own, 10 for TV).
     projection : {"exact", "paper"}
@@ -60,14 +66,16 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         OpenCL device spec and ``"float32"``/``"float64"``.
     callback : callable or None
         ``callback(iteration, residual, theta)`` after each iteration (``theta`` is a
-        device array); returning True stops the run.
+        device array; for a batch ``residual`` has one value per set); returning True stops the run.
     x0 : array_like or None
-        Initial estimate ``(T, m, n)``; zeros by default.
+        Initial estimate ``(T, m, n)`` (for a batch: every set's, or ``(B, T, m, n)``); zeros by default.
     tol : float or None
-        Stop when the relative change of the residual between iterations is below ``tol``.
+        Stop when the relative change of the residual between iterations is below ``tol``
+        (for a batch: in every set).
     truth : array_like or None
-        Ground truth ``(T, m, n)``: adds per-iteration PSNR (dB; peak 1 for data in
-        [0, 1], see :func:`rsocl.analysis.metrics.default_data_range`).
+        Ground truth ``(T, m, n)`` (for a batch ``(B, T, m, n)``, or one for every set): adds
+        per-iteration PSNR (dB; peak 1 for data in [0, 1], see
+        :func:`rsocl.analysis.metrics.default_data_range`).
     regularizer_options : dict or None
         Options of a regularizer given by name.
     saturation : float or None
@@ -80,7 +88,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                               projection=projection, tol=tol, callback=callback)
     reg = make_regularizer(regularizer, regularizer_options, settings.tv_iterations)
-    settings = settings.settled_for(reg, dtype)
+    settings = settings.settled_for(reg, dtype).for_batch(problem.batch)
     staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype)
     solver = ADMM(staged.op, staged.g, reg, lam=settings.lam, eta=settings.eta, projection=settings.projection,
                   x0=staged.x0, valid=problem.valid)

@@ -3,8 +3,10 @@
 A regularizer is the ``theta = denoise(f - b, weight = lam / eta)`` step of the
 ADMM in MODEL.md (Eq. 13): given a ``pyopencl.array.Array`` of shape
 ``(T, m, n)`` and a weight, it returns the denoised array, on the device, with
-the same shape and dtype. Subclasses declare their options and implement one
-hook, :meth:`Regularizer._denoise`.
+the same shape and dtype. A batch of sets, ``(B, T, m, n)``, takes one weight per set
+(or one for all) and is denoised set by set, each as if alone. Subclasses declare their
+options and implement one hook, :meth:`Regularizer._denoise`; one that sets ``batched = True``
+takes the whole batch in that hook (in one launch per pass), the others get one set at a time.
 """
 
 from __future__ import annotations
@@ -66,6 +68,14 @@ class Regularizer:
         Optional ``lam``/``eta`` that :func:`rsocl.solver.reconstruct` uses when the caller
         gives none (measured for this regularizer; data in [0, 1]).
 
+    batched : bool
+        True when ``_denoise`` takes a batch ``(B, T, m, n)`` with a float64 array of ``B``
+        weights itself; otherwise :meth:`denoise` hands it one set at a time.
+    fuses_dual : bool
+        True when the instance has ``denoise_and_update(u, weight, theta, b, f, dual)``: the
+        denoiser's output and the ADMM's next dual update in its own launches (see
+        :class:`rsocl.solver.admm.ADMM`).
+
     Subclasses implement ``_denoise(x, weight, out)``; they may override
     :meth:`workspace_bytes` so the solver can check memory before running.
     """
@@ -74,6 +84,8 @@ class Regularizer:
     options: dict = {}
     dtypes = ("float32", "float64")
     recommended: dict = {}
+    batched = False
+    fuses_dual = False
 
     def __init__(self, **options):
         unknown = sorted(set(options) - set(self.options))
@@ -94,37 +106,63 @@ class Regularizer:
         """Device memory (bytes) the denoiser allocates for an input of ``shape`` and ``dtype``."""
         return 0
 
-    def denoise(self, x, weight: float, out=None):
+    def denoise(self, x, weight, out=None):
         """Denoise the device array ``x`` with strength ``weight`` (>= 0); returns a device array.
 
-        ``weight = 0`` returns a copy of ``x``. ``out`` (same shape and dtype) is
+        ``x`` is ``(T, m, n)``, or a batch ``(B, T, m, n)`` with ``weight`` one number or one per set.
+        ``weight = 0`` returns a copy of ``x`` (of that set). ``out`` (same shape and dtype) is
         written and returned when given; whether it may be ``x`` itself is the
         regularizer's to say.
         """
+        import pyopencl as cl
         import pyopencl.array as cla
 
         if not isinstance(x, cla.Array):
             raise ValueError(f"{self.name}: x must be a pyopencl.array.Array, got {type(x).__name__}")
-        if x.ndim != 3:
-            raise ValueError(f"{self.name}: x must have shape (T, m, n), got {x.shape}")
+        if x.ndim not in (3, 4) or x.size == 0:
+            raise ValueError(f"{self.name}: x must have shape (T, m, n) or a batch (B, T, m, n), got {x.shape}")
         if np.dtype(x.dtype).name not in self.dtypes:
             raise ValueError(f"{self.name}: dtype {x.dtype} not supported; supported: {list(self.dtypes)}")
-        weight = float(weight)
-        if not (np.isfinite(weight) and weight >= 0):
-            raise ValueError(f"{self.name}: weight must be finite and >= 0, got {weight!r}")
+        weights = self.check_weights(weight, x.shape[0] if x.ndim == 4 else None)
         if out is None:
             out = cla.empty_like(x)
         elif out.shape != x.shape or out.dtype != x.dtype:
             raise ValueError(f"{self.name}: out must match x ({x.shape}, {x.dtype}), got {out.shape}, {out.dtype}")
-        if weight == 0:
-            import pyopencl as cl
-
+        if not np.any(weights):
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
         try:
-            return self._denoise(x, weight, out)
+            if x.ndim == 3:
+                return self._denoise(x, float(weights[0]), out)
+            if self.batched:
+                return self._denoise(x, weights, out)
+            return self._set_by_set(x, weights, out)
         except ValueError as exc:
             raise ValueError(f"{self!r}: {exc}") from exc
+
+    def check_weights(self, weight, sets=None) -> np.ndarray:
+        """``weight`` as a float64 array (one value, or ``sets`` values for a batch), each finite and >= 0."""
+        w = np.asarray(weight, dtype=np.float64) if not isinstance(weight, str) else None
+        if w is None or w.ndim > 1 or (w.ndim == 1 and (sets is None or w.shape != (sets,))):
+            per = "a number" if sets is None else f"a number or one per set ({sets} values)"
+            raise ValueError(f"{self.name}: weight must be {per}, got {weight!r}")
+        if not (np.all(np.isfinite(w)) and np.all(w >= 0)):
+            raise ValueError(f"{self.name}: weight must be finite and >= 0, got {weight!r}")
+        return np.broadcast_to(w, (1 if sets is None else sets,)).copy()
+
+    def _set_by_set(self, x, weights, out):
+        """A batch through ``_denoise`` one set at a time, in a ``(T, m, n)`` work array pair."""
+        import pyopencl as cl
+        import pyopencl.array as cla
+
+        one = cla.empty(x.queue, x.shape[1:], x.dtype)
+        done = cla.empty_like(one)
+        for i, w in enumerate(weights):
+            span = dict(byte_count=one.nbytes)
+            cl.enqueue_copy(x.queue, one.data, x.base_data, src_offset=x.offset + i * one.nbytes, **span)
+            result = self._denoise(one, float(w), done) if w > 0 else one
+            cl.enqueue_copy(x.queue, out.base_data, result.data, dst_offset=out.offset + i * one.nbytes, **span)
+        return out
 
     def _denoise(self, x, weight, out):  # pragma: no cover - abstract
         raise NotImplementedError

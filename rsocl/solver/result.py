@@ -13,19 +13,21 @@ __all__ = ["Result"]
 
 @dataclass
 class Result:
-    """A reconstruction.
+    """A reconstruction: of one set, or of a batch of sets of the same rig.
 
     Attributes
     ----------
-    datacube : ndarray, shape (T, m, n)
+    datacube : ndarray, shape (T, m, n), or (B, T, m, n) for a batch
         The estimate ``theta`` (same intensity units as the scene).
     history : dict of str -> ndarray
         Per iteration: ``residual`` (``‖g - H theta‖/‖g‖``), ``time`` (seconds since
         the start, wall clock, when the host has that iteration's residual: the device
-        has finished it), and ``psnr`` (dB, when a ground truth was given).
+        has finished it), and ``psnr`` (dB, when a ground truth was given). For a batch
+        each is ``(iterations, B)``: one column per set.
     rig : Rig
     params : dict
-        Everything needed to repeat the run.
+        Everything needed to repeat the run (for a batch: ``lam``, ``eta`` and
+        ``saturated_pixels`` one per set, ``sets`` the number of sets).
     """
 
     datacube: np.ndarray
@@ -38,6 +40,29 @@ class Result:
         return len(self.history["residual"])
 
     @property
+    def batch(self) -> int | None:
+        """Number of sets of a batch; None for a single set."""
+        return self.datacube.shape[0] if self.datacube.ndim == 4 else None
+
+    @property
     def trimmed(self) -> np.ndarray:
-        """The ``T_se`` sub-frames kept by the rig's trimming rule."""
-        return self.datacube[self.rig.kept_subframes()]
+        """The ``T_se`` sub-frames kept by the rig's trimming rule (of every set of a batch)."""
+        return self.datacube[..., self.rig.kept_subframes(), :, :]
+
+    def set(self, index: int) -> "Result":
+        """Set ``index`` of a batch as a single-set :class:`Result` (its column of the history)."""
+        if self.batch is None:
+            raise ValueError("set() needs a batch result (datacube (B, T, m, n)); this one holds one set")
+        if not -self.batch <= int(index) < self.batch:
+            raise ValueError(f"index must be in [0, {self.batch - 1}] for a batch of {self.batch} sets, got {index}")
+        params = dict(self.params)
+        params.pop("sets", None)
+        for key in ("lam", "eta", "saturated_pixels"):
+            if isinstance(params.get(key), list):
+                params[key] = params[key][index]
+        history = {key: np.asarray(values)[:, index] for key, values in self.history.items()}
+        return Result(self.datacube[index], history, self.rig, params)
+
+    def sets(self) -> list:
+        """Every set of a batch as a single-set :class:`Result` (:meth:`set`); ``[self]`` for one set."""
+        return [self] if self.batch is None else [self.set(i) for i in range(self.batch)]

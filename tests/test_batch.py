@@ -1,0 +1,193 @@
+"""Batches of sets: every set of a batch equals its single-set reconstruction, and bad batches are named."""
+
+import numpy as np
+import pytest
+
+import rsocl
+from rsocl.model import reference as ref
+from rsocl.solver.sets import batch_size, reconstruct_sets
+
+from conftest import SMALL
+
+SHAPE = (7, 9) if SMALL else (11, 13)
+
+
+@pytest.fixture(scope="module")
+def sets():
+    """Three sets of one rig (odd sizes), with their ground truths."""
+    rig = rsocl.Rig.paper_array(4, SHAPE, t_e=1e-4, t_r=3e-5)
+    rng = np.random.default_rng(7)
+    truth = rng.random((3, rig.T) + rig.shape)
+    truth[1] *= 0.5                       # the sets differ in scale, so a mix-up shows
+    return rig, truth, np.stack([ref.forward(rig, t) for t in truth])
+
+
+def _tol(dtype):
+    return 2e-6 if dtype == "float32" else 1e-12
+
+
+@pytest.mark.parametrize("projection", ["exact", "paper"])
+def test_each_set_equals_its_single_set_reconstruction(sets, dtype, projection):
+    rig, truth, g = sets
+    lam, eta = [0.05, 0.1, 0.02], [0.3, 0.0, 0.5]            # per set; the second set is GAP
+    kw = dict(iterations=4 if SMALL else 7, tv_iterations=4, projection=projection, dtype=dtype)
+    batch = rsocl.reconstruct(g, rig, lam=lam, eta=eta, truth=truth, **kw)
+    assert batch.datacube.shape == (3, rig.T) + rig.shape and batch.batch == 3
+    assert batch.history["residual"].shape == batch.history["psnr"].shape == (kw["iterations"], 3)
+    assert batch.params["lam"] == lam and batch.params["eta"] == eta and batch.params["sets"] == 3
+    for i in range(3):
+        one = rsocl.reconstruct(g[i], rig, lam=lam[i], eta=eta[i], truth=truth[i], **kw)
+        scale = np.abs(one.datacube).max()
+        np.testing.assert_allclose(batch.datacube[i], one.datacube, atol=_tol(dtype) * scale)
+        np.testing.assert_allclose(batch.history["residual"][:, i], one.history["residual"], rtol=1e-5)
+        np.testing.assert_allclose(batch.history["psnr"][:, i], one.history["psnr"], atol=1e-4)
+        alone = batch.set(i)
+        assert alone.batch is None and alone.params["lam"] == lam[i] and alone.datacube.shape == one.datacube.shape
+
+
+def test_batch_matches_the_numpy_reference(sets, dtype):
+    rig, truth, g = sets
+    kw = dict(iterations=5, lam=0.05, eta=0.3, tv_iterations=3)
+    got = rsocl.reconstruct(g, rig, dtype=dtype, regularizer_options={"temporal_weight": 2.0}, **kw).datacube
+    for i in range(3):
+        want = ref.admm(rig, g[i], temporal_weight=2.0, **kw)
+        np.testing.assert_allclose(got[i], want, atol=(2e-4 if dtype == "float32" else 1e-10) * np.abs(want).max())
+
+
+def test_saturation_x0_and_a_shared_truth_per_set(sets):
+    rig, truth, g = sets
+    level = float(np.quantile(g, 0.9))
+    x0 = np.random.default_rng(3).random((3, rig.T) + rig.shape)
+    kw = dict(iterations=4, lam=0.05, eta=0.3, tv_iterations=3, saturation=level)
+    batch = rsocl.reconstruct(g, rig, x0=x0, truth=truth[0], **kw)
+    for i in range(3):
+        one = rsocl.reconstruct(g[i], rig, x0=x0[i], truth=truth[0], **kw)
+        np.testing.assert_allclose(batch.datacube[i], one.datacube, atol=2e-6 * np.abs(one.datacube).max())
+        assert batch.params["saturated_pixels"][i] == one.params["saturated_pixels"] == int((g[i] >= level).sum())
+    # one x0 for every set is every set's start
+    shared = rsocl.reconstruct(g, rig, x0=x0[0], **kw)
+    one = rsocl.reconstruct(g[2], rig, x0=x0[0], **kw)
+    np.testing.assert_allclose(shared.datacube[2], one.datacube, atol=2e-6 * np.abs(one.datacube).max())
+
+
+def test_a_batch_of_one_set_and_a_regularizer_without_batches(sets):
+    rig, truth, g = sets
+    kw = dict(iterations=3, lam=0.05, eta=0.3)
+    one = rsocl.reconstruct(g[:1], rig, **kw)
+    assert one.datacube.shape == (1, rig.T) + rig.shape
+    np.testing.assert_array_equal(one.datacube[0], rsocl.reconstruct(g[0], rig, **kw).datacube)
+    # the DCT takes one set at a time (batched = False): the batch still equals each set alone
+    batch = rsocl.reconstruct(g[:2], rig, regularizer="dct", **kw)
+    for i in range(2):
+        alone = rsocl.reconstruct(g[i], rig, regularizer="dct", **kw).datacube
+        np.testing.assert_allclose(batch.datacube[i], alone, atol=2e-6 * np.abs(alone).max())
+
+
+def test_operator_and_tv_take_a_batch_in_one_call(device, dtype, rng):
+    import pyopencl.array as cla
+    from rsocl_plugins.tv import TV
+
+    rig = rsocl.Rig.paper_array(4, SHAPE, t_e=1e-4, t_r=3e-5)
+    op = rsocl.RollingShutterOperator(rig, device=device, dtype=dtype)
+    f = rng.random((2,) + op.domain_shape)
+    g = op.forward(f)
+    assert g.shape == (2,) + op.range_shape
+    tol = 1e-5 if dtype == "float32" else 1e-12
+    for i in range(2):
+        np.testing.assert_allclose(g[i], op.forward(f[i]), rtol=tol, atol=tol)
+        np.testing.assert_allclose(op.adjoint(g)[i], op.adjoint(g[i]), rtol=tol, atol=tol)
+    # TV: one weight per set; no temporal difference across the set boundary (a constant set stays constant)
+    x = np.stack([rng.random(op.domain_shape), np.full(op.domain_shape, 0.25)]).astype(dtype)
+    x[1, 0] = 0.75                                          # an edge in time inside the second set
+    tv = TV(iterations=6, temporal_weight=1.5)
+    out = tv.denoise(cla.to_device(device.queue, x), [0.2, 0.0]).get()
+    want = ref.tv_chambolle(x[0], 0.2, 6, 1.5)
+    np.testing.assert_allclose(out[0], want, atol=1e-4 if dtype == "float32" else 1e-10)
+    np.testing.assert_array_equal(out[1], x[1])             # weight 0: the set is copied
+    both = tv.denoise(cla.to_device(device.queue, x), 0.3).get()
+    for i in range(2):
+        np.testing.assert_allclose(both[i], ref.tv_chambolle(x[i], 0.3, 6, 1.5),
+                                   atol=1e-4 if dtype == "float32" else 1e-10)
+
+
+def test_sums_per_set(device, rng):
+    import pyopencl.array as cla
+    from rsocl.device.reduction import sum_sq_diff
+
+    a, b = rng.random((5, 3, 7)), rng.random((5, 3, 7))
+    got = sum_sq_diff(cla.to_device(device.queue, a), cla.to_device(device.queue, b), sets=5)
+    np.testing.assert_allclose(got, ((a - b) ** 2).sum(axis=(1, 2)), rtol=1e-12)
+    with pytest.raises(ValueError, match="sets must be >= 1 and divide"):
+        sum_sq_diff(cla.to_device(device.queue, a), sets=4)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(lam=[0.1, 0.2]), r"lam must have one value per set: 3 for this batch, got 2"),
+    (dict(eta=[0.1, 0.2, 0.3, 0.4]), r"eta must have one value per set: 3 for this batch, got 4"),
+    (dict(lam=[0.1, -1, 0.2]), r"lam\[1\] must be >= 0"),
+    (dict(eta=[[0.1]]), r"eta must be a number >= 0 or a sequence"),
+    (dict(x0=np.zeros((2, 1, 1, 1))), r"x0 must have shape \(T, m, n\)"),
+])
+def test_bad_batch_arguments_are_named(sets, kwargs, match):
+    rig, truth, g = sets
+    with pytest.raises(ValueError, match=match):
+        rsocl.reconstruct(g, rig, iterations=1, **kwargs)
+
+
+def test_bad_batch_shapes_are_named(sets):
+    rig, truth, g = sets
+    with pytest.raises(ValueError, match=r"g must have shape \(K, m, n\).*or \(B, K, m, n\)"):
+        rsocl.reconstruct(g[:, :3], rig)
+    with pytest.raises(ValueError, match=r"g must have shape.*B >= 1"):
+        rsocl.reconstruct(g[:0], rig)
+    with pytest.raises(ValueError, match=r"truth must have shape .*for this batch"):
+        rsocl.reconstruct(g, rig, truth=truth[:2])
+    with pytest.raises(ValueError, match=r"lam has 3 values \(one per set\), but g holds one set"):
+        rsocl.reconstruct(g[0], rig, lam=[0.1, 0.1, 0.1])
+    with pytest.raises(ValueError, match=r"set\(s\) \[1\]"):
+        rsocl.reconstruct(g * np.array([1.0, 1e9, 1.0])[:, None, None, None], rig, saturation=1e3)
+    op = rsocl.RollingShutterOperator(rig)
+    with pytest.raises(ValueError, match=r"f must have shape .* or \(B, "):
+        op.forward(np.zeros((2, 3) + op.domain_shape))
+    with pytest.raises(ValueError, match=r"weight must be a number or one per set \(3 values\)"):
+        import pyopencl.array as cla
+        from rsocl_plugins.tv import TV
+
+        TV().denoise(cla.zeros(op.queue, (3,) + op.domain_shape, np.float32), [0.1, 0.2])
+
+
+def test_batch_size_follows_the_device_memory(sets, monkeypatch):
+    rig, truth, g = sets
+    device = rsocl.device.get_device()
+    assert batch_size(rig, sets=5, device=device) == 5
+    assert batch_size(rig, device=device, limit=7) == 7
+    one = rsocl.solver.batch.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32,
+                                          rsocl.solver.reconstruct.make_regularizer("tv"), "exact", 1)[1]
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(4.5 * one / 0.8)))
+    assert batch_size(rig, device=device) == 4
+    assert batch_size(rig, device=device, memory_fraction=0.4) == 2
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: one // 2))
+    with pytest.raises(ValueError, match="device memory"):
+        batch_size(rig, device=device)
+    for kwargs, match in [(dict(limit=0), "limit"), (dict(sets=0), "sets"), (dict(memory_fraction=2), "memory_fraction"),
+                          (dict(projection="diag"), "projection")]:
+        with pytest.raises(ValueError, match=match):
+            batch_size(rig, device=device, **kwargs)
+
+
+def test_reconstruct_sets_runs_batches_and_joins_them(sets):
+    rig, truth, g = sets
+    kw = dict(iterations=3, eta=0.3, tv_iterations=3)
+    lam = [0.05, 0.1, 0.02]
+    joined = reconstruct_sets(g, rig, batch=2, lam=lam, truth=truth, **kw)
+    whole = rsocl.reconstruct(g, rig, lam=lam, truth=truth, **kw)
+    np.testing.assert_allclose(joined.datacube, whole.datacube, atol=2e-6 * np.abs(whole.datacube).max())
+    assert joined.params["lam"] == lam and joined.params["batch"] == 2 and joined.params["sets"] == 3
+    assert joined.history["psnr"].shape == (3, 3)
+    np.testing.assert_allclose(joined.history["psnr"], whole.history["psnr"], atol=1e-4)
+    with pytest.raises(ValueError, match="lam must have one value per set: 3 sets, got 2"):
+        reconstruct_sets(g, rig, lam=[0.1, 0.2])
+    with pytest.raises(ValueError, match=r"g must hold S >= 1 sets"):
+        reconstruct_sets(g[0], rig)
+    with pytest.raises(ValueError, match="batch"):
+        reconstruct_sets(g, rig, batch=0)
