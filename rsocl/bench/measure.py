@@ -36,7 +36,7 @@ from dataclasses import asdict, replace
 
 import numpy as np
 
-from rsocl.bench.baseline import interp3d
+from rsocl.model.interpolation import interp3d
 from rsocl.bench.memory import device_memory_bytes
 from rsocl.bench.point import US, BenchPoint, _scene_name
 

@@ -10,7 +10,7 @@ The pieces, one module each (all re-exported here):
 
 * :mod:`rsocl.bench.point`: :class:`BenchPoint`, the knobs of one measurement;
 * :mod:`rsocl.bench.measure`: :func:`run_point`, how a point is measured;
-* :mod:`rsocl.bench.baseline`: :func:`interp3d`, the baseline that needs no solver;
+* :mod:`rsocl.model.interpolation`: :func:`interp3d`, the baseline that needs no solver;
 * :mod:`rsocl.bench.memory`: :func:`device_memory_bytes`, the device memory of a run;
 * :mod:`rsocl.bench.analysis`: :func:`pareto_front` and :func:`picks`;
 * :mod:`rsocl.bench.report`: ``bench.csv``, ``iterations.csv``, ``bench.md``, and the plots of
@@ -27,7 +27,7 @@ from pathlib import Path
 
 # the names of the former single module stay importable from here
 from rsocl.bench.analysis import SPEED_PICK_DB, pareto_front, picks  # noqa: F401
-from rsocl.bench.baseline import interp3d
+from rsocl.model.interpolation import interp3d
 from rsocl.bench.measure import _device_of, run_point
 from rsocl.bench.memory import device_memory_bytes
 from rsocl.bench.point import BASELINE, US, BenchPoint, BenchResult, on_iterations_line
