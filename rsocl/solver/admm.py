@@ -109,6 +109,18 @@ class ADMM:
         inverse = snap * op.K if projection == "exact" else snap
         return 4 * cube + 2 * snap + inverse
 
+    def restart(self, regularizer, lam, x0):
+        """Start over from ``theta = x0`` (a device array, copied) with another regularizer and
+        ``lam``; the data step (its inverse blocks, ``eta``, ``valid``) is kept."""
+        import pyopencl as cl
+
+        self.regularizer, self.lam = regularizer, float(lam)
+        self.weight = self.lam / self.eta if self.eta > 0 else self.lam
+        for dest in (self.theta, self.f):
+            cl.enqueue_copy(self.op.queue, dest.data, x0.data)
+        cl.enqueue_fill_buffer(self.op.queue, self.b.data, np.zeros(1, self.op.dtype), 0, self.b.nbytes)
+        self.iteration = 0
+
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
         op = self.op
