@@ -13,14 +13,12 @@ Four reconstructions then run with the same parameters and iteration count:
 and a Markdown table gives seconds per iteration, PSNR (peak 1), the speed-up over
 both baselines and the PSNR difference to the baseline of the same dtype.
 
-    python benchmarks/bench_admm.py --sizes 64 128 --iterations 20
+    python benchmarks/bench_admm.py --sizes 64 128 --iterations 20 --repeat 3 [--out docs/bench_admm.md]
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import statistics
 import sys
 import time
@@ -37,6 +35,7 @@ from rsocl.analysis.metrics import psnr  # noqa: E402
 from rsocl.model.scenes import builtin_scene, load_scene  # noqa: E402
 
 from numpy_admm_tv import admm_tv  # noqa: E402
+from provenance import DOCS, header_lines, write_page  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -62,7 +61,7 @@ def parse_args(argv=None):
     p.add_argument("--repeat", type=int, default=1,
                    help="rounds: each runs every implementation once, in turn; the table keeps each one's "
                         "fastest, the summary also gives the ratio round by round")
-    p.add_argument("--out", type=Path, default=None, help="also write the report as Markdown to this file")
+    p.add_argument("--out", type=Path, default=DOCS / "bench_admm.md", help="the Markdown page to write")
     return p.parse_args(argv)
 
 
@@ -82,35 +81,6 @@ def signed(x: float) -> str:
     """``x`` with a sign and 4 decimals; a difference that rounds to zero prints as ``+0.0000``."""
     text = f"{x:+.4f}"
     return "+0.0000" if text == "-0.0000" else text
-
-
-def machine(device_name: str) -> list:
-    cpu = platform.processor() or "unknown CPU"
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    cores = os.cpu_count()
-    try:
-        usable = len(os.sched_getaffinity(0))
-    except AttributeError:
-        usable = cores
-    import skimage
-
-    lines = [f"- CPU: {cpu}, {cores} logical cores ({usable} usable by this process)",
-             f"- OpenCL device (rsocl): {device_name}",
-             f"- Python {platform.python_version()}, NumPy {np.__version__}, scikit-image {skimage.__version__}, "
-             f"rsocl {rsocl.__version__}"]
-    blas = {k: v for k, v in os.environ.items() if k.startswith("OPENBLAS")}
-    if blas:
-        lines.append("- environment: " + ", ".join(f"{k}={v}" for k, v in sorted(blas.items())))
-    if hasattr(os, "getloadavg"):
-        lines.append("- load average at start: " + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
-    return lines
 
 
 def run_baseline(g, rig, truth, dtype, params):
@@ -171,19 +141,28 @@ def main(argv=None):
         raise SystemExit("--iterations, --tv-iterations and --repeat must be >= 1")
     if not (args.lam > 0 and args.eta > 0):
         raise SystemExit("--lam and --eta must be > 0 (the baseline is ADMM, not GAP)")
-    device_name = get_device(args.device).name
+    device = get_device(args.device)
     source = scene_source(args.video)
     params = {"iterations": args.iterations, "lam": args.lam, "eta": args.eta,
               "tv_iterations": args.tv_iterations}
 
-    header = ["# ADMM-TV: rsocl vs plain NumPy + scikit-image", ""]
-    header += machine(device_name)
-    header += [f"- scene: {source if source is not None else 'rsocl.model.scenes.builtin_scene'}; paper array, "
-               f"4 cameras, t_e = {T_E * 1e3:g} ms, t_r = {T_R * 1e6:g} us; lam = {args.lam:g}, "
-               f"eta = {args.eta:g}, {args.tv_iterations} TV iterations, {args.iterations} ADMM iterations"
-               + (f", best of {args.repeat} interleaved rounds" if args.repeat > 1 else ""),
-               "- s/iteration: baseline = its loop; rsocl = history['time'][-1] / iterations (device-synced, "
-               "includes the per-iteration residual); PSNR with peak 1 on the [0, 1] scale", ""]
+    import skimage
+
+    header = header_lines("ADMM-TV: rsocl against plain NumPy + scikit-image", device,
+                          None if argv is None else [__file__, *argv])
+    if source is None:
+        scene = "rsocl.model.scenes.builtin_scene"
+    elif source.parent == DATA:
+        scene = f"../shared/data/{source.name}"
+    else:
+        scene = source.name
+    header[-1:] = [f"- scikit-image {skimage.__version__} (the baseline's TV)",
+                   f"- scene: {scene}; paper array, 4 cameras, t_e = {T_E * 1e3:g} ms, t_r = {T_R * 1e6:g} us; "
+                   f"lam = {args.lam:g}, eta = {args.eta:g}, {args.tv_iterations} TV iterations (rsocl's TV with "
+                   f"temporal weight 1, scikit-image's 3-D TV), {args.iterations} ADMM iterations"
+                   + (f", best of {args.repeat} interleaved rounds" if args.repeat > 1 else ""),
+                   "- s/iteration: baseline = its loop; rsocl = history['time'][-1] / iterations (device-synced, "
+                   "includes the per-iteration residual); PSNR with peak 1 on the [0, 1] scale", ""]
     print("\n".join(header), flush=True)
 
     columns = ["size", "T", "implementation", "dtype", "s/iteration", "PSNR (dB)",
@@ -227,10 +206,7 @@ def main(argv=None):
     body = table + ["", f"Speed-up per iteration (target: at least {TARGET:g}× at equal PSNR, ±{PSNR_TOLERANCE} dB):"]
     body += summary
     print("\n".join(body))
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text("\n".join(header + body) + "\n", encoding="utf-8")
-        print(f"\nwritten to {args.out}", file=sys.stderr)
+    write_page(args.out, header + body)
 
 
 if __name__ == "__main__":

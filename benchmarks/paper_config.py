@@ -7,12 +7,15 @@
    PSNR of both, their difference (target: within 0.05 dB), time per iteration and device
    memory of each.
 
-    python benchmarks/paper_config.py [--sets 3] [--device SPEC]
+Writes docs/paper_config.md (``--out``) with the machine, commit and date it was measured on.
+
+    python benchmarks/paper_config.py [--sets 3] [--device SPEC] [--out docs/paper_config.md]
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -22,43 +25,45 @@ import rsocl
 from rsocl.solver.admm import ADMM
 from rsocl.model.scenes import builtin_scene, load_scene
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import DOCS, header_lines, write_page  # noqa: E402
+
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 PAPER_FPS = 67.0
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sets", type=int, default=3, help="sets timed in the paper configuration")
-    parser.add_argument("--iterations", type=int, default=200)
-    parser.add_argument("--device", default=None)
-    args = parser.parse_args()
-    device = rsocl.device.get_device(args.device)
-    print(f"device: {device.name}\n")
-
+def paper_configuration(device, sets, iterations):
+    """Markdown lines: seconds per reconstructed set of the paper's configuration (compile excluded)."""
     rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
-    sets = [rsocl.RollingShutterOperator(rig, device=device).forward(builtin_scene(rig.shape, rig.T, seed=s))
-            for s in range(args.sets + 1)]
-    rsocl.reconstruct(sets[0], rig, iterations=2, device=device)          # compile once
+    snapshots = [rsocl.RollingShutterOperator(rig, device=device).forward(builtin_scene(rig.shape, rig.T, seed=s))
+                 for s in range(sets + 1)]
+    rsocl.reconstruct(snapshots[0], rig, iterations=2, device=device)          # compile once
     seconds = []
-    for g in sets[1:]:
+    for g in snapshots[1:]:
         t0 = time.perf_counter()
-        rsocl.reconstruct(g, rig, iterations=args.iterations, device=device)
+        rsocl.reconstruct(g, rig, iterations=iterations, device=device)
         seconds.append(time.perf_counter() - t0)
     per_set = float(np.median(seconds))
-    print(f"## Paper configuration: 4 cameras, 50x50, T = {rig.T}, {args.iterations} iterations, float32\n")
-    print(f"- {per_set:.2f} s per reconstructed set (median of {args.sets}); {1 / per_set:.3f} sets/s, "
-          f"i.e. {1 / per_set / PAPER_FPS:.4f} of the cameras' {PAPER_FPS:g} fps "
-          f"({PAPER_FPS * per_set:.0f}x slower than real time)")
-    print(f"- each set is {rig.T} sub-frames: {rig.T / per_set:.0f} reconstructed sub-frames/s\n")
+    spread = f", {min(seconds):.2f}-{max(seconds):.2f} s over the {sets} sets" if sets > 1 else ""
+    return [f"## Paper configuration: 4 cameras, 50x50, T = {rig.T}, {iterations} iterations, float32", "",
+            "Snapshots of the built-in scene (a different seed per set); each set is one `rsocl.reconstruct` call "
+            "(operator and solver set-up included, kernel compilation excluded).", "",
+            f"- {per_set:.2f} s per reconstructed set (median of {sets}{spread}); {1 / per_set:.2f} sets/s, "
+            f"i.e. {1 / per_set / PAPER_FPS:.4f} of the cameras' {PAPER_FPS:g} fps "
+            f"({PAPER_FPS * per_set:.0f}x slower than real time)",
+            f"- each set is {rig.T} sub-frames: {rig.T / per_set:.0f} reconstructed sub-frames/s", ""]
 
-    print("## float32 against float64 (64x64 paper array, default settings)\n")
-    print("| video | PSNR float32 | PSNR float64 | difference | ms/iteration f32 | f64 | device MiB f32 | f64 |")
-    print("|---|---|---|---|---|---|---|---|")
+
+def precision(device, iterations):
+    """Markdown lines: float32 against float64 on the shared videos (64x64, default settings)."""
+    lines = ["## float32 against float64 (64x64 paper array, default settings)", "",
+             "| video | PSNR float32 | PSNR float64 | difference | ms/iteration f32 | f64 | device MiB f32 | f64 |",
+             "|---|---|---|---|---|---|---|---|"]
     big = rsocl.Rig.paper_array(4, (64, 64), t_e=0.18e-3, t_r=35e-6)
     for video in ("runner40", "traffic48"):
         path = DATA / f"{video}.npz"
         if not path.exists():
-            print(f"| {video} | missing {path} | | | | | | |")
+            lines.append(f"| {video} | missing ../shared/data/{path.name} | | | | | | |")
             continue
         truth = load_scene(path, big.shape, big.T)
         g = rsocl.RollingShutterOperator(big, device=device, dtype="float64").forward(truth)
@@ -67,15 +72,34 @@ def main():
             if dtype == "float64" and not device.has_fp64:
                 continue
             rsocl.reconstruct(g, big, iterations=1, device=device, dtype=dtype)
-            res = rsocl.reconstruct(g, big, iterations=args.iterations, truth=truth, device=device, dtype=dtype)
+            res = rsocl.reconstruct(g, big, iterations=iterations, truth=truth, device=device, dtype=dtype)
             op = rsocl.RollingShutterOperator(big, device=device, dtype=dtype)
             reg = rsocl.common.registry.load("rsocl.regularizers", "tv")()
             mem = ADMM.buffers_bytes(op, "exact") + reg.workspace_bytes(op.domain_shape, op.dtype)
             row[dtype] = (res.history["psnr"][-1], res.history["time"][-1] / res.iterations * 1e3, mem / 2**20)
         if len(row) == 2:
             a, b = row["float32"], row["float64"]
-            print(f"| {video} | {a[0]:.3f} | {b[0]:.3f} | {a[0] - b[0]:+.3f} dB | {a[1]:.1f} | {b[1]:.1f} | "
-                  f"{a[2]:.1f} | {b[2]:.1f} |", flush=True)
+            lines.append(f"| {video} | {a[0]:.3f} | {b[0]:.3f} | {a[0] - b[0]:+.3f} dB | {a[1]:.1f} | {b[1]:.1f} | "
+                         f"{a[2]:.1f} | {b[2]:.1f} |")
+    return lines
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sets", type=int, default=3, help="sets timed in the paper configuration")
+    parser.add_argument("--iterations", type=int, default=200)
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--out", type=Path, default=DOCS / "paper_config.md", help="the Markdown page to write")
+    args = parser.parse_args(argv)
+    if args.sets < 1 or args.iterations < 1:
+        raise SystemExit("--sets and --iterations must be >= 1")
+    device = rsocl.device.get_device(args.device)
+    page = header_lines("The paper's configuration, and float32 against float64", device,
+                        None if argv is None else [__file__, *argv])
+    page += paper_configuration(device, args.sets, args.iterations)
+    page += precision(device, args.iterations)
+    print("\n".join(page))
+    write_page(args.out, page)
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@
  *   admm_difference (one work item per voxel) u = f - b     (input of the denoiser)
  *
  * Voxel-parallel passes keep neighbouring work items on neighbouring addresses, which
- * CPU vectorisers need (a per-pixel loop over the whole column ran 5x slower on PoCL).
+ * CPU vectorisers need (a per-pixel loop over the whole column takes 5x the time on PoCL).
  */
 #ifndef PROJECTION_EXACT
 #define PROJECTION_EXACT 1

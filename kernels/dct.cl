@@ -12,12 +12,12 @@
  * summation index and o the output index, so one kernel serves both directions
  * and consecutive outputs read consecutive table entries.
  *
- * Speed on PoCL 3 (CPU, 2 cores): computing the basis with cos() in the kernel
- * (called one lane at a time there) was 8-20x slower than this table; a plain
+ * Why a table and explicit vectors: on PoCL 3 (CPU) cos() is called one lane at a
+ * time, so computing the basis in the kernel costs 8-20x the table lookup; and a
  * one-output-per-work-item loop is not vectorised across work items (its trip
- * count L varies) and was 1.5-5x slower than the explicit vectors used here: every work item produces CH = 64 bytes
- * of consecutive outputs (16 floats or 8 doubles) as NV vectors of VW, so the
- * inner loop is vector multiply-adds on whole cache lines. */
+ * count L varies), 1.5-5x the time of the explicit vectors. Every work item
+ * produces CH = 64 bytes of consecutive outputs (16 floats or 8 doubles) as NV
+ * vectors of VW, so the inner loop is vector multiply-adds on whole cache lines. */
 
 #define DCT_CAT_(a, b) a##b
 #define DCT_CAT(a, b) DCT_CAT_(a, b)

@@ -11,7 +11,7 @@
 
 /* Launch with an exact grid (rsocl.device.launch.voxel_launches): there is no bounds test, and
  * neighbours across an edge are read at a clamped index and discarded with a select,
- * because PoCL turns a per-work-item `if` into masked loads and stores (2x slower).
+ * because PoCL turns a per-work-item `if` into masked loads and stores (2x the time).
  * Selects on y and s are uniform in a work group (a row); along x, where a per-lane
  * select costs PoCL a vector of 64-bit indices per row of 8 voxels, the kernels use:
  *  - xnext[x] = 1 for x < n - 1, else 0 (n values): the dual multiplies the x difference

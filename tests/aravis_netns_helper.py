@@ -110,7 +110,8 @@ def fake_checks(workdir):
     from gi.repository import Aravis  # noqa: F401  (import_aravis did require_version)
 
     from rsocl.hardware.backend import CameraError, CameraTimeout
-    from rsocl_plugins.aravis import AravisCamera, discover
+    from rsocl_plugins.aravis import AravisCamera
+    from rsocl_plugins.aravis_discovery import discover
 
     checks = Checks()
     config = {"address": "Fake_1", "interfaces": ["Fake"]}
@@ -228,7 +229,7 @@ def stop_fake_cameras(procs):
 
 def modified_genicam(workdir):
     """The fake camera's own GenICam XML with SFNC ``ExposureTime``, ``Mono12`` and ``SensorReadoutTime``."""
-    from rsocl_plugins.aravis import import_aravis
+    from rsocl_plugins.aravis_discovery import import_aravis
 
     Aravis, _ = import_aravis()
     Aravis.disable_interface("GigEVision")
@@ -265,7 +266,8 @@ def write_rig(path, formats, interfaces):
 
 def gige_checks(workdir):
     from rsocl.hardware.backend import CameraDisconnected, CameraTimeout
-    from rsocl_plugins.aravis import AravisCamera, discover, import_aravis
+    from rsocl_plugins.aravis import AravisCamera
+    from rsocl_plugins.aravis_discovery import discover, import_aravis
 
     import_aravis()
     checks = Checks()
@@ -317,7 +319,8 @@ def gige_checks(workdir):
 
         def c_capture(facts):
             try:
-                from rsocl.hardware.capture import capture_sets, load_raw
+                from rsocl.hardware.capture import capture_sets
+                from rsocl.hardware.capture_file import load_raw
             except ImportError as exc:
                 facts["skipped"] = f"rsocl.hardware.capture not available: {exc}"
                 return
@@ -399,7 +402,7 @@ def main(argv):
     workdir = Path(argv[2])
     workdir.mkdir(parents=True, exist_ok=True)
     # Before any Aravis discovery: only the interfaces the check needs.
-    from rsocl_plugins.aravis import import_aravis
+    from rsocl_plugins.aravis_discovery import import_aravis
 
     Aravis, _ = import_aravis()
     Aravis.disable_interface("USB3Vision")

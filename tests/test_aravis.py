@@ -29,7 +29,8 @@ import numpy as np
 import pytest
 
 from rsocl.hardware.backend import CameraError
-from rsocl_plugins.aravis import AravisCamera, convert_buffer
+from rsocl_plugins.aravis import AravisCamera
+from rsocl_plugins.aravis_formats import convert_buffer
 
 HELPER = Path(__file__).with_name("aravis_netns_helper.py")
 REQUIRE = os.environ.get("RSOCL_REQUIRE_ARAVIS") == "1"

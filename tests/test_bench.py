@@ -8,9 +8,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from rsocl.bench import run as bench
 from rsocl.bench.run import (BASELINE, COLUMNS, BenchPoint, build_points, device_memory_bytes, interp3d, pareto_front,
-                         parse_sweep, run_bench, run_point, write_outputs)
+                             parse_sweep, run_bench, run_point, write_outputs)
+from rsocl.cli import bench as bench_cli
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.solver.plan import crop_rig
 from rsocl.model.rig import Rig
@@ -171,12 +171,12 @@ def test_writers_without_sweeps_still_write_every_file(tmp_path):
 
 def test_cmd_bench_quick_end_to_end(tmp_path, capsys):
     parser = argparse.ArgumentParser(prog="rsocl")
-    bench.add_bench_parser(parser.add_subparsers(dest="command"))
+    bench_cli.add_parser(parser.add_subparsers(dest="command"))
     out = tmp_path / "b"
     args = parser.parse_args(["bench", "--quick", "--shape", "12", "--iterations", "4", "--out", str(out),
                               "--quiet", "--sweep", "cameras=1,2", "--sweep", "dt", "--sweep", "roi"])
-    assert args.func is bench.cmd_bench
-    assert bench.cmd_bench(args) == 0
+    assert args.func is bench_cli.cmd_bench
+    assert bench_cli.cmd_bench(args) == 0
     assert sorted(p.name for p in out.iterdir()) == sorted(FILES)
     line = capsys.readouterr().out
     assert "points in" in line and "quality:" in line
@@ -189,7 +189,7 @@ def test_cmd_bench_quick_end_to_end(tmp_path, capsys):
 
 def test_cmd_bench_missing_scene(tmp_path):
     parser = argparse.ArgumentParser(prog="rsocl")
-    bench.add_bench_parser(parser.add_subparsers(dest="command"))
+    bench_cli.add_parser(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["bench", "--scene", str(tmp_path / "nope.npz"), "--out", str(tmp_path)])
     with pytest.raises(FileNotFoundError, match="nope.npz"):
-        bench.cmd_bench(args)
+        bench_cli.cmd_bench(args)

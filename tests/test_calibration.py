@@ -300,10 +300,10 @@ ANGLES = (0, 90, 180, 270)
 def _calibrate(argv):
     import argparse
 
-    from rsocl.cli.calibrate import add_calibrate_parser, cmd_calibrate
+    from rsocl.cli.calibrate import add_parser, cmd_calibrate
 
     parser = argparse.ArgumentParser(prog="rsocl")
-    add_calibrate_parser(parser.add_subparsers(dest="command", required=True))
+    add_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(["calibrate"] + [str(a) for a in argv])
     args.quiet = True
     return cmd_calibrate(args)

@@ -8,7 +8,9 @@ import pytest
 
 from rsocl import reconstruct
 from rsocl.model import reference
-from rsocl.hardware.capture import CaptureFailed, add_capture_parser, capture_sets, cmd_capture, load_raw
+from rsocl.cli.capture import add_parser as add_capture_parser, cmd_capture
+from rsocl.hardware.capture import CaptureFailed, capture_sets
+from rsocl.hardware.capture_file import load_raw
 from rsocl.files.hdf5 import load_capture
 from rsocl.analysis.metrics import psnr
 from rsocl.model.rig import Rig
@@ -68,15 +70,15 @@ def test_capture_round_trip(tmp_path):
 
 
 def test_each_frame_is_written_before_the_next_is_requested(tmp_path, monkeypatch):
-    from rsocl.hardware import capture as capture_module
+    from rsocl.hardware import capture_file
 
     log = []
-    real_read, real_add = SimulatedCamera._read, capture_module._Writer.add_raw
+    real_read, real_add = SimulatedCamera._read, capture_file.CaptureWriter.add_raw
     monkeypatch.setattr(SimulatedCamera, "_read", lambda self, t: log.append(("read", self.index)) or
                         real_read(self, t))
     monkeypatch.setattr(SimulatedCamera, "_trigger", (lambda trig: lambda self: log.append(("trigger", self.index))
                                                       or trig(self))(SimulatedCamera._trigger))
-    monkeypatch.setattr(capture_module._Writer, "add_raw", lambda self, i, j, frame, cam: log.append(("write", i))
+    monkeypatch.setattr(capture_file.CaptureWriter, "add_raw", lambda self, i, j, frame, cam: log.append(("write", i))
                         or real_add(self, i, j, frame, cam))
     capture_sets(_rigfile(), tmp_path / "c.h5", sets=2)
     one_set = [("trigger", i) for i in range(4)] + [x for i in range(4) for x in (("read", i), ("write", i))]

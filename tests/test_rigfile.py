@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from rsocl.model.rig import Camera, Rig
-from rsocl.files.rigfile import RigFile, dumps_toml, load_rigfile, row_map_from_homography, save_rigfile
+from rsocl.files.rigfile import RigFile, load_rigfile, save_rigfile
+from rsocl.files.toml_writer import dumps_toml
+from rsocl.model.row_map import row_map_from_homography
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -40,7 +40,8 @@ import numpy as np
 import pytest
 
 from rsocl.hardware.backend import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
-from rsocl_plugins.v4l2 import EXPOSURE_UNIT, V4L2Camera, convert_frame
+from rsocl_plugins.v4l2 import EXPOSURE_UNIT, V4L2Camera
+from rsocl_plugins.v4l2_formats import convert_frame
 
 _real_mmap = mmap_module.mmap
 PAGE = mmap_module.PAGESIZE

@@ -15,7 +15,9 @@ The pieces, one module each (all re-exported here):
 * :mod:`rsocl.bench.analysis`: :func:`pareto_front` and :func:`picks`;
 * :mod:`rsocl.bench.report`: ``bench.csv``, ``iterations.csv``, ``bench.md``, and the plots of
   :mod:`rsocl.bench.plots`;
-* this module: the sweeps (:func:`build_points`, :func:`run_bench`) and the command line.
+* this module: the sweeps (:func:`build_points`, :func:`run_bench`).
+
+The command line, ``rsocl bench``, is :mod:`rsocl.cli.bench`.
 """
 
 from __future__ import annotations
@@ -23,20 +25,18 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import replace
-from pathlib import Path
 
-# the names of the former single module stay importable from here
 from rsocl.bench.analysis import SPEED_PICK_DB, pareto_front, picks  # noqa: F401
 from rsocl.model.interpolation import interp3d
 from rsocl.bench.measure import _device_of, run_point
 from rsocl.bench.memory import device_memory_bytes
-from rsocl.bench.point import BASELINE, US, BenchPoint, BenchResult, on_iterations_line
-from rsocl.bench.report import (COLUMNS, _num, markdown, tradeoff_lines, write_csv, write_iterations_csv,  # noqa: F401
-                           write_outputs)
+from rsocl.bench.point import BASELINE, BenchPoint, BenchResult, on_iterations_line
+from rsocl.bench.report import (COLUMNS, markdown, tradeoff_lines, write_csv, write_iterations_csv,  # noqa: F401
+                                write_outputs)
 
 __all__ = ["BenchPoint", "BenchResult", "SWEEPS", "BASELINE", "run_point", "interp3d", "device_memory_bytes",
-           "build_points", "run_bench", "pareto_front", "markdown", "write_csv", "write_outputs",
-           "add_bench_parser", "cmd_bench"]
+           "build_points", "parse_sweep", "run_bench", "canonical_device", "pareto_front", "picks", "markdown",
+           "write_csv", "write_outputs"]
 
 
 # ---------------------------------------------------------------------- sweeps
@@ -51,7 +51,7 @@ QUICK = {"cameras": [1, 2, 4, 8], "iterations": [0.1, 0.25, 0.5, 1.0], "tv_itera
          "dt": [1, 2, 4], "roi": [0.5, 0.75, 1.0], "regularizer": ["tv"]}
 
 
-def _canonical_device(spec):
+def canonical_device(spec):
     """``"P:D"`` of the device ``spec`` selects (so one device is one point whatever its spelling)."""
     from rsocl.device.context import list_devices
 
@@ -153,7 +153,7 @@ def build_points(default: BenchPoint, sweeps=None, *, quick=False, baseline=True
                 if knob == "regularizer":
                     point = _regularizer_point(default, value)
                 elif knob == "device":
-                    point = replace(default, device=_canonical_device(value))
+                    point = replace(default, device=canonical_device(value))
                 else:
                     point = replace(default, **{knob: value})
             except Exception as exc:                      # a broken plugin, an out-of-range value
@@ -207,7 +207,7 @@ def run_bench(default: BenchPoint, sweeps=None, *, quick=False, baseline=True, p
 
     start = time.perf_counter()
     load_start = _load()
-    default = replace(default, device=_canonical_device(default.device))
+    default = replace(default, device=canonical_device(default.device))
     points, notes = build_points(default, sweeps, quick=quick, baseline=baseline)
     cache = {} if cache is None else cache
     rows = []
@@ -241,77 +241,3 @@ def _load():
         return os.getloadavg()[0]
     except (AttributeError, OSError):
         return None
-
-
-# ---------------------------------------------------------------------- command line
-def add_bench_parser(subparsers):
-    """Add ``rsocl bench`` to the ``rsocl`` command's sub-parsers."""
-    import argparse
-
-    p = subparsers.add_parser(
-        "bench", help="sweep settings on a scene: PSNR/SSIM against seconds and memory; CSV, Markdown, plots",
-        description="Measure what each setting buys: sweeps one knob at a time around a default point "
-                    "(4 cameras, 64x64, 200 ADMM-TV iterations with 10 inner, float32, dt = t_r), with a "
-                    "3-D interpolation baseline; writes bench.csv, iterations.csv, bench.md, pareto.png, "
-                    "cameras.png and iterations.png.")
-    p.add_argument("--scene", default="builtin", help="'builtin' or a video file (.npz key 'video', .tif, .gif)")
-    p.add_argument("--sweep", action="append", default=None, metavar="NAME[=V1,V2,...]",
-                   help=f"sweep to run, repeatable: {', '.join(SWEEPS)} (default: all; --quick: "
-                        f"{', '.join(QUICK)})")
-    p.add_argument("--quick", action="store_true",
-                   help="32x32, 100 iterations, fewer values: about a minute on 2 CPU cores")
-    p.add_argument("--out", default="rsocl-bench", help="output folder (default ./rsocl-bench)")
-    p.add_argument("--device", default=None, help="OpenCL device for every point but the device sweep")
-    p.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs (default 180)")
-    p.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs (default 35)")
-    p.add_argument("--lam", type=float, default=None, help="regularization weight (default rsocl's)")
-    p.add_argument("--eta", type=float, default=None, help="ADMM penalty (default rsocl's)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar and no table, only the result line")
-    # testing and tuning knobs: the default point's grid side, cameras and iterations
-    p.add_argument("--shape", type=int, default=None, help=argparse.SUPPRESS)
-    p.add_argument("--cameras", type=int, default=None, help=argparse.SUPPRESS)
-    p.add_argument("--iterations", type=int, default=None, help=argparse.SUPPRESS)
-    p.add_argument("--tv-iterations", type=int, default=None, help=argparse.SUPPRESS)
-    p.set_defaults(func=cmd_bench)
-    return p
-
-
-def default_point(args) -> BenchPoint:
-    """The default point of a ``rsocl bench`` command line."""
-    from rsocl.solver.reconstruct import DEFAULTS
-
-    scene = args.scene
-    if scene != "builtin" and not Path(scene).exists():
-        raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
-    quick = bool(args.quick)
-
-    def pick(value, fallback):
-        return fallback if value is None else value
-
-    return BenchPoint(
-        scene=scene, cameras=pick(args.cameras, 4), shape=pick(args.shape, 32 if quick else 64),
-        iterations=pick(args.iterations, 100 if quick else DEFAULTS["iterations"]),
-        tv_iterations=pick(args.tv_iterations, DEFAULTS["tv_iterations"]),
-        device=_canonical_device(args.device), lam=pick(args.lam, DEFAULTS["lam"]), eta=pick(args.eta, DEFAULTS["eta"]),
-        t_e=args.t_e_us * US, t_r=args.t_r_us * US)
-
-
-def cmd_bench(args) -> int:
-    """``rsocl bench``: run the sweeps and write the files."""
-    default = default_point(args)
-    sweeps = None if not args.sweep else [parse_sweep(s) for s in args.sweep]
-    result = run_bench(default, sweeps, quick=args.quick, progress=not args.quiet)
-    if not result.rows:
-        raise ValueError("no point could be measured: " + "; ".join(result.notes))
-    files = write_outputs(result, args.out)
-    if not args.quiet:
-        print(markdown(result))
-        print("wrote " + ", ".join(str(f) for f in files))
-    else:
-        speed, quality = picks(result)
-        text = f"{len(result.rows)} points in {result.seconds:.0f} s; wrote {Path(args.out) / 'bench.md'}"
-        if quality is not None:
-            text += (f"; quality: {quality['label']} {_num(quality['psnr'], '.2f')} dB; "
-                     f"speed: {speed['label']} {_num(speed['psnr'], '.2f')} dB in {speed['seconds']:.2f} s")
-        print(text)
-    return 0

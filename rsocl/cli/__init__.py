@@ -1,4 +1,4 @@
-"""Layer 8, the ``rsocl`` command line: one module per group of subcommands."""
+"""Layer 8, the ``rsocl`` command line: one module per subcommand, the shared arguments in :mod:`~rsocl.cli.options`."""
 
 from rsocl.cli.main import build_parser, main
 

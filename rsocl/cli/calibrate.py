@@ -1,6 +1,6 @@
 """``rsocl calibrate``: measure homographies, row times and gains, and write them into a rig file.
 
-Wired into :mod:`rsocl.cli` with :func:`add_calibrate_parser`; the command is
+Wired into :mod:`rsocl.cli` with :func:`add_parser`; the command is
 :func:`cmd_calibrate`. Every measurement is optional, but at least one is
 needed:
 
@@ -39,7 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["add_calibrate_parser", "cmd_calibrate", "load_frames", "parse_points"]
+from rsocl.cli.options import say
+
+__all__ = ["add_parser", "cmd_calibrate", "load_frames", "parse_points"]
 
 _IMAGE_SUFFIXES = (".npy", ".png", ".tif", ".tiff")
 
@@ -134,7 +136,7 @@ def _per_camera(frames, C, what):
 
 
 # ---------------------------------------------------------------------- parser
-def add_calibrate_parser(subparsers):
+def add_parser(subparsers):
     """Add the ``calibrate`` sub-command to an :mod:`argparse` sub-parsers object; returns its parser."""
     p = subparsers.add_parser(
         "calibrate", help="measure homographies, t_r and gains and write them into a rig file",
@@ -176,11 +178,6 @@ def add_calibrate_parser(subparsers):
 
 
 # ---------------------------------------------------------------------- command
-def _say(args, *text):
-    if not getattr(args, "quiet", False):
-        print(*text, flush=True)
-
-
 def _nominal_angle(camera: dict, shape) -> float:
     """The rotation the rig file states for a camera (angle, or implied by its homography), degrees."""
     from rsocl.hardware.calibration import homography_angle
@@ -218,7 +215,7 @@ def _register(args, rigfile, updates):
         n = given.shape[1] if given is not None else 4
         reference_points = given[0] if given is not None else \
             detect_markers(frames[0], n, reference=reference, **options)
-        _say(args, "reference markers (camera 0): " + " ".join(f"{x:.2f},{y:.2f}" for x, y in reference_points))
+        say(args, "reference markers (camera 0): " + " ".join(f"{x:.2f},{y:.2f}" for x, y in reference_points))
     if len(reference_points) < 4:
         raise ValueError(f"a homography needs at least 4 markers, got {len(reference_points)}")
     detected, reprojected, outlines, titles = [], [], [], []
@@ -241,9 +238,9 @@ def _register(args, rigfile, updates):
         name = camera.get("name")
         titles.append(f"camera {c}" + (f" ({name})" if name else "") + f": {measured:.1f}°, "
                       f"rms {registration.rms_error:.2f} px")
-        _say(args, f"camera {c}: homography from {len(reference_points)} markers, rms reprojection "
-                   f"{registration.rms_error:.3f} px, rotation {measured:.2f}° (rig file: {angle:g}°), "
-                   f"sensor rows 0..{rows.max():.2f} over the ROI")
+        say(args, f"camera {c}: homography from {len(reference_points)} markers, rms reprojection "
+                  f"{registration.rms_error:.3f} px, rotation {measured:.2f}° (rig file: {angle:g}°), "
+                  f"sensor rows 0..{rows.max():.2f} over the ROI")
     return frames, detected, reprojected, outlines, titles
 
 
@@ -265,7 +262,7 @@ def _row_times(args, rigfile, updates):
         except ValueError as exc:
             raise ValueError(f"camera {c}: {exc}") from None
         message = check_row_time(t_r, camera["t_r"], args.tolerance, raise_error=False)
-        _say(args, f"camera {c}: {message}")
+        say(args, f"camera {c}: {message}")
         if message.startswith("t_r mismatch"):
             problems.append(f"camera {c}: {message}")
         updates[c]["t_r"] = t_r
@@ -281,7 +278,7 @@ def _gains(args, rigfile, updates):
     gains = flat_field_gain(frames, dark=args.dark)
     for c, gain in enumerate(gains):
         updates[c]["gain"] = float(gain)
-    _say(args, "gains relative to camera 0: " + ", ".join(f"{g:.4f}" for g in gains))
+    say(args, "gains relative to camera 0: " + ", ".join(f"{g:.4f}" for g in gains))
 
 
 def _updated(rigfile, updates):
@@ -303,7 +300,7 @@ def _updated(rigfile, updates):
     dt = rigfile.dt
     new_t_r = min(camera["t_r"] for camera in cameras)
     if dt is not None and math.isclose(dt, old_t_r, rel_tol=1e-9):
-        dt = new_t_r                                   # dt was the row time: keep it so
+        dt = new_t_r                                   # a dt equal to the row time follows the measured one
     try:
         return RigFile(shape=rigfile.shape, cameras=cameras, dt=dt, mask=rigfile.mask, path=rigfile.path)
     except ValueError as exc:
@@ -311,7 +308,7 @@ def _updated(rigfile, updates):
 
 
 def cmd_calibrate(args) -> int:
-    """Run ``rsocl calibrate`` with parsed ``args`` (see :func:`add_calibrate_parser`); returns 0.
+    """Run ``rsocl calibrate`` with parsed ``args`` (see :func:`add_parser`); returns 0.
 
     Raises ``ValueError`` / ``FileNotFoundError`` with a message naming the
     option and camera at fault; nothing is written then.
@@ -339,5 +336,5 @@ def cmd_calibrate(args) -> int:
         written.append(marker_overlay_png(png, frames, detected, reprojected, outlines=outlines, titles=titles))
     written.insert(0, save_rigfile(out, calibrated))
     rig = calibrated.rig()
-    _say(args, f"rig: {rig!r}\nwrote " + ", ".join(str(p) for p in written))
+    say(args, f"rig: {rig!r}\nwrote " + ", ".join(str(p) for p in written))
     return 0

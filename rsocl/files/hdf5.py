@@ -6,15 +6,8 @@ clobbers an existing one.
 
 Layout (format version 1)
 -------------------------
-Root attributes, both kinds:
-
-- ``rsocl_file``: ``"capture"`` or ``"reconstruction"``;
-- ``format_version``: ``1``;
-- ``rig``: JSON of :meth:`rsocl.model.rig.Rig.to_dict` in which each camera's
-  ``row_map`` array is replaced by ``{"dataset": "rig_row_maps/<camera index>"}``
-  (or ``null``); the row maps are float64 datasets at those paths;
-- human-readable copies (not read back): ``T``, ``T_se``, ``dt`` (seconds),
-  ``mask``, ``n_cameras``, ``n_channels``, ``shape``.
+Root attributes, both kinds: the header of :mod:`rsocl.files.hdf5_header` (kind, format
+version, the rig).
 
 Capture: dataset ``snapshots`` ``[K, m, n]``, optional ``truth`` ``[T, m, n]``,
 attribute ``meta`` (JSON object).
@@ -27,7 +20,6 @@ shape), attribute ``params`` (JSON object), group ``history`` of 1-D datasets
 from __future__ import annotations
 
 import json
-import numbers
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,16 +28,11 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.files.atomic import atomic_path
+from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, open_checked, read_rig, str_attr, write_header
 from rsocl.model.rig import Rig
 
 __all__ = ["Capture", "Reconstruction", "save_capture", "load_capture",
            "save_reconstruction", "load_reconstruction", "FORMAT_VERSION"]
-
-#: Version written to the ``format_version`` attribute; files with a larger
-#: version are refused.
-FORMAT_VERSION = 1
-
-_ROW_MAPS = "rig_row_maps"
 
 
 @dataclass(frozen=True)
@@ -95,108 +82,7 @@ class Reconstruction:
     truth: np.ndarray | None
 
 
-# ---------------------------------------------------------------------- JSON
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
-
-
-def _dumps(name: str, data) -> str:
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise ValueError(f"{name} must be a dict of str -> JSON-serialisable values, got {type(data).__name__}")
-    for key in data:
-        if not isinstance(key, str):
-            raise ValueError(f"{name} keys must be str, got {key!r}")
-    try:
-        return json.dumps(data, default=_json_default)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be JSON-serialisable (numbers, str, bool, None, lists, dicts, "
-                         f"NumPy scalars/arrays): {exc}") from None
-
-
-# ---------------------------------------------------------------------- rig
-def _write_rig(h5, rig: Rig) -> None:
-    """Store ``rig`` in the root of the open file ``h5`` (attributes + row-map datasets)."""
-    data = rig.to_dict()
-    for index, camera in enumerate(data["cameras"]):
-        row_map = camera.get("row_map")
-        if row_map is not None:
-            name = f"{_ROW_MAPS}/{index}"
-            h5.create_dataset(name, data=np.asarray(row_map, dtype=np.float64))
-            camera["row_map"] = {"dataset": name}
-    h5.attrs["rig"] = json.dumps(data, allow_nan=False)
-    h5.attrs["T"] = rig.T
-    h5.attrs["T_se"] = rig.T_se
-    h5.attrs["dt"] = rig.dt
-    h5.attrs["mask"] = rig.mask
-    h5.attrs["n_cameras"] = rig.C
-    h5.attrs["n_channels"] = rig.n_channels
-    h5.attrs["shape"] = np.asarray(rig.shape, dtype=np.int64)
-
-
-def _read_rig(h5, source: str) -> Rig:
-    try:
-        data = json.loads(_str_attr(h5, "rig", source))
-        for camera in data["cameras"]:
-            ref = camera.get("row_map")
-            if isinstance(ref, dict):
-                camera["row_map"] = np.asarray(h5[ref["dataset"]][()], dtype=np.float64)
-        return Rig.from_dict(data)
-    except (KeyError, TypeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{source}: the stored rig description is damaged ({exc!r})") from None
-
-
-# ---------------------------------------------------------------------- files
-def _str_attr(h5, name: str, source: str) -> str:
-    if name not in h5.attrs:
-        raise ValueError(f"{source}: attribute {name!r} is missing")
-    value = h5.attrs[name]
-    if isinstance(value, bytes):
-        value = value.decode("utf-8")
-    return str(value)
-
-
-def _write_header(h5, kind: str, rig: Rig) -> None:
-    h5.attrs["rsocl_file"] = kind
-    h5.attrs["format_version"] = FORMAT_VERSION
-    _write_rig(h5, rig)
-
-
-def _open_checked(path, kind: str):
-    """Open ``path`` read-only and check that it is an rsocl file of ``kind``."""
-    import h5py
-
-    path = Path(os.fspath(path))
-    if not path.exists():
-        raise FileNotFoundError(f"path: {kind} file {str(path)!r} does not exist")
-    try:
-        h5 = h5py.File(path, "r")
-    except OSError as exc:
-        raise ValueError(f"path: {str(path)!r} is not a readable HDF5 file ({exc})") from None
-    try:
-        found = h5.attrs.get("rsocl_file")
-        if isinstance(found, bytes):
-            found = found.decode("utf-8")
-        if found != kind:
-            what = "not an rsocl file" if found is None else f"an rsocl {found!r} file"
-            raise ValueError(f"path: {str(path)!r} is {what}, expected an rsocl {kind!r} file")
-        version = h5.attrs.get("format_version")
-        if version is None or not isinstance(version, numbers.Integral) or not 1 <= int(version) <= FORMAT_VERSION:
-            raise ValueError(f"path: {str(path)!r} has format_version {version!r}; this rsocl reads 1.."
-                             f"{FORMAT_VERSION}")
-    except BaseException:
-        h5.close()
-        raise
-    return h5
-
-
+# ---------------------------------------------------------------------- checks
 def _cube(name: str, array, expected_shape=None, what="") -> np.ndarray:
     array = check.finite_array(name, array)
     if array.ndim != 3:
@@ -253,13 +139,13 @@ def save_capture(path, snapshots, rig, *, truth=None, attrs=None) -> Path:
                       "[K = rig.n_channels, m, n] = rig's channels and shape")
     if truth is not None:
         truth = _cube("truth", truth, (rig.T, m, n), "[T = rig.T, m, n]")
-    meta = _dumps("attrs", attrs)
+    meta = dumps_json("attrs", attrs)
     path = Path(os.fspath(path))
     import h5py
 
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as h5:
-            _write_header(h5, "capture", rig)
+            write_header(h5, "capture", rig)
             h5.attrs["meta"] = meta
             h5.create_dataset("snapshots", data=snapshots)
             if truth is not None:
@@ -290,12 +176,12 @@ def load_capture(path) -> Capture:
         a newer format version) or its content is damaged.
     """
     source = str(path)
-    with _open_checked(path, "capture") as h5:
-        rig = _read_rig(h5, source)
+    with open_checked(path, "capture") as h5:
+        rig = read_rig(h5, source)
         if "snapshots" not in h5:
             raise ValueError(f"{source}: dataset 'snapshots' is missing")
         return Capture(snapshots=h5["snapshots"][()], rig=rig, truth=_optional(h5, "truth"),
-                       meta=json.loads(_str_attr(h5, "meta", source)))
+                       meta=json.loads(str_attr(h5, "meta", source)))
 
 
 # ---------------------------------------------------------------------- reconstruction
@@ -338,7 +224,7 @@ def save_reconstruction(path, datacube, rig, *, params=None, history=None, truth
                          f"1 <= T <= rig.T = {rig.T}, got {datacube.shape}")
     if truth is not None:
         truth = _cube("truth", truth, datacube.shape, "(the datacube's shape)")
-    params_json = _dumps("params", params)
+    params_json = dumps_json("params", params)
     traces = {}
     if history is not None:
         if not isinstance(history, dict):
@@ -356,7 +242,7 @@ def save_reconstruction(path, datacube, rig, *, params=None, history=None, truth
 
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as h5:
-            _write_header(h5, "reconstruction", rig)
+            write_header(h5, "reconstruction", rig)
             h5.attrs["params"] = params_json
             h5.create_dataset("datacube", data=datacube)
             if truth is not None:
@@ -389,8 +275,8 @@ def load_reconstruction(path) -> Reconstruction:
         If the file is not an rsocl reconstruction file or is damaged.
     """
     source = str(path)
-    with _open_checked(path, "reconstruction") as h5:
-        rig = _read_rig(h5, source)
+    with open_checked(path, "reconstruction") as h5:
+        rig = read_rig(h5, source)
         if "datacube" not in h5:
             raise ValueError(f"{source}: dataset 'datacube' is missing")
         history = {}
@@ -398,5 +284,5 @@ def load_reconstruction(path) -> Reconstruction:
             for name, dataset in h5["history"].items():
                 history[name] = dataset[()]
         return Reconstruction(datacube=h5["datacube"][()], rig=rig,
-                              params=json.loads(_str_attr(h5, "params", source)),
+                              params=json.loads(str_attr(h5, "params", source)),
                               history=history, truth=_optional(h5, "truth"))

@@ -18,6 +18,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.hardware.calibration._common import _homography, _origin, _points, _reference_grid, _shape, _transform
 from rsocl.hardware.calibration.markers import detect_markers, order_markers
+from rsocl.model.row_map import row_map_from_homography as model_row_map
 
 
 def estimate_homography(reference_points, sensor_points) -> np.ndarray:
@@ -156,7 +157,7 @@ def row_map_from_homography(H, shape) -> np.ndarray:
         within 1e-9 of an integer are snapped to it. Pass it as
         ``Camera(row_map=...)``. For a rotation (:func:`rotation_homography`)
         it equals ``Camera(angle).rows(shape)``. This is
-        :func:`rsocl.files.rigfile.row_map_from_homography` (one implementation for
+        :func:`rsocl.model.row_map.row_map_from_homography` (one implementation for
         the rig file and calibration); ``H`` is first scaled to
         ``H[2, 2] = 1`` so that ``H`` and ``-H`` give the same map.
 
@@ -166,13 +167,11 @@ def row_map_from_homography(H, shape) -> np.ndarray:
         If the ROI crosses the homography's horizon (some pixel maps to
         infinity or behind the camera).
     """
-    from rsocl.files.rigfile import row_map_from_homography as rigfile_row_map
-
     H = _homography("H", H)
     shape = _shape(shape)
     if H[2, 2] != 0:
         H = H / H[2, 2]
-    return rigfile_row_map(H, shape)
+    return model_row_map(H, shape)
 
 
 def reference_outline(H, shape, *, frame_origin=(0, 0), samples=16) -> np.ndarray:

@@ -1,0 +1,119 @@
+"""Where, when and on what a benchmark ran: the header of every page a benchmark writes to docs/.
+
+A page of measurements is only meaningful with the machine, the code and the time it was
+measured on, so every script in ``benchmarks/`` starts its page with :func:`header_lines`
+and writes it with :func:`write_page` (atomically: a failed run never leaves half a page).
+
+    date (UTC), git commit (short hash, ``-dirty`` when tracked files differ from it),
+    CPU model, logical cores (and how many this process may use), load average at start,
+    OpenCL platform / device / driver, Python, NumPy, pyopencl and rsocl versions,
+    and the command line that produced the page.
+"""
+
+from __future__ import annotations
+
+import datetime
+import os
+import platform
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+#: The repository root (benchmarks/ is one level below it).
+ROOT = Path(__file__).resolve().parents[1]
+#: Where the benchmarks write their pages.
+DOCS = ROOT / "docs"
+
+__all__ = ["ROOT", "DOCS", "git_revision", "cpu_model", "header_lines", "write_page"]
+
+
+def git_revision(root: Path = ROOT) -> str:
+    """``git rev-parse --short HEAD`` of ``root``, with ``-dirty`` when tracked files are modified.
+
+    Returns ``"unknown (not a git checkout)"`` where git or the repository is missing.
+    """
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown (not a git checkout)"
+    return head + ("-dirty" if dirty else "")
+
+
+def cpu_model() -> str:
+    """The CPU's model name from ``/proc/cpuinfo`` (Linux), else :func:`platform.processor`."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as handle:
+            for line in handle:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown CPU"
+
+
+def _cores() -> str:
+    cores = os.cpu_count()
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:
+        usable = cores
+    return f"{cores} logical cores ({usable} usable by this process)"
+
+
+def header_lines(title: str, device=None, argv=None) -> list:
+    """Markdown lines: ``# title`` and the provenance list, ending with a blank line.
+
+    Parameters
+    ----------
+    title : str
+        The page's title.
+    device : rsocl.device.Device, optional
+        The OpenCL device the measurements ran on (platform, device and driver are listed).
+    argv : list of str, optional
+        The script's arguments (default ``sys.argv``), shown as the command that reproduces the page.
+    """
+    import pyopencl as cl
+
+    import rsocl
+
+    argv = sys.argv if argv is None else argv
+    script = Path(argv[0]).resolve()
+    try:
+        script = script.relative_to(ROOT)
+    except ValueError:
+        pass
+    command = " ".join(["python", str(script)] + [shlex.quote(a) for a in argv[1:]])
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    lines = [f"# {title}", "",
+             f"- measured: {now}, git commit {git_revision()}",
+             f"- command: `{command}`",
+             f"- CPU: {cpu_model()}, {_cores()}"]
+    if hasattr(os, "getloadavg"):
+        lines.append("- load average at start: " + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
+    if device is not None:
+        dev = device.device
+        lines.append(f"- OpenCL device: {device.name} ({dev.version.strip()}; driver {dev.driver_version.strip()}; "
+                     f"{dev.max_compute_units} compute units)")
+    lines.append(f"- Python {platform.python_version()}, NumPy {np.__version__}, pyopencl {cl.VERSION_TEXT}, "
+                 f"rsocl {rsocl.__version__}")
+    return lines + [""]
+
+
+def write_page(path, lines) -> Path:
+    """Write ``lines`` (joined by newlines) to ``path`` atomically; returns the path.
+
+    The folder must exist (``FileNotFoundError`` otherwise, before anything is written).
+    """
+    from rsocl.files.atomic import atomic_path
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines).rstrip("\n") + "\n", encoding="utf-8")
+    print(f"written to {path}", file=sys.stderr)
+    return path

@@ -1,0 +1,77 @@
+"""The device node behind a ``v4l2`` camera: its path, the linuxpy import, OS errors as camera errors."""
+
+from __future__ import annotations
+
+import errno
+import functools
+import os
+
+from rsocl.hardware.backend import CameraDisconnected, CameraError
+
+__all__ = ["GONE", "UNSUPPORTED", "device_path", "import_linuxpy", "os_error", "os_errors"]
+
+#: errno of a device that went away (unplugged): CameraDisconnected.
+GONE = {errno.ENODEV, errno.ENXIO}
+#: errno of a request the driver does not implement.
+UNSUPPORTED = {errno.ENOTTY, errno.EINVAL, errno.ENODATA, errno.EOPNOTSUPP, errno.ENOSYS}
+
+
+def device_path(device) -> str:
+    """``0`` / ``"0"`` -> ``/dev/video0``; a path is kept as given."""
+    if isinstance(device, bool) or device is None:
+        raise ValueError(f"device must be a path like /dev/video0 or an index, got {device!r}")
+    if isinstance(device, int):
+        if device < 0:
+            raise ValueError(f"device index must be >= 0, got {device}")
+        return f"/dev/video{device}"
+    text = os.fspath(device).strip() if not isinstance(device, str) else device.strip()
+    if not text:
+        raise ValueError("device must be a path like /dev/video0 or an index, got an empty string")
+    if text.isdigit():
+        return f"/dev/video{int(text)}"
+    return text
+
+
+def import_linuxpy(name: str):
+    """``linuxpy.video.device``; a CameraError naming camera ``name`` and the extra to install when missing."""
+    try:
+        from linuxpy.video import device as lvd
+    except (ImportError, OSError) as exc:
+        raise CameraError(f"{name}: the v4l2 camera backend needs linuxpy (Linux only), which could not "
+                          f"be imported ({type(exc).__name__}: {exc}); install it with: "
+                          'pip install "rsocl[v4l2]"') from exc
+    return lvd
+
+
+def os_error(name: str, exc: OSError) -> CameraError:
+    """The camera error of ``exc``: CameraDisconnected when the device went away, else CameraError."""
+    if exc.errno in GONE:
+        return CameraDisconnected(f"{name}: the device went away ({os.strerror(exc.errno)}); "
+                                  "check the cable, then close and open the camera again")
+    reason = f"{os.strerror(exc.errno)} (errno {exc.errno})" if exc.errno else str(exc)
+    if exc.errno == errno.EBUSY:
+        reason += "; another program may be using the camera"
+    return CameraError(f"{name}: {reason}")
+
+
+def os_errors(fn):
+    """Decorate a camera hook (a method; the camera has ``name`` and ``_lvd``): errors as camera errors.
+
+    OSError -> :func:`os_error` (ENODEV -> CameraDisconnected), linuxpy's V4L2Error -> CameraError.
+    """
+
+    @functools.wraps(fn)
+    def hook(self, *args):
+        try:
+            return fn(self, *args)
+        except CameraError:
+            raise
+        except OSError as exc:
+            raise os_error(self.name, exc) from exc
+        except Exception as exc:
+            lvd = self._lvd
+            if lvd is not None and isinstance(exc, lvd.V4L2Error):
+                raise CameraError(f"{self.name}: {exc}") from exc
+            raise
+
+    return hook

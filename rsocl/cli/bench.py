@@ -1,0 +1,86 @@
+"""``rsocl bench``: sweep settings around a default point; PSNR/SSIM against seconds and memory, as files."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+__all__ = ["add_parser", "default_point", "cmd_bench"]
+
+
+def add_parser(subparsers):
+    """Add ``bench`` to the ``rsocl`` sub-parsers; returns its parser."""
+    from rsocl.bench.run import QUICK, SWEEPS
+
+    p = subparsers.add_parser(
+        "bench", help="sweep settings on a scene: PSNR/SSIM against seconds and memory; CSV, Markdown, plots",
+        description="Measure what each setting buys: sweeps one knob at a time around a default point "
+                    "(4 cameras, 64x64, 200 ADMM-TV iterations with 10 inner, float32, dt = t_r), with a "
+                    "3-D interpolation baseline; writes bench.csv, iterations.csv, bench.md, pareto.png, "
+                    "cameras.png and iterations.png.")
+    p.add_argument("--scene", default="builtin", help="'builtin' or a video file (.npz key 'video', .tif, .gif)")
+    p.add_argument("--sweep", action="append", default=None, metavar="NAME[=V1,V2,...]",
+                   help=f"sweep to run, repeatable: {', '.join(SWEEPS)} (default: all; --quick: "
+                        f"{', '.join(QUICK)})")
+    p.add_argument("--quick", action="store_true",
+                   help="32x32, 100 iterations, fewer values: about a minute on 2 CPU cores")
+    p.add_argument("--out", default="rsocl-bench", help="output folder (default ./rsocl-bench)")
+    p.add_argument("--device", default=None, help="OpenCL device for every point but the device sweep")
+    p.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs (default 180)")
+    p.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs (default 35)")
+    p.add_argument("--lam", type=float, default=None, help="regularization weight (default rsocl's)")
+    p.add_argument("--eta", type=float, default=None, help="ADMM penalty (default rsocl's)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no table, only the result line")
+    # testing and tuning knobs: the default point's grid side, cameras and iterations
+    p.add_argument("--shape", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--cameras", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--iterations", type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument("--tv-iterations", type=int, default=None, help=argparse.SUPPRESS)
+    p.set_defaults(func=cmd_bench)
+    return p
+
+
+def default_point(args):
+    """The default :class:`~rsocl.bench.point.BenchPoint` of a ``rsocl bench`` command line."""
+    from rsocl.bench.point import US, BenchPoint
+    from rsocl.bench.run import canonical_device
+    from rsocl.solver.reconstruct import DEFAULTS
+
+    scene = args.scene
+    if scene != "builtin" and not Path(scene).exists():
+        raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
+    quick = bool(args.quick)
+
+    def pick(value, fallback):
+        return fallback if value is None else value
+
+    return BenchPoint(
+        scene=scene, cameras=pick(args.cameras, 4), shape=pick(args.shape, 32 if quick else 64),
+        iterations=pick(args.iterations, 100 if quick else DEFAULTS["iterations"]),
+        tv_iterations=pick(args.tv_iterations, DEFAULTS["tv_iterations"]),
+        device=canonical_device(args.device), lam=pick(args.lam, DEFAULTS["lam"]), eta=pick(args.eta, DEFAULTS["eta"]),
+        t_e=args.t_e_us * US, t_r=args.t_r_us * US)
+
+
+def cmd_bench(args) -> int:
+    """Run the sweeps and write the files; returns 0 (a ValueError when no point could be measured)."""
+    from rsocl.bench.report import _num
+    from rsocl.bench.run import markdown, parse_sweep, picks, run_bench, write_outputs
+
+    default = default_point(args)
+    sweeps = None if not args.sweep else [parse_sweep(s) for s in args.sweep]
+    result = run_bench(default, sweeps, quick=args.quick, progress=not args.quiet)
+    if not result.rows:
+        raise ValueError("no point could be measured: " + "; ".join(result.notes))
+    files = write_outputs(result, args.out)
+    if not args.quiet:
+        print(markdown(result))
+        print("wrote " + ", ".join(str(f) for f in files))
+    else:
+        speed, quality = picks(result)
+        text = f"{len(result.rows)} points in {result.seconds:.0f} s; wrote {Path(args.out) / 'bench.md'}"
+        if quality is not None:
+            text += (f"; quality: {quality['label']} {_num(quality['psnr'], '.2f')} dB; "
+                     f"speed: {speed['label']} {_num(speed['psnr'], '.2f')} dB in {speed['seconds']:.2f} s")
+        print(text)
+    return 0

@@ -1,0 +1,45 @@
+"""``rsocl capture``: a rig file (TOML) -> a capture file (HDF5) of synchronized sets from the cameras."""
+
+from __future__ import annotations
+
+import sys
+
+__all__ = ["add_parser", "cmd_capture"]
+
+
+def add_parser(subparsers):
+    """Add ``capture`` to the ``rsocl`` sub-parsers; returns its parser."""
+    p = subparsers.add_parser(
+        "capture", help="rig file (TOML) -> capture file (HDF5): synchronized sets from the cameras",
+        description="Capture synchronized sets from the cameras of a rig file. Each raw frame is written "
+                    "before the next is requested, to OUT.partial, renamed to OUT at the end; if a camera "
+                    "fails, OUT keeps everything captured and records the failure, and the exit status is 1.")
+    p.add_argument("--rig", required=True, help="TOML rig file (seconds, degrees)")
+    p.add_argument("--out", required=True, help="capture file to write (.h5)")
+    p.add_argument("--sets", type=int, default=1, help="number of synchronized sets (default 1)")
+    p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for each frame (default 2)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar, only errors")
+    p.set_defaults(func=cmd_capture)
+    return p
+
+
+def cmd_capture(args) -> int:
+    """Run :func:`~rsocl.hardware.capture.capture_sets`: 0 on success, 1 when a camera failed (the file records it).
+
+    Bad arguments or rig files raise ValueError / FileNotFoundError (the CLI's exit status 2).
+    """
+    from rsocl.hardware.capture import CaptureFailed, capture_sets
+
+    quiet = bool(getattr(args, "quiet", False))
+    try:
+        path = capture_sets(args.rig, args.out, sets=args.sets, timeout=args.timeout, progress=not quiet)
+    except CaptureFailed as exc:
+        print(f"rsocl capture: error: {exc}", file=sys.stderr)
+        return 1
+    if not quiet:
+        from rsocl.files.hdf5 import load_capture
+
+        rig = load_capture(path).rig
+        print(f"wrote {path}: {args.sets} set(s) from {rig.C} camera(s), {rig.shape[0]}x{rig.shape[1]}, "
+              f"T = {rig.T} sub-frames", flush=True)
+    return 0

@@ -1,0 +1,33 @@
+"""``rsocl devices``: the OpenCL platforms and devices, and which one is the default."""
+
+from __future__ import annotations
+
+__all__ = ["add_parser", "cmd_devices"]
+
+
+def add_parser(subparsers):
+    """Add ``devices`` to the ``rsocl`` sub-parsers; returns its parser."""
+    p = subparsers.add_parser("devices", help="list OpenCL platforms and devices")
+    p.set_defaults(func=cmd_devices)
+    return p
+
+
+def cmd_devices(args) -> int:
+    """Print one line per device (``*`` marks the default); returns 1 when there is none."""
+    from rsocl.device.context import INSTALL_HINT, get_device, list_devices
+
+    found = list_devices()
+    if not found:
+        print(f"no OpenCL device found; {INSTALL_HINT}")
+        return 1
+    import pyopencl as cl
+
+    default = get_device(None).device
+    for pi, di, platform, dev in found:
+        mark = "*" if dev == default else " "
+        fp64 = "fp64" if "cl_khr_fp64" in dev.extensions else "no fp64"
+        print(f"{mark} {pi}:{di}  {platform.name.strip()} / {dev.name.strip()}  "
+              f"[{cl.device_type.to_string(dev.type)}, {dev.max_compute_units} units, "
+              f"{dev.global_mem_size / 2**30:.1f} GiB, max buffer {dev.max_mem_alloc_size / 2**30:.1f} GiB, {fp64}]")
+    print("* = default choice")
+    return 0

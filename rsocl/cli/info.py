@@ -1,0 +1,43 @@
+"""``rsocl info``: the numbers of a rig (T, N_s, T_se, compression ratio, effective frame rate, memory)."""
+
+from __future__ import annotations
+
+from rsocl.cli.options import US, add_rig_args, rig_from
+
+__all__ = ["add_parser", "cmd_info"]
+
+
+def add_parser(subparsers):
+    """Add ``info`` to the ``rsocl`` sub-parsers; returns its parser."""
+    p = subparsers.add_parser("info", help="T, N_s, T_se, compression ratio and effective fps of a rig")
+    add_rig_args(p, shape=(50, 50))
+    p.add_argument("--capture", default=None, help="read the rig from this capture file instead")
+    p.add_argument("--camera-fps", type=float, default=67.0, help="camera frame rate, Hz (default 67)")
+    p.set_defaults(func=cmd_info)
+    return p
+
+
+def cmd_info(args) -> int:
+    """Print one ``key  value`` line per quantity of the rig; returns 0."""
+    from rsocl.files.hdf5 import load_capture
+
+    rig = load_capture(args.capture).rig if args.capture else rig_from(args)
+    m, n = rig.shape
+    rows = [
+        ("cameras", f"{rig.C} ({rig.n_channels} snapshots)"),
+        ("ROI", f"{m} x {n} pixels"),
+        ("sub-frame dt", f"{rig.dt / US:g} µs ({rig.subframe_rate:,.0f} sub-frames/s)"),
+        ("mask", rig.mask),
+        ("T (sub-frames)", f"{rig.T}"),
+        ("N_s = ceil(t_e/t_r)", f"{rig.N_s}"),
+        ("t_e/dt (exact rule)", f"{rig.exposure_subframes:.2f}"),
+        ("T_se (trimmed)", f"{rig.T_se} (sub-frames {rig.kept_subframes().start}..{rig.kept_subframes().stop - 1}, "
+                           f"each seen by >= {rig.min_cameras} cameras)"),
+        ("compression ratio", f"{rig.compression_ratio:.2f}x (T_se / snapshots)"),
+        (f"effective fps at {args.camera_fps:g} fps", f"{rig.effective_fps(args.camera_fps):,.0f}"),
+        ("datacube", f"{rig.datacube_bytes(4) / 2**20:.2f} MiB in float32"),
+    ]
+    width = max(len(k) for k, _ in rows)
+    for key, value in rows:
+        print(f"{key:<{width}}  {value}")
+    return 0

@@ -1,0 +1,95 @@
+"""Arguments and output shared by the ``rsocl`` subcommands: the rig, the OpenCL device, the solver."""
+
+from __future__ import annotations
+
+__all__ = ["US", "add_rig_args", "rig_from", "add_device_args", "add_solver_args", "reg_options", "say",
+           "run_reconstruction", "quality_line"]
+
+#: One microsecond, seconds (the command line gives times in µs).
+US = 1e-6
+
+
+def add_rig_args(p, cameras=4, shape=(64, 64)):
+    """Add the rig group (cameras, ROI, t_e, t_r, dt in µs, mask) to parser ``p``."""
+    g = p.add_argument_group("rig (the paper's array: angles 0, 90, 180, 270, 45, 135, 225, 315)")
+    g.add_argument("--cameras", type=int, default=cameras, help=f"number of cameras, 1..8 (default {cameras})")
+    g.add_argument("--shape", type=int, nargs=2, default=list(shape), metavar=("M", "N"),
+                   help=f"ROI rows and columns, pixels (default {shape[0]} {shape[1]})")
+    g.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs (default 180)")
+    g.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs (default 35)")
+    g.add_argument("--dt-us", type=float, default=None, help="sub-frame duration, µs (default t_r)")
+    g.add_argument("--mask", choices=["exact", "binary"], default="exact", help="shutter weights (default exact)")
+
+
+def rig_from(args):
+    """The :class:`~rsocl.model.rig.Rig` of the arguments :func:`add_rig_args` added."""
+    from rsocl.model.rig import Rig
+
+    dt = None if args.dt_us is None else args.dt_us * US
+    return Rig.paper_array(args.cameras, tuple(args.shape), t_e=args.t_e_us * US, t_r=args.t_r_us * US,
+                           dt=dt, mask=args.mask)
+
+
+def add_device_args(p):
+    """Add ``--device``, ``--dtype`` and ``--quiet`` to parser ``p``."""
+    p.add_argument("--device", default=None,
+                   help="OpenCL device: 'P:D' indices from 'rsocl devices', or a name substring "
+                        "(default: RSOCL_DEVICE, PYOPENCL_CTX, else first GPU, else CPU)")
+    p.add_argument("--dtype", choices=["float32", "float64"], default="float32", help="device precision")
+    p.add_argument("--quiet", action="store_true", help="no progress bar, only errors and the result line")
+
+
+def add_solver_args(p):
+    """Add the solver group (iterations, lam, eta, inner iterations, projection, regularizer) to ``p``."""
+    from rsocl.solver.reconstruct import DEFAULTS
+
+    g = p.add_argument_group("solver (defaults for scenes in [0, 1])")
+    g.add_argument("--iterations", type=int, default=DEFAULTS["iterations"])
+    g.add_argument("--lam", type=float, default=None,
+                   help=f"regularization weight (default: the regularizer's recommendation, else {DEFAULTS['lam']})")
+    g.add_argument("--eta", type=float, default=None,
+                   help=f"ADMM penalty; 0 runs GAP (default: the regularizer's recommendation, else {DEFAULTS['eta']})")
+    g.add_argument("--tv-iterations", type=int, default=None, help="inner denoiser iterations (TV default 10)")
+    g.add_argument("--projection", choices=["exact", "paper"], default="exact")
+    g.add_argument("--regularizer", default="tv", help="regularizer name (see 'rsocl plugins')")
+    g.add_argument("--reg-opt", action="append", default=[], metavar="KEY=VALUE",
+                   help="regularizer option, repeatable")
+
+
+def reg_options(pairs):
+    """``["KEY=VALUE", ...]`` of ``--reg-opt`` -> ``{KEY: VALUE}`` (strings; the regularizer parses them)."""
+    options = {}
+    for pair in pairs:
+        if "=" not in pair:
+            raise ValueError(f"--reg-opt must be KEY=VALUE, got {pair!r}")
+        key, value = pair.split("=", 1)
+        options[key.strip()] = value.strip()
+    return options
+
+
+def say(args, *text):
+    """Print ``text`` unless ``--quiet``."""
+    if not getattr(args, "quiet", False):
+        print(*text, flush=True)
+
+
+def run_reconstruction(args, g, rig, truth=None):
+    """:func:`rsocl.reconstruct` of snapshots ``g`` with the solver and device arguments."""
+    from rsocl.solver.reconstruct import reconstruct
+
+    return reconstruct(g, rig, regularizer=args.regularizer, regularizer_options=reg_options(args.reg_opt),
+                       iterations=args.iterations, lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
+                       projection=args.projection, device=args.device, dtype=args.dtype, truth=truth,
+                       progress=not args.quiet)
+
+
+def quality_line(result, truth):
+    """``PSNR .. dB, SSIM .., N iterations in .. s (.. ms/iteration)`` (PSNR and SSIM only with a truth)."""
+    from rsocl.analysis.metrics import psnr, ssim
+
+    seconds = result.history["time"][-1]
+    text = f"{result.iterations} iterations in {seconds:.2f} s ({seconds / result.iterations * 1e3:.1f} ms/iteration)"
+    if truth is not None:
+        mean_ssim, _ = ssim(result.datacube, truth)
+        text = f"PSNR {psnr(result.datacube, truth):.2f} dB, SSIM {mean_ssim:.3f}, " + text
+    return text

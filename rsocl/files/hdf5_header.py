@@ -1,0 +1,142 @@
+"""The header every rsocl HDF5 file starts with: its kind, format version and the rig.
+
+Root attributes (format version 1):
+
+- ``rsocl_file``: ``"capture"`` or ``"reconstruction"``;
+- ``format_version``: ``1``;
+- ``rig``: JSON of :meth:`rsocl.model.rig.Rig.to_dict` in which each camera's
+  ``row_map`` array is replaced by ``{"dataset": "rig_row_maps/<camera index>"}``
+  (or ``null``); the row maps are float64 datasets at those paths;
+- human-readable copies (not read back): ``T``, ``T_se``, ``dt`` (seconds),
+  ``mask``, ``n_cameras``, ``n_channels``, ``shape``.
+
+:func:`write_header` writes them, :func:`open_checked` opens a file and checks its kind and
+version, :func:`read_rig` reads the rig back; JSON attributes go through :func:`dumps_json`.
+"""
+
+from __future__ import annotations
+
+import json
+import numbers
+import os
+from pathlib import Path
+
+import numpy as np
+
+from rsocl.model.rig import Rig
+
+__all__ = ["FORMAT_VERSION", "json_default", "dumps_json", "write_rig", "read_rig", "str_attr", "write_header",
+           "open_checked"]
+
+#: Version written to the ``format_version`` attribute; files with a larger
+#: version are refused.
+FORMAT_VERSION = 1
+
+_ROW_MAPS = "rig_row_maps"
+
+
+# ---------------------------------------------------------------------- JSON
+def json_default(value):
+    """``default`` for :func:`json.dumps`: NumPy scalars and arrays as numbers and lists, paths as str."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+
+def dumps_json(name: str, data) -> str:
+    """JSON text of the dict ``data`` (None: ``{}``); a ValueError naming ``name`` when it cannot be written."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{name} must be a dict of str -> JSON-serialisable values, got {type(data).__name__}")
+    for key in data:
+        if not isinstance(key, str):
+            raise ValueError(f"{name} keys must be str, got {key!r}")
+    try:
+        return json.dumps(data, default=json_default)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be JSON-serialisable (numbers, str, bool, None, lists, dicts, "
+                         f"NumPy scalars/arrays): {exc}") from None
+
+
+# ---------------------------------------------------------------------- rig
+def write_rig(h5, rig: Rig) -> None:
+    """Store ``rig`` in the root of the open file ``h5`` (attributes + row-map datasets)."""
+    data = rig.to_dict()
+    for index, camera in enumerate(data["cameras"]):
+        row_map = camera.get("row_map")
+        if row_map is not None:
+            name = f"{_ROW_MAPS}/{index}"
+            h5.create_dataset(name, data=np.asarray(row_map, dtype=np.float64))
+            camera["row_map"] = {"dataset": name}
+    h5.attrs["rig"] = json.dumps(data, allow_nan=False)
+    h5.attrs["T"] = rig.T
+    h5.attrs["T_se"] = rig.T_se
+    h5.attrs["dt"] = rig.dt
+    h5.attrs["mask"] = rig.mask
+    h5.attrs["n_cameras"] = rig.C
+    h5.attrs["n_channels"] = rig.n_channels
+    h5.attrs["shape"] = np.asarray(rig.shape, dtype=np.int64)
+
+
+def read_rig(h5, source: str) -> Rig:
+    """The rig :func:`write_rig` stored in the open file ``h5``; ``source`` names the file in errors."""
+    try:
+        data = json.loads(str_attr(h5, "rig", source))
+        for camera in data["cameras"]:
+            ref = camera.get("row_map")
+            if isinstance(ref, dict):
+                camera["row_map"] = np.asarray(h5[ref["dataset"]][()], dtype=np.float64)
+        return Rig.from_dict(data)
+    except (KeyError, TypeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{source}: the stored rig description is damaged ({exc!r})") from None
+
+
+# ---------------------------------------------------------------------- header
+def str_attr(h5, name: str, source: str) -> str:
+    """Root attribute ``name`` of ``h5`` as str; a ValueError naming ``source`` when it is missing."""
+    if name not in h5.attrs:
+        raise ValueError(f"{source}: attribute {name!r} is missing")
+    value = h5.attrs[name]
+    if isinstance(value, bytes):
+        value = value.decode("utf-8")
+    return str(value)
+
+
+def write_header(h5, kind: str, rig: Rig) -> None:
+    """Write the header (``rsocl_file = kind``, ``format_version``, the rig) to the open file ``h5``."""
+    h5.attrs["rsocl_file"] = kind
+    h5.attrs["format_version"] = FORMAT_VERSION
+    write_rig(h5, rig)
+
+
+def open_checked(path, kind: str):
+    """Open ``path`` read-only and check that it is an rsocl file of ``kind``."""
+    import h5py
+
+    path = Path(os.fspath(path))
+    if not path.exists():
+        raise FileNotFoundError(f"path: {kind} file {str(path)!r} does not exist")
+    try:
+        h5 = h5py.File(path, "r")
+    except OSError as exc:
+        raise ValueError(f"path: {str(path)!r} is not a readable HDF5 file ({exc})") from None
+    try:
+        found = h5.attrs.get("rsocl_file")
+        if isinstance(found, bytes):
+            found = found.decode("utf-8")
+        if found != kind:
+            what = "not an rsocl file" if found is None else f"an rsocl {found!r} file"
+            raise ValueError(f"path: {str(path)!r} is {what}, expected an rsocl {kind!r} file")
+        version = h5.attrs.get("format_version")
+        if version is None or not isinstance(version, numbers.Integral) or not 1 <= int(version) <= FORMAT_VERSION:
+            raise ValueError(f"path: {str(path)!r} has format_version {version!r}; this rsocl reads 1.."
+                             f"{FORMAT_VERSION}")
+    except BaseException:
+        h5.close()
+        raise
+    return h5

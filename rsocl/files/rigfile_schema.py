@@ -1,0 +1,172 @@
+"""The tables of a rig file checked against its schema and normalised (see :mod:`rsocl.files.rigfile`).
+
+Every error is a :class:`ValueError` naming the table and key (``camera[2].t_e``); times are
+seconds, angles degrees, shapes and ROIs pixels.
+"""
+
+from __future__ import annotations
+
+import numbers
+import os
+from pathlib import Path
+
+import numpy as np
+
+from rsocl.common import validation as check
+from rsocl.model.rig import Camera
+from rsocl.model.row_map import row_map_from_homography
+
+__all__ = ["RIG_KEYS", "CAMERA_KEYS", "check_rig_table", "check_camera", "resolve_path", "to_camera"]
+
+#: Keys of the ``[rig]`` table.
+RIG_KEYS = ("shape", "dt", "mask")
+#: Keys of a ``[[camera]]`` table, in the order a rig file is written.
+CAMERA_KEYS = ("backend", "name", "address", "angle", "row_map_file", "homography", "t_e", "t_r", "t_a", "t_d",
+               "frames", "gain", "roi", "pixel_format", "config")
+_GEOMETRY = ("angle", "row_map_file", "homography", "row_map")
+
+
+def _where(i, key):
+    return f"camera[{i}].{key}"
+
+
+def _int_list(name, value, length, minimum):
+    if not isinstance(value, (list, tuple, np.ndarray)) or len(value) != length:
+        raise ValueError(f"{name} must be a list of {length} integers, got {value!r}")
+    out = []
+    for j, v in enumerate(value):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Integral) or v < minimum[j]:
+            raise ValueError(f"{name}[{j}] must be an integer >= {minimum[j]}, got {v!r}")
+        out.append(int(v))
+    return out
+
+
+def check_rig_table(rig) -> dict:
+    """The ``[rig]`` table normalised: ``shape`` (tuple of 2 ints), ``dt`` (seconds or None), ``mask``."""
+    if not isinstance(rig, dict):
+        raise ValueError(f"[rig] must be a table, got {rig!r}")
+    unknown = sorted(set(rig) - set(RIG_KEYS))
+    if unknown:
+        raise ValueError(f"[rig] has unknown key(s) {unknown}; known: {list(RIG_KEYS)}")
+    if "shape" not in rig:
+        raise ValueError("rig.shape = [m, n] (rows, columns of the reference ROI, pixels) is required")
+    out = {"shape": tuple(_int_list("rig.shape", rig["shape"], 2, (1, 1)))}
+    out["dt"] = None if rig.get("dt") is None else check.positive("rig.dt", rig["dt"], "seconds")
+    out["mask"] = check.choice("rig.mask", rig.get("mask", "exact"), {"exact", "binary"})
+    return out
+
+
+def check_camera(i, cam, shape, base_dir):
+    """A normalised copy of camera table ``i`` (raises ValueError naming ``camera[i].key``)."""
+    if not isinstance(cam, dict):
+        raise ValueError(f"camera[{i}] must be a table, got {cam!r}")
+    unknown = sorted(set(cam) - set(CAMERA_KEYS) - {"row_map"})
+    if unknown:
+        raise ValueError(f"camera[{i}] has unknown key(s) {unknown}; known: {list(CAMERA_KEYS)}")
+    out = {}
+    backend = cam.get("backend")
+    if not isinstance(backend, str) or not backend:
+        raise ValueError(f"{_where(i, 'backend')} (camera plugin name, e.g. 'simulated') is required, got "
+                         f"{backend!r}")
+    out["backend"] = backend
+    if cam.get("name") is not None:
+        if not isinstance(cam["name"], str):
+            raise ValueError(f"{_where(i, 'name')} must be a string, got {cam['name']!r}")
+        out["name"] = cam["name"]
+    config = cam.get("config", {})
+    if not isinstance(config, dict):
+        raise ValueError(f"{_where(i, 'config')} must be a table of backend settings, got {config!r}")
+    config = dict(config)
+    if cam.get("address") is not None:
+        if "address" in config:
+            raise ValueError(f"camera[{i}]: give 'address' or 'config.address', not both")
+        config["address"] = cam["address"]
+    out["config"] = config
+
+    geometry = [key for key in _GEOMETRY if cam.get(key) is not None]
+    if "row_map_file" in geometry and "row_map" in geometry:
+        geometry.remove("row_map")  # the array loaded from that file: reload it
+    if len(geometry) > 1:
+        raise ValueError(f"camera[{i}]: give only one of 'angle', 'row_map_file', 'homography'; got {geometry}")
+    if "angle" in geometry:
+        out["angle"] = check.finite(_where(i, "angle"), cam["angle"])
+    elif "homography" in geometry:
+        H = cam["homography"]
+        try:
+            array = np.asarray(H, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{_where(i, 'homography')} must be a 3x3 list of numbers, got {H!r}") from None
+        try:
+            row_map_from_homography(array, shape)
+        except ValueError as exc:
+            raise ValueError(f"{_where(i, 'homography')}: {exc}") from None
+        out["homography"] = array.tolist()
+    elif "row_map_file" in geometry:
+        name = cam["row_map_file"]
+        if not isinstance(name, (str, os.PathLike)):
+            raise ValueError(f"{_where(i, 'row_map_file')} must be a path string, got {name!r}")
+        out["row_map_file"] = os.fspath(name)
+        out["row_map"] = _load_row_map(i, resolve_path(name, base_dir), shape)
+    elif "row_map" in geometry:  # built in Python, written as a .npy file by save_rigfile
+        out["row_map"] = _check_row_map(i, "row_map", cam["row_map"], shape)
+
+    for key, required, default in (("t_e", True, None), ("t_r", True, None), ("t_a", False, 0.0),
+                                   ("gain", False, 1.0), ("t_d", False, None)):
+        value = cam.get(key)
+        if value is None:
+            if required:
+                raise ValueError(f"{_where(i, key)} is required (seconds)")
+            if default is not None:
+                out[key] = default
+            continue
+        if key == "t_a":
+            out[key] = check.non_negative(_where(i, key), value, "seconds")
+        else:
+            out[key] = check.positive(_where(i, key), value, "" if key == "gain" else "seconds")
+    out["frames"] = check.positive_int(_where(i, "frames"), cam.get("frames", 1))
+    if cam.get("roi") is not None:
+        out["roi"] = _int_list(_where(i, "roi") + " ([x, y, width, height])", cam["roi"], 4, (0, 0, 1, 1))
+    if cam.get("pixel_format") is not None:
+        if not isinstance(cam["pixel_format"], str):
+            raise ValueError(f"{_where(i, 'pixel_format')} must be a string, got {cam['pixel_format']!r}")
+        out["pixel_format"] = cam["pixel_format"]
+    try:
+        to_camera(out)
+    except ValueError as exc:
+        raise ValueError(f"camera[{i}]: {exc}") from None
+    return out
+
+
+def resolve_path(name, base_dir) -> Path:
+    """``name`` relative to ``base_dir`` (the rig file's folder), unless absolute or ``base_dir`` is None."""
+    path = Path(os.fspath(name))
+    return path if path.is_absolute() or base_dir is None else Path(base_dir) / path
+
+
+def _check_row_map(i, key, array, shape):
+    array = check.finite_array(_where(i, key), array).astype(np.float64)
+    if array.shape != tuple(shape):
+        raise ValueError(f"{_where(i, key)} has shape {array.shape}, the rig's shape is {tuple(shape)}")
+    if array.min() < 0:
+        raise ValueError(f"{_where(i, key)} values must be >= 0 rows, got minimum {array.min()!r}")
+    return array
+
+
+def _load_row_map(i, path, shape):
+    if not path.is_file():
+        raise ValueError(f"{_where(i, 'row_map_file')}: file {str(path)!r} does not exist")
+    try:
+        array = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{_where(i, 'row_map_file')}: {str(path)!r} is not a readable .npy array ({exc})") from None
+    return _check_row_map(i, "row_map_file", array, shape)
+
+
+def to_camera(cam, shape=None) -> Camera:
+    """The :class:`~rsocl.model.rig.Camera` of a normalised camera dict."""
+    row_map = cam.get("row_map")
+    if cam.get("homography") is not None and shape is not None:
+        row_map = row_map_from_homography(cam["homography"], shape)
+    angle = cam.get("angle", 0.0)
+    return Camera(angle, t_e=cam["t_e"], t_r=cam["t_r"], t_a=cam.get("t_a", 0.0), t_d=cam.get("t_d"),
+                  gain=cam.get("gain", 1.0), frames=cam.get("frames", 1), row_map=row_map)
