@@ -69,7 +69,7 @@ def video_at_speed(video, shape, T, frames_per_subframe, crop=None) -> np.ndarra
 
 def scene_names():
     """Names of every scene, in report order (builtin first; a video's need ``../shared/data``)."""
-    names = ["builtin", "builtin-slow"]
+    names = ["builtin", "builtin-slow", "builtin-fast"]
     for video in ("runner40", "traffic48"):
         names += [f"{video}@0.5", f"{video}@1", f"{video}@2", f"{video}-crop@1"]
     return names
@@ -79,7 +79,8 @@ def make_scene(name, shape, T) -> np.ndarray:
     """The datacube of scene ``name`` (see :func:`scene_names`) on an ``(m, n)`` grid with ``T`` sub-frames.
 
     ``builtin``: :func:`rsocl.model.scenes.builtin_scene`; ``builtin-slow``: the middle ``T`` of
-    the same scene rendered on ``2T`` sub-frames (half the speed). ``VIDEO@k``: the whole
+    the same scene rendered on ``2T`` sub-frames (half the speed); ``builtin-fast``: the scene
+    rendered on ``ceil(T/2)`` sub-frames, played forwards then backwards (twice the speed). ``VIDEO@k``: the whole
     frame at ``k`` source frames per sub-frame; ``VIDEO-crop@k``: the crop of :data:`CROPS`
     (2x zoom).
     """
@@ -87,6 +88,9 @@ def make_scene(name, shape, T) -> np.ndarray:
         return builtin_scene(shape, T)
     if name == "builtin-slow":
         return builtin_scene(shape, 2 * T)[T // 2:T // 2 + T]
+    if name == "builtin-fast":
+        half = builtin_scene(shape, (T + 1) // 2)
+        return np.concatenate([half, half[::-1]])[:T]
     video, _, speed = name.partition("@")
     crop = None
     if video.endswith("-crop"):

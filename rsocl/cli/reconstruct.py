@@ -36,5 +36,12 @@ def cmd_reconstruct(args) -> int:
                         truth=capture.truth)
     gif = Path(args.gif) if args.gif else out.with_suffix(".gif")
     comparison_gif(gif, truth, result.datacube)
-    say(args, f"wrote {out} and {gif}")
+    written = [out, gif]
+    if result.params.get("tuning"):
+        from rsocl.analysis.tuning_plot import tuning_plot
+
+        chosen = ", ".join(f"{k} = {v:.3g}" for k, v in result.params["tuning"]["chosen"].items())
+        say(args, f"chosen from the snapshots: {chosen}")
+        written.append(tuning_plot(gif.with_name(gif.stem + "-tuning.png"), result.params["tuning"]))
+    say(args, "wrote " + ", ".join(str(p) for p in written))
     return 0

@@ -89,8 +89,8 @@ def estimate(rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", dev
         op.device.check_fits("the planned reconstruction", int(np.prod(op.domain_shape)) * op.dtype.itemsize,
                              total_bytes=memory)
         g = np.zeros(op.range_shape)
-        reconstruct(g, rig, regularizer=regularizer, iterations=1, device=device, dtype=dtype)  # compile
-        result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=device, dtype=dtype)
+        reconstruct(g, rig, regularizer=regularizer, iterations=1, device=device, dtype=dtype, tune=False)  # compile
+        result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=device, dtype=dtype, tune=False)
         per_iteration = result.history["time"][-1] / 3
     return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations)
 

@@ -4,13 +4,19 @@ device, run the ADMM iterations, collect the result (:mod:`rsocl.solver.problem`
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import numpy as np
+
 from rsocl.common.registry import load
+from rsocl.model.interpolation import interp3d
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import ADMM
 from rsocl.solver.iterate import collect, run_iterations
 from rsocl.solver.problem import DEFAULTS, check_problem, check_settings, stage_on_device
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.result import Result
+from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, tune_parameters
 
 __all__ = ["reconstruct", "make_regularizer", "Result", "DEFAULTS"]
 
@@ -34,7 +40,7 @@ def make_regularizer(regularizer, options=None, tv_iterations=None) -> Regulariz
 
 def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta=None, tv_iterations=None,
                 projection="exact", device=None, dtype="float32", callback=None, x0=None, tol=None,
-                truth=None, regularizer_options=None, saturation=None, progress=False) -> Result:
+                truth=None, regularizer_options=None, saturation=None, tune=True, progress=False) -> Result:
     """Reconstruct the ``(T, m, n)`` datacube from snapshots ``g`` ``(K, m, n)`` with ADMM.
 
     Parameters
@@ -75,14 +81,66 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         saturated and left out of the data term; None keeps every pixel.
     progress : bool
         Show a progress bar (tqdm).
+    tune : bool
+        True (default): choose ``lam`` and the regularizer's tunable options (TV:
+        ``temporal_weight``) that the caller left unset from the snapshots alone, by block
+        cross-validation on held-out snapshot pixels (:mod:`rsocl.solver.tuning`; no ground
+        truth is used), then start the run from :func:`rsocl.model.interpolation.interp3d`
+        unless ``x0`` is given. Values the caller gives (``lam``, ``regularizer_options``, a
+        regularizer instance's options) are kept. The chosen values and every candidate's
+        criterion are in ``Result.params["tuning"]``. False: the fixed defaults, zero start.
     """
     problem = check_problem(g, rig, x0=x0, truth=truth, saturation=saturation)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                               projection=projection, tol=tol, callback=callback)
     reg = make_regularizer(regularizer, regularizer_options, settings.tv_iterations)
+    fixed_lam = settings.lam
     settings = settings.settled_for(reg, dtype)
     staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype)
+    tuning = None
+    if tune:
+        tuning = _tune(problem, staged, settings, regularizer, reg, regularizer_options, fixed_lam, progress)
+    if tuning is not None:
+        reg = _with_options(regularizer, reg, regularizer_options,
+                            {k: v for k, v in tuning.chosen.items() if k != "lam"}, settings.tv_iterations)
+        settings = replace(settings, lam=tuning.chosen["lam"])
+        if staged.x0 is None:
+            import pyopencl.array as cla
+
+            start = interp3d(problem.g, problem.rig, valid=problem.valid)[staged.solved]
+            staged.x0 = cla.to_device(staged.op.queue, np.ascontiguousarray(start, dtype=staged.op.dtype))
     solver = ADMM(staged.op, staged.g, reg, lam=settings.lam, eta=settings.eta, projection=settings.projection,
                   x0=staged.x0, valid=problem.valid)
     history = run_iterations(solver, staged, settings, progress=progress)
-    return collect(solver, staged, problem, settings, reg, history)
+    result = collect(solver, staged, problem, settings, reg, history)
+    result.params["tuning"] = tuning.as_params() if tuning is not None else None
+    result.params["warm_start"] = "interp3d" if tuning is not None and problem.x0 is None else (
+        "x0" if problem.x0 is not None else "zeros")
+    return result
+
+
+def _with_options(regularizer, reg, user_options, options, tv_iterations):
+    """``reg``'s kind with ``options`` over the caller's ones."""
+    if isinstance(regularizer, Regularizer):
+        return type(reg)(**{**reg.values, **options})
+    return make_regularizer(regularizer, {**dict(user_options or {}), **options}, tv_iterations)
+
+
+def _tune(problem, staged, settings, regularizer, reg, user_options, fixed_lam, progress):
+    """Run :func:`tune_parameters` over what the caller left unset; None when nothing is."""
+    given = set(reg.values) if isinstance(regularizer, Regularizer) else set(user_options or {})
+    tunable = {k: v for k, v in getattr(reg, "tunable", {}).items() if k not in given}
+    if fixed_lam is None:
+        lam = [settings.lam * f for f in LAM_FACTORS] if settings.lam > 0 else settings.lam
+    else:
+        lam = fixed_lam
+    if (not tunable and np.isscalar(lam)) or (np.isscalar(lam) and lam == 0):
+        return None                    # nothing to choose; lam = 0 makes the regularizer's options moot
+    fixed = {k: v for k, v in reg.values.items() if k in given}
+    if fixed_lam is not None:
+        fixed["lam"] = fixed_lam
+    return tune_parameters(
+        staged.op, staged.g, problem.g, problem.rig,
+        lambda options: _with_options(regularizer, reg, user_options, options, settings.tv_iterations),
+        tunable=tunable, lam=lam, eta=settings.eta, projection=settings.projection, valid=problem.valid,
+        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations)), fixed=fixed, progress=progress)

@@ -65,6 +65,9 @@ class Regularizer:
     recommended : dict
         Optional ``lam``/``eta`` that :func:`rsocl.solver.reconstruct` uses when the caller
         gives none (measured for this regularizer; data in [0, 1]).
+    tunable : dict of str -> tuple of float
+        Options that :func:`rsocl.solver.tuning.tune_parameters` may choose from the data,
+        with their coarse candidate values (positive, log spaced); empty: only ``lam`` is tuned.
 
     Subclasses implement ``_denoise(x, weight, out)``; they may override
     :meth:`workspace_bytes` so the solver can check memory before running.
@@ -74,6 +77,7 @@ class Regularizer:
     options: dict = {}
     dtypes = ("float32", "float64")
     recommended: dict = {}
+    tunable: dict = {}
 
     def __init__(self, **options):
         unknown = sorted(set(options) - set(self.options))

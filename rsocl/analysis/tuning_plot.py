@@ -1,0 +1,64 @@
+"""The plot of a parameter search: the criterion of every candidate against its parameters.
+
+Reads the record :func:`rsocl.solver.tuning.Tuning.as_params` writes (``Result.params["tuning"]``,
+also in the reconstruction file), so it draws a search from a file as well as from a run.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from rsocl.files.atomic import atomic_path
+
+__all__ = ["tuning_plot"]
+
+
+def tuning_plot(path, record, *, dpi=100) -> Path:
+    """Write a PNG of the cross-validation criterion against each searched parameter.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        PNG to write (atomically).
+    record : dict
+        ``Result.params["tuning"]``: ``candidates`` (dicts with ``lam``, the tuned options and
+        ``score``), ``chosen`` and ``fixed``.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    if not isinstance(record, dict) or not record.get("candidates"):
+        raise ValueError("record must be a tuning record with at least one candidate (Result.params['tuning'])")
+    candidates = [c for c in record["candidates"] if c.get("score") is not None]
+    chosen = record["chosen"]
+    names = [k for k in chosen if len({c.get(k) for c in candidates}) > 1] or list(chosen)
+    figure = Figure(figsize=(4.0 * len(names), 3.2))
+    FigureCanvasAgg(figure)
+    for i, name in enumerate(names, 1):
+        ax = figure.add_subplot(1, len(names), i)
+        others = {k: v for k, v in chosen.items() if k != name}
+        line = sorted((c[name], c["score"]) for c in candidates if all(c.get(k) == v for k, v in others.items()))
+        rest = [(c[name], c["score"]) for c in candidates if (c[name], c["score"]) not in line]
+        if rest:
+            ax.plot(*zip(*rest), "o", color="0.7", label="other candidates")
+        if line:
+            ax.plot(*zip(*line), "o-", color="C0", label="others at the chosen values")
+        best = min(candidates, key=lambda c: c["score"])
+        ax.plot([best[name]], [best["score"]], "*", color="C3", markersize=14, label=f"chosen {name} = {best[name]:.3g}")
+        ax.set_xscale("log")
+        ax.set_xlabel(name)
+        ax.set_ylabel("held-out relative error")
+        ax.legend(fontsize=7)
+    fixed = ", ".join(f"{k} = {v:g}" for k, v in record.get("fixed", {}).items() if isinstance(v, (int, float)))
+    figure.suptitle("cross-validation on held-out snapshot pixels" + (f" (fixed: {fixed})" if fixed else ""),
+                    fontsize=9)
+    figure.tight_layout()
+    path = Path(os.fspath(path))
+    with atomic_path(path) as tmp:
+        figure.savefig(tmp, format="png", dpi=dpi, facecolor="white")
+    return path
