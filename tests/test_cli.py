@@ -36,6 +36,13 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
     assert len(result.history["residual"]) == 15
     assert (tmp_path / "rec.gif").exists()
     assert result.rig == capture.rig
+    # lam was not given: chosen from the snapshots, recorded in the file, plotted next to the GIF
+    assert result.params["tuning"]["fixed"] == {"temporal_weight": 0.5}
+    assert result.params["lam"] == result.params["tuning"]["chosen"]["lam"]
+    assert (tmp_path / "rec-tuning.png").stat().st_size > 0
+    fast = tmp_path / "fast.h5"
+    assert main(["reconstruct", str(cap), "--out", str(fast), "--iterations", "5", "--quiet", "--fast"]) == 0
+    assert load_reconstruction(fast).params["tuning"] is None and not (tmp_path / "fast-tuning.png").exists()
 
 
 def test_errors_are_reported_not_raised(tmp_path, capsys):

@@ -117,7 +117,7 @@ def test_paper_projection_divergence_is_reported():
     rig = rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6)
     g = np.ones((4, 16, 16)) * 3.0
     with pytest.raises(FloatingPointError, match="projection='paper'"):
-        rsocl.reconstruct(g, rig, iterations=300, lam=1e3, eta=1e-3, projection="paper")
+        rsocl.reconstruct(g, rig, iterations=300, lam=1e3, eta=1e-3, projection="paper", tune=False)
 
 
 def test_regularizer_recommendations_fill_unset_lam_and_eta(problem):
