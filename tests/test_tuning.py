@@ -64,7 +64,7 @@ def test_no_ground_truth_reaches_the_tuning():
     assert record["chosen"] == seen.params["tuning"]["chosen"]
     assert blind.params["lam"] == record["chosen"]["lam"]
     assert blind.params["regularizer_options"]["temporal_weight"] == record["chosen"]["temporal_weight"]
-    assert blind.params["warm_start"] == "interp3d"
+    assert blind.params["start"] == "zeros"
     assert len(record["candidates"]) >= 6 and all(c["score"] > 0 for c in record["candidates"])
     assert min(c["score"] for c in record["candidates"]) == pytest.approx(
         next(c["score"] for c in record["candidates"]
@@ -75,7 +75,7 @@ def test_values_the_caller_fixes_win():
     rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1e-4, t_r=3e-5)
     g = ref.forward(rig, np.random.default_rng(3).random((rig.T,) + rig.shape))
     both = rsocl.reconstruct(g, rig, iterations=12, lam=0.05, regularizer_options={"temporal_weight": 2.0})
-    assert both.params["tuning"] is None and both.params["warm_start"] == "zeros"
+    assert both.params["tuning"] is None and both.params["start"] == "zeros"
     weight = rsocl.reconstruct(g, rig, iterations=12, regularizer_options={"temporal_weight": 2.0})
     assert weight.params["regularizer_options"]["temporal_weight"] == 2.0
     assert weight.params["tuning"]["fixed"] == {"temporal_weight": 2.0}
