@@ -36,10 +36,10 @@ from quality_scenes import DATA, make_scene, noisy  # noqa: E402
 
 WEIGHTS = (1.0, 3.0, 10.0, 30.0)
 LAMS = (0.03, 0.1, 0.3)
-#: Scenes the tuning's own settings (hold-out block = a quarter of the side, candidate runs of 0.25x
-#: the iterations, lam x 0.3/1/3, temporal weights 1/3/10/30 and midpoints) were chosen on
-#: (64x64, noiseless); every other row is held out.
-TUNED_ON = ("builtin", "runner40@1", "traffic48@1")
+#: Scenes the tuning's own settings (hold-out block = half the side, from 1/2, 1/4, 1/8; candidate
+#: runs of 0.25x the iterations; lam x 0.3/1/3; temporal weights 1/3/10/30 and midpoints) were
+#: chosen on (64x64, noiseless); every other row is held out.
+TUNED_ON = ("builtin", "runner40@0.5", "runner40@1", "traffic48@1")
 #: (scene, size, noise) cases: noise "none" or "poisson" (1000 photo-electrons at full scale
 #: and read noise 1 % of full scale).
 CASES = ([(s, 64, "none") for s in ("builtin", "builtin-slow", "builtin-fast", "runner40@0.5", "runner40@1",

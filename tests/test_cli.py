@@ -71,7 +71,7 @@ def test_demo_console_script(tmp_path):
                            "--iterations", "40", "--quiet"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "PSNR" in proc.stdout
-    for name in ("demo.gif", "snapshots.png", "subframes.png", "demo.h5"):
+    for name in ("demo.gif", "snapshots.png", "subframes.png", "demo.h5", "demo-tuning.png"):
         assert (tmp_path / name).stat().st_size > 0
     psnr = float(proc.stdout.split("PSNR ")[1].split(" dB")[0])
     assert psnr > 15
