@@ -39,18 +39,21 @@ def tuning_plot(path, record, *, dpi=100) -> Path:
     names = [k for k in chosen if len({c.get(k) for c in candidates}) > 1] or list(chosen)
     figure = Figure(figsize=(4.0 * len(names), 3.2))
     FigureCanvasAgg(figure)
+    from matplotlib.ticker import NullFormatter
+
+    best = min(candidates, key=lambda c: c["score"])
     for i, name in enumerate(names, 1):
         ax = figure.add_subplot(1, len(names), i)
-        others = {k: v for k, v in chosen.items() if k != name}
-        line = sorted((c[name], c["score"]) for c in candidates if all(c.get(k) == v for k, v in others.items()))
-        rest = [(c[name], c["score"]) for c in candidates if (c[name], c["score"]) not in line]
-        if rest:
-            ax.plot(*zip(*rest), "o", color="0.7", label="other candidates")
-        if line:
-            ax.plot(*zip(*line), "o-", color="C0", label="others at the chosen values")
-        best = min(candidates, key=lambda c: c["score"])
+        groups = {}                       # one line per setting of the other parameters
+        for c in candidates:
+            key = tuple((k, c[k]) for k in chosen if k != name and k in c)
+            groups.setdefault(key, []).append((c[name], c["score"]))
+        for j, (key, points) in enumerate(sorted(groups.items(), key=lambda item: -len(item[1]))):
+            label = ", ".join(f"{k} = {v:.3g}" for k, v in key) or "candidates"
+            ax.plot(*zip(*sorted(points)), "o-" if len(points) > 1 else "o", color=f"C{j % 10}", label=label)
         ax.plot([best[name]], [best["score"]], "*", color="C3", markersize=14, label=f"chosen {name} = {best[name]:.3g}")
         ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(name)
         ax.set_ylabel("held-out relative error")
         ax.legend(fontsize=7)
