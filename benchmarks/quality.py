@@ -45,7 +45,7 @@ TUNED_ON = ("builtin", "runner40@0.5", "runner40@1", "traffic48@1")
 CASES = ([(s, 64, "none") for s in ("builtin", "builtin-slow", "builtin-fast", "runner40@0.5", "runner40@1",
                                     "runner40@2", "runner40-crop@1", "traffic48@0.5", "traffic48@1", "traffic48@2")]
          + [(s, 64, "poisson") for s in ("builtin", "runner40@1", "traffic48@1")]
-         + [("builtin", 128, "none"), ("runner40@1", 128, "none")])
+         + [("builtin", 128, "none"), ("runner40@1", 128, "none"), ("builtin", 128, "poisson")])
 
 
 class Cache:
