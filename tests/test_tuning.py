@@ -64,7 +64,7 @@ def test_no_ground_truth_reaches_the_tuning():
     assert record["chosen"] == seen.params["tuning"]["chosen"]
     assert blind.params["lam"] == record["chosen"]["lam"]
     assert blind.params["regularizer_options"]["temporal_weight"] == record["chosen"]["temporal_weight"]
-    assert blind.params["start"] == "zeros"
+    assert blind.params["start"] == "interp3d"
     assert len(record["candidates"]) >= 6 and all(c["score"] > 0 for c in record["candidates"])
     assert min(c["score"] for c in record["candidates"]) == pytest.approx(
         next(c["score"] for c in record["candidates"]
