@@ -7,8 +7,9 @@ and a 2x zoomed crop), grid size and noise level, with the paper's 4-camera arra
 (temporal weight 1, 3, 10, 30 × lam 0.03, 0.1, 0.3), of ``rsocl.reconstruct``'s self-tuned
 default (block cross-validation, start from interp3d) and of the same choice started from zeros; the
 wall time of the tuned run against the fixed run of the same size (temporal weight 3, lam 0.1,
-``tune=False``), once per case and in alternating rounds on the built-in scene (:func:`timing`). Results are cached per run (``--cache``), so an interrupted run
-goes on where it stopped. Writes docs/quality.md (``--out``) with the provenance header.
+``tune=False``) in alternating rounds on the built-in scene (:func:`timing`). Results are cached
+per run (``--cache``), so an interrupted run goes on where it stopped. Writes docs/quality.md
+(``--out``) with the provenance header.
 
     python benchmarks/quality.py [--sizes 64 128] [--iterations 200] [--out docs/quality.md]
 """
@@ -153,7 +154,8 @@ def main(argv=None):
         page += ["", f"Summary over {len(stats)} cases: tuned - best grid from {min(s['to_best'] for s in stats):+.2f} "
                      f"to {max(s['to_best'] for s in stats):+.2f} dB; tuned - interp3d from "
                      f"{min(s['to_interp'] for s in stats):+.2f} to {max(s['to_interp'] for s in stats):+.2f} dB "
-                     f"(noiseless: from {min(s['to_interp'] for s in clean):+.2f} dB); starting from interp3d rather than zeros changes the tuned PSNR by "
+                     f"(noiseless: from {min(s['to_interp'] for s in clean):+.2f} dB); starting from interp3d "
+                     "rather than zeros changes the tuned PSNR by "
                      f"{min(s['warm'] for s in stats):+.2f} to {max(s['warm'] for s in stats):+.2f} dB."]
     page += timing(args)
     write_page(args.out, page)

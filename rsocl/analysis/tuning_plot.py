@@ -51,7 +51,8 @@ def tuning_plot(path, record, *, dpi=100) -> Path:
         for j, (key, points) in enumerate(sorted(groups.items(), key=lambda item: -len(item[1]))):
             label = ", ".join(f"{k} = {v:.3g}" for k, v in key) or "candidates"
             ax.plot(*zip(*sorted(points)), "o-" if len(points) > 1 else "o", color=f"C{j % 10}", label=label)
-        ax.plot([best[name]], [best["score"]], "*", color="C3", markersize=14, label=f"chosen {name} = {best[name]:.3g}")
+        ax.plot([best[name]], [best["score"]], "*", color="C3", markersize=14,
+                label=f"chosen {name} = {best[name]:.3g}")
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(name)

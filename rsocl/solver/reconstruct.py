@@ -88,8 +88,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         truth is used), then run with them from :func:`rsocl.model.interpolation.interp3d`
         unless ``x0`` is given (measured in ``benchmarks/quality.py``: -0.12 to +0.01 dB at
         64x64, +0.2 to +0.7 dB at 128x128 over a zero start). Values the caller gives
-        (``lam``, ``regularizer_options``, a regularizer instance's options) are kept. The chosen values and every candidate's
-        criterion are in ``Result.params["tuning"]``. False: the fixed defaults, zero start.
+        (``lam``, ``regularizer_options``, a regularizer instance's options) are kept. The
+        chosen values and every candidate's criterion are in ``Result.params["tuning"]``. False: the fixed defaults, zero start.
     """
     problem = check_problem(g, rig, x0=x0, truth=truth, saturation=saturation)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,

@@ -123,7 +123,8 @@ class Tuning:
     def as_params(self) -> dict:
         """A JSON-ready record for :attr:`rsocl.solver.result.Result.params`."""
         return {"criterion": "block cross-validation: relative error of held-out snapshot pixels",
-                "chosen": dict(self.chosen), "fixed": dict(self.fixed), "candidates": [{k: (v if math.isfinite(v) else None) for k, v in c.items()} for c in self.candidates],
+                "chosen": dict(self.chosen), "fixed": dict(self.fixed),
+                "candidates": [{k: (v if math.isfinite(v) else None) for k, v in c.items()} for c in self.candidates],
                 "iterations_per_candidate": self.iterations, "block": self.block, "held_out_pixels": self.held_out,
                 "seconds": self.seconds}
 
