@@ -39,11 +39,11 @@ def paper_configuration(device, sets, iterations):
     rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
     snapshots = [rsocl.RollingShutterOperator(rig, device=device).forward(builtin_scene(rig.shape, rig.T, seed=s))
                  for s in range(sets + 1)]
-    rsocl.reconstruct(snapshots[0], rig, iterations=2, device=device)          # compile once
+    rsocl.reconstruct(snapshots[0], rig, iterations=2, device=device, tune=False)          # compile once
     seconds = []
     for g in snapshots[1:]:
         t0 = time.perf_counter()
-        rsocl.reconstruct(g, rig, iterations=iterations, device=device)
+        rsocl.reconstruct(g, rig, iterations=iterations, device=device, tune=False)
         seconds.append(time.perf_counter() - t0)
     per_set = float(np.median(seconds))
     spread = f", {min(seconds):.2f}-{max(seconds):.2f} s over the {sets} sets" if sets > 1 else ""
@@ -65,14 +65,15 @@ def batches(device, batch, rounds, iterations):
     rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
     op = rsocl.RollingShutterOperator(rig, device=device)
     g = np.stack([op.forward(builtin_scene(rig.shape, rig.T, seed=100 + s)) for s in range(batch)])
-    rsocl.reconstruct(g, rig, iterations=2, device=device)                    # compile once
-    rsocl.reconstruct(g[0], rig, iterations=2, device=device)
+    rsocl.reconstruct(g, rig, iterations=2, device=device, tune=False)                    # compile once
+    rsocl.reconstruct(g[0], rig, iterations=2, device=device, tune=False)
 
     def batched():
-        return rsocl.reconstruct(g, rig, iterations=iterations, device=device).datacube
+        return rsocl.reconstruct(g, rig, iterations=iterations, device=device, tune=False).datacube
 
     def loop():
-        return np.stack([rsocl.reconstruct(one, rig, iterations=iterations, device=device).datacube for one in g])
+        return np.stack([rsocl.reconstruct(one, rig, iterations=iterations, device=device, tune=False).datacube
+                         for one in g])
 
     rates = {"batch": [], "loop": []}
     worst = 0.0
@@ -117,8 +118,9 @@ def precision(device, iterations):
         for dtype in ("float32", "float64"):
             if dtype == "float64" and not device.has_fp64:
                 continue
-            rsocl.reconstruct(g, big, iterations=1, device=device, dtype=dtype)
-            res = rsocl.reconstruct(g, big, iterations=iterations, truth=truth, device=device, dtype=dtype)
+            rsocl.reconstruct(g, big, iterations=1, device=device, dtype=dtype, tune=False)
+            res = rsocl.reconstruct(g, big, iterations=iterations, truth=truth, device=device, dtype=dtype,
+                                    tune=False)
             op = rsocl.RollingShutterOperator(big, device=device, dtype=dtype)
             reg = rsocl.common.registry.load("rsocl.regularizers", "tv")()
             mem = ADMM.buffers_bytes(op, "exact") + reg.workspace_bytes(op.domain_shape, op.dtype)

@@ -92,7 +92,7 @@ def part_seams(args):
     truth = builtin_scene(rig.shape, rig.T, seed=0)
     g = rsocl.RollingShutterOperator(rig).forward(truth)
     began = time.perf_counter()
-    untiled = rsocl.reconstruct(g, rig, iterations=args.iterations, progress=True).datacube
+    untiled = rsocl.reconstruct(g, rig, iterations=args.iterations, tune=False, progress=True).datacube
     untiled_s = time.perf_counter() - began
     tiled_result = reconstruct_tiled(g, rig, tile=(128, 128), halo=16, iterations=args.iterations, progress=True)
     tiled = tiled_result.datacube

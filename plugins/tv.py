@@ -59,6 +59,7 @@ class TV(Regularizer):
 
     name = "tv"
     batched = True
+    tunable = {"temporal_weight": (1.0, 3.0, 10.0, 30.0)}
     options = {
         "iterations": Option(10, "iterations", "Chambolle iterations per denoising call", 1, 100000),
         "temporal_weight": Option(3.0, "", "weight of the temporal difference (0: 2-D per sub-frame, "

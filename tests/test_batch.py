@@ -5,6 +5,7 @@ import pytest
 
 import rsocl
 from rsocl.model import reference as ref
+from rsocl.model.interpolation import interp3d
 from rsocl.solver.sets import batch_size, reconstruct_sets
 
 from conftest import SMALL
@@ -30,7 +31,7 @@ def _tol(dtype):
 def test_each_set_equals_its_single_set_reconstruction(sets, dtype, projection):
     rig, truth, g = sets
     lam, eta = [0.05, 0.1, 0.02], [0.3, 0.0, 0.5]            # per set; the second set is GAP
-    kw = dict(iterations=4 if SMALL else 7, tv_iterations=4, projection=projection, dtype=dtype)
+    kw = dict(iterations=4 if SMALL else 7, tv_iterations=4, projection=projection, dtype=dtype, tune=False)
     batch = rsocl.reconstruct(g, rig, lam=lam, eta=eta, truth=truth, **kw)
     assert batch.datacube.shape == (3, rig.T) + rig.shape and batch.batch == 3
     assert batch.history["residual"].shape == batch.history["psnr"].shape == (kw["iterations"], 3)
@@ -48,7 +49,8 @@ def test_each_set_equals_its_single_set_reconstruction(sets, dtype, projection):
 def test_batch_matches_the_numpy_reference(sets, dtype):
     rig, truth, g = sets
     kw = dict(iterations=5, lam=0.05, eta=0.3, tv_iterations=3)
-    got = rsocl.reconstruct(g, rig, dtype=dtype, regularizer_options={"temporal_weight": 2.0}, **kw).datacube
+    got = rsocl.reconstruct(g, rig, dtype=dtype, regularizer_options={"temporal_weight": 2.0}, tune=False,
+                            **kw).datacube
     for i in range(3):
         want = ref.admm(rig, g[i], temporal_weight=2.0, **kw)
         np.testing.assert_allclose(got[i], want, atol=(2e-4 if dtype == "float32" else 1e-10) * np.abs(want).max())
@@ -58,7 +60,7 @@ def test_saturation_x0_and_a_shared_truth_per_set(sets):
     rig, truth, g = sets
     level = float(np.quantile(g, 0.9))
     x0 = np.random.default_rng(3).random((3, rig.T) + rig.shape)
-    kw = dict(iterations=4, lam=0.05, eta=0.3, tv_iterations=3, saturation=level)
+    kw = dict(iterations=4, lam=0.05, eta=0.3, tv_iterations=3, saturation=level, tune=False)
     batch = rsocl.reconstruct(g, rig, x0=x0, truth=truth[0], **kw)
     for i in range(3):
         one = rsocl.reconstruct(g[i], rig, x0=x0[i], truth=truth[0], **kw)
@@ -72,7 +74,7 @@ def test_saturation_x0_and_a_shared_truth_per_set(sets):
 
 def test_a_batch_of_one_set_and_a_regularizer_without_batches(sets):
     rig, truth, g = sets
-    kw = dict(iterations=3, lam=0.05, eta=0.3)
+    kw = dict(iterations=3, lam=0.05, eta=0.3, tune=False)
     one = rsocl.reconstruct(g[:1], rig, **kw)
     assert one.datacube.shape == (1, rig.T) + rig.shape
     np.testing.assert_array_equal(one.datacube[0], rsocl.reconstruct(g[0], rig, **kw).datacube)
@@ -177,7 +179,7 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
 
 def test_reconstruct_sets_runs_batches_and_joins_them(sets):
     rig, truth, g = sets
-    kw = dict(iterations=3, eta=0.3, tv_iterations=3)
+    kw = dict(iterations=3, eta=0.3, tv_iterations=3, tune=False)
     lam = [0.05, 0.1, 0.02]
     joined = reconstruct_sets(g, rig, batch=2, lam=lam, truth=truth, **kw)
     whole = rsocl.reconstruct(g, rig, lam=lam, truth=truth, **kw)
@@ -191,3 +193,28 @@ def test_reconstruct_sets_runs_batches_and_joins_them(sets):
         reconstruct_sets(g[0], rig)
     with pytest.raises(ValueError, match="batch"):
         reconstruct_sets(g, rig, batch=0)
+
+
+def test_a_tuned_batch_applies_its_first_sets_choice_to_every_set(sets):
+    """Self-tuning a batch: the choice made on set 0 serves every set, each started from its own interp3d."""
+    rig, _, g = sets
+    kw = dict(iterations=4, tv_iterations=3, eta=0.3)
+    batch = rsocl.reconstruct(g[:2], rig, **kw)
+    chosen = batch.params["tuning"]["chosen"]
+    assert batch.params["start"] == "interp3d" and set(chosen) >= {"lam", "temporal_weight"}
+    first = rsocl.reconstruct(g[0], rig, **kw)
+    assert first.params["tuning"]["chosen"] == chosen
+    np.testing.assert_allclose(batch.datacube[0], first.datacube, atol=2e-6 * np.abs(first.datacube).max())
+    fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]})
+    second = rsocl.reconstruct(g[1], rig, x0=interp3d(g[1], rig), tune=False, **fixed)
+    np.testing.assert_allclose(batch.datacube[1], second.datacube, atol=2e-6 * np.abs(second.datacube).max())
+
+
+def test_tuned_sets_in_several_batches_share_the_first_batchs_choice(sets):
+    rig, _, g = sets
+    kw = dict(iterations=4, tv_iterations=3, eta=0.3)
+    joined = reconstruct_sets(g, rig, batch=2, **kw)
+    chosen = joined.params["tuning"]["chosen"]
+    fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]})
+    last = rsocl.reconstruct(g[2], rig, x0=interp3d(g[2], rig), tune=False, **fixed).datacube
+    np.testing.assert_allclose(joined.datacube[2], last, atol=2e-6 * np.abs(last).max())

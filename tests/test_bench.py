@@ -133,6 +133,20 @@ def test_points_and_sweep_parsing():
     assert sum(p.regularizer == BASELINE for p in pts) == 3                    # C=4, C=1, ROI 8
     assert pts[-1].roi == 8 and pts[-2].roi == 8                                # crops last, after the full ROI
     assert any("roi=32" in n for n in notes) and any("nope" in n for n in notes)
+    assert parse_sweep("tune=false,1") == ("tune", [False, True])
+    with pytest.raises(ValueError, match="true/false"):
+        parse_sweep("tune=maybe")
+
+
+def test_self_tuned_point_beside_the_fixed_one():
+    default = BenchPoint(shape=16, iterations=10)
+    result = run_bench(default, ["tune"], progress=False, repeat_default=False)
+    rows = {r["label"]: r for r in result.rows}
+    assert set(rows) == {"default", "self-tuned", BASELINE}
+    tuned, fixed = rows["self-tuned"], rows["default"]
+    assert fixed["lam"] == 0.1 and any(tuned["lam"] == pytest.approx(v) for v in (0.03, 0.1, 0.3))
+    assert tuned["seconds"] > 0 and 5 < tuned["psnr"] < 60
+    assert tuned["regularizer_options"]["temporal_weight"] > 0
 
 
 @pytest.fixture(scope="module")

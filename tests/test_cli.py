@@ -36,6 +36,13 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
     assert len(result.history["residual"]) == 15
     assert (tmp_path / "rec.gif").exists()
     assert result.rig == capture.rig
+    # lam was not given: chosen from the snapshots, recorded in the file, plotted next to the GIF
+    assert result.params["tuning"]["fixed"] == {"temporal_weight": 0.5}
+    assert result.params["lam"] == result.params["tuning"]["chosen"]["lam"]
+    assert (tmp_path / "rec-tuning.png").stat().st_size > 0
+    fast = tmp_path / "fast.h5"
+    assert main(["reconstruct", str(cap), "--out", str(fast), "--iterations", "5", "--quiet", "--fast"]) == 0
+    assert load_reconstruction(fast).params["tuning"] is None and not (tmp_path / "fast-tuning.png").exists()
 
 
 def test_errors_are_reported_not_raised(tmp_path, capsys):
@@ -64,7 +71,7 @@ def test_demo_console_script(tmp_path):
                            "--iterations", "40", "--quiet"], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "PSNR" in proc.stdout
-    for name in ("demo.gif", "snapshots.png", "subframes.png", "demo.h5"):
+    for name in ("demo.gif", "snapshots.png", "subframes.png", "demo.h5", "demo-tuning.png"):
         assert (tmp_path / name).stat().st_size > 0
     psnr = float(proc.stdout.split("PSNR ")[1].split(" dB")[0])
     assert psnr > 15
@@ -85,12 +92,12 @@ def test_a_capture_of_several_sets_is_reconstructed_in_batches(tmp_path, capsys)
     with h5py.File(cap, "a") as h5:                     # as rsocl capture writes it: every set, registered
         h5.create_dataset("snapshot_sets", data=sets)
     assert main(["reconstruct", str(cap), "--out", str(rec), "--iterations", "4", "--batch", "2",
-                 "--dtype", "float64"]) == 0
+                 "--dtype", "float64", "--fast"]) == 0
     out = capsys.readouterr().out
     assert "3 sets in batches of 2" in out and "set 2: 4 iterations" in out
     for i in range(3):
         got = load_reconstruction(tmp_path / f"rec-set{i:03d}.h5").datacube
-        one = rsocl.reconstruct(sets[i], rig, iterations=4, dtype="float64").datacube
+        one = rsocl.reconstruct(sets[i], rig, iterations=4, dtype="float64", tune=False).datacube
         np.testing.assert_allclose(got, one, atol=1e-10 * np.abs(one).max())
     assert (tmp_path / "rec.gif").exists() and not rec.exists()
     assert main(["reconstruct", str(cap), "--out", str(rec), "--batch", "0"]) == 2

@@ -19,6 +19,7 @@ def _solve(rig, scene, dtype="float32", **kw):
     g = ref.forward(rig, scene)
     kw.setdefault("iterations", 40)
     kw.setdefault("lam", 0.01)  # random test scenes are rough: regularize lightly
+    kw.setdefault("tune", False)  # the solver at the extremes; tests/test_tuning.py runs the search
     res = rsocl.reconstruct(g, rig, dtype=dtype, **kw)
     assert np.all(np.isfinite(res.datacube))
     assert np.all(np.isfinite(res.history["residual"]))
@@ -126,10 +127,10 @@ def test_sixteen_bit_data_in_float32():
     truth = _scene(rig) * 65535.0
     g = ref.forward(rig, truth)
     assert g.max() <= scale
-    res = rsocl.reconstruct(g, rig, lam=0.1 * 65535, eta=0.2, iterations=40)
+    res = rsocl.reconstruct(g, rig, lam=0.1 * 65535, eta=0.2, iterations=40, tune=False)
     assert np.all(np.isfinite(res.datacube))
     assert res.history["residual"][-1] < 0.1
-    small = rsocl.reconstruct(g / 65535.0, rig, iterations=40)
+    small = rsocl.reconstruct(g / 65535.0, rig, iterations=40, tune=False)
     np.testing.assert_allclose(res.datacube / 65535.0, small.datacube, atol=1e-3)
 
 
@@ -187,7 +188,7 @@ def test_saturated_pixels_are_flagged_and_left_out(projection):
     assert 0.05 < (g >= level).mean() < 0.2
     outside = np.ones(truth.shape, bool)
     outside[7:10, 4:10, 4:10] = False
-    kw = dict(iterations=60, projection=projection, lam=0.01, eta=0.2 if projection == "exact" else 5.0)
+    kw = dict(iterations=60, projection=projection, lam=0.01, eta=0.2 if projection == "exact" else 5.0, tune=False)
     naive = rsocl.reconstruct(clipped, rig, **kw)
     flagged = rsocl.reconstruct(clipped, rig, saturation=level, **kw)
     assert flagged.params["saturated_pixels"] == int((clipped >= level).sum())

@@ -80,7 +80,7 @@ def test_fused_admm_equals_plain_admm(device, dtype, projection):
     g = np.stack([ref.forward(rig, t) for t in truth])
     local_bytes = 8192 * np.dtype(dtype).itemsize // 4          # tiles of one sub-frame: two launches
     kw = dict(iterations=4, lam=[0.05, 0.1], eta=[0.3, 0.0], tv_iterations=5, projection=projection, dtype=dtype,
-              device=device.limited(local_mem_bytes=local_bytes, **SMALL_GROUP))
+              device=device.limited(local_mem_bytes=local_bytes, **SMALL_GROUP), tune=False)
     import pyopencl.array as cla
 
     cube = cla.zeros(kw["device"].queue, (2, rig.T) + rig.shape, dtype)
@@ -94,7 +94,7 @@ def test_a_device_without_fp64(small):
     assert not small.has_fp64 and small.acc_dtype == np.float32
     rig = rsocl.Rig.paper_array(4, (6, 5), t_e=1e-4, t_r=3e-5)
     g = ref.forward(rig, np.random.default_rng(2).random((rig.T,) + rig.shape))
-    kw = dict(iterations=3, lam=0.05, eta=0.3, tv_iterations=3)
+    kw = dict(iterations=3, lam=0.05, eta=0.3, tv_iterations=3, tune=False)
     got = rsocl.reconstruct(g, rig, device=small, **kw).datacube
     np.testing.assert_allclose(got, rsocl.reconstruct(g, rig, **kw).datacube, rtol=0, atol=1e-5)
     with pytest.raises(ValueError, match="float64"):

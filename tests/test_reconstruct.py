@@ -35,7 +35,7 @@ def test_reference_exact_step_solves_the_data_term(problem):
 
 def test_history_and_psnr_improve(problem):
     rig, truth, g = problem
-    res = rsocl.reconstruct(g, rig, iterations=25, lam=0.02, eta=0.2, truth=truth)
+    res = rsocl.reconstruct(g, rig, iterations=25, lam=0.02, eta=0.2, truth=truth, tune=False)
     h = res.history
     assert set(h) == {"residual", "time", "psnr"} and len(h["residual"]) == 25 == res.iterations
     assert np.all(np.diff(h["time"]) >= 0)
@@ -74,7 +74,7 @@ def test_callback_tol_and_x0(problem):
     res = rsocl.reconstruct(g, rig, iterations=50, callback=stop_at_three)
     assert res.iterations == 3 and [s[0] for s in seen] == [0, 1, 2]
     assert seen[0][2] == (rig.T,) + rig.shape
-    res = rsocl.reconstruct(g, rig, iterations=500, tol=1e-3)
+    res = rsocl.reconstruct(g, rig, iterations=500, tol=1e-3, tune=False)
     assert 1 < res.iterations < 500
     # starting from the truth with no regularization keeps the data term at zero
     res = rsocl.reconstruct(g, rig, iterations=2, lam=0.0, eta=0.5, x0=truth, dtype="float64")
@@ -117,16 +117,16 @@ def test_paper_projection_divergence_is_reported():
     rig = rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6)
     g = np.ones((4, 16, 16)) * 3.0
     with pytest.raises(FloatingPointError, match="projection='paper'"):
-        rsocl.reconstruct(g, rig, iterations=300, lam=1e3, eta=1e-3, projection="paper")
+        rsocl.reconstruct(g, rig, iterations=300, lam=1e3, eta=1e-3, projection="paper", tune=False)
 
 
 def test_regularizer_recommendations_fill_unset_lam_and_eta(problem):
     rig, truth, g = problem
-    res = rsocl.reconstruct(g, rig, regularizer="dct", iterations=2)
+    res = rsocl.reconstruct(g, rig, regularizer="dct", iterations=2, tune=False)
     assert (res.params["lam"], res.params["eta"]) == (0.3, 0.2)
     res = rsocl.reconstruct(g, rig, regularizer="dct", iterations=2, lam=0.05)
     assert res.params["lam"] == 0.05
-    res = rsocl.reconstruct(g, rig, iterations=2)
+    res = rsocl.reconstruct(g, rig, iterations=2, tune=False)
     assert (res.params["lam"], res.params["eta"]) == (0.1, 0.2)
 
 
@@ -134,7 +134,7 @@ def test_pipelined_residuals_equal_the_waited_ones(problem):
     # Without callback, truth or tol, reconstruct reads each residual while the device runs
     # the next iteration; the history must be the one of the run that waits every time.
     rig, truth, g = problem
-    kw = dict(iterations=7, lam=0.05, eta=0.3, tv_iterations=3, dtype="float64")
+    kw = dict(iterations=7, lam=0.05, eta=0.3, tv_iterations=3, dtype="float64", tune=False)
     fast = rsocl.reconstruct(g, rig, **kw)
     seen = []
     waited = rsocl.reconstruct(g, rig, callback=lambda it, r, theta: seen.append(it) and False, **kw)

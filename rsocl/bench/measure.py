@@ -36,7 +36,7 @@ from dataclasses import asdict, replace
 
 import numpy as np
 
-from rsocl.bench.baseline import interp3d
+from rsocl.model.interpolation import interp3d
 from rsocl.bench.memory import device_memory_bytes
 from rsocl.bench.point import US, BenchPoint, _scene_name
 
@@ -153,8 +153,8 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: 
     # a sub-frame of k*t_r integrates k times the light of one of t_r: scale the snapshots so
     # that the datacube stays in [0, 1] (the scale rsocl's lam and eta assume, README)
     g_scaled = g * (ref.dt / rig.dt)
-    kwargs = dict(regularizer=point.regularizer, lam=point.lam, eta=point.eta, tv_iterations=point.tv_iterations,
-                  device=point.device, dtype=point.dtype)
+    kwargs = dict(regularizer=point.regularizer, lam=None if point.tune else point.lam, eta=point.eta,
+                  tv_iterations=point.tv_iterations, device=point.device, dtype=point.dtype, tune=point.tune)
     warm = ("warm",) + tuple(v for f, v in asdict(point).items() if f not in ("scene", "iterations", "lam", "eta"))
     if warm not in cache:
         reconstruct(g_scaled, rig, iterations=1, **kwargs)
@@ -172,6 +172,7 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: 
     memory = device_memory_bytes(rig, point.regularizer, point.dtype, device=point.device,
                                  tv_iterations=point.tv_iterations, with_truth=False)
     return _row(point, rig, window, psnr=psnr_value, ssim_mean=mean_ssim, ssim_per_subframe=per, seconds=seconds,
+                lam=result.params["lam"], regularizer_options=result.params["regularizer_options"],
                 seconds_per_iteration=float(result.history["time"][-1]) / result.iterations,
                 peak_device_memory_bytes=memory, device=result.params["device"],
                 psnr_full_roi=_full_roi_psnr(point, cache, window, truth_ref), _history=history)

@@ -41,6 +41,10 @@ class BenchPoint:
         ADMM weights (defaults of :func:`rsocl.solver.reconstruct`).
     t_e, t_r : float
         Exposure and row time of every camera, seconds.
+    tune : bool
+        True: the self-tuned default of :func:`rsocl.solver.reconstruct` (``lam`` and the
+        regularizer's tunable options chosen from the snapshots, warm start from interp3d;
+        ``lam`` above is then ignored); False: the fixed settings.
     """
 
     scene: str = "builtin"
@@ -57,6 +61,7 @@ class BenchPoint:
     eta: float = 0.2
     t_e: float = 180e-6
     t_r: float = 35e-6
+    tune: bool = False
 
     def __post_init__(self):
         from rsocl.common import validation as check

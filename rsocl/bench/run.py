@@ -10,7 +10,7 @@ The pieces, one module each (all re-exported here):
 
 * :mod:`rsocl.bench.point`: :class:`BenchPoint`, the knobs of one measurement;
 * :mod:`rsocl.bench.measure`: :func:`run_point`, how a point is measured;
-* :mod:`rsocl.bench.baseline`: :func:`interp3d`, the baseline that needs no solver;
+* :mod:`rsocl.model.interpolation`: :func:`interp3d`, the baseline that needs no solver;
 * :mod:`rsocl.bench.memory`: :func:`device_memory_bytes`, the device memory of a run;
 * :mod:`rsocl.bench.analysis`: :func:`pareto_front` and :func:`picks`;
 * :mod:`rsocl.bench.report`: ``bench.csv``, ``iterations.csv``, ``bench.md``, and the plots of
@@ -27,7 +27,7 @@ import time
 from dataclasses import replace
 
 from rsocl.bench.analysis import SPEED_PICK_DB, pareto_front, picks  # noqa: F401
-from rsocl.bench.baseline import interp3d
+from rsocl.model.interpolation import interp3d
 from rsocl.bench.measure import _device_of, run_point
 from rsocl.bench.memory import device_memory_bytes
 from rsocl.bench.point import BASELINE, BenchPoint, BenchResult, on_iterations_line
@@ -42,13 +42,14 @@ __all__ = ["BenchPoint", "BenchResult", "SWEEPS", "BASELINE", "run_point", "inte
 # ---------------------------------------------------------------------- sweeps
 #: Sweep name -> the :class:`BenchPoint` field it varies.
 SWEEPS = {"cameras": "cameras", "iterations": "iterations", "tv_iterations": "tv_iterations",
-          "regularizer": "regularizer", "dtype": "dtype", "dt": "dt_factor", "roi": "roi", "device": "device"}
+          "regularizer": "regularizer", "dtype": "dtype", "dt": "dt_factor", "roi": "roi", "device": "device",
+          "tune": "tune"}
 #: Sweep values of the full run; iterations and roi as fractions of the default point's.
 FULL = {"cameras": [1, 2, 3, 4, 5, 6, 7, 8], "iterations": [0.125, 0.25, 0.5, 1.0, 1.5],
         "tv_iterations": [2, 5, 10, 20], "dt": [1, 2, 3, 4], "roi": [0.5, 0.75, 1.0]}
 #: The ``--quick`` run: fewer values, the sweeps that show the trade.
 QUICK = {"cameras": [1, 2, 4, 8], "iterations": [0.1, 0.25, 0.5, 1.0], "tv_iterations": [2, 5, 10],
-         "dt": [1, 2, 4], "roi": [0.5, 0.75, 1.0], "regularizer": ["tv"]}
+         "dt": [1, 2, 4], "roi": [0.5, 0.75, 1.0], "regularizer": ["tv"], "tune": [False, True]}
 
 
 def canonical_device(spec):
@@ -85,6 +86,8 @@ def _default_values(name, default: BenchPoint, quick: bool, notes: list):
         return [f"{pi}:{di}" for pi, di, _, _ in list_devices()]
     if name == "tv_iterations":
         return list(FULL["tv_iterations"])
+    if name == "tune":
+        return [False, True]
     raise ValueError(f"unknown sweep {name!r}; known: {sorted(SWEEPS)}")
 
 
@@ -96,6 +99,12 @@ def parse_sweep(text: str):
         raise ValueError(f"--sweep must be one of {sorted(SWEEPS)} (optionally NAME=v1,v2,...), got {text!r}")
     if not values.strip():
         return name, None
+    if name == "tune":
+        flags = {"0": False, "false": False, "no": False, "1": True, "true": True, "yes": True}
+        values = [v.strip().lower() for v in values.split(",") if v.strip()]
+        if any(v not in flags for v in values):
+            raise ValueError(f"--sweep tune: values must be true/false (or 1/0), got {values!r}")
+        return name, [flags[v] for v in values]
     kind = {"cameras": int, "iterations": int, "tv_iterations": int, "roi": int, "dt": float}.get(name, str)
     try:
         return name, [kind(v.strip()) for v in values.split(",") if v.strip()]
@@ -189,6 +198,8 @@ def _label(point: BenchPoint, default: BenchPoint) -> str:
         parts.append(f"dt={point.dt_factor:g}t_r")
     if point.device != default.device:
         parts.append(f"dev {point.device}")
+    if point.tune != default.tune:
+        parts.append("self-tuned" if point.tune else "fixed")
     return " ".join(parts) or "default"
 
 

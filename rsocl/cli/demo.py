@@ -22,7 +22,8 @@ def add_parser(subparsers):
 
 
 def cmd_demo(args) -> int:
-    """Write ``demo.h5``, ``demo.gif``, ``snapshots.png`` and ``subframes.png`` to ``--out``; returns 0."""
+    """Write ``demo.h5``, ``demo.gif``, ``snapshots.png``, ``subframes.png`` and (unless ``--fast``)
+    ``demo-tuning.png``, the parameter search, to ``--out``; returns 0."""
     from rsocl.analysis.visual import comparison_gif, datacube_montage, snapshot_montage
     from rsocl.files.hdf5 import save_reconstruction
     from rsocl.model.operator import RollingShutterOperator
@@ -43,5 +44,9 @@ def cmd_demo(args) -> int:
              comparison_gif(out / "demo.gif", truth, result.datacube),
              snapshot_montage(out / "snapshots.png", g, rig=rig),
              datacube_montage(out / "subframes.png", result.datacube, truth=truth)]
+    if result.params.get("tuning"):
+        from rsocl.analysis.tuning_plot import tuning_plot
+
+        files.append(tuning_plot(out / "demo-tuning.png", result.params["tuning"]))
     say(args, "wrote " + ", ".join(str(f) for f in files))
     return 0

@@ -54,6 +54,10 @@ def add_solver_args(p):
     g.add_argument("--regularizer", default="tv", help="regularizer name (see 'rsocl plugins')")
     g.add_argument("--reg-opt", action="append", default=[], metavar="KEY=VALUE",
                    help="regularizer option, repeatable")
+    g.add_argument("--fast", action="store_true",
+                   help="skip the parameter search: fixed lam and regularizer options, zero start (by default "
+                        "the values not given are chosen from the snapshots by cross-validation, which costs "
+                        "about 3x the time of the run)")
 
 
 def reg_options(pairs):
@@ -80,7 +84,7 @@ def run_reconstruction(args, g, rig, truth=None):
     return reconstruct(g, rig, regularizer=args.regularizer, regularizer_options=reg_options(args.reg_opt),
                        iterations=args.iterations, lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
                        projection=args.projection, device=args.device, dtype=args.dtype, truth=truth,
-                       progress=not args.quiet)
+                       tune=not args.fast, progress=not args.quiet)
 
 
 def quality_line(result, truth):

@@ -61,7 +61,7 @@ def cmd_reconstruct(args) -> int:
         save_reconstruction(out, result.datacube, capture.rig, params=result.params, history=result.history,
                             truth=capture.truth)
         comparison_gif(gif, truth, result.datacube)
-        say(args, f"wrote {out} and {gif}")
+        say(args, "wrote " + ", ".join(str(p) for p in [out, gif, *_tuning_plot(args, result.params, gif)]))
         return 0
     batch = _reconstruct_sets(args, sets, capture.rig)
     say(args, f"{sets.shape[0]} sets in batches of {batch.params['batch']}")
@@ -72,8 +72,20 @@ def cmd_reconstruct(args) -> int:
         save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history,
                             truth=capture.truth if i == 0 else None)
     comparison_gif(gif, truth, batch.set(0).datacube)
-    say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)} and {gif}")
+    plots = _tuning_plot(args, batch.set(0).params, gif)
+    say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, " + ", ".join(map(str, [gif, *plots])))
     return 0
+
+
+def _tuning_plot(args, params, gif) -> list:
+    """Say the values chosen from the snapshots and plot the criterion next to the GIF; the files written."""
+    if not params.get("tuning"):
+        return []
+    from rsocl.analysis.tuning_plot import tuning_plot
+
+    chosen = ", ".join(f"{k} = {v:.3g}" for k, v in params["tuning"]["chosen"].items())
+    say(args, f"chosen from the snapshots: {chosen}")
+    return [tuning_plot(gif.with_name(gif.stem + "-tuning.png"), params["tuning"])]
 
 
 def _reconstruct_sets(args, sets, rig):
@@ -86,4 +98,4 @@ def _reconstruct_sets(args, sets, rig):
                             regularizer_options=reg_options(args.reg_opt), iterations=args.iterations,
                             lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
                             projection=args.projection, device=args.device, dtype=args.dtype,
-                            progress=not args.quiet)
+                            tune=not args.fast, progress=not args.quiet)

@@ -203,7 +203,8 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
         result = reconstruct(g, rig, settings.regularizer, iterations=settings.iterations, lam=settings.lam,
                              eta=settings.eta, tv_iterations=settings.tv_iterations,
                              projection=settings.projection, device=device, dtype=settings.dtype,
-                             regularizer_options=settings.options, saturation=settings.saturation)
+                             regularizer_options=settings.options, saturation=settings.saturation,
+                             tune=False)  # the capture's settings, never a tile's own choice
         seconds = time.perf_counter() - began
     piece = Piece(job.set_index, job.tile.index, solved.start, solved.stop,
                   core_block(result.datacube, job.tile, solved), seconds, result.iterations,

@@ -173,6 +173,20 @@ class ADMM:
         """Device memory of the solver's own arrays for ``sets`` sets, bytes (:func:`state_bytes`)."""
         return state_bytes(op.domain_shape, op.K, op.dtype, projection, sets, own_inverse)
 
+    def restart(self, regularizer, lam, x0):
+        """Start over from ``theta = x0`` (a device array, copied) with another regularizer and
+        ``lam`` (one number, or one per set); the data step (its inverse blocks, ``eta``, ``valid``) is kept."""
+        import pyopencl as cl
+
+        self.regularizer = regularizer
+        self.fused = bool(getattr(regularizer, "fuses_dual", False))
+        self.lams = _per_set("lam", lam, self.sets)
+        self.weights = np.where(self.etas > 0, self.lams / np.where(self.etas > 0, self.etas, 1.0), self.lams)
+        for dest in (self.theta, self.f):
+            cl.enqueue_copy(self.op.queue, dest.data, x0.data)
+        cl.enqueue_fill_buffer(self.op.queue, self.b.data, np.zeros(1, self.op.dtype), 0, self.b.nbytes)
+        self.iteration = 0
+
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
         op, queue = self.op, self.op.queue

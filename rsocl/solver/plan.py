@@ -124,8 +124,8 @@ def estimate(rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", dev
     per_iteration = None
     if measure and limit is None:
         g = np.zeros((rig.n_channels,) + rig.shape)
-        reconstruct(g, rig, regularizer=regularizer, iterations=1, device=dev, dtype=dtype)  # compile
-        result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=dev, dtype=dtype)
+        reconstruct(g, rig, regularizer=regularizer, iterations=1, device=dev, dtype=dtype, tune=False)  # compile
+        result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=dev, dtype=dtype, tune=False)
         per_iteration = result.history["time"][-1] / 3
     return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations, limit is None, limit)
 

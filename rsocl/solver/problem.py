@@ -22,7 +22,8 @@ __all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_
 
 #: Defaults for data scaled to [0, 1] per sub-frame intensity (snapshots then lie in
 #: [0, t_e/dt]): 200 ADMM iterations, ``lam = 0.1``, ``eta = 0.2``, 10 inner TV iterations
-#: (measured in ``benchmarks/quality.py``).
+#: (measured in ``benchmarks/solver_settings.py``); :func:`rsocl.solver.reconstruct` tunes ``lam``
+#: from the data unless given.
 DEFAULTS = {"iterations": 200, "lam": 0.1, "eta": 0.2, "tv_iterations": 10}
 
 

@@ -67,6 +67,9 @@ class Regularizer:
     recommended : dict
         Optional ``lam``/``eta`` that :func:`rsocl.solver.reconstruct` uses when the caller
         gives none (measured for this regularizer; data in [0, 1]).
+    tunable : dict of str -> tuple of float
+        Options that :func:`rsocl.solver.tuning.tune_parameters` may choose from the data,
+        with their coarse candidate values (positive, log spaced); empty: only ``lam`` is tuned.
 
     batched : bool
         True when ``_denoise`` takes a batch ``(B, T, m, n)`` with a float64 array of ``B``
@@ -86,6 +89,7 @@ class Regularizer:
     recommended: dict = {}
     batched = False
     fuses_dual = False
+    tunable: dict = {}
 
     def __init__(self, **options):
         unknown = sorted(set(options) - set(self.options))

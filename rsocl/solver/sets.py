@@ -91,7 +91,8 @@ def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, tr
 
     ``lam``/``eta`` are one number or one per set; ``x0``/``truth`` one ``(T, m, n)`` cube for every set
     or ``(S, T, m, n)``; the other keyword arguments go to :func:`rsocl.solver.reconstruct.reconstruct`
-    unchanged. Returns one batch :class:`Result` of all ``S`` sets: datacube ``(S, T, m, n)``, every
+    unchanged. A self-tuned run (the default) chooses its values on the first set, and every later
+    batch runs with them, each set from its own ``interp3d`` start. Returns one batch :class:`Result` of all ``S`` sets: datacube ``(S, T, m, n)``, every
     history entry ``(iterations, S)`` (``time`` counts from the start of each set's batch; with
     ``tol`` a batch that stopped early is padded with NaN), ``params["batch"]`` the batch size.
     """
@@ -129,12 +130,34 @@ def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, tr
             results.append(reconstruct(g[part], rig, device=device, dtype=dtype, regularizer=regularizer,
                                        regularizer_options=regularizer_options, projection=projection,
                                        **pick, **kwargs))
+            if start == 0 and results[0].params.get("tuning"):
+                # one capture, one setting: the first batch's choice serves the later batches
+                regularizer_options, lam, kwargs = _keep_choice(results[0].params["tuning"]["chosen"],
+                                                                regularizer_options, lam, kwargs)
+                per_set["lam"] = lam
+                if x0 is None:
+                    cubes["x0"] = _interpolated(g, rig, kwargs.get("saturation"))
             if bar is not None:
                 bar.update(part.stop - part.start)
     finally:
         if bar is not None:
             bar.close()
     return _joined(results, batch)
+
+
+def _keep_choice(chosen, regularizer_options, lam, kwargs):
+    """Regularizer options, ``lam`` and keyword arguments that fix the values ``chosen`` by tuning."""
+    options = {k: v for k, v in chosen.items() if k != "lam"}
+    if options:
+        regularizer_options = {**dict(regularizer_options or {}), **options}
+    return regularizer_options, chosen["lam"] if lam is None else lam, dict(kwargs, tune=False)
+
+
+def _interpolated(g, rig, saturation):
+    """The warm start of a tuned run for every set: ``interp3d`` of its snapshots ``(S, T, m, n)``."""
+    from rsocl.model.interpolation import interp3d
+
+    return np.stack([interp3d(one, rig, valid=None if saturation is None else one < saturation) for one in g])
 
 
 def _joined(results, batch) -> Result:

@@ -1,0 +1,96 @@
+"""The self-tuning step of :func:`rsocl.solver.reconstruct`: what the caller left unset
+(``lam``, the regularizer's :attr:`~rsocl.solver.regularizer.Regularizer.tunable` options) is
+chosen from the snapshots by :func:`rsocl.solver.tuning.tune_parameters`, and the run then
+starts from the :func:`~rsocl.model.interpolation.interp3d` interpolation of the snapshots.
+
+A batch of sets of one rig is tuned on its first set, and the chosen values apply to every set
+(one capture, one setting); per-set ``lam`` or ``eta`` given by the caller are kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from rsocl.model.interpolation import interp3d
+from rsocl.solver.problem import stage_on_device
+from rsocl.solver.regularizer import Regularizer
+from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, tune_parameters
+
+__all__ = ["tune_and_start"]
+
+
+def _first(value):
+    """The first set's value of a per-set tuple, else the value."""
+    return value[0] if isinstance(value, tuple) else value
+
+
+def with_options(regularizer, reg, user_options, options, tv_iterations, make):
+    """``reg``'s kind with ``options`` over the caller's ones (``make``: the name -> instance factory)."""
+    if isinstance(regularizer, Regularizer):
+        return type(reg)(**{**reg.values, **options})
+    return make(regularizer, {**dict(user_options or {}), **options}, tv_iterations)
+
+
+def _search(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, progress):
+    """Run :func:`tune_parameters` over what the caller left unset on one set; None when nothing is."""
+    given = set(reg.values) if isinstance(regularizer, Regularizer) else set(user_options or {})
+    tunable = {k: v for k, v in getattr(reg, "tunable", {}).items() if k not in given}
+    lam0 = _first(settings.lam)
+    if fixed_lam is None:
+        lam = [lam0 * f for f in LAM_FACTORS] if lam0 > 0 else lam0
+    else:
+        lam = _first(fixed_lam)
+    if (not tunable and np.isscalar(lam)) or (np.isscalar(lam) and lam == 0):
+        return None                    # nothing to choose; lam = 0 makes the regularizer's options moot
+    fixed = {k: v for k, v in reg.values.items() if k in given}
+    if fixed_lam is not None:
+        fixed["lam"] = lam
+    return tune_parameters(
+        staged.op, staged.g, problem.g, problem.rig,
+        lambda options: with_options(regularizer, reg, user_options, options, settings.tv_iterations, make),
+        tunable=tunable, lam=lam, eta=_first(settings.eta), projection=settings.projection, valid=problem.valid,
+        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations)), fixed=fixed, progress=progress)
+
+
+def _warm_start(problem, staged):
+    """``interp3d`` of the snapshots over the solved sub-frames, uploaded (one per set of a batch)."""
+    import pyopencl.array as cla
+
+    def one(g, valid):
+        return interp3d(g, problem.rig, valid=valid)[staged.solved]
+
+    if problem.batch is None:
+        start = one(problem.g, problem.valid)
+    else:
+        start = np.stack([one(problem.g[b], None if problem.valid is None else problem.valid[b])
+                          for b in range(problem.batch)])
+    return cla.to_device(staged.op.queue, np.ascontiguousarray(start, dtype=staged.op.dtype))
+
+
+def tune_and_start(problem, staged, settings, regularizer, reg, user_options, fixed_lam, *, make, device, dtype,
+                   progress=False):
+    """Choose the unset parameters from the snapshots and set the warm start.
+
+    Returns ``(reg, settings, tuning)``: the regularizer and settings to run with, and the
+    :class:`~rsocl.solver.tuning.Tuning` record (None when nothing was left to choose; then
+    ``reg``, ``settings`` and ``staged`` are unchanged). ``staged.x0`` becomes the
+    interpolation start unless the caller gave ``x0``.
+    """
+    one, one_staged = problem, staged
+    if problem.batch is not None:
+        one = replace(problem, g=problem.g[0], valid=None if problem.valid is None else problem.valid[0],
+                      x0=None, truth=None, batch=None)
+        one_staged = stage_on_device(one, reg, replace(settings, lam=_first(settings.lam), eta=_first(settings.eta)),
+                                     device=device, dtype=dtype)
+    tuning = _search(one, one_staged, settings, regularizer, reg, user_options, fixed_lam, make, progress)
+    if tuning is None:
+        return reg, settings, None
+    options = {k: v for k, v in tuning.chosen.items() if k != "lam"}
+    reg = with_options(regularizer, reg, user_options, options, settings.tv_iterations, make)
+    if fixed_lam is None:
+        settings = replace(settings, lam=tuning.chosen["lam"])
+    if staged.x0 is None:
+        staged.x0 = _warm_start(problem, staged)
+    return reg, settings, tuning

@@ -1,0 +1,269 @@
+"""Parameters from the data: block cross-validation on the snapshots, no ground truth.
+
+The criterion
+-------------
+The reference grid is cut into square blocks of ``block`` pixels; in each block one channel
+(camera) is held out of the data term, the channel changing from block to block
+(:func:`holdout`). An ADMM run on the remaining snapshot pixels, with candidate parameters,
+predicts the held-out ones as ``H theta``; the criterion is the relative prediction error
+``‖g - H theta‖ / ‖g‖`` over the held-out pixels. No ground truth enters: only the snapshots,
+the rig and the saturation mask.
+
+Why blocks of one channel: a camera reads a whole line at one instant, so a held-out pixel
+whose line neighbours were fitted is predicted from them (same instant, one pixel away)
+whatever the temporal prior; random single pixels reward spatial smoothing and pick
+temporal weights that lose up to 2 dB (measured on Runner, Traffic and the built-in scene).
+Whole blocks force the prediction through the other cameras and through time, as the
+sub-frames no camera sees are reconstructed in a real capture. Noise in the held-out
+pixels adds the same constant to every candidate's error, so the criterion stays unbiased.
+
+Why cross-validation rather than GCV or SURE: both need the noise level (SURE) or the trace
+of the reconstruction's Jacobian, which for ADMM with TV (a nonlinear map) takes a
+Monte-Carlo divergence estimate, i.e. extra perturbed runs per candidate; held-out pixels
+need neither. GCV and SURE were not measured against it.
+
+The search
+----------
+Coordinate search in log space: each tunable option of the regularizer (TV:
+``temporal_weight``, :attr:`rsocl.solver.regularizer.Regularizer.tunable`) over its coarse
+values at the recommended ``lam``, then the geometric midpoints next to the best value; then
+``lam`` times 0.3 and 3. Every candidate starts from the same warm start (:func:`interp3d` of
+the fitted pixels) and runs ``iterations`` ADMM steps; the data step's inverse blocks are
+computed once for all candidates. Values the caller fixed are not searched.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rsocl.common import validation as check
+from rsocl.device.reduction import sum_sq_diff
+from rsocl.model.interpolation import interp3d
+from rsocl.solver.admm import ADMM
+
+__all__ = ["LAM_FACTORS", "CANDIDATE_FRACTION", "holdout", "default_block", "Tuning", "tune_parameters"]
+
+#: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
+LAM_FACTORS = (0.3, 1.0, 3.0)
+#: Hold-out patterns (:func:`tune_parameters`). Two folds (a camera, then the opposite one) were
+#: measured no better on the tuning set of ``benchmarks/quality.py`` (64x64; PSNR in dB, one fold /
+#: two): built-in 18.13 / 18.08, twice as fast 16.11 / 16.11, Runner at 1 21.48 / 21.16, at 0.5
+#: 24.30 / 24.30, Traffic 17.69 / 17.69, for twice the cost.
+FOLDS = 1
+#: ADMM iterations per candidate, as a fraction of the final run's iterations (at least 10):
+#: seven candidates cost about 1.75 final runs.
+CANDIDATE_FRACTION = 0.25
+
+
+def default_block(shape) -> int:
+    """Side of the hold-out blocks, pixels: half the grid's smaller side, at least 2.
+
+    With 4 cameras each one is held out of one quadrant. Measured in ``benchmarks/quality.py``'s
+    tuning set (64x64, noiseless; PSNR in dB of the tuned run for blocks of 1/2, 1/4 and 1/8 of
+    the side): Runner at 0.5 frames per sub-frame 24.30 / 23.79 / 24.30, Runner at 1 21.48 /
+    21.16 / 20.39, Traffic 17.70 / 17.70 / 17.70, the built-in scene 18.19 / 18.19 / 18.13.
+    """
+    return max(2, int(round(min(shape) / 2)))
+
+
+def holdout(shape, channels: int, block: int | None = None, shift: int = 0) -> np.ndarray:
+    """Snapshot pixels held out of the fit, ``(channels, m, n)`` bool (True: held out).
+
+    Block ``(i, j)`` (rows ``i*block ...``, columns ``j*block ...``) holds out channel
+    ``(i + s*j + shift) mod P`` with ``P = max(channels, 2)`` and ``s = 2`` for ``P >= 4``, else 1; a
+    value ``>= channels`` (one camera only) holds out nothing there. With ``K >= 2`` channels
+    every pixel keeps ``K - 1`` of them.
+    """
+    m, n = check.grid_shape("shape", shape)
+    channels = check.positive_int("channels", channels)
+    block = default_block((m, n)) if block is None else check.positive_int("block", block)
+    period = max(channels, 2)
+    step = 2 if period >= 4 else 1
+    i = np.arange(m)[:, None] // block
+    j = np.arange(n)[None, :] // block
+    which = (i + step * j + int(shift)) % period
+    return np.stack([which == k for k in range(channels)])
+
+
+@dataclass
+class Tuning:
+    """What :func:`tune_parameters` chose and why.
+
+    Attributes
+    ----------
+    chosen : dict
+        ``lam`` and the tuned options (e.g. ``temporal_weight``) with the smallest criterion.
+    candidates : list of dict
+        Every candidate run, in order: its ``lam``, options and ``score`` (the relative
+        prediction error of the held-out snapshot pixels).
+    fixed : dict
+        Parameters the caller fixed (not searched).
+    iterations : int
+        ADMM iterations per candidate.
+    block : int
+        Side of the hold-out blocks, pixels.
+    held_out : int
+        Snapshot pixels held out.
+    seconds : float
+        Wall time of the whole search, seconds.
+    """
+
+    chosen: dict
+    candidates: list = field(default_factory=list)
+    fixed: dict = field(default_factory=dict)
+    iterations: int = 0
+    block: int = 0
+    held_out: int = 0
+    seconds: float = 0.0
+
+    def as_params(self) -> dict:
+        """A JSON-ready record for :attr:`rsocl.solver.result.Result.params`."""
+        return {"criterion": "block cross-validation: relative error of held-out snapshot pixels",
+                "chosen": dict(self.chosen), "fixed": dict(self.fixed),
+                "candidates": [{k: (v if math.isfinite(v) else None) for k, v in c.items()} for c in self.candidates],
+                "iterations_per_candidate": self.iterations, "block": self.block, "held_out_pixels": self.held_out,
+                "seconds": self.seconds}
+
+
+def _midpoints(values, best):
+    """Geometric midpoints between ``best`` and its neighbours in the sorted coarse ``values``."""
+    values = sorted(values)
+    k = values.index(best)
+    out = []
+    for other in (values[k - 1] if k > 0 else None, values[k + 1] if k + 1 < len(values) else None):
+        if other is not None and other > 0 and best > 0:
+            out.append(float(math.sqrt(best * other)))
+    return out
+
+
+def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta, projection="exact",
+                    valid=None, iterations=60, block=None, folds=None, fixed=None, progress=False) -> Tuning:
+    """Search the parameters that predict held-out snapshot pixels best (see the module doc).
+
+    Parameters
+    ----------
+    op : RollingShutterOperator
+        The staged operator (its sub-frames are the ones solved).
+    g_device : pyopencl.array.Array
+        Snapshots on the device, ``(K, m, n)``.
+    g : ndarray
+        The same snapshots on the host (for the warm start).
+    rig : Rig
+    make_regularizer : callable
+        ``make_regularizer(options)`` -> a Regularizer with those option values.
+    tunable : dict of str -> sequence of float
+        Options to search and their coarse candidate values (log spaced, > 0).
+    lam : float or sequence of float
+        The ``lam`` to use, or its candidates (the middle one is tried first).
+    eta : float
+    projection : {"exact", "paper"}
+    valid : ndarray of bool or None
+        Snapshot pixels usable at all (saturated ones left out).
+    iterations : int
+        ADMM iterations per candidate.
+    block : int or None
+        Side of the hold-out blocks (default :func:`default_block`).
+    folds : int or None
+        Hold-out patterns (default :data:`FOLDS`); fold ``k`` shifts the held-out channels by ``k*P // folds``
+        (:func:`holdout`), so with 2 folds and 4 cameras each block leaves out a camera and
+        then the opposite one. The criterion pools the held-out errors of all folds.
+    fixed : dict or None
+        Parameters the caller fixed, recorded in the result.
+    progress : bool
+        Show a progress bar (tqdm) over the candidates.
+
+    Returns
+    -------
+    Tuning
+    """
+    import pyopencl.array as cla
+
+    start = time.perf_counter()
+    iterations = check.positive_int("tuning iterations", iterations)
+    block = default_block(rig.shape) if block is None else check.positive_int("block", block)
+    lams = [float(lam)] if np.isscalar(lam) else [float(v) for v in lam]
+    folds = check.positive_int("folds", FOLDS if folds is None else folds)
+    held_out = 0
+    period = max(rig.n_channels, 2)
+    usable = np.ones((rig.n_channels,) + rig.shape, bool) if valid is None else np.asarray(valid, bool)
+    solved = _solved(rig, op)
+    parts = []                    # per fold: fitted pixels, their warm start, the held-out weights
+    for k in range(folds):
+        held = holdout(rig.shape, rig.n_channels, block, shift=(k * period) // folds)
+        fit, scored = usable & ~held, usable & held
+        if not scored.any() or not fit.any():
+            raise ValueError(f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
+                             f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}")
+        x0 = cla.to_device(op.queue, np.ascontiguousarray(interp3d(g, rig, valid=fit)[solved], dtype=op.dtype))
+        held_out += int(scored.sum())
+        parts.append([fit, x0, cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype)), None])
+    scale = sum(sum_sq_diff(g_device, weights=part[2]) for part in parts)
+    current = {"lam": lams[len(lams) // 2], **{name: float(sorted(values)[(len(values) - 1) // 2])
+                                                for name, values in tunable.items()}}
+    scores = {}
+    candidates = []
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        planned = sum(len(v) + 2 for v in tunable.values()) + max(len(lams) - 1, 0) + 1
+        bar = tqdm(total=planned, desc="tuning", unit="candidate", leave=False, disable=None)
+
+    def score(point):
+        key = tuple(sorted(point.items()))
+        if key in scores:
+            return scores[key]
+        reg = make_regularizer({k: v for k, v in point.items() if k != "lam"})
+        err = 0.0
+        for part in parts:
+            fit, x0, weights, solver = part
+            if solver is None:
+                part[3] = solver = ADMM(op, g_device, reg, lam=point["lam"], eta=eta, projection=projection, x0=x0,
+                                        valid=fit)
+            else:
+                solver.restart(reg, point["lam"], x0)
+            for _ in range(iterations):
+                solver.step()
+            op.forward_into(solver.theta, solver.hx)
+            err += sum_sq_diff(g_device, solver.hx, weights=weights)
+        value = float(math.sqrt(err / scale)) if scale > 0 else float(math.sqrt(err))
+        if not math.isfinite(value):
+            value = math.inf
+        scores[key] = value
+        candidates.append({**point, "score": value})
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(best=f"{min(scores.values()):.4g}")
+        return value
+
+    try:
+        for name, values in tunable.items():
+            coarse = sorted(float(v) for v in values)
+            for v in coarse:
+                score({**current, name: v})
+            best = min(coarse, key=lambda v: scores[tuple(sorted({**current, name: v}.items()))])
+            refined = coarse + _midpoints(coarse, best)
+            for v in refined:
+                score({**current, name: v})
+            current[name] = min(refined, key=lambda v: scores[tuple(sorted({**current, name: v}.items()))])
+        for v in lams:
+            score({**current, "lam": v})
+        current["lam"] = min(lams, key=lambda v: scores[tuple(sorted({**current, "lam": v}.items()))])
+    finally:
+        if bar is not None:
+            bar.close()
+    return Tuning(chosen=dict(current), candidates=candidates, fixed=dict(fixed or {}), iterations=iterations,
+                  block=block, held_out=held_out, seconds=time.perf_counter() - start)
+
+
+def _solved(rig, op) -> slice:
+    """The sub-frames ``op`` models, as a slice of the rig's ``T``."""
+    solved = rig.sampled_range()
+    if solved.stop - solved.start != op.T:
+        raise ValueError(f"the operator models {op.T} sub-frames, the rig samples {solved.stop - solved.start}")
+    return solved

@@ -1,0 +1,97 @@
+"""Parameters chosen from the data (rsocl.solver.tuning): the criterion, the search, the defaults."""
+
+import inspect
+
+import numpy as np
+import pytest
+
+import rsocl
+from rsocl.model import reference as ref
+from rsocl.solver.tuning import holdout, tune_parameters
+
+SHAPE = (24, 24)
+
+
+def _rig():
+    return rsocl.Rig.paper_array(4, SHAPE, t_e=0.18e-3, t_r=35e-6)
+
+
+def _static(rig):
+    from rsocl.model.scenes import builtin_scene
+
+    frame = builtin_scene(rig.shape, rig.T)[:1]
+    return np.repeat(frame, rig.T, axis=0).astype(np.float64)
+
+
+def _independent(rig, seed=0):
+    """Every sub-frame an independent random image of 6x6-pixel blocks: nothing carries over in time."""
+    blocks = np.random.default_rng(seed).uniform(0.1, 0.9, (rig.T, SHAPE[0] // 6, SHAPE[1] // 6))
+    return np.kron(blocks, np.ones((6, 6)))
+
+
+def test_holdout_keeps_all_but_one_channel_per_pixel():
+    held = holdout((20, 30), 4, block=5)
+    assert held.shape == (4, 20, 30)
+    assert np.all(held.sum(axis=0) == 1)              # one channel held out everywhere
+    assert all(held[k].any() for k in range(4))      # every channel is held out somewhere
+    one = holdout((8, 8), 1, block=2)
+    assert one.any() and not one.all()               # one camera: half the blocks fitted
+    with pytest.raises(ValueError, match="block"):
+        holdout((8, 8), 4, block=0)
+
+
+def test_static_scene_picks_a_strong_temporal_weight():
+    rig = _rig()
+    res = rsocl.reconstruct(ref.forward(rig, _static(rig)), rig, iterations=30)
+    assert res.params["tuning"]["chosen"]["temporal_weight"] >= 10
+
+
+def test_independent_frames_pick_a_weak_temporal_weight():
+    rig = _rig()
+    res = rsocl.reconstruct(ref.forward(rig, _independent(rig)), rig, iterations=30)
+    assert res.params["tuning"]["chosen"]["temporal_weight"] <= 3
+
+
+def test_no_ground_truth_reaches_the_tuning():
+    # the search takes no truth at all, and a run with truth=None chooses what a run with one does
+    assert "truth" not in inspect.signature(tune_parameters).parameters
+    rig = _rig()
+    truth = _static(rig) * 0.5 + 0.5 * _independent(rig)
+    g = ref.forward(rig, truth)
+    blind = rsocl.reconstruct(g, rig, iterations=20, truth=None)
+    seen = rsocl.reconstruct(g, rig, iterations=20, truth=truth)
+    record = blind.params["tuning"]
+    assert record["chosen"] == seen.params["tuning"]["chosen"]
+    assert blind.params["lam"] == record["chosen"]["lam"]
+    assert blind.params["regularizer_options"]["temporal_weight"] == record["chosen"]["temporal_weight"]
+    assert blind.params["start"] == "interp3d"
+    assert len(record["candidates"]) >= 6 and all(c["score"] > 0 for c in record["candidates"])
+    assert min(c["score"] for c in record["candidates"]) == pytest.approx(
+        next(c["score"] for c in record["candidates"]
+             if c["lam"] == record["chosen"]["lam"] and c["temporal_weight"] == record["chosen"]["temporal_weight"]))
+
+
+def test_values_the_caller_fixes_win():
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1e-4, t_r=3e-5)
+    g = ref.forward(rig, np.random.default_rng(3).random((rig.T,) + rig.shape))
+    both = rsocl.reconstruct(g, rig, iterations=12, lam=0.05, regularizer_options={"temporal_weight": 2.0})
+    assert both.params["tuning"] is None and both.params["start"] == "zeros"
+    weight = rsocl.reconstruct(g, rig, iterations=12, regularizer_options={"temporal_weight": 2.0})
+    assert weight.params["regularizer_options"]["temporal_weight"] == 2.0
+    assert weight.params["tuning"]["fixed"] == {"temporal_weight": 2.0}
+    assert all(set(c) == {"lam", "score"} for c in weight.params["tuning"]["candidates"])      # only lam searched
+    lam = rsocl.reconstruct(g, rig, iterations=12, lam=0.05)
+    assert lam.params["lam"] == 0.05 and {c["lam"] for c in lam.params["tuning"]["candidates"]} == {0.05}
+    fast = rsocl.reconstruct(g, rig, iterations=12, tune=False)
+    assert fast.params["tuning"] is None
+    assert (fast.params["lam"], fast.params["regularizer_options"]["temporal_weight"]) == (0.1, 3.0)
+
+
+def test_tuning_survives_blank_and_saturated_captures():
+    rig = rsocl.Rig.paper_array(2, (12, 12), t_e=1e-4, t_r=3e-5)
+    blank = rsocl.reconstruct(np.zeros((2, 12, 12)), rig, iterations=10)
+    assert not blank.datacube.any() and blank.params["tuning"]["chosen"]
+    g = ref.forward(rig, np.random.default_rng(4).random((rig.T,) + rig.shape))
+    level = np.quantile(g, 0.9)
+    res = rsocl.reconstruct(np.minimum(g, level), rig, iterations=10, saturation=level)
+    assert np.all(np.isfinite(res.datacube)) and res.params["saturated_pixels"] > 0
