@@ -114,9 +114,12 @@ class TV(Regularizer):
             kernel = self._program(x, "tv_fused.cl").tv_fused
             reserved = int(kernel.get_work_group_info(cl.kernel_work_group_info.LOCAL_MEM_SIZE, dev.device))
             shape = x.shape if x.ndim == 4 else (1,) + x.shape
+            # a CPU runs a work group's items as loops split at barriers: one item per group runs
+            # each row of a tile as one contiguous (vectorised) loop
+            cpu = bool(dev.device.type & cl.device_type.CPU)
             cache[key] = tv_fused.plan(shape, x.dtype.itemsize, self.iterations, self.fused, self.planes == 3,
                                        local_bytes=dev.local_mem_bytes - reserved,
-                                       group=dev.group_limit(kernel), max_items=dev.max_work_item_sizes)
+                                       group=1 if cpu else dev.group_limit(kernel), max_items=dev.max_work_item_sizes)
         return cache[key]
 
     def _buffers(self, x, copies):
