@@ -126,6 +126,58 @@ inline void fused_dual_row(__local real *restrict p0, __local real *restrict p1,
     }
 }
 
+/* Copies between global memory and the region, along one row: voxels k * LX (k = 0, 1, ...) below
+ * len of row pointers that start at the first voxel; p is 0 where p_zero. */
+inline void fused_load_row(__local real *restrict img, __local real *restrict p0, __local real *restrict p1,
+                           __local real *restrict p2, __global const real *restrict gimg,
+                           __global const real *restrict g0, __global const real *restrict g1,
+                           __global const real *restrict g2, int p_zero, int len, int LX)
+{
+    if (p_zero) {
+        for (int i = 0; i < len; i += LX) {
+            img[i] = gimg[i]; p0[i] = (real)0; p1[i] = (real)0;
+#if TEMPORAL
+            p2[i] = (real)0;
+#endif
+        }
+    } else if (LX == 1) {
+        for (int i = 0; i < len; ++i) {
+            img[i] = gimg[i]; p0[i] = g0[i]; p1[i] = g1[i];
+#if TEMPORAL
+            p2[i] = g2[i];
+#endif
+        }
+    } else {
+        for (int i = 0; i < len; i += LX) {
+            img[i] = gimg[i]; p0[i] = g0[i]; p1[i] = g1[i];
+#if TEMPORAL
+            p2[i] = g2[i];
+#endif
+        }
+    }
+}
+
+inline void fused_store_row(__global real *restrict g0, __global real *restrict g1, __global real *restrict g2,
+                            __local const real *restrict p0, __local const real *restrict p1,
+                            __local const real *restrict p2, int len, int LX)
+{
+    if (LX == 1) {
+        for (int i = 0; i < len; ++i) {
+            g0[i] = p0[i]; g1[i] = p1[i];
+#if TEMPORAL
+            g2[i] = p2[i];
+#endif
+        }
+    } else {
+        for (int i = 0; i < len; i += LX) {
+            g0[i] = p0[i]; g1[i] = p1[i];
+#if TEMPORAL
+            g2[i] = p2[i];
+#endif
+        }
+    }
+}
+
 /* out = img + d(p) at one voxel (local index li): the final write's primal. */
 inline real fused_primal(__local const real *IMG, __local const real *P0, __local const real *P1,
                          __local const real *P2, int li, int x, int y, int t, int RX, int RXY, real wt)
@@ -178,16 +230,10 @@ __kernel void tv_fused(__global const real *img, __global const real *pin, __glo
     /* ---- load the region ---- */
     for (int t = r.t0; t < r.t1; ++t)
         for (int y = r.y0 + ly; y < r.y1; y += LY) {
-            int row = ((t - r.t0) * RY + (y - r.y0)) * RX - r.x0;
-            size_t grow = base + ((size_t)t * m + y) * n;
-            for (int x = r.x0 + lx; x < r.x1; x += LX) {
-                IMG[row + x] = img[grow + x];
-                P0[row + x] = p_zero ? (real)0 : pin[grow + x];
-                P1[row + x] = p_zero ? (real)0 : pin[N + grow + x];
-#if TEMPORAL
-                P2[row + x] = p_zero ? (real)0 : pin[2 * N + grow + x];
-#endif
-            }
+            int row = ((t - r.t0) * RY + (y - r.y0)) * RX + lx;
+            size_t g = base + ((size_t)t * m + y) * n + r.x0 + lx;
+            fused_load_row(IMG + row, P0 + row, P1 + row, P2 + row, img + g, pin + g, pin + N + g,
+                           pin + (TV_ARRAYS - 3) * N + g, p_zero, RX - lx, LX);
         }
     barrier(CLK_LOCAL_MEM_FENCE);
 
@@ -227,6 +273,16 @@ __kernel void tv_fused(__global const real *img, __global const real *pin, __glo
 
     /* ---- write the interior: p, or the final out (and the ADMM's dual update) ---- */
     const int final_ = mode & FUSED_FINAL, update_dual = (mode & FUSED_DUAL) && dual[set];
+    if (!final_) {
+        for (int t = in.t0; t < in.t1; ++t)
+            for (int y = in.y0 + ly; y < in.y1; y += LY) {
+                int row = ((t - r.t0) * RY + (y - r.y0)) * RX + (in.x0 - r.x0) + lx;
+                size_t g = base + ((size_t)t * m + y) * n + in.x0 + lx;
+                fused_store_row(pout + g, pout + N + g, pout + (TV_ARRAYS - 3) * N + g, P0 + row, P1 + row,
+                                P2 + row, in.x1 - in.x0 - lx, LX);
+            }
+        return;
+    }
     for (int t = in.t0; t < in.t1; ++t)
         for (int y = in.y0 + ly; y < in.y1; y += LY)
             for (int x = in.x0 + lx; x < in.x1; x += LX) {
