@@ -16,9 +16,10 @@
  * x = gx*AX, y = gy*AY, t = (gz % tiles_t)*AT of set gz / tiles_t. `local` holds 5 arrays (img,
  * p0, p1, p2, out; 4 without TEMPORAL) of `cap` values, one guard value before each and one after
  * the last, so that the read of a left (right) neighbour at the region's first (last) voxel stays
- * inside local memory (the value is discarded). Each work item takes the voxels x = xb + lx,
- * y = yb + ly of every block of LX x LY of a phase (load, primal, dual step, write); one barrier
- * separates the phases.
+ * inside local memory (the value is discarded). Each work item takes the rows y = y0 + ly + k LY
+ * of a phase (load, primal, dual step, write) and in them the voxels x = x0 + lx + k LX; one barrier
+ * separates the phases. Rows are loops of their own over restrict pointers, with a unit-stride
+ * version for LX = 1: a CPU device (one work item per group) runs them as vectorised loops.
  *
  * mode: bit 0 = p starts at 0 (pin is not read), bit 1 = final (write out = img + d(p), not p),
  * bit 2 = also the ADMM's next dual update from u = img and theta = out: b = theta - u and
