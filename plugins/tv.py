@@ -52,9 +52,12 @@ class TV(Regularizer):
     takes the plain path whatever ``fused`` says. Tiles and work groups follow the device's
     ``CL_DEVICE_LOCAL_MEM_SIZE``, ``CL_DEVICE_MAX_WORK_GROUP_SIZE``, ``CL_DEVICE_MAX_WORK_ITEM_SIZES``
     and the kernel's own limits. The fused path moves a quarter of the plain path's bytes on PoCL's
-    512 KiB of local memory and about 60 % with 48 KiB (counted), but on PoCL (2 CPU cores) a TV
-    call takes 26-166x the plain path's time (``benchmarks/tv_fused.py``, ``docs/tv_fused.md``),
-    so the default is the plain path. It has not been measured on a GPU.
+    512 KiB of local memory and about 60 % with 48 KiB (counted). On a CPU device a work group is
+    one work item, which runs each row of its tile as one contiguous loop; even so, on PoCL (2 CPU
+    cores, where the plain path's data stays in cache) a TV call takes 1.8-12x the plain path's time
+    (``benchmarks/tv_fused.py``, ``docs/tv_fused.md``): the halos' redundant updates (a region of
+    39x23x23 voxels for a 32x16x16 tile at 3 updates per launch) outweigh the saved bytes, so the
+    default is the plain path. It has not been measured on a GPU.
     """
 
     name = "tv"
@@ -115,9 +118,12 @@ class TV(Regularizer):
             kernel = self._program(x, "tv_fused.cl").tv_fused
             reserved = int(kernel.get_work_group_info(cl.kernel_work_group_info.LOCAL_MEM_SIZE, dev.device))
             shape = x.shape if x.ndim == 4 else (1,) + x.shape
+            # a CPU runs a work group's items as loops split at barriers: one item per group runs
+            # each row of a tile as one contiguous (vectorised) loop
+            cpu = bool(dev.device.type & cl.device_type.CPU)
             cache[key] = tv_fused.plan(shape, x.dtype.itemsize, self.iterations, self.fused, self.planes == 3,
                                        local_bytes=dev.local_mem_bytes - reserved,
-                                       group=dev.group_limit(kernel), max_items=dev.max_work_item_sizes)
+                                       group=1 if cpu else dev.group_limit(kernel), max_items=dev.max_work_item_sizes)
         return cache[key]
 
     def _buffers(self, x, copies):
