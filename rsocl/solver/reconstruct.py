@@ -1,6 +1,23 @@
-"""``reconstruct``: what a user runs. Four named steps: check the inputs, stage them on the
-device, run the ADMM iterations, collect the result (:mod:`rsocl.solver.problem`,
-:mod:`rsocl.solver.iterate`)."""
+"""``reconstruct``: what a user runs. Five named steps: check the inputs, stage them on the
+device, choose what the caller left unset from the data, run the ADMM iterations, collect the
+result (:mod:`rsocl.solver.problem`, :mod:`rsocl.solver.autotune`, :mod:`rsocl.solver.iterate`).
+
+**Batches.** ``g`` of shape ``(B, K, m, n)`` holds ``B`` sets of one rig and is reconstructed in
+one run: every kernel launch serves the whole batch, each set is solved as if alone (the same
+result to float rounding) and the datacube is ``(B, T, m, n)`` (:class:`Result`). ``lam`` and
+``eta`` are one number or one per set; ``x0`` and ``truth`` one ``(T, m, n)`` cube for every set
+or ``(B, T, m, n)``; the callback's residual and ``tol`` act per set.
+:func:`rsocl.solver.sets.reconstruct_sets` sizes batches to the device.
+
+**Self-tuning** (``tune=True``, the default). ``lam`` and the regularizer's tunable options that
+the caller left unset are chosen from the snapshots alone by block cross-validation on held-out
+snapshot pixels (:mod:`rsocl.solver.tuning`; no ground truth is used), and the run starts from
+:func:`rsocl.model.interpolation.interp3d` unless ``x0`` is given (measured in
+``benchmarks/quality.py``: -0.12 to +0.01 dB at 64x64, +0.1 to +0.7 dB at 128x128 over a zero
+start). Values the caller gives (``lam``, ``regularizer_options``, a regularizer instance's
+options) are kept. The chosen values and every candidate's criterion are in
+``Result.params["tuning"]``. A batch is tuned on its first set and the choice serves every set.
+"""
 
 from __future__ import annotations
 
@@ -38,63 +55,39 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
                 truth=None, regularizer_options=None, saturation=None, tune=True, progress=False) -> Result:
     """Reconstruct the ``(T, m, n)`` datacube from snapshots ``g`` ``(K, m, n)`` with ADMM.
 
-    A batch of ``B`` sets of the same rig, ``g`` of shape ``(B, K, m, n)``, is reconstructed in one
-    run: every kernel launch serves the whole batch, each set is solved as if alone (same result to
-    float rounding), and the result's datacube is ``(B, T, m, n)`` (see :class:`Result`;
-    :func:`rsocl.solver.sets.reconstruct_sets` sizes batches to the device).
+    For a batch of sets, ``g`` ``(B, K, m, n)`` -> ``(B, T, m, n)``; ``lam``, ``eta`` may then be one
+    value per set and ``x0``, ``truth`` one cube per set (module doc). Data in [0, 1] per sub-frame.
 
     Parameters
     ----------
-    g : array_like, shape (K, m, n) or (B, K, m, n)
-        Snapshots registered on the reference grid, in the units of the forward
-        model (a scene in [0, 1] gives snapshots in [0, t_e/dt]).
+    g : array_like
+        Snapshots on the reference grid (a scene in [0, 1] gives values in [0, t_e/dt]).
     rig : Rig
     regularizer : str or Regularizer
-        Registry name (``"tv"``) or an instance.
+        Registry name (``"tv"``) or an instance; ``regularizer_options``: options of a named one.
     iterations : int
-        ADMM iterations (default 200).
-    lam : float or sequence of float
-        Regularization strength, >= 0 (default: the regularizer's ``recommended`` value,
-        else 0.1, for data in [0, 1]); for a batch, one number or one per set.
-    eta : float or sequence of float
-        ADMM penalty, >= 0 (default likewise, else 0.2); ``0`` runs GAP (denoiser weight ``lam``);
-        for a batch, one number or one per set.
-    tv_iterations : int
-        Inner iterations of an iterative denoiser (default: the regularizer's own, 10 for TV).
+        ADMM iterations (default 200); ``tv_iterations``: inner denoiser iterations (TV: 10).
+    lam, eta : float
+        Regularization strength and ADMM penalty, >= 0 (default: the regularizer's
+        ``recommended``, else 0.1 and 0.2); ``eta = 0`` runs GAP (denoiser weight ``lam``).
     projection : {"exact", "paper"}
         Exact per-pixel ``(eta I + H Hᵀ)⁻¹`` or the paper's diagonal (Eq. 15).
     device, dtype
         OpenCL device spec and ``"float32"``/``"float64"``.
     callback : callable or None
-        ``callback(iteration, residual, theta)`` after each iteration (``theta`` is a
-        device array; for a batch ``residual`` has one value per set); returning True stops the run.
-    x0 : array_like or None
-        Initial estimate ``(T, m, n)`` (for a batch: every set's, or ``(B, T, m, n)``); zeros by default.
+        ``callback(iteration, residual, theta)`` after each iteration; True stops the run.
+    x0, truth : array_like or None
+        Start (default zeros, or ``interp3d`` when tuned) and ground truth (adds PSNR in dB,
+        peak 1 for data in [0, 1]), ``(T, m, n)``.
     tol : float or None
-        Stop when the relative change of the residual between iterations is below ``tol``
-        (for a batch: in every set).
-    truth : array_like or None
-        Ground truth ``(T, m, n)`` (for a batch ``(B, T, m, n)``, or one for every set): adds
-        per-iteration PSNR (dB; peak 1 for data in [0, 1], see
-        :func:`rsocl.analysis.metrics.default_data_range`).
-    regularizer_options : dict or None
-        Options of a regularizer given by name.
+        Stop when the residual's relative change between iterations is below ``tol``.
     saturation : float or None
-        Snapshot value (same units as ``g``) at or above which a pixel is flagged as
-        saturated and left out of the data term; None keeps every pixel.
+        Snapshot value (units of ``g``) from which a pixel is left out of the data term.
+    tune : bool
+        Choose ``lam`` and the tunable options (TV: ``temporal_weight``) the caller left unset
+        from the snapshots alone (:mod:`rsocl.solver.autotune`); False: fixed defaults.
     progress : bool
         Show a progress bar (tqdm).
-    tune : bool
-        True (default): choose ``lam`` and the regularizer's tunable options (TV:
-        ``temporal_weight``) that the caller left unset from the snapshots alone, by block
-        cross-validation on held-out snapshot pixels (:mod:`rsocl.solver.tuning`; no ground
-        truth is used), then run with them from :func:`rsocl.model.interpolation.interp3d`
-        unless ``x0`` is given (measured in ``benchmarks/quality.py``: -0.12 to +0.01 dB at
-        64x64, +0.2 to +0.7 dB at 128x128 over a zero start). Values the caller gives
-        (``lam``, ``regularizer_options``, a regularizer instance's options) are kept. The
-        chosen values and every candidate's criterion are in ``Result.params["tuning"]``. A
-        batch is tuned on its first set and the choice applies to every set
-        (:mod:`rsocl.solver.autotune`). False: the fixed defaults, zero start.
     """
     problem = check_problem(g, rig, x0=x0, truth=truth, saturation=saturation)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
