@@ -94,7 +94,8 @@ def part_seams(args):
     began = time.perf_counter()
     untiled = rsocl.reconstruct(g, rig, iterations=args.iterations, tune=False, progress=True).datacube
     untiled_s = time.perf_counter() - began
-    tiled_result = reconstruct_tiled(g, rig, tile=(128, 128), halo=16, iterations=args.iterations, progress=True)
+    tiled_result = reconstruct_tiled(g, rig, tile=(128, 128), halo=16, iterations=args.iterations, tune=False,
+                                     progress=True)
     tiled = tiled_result.datacube
     diff = np.abs(tiled - untiled)
     kept = rig.kept_subframes()
@@ -181,7 +182,7 @@ def part_cluster(args):
     for _ in range(args.rounds):
         for workers in (1, 2):
             result = reconstruct_tiled(sets, rig, tile=rig.shape, halo=0, iterations=args.iterations,
-                                       workers=workers)
+                                       workers=workers, tune=False)
             times[workers].append(result.seconds)
             if reference is None:
                 reference = result.datacube

@@ -48,7 +48,7 @@ def test_every_set_into_one_store(capture, tmp_path):
     path, rig, sets = capture
     out = tmp_path / "sets.zarr"
     assert main(["reconstruct", str(path), "--out", str(out), "--sets", "--tile", "20", "26", "--halo", "0",
-                 "--iterations", "4", "--quiet"]) == 0
+                 "--iterations", "4", "--fast", "--quiet"]) == 0
     cube = zarr.open_group(str(out), mode="r")["datacube"]
     assert cube.shape == (3, rig.T) + rig.shape
     for s in range(3):

@@ -42,7 +42,7 @@ def _problem(shape, sets=None, seed=0):
 
 def test_local_and_distributed_schedulers_give_the_same_numbers(cluster):
     rig, g = _problem((30, 36), sets=2)
-    kwargs = dict(tile=(15, 18), halo=6, iterations=8)
+    kwargs = dict(tile=(15, 18), halo=6, iterations=8, tune=False)
     local = reconstruct_tiled(g, rig, **kwargs)
     remote = reconstruct_tiled(g, rig, scheduler=cluster[0].scheduler_address, **kwargs)
     assert remote.datacube.shape == (2, rig.T) + rig.shape and len(remote.pieces) == 8
@@ -101,7 +101,7 @@ def _tiles_done(store) -> int:
 def test_a_worker_killed_mid_run_and_every_chunk_is_still_correct(cluster, tmp_path):
     cluster_, client = cluster
     rig, g = _problem((48, 48))
-    kwargs = dict(tile=(16, 16), halo=6, iterations=40)
+    kwargs = dict(tile=(16, 16), halo=6, iterations=40, tune=False)
     reference = reconstruct_tiled(g, rig, **kwargs).datacube
     store = tmp_path / "rec.zarr"
     outcome = {}
@@ -171,8 +171,8 @@ def test_rsocl_reconstruct_on_the_cluster_of_rsocl_scheduler_and_on_its_own_work
 
     rig, g = _problem((18, 20))
     save_capture(tmp_path / "cap.h5", g, rig)
-    expected = reconstruct_tiled(g, rig, tile=(9, 10), halo=3, iterations=3).datacube
-    args = ["reconstruct", str(tmp_path / "cap.h5"), "--tile", "9", "10", "--halo", "3", "--iterations", "3", "--quiet"]
+    expected = reconstruct_tiled(g, rig, tile=(9, 10), halo=3, iterations=3, tune=False).datacube
+    args = ["reconstruct", str(tmp_path / "cap.h5"), "--tile", "9", "10", "--halo", "3", "--iterations", "3", "--fast", "--quiet"]
     monkeypatch.setenv("RSOCL_SCHEDULER", cluster[0].scheduler_address)
     assert main(args + ["--out", str(tmp_path / "env.zarr")]) == 0
     monkeypatch.delenv("RSOCL_SCHEDULER")

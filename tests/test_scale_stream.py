@@ -38,15 +38,15 @@ def test_a_stream_of_windows_matches_the_whole_capture():
     truth = builtin_scene(rig.shape, rig.T, seed=1)
     g = rsocl.RollingShutterOperator(rig).forward(truth)
     whole = rsocl.reconstruct(g, rig, iterations=20, tune=False).datacube
-    stream = reconstruct_stream(g, rig, window=2, overlap=1, iterations=20)
+    stream = reconstruct_stream(g, rig, window=2, overlap=1, iterations=20, tune=False)
     assert stream.datacube.shape == whole.shape and len(stream.windows) == 2
     assert all(b - a < rig.T for a, b in stream.spans)          # each window models part of the capture
     sampled = rig.sampled_range()
     assert np.all(stream.owner[sampled] >= 0)
     assert psnr(stream.datacube, truth) > psnr(whole, truth) - 0.3
-    one = reconstruct_stream(g, rig, window=3, overlap=0, iterations=20, tile=(10, 12), halo=4)
+    one = reconstruct_stream(g, rig, window=3, overlap=0, iterations=20, tile=(10, 12), halo=4, tune=False)
     np.testing.assert_array_equal(one.datacube, reconstruct_tiled(g, rig, tile=(10, 12), halo=4,
-                                                                  iterations=20).datacube)
+                                                                  iterations=20, tune=False).datacube)
 
 
 def test_rsocl_reconstruct_window(tmp_path, capsys):

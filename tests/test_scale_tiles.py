@@ -70,7 +70,7 @@ def test_tiled_matches_untiled(angles, shape, tile):
     rig = Rig([Camera(a, t_e=1.8e-4, t_r=3.5e-5) for a in angles], shape)
     g, truth = _problem(rig)
     untiled = rsocl.reconstruct(g, rig, iterations=ITER, tune=False).datacube
-    result = reconstruct_tiled(g, rig, tile=tile, halo=12, iterations=ITER)
+    result = reconstruct_tiled(g, rig, tile=tile, halo=12, iterations=ITER, tune=False)
     tiled = result.datacube
     assert tiled.shape == untiled.shape and tiled.dtype == untiled.dtype
     assert len(result.pieces) == len(tile_grid(shape, tile, 12)) and not result.failures
@@ -95,14 +95,14 @@ def test_one_tile_covering_the_grid_is_the_untiled_reconstruction():
     rig = rsocl.Rig.paper_array(4, (24, 28), t_e=1.8e-4, t_r=3.5e-5)
     g, _ = _problem(rig)
     untiled = rsocl.reconstruct(g, rig, iterations=ITER, tune=False).datacube
-    np.testing.assert_array_equal(reconstruct_tiled(g, rig, tile=(24, 28), halo=0, iterations=ITER).datacube,
+    np.testing.assert_array_equal(reconstruct_tiled(g, rig, tile=(24, 28), halo=0, iterations=ITER, tune=False).datacube,
                                   untiled)
 
 
 def test_sets_and_the_in_process_loop_give_the_same_numbers(monkeypatch):
     rig = rsocl.Rig.paper_array(4, (24, 30), t_e=1.8e-4, t_r=3.5e-5)
     sets = np.stack([_problem(rig, seed=s)[0] for s in range(3)])
-    kwargs = dict(tile=(12, 16), halo=8, iterations=10)
+    kwargs = dict(tile=(12, 16), halo=8, iterations=10, tune=False)
     local = reconstruct_tiled(sets, rig, **kwargs)
     assert local.datacube.shape == (3, rig.T) + rig.shape
     for s in range(3):

@@ -57,7 +57,7 @@ def add_solver_args(p):
     g.add_argument("--fast", action="store_true",
                    help="skip the parameter search: fixed lam and regularizer options, zero start (by default "
                         "the values not given are chosen from the snapshots by cross-validation, which costs "
-                        "about 3x the time of the run)")
+                        "about 3x the time of the run; a tiled run chooses once, on the centre tile, for every tile)")
 
 
 def reg_options(pairs):

@@ -2,7 +2,9 @@
 
 ``rsocl reconstruct`` runs tiled when asked (``--tile``, ``--sets``, ``--scheduler``/``RSOCL_SCHEDULER``,
 ``--workers``, an ``--out`` ending in ``.zarr``) or when the capture does not fit the device in
-one piece (then with the tile ``rsocl plan`` would propose). ``rsocl plan`` prints a tiling
+one piece (then with the tile ``rsocl plan`` would propose). A tiled run (and a stream of
+windows) chooses the unset parameters once for every tile, as ``rsocl.scale.reconstruct_tiled``
+does; ``--fast`` keeps the fixed defaults. ``rsocl plan`` prints a tiling
 proposal when the problem does not fit one device, or for ``--tile``.
 """
 
@@ -104,7 +106,7 @@ def reconstruct_tiled_if_needed(args):
             lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations, projection=args.projection,
             device=args.device, dtype=args.dtype, regularizer_options=reg_options(args.reg_opt),
             out=args.out if zarr_out else None, scheduler=args.scheduler, workers=args.workers,
-            retries=args.retries, progress=not args.quiet)
+            retries=args.retries, tune=not args.fast, progress=not args.quiet)
     except TilesFailed as exc:
         print(f"rsocl reconstruct: error: {exc}", flush=True)
         return 1
@@ -146,7 +148,7 @@ def _stream(args, capture):
         regularizer=args.regularizer, iterations=args.iterations, lam=args.lam, eta=args.eta,
         tv_iterations=args.tv_iterations, projection=args.projection, device=args.device, dtype=args.dtype,
         regularizer_options=reg_options(args.reg_opt), scheduler=args.scheduler, retries=args.retries,
-        progress=not args.quiet)
+        tune=not args.fast, progress=not args.quiet)
     truth = None if args.no_truth else loaded.truth
     text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
     if truth is not None:

@@ -47,6 +47,9 @@ _ROW_MAPS = "rig_row_maps"
 TILE_FIELDS = ("done", "start", "stop", "seconds", "iterations", "residual")
 #: attributes that must match for a store to be resumed
 _IDENTITY = ("rsocl_file", "rig", "tiling", "input_digest", "dtype")
+#: parameters that may differ in a resumed store: the device, and the tuning record (its timing;
+#: the values it chose are compared as ``lam`` and ``regularizer_options``)
+_NOT_COMPARED = ("device", "tuning")
 
 
 def require_zarr(name="out"):
@@ -130,7 +133,7 @@ def prepare_store(path, spec: StoreSpec, name="out") -> np.ndarray:
         differ = [key for key in _IDENTITY if found.get(key) != attrs[key]]
         old_params, new_params = json.loads(found.get("params", "{}")), spec.params
         differ += [f"params.{k}" for k in sorted(set(old_params) | set(new_params))
-                   if k != "device" and old_params.get(k) != new_params.get(k)]
+                   if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)]
         if differ:
             raise ValueError(f"{name}: {str(path)!r} holds another reconstruction (it differs in "
                              f"{', '.join(differ)}); remove it or choose another path")

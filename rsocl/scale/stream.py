@@ -97,7 +97,9 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=2, overlap=1, tile=None, p
     tile : (int, int) or None
         Tile of each window (None: the whole grid, one task per window).
     **kwargs
-        As :func:`rsocl.scale.reconstruct_tiled` (``halo``, ``iterations``, ``scheduler``, ...).
+        As :func:`rsocl.scale.reconstruct_tiled` (``halo``, ``iterations``, ``scheduler``,
+        ``tune``, ...). With ``tune`` (the default) the first window chooses the unset
+        parameters and every later window runs with that choice (one capture, one setting).
     """
     from rsocl.scale.tiled import reconstruct_tiled
 
@@ -122,6 +124,10 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=2, overlap=1, tile=None, p
             print(f"window {w + 1}/{len(windows)}: frames {k0}..{k1 - 1}, sub-frames {spans[w].start}.."
                   f"{spans[w].stop - 1}", flush=True)
         result = reconstruct_tiled(g[window_channels(rig, k0, k1)], sub, tile=tile, progress=progress, **kwargs)
+        if not results and result.tuning is not None:
+            kwargs["tune"] = result.tuning              # the first window's choice, for every later window
+        elif not results:
+            kwargs["tune"] = False                      # nothing was left to choose
         results.append(result)
         cube = np.asarray(result.datacube)
         if datacube is None:

@@ -2,7 +2,9 @@
 
 Every input is checked before anything is computed: the snapshots against the rig, the solver
 settings (``lam``/``eta`` settled once, from the regularizer's recommendation, for every tile),
-the tile and halo, the output path, and the scheduler (connected to first).
+the tile and halo, the output path, and the scheduler (connected to first). With ``tune`` (the
+default, as for :func:`rsocl.reconstruct`) what the caller left unset is then chosen once from
+the centre tile of the first set (:mod:`rsocl.scale.tuned`) and every task runs with that choice.
 """
 
 from __future__ import annotations
@@ -17,10 +19,12 @@ from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
 from rsocl.scale.runner import Engine
 from rsocl.scale.tiles import DEFAULT_HALO, check_halo, place, tile_grid, tile_rig
+from rsocl.scale.tuned import tune_tiles, tuned_options
 from rsocl.scale.work import Job, RigPayload, TileSettings
 from rsocl.solver.plan import device_limit, memory_need
 from rsocl.solver.problem import check_settings
 from rsocl.solver.reconstruct import make_regularizer
+from rsocl.solver.tuning import Tuning
 
 __all__ = ["reconstruct_tiled", "TiledResult", "TilesFailed"]
 
@@ -35,15 +39,19 @@ class TiledResult:
         ``(T, m, n)``, or ``(S, T, m, n)`` for ``S`` sets; a Zarr array when written to a store.
     rig : Rig
     params : dict
-        The settings every tile ran with, the tile and halo.
+        The settings every tile ran with, the tile and halo; ``"tuning"`` the record of the
+        choice (:meth:`rsocl.solver.tuning.Tuning.as_params`, None when not tuned) and
+        ``"start"`` every tile's first iterate (``"interp3d"`` or ``"zeros"``).
     pieces : list of rsocl.scale.work.Piece
         The tasks run now (blocks dropped), with their sub-frames, seconds and residual.
     skipped : int
         Tasks already done in the store, not run again.
     failures : list of rsocl.scale.runner.Failure
     seconds : float
-        Wall-clock time of the run, seconds.
+        Wall-clock time of the run (the tuning included), seconds.
     store : Path or None
+    tuning : rsocl.solver.tuning.Tuning or None
+        The values chosen for every tile, None when not tuned.
     """
 
     datacube: object
@@ -54,6 +62,7 @@ class TiledResult:
     failures: list = field(default_factory=list)
     seconds: float = 0.0
     store: Path | None = None
+    tuning: Tuning | None = None
 
     @property
     def trimmed(self):
@@ -95,10 +104,25 @@ def _check_tile_memory(rig, grid, reg, dtype, projection, device):
                          f"({dev.name}); choose a smaller tile (rsocl plan proposes one)")
 
 
+def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype, saturation, device):
+    """Every task's :class:`TileSettings` and the run's ``params``, with ``tuning``'s choice (None: as given)."""
+    options = tuned_options(tuning, regularizer_options)
+    reg = make_regularizer(regularizer, options, checked.tv_iterations)
+    lam = checked.lam if tuning is None or fixed_lam is not None else tuning.chosen["lam"]
+    start = "zeros" if tuning is None else "interp3d"
+    settings = TileSettings(regularizer, options, checked.iterations, lam, checked.eta, checked.tv_iterations,
+                            checked.projection, str(np.dtype(dtype)), saturation, device, start)
+    params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
+              "lam": lam, "eta": checked.eta, "projection": checked.projection, "dtype": settings.dtype,
+              "device": device, "tol": None, "saturation": saturation,
+              "tuning": None if tuning is None else tuning.as_params(), "start": start}
+    return settings, params
+
+
 def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAULT_HALO, iterations=None,
                       lam=None, eta=None, tv_iterations=None, projection="exact", device=None, dtype="float32",
                       regularizer_options=None, saturation=None, out=None, scheduler=None, workers=None,
-                      retries=2, progress=False) -> TiledResult:
+                      retries=2, tune=True, progress=False) -> TiledResult:
     """Reconstruct ``snapshots`` tile by tile (and set by set) as tasks of a Dask graph.
 
     Parameters
@@ -124,8 +148,19 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
         See :class:`rsocl.scale.runner.Engine`.
     retries : int
         Extra attempts of a failing task (>= 0).
+    tune : bool or rsocl.solver.tuning.Tuning
+        True (default): ``lam`` and the regularizer's tunable options that are left unset are
+        chosen from the snapshots once, in this process, before any task runs, on the tile
+        nearest the grid's centre (with its halo, over its own rig) of the first set, as
+        :func:`rsocl.reconstruct` chooses them (:mod:`rsocl.scale.tuned`); every tile of every
+        set then runs with the chosen values and starts from the interpolation of its own
+        snapshots. A single tile covering the grid gives ``rsocl.reconstruct(g, rig)``. The
+        search costs about 1.75 runs of one tile. A :class:`~rsocl.solver.tuning.Tuning` (an
+        earlier run's choice, e.g. the first window of a stream) is applied as it is. False:
+        the fixed defaults, zero start. The record is in ``params["tuning"]`` (and a store's
+        ``params`` attribute).
     progress : bool
-        A progress bar over the tasks.
+        A progress bar over the tuning candidates and the tasks.
 
     Raises
     ------
@@ -138,9 +173,12 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
     if not isinstance(regularizer, str):
         raise ValueError(f"regularizer must be a registry name for a tiled reconstruction (each task builds its "
                          f"own), got {regularizer!r}")
+    if not isinstance(tune, (bool, np.bool_, Tuning)):
+        raise ValueError(f"tune must be True, False or an rsocl.solver.tuning.Tuning, got {tune!r}")
     checked = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                              projection=projection)
     reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
+    fixed_lam = checked.lam
     checked = checked.settled_for(reg, dtype)
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
@@ -152,17 +190,18 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
         store = check_store_path(out, "out")
     if engine.mode != "distributed":
         _check_tile_memory(rig, grid, reg, dtype, checked.projection, device)
-    settings = TileSettings(regularizer, dict(regularizer_options or {}), checked.iterations, checked.lam,
-                            checked.eta, checked.tv_iterations, checked.projection, str(np.dtype(dtype)),
-                            saturation, device)
     span = rig.sampled_range()
-    params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
-              "lam": checked.lam, "eta": checked.eta, "projection": checked.projection, "dtype": settings.dtype,
-              "device": device, "tol": None, "saturation": saturation, "saturated_pixels": 0,
-              "solved_subframes": [span.start, span.stop], "tile": list(grid.tile), "halo": grid.halo}
     with engine:                        # a cluster is reached (or started) before the input is read
         began = time.perf_counter()
-        digest, params["saturated_pixels"] = scan(source, saturation)
+        digest, saturated = scan(source, saturation)
+        tuning = tune if isinstance(tune, Tuning) else None
+        if tune is True or tune is np.True_:
+            tuning = tune_tiles(source, rig, grid, regularizer, checked, fixed_lam, regularizer_options,
+                                device=device, dtype=dtype, saturation=saturation, progress=progress)
+        settings, params = _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype,
+                                     saturation, device)
+        params.update({"saturated_pixels": saturated, "solved_subframes": [span.start, span.stop],
+                       "tile": list(grid.tile), "halo": grid.halo})
         done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)
         if store is not None:
             from rsocl.scale.store import StoreSpec, prepare_store
@@ -188,7 +227,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
             target = datacube if piece.set_index is None else datacube[piece.set_index]
             place(target, tiles[piece.index], piece.start, piece.block, (span.start, span.stop))
             piece.block = None
-    result = TiledResult(datacube, rig, params, pieces, int(done.sum()), failures, seconds, store)
+    result = TiledResult(datacube, rig, params, pieces, int(done.sum()), failures, seconds, store, tuning)
     if failures:
         raise TilesFailed(result)
     return result

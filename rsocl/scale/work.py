@@ -30,7 +30,11 @@ __all__ = ["TileSettings", "RigPayload", "FileBlock", "Job", "Piece", "solve_til
 class TileSettings:
     """The solver settings of the whole capture, applied as they are to every tile.
 
-    ``lam`` and ``eta`` are settled (never None) so that no tile picks its own.
+    ``lam`` and ``eta`` are settled (never None) so that no tile picks its own; a self-tuned
+    run puts the values chosen once for the capture here (:mod:`rsocl.scale.tuned`). ``start``
+    is each tile's first iterate: ``"zeros"``, or ``"interp3d"`` (the
+    :func:`~rsocl.model.interpolation.interp3d` interpolation of the tile's own snapshots over
+    its rig, the start of a tuned :func:`rsocl.reconstruct`).
     """
 
     regularizer: str
@@ -43,6 +47,7 @@ class TileSettings:
     dtype: str
     saturation: float | None
     device: str | None
+    start: str = "zeros"
 
 
 @dataclass(frozen=True)
@@ -190,6 +195,19 @@ def _rig_for(payload: RigPayload, tile: Tile) -> Rig:
 
 
 # ---------------------------------------------------------------------- the task
+def _start(g, rig: Rig, settings: TileSettings):
+    """The tile's first iterate ``(T, h, w)`` for ``settings.start``, None for zeros."""
+    if settings.start == "zeros":
+        return None
+    if settings.start != "interp3d":
+        raise ValueError(f"start must be 'zeros' or 'interp3d', got {settings.start!r}")
+    from rsocl.model.interpolation import interp3d
+    from rsocl.solver.problem import check_problem
+
+    problem = check_problem(g, rig, saturation=settings.saturation)
+    return interp3d(problem.g, rig, valid=problem.valid)
+
+
 def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     """Reconstruct ``job``'s tile with the capture's settings; write it to the store or return it."""
     from rsocl.solver.reconstruct import reconstruct
@@ -197,13 +215,14 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     rig = _rig_for(payload, job.tile)
     solved = rig.sampled_range()
     g = job.snapshots()
+    x0 = _start(g, rig, settings)
     device = worker_device(settings.device)
     with _lock_for(device):
         began = time.perf_counter()
         result = reconstruct(g, rig, settings.regularizer, iterations=settings.iterations, lam=settings.lam,
                              eta=settings.eta, tv_iterations=settings.tv_iterations,
                              projection=settings.projection, device=device, dtype=settings.dtype,
-                             regularizer_options=settings.options, saturation=settings.saturation,
+                             regularizer_options=settings.options, saturation=settings.saturation, x0=x0,
                              tune=False)  # the capture's settings, never a tile's own choice
         seconds = time.perf_counter() - began
     piece = Piece(job.set_index, job.tile.index, solved.start, solved.stop,

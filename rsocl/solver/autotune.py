@@ -18,7 +18,7 @@ from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, tune_parameters
 
-__all__ = ["tune_and_start"]
+__all__ = ["tune_and_start", "choose_unset"]
 
 
 def _first(value):
@@ -33,8 +33,15 @@ def with_options(regularizer, reg, user_options, options, tv_iterations, make):
     return make(regularizer, {**dict(user_options or {}), **options}, tv_iterations)
 
 
-def _search(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, progress):
-    """Run :func:`tune_parameters` over what the caller left unset on one set; None when nothing is."""
+def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, progress=False):
+    """Run :func:`tune_parameters` over what the caller left unset on one set; None when nothing is.
+
+    ``problem`` and ``staged`` are one set, checked and staged; ``settings`` are settled
+    (:meth:`~rsocl.solver.problem.Settings.settled_for`); ``fixed_lam`` is the caller's ``lam``
+    (None: searched). ``lam`` candidates are the settled ``lam`` times
+    :data:`~rsocl.solver.tuning.LAM_FACTORS`; each candidate runs
+    :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations`` (at least 10).
+    """
     given = set(reg.values) if isinstance(regularizer, Regularizer) else set(user_options or {})
     tunable = {k: v for k, v in getattr(reg, "tunable", {}).items() if k not in given}
     lam0 = _first(settings.lam)
@@ -84,7 +91,7 @@ def tune_and_start(problem, staged, settings, regularizer, reg, user_options, fi
                       x0=None, truth=None, batch=None)
         one_staged = stage_on_device(one, reg, replace(settings, lam=_first(settings.lam), eta=_first(settings.eta)),
                                      device=device, dtype=dtype)
-    tuning = _search(one, one_staged, settings, regularizer, reg, user_options, fixed_lam, make, progress)
+    tuning = choose_unset(one, one_staged, settings, regularizer, reg, user_options, fixed_lam, make, progress)
     if tuning is None:
         return reg, settings, None
     options = {k: v for k, v in tuning.chosen.items() if k != "lam"}

@@ -1,0 +1,104 @@
+"""A tiled run chooses its parameters once, as rsocl.reconstruct does, and every tile uses that choice."""
+
+import numpy as np
+import pytest
+
+import rsocl
+import rsocl.solver.reconstruct as reconstruct_module
+from rsocl.model.interpolation import interp3d
+from rsocl.model.scenes import builtin_scene
+from rsocl.scale import reconstruct_tiled, tile_grid
+from rsocl.scale.stream import reconstruct_stream
+from rsocl.scale.tiles import tile_rig
+from rsocl.scale.tuned import by_distance_to_centre
+
+ITER = 12
+
+
+def _problem(rig, seed=0):
+    truth = builtin_scene(rig.shape, rig.T, seed=seed)
+    return rsocl.RollingShutterOperator(rig).forward(truth), truth
+
+
+def _record_calls(monkeypatch):
+    """Every tile's call of rsocl.reconstruct: its lam, options, start and tune flag."""
+    calls = []
+    real = reconstruct_module.reconstruct
+
+    def recording(g, rig, *args, **kwargs):
+        calls.append({"lam": kwargs["lam"], "options": dict(kwargs["regularizer_options"]), "tune": kwargs["tune"],
+                      "x0": kwargs.get("x0"), "g": np.array(g), "rig": rig})
+        return real(g, rig, *args, **kwargs)
+
+    monkeypatch.setattr(reconstruct_module, "reconstruct", recording)
+    return calls
+
+
+def test_a_single_tile_over_the_grid_is_the_untiled_tuned_reconstruction():
+    rig = rsocl.Rig.paper_array(4, (20, 24), t_e=1.8e-4, t_r=3.5e-5)
+    g, _ = _problem(rig)
+    untiled = rsocl.reconstruct(g, rig, iterations=ITER)
+    tiled = reconstruct_tiled(g, rig, tile=rig.shape, halo=0, iterations=ITER)
+    assert untiled.params["tuning"] is not None and untiled.params["start"] == "interp3d"
+    assert tiled.params["tuning"]["chosen"] == untiled.params["tuning"]["chosen"]
+    assert tiled.params["lam"] == untiled.params["lam"] == untiled.params["tuning"]["chosen"]["lam"]
+    assert tiled.params["regularizer_options"] == untiled.params["regularizer_options"]
+    assert tiled.params["start"] == "interp3d"
+    np.testing.assert_allclose(tiled.datacube, untiled.datacube, atol=1e-5)
+    fixed = rsocl.reconstruct(g, rig, iterations=ITER, tune=False).datacube
+    assert np.abs(fixed - untiled.datacube).max() > 1e-3          # the tolerance above tells tuned from fixed
+
+
+def test_every_tile_of_every_set_gets_the_choice_made_on_the_centre_tile_of_the_first_set(monkeypatch, tmp_path):
+    pytest.importorskip("zarr")
+    from rsocl.scale.store import load_store
+
+    rig = rsocl.Rig.paper_array(4, (30, 36), t_e=1.8e-4, t_r=3.5e-5)
+    sets = np.stack([_problem(rig, seed=s)[0] for s in range(2)])
+    grid = tile_grid(rig.shape, (10, 12), 4)
+    centre = by_distance_to_centre(grid)[0]
+    assert centre.index == (1, 1)
+    expected = rsocl.reconstruct(sets[0][:, centre.outer_slices[0], centre.outer_slices[1]],
+                                 tile_rig(rig, centre), iterations=ITER).params["tuning"]["chosen"]
+    calls = _record_calls(monkeypatch)
+    result = reconstruct_tiled(sets, rig, tile=(10, 12), halo=4, iterations=ITER, out=tmp_path / "rec.zarr")
+    assert result.tuning.chosen == expected
+    assert len(calls) == 2 * len(grid)
+    options = {k: v for k, v in expected.items() if k != "lam"}
+    for call in calls:                 # one setting for every tile and set, each from its own interpolation
+        assert call["lam"] == expected["lam"] and call["options"] == options and call["tune"] is False
+        np.testing.assert_array_equal(call["x0"], interp3d(call["g"], call["rig"]))
+    stored = load_store(tmp_path / "rec.zarr").params
+    assert stored["tuning"]["chosen"] == expected and stored["lam"] == expected["lam"]
+    assert stored["start"] == "interp3d"
+    again = reconstruct_tiled(sets, rig, tile=(10, 12), halo=4, iterations=ITER, out=tmp_path / "rec.zarr")
+    assert again.skipped == 2 * len(grid) and not again.pieces          # resumed, nothing redone
+
+
+def test_fixed_settings_when_not_tuned_or_when_nothing_is_left_to_choose(monkeypatch):
+    rig = rsocl.Rig.paper_array(4, (20, 24), t_e=1.8e-4, t_r=3.5e-5)
+    g, _ = _problem(rig)
+    calls = _record_calls(monkeypatch)
+    fixed = reconstruct_tiled(g, rig, tile=(10, 12), halo=4, iterations=4, tune=False)
+    assert fixed.tuning is None and fixed.params["tuning"] is None and fixed.params["start"] == "zeros"
+    assert all(c["x0"] is None and c["options"] == {} for c in calls)
+    assert fixed.params["lam"] == rsocl.reconstruct(g, rig, iterations=4, tune=False).params["lam"]
+    calls.clear()
+    given = reconstruct_tiled(g, rig, tile=(10, 12), halo=4, iterations=4, lam=0.05,
+                              regularizer_options={"temporal_weight": 2.0})
+    assert given.tuning is None and given.params["start"] == "zeros" and given.params["lam"] == 0.05
+    assert all(c["lam"] == 0.05 and c["options"] == {"temporal_weight": 2.0} for c in calls)
+    with pytest.raises(ValueError, match="tune must be True, False or"):
+        reconstruct_tiled(g, rig, tile=(10, 12), tune="yes")
+
+
+def test_a_stream_runs_every_window_with_the_first_windows_choice():
+    from rsocl.model.rig import Camera, Rig
+
+    rig = Rig([Camera(a, t_e=1.8e-4, t_r=3.5e-5, frames=3, t_d=12 * 3.5e-5) for a in (0, 90, 180, 270)], (12, 12))
+    g, _ = _problem(rig)
+    stream = reconstruct_stream(g, rig, window=2, overlap=1, iterations=ITER, halo=0)
+    first, second = stream.results
+    assert first.tuning is not None and second.tuning is first.tuning
+    assert second.params["lam"] == first.params["lam"] and second.params["start"] == "interp3d"
+    assert second.params["regularizer_options"] == first.params["regularizer_options"]
