@@ -95,3 +95,21 @@ def test_tuning_survives_blank_and_saturated_captures():
     level = np.quantile(g, 0.9)
     res = rsocl.reconstruct(np.minimum(g, level), rig, iterations=10, saturation=level)
     assert np.all(np.isfinite(res.datacube)) and res.params["saturated_pixels"] > 0
+
+
+def test_an_earlier_choice_runs_again_without_a_search():
+    """``tune=<Tuning>`` applies a recorded choice (values and interp3d start) as the tuned run did."""
+    from rsocl.solver.tuning import Tuning
+
+    rig = _rig()
+    g = ref.forward(rig, _static(rig))
+    first = rsocl.reconstruct(g, rig, iterations=12)
+    again = rsocl.reconstruct(g, rig, iterations=12, tune=Tuning.from_params(first.params["tuning"]))
+    assert again.params["tuning"]["chosen"] == first.params["tuning"]["chosen"]
+    assert again.params["start"] == "interp3d" and again.params["lam"] == first.params["lam"]
+    np.testing.assert_allclose(again.datacube, first.datacube, atol=1e-6 * np.abs(first.datacube).max())
+    fixed = rsocl.reconstruct(g, rig, iterations=12, tune=False)
+    assert np.abs(fixed.datacube - first.datacube).max() > 1e-3 * np.abs(first.datacube).max()
+    for bad in ("yes", 1, None):
+        with pytest.raises(ValueError, match="tune must be True, False"):
+            rsocl.reconstruct(g, rig, iterations=2, tune=bad)

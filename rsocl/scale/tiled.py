@@ -22,6 +22,7 @@ from rsocl.scale.tiles import DEFAULT_HALO, check_halo, place, tile_grid, tile_r
 from rsocl.scale.tuned import tune_tiles, tuned_options
 from rsocl.scale.work import Job, RigPayload, TileSettings
 from rsocl.solver.plan import device_limit, memory_need
+from rsocl.solver.autotune import check_tune
 from rsocl.solver.problem import check_settings
 from rsocl.solver.reconstruct import make_regularizer
 from rsocl.solver.tuning import Tuning
@@ -173,8 +174,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
     if not isinstance(regularizer, str):
         raise ValueError(f"regularizer must be a registry name for a tiled reconstruction (each task builds its "
                          f"own), got {regularizer!r}")
-    if not isinstance(tune, (bool, np.bool_, Tuning)):
-        raise ValueError(f"tune must be True, False or an rsocl.solver.tuning.Tuning, got {tune!r}")
+    tune = check_tune(tune)
     checked = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                              projection=projection)
     reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
@@ -195,7 +195,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
         began = time.perf_counter()
         digest, saturated = scan(source, saturation)
         tuning = tune if isinstance(tune, Tuning) else None
-        if tune is True or tune is np.True_:
+        if tune is True:
             tuning = tune_tiles(source, rig, grid, regularizer, checked, fixed_lam, regularizer_options,
                                 device=device, dtype=dtype, saturation=saturation, progress=progress)
         settings, params = _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype,

@@ -4,8 +4,9 @@
 snapshots (:mod:`rsocl.solver.autotune`). A tiled run makes that choice once, in the client,
 before any task is submitted: on the tile whose core is nearest the grid's centre (its block
 with the halo, over its own rig, cut as every tile is by :func:`rsocl.scale.tiles.tile_rig`), of
-the first set; the next nearest when every pixel of that block is saturated. Every tile of every set then runs with the chosen values, so neighbouring tiles
-cannot differ in their settings, and starts from the
+the first set; the next nearest when every pixel of that block is saturated. Every tile of
+every set then runs with the chosen values, so neighbouring tiles cannot differ in their
+settings, and starts from the
 :func:`~rsocl.model.interpolation.interp3d` interpolation of its own snapshots, as the untiled
 tuned run does. A single tile covering the grid therefore runs exactly as
 ``rsocl.reconstruct(g, rig)``.
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 from rsocl.scale.tiles import Tile, TileGrid, tile_rig
 from rsocl.scale.work import Job, worker_device
-from rsocl.solver.autotune import choose_unset
+from rsocl.solver.autotune import choose_unset, chosen_options
 from rsocl.solver.problem import check_problem, stage_on_device
 from rsocl.solver.reconstruct import make_regularizer
 
@@ -34,15 +35,16 @@ def by_distance_to_centre(grid: TileGrid) -> list:
 
 
 def _tuning_block(source, grid: TileGrid, saturation):
-    """The tile to tune on and its snapshots of the first set: the nearest the centre with a pixel below saturation."""
+    """The tile to tune on and its snapshots of the first set: the nearest the centre with a pixel
+    below saturation (the nearest when every tile is saturated: :func:`check_problem` says so)."""
     set_index = None if source.n_sets is None else 0
-    tiles = by_distance_to_centre(grid)
-    for tile in tiles:
+    nearest = None
+    for tile in by_distance_to_centre(grid):
         g = Job(set_index, tile, source.block(set_index, tile), (0, 0)).snapshots()
         if saturation is None or (g < saturation).any():
             return tile, g
-    tile = tiles[0]                     # every tile saturated: check_problem says so
-    return tile, Job(set_index, tile, source.block(set_index, tile), (0, 0)).snapshots()
+        nearest = nearest or (tile, g)
+    return nearest
 
 
 def tune_tiles(source, rig, grid: TileGrid, regularizer: str, settings, fixed_lam, regularizer_options, *,
@@ -81,5 +83,4 @@ def tune_tiles(source, rig, grid: TileGrid, regularizer: str, settings, fixed_la
 
 def tuned_options(tuning, regularizer_options) -> dict:
     """The regularizer options every tile runs with: the caller's, with the chosen ones over them."""
-    chosen = {} if tuning is None else {k: v for k, v in tuning.chosen.items() if k != "lam"}
-    return {**dict(regularizer_options or {}), **chosen}
+    return {**dict(regularizer_options or {}), **({} if tuning is None else chosen_options(tuning))}

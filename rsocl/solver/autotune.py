@@ -16,14 +16,28 @@ import numpy as np
 from rsocl.model.interpolation import interp3d
 from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
-from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, tune_parameters
+from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, tune_parameters
 
-__all__ = ["tune_and_start", "choose_unset"]
+__all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options"]
+
+
+def check_tune(tune):
+    """``tune`` checked: ``True``/``False`` (a bool), or an earlier :class:`Tuning` to run with."""
+    if isinstance(tune, Tuning):
+        return tune
+    if isinstance(tune, (bool, np.bool_)):
+        return bool(tune)
+    raise ValueError(f"tune must be True, False or an rsocl.solver.tuning.Tuning, got {tune!r}")
 
 
 def _first(value):
     """The first set's value of a per-set tuple, else the value."""
     return value[0] if isinstance(value, tuple) else value
+
+
+def chosen_options(tuning) -> dict:
+    """The regularizer options a :class:`Tuning` chose (its ``chosen`` without ``lam``)."""
+    return {k: v for k, v in tuning.chosen.items() if k != "lam"}
 
 
 def with_options(regularizer, reg, user_options, options, tv_iterations, make):
@@ -76,26 +90,33 @@ def _warm_start(problem, staged):
     return cla.to_device(staged.op.queue, np.ascontiguousarray(start, dtype=staged.op.dtype))
 
 
-def tune_and_start(problem, staged, settings, regularizer, reg, user_options, fixed_lam, *, make, device, dtype,
-                   progress=False):
-    """Choose the unset parameters from the snapshots and set the warm start.
-
-    Returns ``(reg, settings, tuning)``: the regularizer and settings to run with, and the
-    :class:`~rsocl.solver.tuning.Tuning` record (None when nothing was left to choose; then
-    ``reg``, ``settings`` and ``staged`` are unchanged). ``staged.x0`` becomes the
-    interpolation start unless the caller gave ``x0``.
-    """
+def _search_first_set(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, device, dtype,
+                      progress):
+    """:func:`choose_unset` on the problem, or on the first set of a batch (staged on its own)."""
     one, one_staged = problem, staged
     if problem.batch is not None:
         one = replace(problem, g=problem.g[0], valid=None if problem.valid is None else problem.valid[0],
                       x0=None, truth=None, batch=None)
         one_staged = stage_on_device(one, reg, replace(settings, lam=_first(settings.lam), eta=_first(settings.eta)),
                                      device=device, dtype=dtype)
-    tuning = choose_unset(one, one_staged, settings, regularizer, reg, user_options, fixed_lam, make, progress)
+    return choose_unset(one, one_staged, settings, regularizer, reg, user_options, fixed_lam, make, progress)
+
+
+def tune_and_start(problem, staged, settings, regularizer, reg, user_options, fixed_lam, *, make, device, dtype,
+                   choice=None, progress=False):
+    """Choose the unset parameters from the snapshots (or run with ``choice``, an earlier
+    :class:`~rsocl.solver.tuning.Tuning`, without a search) and set the warm start.
+
+    Returns ``(reg, settings, tuning)``: the regularizer and settings to run with, and the
+    :class:`~rsocl.solver.tuning.Tuning` record (None when nothing was left to choose; then
+    ``reg``, ``settings`` and ``staged`` are unchanged). ``staged.x0`` becomes the
+    interpolation start unless the caller gave ``x0``.
+    """
+    tuning = choice if choice is not None else _search_first_set(
+        problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, device, dtype, progress)
     if tuning is None:
         return reg, settings, None
-    options = {k: v for k, v in tuning.chosen.items() if k != "lam"}
-    reg = with_options(regularizer, reg, user_options, options, settings.tv_iterations, make)
+    reg = with_options(regularizer, reg, user_options, chosen_options(tuning), settings.tv_iterations, make)
     if fixed_lam is None:
         settings = replace(settings, lam=tuning.chosen["lam"])
     if staged.x0 is None:

@@ -24,7 +24,7 @@ from __future__ import annotations
 from rsocl.common.registry import load
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import ADMM
-from rsocl.solver.autotune import tune_and_start
+from rsocl.solver.autotune import check_tune, tune_and_start
 from rsocl.solver.iterate import collect, run_iterations
 from rsocl.solver.problem import DEFAULTS, check_problem, check_settings, stage_on_device
 from rsocl.solver.regularizer import Regularizer
@@ -72,8 +72,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         ``recommended``, else 0.1 and 0.2); ``eta = 0`` runs GAP (denoiser weight ``lam``).
     projection : {"exact", "paper"}
         Exact per-pixel ``(eta I + H Hᵀ)⁻¹`` or the paper's diagonal (Eq. 15).
-    device, dtype
-        OpenCL device spec and ``"float32"``/``"float64"``.
+    device, dtype, progress
+        OpenCL device spec, ``"float32"``/``"float64"``, and a progress bar (tqdm).
     callback : callable or None
         ``callback(iteration, residual, theta)`` after each iteration; True stops the run.
     x0, truth : array_like or None
@@ -83,13 +83,12 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         Stop when the residual's relative change between iterations is below ``tol``.
     saturation : float or None
         Snapshot value (units of ``g``) from which a pixel is left out of the data term.
-    tune : bool
+    tune : bool or Tuning
         Choose ``lam`` and the tunable options (TV: ``temporal_weight``) the caller left unset
-        from the snapshots alone (:mod:`rsocl.solver.autotune`); False: fixed defaults.
-    progress : bool
-        Show a progress bar (tqdm).
+        from the snapshots alone (:mod:`rsocl.solver.autotune`); a ``Tuning``: run with that
+        earlier choice, without a search; False: fixed defaults.
     """
-    problem = check_problem(g, rig, x0=x0, truth=truth, saturation=saturation)
+    problem, tune = check_problem(g, rig, x0=x0, truth=truth, saturation=saturation), check_tune(tune)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                               projection=projection, tol=tol, callback=callback)
     reg = make_regularizer(regularizer, regularizer_options, settings.tv_iterations)
@@ -97,10 +96,10 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     settings = settings.settled_for(reg, dtype).for_batch(problem.batch)
     staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype)
     tuning = None
-    if tune:
+    if tune is not False:
         reg, settings, tuning = tune_and_start(problem, staged, settings, regularizer, reg, regularizer_options,
                                                fixed_lam, make=make_regularizer, device=device, dtype=dtype,
-                                               progress=progress)
+                                               choice=None if tune is True else tune, progress=progress)
     solver = ADMM(staged.op, staged.g, reg, lam=settings.lam, eta=settings.eta, projection=settings.projection,
                   x0=staged.x0, valid=problem.valid)
     history = run_iterations(solver, staged, settings, progress=progress)

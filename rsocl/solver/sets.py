@@ -17,6 +17,7 @@ from rsocl.device.context import get_device
 from rsocl.model.rig import Rig
 from rsocl.solver.batch import batch_memory
 from rsocl.solver.result import Result
+from rsocl.solver.tuning import Tuning
 
 __all__ = ["batch_size", "reconstruct_sets", "MAX_BATCH"]
 
@@ -132,32 +133,13 @@ def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, tr
                                        **pick, **kwargs))
             if start == 0 and results[0].params.get("tuning"):
                 # one capture, one setting: the first batch's choice serves the later batches
-                regularizer_options, lam, kwargs = _keep_choice(results[0].params["tuning"]["chosen"],
-                                                                regularizer_options, lam, kwargs)
-                per_set["lam"] = lam
-                if x0 is None:
-                    cubes["x0"] = _interpolated(g, rig, kwargs.get("saturation"))
+                kwargs["tune"] = Tuning.from_params(results[0].params["tuning"])
             if bar is not None:
                 bar.update(part.stop - part.start)
     finally:
         if bar is not None:
             bar.close()
     return _joined(results, batch)
-
-
-def _keep_choice(chosen, regularizer_options, lam, kwargs):
-    """Regularizer options, ``lam`` and keyword arguments that fix the values ``chosen`` by tuning."""
-    options = {k: v for k, v in chosen.items() if k != "lam"}
-    if options:
-        regularizer_options = {**dict(regularizer_options or {}), **options}
-    return regularizer_options, chosen["lam"] if lam is None else lam, dict(kwargs, tune=False)
-
-
-def _interpolated(g, rig, saturation):
-    """The warm start of a tuned run for every set: ``interp3d`` of its snapshots ``(S, T, m, n)``."""
-    from rsocl.model.interpolation import interp3d
-
-    return np.stack([interp3d(one, rig, valid=None if saturation is None else one < saturation) for one in g])
 
 
 def _joined(results, batch) -> Result:

@@ -120,6 +120,15 @@ class Tuning:
     held_out: int = 0
     seconds: float = 0.0
 
+    @classmethod
+    def from_params(cls, record: dict) -> "Tuning":
+        """The choice recorded by :meth:`as_params` (e.g. ``Result.params["tuning"]``), to run again with."""
+        candidates = [{k: (math.inf if k == "score" and v is None else v) for k, v in c.items()}
+                      for c in record.get("candidates", [])]
+        return cls(dict(record["chosen"]), candidates, dict(record.get("fixed", {})),
+                   record.get("iterations_per_candidate", 0), record.get("block", 0),
+                   record.get("held_out_pixels", 0), record.get("seconds", 0.0))
+
     def as_params(self) -> dict:
         """A JSON-ready record for :attr:`rsocl.solver.result.Result.params`."""
         return {"criterion": "block cross-validation: relative error of held-out snapshot pixels",
