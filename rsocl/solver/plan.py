@@ -81,23 +81,17 @@ def crop_rig(rig: Rig, roi, dt=None) -> Rig:
 def memory_need(rig: Rig, *, regularizer="tv", dtype="float32", projection="exact") -> tuple:
     """``(largest buffer, total)`` device bytes of reconstructing ``rig``'s sampled sub-frames.
 
-    From the shapes alone (nothing is allocated): the datacube over
-    :meth:`Rig.sampled_range`, the solver's arrays (:meth:`ADMM.buffers_bytes`) and the
-    regularizer's workspace.
+    From the shapes alone (nothing is allocated), by the count :func:`rsocl.solver.reconstruct`
+    checks before it runs (:func:`rsocl.solver.batch.batch_memory` of one set): the datacube over
+    :meth:`Rig.sampled_range`, the solver's arrays and the regularizer's workspace.
     """
-    from types import SimpleNamespace
-
     from rsocl.common.registry import load
-    from rsocl.solver.admm import ADMM
+    from rsocl.solver.batch import batch_memory
 
     solved = rig.sampled_range()
-    dtype = np.dtype(dtype)
     domain = (solved.stop - solved.start,) + rig.shape
-    shapes = SimpleNamespace(domain_shape=domain, range_shape=(rig.n_channels,) + rig.shape, dtype=dtype,
-                             K=rig.n_channels)
     reg = load("rsocl.regularizers", regularizer)() if isinstance(regularizer, str) else regularizer
-    cube = int(np.prod(domain)) * dtype.itemsize
-    return cube, ADMM.buffers_bytes(shapes, projection) + reg.workspace_bytes(domain, dtype)
+    return batch_memory(domain, rig.n_channels, dtype, reg, projection, 1)
 
 
 def device_limit(device, largest: int, total: int) -> str | None:
