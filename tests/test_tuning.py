@@ -113,3 +113,31 @@ def test_an_earlier_choice_runs_again_without_a_search():
     for bad in ("yes", 1, None):
         with pytest.raises(ValueError, match="tune must be True, False"):
             rsocl.reconstruct(g, rig, iterations=2, tune=bad)
+
+
+@pytest.mark.parametrize("batch", [None, 3])
+def test_a_search_that_would_not_fit_is_refused_before_it_runs(batch, monkeypatch):
+    """The search's buffers count beside the run's: a device with room for the run alone refuses
+    the search (naming the way out) before any candidate runs, and still runs with fixed values."""
+    from rsocl.solver import autotune
+    from rsocl.solver.batch import memory_bytes
+    from rsocl.solver.reconstruct import make_regularizer
+
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1e-4, t_r=3e-5)
+    g = ref.forward(rig, np.random.default_rng(5).random((rig.T,) + rig.shape))
+    g = g if batch is None else np.stack([g] * batch)
+    device = rsocl.device.get_device()
+    op = rsocl.RollingShutterOperator(rig, device=device, subframes=rig.sampled_range())
+    reg = make_regularizer("tv")
+    run = memory_bytes(op, reg, "exact", batch or 1)[1]
+    extra = autotune.search_memory(op, reg, "exact", batch)
+    assert 0 < extra
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: run + extra // 2))
+    monkeypatch.setattr(autotune, "tune_parameters", lambda *a, **k: pytest.fail("the search ran"))
+    with pytest.raises(ValueError, match=r"choosing the parameters from the data .* tune=False"):
+        rsocl.reconstruct(g, rig, iterations=4, device=device)
+    fixed = rsocl.reconstruct(g, rig, iterations=4, device=device, tune=False)
+    assert np.all(np.isfinite(fixed.datacube))
+    given = rsocl.reconstruct(g, rig, iterations=4, device=device, lam=0.1,
+                              regularizer_options={"temporal_weight": 3.0})
+    assert given.params["tuning"] is None

@@ -206,12 +206,14 @@ class Device:
                              "use dtype='float32' or another device")
         return dt
 
-    def check_fits(self, what: str, nbytes: int, total_bytes: int | None = None, dtype=None):
+    def check_fits(self, what: str, nbytes: int, total_bytes: int | None = None, dtype=None, also: str = ""):
         """Raise a ``ValueError`` with the numbers when a buffer (or all of them) would not fit.
 
-        ``dtype`` (the buffers' type) adds the hint to use float32 when it is float64.
+        ``dtype`` (the buffers' type) adds the hint to use float32 when it is float64; ``also`` is
+        one more way out, put first in the hint.
         """
-        hint = "reduce the ROI (shape), raise dt"
+        hint = f"{also}, " if also else ""
+        hint += "reduce the ROI (shape), raise dt"
         if dtype is not None and np.dtype(dtype) == np.float64:
             hint += ", use float32"
         hint += ", or split it into tiles (rsocl plan proposes them; rsocl reconstruct --tile H W)"

@@ -14,11 +14,12 @@ from dataclasses import replace
 import numpy as np
 
 from rsocl.model.interpolation import interp3d
+from rsocl.solver.batch import batch_memory, memory_bytes
 from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, tune_parameters
 
-__all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options"]
+__all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options", "search_memory"]
 
 
 def check_tune(tune):
@@ -47,15 +48,8 @@ def with_options(regularizer, reg, user_options, options, tv_iterations, make):
     return make(regularizer, {**dict(user_options or {}), **options}, tv_iterations)
 
 
-def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, progress=False):
-    """Run :func:`tune_parameters` over what the caller left unset on one set; None when nothing is.
-
-    ``problem`` and ``staged`` are one set, checked and staged; ``settings`` are settled
-    (:meth:`~rsocl.solver.problem.Settings.settled_for`); ``fixed_lam`` is the caller's ``lam``
-    (None: searched). ``lam`` candidates are the settled ``lam`` times
-    :data:`~rsocl.solver.tuning.LAM_FACTORS`; each candidate runs
-    :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations`` (at least 10).
-    """
+def _to_search(settings, regularizer, reg, user_options, fixed_lam):
+    """``(tunable, lam, fixed)`` of the search, or None when the caller left nothing to choose."""
     given = set(reg.values) if isinstance(regularizer, Regularizer) else set(user_options or {})
     tunable = {k: v for k, v in getattr(reg, "tunable", {}).items() if k not in given}
     lam0 = _first(settings.lam)
@@ -68,6 +62,27 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     fixed = {k: v for k, v in reg.values.items() if k in given}
     if fixed_lam is not None:
         fixed["lam"] = lam
+    return tunable, lam, fixed
+
+
+def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, progress=False,
+                 checked=False):
+    """Run :func:`tune_parameters` over what the caller left unset on one set; None when nothing is.
+
+    ``problem`` and ``staged`` are one set, checked and staged; ``settings`` are settled
+    (:meth:`~rsocl.solver.problem.Settings.settled_for`); ``fixed_lam`` is the caller's ``lam``
+    (None: searched). ``lam`` candidates are the settled ``lam`` times
+    :data:`~rsocl.solver.tuning.LAM_FACTORS`; each candidate runs
+    :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations`` (at least 10).
+    Unless ``checked`` (the caller did it, for a batch), the search's memory beside this set's
+    run (:func:`search_memory`) is checked against the device before anything runs.
+    """
+    search = _to_search(settings, regularizer, reg, user_options, fixed_lam)
+    if search is None:
+        return None
+    tunable, lam, fixed = search
+    if not checked:
+        _check_search_fits(problem, staged, settings, reg)
     return tune_parameters(
         staged.op, staged.g, problem.g, problem.rig,
         lambda options: with_options(regularizer, reg, user_options, options, settings.tv_iterations, make),
@@ -90,16 +105,45 @@ def _warm_start(problem, staged):
     return cla.to_device(staged.op.queue, np.ascontiguousarray(start, dtype=staged.op.dtype))
 
 
+def search_memory(op, reg, projection: str, batch) -> int:
+    """Device bytes the search adds to a staged run on ``op``: one set's ADMM and regularizer
+    workspace, its warm start and hold-out weights, and for a batch (``batch`` sets, None: one
+    set) the first set's own snapshots and inverse blocks."""
+    cube = op.domain_shape
+    itemsize = np.dtype(op.dtype).itemsize
+    snap = op.K * int(np.prod(cube[1:])) * itemsize
+    extra = batch_memory(cube, op.K, op.dtype, reg, projection, 1)[1] + int(np.prod(cube)) * itemsize + snap
+    if batch is not None:
+        extra += snap * (op.K + 1)
+    return extra
+
+
+def _check_search_fits(problem, staged, settings, reg):
+    """Raise before the search when it and the staged run together would not fit the device."""
+    sets = problem.batch or 1
+    largest, run = memory_bytes(staged.op, reg, settings.projection, sets, truth=problem.truth is not None)
+    extra = search_memory(staged.op, reg, settings.projection, problem.batch)
+    staged.op.device.check_fits(f"choosing the parameters from the data (ADMM with {reg.name} on "
+                                f"T={staged.op.T} x {problem.rig.shape[0]} x {problem.rig.shape[1]}, "
+                                f"{extra / 2**20:.1f} MiB beside the run's {run / 2**20:.1f} MiB)",
+                                largest, total_bytes=run + extra, dtype=staged.op.dtype,
+                                also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fast)")
+
+
 def _search_first_set(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, device, dtype,
                       progress):
     """:func:`choose_unset` on the problem, or on the first set of a batch (staged on its own)."""
-    one, one_staged = problem, staged
-    if problem.batch is not None:
-        one = replace(problem, g=problem.g[0], valid=None if problem.valid is None else problem.valid[0],
-                      x0=None, truth=None, batch=None)
-        one_staged = stage_on_device(one, reg, replace(settings, lam=_first(settings.lam), eta=_first(settings.eta)),
-                                     device=device, dtype=dtype)
-    return choose_unset(one, one_staged, settings, regularizer, reg, user_options, fixed_lam, make, progress)
+    if problem.batch is None:
+        return choose_unset(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, progress)
+    if _to_search(settings, regularizer, reg, user_options, fixed_lam) is None:
+        return None
+    _check_search_fits(problem, staged, settings, reg)
+    one = replace(problem, g=problem.g[0], valid=None if problem.valid is None else problem.valid[0],
+                  x0=None, truth=None, batch=None)
+    one_staged = stage_on_device(one, reg, replace(settings, lam=_first(settings.lam), eta=_first(settings.eta)),
+                                 device=device, dtype=dtype)
+    return choose_unset(one, one_staged, settings, regularizer, reg, user_options, fixed_lam, make, progress,
+                        checked=True)
 
 
 def tune_and_start(problem, staged, settings, regularizer, reg, user_options, fixed_lam, *, make, device, dtype,
