@@ -41,9 +41,7 @@ def tuning_plot(path, record, *, dpi=100) -> Path:
     FigureCanvasAgg(figure)
     from matplotlib.ticker import NullFormatter
 
-    # the chosen candidate (the start point may be kept over a slightly lower score), else the lowest
-    best = next((c for c in candidates if all(c.get(k) == v for k, v in chosen.items() if k in c)),
-                min(candidates, key=lambda c: c["score"]))
+    best = min(candidates, key=lambda c: c["score"])
     for i, name in enumerate(names, 1):
         ax = figure.add_subplot(1, len(names), i)
         groups = {}                       # one line per setting of the other parameters

@@ -30,13 +30,6 @@ values at the recommended ``lam``, then the geometric midpoints next to the best
 ``lam`` times 0.3 and 3. Every candidate starts from the same warm start (:func:`interp3d` of
 the fitted pixels) and runs ``iterations`` ADMM steps; the data step's inverse blocks are
 computed once for all candidates. Values the caller fixed are not searched.
-
-The start point (the recommended values, e.g. TV's temporal weight 3 and ``lam`` 0.1) is kept
-unless the best candidate beats it by more than the criterion's own uncertainty: the held-out
-squared error is summed per hold-out block, and the best candidate is taken only when its mean
-gain over the blocks exceeds one standard error of that per-block gain (:data:`KEEP_START`).
-A flat criterion then falls back to values measured on many scenes instead of following
-differences smaller than the block-to-block spread.
 """
 
 from __future__ import annotations
@@ -52,7 +45,7 @@ from rsocl.device.reduction import sum_sq_diff
 from rsocl.model.interpolation import interp3d
 from rsocl.solver.admm import ADMM
 
-__all__ = ["LAM_FACTORS", "CANDIDATE_FRACTION", "KEEP_START", "block_labels", "holdout", "default_block", "Tuning", "tune_parameters"]
+__all__ = ["LAM_FACTORS", "CANDIDATE_FRACTION", "holdout", "default_block", "Tuning", "tune_parameters"]
 
 #: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
 LAM_FACTORS = (0.3, 1.0, 3.0)
@@ -61,9 +54,6 @@ LAM_FACTORS = (0.3, 1.0, 3.0)
 #: two): built-in 18.13 / 18.08, twice as fast 16.11 / 16.11, Runner at 1 21.48 / 21.16, at 0.5
 #: 24.30 / 24.30, Traffic 17.69 / 17.69, for twice the cost.
 FOLDS = 1
-#: Keep the start point unless the best candidate's mean per-block gain exceeds this many standard
-#: errors of it (0: always take the best candidate; see the module doc).
-KEEP_START = 1.0
 #: ADMM iterations per candidate, as a fraction of the final run's iterations (at least 10):
 #: seven candidates cost about 1.75 final runs.
 CANDIDATE_FRACTION = 0.25
@@ -99,13 +89,6 @@ def holdout(shape, channels: int, block: int | None = None, shift: int = 0) -> n
     return np.stack([which == k for k in range(channels)])
 
 
-def block_labels(shape, block: int) -> np.ndarray:
-    """Index of each pixel's hold-out block, ``(m, n)`` int (row-major over the blocks)."""
-    m, n = shape
-    across = -(-n // block)
-    return (np.arange(m)[:, None] // block) * across + np.arange(n)[None, :] // block
-
-
 @dataclass
 class Tuning:
     """What :func:`tune_parameters` chose and why.
@@ -127,10 +110,6 @@ class Tuning:
         Snapshot pixels held out.
     seconds : float
         Wall time of the whole search, seconds.
-    start : dict
-        The start point's values (the recommended ones) and the test that kept or left it:
-        ``values``, ``best`` (the best candidate), ``gain`` (its mean per-block gain over the start, as
-        a fraction of the held-out energy), ``standard_error`` of that gain, ``kept`` (bool).
     """
 
     chosen: dict
@@ -140,7 +119,6 @@ class Tuning:
     block: int = 0
     held_out: int = 0
     seconds: float = 0.0
-    start: dict = field(default_factory=dict)
 
     @classmethod
     def from_params(cls, record: dict) -> "Tuning":
@@ -149,7 +127,7 @@ class Tuning:
                       for c in record.get("candidates", [])]
         return cls(dict(record["chosen"]), candidates, dict(record.get("fixed", {})),
                    record.get("iterations_per_candidate", 0), record.get("block", 0),
-                   record.get("held_out_pixels", 0), record.get("seconds", 0.0), dict(record.get("start", {})))
+                   record.get("held_out_pixels", 0), record.get("seconds", 0.0))
 
     def as_params(self) -> dict:
         """A JSON-ready record for :attr:`rsocl.solver.result.Result.params`."""
@@ -157,7 +135,7 @@ class Tuning:
                 "chosen": dict(self.chosen), "fixed": dict(self.fixed),
                 "candidates": [{k: (v if math.isfinite(v) else None) for k, v in c.items()} for c in self.candidates],
                 "iterations_per_candidate": self.iterations, "block": self.block, "held_out_pixels": self.held_out,
-                "seconds": self.seconds, "start": dict(self.start)}
+                "seconds": self.seconds}
 
 
 def _midpoints(values, best):
@@ -223,7 +201,6 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
     usable = np.ones((rig.n_channels,) + rig.shape, bool) if valid is None else np.asarray(valid, bool)
     solved = _solved(rig, op)
     parts = []                    # per fold: fitted pixels, their warm start, the held-out weights
-    masks = []                    # per fold: the held-out pixels (host)
     for k in range(folds):
         held = holdout(rig.shape, rig.n_channels, block, shift=(k * period) // folds)
         fit, scored = usable & ~held, usable & held
@@ -232,18 +209,11 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
                              f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}")
         x0 = cla.to_device(op.queue, np.ascontiguousarray(interp3d(g, rig, valid=fit)[solved], dtype=op.dtype))
         held_out += int(scored.sum())
-        masks.append(scored)
         parts.append([fit, x0, cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype)), None])
     scale = sum(sum_sq_diff(g_device, weights=part[2]) for part in parts)
     current = {"lam": lams[len(lams) // 2], **{name: float(sorted(values)[(len(values) - 1) // 2])
                                                 for name, values in tunable.items()}}
-    start_point = dict(current)
-    labels = block_labels(rig.shape, block).ravel()
-    n_blocks = int(labels.max()) + 1
-    g_host = np.asarray(g, dtype=np.float64)
-    energy = max(sum(float(np.sum(g_host[mask] ** 2)) for mask in masks), np.finfo(np.float64).tiny)
     scores = {}
-    per_block = {}                 # candidate -> held-out squared error per block, over the held-out energy
     candidates = []
 
     bar = None
@@ -259,8 +229,7 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
             return scores[key]
         reg = make_regularizer({k: v for k, v in point.items() if k != "lam"})
         err = 0.0
-        blocks = np.zeros(n_blocks)
-        for part, mask in zip(parts, masks):
+        for part in parts:
             fit, x0, weights, solver = part
             if solver is None:
                 part[3] = solver = ADMM(op, g_device, reg, lam=point["lam"], eta=eta, projection=projection, x0=x0,
@@ -271,9 +240,6 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
                 solver.step()
             op.forward_into(solver.theta, solver.hx)
             err += sum_sq_diff(g_device, solver.hx, weights=weights)
-            residual = np.where(mask, (g_host - solver.hx.get()) ** 2, 0.0).sum(axis=0)
-            blocks += np.bincount(labels, weights=residual.ravel(), minlength=n_blocks)
-        per_block[key] = blocks / energy
         value = float(math.sqrt(err / scale)) if scale > 0 else float(math.sqrt(err))
         if not math.isfinite(value):
             value = math.inf
@@ -300,24 +266,8 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
     finally:
         if bar is not None:
             bar.close()
-    chosen, start_record = _keep_start(start_point, current, per_block)
-    return Tuning(chosen=chosen, candidates=candidates, fixed=dict(fixed or {}), iterations=iterations,
-                  block=block, held_out=held_out, seconds=time.perf_counter() - start, start=start_record)
-
-
-def _keep_start(start, best, per_block):
-    """``(chosen, record)``: ``best``, or ``start`` when ``best``'s mean gain over the hold-out blocks
-    is not above :data:`KEEP_START` standard errors of it (see the module doc)."""
-    record = {"values": dict(start), "best": dict(best), "gain": 0.0, "standard_error": 0.0, "kept": start == best}
-    if start == best:
-        return dict(best), record
-    gains = per_block[tuple(sorted(start.items()))] - per_block[tuple(sorted(best.items()))]
-    if gains.size < 2 or not np.all(np.isfinite(gains)):
-        return dict(best), record                  # one block, or a diverged start: nothing to weigh
-    gain, error = float(gains.mean()), float(gains.std(ddof=1) / math.sqrt(gains.size))
-    kept = bool(KEEP_START > 0 and gain <= KEEP_START * error)
-    record.update(gain=gain, standard_error=error, kept=kept)
-    return dict(start if kept else best), record
+    return Tuning(chosen=dict(current), candidates=candidates, fixed=dict(fixed or {}), iterations=iterations,
+                  block=block, held_out=held_out, seconds=time.perf_counter() - start)
 
 
 def _solved(rig, op) -> slice:
