@@ -3,7 +3,8 @@
 1. Paper array (4 cameras, 50x50, t_e = 180 µs, t_r = 35 µs), 200 ADMM-TV iterations:
    seconds per reconstructed set (compile excluded; the operator and solver set-up included)
    and how many sets per second that is against the paper cameras' 67 fps; then sets per second
-   with batches of ``--batch`` sets against the one-set-at-a-time loop, in alternating rounds;
+   as one batch of ``--batch`` sets, in the batches ``batch_size`` chooses, and one set at a time,
+   in alternating rounds;
    then batches at fewer ADMM and TV iterations: sets per second and PSNR against the default.
 2. float32 against float64 at equal settings on the shared videos (64x64, default settings):
    PSNR of both, their difference (target: within 0.05 dB), time per iteration and device
@@ -58,48 +59,55 @@ def paper_configuration(device, sets, iterations):
 
 
 def batches(device, batch, rounds, iterations):
-    """Markdown lines: sets per second with batches of ``batch`` sets against one set at a time.
+    """Markdown lines: sets per second of ``batch`` sets as one batch, in the batches
+    :func:`rsocl.solver.sets.batch_size` chooses for the device (``reconstruct_sets``, the CLI's
+    path), and one set at a time.
 
-    Each round reconstructs the same ``batch`` sets both ways (which goes first alternates);
-    the ratio is taken within each round.
+    Each round reconstructs the same sets every way (the order reverses every other round); the
+    ratios are taken within each round.
     """
+    from rsocl.solver.sets import CACHE_FRACTION, batch_size, reconstruct_sets
+
     rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
     op = rsocl.RollingShutterOperator(rig, device=device)
     g = np.stack([op.forward(builtin_scene(rig.shape, rig.T, seed=100 + s)) for s in range(batch)])
-    rsocl.reconstruct(g, rig, iterations=2, device=device, tune=False)                    # compile once
-    rsocl.reconstruct(g[0], rig, iterations=2, device=device, tune=False)
-
-    def batched():
-        return rsocl.reconstruct(g, rig, iterations=iterations, device=device, tune=False).datacube
-
-    def loop():
-        return np.stack([rsocl.reconstruct(one, rig, iterations=iterations, device=device, tune=False).datacube
-                         for one in g])
-
-    rates = {"batch": [], "loop": []}
+    chosen = batch_size(rig, sets=batch, device=device)
+    for b in {batch, chosen, 1}:
+        rsocl.reconstruct(g[:b] if b > 1 else g[0], rig, iterations=2, device=device, tune=False)  # compile once
+    ways = {
+        f"one batch of {batch}": lambda: rsocl.reconstruct(g, rig, iterations=iterations, device=device,
+                                                           tune=False).datacube,
+        f"batches of {chosen} (batch_size)": lambda: reconstruct_sets(g, rig, iterations=iterations, device=device,
+                                                                       tune=False).datacube,
+        "one at a time": lambda: np.stack([rsocl.reconstruct(one, rig, iterations=iterations, device=device,
+                                                             tune=False).datacube for one in g]),
+    }
+    names = list(ways)
+    rates = {k: [] for k in names}
     worst = 0.0
     for r in range(rounds):
         results = {}
-        for name in (("batch", "loop") if r % 2 == 0 else ("loop", "batch")):
+        for name in (names if r % 2 == 0 else names[::-1]):
             t0 = time.perf_counter()
-            results[name] = batched() if name == "batch" else loop()
+            results[name] = ways[name]()
             rates[name].append(batch / (time.perf_counter() - t0))
-        worst = max(worst, float(np.abs(results["batch"] - results["loop"]).max() / np.abs(results["loop"]).max()))
-    ratio = [b / s for b, s in zip(rates["batch"], rates["loop"])]
-    med = {k: float(np.median(v)) for k, v in rates.items()}
-    return [f"## Batches: {batch} sets per `rsocl.reconstruct` call against one set per call", "",
-            f"The same {batch} sets of the paper configuration ({iterations} iterations, float32) reconstructed "
-            f"as one batch `(B, K, m, n)` and one set at a time, in {rounds} alternating rounds "
-            "(set-up included, compilation excluded).", "",
-            "| | sets/s (median) | range over rounds | s per set |", "|---|---|---|---|",
-            f"| batch of {batch} | {med['batch']:.2f} | {min(rates['batch']):.2f}-{max(rates['batch']):.2f} | "
-            f"{1 / med['batch']:.3f} |",
-            f"| one at a time | {med['loop']:.2f} | {min(rates['loop']):.2f}-{max(rates['loop']):.2f} | "
-            f"{1 / med['loop']:.3f} |", "",
-            f"- batch / loop: {np.median(ratio):.2f}× (median of the rounds' ratios, "
-            f"{min(ratio):.2f}-{max(ratio):.2f}×)",
-            f"- largest difference between a set's batched and single-set result: {worst:.1e} of the largest value",
-            ""]
+        loop = results["one at a time"]
+        worst = max(worst, *(float(np.abs(results[k] - loop).max() / np.abs(loop).max()) for k in names))
+    lines = [f"## Batches: {batch} sets per call against one set per call", "",
+             f"The same {batch} sets of the paper configuration ({iterations} iterations, float32) reconstructed "
+             f"as one batch `(B, K, m, n)`, in the batches `rsocl.solver.sets.batch_size` chooses for this device "
+             f"({chosen} sets: on a CPU device a batch stays within {CACHE_FRACTION:.0%} of its "
+             f"{device.cache_bytes / 2**20:.0f} MiB cache), and one set at a time, in {rounds} rounds with the "
+             "order reversed every other round (set-up included, compilation excluded).", "",
+             "| | sets/s (median) | range over rounds | s per set | against one at a time |",
+             "|---|---|---|---|---|"]
+    for name in names:
+        med = float(np.median(rates[name]))
+        ratio = [a / b for a, b in zip(rates[name], rates["one at a time"])]
+        lines.append(f"| {name} | {med:.2f} | {min(rates[name]):.2f}-{max(rates[name]):.2f} | {1 / med:.3f} | "
+                     f"{np.median(ratio):.2f}× ({min(ratio):.2f}-{max(ratio):.2f}×) |")
+    return lines + ["", f"- largest difference between a set's batched and single-set result: {worst:.1e} of the "
+                        "largest value", ""]
 
 
 #: ``(ADMM iterations, TV iterations)`` of the settings trade, the default first.
@@ -107,10 +115,12 @@ SETTINGS = ((200, 10), (100, 10), (100, 5), (50, 5), (50, 3), (25, 3))
 
 
 def settings_trade(device, batch, rounds):
-    """Markdown lines: sets per second and PSNR of the paper configuration in batches of ``batch``
-    sets at fewer ADMM and TV iterations (:data:`SETTINGS`), each against the default in the same
-    rounds (settings in turn, the order reversed every other round)."""
+    """Markdown lines: sets per second and PSNR of ``batch`` sets of the paper configuration (in the
+    batches :func:`rsocl.solver.sets.reconstruct_sets` chooses) at fewer ADMM and TV iterations
+    (:data:`SETTINGS`), each against the default in the same rounds (settings in turn, the order
+    reversed every other round)."""
     from rsocl.analysis.metrics import psnr
+    from rsocl.solver.sets import batch_size, reconstruct_sets
 
     rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
     op = rsocl.RollingShutterOperator(rig, device=device)
@@ -122,8 +132,8 @@ def settings_trade(device, batch, rounds):
     for r in range(rounds):
         for key in (SETTINGS if r % 2 == 0 else SETTINGS[::-1]):
             t0 = time.perf_counter()
-            cube = rsocl.reconstruct(g, rig, iterations=key[0], tv_iterations=key[1], device=device,
-                                     tune=False).datacube
+            cube = reconstruct_sets(g, rig, iterations=key[0], tv_iterations=key[1], device=device,
+                                    tune=False).datacube
             rates[key].append(batch / (time.perf_counter() - t0))
             quality[key] = float(np.mean([psnr(c, t) for c, t in zip(cube, truth)]))
     videos = {}
@@ -135,8 +145,9 @@ def settings_trade(device, batch, rounds):
             videos[video] = {key: psnr(rsocl.reconstruct(one, rig, iterations=key[0], tv_iterations=key[1],
                                                          device=device, tune=False).datacube, t) for key in SETTINGS}
     base = SETTINGS[0]
-    lines = [f"## Fewer iterations: the speed and what it costs ({batch} sets per batch)", "",
-             f"The paper configuration in batches of {batch} sets of the built-in scene (other seeds than above), "
+    lines = [f"## Fewer iterations: the speed and what it costs ({batch} sets)", "",
+             f"The paper configuration, {batch} sets of the built-in scene (other seeds than above) in the batches "
+             f"`batch_size` chooses ({batch_size(rig, sets=batch, device=device)} sets), "
              f"{rounds} rounds with the settings in turn; PSNR is the mean over the sets (dB, peak 1). Ratios "
              "are taken within each round against the default (200 ADMM iterations, 10 TV iterations). "
              "Fixed settings (temporal weight 3, lam 0.1, start from zeros). The last columns: the change of "

@@ -177,6 +177,29 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
             batch_size(rig, device=device, **kwargs)
 
 
+def test_batch_size_on_a_cpu_keeps_the_batch_in_its_cache(sets, monkeypatch):
+    rig, truth, g = sets
+    device = rsocl.device.get_device()
+    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+    cube = (rig.T,) + rig.shape
+
+    def total(b):
+        return rsocl.solver.batch.batch_memory(cube, rig.n_channels, np.float32, reg, "exact", b)[1]
+
+    monkeypatch.setattr(type(device), "is_cpu", property(lambda self: True))
+    cache = (total(3) + total(4)) / 2 / 0.75            # three sets fit in three quarters of it, four do not
+    monkeypatch.setattr(type(device), "cache_bytes", property(lambda self: int(cache)))
+    assert batch_size(rig, sets=8, device=device) == 3
+    assert batch_size(rig, sets=8, device=device, cache_fraction=(total(2) + total(3)) / 2 / cache) == 2
+    assert batch_size(rig, sets=8, device=device, cache_fraction=None) == 8
+    monkeypatch.setattr(type(device), "cache_bytes", property(lambda self: 16))
+    assert batch_size(rig, sets=8, device=device) == 1                     # at least one set
+    monkeypatch.setattr(type(device), "is_cpu", property(lambda self: False))
+    assert batch_size(rig, sets=8, device=device) == 8                     # a GPU fills its memory instead
+    with pytest.raises(ValueError, match="cache_fraction"):
+        batch_size(rig, device=device, cache_fraction=0)
+
+
 def test_reconstruct_sets_runs_batches_and_joins_them(sets):
     rig, truth, g = sets
     kw = dict(iterations=3, eta=0.3, tv_iterations=3, tune=False)

@@ -159,6 +159,16 @@ class Device:
         return int(self.device.global_mem_size)
 
     @property
+    def cache_bytes(self) -> int:
+        """Global memory cache, bytes (``CL_DEVICE_GLOBAL_MEM_CACHE_SIZE``; 0 when the device reports none)."""
+        return int(getattr(self.device, "global_mem_cache_size", 0) or 0)
+
+    @property
+    def is_cpu(self) -> bool:
+        """Whether the device is a CPU (``CL_DEVICE_TYPE_CPU``)."""
+        return bool(self.device.type & _cl().device_type.CPU)
+
+    @property
     def max_work_group_size(self) -> int:
         """Most work items in a work group (``CL_DEVICE_MAX_WORK_GROUP_SIZE``)."""
         return min(int(self.device.max_work_group_size), self.limits.get("max_work_group_size", 1 << 62))
