@@ -120,10 +120,10 @@ class TV(Regularizer):
             shape = x.shape if x.ndim == 4 else (1,) + x.shape
             # a CPU runs a work group's items as loops split at barriers: one item per group runs
             # each row of a tile as one contiguous (vectorised) loop
-            cpu = bool(dev.device.type & cl.device_type.CPU)
             cache[key] = tv_fused.plan(shape, x.dtype.itemsize, self.iterations, self.fused, self.planes == 3,
                                        local_bytes=dev.local_mem_bytes - reserved,
-                                       group=1 if cpu else dev.group_limit(kernel), max_items=dev.max_work_item_sizes)
+                                       group=1 if dev.is_cpu else dev.group_limit(kernel),
+                                       max_items=dev.max_work_item_sizes)
         return cache[key]
 
     def _buffers(self, x, copies):
@@ -152,8 +152,6 @@ class TV(Regularizer):
         return self._run(u, weights if u.ndim == 4 else float(weights[0]), theta, (b, f, dual))
 
     def _run(self, x, weight, out, dual):
-        import pyopencl as cl
-
         if out.base_data.int_ptr == x.base_data.int_ptr:
             raise ValueError("out must be another buffer than x (every TV iteration reads x)")
         sets = x.shape[0] if x.ndim == 4 else 1

@@ -64,6 +64,11 @@ def _per_set(name, value, sets):
     return arr.copy()
 
 
+def _denoiser_weights(lams, etas):
+    """The denoiser's weight per set: ``lam / eta``, or ``lam`` where ``eta = 0`` (GAP)."""
+    return np.where(etas > 0, lams / np.where(etas > 0, etas, 1.0), lams)
+
+
 class ADMM:
     """ADMM state on the device; :meth:`step` runs one iteration.
 
@@ -99,7 +104,7 @@ class ADMM:
         self.batched = g.ndim == 4
         self.sets = op.sets_of(g, op.range_shape)
         self.lams, self.etas = _per_set("lam", lam, self.sets), _per_set("eta", eta, self.sets)
-        self.weights = np.where(self.etas > 0, self.lams / np.where(self.etas > 0, self.etas, 1.0), self.lams)
+        self.weights = _denoiser_weights(self.lams, self.etas)
         queue = op.queue
         batch = (self.sets,) if self.batched else ()
         shape = batch + op.domain_shape
@@ -181,7 +186,7 @@ class ADMM:
         self.regularizer = regularizer
         self.fused = bool(getattr(regularizer, "fuses_dual", False))
         self.lams = _per_set("lam", lam, self.sets)
-        self.weights = np.where(self.etas > 0, self.lams / np.where(self.etas > 0, self.etas, 1.0), self.lams)
+        self.weights = _denoiser_weights(self.lams, self.etas)
         for dest in (self.theta, self.f):
             cl.enqueue_copy(self.op.queue, dest.data, x0.data)
         cl.enqueue_fill_buffer(self.op.queue, self.b.data, np.zeros(1, self.op.dtype), 0, self.b.nbytes)

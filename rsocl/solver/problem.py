@@ -15,7 +15,6 @@ from rsocl.analysis.metrics import default_data_range
 from rsocl.common import validation as check
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
-from rsocl.solver.admm import ADMM
 from rsocl.solver.batch import match_batch, memory_bytes, per_set_value
 
 __all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_settings", "stage_on_device"]
