@@ -64,23 +64,28 @@ typedef struct { int x0, x1, y0, y1, t0, t1; } box_t;
 #define FUSED_PRIMAL_T(i)
 #endif
 
+/* STEP(i, x) over the row's voxels x = x0 + k * LX below x1 (i: the local index), with a loop of
+ * its own for the unit stride, which a CPU compiler vectorises. */
+#define FUSED_ROW_LOOP(STEP)                                                                       \
+    if (LX == 1) {                                                                                 \
+        for (int x = x0; x < x1; ++x) {                                                            \
+            int i = x - rx0;                                                                       \
+            STEP(i, x)                                                                             \
+        }                                                                                          \
+    } else {                                                                                       \
+        for (int x = x0; x < x1; x += LX) {                                                        \
+            int i = x - rx0;                                                                       \
+            STEP(i, x)                                                                             \
+        }                                                                                          \
+    }
+
 inline void fused_primal_row(__local real *restrict o, __local const real *restrict img,
                              __local const real *restrict p0, __local const real *restrict up_p0,
                              __local const real *restrict p1, __local const real *restrict p2,
                              __local const real *restrict prev_p2, int has_y, int has_t, real wt,
                              int rx0, int x0, int x1, int LX)
 {
-    if (LX == 1) {
-        for (int x = x0; x < x1; ++x) {
-            int i = x - rx0;
-            FUSED_PRIMAL_STEP(i, x)
-        }
-    } else {
-        for (int x = x0; x < x1; x += LX) {
-            int i = x - rx0;
-            FUSED_PRIMAL_STEP(i, x)
-        }
-    }
+    FUSED_ROW_LOOP(FUSED_PRIMAL_STEP)
 }
 
 /* The dual step (as tv.cl's dual_update) along one row: src is the primal's row, src_up the row
@@ -114,17 +119,7 @@ inline void fused_dual_row(__local real *restrict p0, __local real *restrict p1,
                            __local const real *restrict src_next, real tau, real tau_over_weight, real wt,
                            int n1, int rx0, int x0, int x1, int LX)
 {
-    if (LX == 1) {
-        for (int x = x0; x < x1; ++x) {
-            int i = x - rx0;
-            FUSED_DUAL_STEP(i, x)
-        }
-    } else {
-        for (int x = x0; x < x1; x += LX) {
-            int i = x - rx0;
-            FUSED_DUAL_STEP(i, x)
-        }
-    }
+    FUSED_ROW_LOOP(FUSED_DUAL_STEP)
 }
 
 /* Copies between global memory and the region, along one row: voxels k * LX (k = 0, 1, ...) below
