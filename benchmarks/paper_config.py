@@ -36,9 +36,14 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 PAPER_FPS = 67.0
 
 
+def paper_rig():
+    """The paper's configuration: 4 cameras, 50x50, t_e = 180 µs, t_r = 35 µs."""
+    return rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
+
+
 def paper_configuration(device, sets, iterations):
     """Markdown lines: seconds per reconstructed set of the paper's configuration (compile excluded)."""
-    rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
+    rig = paper_rig()
     snapshots = [rsocl.RollingShutterOperator(rig, device=device).forward(builtin_scene(rig.shape, rig.T, seed=s))
                  for s in range(sets + 1)]
     rsocl.reconstruct(snapshots[0], rig, iterations=2, device=device, tune=False)          # compile once
@@ -68,7 +73,7 @@ def batches(device, batch, rounds, iterations):
     """
     from rsocl.solver.sets import CACHE_FRACTION, batch_size, reconstruct_sets
 
-    rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
+    rig = paper_rig()
     op = rsocl.RollingShutterOperator(rig, device=device)
     g = np.stack([op.forward(builtin_scene(rig.shape, rig.T, seed=100 + s)) for s in range(batch)])
     chosen = batch_size(rig, sets=batch, device=device)
@@ -122,7 +127,7 @@ def settings_trade(device, batch, rounds):
     from rsocl.analysis.metrics import psnr
     from rsocl.solver.sets import batch_size, reconstruct_sets
 
-    rig = rsocl.Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
+    rig = paper_rig()
     op = rsocl.RollingShutterOperator(rig, device=device)
     truth = np.stack([builtin_scene(rig.shape, rig.T, seed=200 + s) for s in range(batch)])
     g = np.stack([op.forward(t) for t in truth])
