@@ -56,8 +56,8 @@ def add_solver_args(p):
                    help="regularizer option, repeatable")
     g.add_argument("--fast", action="store_true",
                    help="skip the parameter search: fixed lam and regularizer options, zero start (by default "
-                        "the values not given are chosen from the snapshots by cross-validation, which costs "
-                        "about 3x the time of the run; a tiled run chooses once, on the centre tile, for every tile)")
+                        "the values not given are chosen from the snapshots by cross-validation: a tuned run takes "
+                        "2-3x the time of a fixed one; a tiled run chooses once, on the centre tile, for every tile)")
 
 
 def reg_options(pairs):

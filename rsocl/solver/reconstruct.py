@@ -107,4 +107,3 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     result.params["tuning"] = tuning.as_params() if tuning is not None else None
     result.params["start"] = "x0" if problem.x0 is not None else ("interp3d" if tuning is not None else "zeros")
     return result
-
