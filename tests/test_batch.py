@@ -241,3 +241,48 @@ def test_tuned_sets_in_several_batches_share_the_first_batchs_choice(sets):
     fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]})
     last = rsocl.reconstruct(g[2], rig, x0=interp3d(g[2], rig), tune=False, **fixed).datacube
     np.testing.assert_allclose(joined.datacube[2], last, atol=2e-6 * np.abs(last).max())
+
+
+def test_own_inverses_rule():
+    from rsocl.solver.admm import own_inverses
+
+    same = np.ones((3, 4, 2, 2), bool)
+    differ = same.copy()
+    differ[1, 0, 0, 0] = False
+    assert not own_inverses("exact", [0.2, 0.3], None, 1)                 # one set: nothing to share
+    assert own_inverses("exact", [0.2, 0.3, 0.2], None, 3)                # the exact blocks hold eta
+    assert not own_inverses("paper", [0.2, 0.3, 0.2], None, 3)            # the paper's do not
+    assert not own_inverses("exact", 0.2, same, 3)
+    assert own_inverses("paper", 0.2, differ, 3)                          # different pixels left out
+
+
+@pytest.mark.parametrize("projection", ["exact", "paper"])
+@pytest.mark.parametrize("case", ["shared", "eta per set", "saturation per set"])
+def test_the_memory_count_and_the_solver_agree_on_per_set_inverses(sets, monkeypatch, projection, case):
+    """stage_on_device counts per-set inverse blocks exactly when ADMM allocates them."""
+    import rsocl.solver.admm as admm
+    import rsocl.solver.problem as problem
+
+    rig, truth, g = sets
+    kwargs = {}
+    if case == "eta per set":
+        kwargs["eta"] = [0.1, 0.2, 0.3]
+    elif case == "saturation per set":
+        kwargs["saturation"] = float(np.quantile(g[0], 0.9))             # set 1 (half the scale) loses fewer pixels
+    counted, allocated = [], []
+    memory_bytes, inverses = problem.memory_bytes, admm.ADMM._inverses
+
+    def count(*args, **kw):
+        counted.append(kw["own_inverse"])
+        return memory_bytes(*args, **kw)
+
+    def allocate(self, *args):
+        own, blocks = inverses(self, *args)
+        allocated.append(bool(own))
+        return own, blocks
+
+    monkeypatch.setattr(problem, "memory_bytes", count)
+    monkeypatch.setattr(admm.ADMM, "_inverses", allocate)
+    rsocl.reconstruct(g, rig, iterations=2, projection=projection, tune=False, **kwargs)
+    assert counted == allocated
+    assert allocated == [case == "saturation per set" or (case == "eta per set" and projection == "exact")]

@@ -44,6 +44,24 @@ def block_inverse(gram: np.ndarray, eta: float) -> np.ndarray:
     return np.einsum("...ij,...j,...kj->...ik", vec, inv, vec)
 
 
+def own_inverses(projection: str, etas, valid, sets: int) -> bool:
+    """Whether every set of a batch of ``sets`` needs its own inverse blocks: the rule :class:`ADMM`
+    allocates by and the memory counts use.
+
+    One set of blocks serves the batch unless the valid snapshot pixels differ between sets
+    (``valid``: None for all pixels, or booleans of ``sets`` equal-sized sets), or, for the exact
+    projection, whose blocks hold ``eta``, ``etas`` (one value or one per set) differ.
+    """
+    if sets <= 1:
+        return False
+    if projection == "exact" and len(set(np.ravel(etas).tolist())) > 1:
+        return True
+    if valid is None:
+        return False
+    valid = np.asarray(valid, dtype=bool).reshape(sets, -1)
+    return bool((valid != valid[:1]).any())
+
+
 def state_bytes(cube, K: int, dtype, projection: str, sets: int = 1, own_inverse: bool = False) -> int:
     """Device memory of :class:`ADMM`'s own arrays, bytes: theta, b, f, u (``cube`` each), H·theta and the
     per-set values of each of ``sets`` sets, and the inverse blocks (one set of them, or one per set)."""
@@ -153,8 +171,7 @@ class ADMM:
         per set): one set of blocks serves the batch unless ``eta`` or the valid pixels differ."""
         sets = self.sets
         valid = None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool).reshape((-1,) + op.range_shape)
-        own = (valid is not None and sets > 1 and not (valid == valid[:1]).all()) or (
-            projection == "exact" and len(set(self.etas)) > 1)
+        own = own_inverses(projection, self.etas, valid, sets)
         count = sets if own else 1
         if projection == "paper":
             psi = op.psi

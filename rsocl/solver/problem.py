@@ -15,6 +15,7 @@ from rsocl.analysis.metrics import default_data_range
 from rsocl.common import validation as check
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
+from rsocl.solver.admm import own_inverses
 from rsocl.solver.batch import match_batch, memory_bytes, per_set_value
 
 __all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_settings", "stage_on_device"]
@@ -161,8 +162,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=solved)
     sets = problem.batch or 1
     valid = problem.valid
-    own = (isinstance(settings.eta, tuple) and len(set(settings.eta)) > 1) or (
-        valid is not None and sets > 1 and not (valid == valid[:1]).all())
+    own = own_inverses(settings.projection, settings.eta, valid, sets)
     largest, need = memory_bytes(op, reg, settings.projection, sets, truth=problem.truth is not None,
                                  own_inverse=own)
     batch = "" if problem.batch is None else f"{sets} sets of "

@@ -17,6 +17,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.device.context import get_device
 from rsocl.model.rig import Rig
+from rsocl.solver.admm import own_inverses
 from rsocl.solver.batch import batch_memory
 from rsocl.solver.result import Result
 from rsocl.solver.tuning import Tuning
@@ -128,8 +129,11 @@ def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, tr
         if value is not None and np.ndim(value) == 4 and np.shape(value)[0] != count:
             raise ValueError(f"{name} must have one cube per set: {count} sets, got {np.shape(value)[0]}")
     if batch is None:
+        saturation = kwargs.get("saturation")
+        valid = None if saturation is None else g < check.positive("saturation", saturation, "(snapshot units)")
+        own = own_inverses(projection, 0.0 if eta is None else eta, valid, count)
         batch = batch_size(rig, regularizer, sets=count, dtype=dtype, device=device, projection=projection,
-                           truth=truth is not None, own_inverse=np.ndim(eta) == 1,
+                           truth=truth is not None, own_inverse=own,
                            regularizer_options=regularizer_options)
     batch = check.positive_int("batch", batch)
     bar = None
