@@ -22,7 +22,6 @@ with PyTorch at its faster thread count, round by round.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import time
@@ -45,7 +44,7 @@ try:
     from torch_admm_tv import admm_tv as torch_admm_tv
 except ImportError:                          # the PyTorch peer is optional
     torch = None
-from provenance import DOCS, header_lines, write_page  # noqa: E402
+from provenance import DOCS, header_lines, usable_cores, write_page  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -119,9 +118,14 @@ def run_torch(g, rig, truth, params, threads):
     return seconds, psnr(theta, truth, data_range=1.0)
 
 
+def torch_peers(torch_threads) -> dict:
+    """The PyTorch runs of a round, ``{"torch Nt": N}`` (N threads); none without torch."""
+    return {f"torch {n}t": n for n in torch_threads} if torch is not None else {}
+
+
 def implementations(torch_threads):
-    """The (implementation, dtype) pairs of a round; PyTorch as ``torch Nt``, one per thread count."""
-    peers = [(f"torch {n}t", "float32") for n in torch_threads] if torch is not None else []
+    """The (implementation, dtype) pairs of a round; PyTorch once per thread count (:func:`torch_peers`)."""
+    peers = [(label, "float32") for label in torch_peers(torch_threads)]
     return [("baseline", "float64"), ("baseline", "float32"), ("rsocl", "float32"), ("rsocl", "float64")] + peers
 
 
@@ -135,13 +139,14 @@ def timed_rounds(g, rig, truth, params, device, repeat, torch_threads=()):
     for dtype in ("float32", "float64"):                  # kernel builds: not timed
         rsocl.reconstruct(g, rig, device=device, dtype=dtype, **dict(rsocl_params(params), iterations=2))
     runs = {key: [] for key in implementations(torch_threads)}
+    peers = torch_peers(torch_threads)
     for r in range(repeat):
         for impl, dtype in runs:
             t0 = time.perf_counter()
             if impl == "baseline":
                 out = run_baseline(g, rig, truth, np.dtype(dtype).type, params)
-            elif impl.startswith("torch"):
-                out = run_torch(g, rig, truth, params, int(impl.split()[1][:-1]))
+            elif impl in peers:
+                out = run_torch(g, rig, truth, params, peers[impl])
             else:
                 out = run_rsocl(g, rig, truth, dtype, params, device)
             runs[impl, dtype].append(out)
@@ -169,8 +174,7 @@ def main(argv=None):
         raise SystemExit("--iterations, --tv-iterations and --repeat must be >= 1")
     if not (args.lam > 0 and args.eta > 0):
         raise SystemExit("--lam and --eta must be > 0 (the baseline is ADMM, not GAP)")
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    torch_threads = sorted(set(args.torch_threads or (1, cores)))
+    torch_threads = sorted(set(args.torch_threads or (1, usable_cores())))
     if torch_threads[0] < 1:
         raise SystemExit(f"--torch-threads must be >= 1, got {args.torch_threads}")
     device = get_device(args.device)
@@ -230,11 +234,11 @@ def main(argv=None):
         diff = db - base64[1]
         checks.append(f"rsocl float32 vs baseline float64 (a user's default): {base64[0] / sec:.1f}× "
                       f"(ΔPSNR {signed(diff)} dB)")
-        peers = [key for key in runs if key[0].startswith("torch")]
+        peers = [(label, "float32") for label in torch_peers(torch_threads)]
         if peers:
             fastest = min(peers, key=lambda key: runs[key][0])
             checks.append(f"rsocl float32 vs PyTorch float32 at its faster thread count each round "
-                          f"({', '.join(key[0].split()[1] for key in peers)} tried): "
+                          f"({', '.join(f'{n}t' for n in torch_threads)} tried): "
                           f"{round_ratios(rounds, ('rsocl', 'float32'), peers)} round by round "
                           f"(ΔPSNR {signed(db - runs[fastest][1])} dB)")
         summary.append(f"- {side}×{side}: " + "; ".join(checks))

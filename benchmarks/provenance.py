@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Where the benchmarks write their pages.
 DOCS = ROOT / "docs"
 
-__all__ = ["ROOT", "DOCS", "git_revision", "cpu_model", "header_lines", "write_page"]
+__all__ = ["ROOT", "DOCS", "git_revision", "cpu_model", "header_lines", "usable_cores", "write_page"]
 
 
 def git_revision(root: Path = ROOT) -> str:
@@ -57,13 +57,16 @@ def cpu_model() -> str:
     return platform.processor() or "unknown CPU"
 
 
-def _cores() -> str:
-    cores = os.cpu_count()
+def usable_cores() -> int:
+    """Logical cores this process may run on (its CPU affinity where the OS has one)."""
     try:
-        usable = len(os.sched_getaffinity(0))
+        return len(os.sched_getaffinity(0))
     except AttributeError:
-        usable = cores
-    return f"{cores} logical cores ({usable} usable by this process)"
+        return os.cpu_count() or 1
+
+
+def _cores() -> str:
+    return f"{os.cpu_count()} logical cores ({usable_cores()} usable by this process)"
 
 
 def header_lines(title: str, device=None, argv=None) -> list:
