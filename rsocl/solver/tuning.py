@@ -255,14 +255,14 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
             coarse = sorted(float(v) for v in values)
             for v in coarse:
                 score({**current, name: v})
-            best = min(coarse, key=lambda v: scores[tuple(sorted({**current, name: v}.items()))])
+            best = min(coarse, key=lambda v: score({**current, name: v}))            # run above: cached
             refined = coarse + _midpoints(coarse, best)
             for v in refined:
                 score({**current, name: v})
-            current[name] = min(refined, key=lambda v: scores[tuple(sorted({**current, name: v}.items()))])
+            current[name] = min(refined, key=lambda v: score({**current, name: v}))
         for v in lams:
             score({**current, "lam": v})
-        current["lam"] = min(lams, key=lambda v: scores[tuple(sorted({**current, "lam": v}.items()))])
+        current["lam"] = min(lams, key=lambda v: score({**current, "lam": v}))
     finally:
         if bar is not None:
             bar.close()
