@@ -163,12 +163,20 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
     device = rsocl.device.get_device()
     assert batch_size(rig, sets=5, device=device) == 5
     assert batch_size(rig, device=device, limit=7) == 7
-    one = rsocl.solver.batch.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32,
-                                          rsocl.solver.reconstruct.make_regularizer("tv"), "exact", 1)[1]
-    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(4.5 * one / 0.8)))
+    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+
+    def total(b, start=False):
+        return rsocl.solver.batch.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b,
+                                               start=start)[1]
+
+    memory = (total(4) + total(5)) / 2 / 0.8            # four sets fit in 80 % of it, five do not
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(memory)))
     assert batch_size(rig, device=device) == 4
-    assert batch_size(rig, device=device, memory_fraction=0.4) == 2
-    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: one // 2))
+    assert batch_size(rig, device=device, memory_fraction=(total(2) + total(3)) / 2 / memory) == 2
+    memory = (total(3, True) + total(4, True)) / 2 / 0.8   # a start cube per set: three sets, not four
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(memory)))
+    assert batch_size(rig, device=device, start=True) == 3
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: total(1) // 2))
     with pytest.raises(ValueError, match="device memory"):
         batch_size(rig, device=device)
     for kwargs, match in [(dict(limit=0), "limit"), (dict(sets=0), "sets"), (dict(memory_fraction=2), "memory_fraction"),
@@ -190,6 +198,7 @@ def test_batch_size_on_a_cpu_keeps_the_batch_in_its_cache(sets, monkeypatch):
     cache = (total(3) + total(4)) / 2 / 0.75            # three sets fit in three quarters of it, four do not
     monkeypatch.setattr(type(device), "cache_bytes", property(lambda self: int(cache)))
     assert batch_size(rig, sets=8, device=device) == 3
+    assert batch_size(rig, sets=8, device=device, start=True) == 3      # the start cube, read once: not cached
     assert batch_size(rig, sets=8, device=device, cache_fraction=(total(2) + total(3)) / 2 / cache) == 2
     assert batch_size(rig, sets=8, device=device, cache_fraction=None) == 8
     monkeypatch.setattr(type(device), "cache_bytes", property(lambda self: 16))

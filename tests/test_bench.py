@@ -50,6 +50,10 @@ def test_single_point_row():
     # the timed run is a user's run, without the ground truth on the device
     assert row["peak_device_memory_bytes"] == by_hand == device_memory_bytes(rig, "tv", "float32", with_truth=False)
     assert run_point(point, {})["_history"] is None                              # no history asked, no extra run
+    # a self-tuned point also holds its interp3d start (T m n values), or more while it searches
+    tuned = run_point(BenchPoint(shape=16, iterations=5, tune=True), {})
+    assert tuned["peak_device_memory_bytes"] == device_memory_bytes(rig, "tv", "float32", with_truth=False, tuned=True)
+    assert tuned["peak_device_memory_bytes"] >= by_hand + 4 * T * m * n
 
 
 def test_interp3d_exact_for_a_scene_constant_in_time(still_scene):

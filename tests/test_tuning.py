@@ -115,24 +115,24 @@ def test_an_earlier_choice_runs_again_without_a_search():
             rsocl.reconstruct(g, rig, iterations=2, tune=bad)
 
 
-@pytest.mark.parametrize("batch", [None, 3])
-def test_a_search_that_would_not_fit_is_refused_before_it_runs(batch, monkeypatch):
-    """The search's buffers count beside the run's: a device with room for the run alone refuses
-    the search (naming the way out) before any candidate runs, and still runs with fixed values."""
+def test_a_search_that_would_not_fit_is_refused_before_it_runs(monkeypatch):
+    """The search's buffers count beside the staged problem: a device with room for the run but
+    not for the search refuses the search (naming the way out) before any candidate runs, and
+    still runs with fixed values. (For a batch the run needs more than the search on its first
+    set: test_the_memory_counts_bound_what_the_search_and_the_run_hold.)"""
     from rsocl.solver import autotune
     from rsocl.solver.batch import memory_bytes
     from rsocl.solver.reconstruct import make_regularizer
 
     rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1e-4, t_r=3e-5)
     g = ref.forward(rig, np.random.default_rng(5).random((rig.T,) + rig.shape))
-    g = g if batch is None else np.stack([g] * batch)
     device = rsocl.device.get_device()
     op = rsocl.RollingShutterOperator(rig, device=device, subframes=rig.sampled_range())
     reg = make_regularizer("tv")
-    run = memory_bytes(op, reg, "exact", batch or 1)[1]
-    extra = autotune.search_memory(op, reg, "exact", batch)
-    assert 0 < extra
-    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: run + extra // 2))
+    run = memory_bytes(op, reg, "exact", 1, start=True)[1]
+    peak = autotune.search_peak(op, reg, "exact", None)
+    assert run < peak
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: peak - 1))
     monkeypatch.setattr(autotune, "tune_parameters", lambda *a, **k: pytest.fail("the search ran"))
     with pytest.raises(ValueError, match=r"choosing the parameters from the data .* tune=False"):
         rsocl.reconstruct(g, rig, iterations=4, device=device)
@@ -141,6 +141,69 @@ def test_a_search_that_would_not_fit_is_refused_before_it_runs(batch, monkeypatc
     given = rsocl.reconstruct(g, rig, iterations=4, device=device, lam=0.1,
                               regularizer_options={"temporal_weight": 3.0})
     assert given.params["tuning"] is None
+
+
+def _live_device_bytes():
+    """Bytes of the distinct device buffers behind every live ``pyopencl.array.Array``."""
+    import gc
+
+    import pyopencl.array as cla
+
+    buffers = {}
+    for obj in gc.get_objects():
+        if isinstance(obj, cla.Array) and obj.base_data is not None:
+            buffers[obj.base_data.int_ptr] = obj.base_data.size
+    return sum(buffers.values())
+
+
+@pytest.mark.parametrize("batch, truth, x0, saturated", [(None, False, False, False), (None, True, True, False),
+                                                        (3, False, False, False), (3, True, False, True)])
+def test_the_memory_counts_bound_what_the_search_and_the_run_hold(batch, truth, x0, saturated, monkeypatch):
+    """The device arrays alive while the search runs and while the run iterates stay within the
+    counts the device is checked against (search_peak; memory_bytes with the start cube), and the
+    counts exceed them by no more than the valid-pixel mask they count always and a few small
+    per-set values: neither an under-count (an allocation failure mid-run) nor a refusal of what fits."""
+    from rsocl.solver import autotune, tuning
+    from rsocl.solver.admm import own_inverses
+    from rsocl.solver.batch import memory_bytes
+    from rsocl.solver.reconstruct import make_regularizer
+
+    rig = rsocl.Rig.paper_array(4, (12, 16), t_e=1e-4, t_r=3e-5)
+    cube = np.random.default_rng(5).random((rig.T,) + rig.shape)
+    g = ref.forward(rig, cube)
+    sets = batch or 1
+    if batch is not None:
+        g, cube = np.stack([g * (1 + 0.1 * b) for b in range(batch)]), np.stack([cube] * batch)
+    saturation = float(np.quantile(g, 0.9)) if saturated else None
+    op = rsocl.RollingShutterOperator(rig, subframes=rig.sampled_range())
+    reg = make_regularizer("tv")
+    valid = None if saturation is None else g < saturation
+    own = own_inverses("exact", 0.2, valid, sets)
+    run_count = memory_bytes(op, reg, "exact", sets, truth=truth, own_inverse=own, start=True)[1]
+    search_count = autotune.search_peak(op, reg, "exact", batch, truth=truth, start=x0)
+    snap = op.K * op.mn * op.dtype.itemsize
+    peak = {"search": 0, "run": 0}
+
+    class Probe(tuning.ADMM):
+        def step(self):
+            peak["search"] = max(peak["search"], _live_device_bytes() - base)
+            return super().step()
+
+    def callback(iteration, residual, theta):
+        peak["run"] = max(peak["run"], _live_device_bytes() - base)
+
+    monkeypatch.setattr(tuning, "ADMM", Probe)
+    base = _live_device_bytes()
+    result = rsocl.reconstruct(g, rig, iterations=3, callback=callback, truth=cube if truth else None,
+                               x0=cube if x0 else None, saturation=saturation)
+    assert result.params["tuning"] is not None and peak["search"] > 0 and peak["run"] > 0
+    small = 256                                     # per-set step lengths, eta, flags: uncounted
+    assert peak["search"] <= search_count + small
+    assert peak["run"] <= run_count + small
+    assert search_count - peak["search"] <= snap * (1 if batch is None else 0) + small
+    assert run_count - peak["run"] <= (0 if saturated else sets * snap) + small
+    if batch is not None:                           # the run's own check covers its search
+        assert search_count < run_count
 
 
 @pytest.mark.parametrize("cameras, shape", [(2, (16, 16)), (3, (16, 24)), (6, (16, 16)), (8, (20, 12))])

@@ -170,7 +170,8 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: 
     if point.roi is None:
         cache[("cube", point)] = estimate
     memory = device_memory_bytes(rig, point.regularizer, point.dtype, device=point.device,
-                                 tv_iterations=point.tv_iterations, with_truth=False)
+                                 tv_iterations=point.tv_iterations, with_truth=False,
+                                 tuned=result.params["tuning"] is not None)
     return _row(point, rig, window, psnr=psnr_value, ssim_mean=mean_ssim, ssim_per_subframe=per, seconds=seconds,
                 lam=result.params["lam"], regularizer_options=result.params["regularizer_options"],
                 seconds_per_iteration=float(result.history["time"][-1]) / result.iterations,

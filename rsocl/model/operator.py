@@ -15,12 +15,20 @@ from rsocl.device.context import c_type, get_device
 from rsocl.device.launch import block_grid, element_launches
 from rsocl.model.rig import Rig
 
-__all__ = ["RollingShutterOperator"]
+__all__ = ["RollingShutterOperator", "geometry_bytes"]
 
 #: Pixels per work item (one explicit vector of this many lanes): 32 bytes per load.
 VECTOR_WIDTH = {"float32": 8, "float64": 4}
 #: rows per work item of the forward, adjoint and ADMM projection kernels (``TILE_R``)
 BLOCK_ROWS = 4
+
+
+def geometry_bytes(K: int, pixels: int, dtype) -> int:
+    """Device bytes of an operator's geometry for ``K`` channels of ``pixels`` pixels each: the
+    exposure-start index (int32) and fraction per channel and pixel, the window length and gain per
+    channel (:class:`RollingShutterOperator`'s ``first``, ``frac``, ``length``, ``gain``)."""
+    itemsize = np.dtype(dtype).itemsize
+    return int(K) * int(pixels) * (4 + itemsize) + 2 * int(K) * itemsize
 
 
 class RollingShutterOperator:

@@ -63,7 +63,8 @@ def own_inverses(projection: str, etas, valid, sets: int) -> bool:
 
 
 def state_bytes(cube, K: int, dtype, projection: str, sets: int = 1, own_inverse: bool = False) -> int:
-    """Device memory of :class:`ADMM`'s own arrays, bytes: theta, b, f, u (``cube`` each), H·theta and the
+    """Device memory of :class:`ADMM`'s own arrays, bytes: theta, b, f, u (``cube`` each), H·theta, the
+    mask of valid snapshot pixels (counted always; allocated when some pixel is left out) and the
     per-set values of each of ``sets`` sets, and the inverse blocks (one set of them, or one per set)."""
     itemsize = np.dtype(dtype).itemsize
     per_cube = int(np.prod(cube)) * itemsize

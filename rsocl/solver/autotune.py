@@ -14,12 +14,14 @@ from dataclasses import replace
 import numpy as np
 
 from rsocl.model.interpolation import interp3d
-from rsocl.solver.batch import batch_memory, memory_bytes
+from rsocl.solver.admm import state_bytes
+from rsocl.solver.batch import memory_bytes, problem_bytes, workspace_memory
 from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
-from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, tune_parameters
+from rsocl.solver.tuning import CANDIDATE_FRACTION, FOLDS, LAM_FACTORS, Tuning, tune_parameters
 
-__all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options", "search_memory"]
+__all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options", "search_memory", "search_peak",
+           "starts_from_interpolation"]
 
 
 def check_tune(tune):
@@ -74,8 +76,8 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     (None: searched). ``lam`` candidates are the settled ``lam`` times
     :data:`~rsocl.solver.tuning.LAM_FACTORS`; each candidate runs
     :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations`` (at least 10).
-    Unless ``checked`` (the caller did it, for a batch), the search's memory beside this set's
-    run (:func:`search_memory`) is checked against the device before anything runs.
+    Unless ``checked`` (the caller did it, for a batch), the search's memory beside the staged
+    problem (:func:`search_peak`) is checked against the device before anything runs.
     """
     search = _to_search(settings, regularizer, reg, user_options, fixed_lam)
     if search is None:
@@ -106,28 +108,48 @@ def _warm_start(problem, staged):
 
 
 def search_memory(op, reg, projection: str, batch) -> int:
-    """Device bytes the search adds to a staged run on ``op``: one set's ADMM and regularizer
-    workspace, its warm start and hold-out weights, and for a batch (``batch`` sets, None: one
-    set) the first set's own snapshots and inverse blocks."""
+    """Device bytes the search allocates beside the staged problem, freed before the run's solver is
+    made: per hold-out fold (:data:`~rsocl.solver.tuning.FOLDS`) one set's ADMM arrays, its warm
+    start and held-out weights; one set's regularizer workspace; and for a batch (``batch`` sets,
+    None: one set) the first set staged on its own (operator geometry and snapshots)."""
     cube = op.domain_shape
     itemsize = np.dtype(op.dtype).itemsize
     snap = op.K * int(np.prod(cube[1:])) * itemsize
-    extra = batch_memory(cube, op.K, op.dtype, reg, projection, 1)[1] + int(np.prod(cube)) * itemsize + snap
+    per_fold = state_bytes(cube, op.K, op.dtype, projection, 1) + int(np.prod(cube)) * itemsize + snap
+    extra = FOLDS * per_fold + workspace_memory(cube, op.dtype, reg, 1)
     if batch is not None:
-        extra += snap * (op.K + 1)
+        extra += problem_bytes(cube, op.K, op.dtype, 1)
     return extra
 
 
+def search_peak(op, reg, projection: str, batch, *, truth=False, start=False) -> int:
+    """Device bytes held while the search runs: the staged problem of ``batch`` sets (None: one set;
+    :func:`~rsocl.solver.batch.problem_bytes`, with a ground truth and a given start cube per set
+    when ``truth``, ``start``) and :func:`search_memory`."""
+    held = problem_bytes(op.domain_shape, op.K, op.dtype, batch or 1, truth=truth, start=start)
+    return held + search_memory(op, reg, projection, batch)
+
+
+def starts_from_interpolation(tune, settings, regularizer, reg, user_options, fixed_lam) -> bool:
+    """Whether :func:`tune_and_start` will give the run an ``interp3d`` start (when the caller gave no
+    ``x0``): ``tune`` is an earlier :class:`Tuning`, or True with something left to choose."""
+    if tune is False:
+        return False
+    return isinstance(tune, Tuning) or _to_search(settings, regularizer, reg, user_options, fixed_lam) is not None
+
+
 def _check_search_fits(problem, staged, settings, reg):
-    """Raise before the search when it and the staged run together would not fit the device."""
-    sets = problem.batch or 1
-    largest, run = memory_bytes(staged.op, reg, settings.projection, sets, truth=problem.truth is not None)
-    extra = search_memory(staged.op, reg, settings.projection, problem.batch)
-    staged.op.device.check_fits(f"choosing the parameters from the data (ADMM with {reg.name} on "
-                                f"T={staged.op.T} x {problem.rig.shape[0]} x {problem.rig.shape[1]}, "
-                                f"{extra / 2**20:.1f} MiB beside the run's {run / 2**20:.1f} MiB)",
-                                largest, total_bytes=run + extra, dtype=staged.op.dtype,
-                                also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fast)")
+    """Raise before the search when it and the staged problem together would not fit the device."""
+    op = staged.op
+    peak = search_peak(op, reg, settings.projection, problem.batch, truth=problem.truth is not None,
+                       start=problem.x0 is not None)
+    extra = search_memory(op, reg, settings.projection, problem.batch)
+    largest = memory_bytes(op, reg, settings.projection, 1)[0]
+    op.device.check_fits(f"choosing the parameters from the data (ADMM with {reg.name} on "
+                         f"T={op.T} x {problem.rig.shape[0]} x {problem.rig.shape[1]}, "
+                         f"{extra / 2**20:.1f} MiB beside the staged problem's {(peak - extra) / 2**20:.1f} MiB)",
+                         largest, total_bytes=peak, dtype=op.dtype,
+                         also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fast)")
 
 
 def _search_first_set(problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, device, dtype,

@@ -78,12 +78,14 @@ def crop_rig(rig: Rig, roi, dt=None) -> Rig:
     return Rig(cams, (h, w), dt=rig.dt if dt is None else dt, mask=rig.mask)
 
 
-def memory_need(rig: Rig, *, regularizer="tv", dtype="float32", projection="exact") -> tuple:
+def memory_need(rig: Rig, *, regularizer="tv", dtype="float32", projection="exact", start=True) -> tuple:
     """``(largest buffer, total)`` device bytes of reconstructing ``rig``'s sampled sub-frames.
 
     From the shapes alone (nothing is allocated), by the count :func:`rsocl.solver.reconstruct`
-    checks before it runs (:func:`rsocl.solver.batch.batch_memory` of one set): the datacube over
-    :meth:`Rig.sampled_range`, the solver's arrays and the regularizer's workspace.
+    checks before it runs (:func:`rsocl.solver.batch.batch_memory` of one set): the operator's
+    geometry and the snapshots, the datacube over :meth:`Rig.sampled_range`, the solver's arrays,
+    the regularizer's workspace and, with ``start`` (the self-tuned default's ``interp3d`` start,
+    or a given ``x0``), the start cube.
     """
     from rsocl.common.registry import load
     from rsocl.solver.batch import batch_memory
@@ -91,7 +93,7 @@ def memory_need(rig: Rig, *, regularizer="tv", dtype="float32", projection="exac
     solved = rig.sampled_range()
     domain = (solved.stop - solved.start,) + rig.shape
     reg = load("rsocl.regularizers", regularizer)() if isinstance(regularizer, str) else regularizer
-    return batch_memory(domain, rig.n_channels, dtype, reg, projection, 1)
+    return batch_memory(domain, rig.n_channels, dtype, reg, projection, 1, start=start)
 
 
 def device_limit(device, largest: int, total: int) -> str | None:

@@ -149,11 +149,14 @@ class Staged:
     unsolved_sq: float = 0.0
 
 
-def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32") -> Staged:
+def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32",
+                    start=False) -> Staged:
     """Build the operator for the sampled sub-frames, check the memory, upload the arrays.
 
     Only the sub-frames some camera samples are modelled; the others stay zero in the result.
-    Raises an error naming the sizes when the run would not fit the device.
+    Raises an error naming the sizes when the run would not fit the device; the count
+    (:func:`~rsocl.solver.batch.memory_bytes`) includes a start cube per set when the problem has
+    an ``x0`` or ``start`` says one will be made after staging (the self-tuned run's ``interp3d`` start).
     """
     import pyopencl.array as cla
 
@@ -164,7 +167,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     valid = problem.valid
     own = own_inverses(settings.projection, settings.eta, valid, sets)
     largest, need = memory_bytes(op, reg, settings.projection, sets, truth=problem.truth is not None,
-                                 own_inverse=own)
+                                 own_inverse=own, start=bool(start) or problem.x0 is not None)
     batch = "" if problem.batch is None else f"{sets} sets of "
     op.device.check_fits(f"ADMM with {reg.name} on {batch}T={op.T} x {rig.shape[0]} x {rig.shape[1]} "
                          f"({op.dtype.name})", largest, total_bytes=need, dtype=op.dtype)

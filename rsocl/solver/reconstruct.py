@@ -24,7 +24,7 @@ from __future__ import annotations
 from rsocl.common.registry import load
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import ADMM
-from rsocl.solver.autotune import check_tune, tune_and_start
+from rsocl.solver.autotune import check_tune, starts_from_interpolation, tune_and_start
 from rsocl.solver.iterate import collect, run_iterations
 from rsocl.solver.problem import DEFAULTS, check_problem, check_settings, stage_on_device
 from rsocl.solver.regularizer import Regularizer
@@ -94,7 +94,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     reg = make_regularizer(regularizer, regularizer_options, settings.tv_iterations)
     fixed_lam = settings.lam
     settings = settings.settled_for(reg, dtype).for_batch(problem.batch)
-    staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype)
+    start = starts_from_interpolation(tune, settings, regularizer, reg, regularizer_options, fixed_lam)
+    staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype, start=start)
     tuning = None
     if tune is not False:
         reg, settings, tuning = tune_and_start(problem, staged, settings, regularizer, reg, regularizer_options,

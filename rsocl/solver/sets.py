@@ -37,7 +37,7 @@ CACHE_FRACTION = 0.75
 
 
 def batch_size(rig: Rig, regularizer="tv", *, sets=None, dtype="float32", device=None, projection="exact",
-               truth=False, own_inverse=False, limit=MAX_BATCH, memory_fraction=0.8,
+               truth=False, own_inverse=False, start=False, limit=MAX_BATCH, memory_fraction=0.8,
                regularizer_options=None, cache_fraction=CACHE_FRACTION) -> int:
     """The largest number of sets of ``rig`` that one batch may hold on ``device``.
 
@@ -54,6 +54,10 @@ def batch_size(rig: Rig, regularizer="tv", *, sets=None, dtype="float32", device
         Whether a ground truth goes with every set (one more datacube each).
     own_inverse : bool
         Whether every set has its own projection blocks (per-set ``eta`` or saturated pixels).
+    start : bool
+        Whether every set has a start cube beside its iterate (a given ``x0``, or the self-tuned
+        run's ``interp3d`` start): one more datacube each, counted against the global memory; it
+        is read once, so the cache limit leaves it out.
     limit : int
         At most this many sets (default :data:`MAX_BATCH`).
     memory_fraction : float
@@ -84,19 +88,21 @@ def batch_size(rig: Rig, regularizer="tv", *, sets=None, dtype="float32", device
     solved = rig.sampled_range()
     cube = (solved.stop - solved.start,) + rig.shape
 
-    def need(b):
-        return batch_memory(cube, rig.n_channels, dt, reg, projection, b, truth=truth, own_inverse=own_inverse)
+    def need(b, with_start=bool(start)):
+        return batch_memory(cube, rig.n_channels, dt, reg, projection, b, truth=truth, own_inverse=own_inverse,
+                            start=with_start)
 
     largest, total = need(1)
     dev.check_fits(f"ADMM with {reg.name} on T={cube[0]} x {rig.shape[0]} x {rig.shape[1]} ({dt.name})",
                    largest, total_bytes=total)
     budget = fraction * dev.global_mem_bytes
+    cache = None
     if cache_fraction is not None and dev.is_cpu and dev.cache_bytes > 0:
-        budget = min(budget, cache_fraction * dev.cache_bytes)
+        cache = cache_fraction * dev.cache_bytes
     best = 1
     for b in range(2, limit + 1):
         largest, total = need(b)
-        if largest > dev.max_alloc_bytes or total > budget:
+        if largest > dev.max_alloc_bytes or total > budget or (cache is not None and need(b, False)[1] > cache):
             break
         best = b
     return best
@@ -133,8 +139,8 @@ def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, tr
         valid = None if saturation is None else g < check.positive("saturation", saturation, "(snapshot units)")
         own = own_inverses(projection, 0.0 if eta is None else eta, valid, count)
         batch = batch_size(rig, regularizer, sets=count, dtype=dtype, device=device, projection=projection,
-                           truth=truth is not None, own_inverse=own,
-                           regularizer_options=regularizer_options)
+                           truth=truth is not None, own_inverse=own, start=x0 is not None or kwargs.get("tune", True)
+                           is not False, regularizer_options=regularizer_options)
     batch = check.positive_int("batch", batch)
     bar = None
     if progress:

@@ -45,7 +45,7 @@ from rsocl.device.reduction import sum_sq_diff
 from rsocl.model.interpolation import interp3d
 from rsocl.solver.admm import ADMM
 
-__all__ = ["LAM_FACTORS", "CANDIDATE_FRACTION", "holdout", "default_block", "Tuning", "tune_parameters"]
+__all__ = ["LAM_FACTORS", "FOLDS", "CANDIDATE_FRACTION", "holdout", "default_block", "Tuning", "tune_parameters"]
 
 #: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
 LAM_FACTORS = (0.3, 1.0, 3.0)
