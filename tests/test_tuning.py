@@ -40,6 +40,37 @@ def test_holdout_keeps_all_but_one_channel_per_pixel():
         holdout((8, 8), 4, block=0)
 
 
+@pytest.mark.parametrize("channels", range(1, 13))
+@pytest.mark.parametrize("shape", [(16, 16), (24, 40), (48, 32), (8, 200)])
+def test_default_folds_hold_out_every_camera_with_as_few_patterns_as_that_takes(channels, shape):
+    from rsocl.solver.tuning import default_folds
+
+    period = max(channels, 2)
+
+    def covered(folds):
+        held = np.zeros(channels, bool)
+        for k in range(folds):
+            held |= holdout(shape, channels, shift=(k * period) // folds).any(axis=(1, 2))
+        return held.all()
+
+    folds = default_folds(shape, channels)
+    assert 1 <= folds <= period and covered(folds)
+    assert folds == 1 or not covered(folds - 1)
+
+
+def test_more_cameras_than_one_pattern_holds_out_are_tuned_on_two_folds():
+    """8 cameras on 16x16: one pattern of 2x2 blocks holds out 4 of them; the search pools two
+    patterns (every camera held out once) and records it; 4 cameras keep one."""
+    from rsocl.model.scenes import builtin_scene
+
+    for cameras, folds in [(8, 2), (4, 1)]:
+        rig = rsocl.Rig.paper_array(cameras, (16, 16), t_e=0.18e-3, t_r=35e-6)
+        record = rsocl.reconstruct(ref.forward(rig, builtin_scene(rig.shape, rig.T)), rig,
+                                   iterations=12).params["tuning"]
+        assert record["folds"] == folds
+        assert record["held_out_pixels"] == folds * 16 * 16          # one camera of each pixel per fold
+
+
 def test_static_scene_picks_a_strong_temporal_weight():
     rig = _rig()
     res = rsocl.reconstruct(ref.forward(rig, _static(rig)), rig, iterations=30)
@@ -156,9 +187,10 @@ def _live_device_bytes():
     return sum(buffers.values())
 
 
-@pytest.mark.parametrize("batch, truth, x0, saturated", [(None, False, False, False), (None, True, True, False),
-                                                        (3, False, False, False), (3, True, False, True)])
-def test_the_memory_counts_bound_what_the_search_and_the_run_hold(batch, truth, x0, saturated, monkeypatch):
+@pytest.mark.parametrize("cameras, batch, truth, x0, saturated", [
+    (4, None, False, False, False), (4, None, True, True, False), (8, None, False, False, False),
+    (4, 3, False, False, False), (4, 3, True, False, True)])
+def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch, truth, x0, saturated, monkeypatch):
     """The device arrays alive while the search runs and while the run iterates stay within the
     counts the device is checked against (search_peak; memory_bytes with the start cube), and the
     counts exceed them by no more than the valid-pixel mask they count always and a few small
@@ -168,7 +200,7 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(batch, truth, 
     from rsocl.solver.batch import memory_bytes
     from rsocl.solver.reconstruct import make_regularizer
 
-    rig = rsocl.Rig.paper_array(4, (12, 16), t_e=1e-4, t_r=3e-5)
+    rig = rsocl.Rig.paper_array(cameras, (12, 16), t_e=1e-4, t_r=3e-5)
     cube = np.random.default_rng(5).random((rig.T,) + rig.shape)
     g = ref.forward(rig, cube)
     sets = batch or 1
@@ -184,9 +216,10 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(batch, truth, 
     snap = op.K * op.mn * op.dtype.itemsize
     peak = {"search": 0, "run": 0}
 
-    class Probe(tuning.ADMM):
+    class Probe(tuning.ADMM):                       # every buffer exists once a candidate's first step ran
         def step(self):
-            peak["search"] = max(peak["search"], _live_device_bytes() - base)
+            if self.iteration <= 1:
+                peak["search"] = max(peak["search"], _live_device_bytes() - base)
             return super().step()
 
     def callback(iteration, residual, theta):
@@ -200,7 +233,9 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(batch, truth, 
     small = 256                                     # per-set step lengths, eta, flags: uncounted
     assert peak["search"] <= search_count + small
     assert peak["run"] <= run_count + small
-    assert search_count - peak["search"] <= snap * (1 if batch is None else 0) + small
+    folds = result.params["tuning"]["folds"]
+    assert folds == (2 if cameras == 8 else 1)
+    assert search_count - peak["search"] <= snap * (folds if batch is None else 0) + small
     assert run_count - peak["run"] <= (0 if saturated else sets * snap) + small
     if batch is not None:                           # the run's own check covers its search
         assert search_count < run_count

@@ -18,7 +18,7 @@ from rsocl.solver.admm import state_bytes
 from rsocl.solver.batch import memory_bytes, problem_bytes, workspace_memory
 from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
-from rsocl.solver.tuning import CANDIDATE_FRACTION, FOLDS, LAM_FACTORS, Tuning, tune_parameters
+from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, default_folds, tune_parameters
 
 __all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options", "search_memory", "search_peak",
            "starts_from_interpolation"]
@@ -75,7 +75,8 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     (:meth:`~rsocl.solver.problem.Settings.settled_for`); ``fixed_lam`` is the caller's ``lam``
     (None: searched). ``lam`` candidates are the settled ``lam`` times
     :data:`~rsocl.solver.tuning.LAM_FACTORS`; each candidate runs
-    :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations`` (at least 10).
+    :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations``, split among the
+    hold-out folds (:func:`~rsocl.solver.tuning.default_folds`; at least 10 per fold).
     Unless ``checked`` (the caller did it, for a batch), the search's memory beside the staged
     problem (:func:`search_peak`) is checked against the device before anything runs.
     """
@@ -85,11 +86,13 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     tunable, lam, fixed = search
     if not checked:
         _check_search_fits(problem, staged, settings, reg)
+    folds = default_folds(problem.rig.shape, problem.rig.n_channels)
     return tune_parameters(
         staged.op, staged.g, problem.g, problem.rig,
         lambda options: with_options(regularizer, reg, user_options, options, settings.tv_iterations, make),
         tunable=tunable, lam=lam, eta=_first(settings.eta), projection=settings.projection, valid=problem.valid,
-        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations)), fixed=fixed, progress=progress)
+        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / folds)), folds=folds, fixed=fixed,
+        progress=progress)
 
 
 def _warm_start(problem, staged):
@@ -109,14 +112,16 @@ def _warm_start(problem, staged):
 
 def search_memory(op, reg, projection: str, batch) -> int:
     """Device bytes the search allocates beside the staged problem, freed before the run's solver is
-    made: per hold-out fold (:data:`~rsocl.solver.tuning.FOLDS`) one set's ADMM arrays, its warm
-    start and held-out weights; one set's regularizer workspace; and for a batch (``batch`` sets,
-    None: one set) the first set staged on its own (operator geometry and snapshots)."""
+    made: per hold-out fold (:func:`~rsocl.solver.tuning.default_folds`) one set's ADMM arrays, its
+    warm start, held-out weights and regularizer workspace (a fold's solver keeps the previous
+    candidate's regularizer until its own turn); and for a batch (``batch`` sets, None: one set)
+    the first set staged on its own (operator geometry and snapshots)."""
     cube = op.domain_shape
     itemsize = np.dtype(op.dtype).itemsize
     snap = op.K * int(np.prod(cube[1:])) * itemsize
-    per_fold = state_bytes(cube, op.K, op.dtype, projection, 1) + int(np.prod(cube)) * itemsize + snap
-    extra = FOLDS * per_fold + workspace_memory(cube, op.dtype, reg, 1)
+    per_fold = (state_bytes(cube, op.K, op.dtype, projection, 1) + int(np.prod(cube)) * itemsize + snap
+                + workspace_memory(cube, op.dtype, reg, 1))
+    extra = default_folds(op.rig.shape, op.K) * per_fold
     if batch is not None:
         extra += problem_bytes(cube, op.K, op.dtype, 1)
     return extra
