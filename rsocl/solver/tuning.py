@@ -93,11 +93,13 @@ def default_folds(shape, channels: int, block: int | None = None) -> int:
     """
     m, n = check.grid_shape("shape", shape)
     channels = check.positive_int("channels", channels)
+    block = default_block((m, n)) if block is None else check.positive_int("block", block)
+    blocks = (-(-m // block), -(-n // block))              # the pattern on the grid of blocks
     period = max(channels, 2)
     for folds in range(FOLDS, period + 1):
         covered = np.zeros(channels, bool)
         for k in range(folds):
-            covered |= holdout((m, n), channels, block, shift=(k * period) // folds).any(axis=(1, 2))
+            covered |= holdout(blocks, channels, 1, shift=(k * period) // folds).any(axis=(1, 2))
         if covered.all():
             return folds
     return period
