@@ -38,8 +38,9 @@ from quality_scenes import DATA, make_scene, noisy  # noqa: E402
 WEIGHTS = (1.0, 3.0, 10.0, 30.0)
 LAMS = (0.03, 0.1, 0.3)
 #: Scenes the tuning's own settings (hold-out block = half the side, from 1/2, 1/4, 1/8; candidate
-#: runs of 0.25x the iterations; one hold-out fold, from 1 and 2; lam x 0.3/1/3; temporal weights
-#: 1/3/10/30 and midpoints) were chosen on (64x64, noiseless); every other row is held out.
+#: runs of 0.25x the iterations; one hold-out fold for these 4 cameras, from 1 and 2; lam x 0.3/1/3;
+#: temporal weights 1/3/10/30 and midpoints) were chosen on (64x64, noiseless); every other row is
+#: held out. (Pooled folds for rigs with more cameras than blocks: ``benchmarks/tuning_configs.py``.)
 TUNED_ON = ("builtin", "builtin-fast", "runner40@0.5", "runner40@1", "traffic48@1")
 #: (scene, size, noise) cases: noise "none" or "poisson" (1000 photo-electrons at full scale
 #: and read noise 1 % of full scale).
