@@ -81,15 +81,17 @@ def default_folds(shape, channels: int, block: int | None = None) -> int:
     With 4 cameras and 2x2 blocks one pattern holds out each camera once; with 6 or 8 cameras it
     holds out only 4 of them, and a camera never held out never tests the candidates. The search
     (:func:`rsocl.solver.autotune.choose_unset`) splits the candidate iterations among the folds,
-    so its cost stays that of one fold. Measured (``benchmarks/tuning_configs.py`` rigs, 6 and 8
-    cameras on 16x16 and 48x32, 100 iterations; 36 cases: the built-in scene at three speeds and
-    with noise, Runner and Traffic at several speeds, a zoomed crop and with noise), two folds of
-    half the iterations each against one fold: the tuned run's PSNR +0.14 dB on average (from
-    -0.76 to +1.16 dB; 17 cases unchanged; the built-in scene +0.41 dB, the videos -0.00 dB). On the
-    12 of them also run on a fixed grid (temporal weight 1, 3, 10 x lam 0.03, 0.1, 0.3; built-in
-    scene, Runner and Traffic at 1 frame per sub-frame) the largest loss to the grid's best
-    setting falls from 1.89 to 0.73 dB. Two folds of the full iterations gave +0.09 dB on average
-    for 1.5x the time (8 cameras, 64x64: 5.35x the fixed run's time against 3.62x).
+    so it takes about what one fold did (1.04x and 1.09x the search time of one fold, 6 cameras
+    at 48x32 and 8 at 64x64, medians of 5 alternating rounds).
+
+    Measured (``benchmarks/tuning_configs.py`` rigs, 6 and 8 cameras on 16x16 and 48x32, 100
+    iterations; 36 cases: the built-in scene at three speeds and with noise, Runner and Traffic at
+    several speeds, a zoomed crop and with noise), two folds of half the iterations each against
+    one fold: the tuned run's PSNR +0.14 dB on average (from -0.76 to +1.16 dB; 17 cases
+    unchanged; the built-in scene +0.41 dB, the videos -0.00 dB). On the 12 of them also run on a
+    fixed grid (temporal weight 1, 3, 10 x lam 0.03, 0.1, 0.3; built-in scene, Runner and Traffic
+    at 1 frame per sub-frame) the largest loss to the grid's best setting falls from 1.89 to
+    0.73 dB. Two folds of the full iterations gave +0.09 dB on average for about 1.5x the time.
     """
     m, n = check.grid_shape("shape", shape)
     channels = check.positive_int("channels", channels)
