@@ -258,3 +258,19 @@ def test_the_tuned_default_beats_interpolation_on_other_rigs(cameras, shape):
     assert any(c["lam"] == record["chosen"]["lam"] and c["temporal_weight"] == record["chosen"]["temporal_weight"]
                for c in record["candidates"])
     assert psnr(res.datacube, truth) > psnr(interp3d(g, rig), truth) + 0.5
+
+
+def test_the_search_summary_says_how_pixels_were_held_out(tmp_path):
+    """The tuning plot's second title line: block, folds, held-out pixels, iterations, candidates, time."""
+    from rsocl.analysis.tuning_plot import search_summary, tuning_plot
+    from rsocl.model.scenes import builtin_scene
+
+    rig = rsocl.Rig.paper_array(8, (16, 16), t_e=0.18e-3, t_r=35e-6)
+    record = rsocl.reconstruct(ref.forward(rig, builtin_scene(rig.shape, rig.T)), rig, iterations=40).params["tuning"]
+    line = search_summary(record)
+    assert line.startswith("blocks of 8 px, 2 hold-out folds, 512 held-out pixels, 10 iterations per candidate and fold")
+    assert f"{len(record['candidates'])} candidates" in line and line.endswith(" s")
+    one = {**record, "folds": 1, "iterations_per_candidate": 20}
+    assert "1 hold-out fold, 512 held-out pixels, 20 iterations per candidate, " in search_summary(one)
+    assert "fold" in search_summary({"candidates": []})                 # an older record without these keys
+    assert tuning_plot(tmp_path / "t.png", record).stat().st_size > 0

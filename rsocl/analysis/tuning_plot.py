@@ -7,11 +7,32 @@ also in the reconstruction file), so it draws a search from a file as well as fr
 from __future__ import annotations
 
 import os
+import textwrap
 from pathlib import Path
 
 from rsocl.files.atomic import atomic_path
 
-__all__ = ["tuning_plot"]
+__all__ = ["tuning_plot", "search_summary"]
+
+
+def search_summary(record) -> str:
+    """One line on how the search held pixels out and ran: block side (pixels), hold-out folds,
+    held-out pixels, ADMM iterations per candidate and per fold, candidates and seconds (what the
+    record has of them)."""
+    parts = []
+    if record.get("block"):
+        parts.append(f"blocks of {record['block']} px")
+    folds = int(record.get("folds", 1) or 1)
+    parts.append(f"{folds} hold-out fold" + ("s" if folds > 1 else ""))
+    if record.get("held_out_pixels"):
+        parts.append(f"{record['held_out_pixels']} held-out pixels")
+    if record.get("iterations_per_candidate"):
+        per = " and fold" if folds > 1 else ""
+        parts.append(f"{record['iterations_per_candidate']} iterations per candidate{per}")
+    parts.append(f"{len(record.get('candidates', []))} candidates")
+    if record.get("seconds"):
+        parts.append(f"{record['seconds']:.2f} s")
+    return ", ".join(parts)
 
 
 def tuning_plot(path, record, *, dpi=100) -> Path:
@@ -23,7 +44,7 @@ def tuning_plot(path, record, *, dpi=100) -> Path:
         PNG to write (atomically).
     record : dict
         ``Result.params["tuning"]``: ``candidates`` (dicts with ``lam``, the tuned options and
-        ``score``), ``chosen`` and ``fixed``.
+        ``score``), ``chosen`` and ``fixed``; the title's second line is :func:`search_summary`.
 
     Returns
     -------
@@ -59,8 +80,10 @@ def tuning_plot(path, record, *, dpi=100) -> Path:
         ax.set_ylabel("held-out relative error")
         ax.legend(fontsize=7)
     fixed = ", ".join(f"{k} = {v:g}" for k, v in record.get("fixed", {}).items() if isinstance(v, (int, float)))
-    figure.suptitle("cross-validation on held-out snapshot pixels" + (f" (fixed: {fixed})" if fixed else ""),
-                    fontsize=9)
+    width = int(figure.get_figwidth() * 17)          # characters of 8-point text per line
+    figure.suptitle(textwrap.fill("cross-validation on held-out snapshot pixels"
+                                  + (f" (fixed: {fixed})" if fixed else ""), width)
+                    + "\n" + textwrap.fill(search_summary(record), width), fontsize=8)
     figure.tight_layout()
     path = Path(os.fspath(path))
     with atomic_path(path) as tmp:
