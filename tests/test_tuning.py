@@ -187,14 +187,17 @@ def _live_device_bytes():
     return sum(buffers.values())
 
 
-@pytest.mark.parametrize("cameras, batch, truth, x0, saturated", [
-    (4, None, False, False, False), (4, None, True, True, False), (8, None, False, False, False),
-    (4, 3, False, False, False), (4, 3, True, False, True)])
-def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch, truth, x0, saturated, monkeypatch):
-    """The device arrays alive while the search runs and while the run iterates stay within the
-    counts the device is checked against (search_peak; memory_bytes with the start cube), and the
-    counts exceed them by no more than the valid-pixel mask they count always and a few small
-    per-set values: neither an under-count (an allocation failure mid-run) nor a refusal of what fits."""
+@pytest.mark.parametrize("cameras, batch, truth, x0, saturated, regularizer", [
+    (4, None, False, False, False, "tv"), (4, None, True, True, False, "tv"), (8, None, False, False, False, "tv"),
+    (4, 3, False, False, False, "tv"), (4, 3, True, False, True, "tv"), (4, 3, False, False, False, "tv-fused"),
+    (4, None, False, False, False, "dct"), (4, None, False, False, False, "wavelet")])
+def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch, truth, x0, saturated, regularizer,
+                                                                  monkeypatch):
+    """For TV (plain and fused), DCT and wavelets: the device arrays alive while the search runs and
+    while the run iterates stay within the counts the device is checked against (search_peak;
+    memory_bytes with the start cube), and the counts exceed them by no more than the valid-pixel
+    mask they count always and a few small per-set values: neither an under-count (an allocation
+    failure mid-run) nor a refusal of what fits."""
     from rsocl.solver import autotune, tuning
     from rsocl.solver.admm import own_inverses
     from rsocl.solver.batch import memory_bytes
@@ -208,7 +211,8 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
         g, cube = np.stack([g * (1 + 0.1 * b) for b in range(batch)]), np.stack([cube] * batch)
     saturation = float(np.quantile(g, 0.9)) if saturated else None
     op = rsocl.RollingShutterOperator(rig, subframes=rig.sampled_range())
-    reg = make_regularizer("tv")
+    name, options = ("tv", {"fused": 2}) if regularizer == "tv-fused" else (regularizer, None)
+    reg = make_regularizer(name, options)
     valid = None if saturation is None else g < saturation
     own = own_inverses("exact", 0.2, valid, sets)
     run_count = memory_bytes(op, reg, "exact", sets, truth=truth, own_inverse=own, start=True)[1]
@@ -227,8 +231,8 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
 
     monkeypatch.setattr(tuning, "ADMM", Probe)
     base = _live_device_bytes()
-    result = rsocl.reconstruct(g, rig, iterations=3, callback=callback, truth=cube if truth else None,
-                               x0=cube if x0 else None, saturation=saturation)
+    result = rsocl.reconstruct(g, rig, name, regularizer_options=options, iterations=3, callback=callback,
+                               truth=cube if truth else None, x0=cube if x0 else None, saturation=saturation)
     assert result.params["tuning"] is not None and peak["search"] > 0 and peak["run"] > 0
     small = 256                                     # per-set step lengths, eta, flags: uncounted
     assert peak["search"] <= search_count + small
