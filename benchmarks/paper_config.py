@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 import rsocl
-from rsocl.solver.admm import ADMM
+from rsocl.bench.memory import device_memory_bytes
 from rsocl.model.scenes import builtin_scene, load_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -192,9 +192,7 @@ def precision(device, iterations):
             rsocl.reconstruct(g, big, iterations=1, device=device, dtype=dtype, tune=False)
             res = rsocl.reconstruct(g, big, iterations=iterations, truth=truth, device=device, dtype=dtype,
                                     tune=False)
-            op = rsocl.RollingShutterOperator(big, device=device, dtype=dtype)
-            reg = rsocl.common.registry.load("rsocl.regularizers", "tv")()
-            mem = ADMM.buffers_bytes(op, "exact") + reg.workspace_bytes(op.domain_shape, op.dtype)
+            mem = device_memory_bytes(big, "tv", dtype, device=device, with_truth=True)
             row[dtype] = (res.history["psnr"][-1], res.history["time"][-1] / res.iterations * 1e3, mem / 2**20)
         if len(row) == 2:
             a, b = row["float32"], row["float64"]

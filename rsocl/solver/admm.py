@@ -191,11 +191,6 @@ class ADMM:
                 blocks.append(np.moveaxis(inverse, (2, 3), (0, 1)))
         return int(own), np.stack(blocks) if own else blocks[0]
 
-    @staticmethod
-    def buffers_bytes(op: RollingShutterOperator, projection: str, sets: int = 1, own_inverse: bool = False) -> int:
-        """Device memory of the solver's own arrays for ``sets`` sets, bytes (:func:`state_bytes`)."""
-        return state_bytes(op.domain_shape, op.K, op.dtype, projection, sets, own_inverse)
-
     def restart(self, regularizer, lam, x0):
         """Start over from ``theta = x0`` (a device array, copied) with another regularizer and
         ``lam`` (one number, or one per set); the data step (its inverse blocks, ``eta``, ``valid``) is kept."""
