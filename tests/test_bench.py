@@ -71,6 +71,36 @@ def test_interp3d_exact_for_a_scene_constant_in_time(still_scene):
         np.testing.assert_allclose(interp3d(g, rig), cube, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("t_e, dt, some_empty", [(26e-6, 87.5e-6, True), (28e-6, 35e-6, False),
+                                                  (180e-6, 35e-6, False), (180e-6, 87.5e-6, False),
+                                                  (1.7e-3, 35e-6, False)])
+def test_interp3d_exact_for_a_constant_scene_under_the_binary_mask(t_e, dt, some_empty):
+    # a binary window averages the sub-frames whose start it holds: their count, not t_e/dt
+    image = np.random.default_rng(1).uniform(0.2, 1.0, size=(9, 11))
+    rig = Rig.paper_array(4, image.shape, t_e, 35e-6, mask="binary", dt=dt)
+    cube = np.repeat(image[None], rig.T, axis=0)
+    g = RollingShutterOperator(rig, dtype="float64").forward(cube)
+    empty = g == 0                  # rows start between sub-frames (dt > t_r): a short window may hold none
+    assert empty.any() == some_empty and not empty.all()
+    seen = ~empty.all(axis=0)                          # a pixel no camera saw is not observed at all
+    assert seen.mean() > 0.7
+    np.testing.assert_allclose(interp3d(g, rig)[:, seen], cube[:, seen], rtol=0, atol=1e-12)
+
+
+def test_interp3d_times_a_binary_sample_at_the_middle_of_its_sub_frames():
+    rig = Rig.paper_array(2, (6, 6), 180e-6, 35e-6, mask="binary")
+    win = rig.windows
+    first, last = np.ceil(win.index + win.fraction), np.minimum(np.floor(win.end), rig.T - 1)
+    ramp = np.arange(rig.T, dtype=np.float64) + 0.5                 # the scene is its own time
+    g = RollingShutterOperator(rig, dtype="float64").forward(np.broadcast_to(ramp[:, None, None], (rig.T,) + rig.shape))
+    est = interp3d(g, rig)
+    y, x = 5, 0
+    lo, hi = sorted(((first[k, y, x] + last[k, y, x]) / 2 + 0.5) for k in range(2))
+    inside = np.flatnonzero((ramp >= lo) & (ramp <= hi))
+    assert inside.size > 2
+    np.testing.assert_allclose(est[inside, y, x], ramp[inside], rtol=0, atol=1e-12)
+
+
 def test_interp3d_is_linear_in_time_between_samples():
     rig = Rig.paper_array(2, (6, 6), 180e-6, 35e-6)
     win = rig.windows

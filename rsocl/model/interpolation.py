@@ -49,10 +49,37 @@ def interp3d(g, rig, valid=None) -> np.ndarray:
             raise ValueError("valid must keep at least one snapshot pixel")
         if valid.all():
             valid = None
+    return _interpolated(g, rig, valid)
+
+
+def _sampled(rig):
+    """Per snapshot pixel, ``(K, m, n)`` each: the sum of its shutter weights (sub-frames) and the
+    centre of the sub-frames it averages (in sub-frames, a sub-frame's centre at ``s + 1/2``).
+
+    ``exact`` mask: the window's length ``t_e/dt`` and its middle. ``binary`` mask (``w = 1`` for
+    the sub-frames ``s`` with ``start <= s <= end``, MODEL.md): the count of those ``s`` within
+    ``0 .. T-1`` and the middle of the first and the last one's centres.
+    """
     win = rig.windows
-    length = win.length[:, None, None]
-    centre = win.index + win.fraction + length / 2.0
-    scaled = g / (win.gain[:, None, None] * length)
+    start = win.index + win.fraction
+    if rig.mask == "exact":
+        length = np.broadcast_to(win.length[:, None, None], start.shape)
+        return length, start + length / 2.0
+    first = np.maximum(np.ceil(start), 0.0)
+    last = np.minimum(np.floor(win.end), rig.T - 1.0)
+    return np.maximum(last - first + 1.0, 0.0), (first + last) / 2.0 + 0.5
+
+
+def _interpolated(g, rig, valid):
+    """:func:`interp3d` of checked ``g`` (float64) and ``valid`` (bool or None: every sample)."""
+    K = rig.n_channels
+    length, centre = _sampled(rig)
+    seen = length > 0                                   # a binary window may hold no sub-frame start
+    if not seen.all():
+        valid = seen if valid is None else valid & seen
+        if not valid.any():                             # H is zero: the snapshots say nothing
+            return np.zeros((rig.T,) + rig.shape)
+    scaled = g / (rig.windows.gain[:, None, None] * np.where(seen, length, 1.0))
     T = rig.T
     if valid is not None:
         centre = np.where(valid, centre, np.inf)          # left-out samples sort last
