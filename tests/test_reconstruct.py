@@ -5,6 +5,7 @@ import pytest
 
 import rsocl
 from rsocl.model import reference as ref
+from rsocl.model.scenes import builtin_scene
 
 
 @pytest.fixture(scope="module")
@@ -118,6 +119,24 @@ def test_paper_projection_divergence_is_reported():
     g = np.ones((4, 16, 16)) * 3.0
     with pytest.raises(FloatingPointError, match="projection='paper'"):
         rsocl.reconstruct(g, rig, iterations=300, lam=1e3, eta=1e-3, projection="paper", tune=False)
+
+
+def test_a_finite_blow_up_is_reported_as_divergence():
+    # the paper's diagonal step with 8 cameras at the default eta grows without bound but stays finite
+    rig = rsocl.Rig.paper_array(8, (16, 16), t_e=0.18e-3, t_r=35e-6)
+    g = ref.forward(rig, builtin_scene(rig.shape, rig.T, dtype=np.float64))
+    with pytest.raises(FloatingPointError, match=r"diverged at iteration \d+: .*1000 times.*projection='paper'"):
+        rsocl.reconstruct(g, rig, iterations=40, projection="paper", tune=False)
+    batch = np.stack([g, g])
+    with pytest.raises(FloatingPointError, match=r"in set\(s\) \[1\]"):
+        rsocl.reconstruct(batch, rig, iterations=40, projection="paper", eta=[50.0, 0.2], tune=False)
+    assert np.isfinite(rsocl.reconstruct(g, rig, iterations=40, tune=False).datacube).all()
+
+
+def test_a_start_far_from_the_data_is_not_taken_for_divergence(problem):
+    rig, truth, g = problem
+    res = rsocl.reconstruct(g, rig, iterations=20, x0=1e5 * np.ones((rig.T,) + rig.shape), tune=False)
+    assert res.history["residual"][0] > 1e3 and res.history["residual"][-1] < res.history["residual"][0]
 
 
 def test_regularizer_recommendations_fill_unset_lam_and_eta(problem):

@@ -19,6 +19,11 @@ from rsocl.solver.result import Result
 __all__ = ["run_iterations", "collect"]
 
 
+#: A run whose residual exceeds this many times the smallest one it had so far (or than 1, the
+#: residual of a zero estimate, if that is larger) has diverged, though still finite.
+GROWTH = 1e3
+
+
 class _History:
     """Per-iteration records of a run; :meth:`record` says when the run should stop."""
 
@@ -26,22 +31,39 @@ class _History:
         self.solver, self.staged, self.settings, self.bar = solver, staged, settings, bar
         self.total_size = total_size
         self.values = {"residual": [], "time": []}
+        self.lowest = None
         if staged.truth is not None:
             self.values["psnr"] = []
         self.start = time.perf_counter()
 
-    def _diverged(self, it, residual):
+    def _grown(self, residual) -> np.ndarray:
+        """Where ``residual`` (one per set) is not finite or beyond :data:`GROWTH` times the smallest so far."""
+        residual = np.asarray(residual, dtype=np.float64)
+        bad = ~np.isfinite(residual)
+        if self.lowest is not None:
+            bad |= residual > GROWTH * np.maximum(self.lowest, 1.0)
+            self.lowest = np.fmin(self.lowest, residual)
+        else:
+            self.lowest = np.where(np.isfinite(residual), residual, np.inf)
+        return bad
+
+    def _diverged(self, it, residual, bad):
         if self.settings.projection == "paper":
             psi = float(self.staged.op.psi.max())
             hint = (" The paper's diagonal step (projection='paper') is stable only when eta is large "
                     f"against psi (max psi = {psi:.3g}); use projection='exact' or raise eta.")
         else:
             hint = " Check lam, eta and the data scale."
+        lowest = self.lowest
+        why = (f" (more than {GROWTH:g} times the smallest residual so far, or than 1, the residual of a zero "
+               f"estimate)")
         if np.ndim(residual):
-            bad = np.flatnonzero(~np.isfinite(residual)).tolist()
-            return FloatingPointError(f"ADMM diverged at iteration {it + 1} in set(s) {bad}: the residuals are "
-                                      f"{np.asarray(residual)[bad].tolist()}.{hint}")
-        return FloatingPointError(f"ADMM diverged at iteration {it + 1}: the residual is {residual}.{hint}")
+            sets = np.flatnonzero(bad).tolist()
+            return FloatingPointError(f"ADMM diverged at iteration {it + 1} in set(s) {sets}: the residuals are "
+                                      f"{np.asarray(residual)[sets].tolist()}{why}, the smallest so far "
+                                      f"{np.asarray(lowest)[sets].tolist()}.{hint}")
+        return FloatingPointError(f"ADMM diverged at iteration {it + 1}: the residual is {residual}{why}, the "
+                                  f"smallest so far {float(lowest):.3g}.{hint}")
 
     def _psnr(self):
         staged, solver = self.staged, self.solver
@@ -53,8 +75,9 @@ class _History:
 
     def record(self, it, residual) -> bool:
         """Book iteration ``it``'s residual (one per set for a batch); True when the run should stop after it."""
-        if not np.all(np.isfinite(residual)):
-            raise self._diverged(it, residual)
+        bad = self._grown(residual)
+        if bad.any():
+            raise self._diverged(it, residual, bad)
         values, settings = self.values, self.settings
         values["residual"].append(residual)
         elapsed = time.perf_counter() - self.start
