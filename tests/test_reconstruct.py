@@ -92,6 +92,8 @@ def test_callback_tol_and_x0(problem):
     (dict(regularizer="nope"), "available"),
     (dict(callback=3), "callback"),
     (dict(dtype="float16"), "dtype"),
+    (dict(dtype="foo"), "dtype must be 'float32' or 'float64', got 'foo'"),
+    (dict(dtype=None), "dtype must be 'float32' or 'float64', got None"),
     (dict(regularizer_options={"bogus": 1}), "unknown option"),
 ])
 def test_bad_arguments_are_named(problem, kwargs, match):
@@ -112,6 +114,16 @@ def test_bad_data_is_refused_before_any_kernel(problem):
         rsocl.reconstruct(g, rig, x0=np.zeros((2, 2, 2)))
     with pytest.raises(ValueError, match="truth contains"):
         rsocl.reconstruct(g, rig, truth=np.full((rig.T,) + rig.shape, np.inf))
+
+
+def test_values_beyond_float32_are_refused_by_name(problem):
+    rig, truth, g = problem
+    with pytest.raises(ValueError, match=r"g holds values up to 1e\+39, beyond float32's largest.*float64"):
+        rsocl.reconstruct(g * 0 + 1e39, rig, tune=False)
+    with pytest.raises(ValueError, match="x0 holds values"):
+        rsocl.reconstruct(g, rig, x0=np.full((rig.T,) + rig.shape, -1e39), tune=False)
+    res = rsocl.reconstruct(g * 1e30, rig, iterations=2, tune=False, dtype="float64")
+    assert np.isfinite(res.datacube).all()
 
 
 def test_paper_projection_divergence_is_reported():

@@ -76,6 +76,17 @@ def choice(name: str, value, allowed) -> str:
     return value
 
 
+def real_dtype(name: str, dtype) -> np.dtype:
+    """``float32`` or ``float64`` (a name, a NumPy type or dtype); ``None`` is refused, not read as float64."""
+    try:
+        dt = None if dtype is None else np.dtype(dtype)
+    except (TypeError, ValueError):
+        dt = None
+    if dt is None or dt.name not in ("float32", "float64"):
+        raise ValueError(f"{name} must be 'float32' or 'float64', got {dtype!r}")
+    return dt
+
+
 def finite_array(name: str, array) -> np.ndarray:
     """A real array with no NaN or inf; returned as a NumPy array (no copy when possible)."""
     array = np.asarray(array)

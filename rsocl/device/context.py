@@ -17,6 +17,7 @@ from importlib import resources
 
 import numpy as np
 
+from rsocl.common import validation as check
 from rsocl.common.validation import positive_int as check_positive
 from rsocl.device.kernel import Kernel
 
@@ -205,12 +206,7 @@ class Device:
 
     def real_dtype(self, dtype) -> np.dtype:
         """Validate ``dtype`` (``"float32"`` or ``"float64"``) for this device."""
-        try:
-            dt = np.dtype(dtype)
-        except TypeError:
-            dt = None
-        if dt not in (np.dtype(np.float32), np.dtype(np.float64)):
-            raise ValueError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
+        dt = check.real_dtype("dtype", dtype)
         if dt == np.float64 and not self.has_fp64:
             raise ValueError(f"dtype='float64' needs cl_khr_fp64, which device {self.name!r} does not support; "
                              "use dtype='float32' or another device")

@@ -18,7 +18,8 @@ from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
 from rsocl.solver.batch import match_batch, memory_bytes, per_set_value
 
-__all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_settings", "stage_on_device"]
+__all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_settings", "check_representable",
+           "stage_on_device"]
 
 #: Defaults for data scaled to [0, 1] per sub-frame intensity (snapshots then lie in
 #: [0, t_e/dt]): 200 ADMM iterations, ``lam = 0.1``, ``eta = 0.2``, 10 inner TV iterations
@@ -62,8 +63,9 @@ class Settings:
 
         Raises ValueError when the regularizer does not support ``dtype``.
         """
-        if np.dtype(dtype).name not in reg.dtypes:
-            raise ValueError(f"dtype {np.dtype(dtype).name!r} is not supported by regularizer {reg!r}; "
+        dtype = check.real_dtype("dtype", dtype)
+        if dtype.name not in reg.dtypes:
+            raise ValueError(f"dtype {dtype.name!r} is not supported by regularizer {reg!r}; "
                              f"supported: {list(reg.dtypes)}")
         recommended = {**DEFAULTS, **getattr(reg, "recommended", {})}
         return replace(self, lam=recommended["lam"] if self.lam is None else self.lam,
@@ -149,6 +151,18 @@ class Staged:
     unsolved_sq: float = 0.0
 
 
+def check_representable(problem: Problem, dtype):
+    """Raise a ValueError naming the array when ``g``, ``x0`` or ``truth`` holds values beyond the
+    largest finite value of ``dtype`` (float64 data above 3.4e38 run in float32 would turn into inf)."""
+    top = float(np.finfo(check.real_dtype("dtype", dtype)).max)
+    for name in ("g", "x0", "truth"):
+        array = getattr(problem, name)
+        if array is not None and array.size and float(np.max(np.abs(array))) > top:
+            raise ValueError(f"{name} holds values up to {float(np.max(np.abs(array))):.3g}, beyond {np.dtype(dtype).name}'s "
+                             f"largest {top:.3g}; scale the data (rsocl works on data in [0, 1] per sub-frame) "
+                             "or use dtype='float64'")
+
+
 def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32",
                     start=False) -> Staged:
     """Build the operator for the sampled sub-frames, check the memory, upload the arrays.
@@ -160,6 +174,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     """
     import pyopencl.array as cla
 
+    check_representable(problem, dtype)
     rig = problem.rig
     solved = rig.sampled_range()
     op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=solved)
