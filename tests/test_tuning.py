@@ -141,6 +141,15 @@ def test_an_earlier_choice_runs_again_without_a_search():
     np.testing.assert_allclose(again.datacube, first.datacube, atol=1e-6 * np.abs(first.datacube).max())
     fixed = rsocl.reconstruct(g, rig, iterations=12, tune=False)
     assert np.abs(fixed.datacube - first.datacube).max() > 1e-3 * np.abs(first.datacube).max()
+    # values the caller fixes win over the earlier choice's, as they do over a search
+    choice = Tuning.from_params(first.params["tuning"])
+    mine = rsocl.reconstruct(g, rig, iterations=12, tune=choice, lam=0.07, regularizer_options={"temporal_weight": 0.5})
+    assert mine.params["lam"] == 0.07 and mine.params["regularizer_options"]["temporal_weight"] == 0.5
+    from rsocl_plugins.tv import TV
+
+    mine = rsocl.reconstruct(g, rig, iterations=12, tune=choice, regularizer=TV(temporal_weight=0.5))
+    assert mine.params["regularizer_options"]["temporal_weight"] == 0.5
+    assert mine.params["lam"] == first.params["lam"]
     for bad in ("yes", 1, None):
         with pytest.raises(ValueError, match="tune must be True, False"):
             rsocl.reconstruct(g, rig, iterations=2, tune=bad)

@@ -50,9 +50,15 @@ def with_options(regularizer, reg, user_options, options, tv_iterations, make):
     return make(regularizer, {**dict(user_options or {}), **options}, tv_iterations)
 
 
+def _given(regularizer, reg, user_options) -> set:
+    """Names of the regularizer options the caller fixed: every option of an instance, else those
+    in ``user_options``. They are neither searched nor replaced by an earlier choice."""
+    return set(reg.values) if isinstance(regularizer, Regularizer) else set(user_options or {})
+
+
 def _to_search(settings, regularizer, reg, user_options, fixed_lam):
     """``(tunable, lam, fixed)`` of the search, or None when the caller left nothing to choose."""
-    given = set(reg.values) if isinstance(regularizer, Regularizer) else set(user_options or {})
+    given = _given(regularizer, reg, user_options)
     tunable = {k: v for k, v in getattr(reg, "tunable", {}).items() if k not in given}
     lam0 = _first(settings.lam)
     if fixed_lam is None:
@@ -180,14 +186,17 @@ def tune_and_start(problem, staged, settings, regularizer, reg, user_options, fi
 
     Returns ``(reg, settings, tuning)``: the regularizer and settings to run with, and the
     :class:`~rsocl.solver.tuning.Tuning` record (None when nothing was left to choose; then
-    ``reg``, ``settings`` and ``staged`` are unchanged). ``staged.x0`` becomes the
-    interpolation start unless the caller gave ``x0``.
+    ``reg``, ``settings`` and ``staged`` are unchanged). Values the caller fixed (``lam``, options)
+    win over an earlier choice's. ``staged.x0`` becomes the interpolation start unless the caller
+    gave ``x0``.
     """
     tuning = choice if choice is not None else _search_first_set(
         problem, staged, settings, regularizer, reg, user_options, fixed_lam, make, device, dtype, progress)
     if tuning is None:
         return reg, settings, None
-    reg = with_options(regularizer, reg, user_options, chosen_options(tuning), settings.tv_iterations, make)
+    given = _given(regularizer, reg, user_options)
+    options = {k: v for k, v in chosen_options(tuning).items() if k not in given}
+    reg = with_options(regularizer, reg, user_options, options, settings.tv_iterations, make)
     if fixed_lam is None:
         settings = replace(settings, lam=tuning.chosen["lam"])
     if staged.x0 is None:
