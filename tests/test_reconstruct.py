@@ -116,6 +116,19 @@ def test_bad_data_is_refused_before_any_kernel(problem):
         rsocl.reconstruct(g, rig, truth=np.full((rig.T,) + rig.shape, np.inf))
 
 
+def test_tv_iterations_do_not_silently_miss_an_instance(problem):
+    from rsocl_plugins.dct import DCT
+    from rsocl_plugins.tv import TV
+
+    rig, truth, g = problem
+    with pytest.raises(ValueError, match="tv_iterations applies to a regularizer given by name"):
+        rsocl.reconstruct(g, rig, regularizer=TV(iterations=10), tv_iterations=3, tune=False)
+    with pytest.raises(ValueError, match="tv_iterations applies to a regularizer given by name"):
+        rsocl.reconstruct(g, rig, regularizer=DCT(), tv_iterations=3, tune=False)
+    res = rsocl.reconstruct(g, rig, regularizer=TV(iterations=4), tv_iterations=4, iterations=2, tune=False)
+    assert res.params["regularizer_options"]["iterations"] == 4
+
+
 def test_values_beyond_float32_are_refused_by_name(problem):
     rig, truth, g = problem
     with pytest.raises(ValueError, match=r"g holds values up to 1e\+39, beyond float32's largest.*float64"):

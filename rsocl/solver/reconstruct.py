@@ -39,6 +39,9 @@ def make_regularizer(regularizer, options=None, tv_iterations=None) -> Regulariz
     if isinstance(regularizer, Regularizer):
         if options:
             raise ValueError("regularizer_options apply to a regularizer given by name, not to an instance")
+        if tv_iterations is not None and tv_iterations != getattr(regularizer, "iterations", None):
+            raise ValueError(f"tv_iterations applies to a regularizer given by name; the instance {regularizer!r} "
+                             "keeps its own options (set its 'iterations' when making it)")
         return regularizer
     if not isinstance(regularizer, str):
         raise ValueError(f"regularizer must be a name or a Regularizer, got {regularizer!r}")
