@@ -128,6 +128,20 @@ def test_tuning_survives_blank_and_saturated_captures():
     assert np.all(np.isfinite(res.datacube)) and res.params["saturated_pixels"] > 0
 
 
+@pytest.mark.parametrize("shape", [(2, 2), (1, 1), (1, 2)])
+def test_one_camera_on_a_tiny_grid_runs_the_fixed_defaults_with_a_warning(shape):
+    from rsocl.solver.tuning import can_hold_out
+
+    rig = rsocl.Rig.paper_array(1, shape, t_e=1e-4, t_r=3e-5)
+    g = ref.forward(rig, np.random.default_rng(3).random((rig.T,) + rig.shape))
+    assert not can_hold_out(rig.shape, 1) and can_hold_out((3, 3), 1) and can_hold_out(shape, 2)
+    with pytest.warns(UserWarning, match=f"1-camera rig on {shape[0]}x{shape[1]} pixels leave no pixels to hold out"):
+        res = rsocl.reconstruct(g, rig, iterations=5)
+    assert res.params["tuning"] is None and res.params["start"] == "zeros"
+    np.testing.assert_array_equal(res.datacube, rsocl.reconstruct(g, rig, iterations=5, tune=False).datacube)
+    assert not can_hold_out((4, 4), 4, valid=np.zeros((4, 4, 4), bool))
+
+
 def test_an_earlier_choice_runs_again_without_a_search():
     """``tune=<Tuning>`` applies a recorded choice (values and interp3d start) as the tuned run did."""
     from rsocl.solver.tuning import Tuning

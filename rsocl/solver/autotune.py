@@ -9,6 +9,7 @@ A batch of sets of one rig is tuned on its first set, and the chosen values appl
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -18,7 +19,7 @@ from rsocl.solver.admm import state_bytes
 from rsocl.solver.batch import memory_bytes, problem_bytes, workspace_memory
 from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
-from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, default_folds, tune_parameters
+from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, can_hold_out, default_folds, tune_parameters
 
 __all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options", "search_memory", "search_peak",
            "starts_from_interpolation"]
@@ -82,12 +83,20 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     (None: searched). ``lam`` candidates are the settled ``lam`` times
     :data:`~rsocl.solver.tuning.LAM_FACTORS`; each candidate runs
     :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations``, split among the
-    hold-out folds (:func:`~rsocl.solver.tuning.default_folds`; at least 10 per fold).
+    hold-out folds (:func:`~rsocl.solver.tuning.default_folds`; at least 10 per fold). When the
+    folds leave no pixels to fit or to score (:func:`~rsocl.solver.tuning.can_hold_out`: one camera
+    on 2x2 pixels or fewer, or too few valid pixels) a warning says so and None is returned.
     Unless ``checked`` (the caller did it, for a batch), the search's memory beside the staged
     problem (:func:`search_peak`) is checked against the device before anything runs.
     """
     search = _to_search(settings, regularizer, reg, user_options, fixed_lam)
     if search is None:
+        return None
+    if not can_hold_out(problem.rig.shape, problem.rig.n_channels, problem.valid):
+        warnings.warn(f"the snapshots of a {problem.rig.n_channels}-camera rig on {problem.rig.shape[0]}x"
+                      f"{problem.rig.shape[1]} pixels leave no pixels to hold out for choosing the parameters: "
+                      "the run uses the fixed defaults (as tune=False); fix lam and the regularizer's options to "
+                      "silence this", UserWarning, stacklevel=5)
         return None
     tunable, lam, fixed = search
     if not checked:

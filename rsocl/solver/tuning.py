@@ -47,8 +47,8 @@ from rsocl.device.reduction import sum_sq_diff
 from rsocl.model.interpolation import interp3d
 from rsocl.solver.admm import ADMM
 
-__all__ = ["LAM_FACTORS", "FOLDS", "CANDIDATE_FRACTION", "holdout", "default_block", "default_folds", "Tuning",
-           "tune_parameters"]
+__all__ = ["LAM_FACTORS", "FOLDS", "CANDIDATE_FRACTION", "holdout", "default_block", "default_folds", "fold_masks",
+           "can_hold_out", "Tuning", "tune_parameters"]
 
 #: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
 LAM_FACTORS = (0.3, 1.0, 3.0)
@@ -124,6 +124,25 @@ def holdout(shape, channels: int, block: int | None = None, shift: int = 0) -> n
     j = np.arange(n)[None, :] // block
     which = (i + step * j + int(shift)) % period
     return np.stack([which == k for k in range(channels)])
+
+
+def fold_masks(shape, channels: int, usable, block: int, folds: int):
+    """Per hold-out fold, ``(fit, scored)``: the usable snapshot pixels (``(channels, m, n)`` bool)
+    that fit the candidates and those held out to score them."""
+    period = max(channels, 2)
+    for k in range(folds):
+        held = holdout(shape, channels, block, shift=(k * period) // folds)
+        yield usable & ~held, usable & held
+
+
+def can_hold_out(shape, channels: int, valid=None) -> bool:
+    """Whether every default hold-out fold (:func:`default_block`, :func:`default_folds`) keeps
+    snapshot pixels both to fit and to score, among the ``valid`` ones (None: all). Not so for one
+    camera on a grid of 2x2 pixels or fewer, whose one block holds the only camera out."""
+    block = default_block(shape)
+    usable = np.ones((channels,) + tuple(shape), bool) if valid is None else np.asarray(valid, bool)
+    return all(fit.any() and scored.any()
+               for fit, scored in fold_masks(shape, channels, usable, block, default_folds(shape, channels, block)))
 
 
 @dataclass
@@ -237,16 +256,14 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
     lams = [float(lam)] if np.isscalar(lam) else [float(v) for v in lam]
     folds = check.positive_int("folds", default_folds(rig.shape, rig.n_channels, block) if folds is None else folds)
     held_out = 0
-    period = max(rig.n_channels, 2)
     usable = np.ones((rig.n_channels,) + rig.shape, bool) if valid is None else np.asarray(valid, bool)
     solved = _solved(rig, op)
     parts = []                    # per fold: fitted pixels, their warm start, the held-out weights
-    for k in range(folds):
-        held = holdout(rig.shape, rig.n_channels, block, shift=(k * period) // folds)
-        fit, scored = usable & ~held, usable & held
+    for fit, scored in fold_masks(rig.shape, rig.n_channels, usable, block, folds):
         if not scored.any() or not fit.any():
             raise ValueError(f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
-                             f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}")
+                             f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}"
+                             "; fix lam and the regularizer's options or pass tune=False")
         x0 = cla.to_device(op.queue, np.ascontiguousarray(interp3d(g, rig, valid=fit)[solved], dtype=op.dtype))
         held_out += int(scored.sum())
         parts.append([fit, x0, cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype)), None])
