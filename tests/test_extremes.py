@@ -130,7 +130,7 @@ def test_sixteen_bit_data_in_float32():
     res = rsocl.reconstruct(g, rig, lam=0.1 * 65535, eta=0.2, iterations=40, tune=False)
     assert np.all(np.isfinite(res.datacube))
     assert res.history["residual"][-1] < 0.1
-    small = rsocl.reconstruct(g / 65535.0, rig, iterations=40, tune=False)
+    small = rsocl.reconstruct(g / 65535.0, rig, lam=0.1, eta=0.2, iterations=40, tune=False)
     np.testing.assert_allclose(res.datacube / 65535.0, small.datacube, atol=1e-3)
 
 

@@ -165,13 +165,17 @@ def test_a_start_far_from_the_data_is_not_taken_for_divergence(problem):
 
 
 def test_regularizer_recommendations_fill_unset_lam_and_eta(problem):
+    from rsocl.model.curvature import default_scale
+
     rig, truth, g = problem
+    scale = default_scale(rig)                      # t_e/dt = 3.3 here: the defaults scale with psi
+    assert 0.5 < scale < 0.7
     res = rsocl.reconstruct(g, rig, regularizer="dct", iterations=2, tune=False)
-    assert (res.params["lam"], res.params["eta"]) == (0.3, 0.2)
+    assert (res.params["lam"], res.params["eta"]) == (pytest.approx(0.3 * scale), pytest.approx(0.2 * scale))
     res = rsocl.reconstruct(g, rig, regularizer="dct", iterations=2, lam=0.05)
     assert res.params["lam"] == 0.05
     res = rsocl.reconstruct(g, rig, iterations=2, tune=False)
-    assert (res.params["lam"], res.params["eta"]) == (0.1, 0.2)
+    assert (res.params["lam"], res.params["eta"]) == (pytest.approx(0.1 * scale), pytest.approx(0.2 * scale))
 
 
 def test_pipelined_residuals_equal_the_waited_ones(problem):

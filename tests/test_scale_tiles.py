@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import rsocl
+from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Camera, Rig
 from rsocl.model.scenes import builtin_scene
 from rsocl.scale import reconstruct_tiled, tile_grid
@@ -88,7 +89,9 @@ def test_tiled_matches_untiled(angles, shape, tile):
 
     assert psnr(tiled, truth) > psnr(untiled, truth) - 0.1
     # the settings of the whole capture, once for every tile
-    assert result.params["lam"] == 0.1 and result.params["eta"] == 0.2 and result.params["tile"] == list(tile)
+    scale = default_scale(rig)                     # the whole rig's, not a tile's
+    assert result.params["lam"] == 0.1 * scale and result.params["eta"] == 0.2 * scale
+    assert result.params["tile"] == list(tile)
 
 
 def test_one_tile_covering_the_grid_is_the_untiled_reconstruction():

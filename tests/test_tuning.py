@@ -7,6 +7,7 @@ import pytest
 
 import rsocl
 from rsocl.model import reference as ref
+from rsocl.model.curvature import default_scale
 from rsocl.solver.tuning import holdout, tune_parameters
 
 SHAPE = (24, 24)
@@ -115,7 +116,8 @@ def test_values_the_caller_fixes_win():
     assert lam.params["lam"] == 0.05 and {c["lam"] for c in lam.params["tuning"]["candidates"]} == {0.05}
     fast = rsocl.reconstruct(g, rig, iterations=12, tune=False)
     assert fast.params["tuning"] is None
-    assert (fast.params["lam"], fast.params["regularizer_options"]["temporal_weight"]) == (0.1, 3.0)
+    lam = 0.1 * default_scale(rig)                                       # t_e/dt = 3.3: psi scales the defaults
+    assert (fast.params["lam"], fast.params["regularizer_options"]["temporal_weight"]) == (lam, 3.0)
 
 
 def test_tuning_survives_blank_and_saturated_captures():

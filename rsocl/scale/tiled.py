@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
 from rsocl.scale.runner import Engine
@@ -179,7 +180,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
                              projection=projection)
     reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
     fixed_lam = checked.lam
-    checked = checked.settled_for(reg, dtype)
+    checked = checked.settled_for(reg, dtype, scale=default_scale(rig))
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
     store = None

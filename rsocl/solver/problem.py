@@ -58,8 +58,11 @@ class Settings:
     tol: float | None
     callback: object
 
-    def settled_for(self, reg, dtype) -> "Settings":
-        """``lam``/``eta`` filled from the regularizer's recommendation, else :data:`DEFAULTS`.
+    def settled_for(self, reg, dtype, scale: float = 1.0) -> "Settings":
+        """``lam``/``eta`` filled from the regularizer's recommendation, else :data:`DEFAULTS`, times
+        ``scale`` (:func:`rsocl.model.curvature.default_scale` of the rig: the data term's curvature
+        against the paper's configuration, for which the defaults hold). A default ``lam`` is not
+        scaled when the caller runs GAP (``eta = 0``), whose denoiser weight is ``lam`` itself.
 
         Raises ValueError when the regularizer does not support ``dtype``.
         """
@@ -68,8 +71,10 @@ class Settings:
             raise ValueError(f"dtype {dtype.name!r} is not supported by regularizer {reg!r}; "
                              f"supported: {list(reg.dtypes)}")
         recommended = {**DEFAULTS, **getattr(reg, "recommended", {})}
-        return replace(self, lam=recommended["lam"] if self.lam is None else self.lam,
-                       eta=recommended["eta"] if self.eta is None else self.eta)
+        eta = recommended["eta"] * scale if self.eta is None else self.eta
+        gap = self.eta is not None and np.all(np.asarray(self.eta) == 0)
+        lam = recommended["lam"] * (1.0 if gap else scale) if self.lam is None else self.lam
+        return replace(self, lam=lam, eta=eta)
 
     def for_batch(self, batch) -> "Settings":
         """These settings for a problem of ``batch`` sets (None: one set); per-set values are checked

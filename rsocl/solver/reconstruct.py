@@ -22,6 +22,7 @@ options) are kept. The chosen values and every candidate's criterion are in
 from __future__ import annotations
 
 from rsocl.common.registry import load
+from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import ADMM
 from rsocl.solver.autotune import check_tune, starts_from_interpolation, tune_and_start
@@ -72,7 +73,9 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         ADMM iterations (default 200); ``tv_iterations``: inner denoiser iterations (TV: 10).
     lam, eta : float
         Regularization strength and ADMM penalty, >= 0 (default: the regularizer's
-        ``recommended``, else 0.1 and 0.2); ``eta = 0`` runs GAP (denoiser weight ``lam``).
+        ``recommended``, else 0.1 and 0.2, for the paper's configuration; other rigs scale both
+        by :func:`rsocl.model.curvature.default_scale`, the data term's curvature relative to
+        it); ``eta = 0`` runs GAP (denoiser weight ``lam``).
     projection : {"exact", "paper"}
         Exact per-pixel ``(eta I + H Hᵀ)⁻¹`` or the paper's diagonal (Eq. 15).
     device, dtype, progress
@@ -96,7 +99,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
                               projection=projection, tol=tol, callback=callback)
     reg = make_regularizer(regularizer, regularizer_options, settings.tv_iterations)
     fixed_lam = settings.lam
-    settings = settings.settled_for(reg, dtype).for_batch(problem.batch)
+    settings = settings.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(problem.batch)
     start = starts_from_interpolation(tune, settings, regularizer, reg, regularizer_options, fixed_lam)
     staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype, start=start)
     tuning = None

@@ -1,0 +1,64 @@
+"""The scale of the data term: how strongly the snapshots pin the datacube down.
+
+The diagonal of ``H Hᵀ`` at a snapshot pixel, ``psi = gain² · Σ_s w_s²`` (MODEL.md's shutter
+weights ``w_s`` over the sub-frames ``s`` of its window), is the curvature of the data term
+``½‖g - H x‖²`` along that pixel's own window. Multiplying every gain by ``c`` multiplies it by
+``c²``, and so does shortening an exposure below one sub-frame by ``c`` (one weight of ``t_e/dt``);
+above a sub-frame it grows like ``t_e/dt`` (about that many weights of 1). :func:`default_scale`
+compares a rig with the paper's configuration, for which the fixed defaults were measured.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["psi_values", "psi_mean", "REFERENCE_PSI", "default_scale"]
+
+
+def psi_values(rig) -> np.ndarray:
+    """``psi`` of every snapshot pixel, ``(K, m, n)`` float64, from the rig's exposure windows alone
+    (no device): ``exact`` mask ``Σ_s |[s, s+1) ∩ [start, end]|²`` over ``s = 0 .. T-1``,
+    ``binary`` mask the count of ``s`` in ``[start, end]``, each times the channel's gain squared."""
+    win = rig.windows
+    T = float(rig.T)
+    start = np.clip(win.index + win.fraction, 0.0, T)
+    end = np.clip(win.end, 0.0, T)
+    gain2 = (win.gain ** 2)[:, None, None]
+    if rig.mask == "binary":
+        first = np.ceil(start)
+        last = np.minimum(np.floor(end), T - 1.0)
+        return np.maximum(last - first + 1.0, 0.0) * gain2
+    a, e = np.floor(start), np.floor(end)
+    within = a == e                                       # the window lies in one sub-frame
+    head = np.where(within, end - start, a + 1.0 - start)
+    tail = np.where(within, 0.0, end - e)
+    full = np.where(within, 0.0, e - a - 1.0)
+    return (head ** 2 + full + tail ** 2) * gain2
+
+
+def psi_mean(rig) -> float:
+    """The mean of :func:`psi_values` over snapshot pixels (dimensionless, sub-frames)."""
+    return float(np.mean(psi_values(rig)))
+
+
+def _reference() -> float:
+    from rsocl.model.rig import Rig
+
+    return psi_mean(Rig.paper_array(1, (1, 1), t_e=180e-6, t_r=35e-6))
+
+
+#: ``psi`` of the paper's configuration (t_e = 180 µs, t_r = dt = 35 µs, gain 1): 5 + (1/7)² = 5.0204.
+REFERENCE_PSI = _reference()
+
+
+def default_scale(rig) -> float:
+    """``psi_mean(rig) / REFERENCE_PSI``: the factor the default ``lam`` and ``eta`` take for ``rig``
+    (1 for the paper's configuration, which the rig matches to rounding when the ratio is within 1e-9 of 1).
+
+    Raises ValueError when no snapshot pixel has any weight (every window misses every sub-frame).
+    """
+    scale = psi_mean(rig) / REFERENCE_PSI
+    if not scale > 0:
+        raise ValueError("the rig's exposure windows hold no sub-frame: every snapshot pixel has zero weight "
+                         "(check t_e, dt and the mask)")
+    return 1.0 if abs(scale - 1.0) < 1e-9 else scale
