@@ -18,6 +18,33 @@ def test_info_paper_figures(capsys):
     assert "13.75x" in out
 
 
+def test_an_output_that_would_replace_the_input_or_cannot_be_made_is_refused_first(tmp_path, capsys, monkeypatch):
+    import os
+    import tempfile
+
+    from rsocl.files.atomic import output_path
+
+    video = tmp_path / "v.npz"
+    np.savez(video, video=np.random.default_rng(0).random((8, 12, 12)))
+    before = video.read_bytes()
+    assert main(["simulate", str(video), "--out", str(video), "--shape", "12", "12"]) == 2
+    assert "is the scene it reads" in capsys.readouterr().err and video.read_bytes() == before
+    os.symlink(video, tmp_path / "link.npz")
+    with pytest.raises(ValueError, match="is the scene it reads"):
+        output_path(tmp_path / "link.npz", "--out", inputs=(("scene", video),))
+
+    def refuse(*args, **kwargs):                     # a folder that takes no new file (read-only, chattr +i)
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    with pytest.raises(ValueError, match=r"--out: cannot create files in .* \(Permission denied\)"):
+        output_path(tmp_path / "new.h5", "--out")
+    assert main(["simulate", "builtin", "--out", str(tmp_path / "c.h5"), "--shape", "12", "12"]) == 2
+    assert "cannot create files" in capsys.readouterr().err and not (tmp_path / "c.h5").exists()
+    monkeypatch.undo()
+    assert not [p for p in os.listdir(tmp_path) if p.endswith(".probe")]
+
+
 def test_simulate_reconstruct_round_trip(tmp_path, capsys):
     cap = tmp_path / "cap.h5"
     rec = tmp_path / "rec.h5"

@@ -70,6 +70,9 @@ def test_tiles_into_an_hdf5_file(capture, tmp_path):
     (["--out", "{tmp}/rec.zarr", "--scheduler", "tcp://127.0.0.1:9"], "scheduler: cannot reach"),
     (["--out", "{tmp}/rec.zarr", "--workers", "0"], "workers must be"),
     (["--out", "{tmp}/rec.zarr", "--tile", "0", "4"], r"tile must be \(H, W\)"),
+    (["--out", "{capture}"], r"--out .*cap.h5' is the capture it reads"),
+    (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/rec.h5"], r"--gif .*rec.h5' is the --out file"),
+    (["--out", "{tmp}/rec.h5", "--gif", "{capture}"], r"--gif .*is the capture it reads"),
 ])
 def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, tmp_path, monkeypatch, capsys,
                                                                        extra, match):
@@ -81,8 +84,11 @@ def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, 
     monkeypatch.setattr(tiled_module, "scan", lambda *a: calls.append(a))
     monkeypatch.setattr("rsocl.cli.reconstruct.run_reconstruction", lambda *a: calls.append(a))
     path = capture[0]
-    argv = ["reconstruct", str(path), "--iterations", "2"] + [e.replace("{tmp}", str(tmp_path)) for e in extra]
+    before = path.read_bytes()
+    argv = ["reconstruct", str(path), "--iterations", "2"] + [e.replace("{tmp}", str(tmp_path))
+                                                              .replace("{capture}", str(path)) for e in extra]
     assert main(argv) == 2
+    assert path.read_bytes() == before
     err = capsys.readouterr().err
     assert re.search(match, err), err
     assert not calls

@@ -29,6 +29,9 @@ def cmd_simulate(args) -> int:
     from rsocl.model.scenes import load_scene
     from rsocl.model.simulate import simulate
 
+    from rsocl.files.atomic import output_path
+
+    output_path(args.out, "--out", inputs=(("scene", None if args.scene == "builtin" else args.scene),))
     rig = rig_from(args)
     truth = load_scene(args.scene, rig.shape, rig.T)
     g = simulate(truth, rig, noise=args.noise, sigma=args.sigma, photons=args.photons, bit_depth=args.bit_depth,

@@ -64,8 +64,11 @@ def check_outputs(args) -> None:
         return
     if args.sets:
         raise ValueError(f"--out: every set (--sets) goes to a Zarr store (--out NAME.zarr), got {args.out!r}")
-    output_path(args.out, "--out")
-    output_path(Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif"), "--gif")
+    reads = (("capture", args.capture),)
+    out = output_path(args.out, "--out", inputs=reads)
+    gif = output_path(Path(args.gif) if args.gif else out.with_suffix(".gif"), "--gif", inputs=reads)
+    if gif.resolve() == out.resolve():
+        raise ValueError(f"--gif {str(gif)!r} is the --out file; give the GIF another name")
 
 
 def _wants_tiles(args, capture) -> bool:

@@ -45,11 +45,12 @@ def _fsync_directory(directory: Path) -> None:
         os.close(fd)
 
 
-def output_path(path, name: str = "path") -> Path:
-    """``path`` as a Path whose folder exists and which is not a directory.
+def output_path(path, name: str = "path", inputs=()) -> Path:
+    """``path`` as a Path whose folder exists and takes new files, which is not a directory and
+    not one of the files ``inputs`` (``(option, path)`` pairs: what the run reads).
 
-    Raises ``FileNotFoundError`` (missing folder) or ``ValueError`` (a directory),
-    naming the parameter ``name``.
+    Raises ``FileNotFoundError`` (missing folder) or ``ValueError`` (a directory, a folder where
+    no file can be created, or an input, which the write would replace), naming the parameter ``name``.
     """
     path = Path(os.fspath(path))
     directory = path.parent if str(path.parent) else Path(".")
@@ -57,7 +58,26 @@ def output_path(path, name: str = "path") -> Path:
         raise FileNotFoundError(f"{name}: directory {str(directory)!r} does not exist (writing {str(path)!r})")
     if path.is_dir():
         raise ValueError(f"{name} must name a file, {str(path)!r} is a directory")
+    for option, source in inputs:
+        if source is not None and _same_file(path, Path(os.fspath(source))):
+            raise ValueError(f"{name} {str(path)!r} is the {option} it reads; writing it would replace the input")
+    try:                                   # the folder takes a new file (read-only mounts, root with chattr +i)
+        fd, probe = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=".probe")
+    except OSError as err:
+        raise ValueError(f"{name}: cannot create files in {str(directory)!r} ({err.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
     return path
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one file (the same inode when both exist, else the same resolved path)."""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
 
 
 @contextlib.contextmanager

@@ -188,7 +188,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
         from rsocl.scale.store import check_store_path, require_zarr
 
         require_zarr("out")
-        store = check_store_path(out, "out")
+        store = check_store_path(out, "out").absolute()   # workers may run in another folder
     if engine.mode != "distributed":
         _check_tile_memory(rig, grid, reg, dtype, checked.projection, device)
     span = rig.sampled_range()
