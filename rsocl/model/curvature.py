@@ -12,7 +12,18 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["psi_values", "psi_mean", "REFERENCE_PSI", "default_scale"]
+__all__ = ["binary_span", "psi_values", "psi_mean", "REFERENCE_PSI", "default_scale"]
+
+
+def binary_span(rig):
+    """First and last sub-frame a ``binary`` window holds (``w = 1`` for the ``s`` in ``0 .. T-1``
+    with ``start <= s <= end``, MODEL.md), ``(K, m, n)`` float64 each; ``last < first`` where the
+    window holds no sub-frame start (``t_e < dt``). Unlike :meth:`Rig.sampled_window`, an empty
+    window stays empty (no clipping of ``first`` to a valid index)."""
+    win = rig.windows
+    first = np.maximum(np.ceil(win.index + win.fraction), 0.0)
+    last = np.minimum(np.floor(win.end), rig.T - 1.0)
+    return first, last
 
 
 def psi_values(rig) -> np.ndarray:
@@ -20,14 +31,13 @@ def psi_values(rig) -> np.ndarray:
     (no device): ``exact`` mask ``Σ_s |[s, s+1) ∩ [start, end]|²`` over ``s = 0 .. T-1``,
     ``binary`` mask the count of ``s`` in ``[start, end]``, each times the channel's gain squared."""
     win = rig.windows
+    gain2 = (win.gain ** 2)[:, None, None]
+    if rig.mask == "binary":
+        first, last = binary_span(rig)
+        return np.maximum(last - first + 1.0, 0.0) * gain2
     T = float(rig.T)
     start = np.clip(win.index + win.fraction, 0.0, T)
     end = np.clip(win.end, 0.0, T)
-    gain2 = (win.gain ** 2)[:, None, None]
-    if rig.mask == "binary":
-        first = np.ceil(start)
-        last = np.minimum(np.floor(end), T - 1.0)
-        return np.maximum(last - first + 1.0, 0.0) * gain2
     a, e = np.floor(start), np.floor(end)
     within = a == e                                       # the window lies in one sub-frame
     head = np.where(within, end - start, a + 1.0 - start)

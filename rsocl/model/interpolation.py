@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rsocl.model.curvature import binary_span
+
 __all__ = ["interp3d"]
 
 
@@ -61,12 +63,11 @@ def _sampled(rig):
     ``0 .. T-1`` and the middle of the first and the last one's centres.
     """
     win = rig.windows
-    start = win.index + win.fraction
     if rig.mask == "exact":
+        start = win.index + win.fraction
         length = np.broadcast_to(win.length[:, None, None], start.shape)
         return length, start + length / 2.0
-    first = np.maximum(np.ceil(start), 0.0)
-    last = np.minimum(np.floor(win.end), rig.T - 1.0)
+    first, last = binary_span(rig)
     return np.maximum(last - first + 1.0, 0.0), (first + last) / 2.0 + 0.5
 
 
