@@ -25,11 +25,10 @@ def add_parser(subparsers):
 
 def cmd_simulate(args) -> int:
     """Simulate the snapshots of ``args.scene`` and write them, the rig and the truth to ``--out``; returns 0."""
+    from rsocl.files.atomic import output_path
     from rsocl.files.hdf5 import save_capture
     from rsocl.model.scenes import load_scene
     from rsocl.model.simulate import simulate
-
-    from rsocl.files.atomic import output_path
 
     output_path(args.out, "--out", inputs=(("scene", None if args.scene == "builtin" else args.scene),))
     rig = rig_from(args)

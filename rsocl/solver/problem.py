@@ -159,13 +159,14 @@ class Staged:
 def check_representable(problem: Problem, dtype):
     """Raise a ValueError naming the array when ``g``, ``x0`` or ``truth`` holds values beyond the
     largest finite value of ``dtype`` (float64 data above 3.4e38 run in float32 would turn into inf)."""
-    top = float(np.finfo(check.real_dtype("dtype", dtype)).max)
+    dtype = check.real_dtype("dtype", dtype)
+    top = float(np.finfo(dtype).max)
     for name in ("g", "x0", "truth"):
         array = getattr(problem, name)
-        if array is not None and array.size and float(np.max(np.abs(array))) > top:
-            raise ValueError(f"{name} holds values up to {float(np.max(np.abs(array))):.3g}, beyond {np.dtype(dtype).name}'s "
-                             f"largest {top:.3g}; scale the data (rsocl works on data in [0, 1] per sub-frame) "
-                             "or use dtype='float64'")
+        peak = float(np.max(np.abs(array))) if array is not None and array.size else 0.0
+        if peak > top:
+            raise ValueError(f"{name} holds values up to {peak:.3g}, beyond {dtype.name}'s largest {top:.3g}; "
+                             "scale the data (rsocl works on data in [0, 1] per sub-frame) or use dtype='float64'")
 
 
 def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32",
