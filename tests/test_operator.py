@@ -113,8 +113,10 @@ def test_shape_and_dtype_errors(device):
 
 
 def test_datacube_too_large_for_device_is_refused(device):
-    # t_e = 10 s over 10 µs sub-frames: T = 10^6 sub-frames of 64x64, 16 GB in float32
-    rig = Rig([Camera(0, t_e=10.0, t_r=1e-5)], (64, 64))
+    # an exposure of twice as many 10 µs sub-frames of 64x64 (float32) as the device's largest
+    # buffer holds: 16 GB on PoCL's 1 GiB limit, 42 GB on an H100's 20 GiB
+    subframes = 2 * device.max_alloc_bytes // (64 * 64 * 4)
+    rig = Rig([Camera(0, t_e=subframes * 1e-5, t_r=1e-5)], (64, 64))
     with pytest.raises(ValueError, match="largest allocation"):
         RollingShutterOperator(rig, device=device)
 

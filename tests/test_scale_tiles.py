@@ -159,9 +159,13 @@ def test_the_fits_message_suggests_float32_only_for_float64(device):
         device.check_fits("x", device.max_alloc_bytes + 1, dtype="float64")
 
 
-def test_plan_proposes_a_tiling_for_the_whole_sensor(capsys):
+def test_plan_proposes_a_tiling_for_the_whole_sensor(capsys, monkeypatch, device):
     from rsocl.cli.main import main
 
+    # a device of PoCL's size (1 GiB largest buffer, 4 GiB in all): the whole sensor does not fit
+    # it in one piece (it does fit an 80 GB GPU)
+    monkeypatch.setattr(type(device), "max_alloc_bytes", property(lambda self: 2**30))
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: 4 * 2**30))
     assert main(["plan", "--shape", "1024", "1280", "--t-r-us", "26", "--no-measure"]) == 0
     out = capsys.readouterr().out
     assert "does not fit the device: tile it" in out and "use float32" not in out
