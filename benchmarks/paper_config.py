@@ -71,7 +71,7 @@ def batches(device, batch, rounds, iterations):
     Each round reconstructs the same sets every way (the order reverses every other round); the
     ratios are taken within each round.
     """
-    from rsocl.solver.sets import CACHE_FRACTION, batch_size, reconstruct_sets
+    from rsocl.solver.sets import CACHE_FRACTION, GPU_BATCH_VOXELS, batch_size, reconstruct_sets
 
     rig = paper_rig()
     op = rsocl.RollingShutterOperator(rig, device=device)
@@ -98,11 +98,14 @@ def batches(device, batch, rounds, iterations):
             rates[name].append(batch / (time.perf_counter() - t0))
         loop = results["one at a time"]
         worst = max(worst, *(float(np.abs(results[k] - loop).max() / np.abs(loop).max()) for k in names))
+    if device.is_cpu:
+        why = f"on this CPU device a batch stays within {CACHE_FRACTION:.0%} of its {device.cache_bytes / 2**20:.0f} MiB cache"
+    else:
+        why = f"on this device up to {GPU_BATCH_VOXELS / 2**20:.0f} Mi voxels, within its memory"
     lines = [f"## Batches: {batch} sets per call against one set per call", "",
              f"The same {batch} sets of the paper configuration ({iterations} iterations, float32) reconstructed "
              f"as one batch `(B, K, m, n)`, in the batches `rsocl.solver.sets.batch_size` chooses for this device "
-             f"({chosen} sets: on a CPU device a batch stays within {CACHE_FRACTION:.0%} of its "
-             f"{device.cache_bytes / 2**20:.0f} MiB cache), and one set at a time, in {rounds} rounds with the "
+             f"({chosen} sets: {why}), and one set at a time, in {rounds} rounds with the "
              "order reversed every other round (set-up included, compilation excluded).", "",
              "| | sets/s (median) | range over rounds | s per set | against one at a time |",
              "|---|---|---|---|---|"]

@@ -295,3 +295,30 @@ def test_the_memory_count_and_the_solver_agree_on_per_set_inverses(sets, monkeyp
     rsocl.reconstruct(g, rig, iterations=2, projection=projection, tune=False, **kwargs)
     assert counted == allocated
     assert allocated == [case == "saturation per set" or (case == "eta per set" and projection == "exact")]
+
+
+def test_batch_size_on_a_gpu_goes_past_max_batch_up_to_its_voxels(sets, monkeypatch):
+    from rsocl.solver.sets import GPU_BATCH_VOXELS, MAX_BATCH
+
+    rig, truth, g = sets
+    device = rsocl.device.get_device()
+    voxels = rig.T * rig.shape[0] * rig.shape[1]
+    monkeypatch.setattr(type(device), "is_cpu", property(lambda self: True))
+    assert batch_size(rig, device=device) == MAX_BATCH
+    monkeypatch.setattr(type(device), "is_cpu", property(lambda self: False))
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: 2**40))
+    monkeypatch.setattr(type(device), "max_alloc_bytes", property(lambda self: 2**40))
+    most = GPU_BATCH_VOXELS // voxels
+    assert most > MAX_BATCH
+    assert batch_size(rig, device=device) == most
+    assert batch_size(rig, device=device, sets=40) == 40
+    assert batch_size(rig, device=device, limit=7) == 7
+    # memory still bounds it: the largest batch within 80 % of the device, found by bisection
+    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+
+    def total(b):
+        return rsocl.solver.batch.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b)[1]
+
+    memory = (total(57) + total(58)) / 2 / 0.8
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(memory)))
+    assert batch_size(rig, device=device) == 57
