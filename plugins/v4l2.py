@@ -7,6 +7,8 @@ Configuration (the ``[camera.config]`` table of a ``backend = "v4l2"`` camera in
 
     [camera.config]
     device = "/dev/video0"     # a path, or an index: 0 -> /dev/video0 (default 0)
+    address = "/dev/video0"    # the same forms; also the [[camera]] table's own ``address`` key.
+                               # Give address or device, or both naming the same node
     pixel_format = "GREY"      # "GREY", "Y16" or "YUYV" (default: the first of these the device offers)
     buffers = 4                # mmap buffers queued in the driver, 1..32 (default 4)
     width = 640                # optional requested frame size; the driver picks the nearest it has
@@ -51,11 +53,18 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
     Parameters
     ----------
     config : dict
-        ``device`` (path or index, default 0), ``pixel_format`` (``GREY``/``Y16``/``YUYV``,
-        default the first the device offers in that order), ``buffers`` (default 4),
-        optional ``width`` / ``height``. See the module documentation for behaviour.
+        ``device`` or ``address`` (path or index, default 0; a rig file camera's
+        ``address`` arrives here as ``address``; both may be given only when they name
+        the same node), ``pixel_format`` (``GREY``/``Y16``/``YUYV``, default the first
+        the device offers in that order), ``buffers`` (default 4), optional ``width`` /
+        ``height``. See the module documentation for behaviour.
     name : str
         Name used in errors (default ``"v4l2 /dev/videoN"``).
+
+    Raises
+    ------
+    ValueError
+        A config value out of range, or ``address`` and ``device`` naming different nodes.
     """
 
     backend = "v4l2"
@@ -63,7 +72,7 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
 
     def __init__(self, config: dict | None = None, name: str | None = None):
         super().__init__(config, name)
-        self.path = device_path(self.config.get("device", 0))
+        self.path = self._device_node()
         if name is None:
             self.name = f"v4l2 {self.path}"
         buffers = self.config.get("buffers", 4)
@@ -83,6 +92,16 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         self._lvd = None
         self._dev = None
         self._reset_state()
+
+    def _device_node(self) -> str:
+        """The node ``address`` or ``device`` names (``/dev/video0`` when neither is given)."""
+        given = {key: self.config[key] for key in ("address", "device") if key in self.config}
+        paths = {key: device_path(value, key) for key, value in given.items()}
+        if len(set(paths.values())) > 1:
+            raise ValueError(f"{self.name}: address = {given['address']!r} ({paths['address']}) and "
+                             f"device = {given['device']!r} ({paths['device']}) name different devices; "
+                             "give one of them (a path like /dev/video0 or an index)")
+        return next(iter(paths.values()), device_path(0))
 
     def _reset_state(self):
         self.device_formats = ()  # pixel formats the device offers (names)

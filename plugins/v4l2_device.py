@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import functools
+import numbers
 import os
 
 from rsocl.hardware.backend import CameraDisconnected, CameraError
@@ -16,17 +17,36 @@ GONE = {errno.ENODEV, errno.ENXIO}
 UNSUPPORTED = {errno.ENOTTY, errno.EINVAL, errno.ENODATA, errno.EOPNOTSUPP, errno.ENOSYS}
 
 
-def device_path(device) -> str:
-    """``0`` / ``"0"`` -> ``/dev/video0``; a path is kept as given."""
-    if isinstance(device, bool) or device is None:
-        raise ValueError(f"device must be a path like /dev/video0 or an index, got {device!r}")
-    if isinstance(device, int):
+def device_path(device, key: str = "device") -> str:
+    """The device node of a ``device`` (or ``address``) config value.
+
+    Parameters
+    ----------
+    device : int, str or os.PathLike
+        An index (``0`` or ``"0"`` -> ``/dev/video0``) or a path, kept as given
+        (``/dev/video2``, ``/dev/v4l/by-id/...``).
+    key : str
+        The config key ``device`` came from, named in errors.
+
+    Returns
+    -------
+    str
+        The path of the device node.
+
+    Raises
+    ------
+    ValueError
+        If ``device`` is not a non-negative index or a non-empty path.
+    """
+    if isinstance(device, bool) or not isinstance(device, (numbers.Integral, str, os.PathLike)):
+        raise ValueError(f"{key} must be a path like /dev/video0 or an index, got {device!r}")
+    if isinstance(device, numbers.Integral):
         if device < 0:
-            raise ValueError(f"device index must be >= 0, got {device}")
-        return f"/dev/video{device}"
-    text = os.fspath(device).strip() if not isinstance(device, str) else device.strip()
+            raise ValueError(f"{key} index must be >= 0, got {device!r}")
+        return f"/dev/video{int(device)}"
+    text = os.fsdecode(device).strip()
     if not text:
-        raise ValueError("device must be a path like /dev/video0 or an index, got an empty string")
+        raise ValueError(f"{key} must be a path like /dev/video0 or an index, got an empty string")
     if text.isdigit():
         return f"/dev/video{int(text)}"
     return text

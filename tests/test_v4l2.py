@@ -550,10 +550,79 @@ def test_device_config(device, path):
 
 @pytest.mark.parametrize("config", [{"device": -1}, {"device": True}, {"device": ""}, {"buffers": 0},
                                     {"buffers": 33}, {"buffers": 2.5}, {"pixel_format": "MJPEG"},
-                                    {"width": 0}, {"height": "480"}])
+                                    {"width": 0}, {"height": "480"}, {"device": None}, {"device": 1.0}])
 def test_bad_config(config):
     with pytest.raises(ValueError):
         V4L2Camera(config)
+
+
+@pytest.mark.parametrize("address, path", [(2, "/dev/video2"), ("3", "/dev/video3"), ("/dev/video2", "/dev/video2"),
+                                           ("/dev/v4l/by-id/usb-cam", "/dev/v4l/by-id/usb-cam")])
+def test_address_selects_the_device(address, path):
+    cam = V4L2Camera({"address": address})
+    assert cam.path == path and cam.name == f"v4l2 {path}"
+    # the same node given both ways, in any of the accepted forms, is not a conflict
+    assert V4L2Camera({"address": address, "device": path}).path == path
+
+
+@pytest.mark.parametrize("config", [{"address": "/dev/video2", "device": "/dev/video3"},
+                                    {"address": 2, "device": 0}, {"address": "/dev/video1", "device": "2"}])
+def test_address_and_device_must_agree(config):
+    with pytest.raises(ValueError, match="address") as info:
+        V4L2Camera(config)
+    message = str(info.value)
+    assert "device" in message and repr(config["address"]) in message and repr(config["device"]) in message
+
+
+@pytest.mark.parametrize("address", [-1, True, "", "  ", 2.5, None])
+def test_bad_address_names_the_key(address):
+    with pytest.raises(ValueError, match=r"^address .*path like /dev/video0 or an index|^address index") as info:
+        V4L2Camera({"address": address})
+    assert repr(address) in str(info.value) or "empty string" in str(info.value)
+
+
+def test_address_opens_the_named_node(fake):
+    assert fake.path != "/dev/video0"
+    with V4L2Camera({"address": fake.path}) as cam:
+        assert cam.path == fake.path and fake.file is not None and fake.file.name == fake.path
+        assert cam.frame_size == (12, 6)
+
+
+def test_rig_file_address_reaches_the_camera(fake, tmp_path):
+    from rsocl.hardware.capture import capture_sets
+    from rsocl.hardware.capture_file import load_raw
+
+    rig_path = tmp_path / "rig.toml"
+    rig_path.write_text(f"""
+[rig]
+shape = [6, 12]
+
+[[camera]]
+backend = "v4l2"
+address = "{fake.path}"
+angle = 0.0
+t_e = 0.01
+t_r = 0.001
+""")
+    image = sensor_image(fake)
+    stop = threading.Event()
+
+    def sensor():  # a free-running webcam: a frame every 5 ms
+        while not stop.wait(0.005):
+            fake.emit(image)
+
+    thread = threading.Thread(target=sensor, daemon=True)
+    thread.start()
+    try:
+        out = capture_sets(rig_path, tmp_path / "capture.h5", sets=2, timeout=2.0)
+    finally:
+        stop.set()
+        thread.join()
+    raw = load_raw(out)
+    assert raw.status == "complete" and raw.sets_complete == 2
+    assert raw.meta["cameras"][0]["name"] == f"camera 0 (v4l2 {fake.path})"
+    assert raw.frames[0].shape == (2, 6, 12)
+    np.testing.assert_array_equal(raw.frames[0][1], image)
 
 
 def test_entry_point():
