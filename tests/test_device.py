@@ -58,3 +58,38 @@ def test_kernels_ship_as_package_data():
     for name in ("common.cl", "operator.cl", "tv.cl", "admm.cl", "reduce.cl"):
         assert "__kernel" in devmod.kernel_source(name) or name == "common.cl"
 
+
+
+NVIDIA_LOG = ("(): Warning: Function admm_dual is a kernel, so overriding noinline attribute. The function may be "
+              "inlined when called.\n(): Warning: Function admm_project is a kernel, so overriding noinline attribute. "
+              "The function may be inlined when called.\n\n")
+
+
+def test_the_drivers_noinline_notice_is_not_a_meaningful_log():
+    assert devmod.meaningful_log(NVIDIA_LOG) == ""
+    assert devmod.meaningful_log(NVIDIA_LOG + "<kernel>:3:9: warning: unused variable 'x'\n") == \
+        "<kernel>:3:9: warning: unused variable 'x'"
+
+
+def _build_with_log(device, monkeypatch, text, log):
+    """Build a program whose source is ``text`` on ``device``, its build log read as ``log`` (None: as built)."""
+    import warnings
+
+    import pyopencl as cl
+
+    real = devmod.kernel_source
+    monkeypatch.setattr(devmod, "kernel_source", lambda name: text if name == "fake.cl" else real(name))
+    if log is not None:
+        monkeypatch.setattr(cl.Program, "get_build_info", lambda self, dev, what: log)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        devmod._build(device.context, ("fake.cl",), (("REAL", "float"),))
+    return [w for w in caught if issubclass(w.category, cl.CompilerWarning)]
+
+
+def test_a_build_warning_reaches_the_user_but_not_the_drivers_noise(device, monkeypatch):
+    source = '#warning "rsocl: a warning of the program"\n__kernel void fake(__global float *a) { a[0] = 1.0f; }\n'
+    genuine = _build_with_log(device, monkeypatch, source, None)
+    assert genuine, "a #warning in the source must surface as pyopencl's CompilerWarning"
+    assert _build_with_log(device, monkeypatch, source, NVIDIA_LOG) == []
+    assert len(_build_with_log(device, monkeypatch, source, NVIDIA_LOG + "warning: else\n")) == len(genuine)
