@@ -47,9 +47,9 @@ def _check_group(group):
 def _entries(group):
     """``{name: {distribution: PluginInfo}}`` of ``group``.
 
-    Only the distributions that declare an entry point of ``group`` have their metadata parsed, so
-    a lookup costs little however many distributions are installed (``available``: 1.8 ms with 62
-    installed, against 15.5 ms when every distribution's ``METADATA`` was parsed).
+    Only the distributions that declare an entry point of ``group`` have their metadata parsed:
+    ``available`` takes 1.8 ms with 62 distributions installed (15.5 ms parsing every one's
+    ``METADATA``) and 11.5 ms with 215 (94.7 ms), and every ``reconstruct`` call looks one up.
     """
     found = {}
     for dist in metadata.distributions():
