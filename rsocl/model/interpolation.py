@@ -7,11 +7,13 @@ the baseline of ``rsocl bench`` and the warm start of :func:`rsocl.solver.recons
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from rsocl.model.curvature import binary_span
 
-__all__ = ["interp3d"]
+__all__ = ["interp3d", "samples", "evaluate", "Samples"]
 
 
 def interp3d(g, rig, valid=None) -> np.ndarray:
@@ -71,27 +73,69 @@ def _sampled(rig):
     return np.maximum(last - first + 1.0, 0.0), (first + last) / 2.0 + 0.5
 
 
-def _interpolated(g, rig, valid):
-    """:func:`interp3d` of checked ``g`` (float64) and ``valid`` (bool or None: every sample)."""
+@dataclass
+class Samples:
+    """Each pixel's samples in time, sorted: what :func:`interp3d` interpolates between.
+
+    ``times`` and ``values`` are ``(K, m, n)`` float64: per pixel, the centres of its samples'
+    windows (sub-frames, a sub-frame's centre at ``s + 1/2``) in ascending order, left-out samples
+    last at ``+inf``, and the samples' scene values (snapshot over gain and window length) in the
+    same order. ``count`` ``(m, n)``: the samples a pixel keeps; ``fallback``: the value of a pixel
+    that keeps none (the mean of every kept sample); ``empty``: no sample is kept anywhere (the
+    snapshots say nothing and the interpolation is zero).
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+    count: np.ndarray
+    fallback: float
+    empty: bool = False
+
+
+def samples(g, rig, valid=None) -> Samples:
+    """The sorted :class:`Samples` of checked snapshots ``g`` (float64 ``(K, m, n)``) and ``valid``
+    (bool of that shape, or None: every sample)."""
     K = rig.n_channels
     length, centre = _sampled(rig)
     seen = length > 0                                   # a binary window may hold no sub-frame start
     if not seen.all():
         valid = seen if valid is None else valid & seen
         if not valid.any():                             # H is zero: the snapshots say nothing
-            return np.zeros((rig.T,) + rig.shape)
+            nothing = np.zeros((K,) + rig.shape)
+            return Samples(nothing, nothing, np.zeros(rig.shape, dtype=np.int64), 0.0, empty=True)
     scaled = g / (rig.windows.gain[:, None, None] * np.where(seen, length, 1.0))
-    T = rig.T
     if valid is not None:
         centre = np.where(valid, centre, np.inf)          # left-out samples sort last
         count = valid.sum(axis=0)
     else:
         count = np.full(rig.shape, K)
     order = np.argsort(centre, axis=0, kind="stable")
-    times = np.take_along_axis(centre, order, axis=0)
-    values = np.take_along_axis(scaled, order, axis=0)
-    query = np.arange(T, dtype=np.float64) + 0.5
-    hi = np.zeros((T,) + rig.shape, dtype=np.int64)
+    fallback = float(np.mean(scaled[valid])) if valid is not None and np.any(count == 0) else 0.0
+    return Samples(np.take_along_axis(centre, order, axis=0), np.take_along_axis(scaled, order, axis=0),
+                   count, fallback)
+
+
+def _interpolated(g, rig, valid):
+    """:func:`interp3d` of checked ``g`` (float64) and ``valid`` (bool or None: every sample)."""
+    found = samples(g, rig, valid)
+    if found.empty:
+        return np.zeros((rig.T,) + rig.shape)
+    return evaluate(found, np.arange(rig.T))
+
+
+def evaluate(found: Samples, subframes) -> np.ndarray:
+    """The interpolation of ``found`` at the centres of ``subframes`` (indices): ``(len, m, n)`` float64.
+
+    Per pixel and sub-frame ``s``: the two kept samples around ``s + 1/2`` (the first two before
+    the first sample, the last two after the last), linearly interpolated and held constant
+    beyond them; samples at equal times give their mean; one kept sample is constant in time,
+    none gives ``found.fallback``. ``rsocl.model.interpolation_device`` computes the same on a
+    device.
+    """
+    times, values, count = found.times, found.values, found.count
+    K = times.shape[0]
+    query = np.asarray(subframes, dtype=np.float64) + 0.5
+    hi = np.zeros((len(query),) + count.shape, dtype=np.int64)
     for k in range(K):                                   # samples at or before each query time
         hi += times[k][None] <= query[:, None, None]
     hi = np.clip(hi, 1, np.maximum(count - 1, 1)[None])
@@ -108,9 +152,7 @@ def _interpolated(g, rig, valid):
     equal = np.isfinite(span) & (span == 0)             # samples at equal times: their mean
     w = np.where(equal, 0.5, w)
     out = v_lo + w * (v_hi - v_lo)
-    if valid is not None:
-        single = count == 1
-        out = np.where(single[None], values[0][None], out)
-        if np.any(count == 0):
-            out = np.where((count == 0)[None], float(np.mean(scaled[valid])), out)
+    out = np.where((count == 1)[None], values[0][None], out)
+    if np.any(count == 0):
+        out = np.where((count == 0)[None], found.fallback, out)
     return out
