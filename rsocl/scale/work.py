@@ -34,7 +34,7 @@ class TileSettings:
     run puts the values chosen once for the capture here (:mod:`rsocl.scale.tuned`). ``start``
     is each tile's first iterate: ``"zeros"``, or ``"interp3d"`` (the
     :func:`~rsocl.model.interpolation.interp3d` interpolation of the tile's own snapshots over
-    its rig, the start of a tuned :func:`rsocl.reconstruct`).
+    its rig, computed on the device; the start of a tuned :func:`rsocl.reconstruct`).
     """
 
     regularizer: str
@@ -195,17 +195,11 @@ def _rig_for(payload: RigPayload, tile: Tile) -> Rig:
 
 
 # ---------------------------------------------------------------------- the task
-def _start(g, rig: Rig, settings: TileSettings):
-    """The tile's first iterate ``(T, h, w)`` for ``settings.start``, None for zeros."""
-    if settings.start == "zeros":
-        return None
-    if settings.start != "interp3d":
+def _start(settings: TileSettings):
+    """The tile's first iterate as :func:`rsocl.reconstruct` takes it: None (zeros) or ``"interp3d"``."""
+    if settings.start not in ("zeros", "interp3d"):
         raise ValueError(f"start must be 'zeros' or 'interp3d', got {settings.start!r}")
-    from rsocl.model.interpolation import interp3d
-    from rsocl.solver.problem import check_problem
-
-    problem = check_problem(g, rig, saturation=settings.saturation)
-    return interp3d(problem.g, rig, valid=problem.valid)
+    return None if settings.start == "zeros" else "interp3d"
 
 
 def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
@@ -215,7 +209,7 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     rig = _rig_for(payload, job.tile)
     solved = rig.sampled_range()
     g = job.snapshots()
-    x0 = _start(g, rig, settings)
+    x0 = _start(settings)
     device = worker_device(settings.device)
     with _lock_for(device):
         began = time.perf_counter()

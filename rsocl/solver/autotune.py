@@ -14,7 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from rsocl.model.interpolation import interp3d
+from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import state_bytes
 from rsocl.solver.batch import memory_bytes, problem_bytes, workspace_memory
 from rsocl.solver.problem import stage_on_device
@@ -22,7 +22,7 @@ from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, can_hold_out, default_folds, tune_parameters
 
 __all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options", "search_memory", "search_peak",
-           "starts_from_interpolation"]
+           "starts_from_interpolation", "interpolation_start"]
 
 
 def check_tune(tune):
@@ -110,19 +110,9 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
         progress=progress)
 
 
-def _warm_start(problem, staged):
-    """``interp3d`` of the snapshots over the solved sub-frames, uploaded (one per set of a batch)."""
-    import pyopencl.array as cla
-
-    def one(g, valid):
-        return interp3d(g, problem.rig, valid=valid)[staged.solved]
-
-    if problem.batch is None:
-        start = one(problem.g, problem.valid)
-    else:
-        start = np.stack([one(problem.g[b], None if problem.valid is None else problem.valid[b])
-                          for b in range(problem.batch)])
-    return cla.to_device(staged.op.queue, np.ascontiguousarray(start, dtype=staged.op.dtype))
+def interpolation_start(problem, staged):
+    """``interp3d`` of the snapshots over the solved sub-frames, on the device (one per set of a batch)."""
+    return interp3d_device(staged.op, problem.g, problem.valid, staged.solved)
 
 
 def search_memory(op, reg, projection: str, batch) -> int:
@@ -209,5 +199,5 @@ def tune_and_start(problem, staged, settings, regularizer, reg, user_options, fi
     if fixed_lam is None:
         settings = replace(settings, lam=tuning.chosen["lam"])
     if staged.x0 is None:
-        staged.x0 = _warm_start(problem, staged)
+        staged.x0 = interpolation_start(problem, staged)
     return reg, settings, tuning

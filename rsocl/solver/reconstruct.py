@@ -25,7 +25,7 @@ from rsocl.common.registry import load
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import ADMM
-from rsocl.solver.autotune import check_tune, starts_from_interpolation, tune_and_start
+from rsocl.solver.autotune import check_tune, interpolation_start, starts_from_interpolation, tune_and_start
 from rsocl.solver.iterate import collect, run_iterations
 from rsocl.solver.problem import DEFAULTS, check_problem, check_settings, stage_on_device
 from rsocl.solver.regularizer import Regularizer
@@ -82,9 +82,12 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         OpenCL device spec, ``"float32"``/``"float64"``, and a progress bar (tqdm).
     callback : callable or None
         ``callback(iteration, residual, theta)`` after each iteration; True stops the run.
-    x0, truth : array_like or None
-        Start (default zeros, or ``interp3d`` when tuned) and ground truth (adds PSNR in dB,
-        peak 1 for data in [0, 1]), ``(T, m, n)``.
+    x0 : array_like, "interp3d" or None
+        Start ``(T, m, n)``; ``"interp3d"``: the interpolation of the snapshots in time
+        (:func:`rsocl.model.interpolation.interp3d`, computed on the device); None (default): zeros,
+        or ``"interp3d"`` when tuned.
+    truth : array_like or None
+        Ground truth ``(T, m, n)``: adds PSNR in dB (peak 1 for data in [0, 1]) to the history.
     tol : float or None
         Stop when the residual's relative change between iterations is below ``tol``.
     saturation : float or None
@@ -94,23 +97,29 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         from the snapshots alone (:mod:`rsocl.solver.autotune`); a ``Tuning``: run with that
         earlier choice, without a search; False: fixed defaults.
     """
-    problem, tune = check_problem(g, rig, x0=x0, truth=truth, saturation=saturation), check_tune(tune)
+    interpolate = isinstance(x0, str)
+    if interpolate and x0 != "interp3d":
+        raise ValueError(f"x0 must be an array (T, m, n), 'interp3d' or None, got {x0!r}")
+    problem = check_problem(g, rig, x0=None if interpolate else x0, truth=truth, saturation=saturation)
+    tune = check_tune(tune)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                               projection=projection, tol=tol, callback=callback)
     reg = make_regularizer(regularizer, regularizer_options, settings.tv_iterations)
     fixed_lam = settings.lam
     settings = settings.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(problem.batch)
-    start = starts_from_interpolation(tune, settings, regularizer, reg, regularizer_options, fixed_lam)
+    start = interpolate or starts_from_interpolation(tune, settings, regularizer, reg, regularizer_options, fixed_lam)
     staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype, start=start)
     tuning = None
     if tune is not False:
         reg, settings, tuning = tune_and_start(problem, staged, settings, regularizer, reg, regularizer_options,
                                                fixed_lam, make=make_regularizer, device=device, dtype=dtype,
                                                choice=None if tune is True else tune, progress=progress)
+    if interpolate and staged.x0 is None:
+        staged.x0 = interpolation_start(problem, staged)
     solver = ADMM(staged.op, staged.g, reg, lam=settings.lam, eta=settings.eta, projection=settings.projection,
                   x0=staged.x0, valid=problem.valid)
     history = run_iterations(solver, staged, settings, progress=progress)
     result = collect(solver, staged, problem, settings, reg, history)
     result.params["tuning"] = tuning.as_params() if tuning is not None else None
-    result.params["start"] = "x0" if problem.x0 is not None else ("interp3d" if tuning is not None else "zeros")
+    result.params["start"] = "x0" if problem.x0 is not None else ("interp3d" if staged.x0 is not None else "zeros")
     return result

@@ -44,7 +44,7 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.device.reduction import sum_sq_diff
-from rsocl.model.interpolation import interp3d
+from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import ADMM
 
 __all__ = ["LAM_FACTORS", "FOLDS", "CANDIDATE_FRACTION", "holdout", "default_block", "default_folds", "fold_masks",
@@ -264,7 +264,7 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
             raise ValueError(f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
                              f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}"
                              "; fix lam and the regularizer's options or pass tune=False")
-        x0 = cla.to_device(op.queue, np.ascontiguousarray(interp3d(g, rig, valid=fit)[solved], dtype=op.dtype))
+        x0 = interp3d_device(op, g, fit, solved)
         held_out += int(scored.sum())
         parts.append([fit, x0, cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype)), None])
     scale = sum(sum_sq_diff(g_device, weights=part[2]) for part in parts)
