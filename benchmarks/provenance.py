@@ -33,18 +33,20 @@ __all__ = ["ROOT", "DOCS", "git_revision", "cpu_model", "header_lines", "usable_
 def git_revision(root: Path = ROOT) -> str:
     """``git rev-parse --short HEAD`` of ``root``, with ``-dirty`` when tracked files are modified.
 
-    Where git or the repository is missing (a copy of the tree sent to another machine), the
-    environment variable ``RSOCL_GIT_COMMIT`` names the commit the copy was made from, shown as
-    ``"<commit> (copy, not a git checkout)"``; without it ``"unknown (not a git checkout)"``.
+    For a copy of the tree sent to another machine, the environment variable ``RSOCL_GIT_COMMIT``
+    names the commit the copy was made from, shown as ``"<commit> (copied tree)"``: it wins over
+    whatever git state the copy carries. Without either, ``"unknown (not a git checkout)"``.
     """
+    copied = os.environ.get("RSOCL_GIT_COMMIT", "").strip()
+    if copied:
+        return f"{copied} (copied tree)"
     try:
         head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
                               text=True, check=True).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
                                capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
-        copied = os.environ.get("RSOCL_GIT_COMMIT", "").strip()
-        return f"{copied} (copy, not a git checkout)" if copied else "unknown (not a git checkout)"
+        return "unknown (not a git checkout)"
     return head + ("-dirty" if dirty else "")
 
 
