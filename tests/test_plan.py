@@ -43,3 +43,26 @@ def test_plan_command(capsys):
     assert "device memory" in out and "proposed ROI" in out
     assert main(["plan", "--speed", "-1"]) == 2
     assert "speed must be > 0" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra, match", [
+    (["--tile", "0", "4"], r"--tile must be \(H, W\) pixels with 1 <= H <= m = 32 and 1 <= W <= n = 32"),
+    (["--roi", "0", "0", "16", "8", "--tile", "16", "9"], r"--tile must be .* 1 <= W <= n = 8, got \[16, 9\]"),
+    (["--halo", "-1"], r"--halo must be a whole number of pixels in \[0, 32\], got -1"),
+    (["--sets", "0"], r"--sets must be an integer >= 1, got 0"),
+    (["--memory-mib", "-5"], r"--memory-mib must be > 0 MiB, got -5.0"),
+    (["--memory-mib", "nan"], r"--memory-mib must be finite"),
+    (["--iterations", "-3"], r"--iterations must be an integer >= 1, got -3"),
+    (["--blur", "0"], r"--blur must be > 0 pixels, got 0.0"),
+])
+def test_plan_checks_every_option_before_printing_or_measuring(capsys, monkeypatch, extra, match):
+    import re
+
+    from rsocl.solver import plan as plan_module
+
+    calls, real = [], plan_module.plan
+    monkeypatch.setattr(plan_module, "plan", lambda *a, **k: calls.append(a) or real(*a, **k))
+    assert main(["plan", "--shape", "32", "32", "--no-measure"] + extra) == 2
+    captured = capsys.readouterr()
+    assert re.search(match, captured.err), captured.err
+    assert captured.out == "" and not calls

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from rsocl.cli.options import add_device_args, add_rig_args, rig_from
-from rsocl.cli.tiling import add_plan_tiling_args, print_plan_tiling
+from rsocl.cli.tiling import add_plan_tiling_args, check_plan_tiling_args, print_plan_tiling
 
 __all__ = ["add_parser", "cmd_plan"]
 
@@ -17,7 +17,7 @@ def add_parser(subparsers):
     p.add_argument("--speed", type=float, default=None, help="largest image speed, pixels/s")
     p.add_argument("--fps", type=float, default=None, help="sub-frame rate wanted, Hz")
     p.add_argument("--blur", type=float, default=1.0, help="motion allowed within a sub-frame, pixels (default 1)")
-    p.add_argument("--iterations", type=int, default=200)
+    p.add_argument("--iterations", type=int, default=200, help="ADMM iterations to cost, >= 1 (default 200)")
     p.add_argument("--regularizer", default="tv")
     p.add_argument("--no-measure", action="store_true", help="memory only; do not time 3 iterations")
     add_device_args(p)
@@ -27,10 +27,17 @@ def add_parser(subparsers):
 
 
 def cmd_plan(args) -> int:
-    """Print the plan of :func:`rsocl.solver.plan.plan` (and a tiling when it does not fit); returns 0."""
-    from rsocl.solver.plan import format_plan, plan
+    """Print the plan of :func:`rsocl.solver.plan.plan` (and a tiling when it does not fit); returns 0.
 
+    Every option is checked before the table is printed or anything is measured.
+    """
+    from rsocl.common import validation as check
+    from rsocl.solver.plan import crop_rig, format_plan, plan
+
+    check.positive_int("--iterations", args.iterations)
+    check.positive("--blur", args.blur, "pixels")
     rig = rig_from(args)
+    check_plan_tiling_args(args, rig.shape if args.roi is None else crop_rig(rig, args.roi).shape)
     p = plan(rig, roi=args.roi, speed=args.speed, fps=args.fps, blur_pixels=args.blur, iterations=args.iterations,
              regularizer=args.regularizer, dtype=args.dtype, device=args.device, measure=not args.no_measure)
     print(format_plan(p))

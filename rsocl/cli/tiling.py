@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["add_reconstruct_tiling_args", "check_outputs", "reconstruct_tiled_if_needed", "add_plan_tiling_args",
-           "print_plan_tiling"]
+           "check_plan_tiling_args", "print_plan_tiling"]
 
 
 def _is_zarr(path) -> bool:
@@ -180,19 +180,36 @@ def add_plan_tiling_args(p):
                    help="device memory one task may use, MiB (default: half the device's)")
 
 
+def check_plan_tiling_args(args, shape) -> None:
+    """Check ``rsocl plan``'s ``--tile``, ``--halo``, ``--sets`` and ``--memory-mib`` before anything is
+    computed; errors name the option and its allowed range.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The ``plan`` arguments of :func:`add_plan_tiling_args`.
+    shape : (int, int)
+        Rows and columns of the grid the tiles cover (the ``--roi`` when given), pixels.
+    """
+    from rsocl.common import validation as check
+    from rsocl.scale.tiles import check_halo, check_tile
+
+    if args.tile is not None:
+        check_tile(args.tile, shape, "--tile")
+    check_halo(args.halo, shape, "--halo")
+    check.positive_int("--sets", args.sets)
+    if args.memory_mib is not None:
+        check.positive("--memory-mib", args.memory_mib, "MiB")
+
+
 def print_plan_tiling(args, p) -> None:
-    """After ``rsocl plan``'s table: the tiling, when the proposal does not fit or ``--tile`` asks."""
+    """After ``rsocl plan``'s table: the tiling, when the proposal does not fit or ``--tile`` asks
+    (the arguments checked first by :func:`check_plan_tiling_args`)."""
     from rsocl.scale.proposal import format_tiling, propose_tiling
 
     if args.tile is None and p.proposed.fits and args.sets == 1:
         return
-    if args.sets < 1:
-        raise ValueError(f"--sets must be >= 1, got {args.sets}")
-    budget = None
-    if args.memory_mib is not None:
-        if not args.memory_mib > 0:
-            raise ValueError(f"--memory-mib must be > 0, got {args.memory_mib}")
-        budget = int(args.memory_mib * 2**20)
+    budget = None if args.memory_mib is None else int(args.memory_mib * 2**20)
     tiling = propose_tiling(p.proposed.rig, tile=args.tile, halo=args.halo, sets=args.sets,
                             iterations=args.iterations, regularizer=args.regularizer, dtype=args.dtype,
                             device=args.device, budget_bytes=budget, measure=not args.no_measure)
