@@ -129,3 +129,54 @@ def test_a_capture_of_several_sets_is_reconstructed_in_batches(tmp_path, capsys)
     assert (tmp_path / "rec.gif").exists() and not rec.exists()
     assert main(["reconstruct", str(cap), "--out", str(rec), "--batch", "0"]) == 2
     assert "--batch must be >= 1" in capsys.readouterr().err
+
+
+def _capture_with_truth(path, mode):
+    """A capture file with its ground truth (``mode`` "sets": 3 sets; "window": 3 frames per camera)."""
+    import h5py
+
+    import rsocl
+    from rsocl.files.hdf5 import save_capture
+    from rsocl.model.rig import Camera, Rig
+    from rsocl.model.scenes import builtin_scene
+
+    if mode == "window":
+        t_r = 3.5e-5
+        rig = Rig([Camera(a, t_e=1.8e-4, t_r=t_r, t_d=12 * t_r, frames=3) for a in (0, 90, 180, 270)], (12, 10))
+    else:
+        rig = rsocl.Rig.paper_array(2, (12, 10), t_e=1e-4, t_r=3e-5)
+    op = rsocl.RollingShutterOperator(rig)
+    truths = [builtin_scene(rig.shape, rig.T, seed=s) for s in range(3 if mode == "sets" else 1)]
+    save_capture(path, op.forward(truths[0]), rig, truth=truths[0])
+    if mode == "sets":
+        with h5py.File(path, "a") as h5:               # as rsocl capture writes it; the truth is set 0's
+            h5.create_dataset("snapshot_sets", data=np.stack([op.forward(t) for t in truths]))
+    return truths[0]
+
+
+@pytest.mark.parametrize("mode, extra", [("one", []), ("sets", ["--batch", "2"]),
+                                         ("tiles", ["--tile", "6", "10", "--halo", "2"]),
+                                         ("window", ["--window", "2", "--halo", "2"])])
+def test_no_truth_keeps_the_truth_out_of_the_reconstruction(tmp_path, capsys, mode, extra):
+    import h5py
+
+    cap = tmp_path / "cap.h5"
+    truth = _capture_with_truth(cap, mode)
+    first = (lambda out: out.with_name(f"{out.stem}-set000{out.suffix}")) if mode == "sets" else (lambda out: out)
+    common = ["--iterations", "3", "--fast", "--quiet", *extra]
+
+    with_truth = tmp_path / "with.h5"                  # without --no-truth the capture's truth is kept and used
+    assert main(["reconstruct", str(cap), "--out", str(with_truth), *common]) == 0
+    assert "PSNR" in capsys.readouterr().out
+    np.testing.assert_array_equal(load_reconstruction(first(with_truth)).truth, truth)
+
+    rec = tmp_path / "rec.h5"
+    assert main(["reconstruct", str(cap), "--out", str(rec), "--no-truth", *common]) == 0
+    assert "PSNR" not in capsys.readouterr().out
+    written = sorted(tmp_path.glob("rec*.h5"))
+    assert written == ([first(rec).with_name(f"rec-set{i:03d}.h5") for i in range(3)] if mode == "sets" else [rec])
+    for path in written:
+        result = load_reconstruction(path)
+        assert result.truth is None and "psnr" not in result.history
+        with h5py.File(path, "r") as h5:
+            assert "truth" not in h5

@@ -44,6 +44,16 @@ def test_reconstruct_into_a_zarr_store_by_tiles(capture, tmp_path, capsys):
     assert "0 tile task(s) in" in capsys.readouterr().out.replace(", 4 already in the store", "")
 
 
+def test_no_truth_and_a_zarr_store(capture, tmp_path, capsys):
+    path, rig, _ = capture
+    out = tmp_path / "rec.zarr"
+    assert main(["reconstruct", str(path), "--out", str(out), "--tile", "10", "26", "--halo", "4",
+                 "--iterations", "3", "--fast", "--no-truth"]) == 0
+    assert "PSNR" not in capsys.readouterr().out
+    group = zarr.open_group(str(out), mode="r")
+    assert "datacube" in group and "truth" not in group and not any("truth" in key for key in group.attrs)
+
+
 def test_every_set_into_one_store(capture, tmp_path):
     path, rig, sets = capture
     out = tmp_path / "sets.zarr"

@@ -20,7 +20,8 @@ def add_parser(subparsers):
                    help="reconstruction file to write (.h5; a capture of several sets writes one per set, "
                         "OUT with '-setNNN' before the suffix), or a Zarr store (.zarr)")
     p.add_argument("--gif", default=None, help="GIF to write (default: next to an .h5 --out; of set 0)")
-    p.add_argument("--no-truth", action="store_true", help="ignore a ground truth stored in the capture")
+    p.add_argument("--no-truth", action="store_true",
+                   help="ignore a ground truth stored in the capture: no PSNR/SSIM, none in the output")
     p.add_argument("--first-set-only", action="store_true", help="of a capture of several sets, set 0 only")
     p.add_argument("--batch", type=int, default=None,
                    help="sets reconstructed together in one batch (default: as many as fit the device, up to 32)")
@@ -39,6 +40,9 @@ def set_path(out: Path, index: int) -> Path:
 def cmd_reconstruct(args) -> int:
     """Reconstruct the capture (every set of a multi-set capture, in batches sized to the device), print the
     quality line of each set, write the reconstruction file(s) and the GIF; returns 0.
+
+    The capture's ground truth (set 0's datacube), unless ``--no-truth``, gives the PSNR/SSIM and
+    is copied into the reconstruction file (of set 0); with ``--no-truth`` it is neither.
 
     The output paths are checked first; tiles (and sets) run on Dask when asked or needed.
     """
@@ -59,7 +63,7 @@ def cmd_reconstruct(args) -> int:
         result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
         print(quality_line(result, truth))
         save_reconstruction(out, result.datacube, capture.rig, params=result.params, history=result.history,
-                            truth=capture.truth)
+                            truth=truth)
         comparison_gif(gif, truth, result.datacube)
         say(args, "wrote " + ", ".join(str(p) for p in [out, gif, *_tuning_plot(args, result.params, gif)]))
         return 0
@@ -70,7 +74,7 @@ def cmd_reconstruct(args) -> int:
         known = truth if i == 0 else None              # the capture's truth is set 0's datacube
         print(f"set {i}: " + quality_line(one, known))
         save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history,
-                            truth=capture.truth if i == 0 else None)
+                            truth=known)
     comparison_gif(gif, truth, batch.set(0).datacube)
     plots = _tuning_plot(args, batch.set(0).params, gif)
     say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, " + ", ".join(map(str, [gif, *plots])))
