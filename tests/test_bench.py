@@ -242,3 +242,60 @@ def test_cmd_bench_missing_scene(tmp_path):
     args = parser.parse_args(["bench", "--scene", str(tmp_path / "nope.npz"), "--out", str(tmp_path)])
     with pytest.raises(FileNotFoundError, match="nope.npz"):
         bench_cli.cmd_bench(args)
+
+
+BENCH_SMALL = ["bench", "--quick", "--shape", "12", "--iterations", "2", "--sweep", "cameras=1", "--quiet"]
+
+
+@pytest.mark.parametrize("extra, match", [
+    (["--lam", "-1"], r"--lam must be >= 0, got -1.0"),
+    (["--eta", "-0.5"], r"--eta must be >= 0 \(0 runs GAP\), got -0.5"),
+    (["--t-r-us", "-3"], r"--t-r-us must be > 0 µs, got -3.0"),
+    (["--t-e-us", "0"], r"--t-e-us must be > 0 µs, got 0.0"),
+    (["--cameras", "9"], r"--cameras must be an integer >= 1 and <= 8, got 9"),
+    (["--tv-iterations", "0"], r"--tv-iterations must be an integer >= 1, got 0"),
+    (["--sweep", "roi=13"], r"--sweep roi=13: roi must be <= shape = 12 pixels"),
+    (["--sweep", "cameras=0"], r"--sweep cameras=0: cameras must be an integer >= 1 and <= 8, got 0"),
+    (["--sweep", "dt=0.5"], r"--sweep dt=0.5: dt_factor must be >= 1"),
+    (["--sweep", "dtype=float16"], r"--sweep dtype=float16: dtype must be one of \['float32', 'float64'\]"),
+    (["--sweep", "regularizer=nope"], r"--sweep regularizer=nope: .*nope"),
+])
+def test_cmd_bench_refuses_bad_values_before_running(tmp_path, capsys, monkeypatch, extra, match):
+    import re
+
+    from rsocl.bench import run as bench_run
+    from rsocl.cli.main import main
+
+    calls, real = [], bench_run.run_point
+    monkeypatch.setattr(bench_run, "run_point", lambda *a, **k: calls.append(a) or real(*a, **k))
+    assert main(BENCH_SMALL + ["--out", str(tmp_path / "b")] + extra) == 2
+    err = capsys.readouterr().err
+    assert re.search(match, err) and len(err.strip().splitlines()) == 1, err
+    assert not calls and not (tmp_path / "b").exists()
+
+
+def test_cmd_bench_fails_when_every_reconstruction_point_is_skipped(tmp_path, capsys, monkeypatch):
+    from rsocl.bench import run as bench_run
+    from rsocl.cli.main import main
+
+    real = bench_run.run_point
+
+    def lost(point, cache, **kwargs):                # the baseline runs, every reconstruction fails
+        if not point.is_baseline:
+            raise RuntimeError(f"device lost (C={point.cameras})")
+        return real(point, cache, **kwargs)
+
+    monkeypatch.setattr(bench_run, "run_point", lost)
+    assert main(BENCH_SMALL + ["--out", str(tmp_path / "b")]) == 1
+    captured = capsys.readouterr()
+    assert "rsocl bench: error: no reconstruction point could be measured" in captured.err
+    assert "default: failed (RuntimeError: device lost (C=4))" in captured.err
+    assert "C=1: failed (RuntimeError: device lost (C=1))" in captured.err
+    assert not (tmp_path / "b").exists()
+    # some points measured: exit 0, and with --quiet the skipped ones are said on stderr
+    monkeypatch.setattr(bench_run, "run_point", lambda point, cache, **kwargs: lost(point, cache, **kwargs)
+                        if point.cameras == 1 else real(point, cache, **kwargs))
+    assert main(BENCH_SMALL + ["--out", str(tmp_path / "b")]) == 0
+    captured = capsys.readouterr()
+    assert "points in" in captured.out
+    assert "rsocl bench: note: C=1: failed (RuntimeError: device lost (C=1))" in captured.err

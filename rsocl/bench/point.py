@@ -38,7 +38,7 @@ class BenchPoint:
     device : str or None
         OpenCL device spec (``"P:D"``); None: rsocl's choice.
     lam, eta : float
-        ADMM weights (defaults of :func:`rsocl.solver.reconstruct`).
+        ADMM weights, >= 0 (defaults of :func:`rsocl.solver.reconstruct`; ``eta = 0`` runs GAP).
     t_e, t_r : float
         Exposure and row time of every camera, seconds.
     tune : bool
@@ -83,6 +83,9 @@ class BenchPoint:
             check.positive_int("tv_iterations", self.tv_iterations)
         check.positive("t_e", self.t_e, "seconds")
         check.positive("t_r", self.t_r, "seconds")
+        check.choice("dtype", self.dtype, {"float32", "float64"})
+        check.non_negative("lam", self.lam)
+        check.non_negative("eta", self.eta, "(0 runs GAP)")
 
     @property
     def roi_size(self) -> int:

@@ -35,8 +35,8 @@ from rsocl.bench.report import (COLUMNS, markdown, tradeoff_lines, write_csv, wr
                                 write_outputs)
 
 __all__ = ["BenchPoint", "BenchResult", "SWEEPS", "BASELINE", "run_point", "interp3d", "device_memory_bytes",
-           "build_points", "parse_sweep", "run_bench", "canonical_device", "pareto_front", "picks", "markdown",
-           "write_csv", "write_outputs"]
+           "sweep_point", "build_points", "parse_sweep", "run_bench", "canonical_device", "pareto_front", "picks",
+           "markdown", "write_csv", "write_outputs"]
 
 
 # ---------------------------------------------------------------------- sweeps
@@ -122,6 +122,24 @@ def _regularizer_point(default: BenchPoint, name: str):
     return replace(default, regularizer=name, tv_iterations=default.tv_iterations if iterative else None)
 
 
+def sweep_point(default: BenchPoint, name: str, value) -> BenchPoint:
+    """The point of sweep ``name`` (a key of :data:`SWEEPS`) at ``value`` around ``default``.
+
+    Raises
+    ------
+    Exception
+        What the knob's check raises: a ValueError for an out-of-range value (``roi`` above
+        ``shape``, ``dt`` below 1, ``cameras`` above 8, ...), the registry's error for an unknown
+        or broken regularizer, the device lookup's for an unknown device.
+    """
+    knob = SWEEPS[name]
+    if knob == "regularizer":
+        return _regularizer_point(default, value)
+    if knob == "device":
+        return replace(default, device=canonical_device(value))
+    return replace(default, **{knob: value})
+
+
 def build_points(default: BenchPoint, sweeps=None, *, quick=False, baseline=True):
     """Points of the requested sweeps around ``default``, deduplicated, default first.
 
@@ -156,15 +174,9 @@ def build_points(default: BenchPoint, sweeps=None, *, quick=False, baseline=True
             labels[point].append(label)
 
     for name, values in requested:
-        knob = SWEEPS[name]
         for value in values:
             try:
-                if knob == "regularizer":
-                    point = _regularizer_point(default, value)
-                elif knob == "device":
-                    point = replace(default, device=canonical_device(value))
-                else:
-                    point = replace(default, **{knob: value})
+                point = sweep_point(default, name, value)
             except Exception as exc:                      # a broken plugin, an out-of-range value
                 notes.append(f"{name}={value}: skipped ({type(exc).__name__}: {exc})")
                 continue

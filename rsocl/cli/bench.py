@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-__all__ = ["add_parser", "default_point", "cmd_bench"]
+__all__ = ["add_parser", "default_point", "check_sweeps", "cmd_bench"]
 
 
 def add_parser(subparsers):
@@ -26,10 +27,10 @@ def add_parser(subparsers):
                    help="32x32, 100 iterations, fewer values: about a minute on 2 CPU cores")
     p.add_argument("--out", default="rsocl-bench", help="output folder (default ./rsocl-bench)")
     p.add_argument("--device", default=None, help="OpenCL device for every point but the device sweep")
-    p.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs (default 180)")
-    p.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs (default 35)")
-    p.add_argument("--lam", type=float, default=None, help="regularization weight (default rsocl's)")
-    p.add_argument("--eta", type=float, default=None, help="ADMM penalty (default rsocl's)")
+    p.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs, > 0 (default 180)")
+    p.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs, > 0 (default 35)")
+    p.add_argument("--lam", type=float, default=None, help="regularization weight, >= 0 (default rsocl's)")
+    p.add_argument("--eta", type=float, default=None, help="ADMM penalty, >= 0; 0 runs GAP (default rsocl's)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no table, only the result line")
     # testing and tuning knobs: the default point's grid side, cameras and iterations
     p.add_argument("--shape", type=int, default=None, help=argparse.SUPPRESS)
@@ -41,15 +42,35 @@ def add_parser(subparsers):
 
 
 def default_point(args):
-    """The default :class:`~rsocl.bench.point.BenchPoint` of a ``rsocl bench`` command line."""
+    """The default :class:`~rsocl.bench.point.BenchPoint` of a ``rsocl bench`` command line.
+
+    Raises
+    ------
+    ValueError
+        Naming the option (``--lam``, ``--t-r-us``, ...) and its allowed range, before anything runs.
+    FileNotFoundError
+        When ``--scene`` names no file.
+    """
     from rsocl.bench.point import US, BenchPoint
     from rsocl.bench.run import canonical_device
+    from rsocl.common import validation as check
     from rsocl.solver.reconstruct import DEFAULTS
 
     scene = args.scene
     if scene != "builtin" and not Path(scene).exists():
         raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
     quick = bool(args.quick)
+    for option, value, maximum in (("--cameras", args.cameras, 8), ("--shape", args.shape, None),
+                                   ("--iterations", args.iterations, None),
+                                   ("--tv-iterations", args.tv_iterations, None)):
+        if value is not None:
+            check.positive_int(option, value, maximum=maximum)
+    if args.lam is not None:
+        check.non_negative("--lam", args.lam)
+    if args.eta is not None:
+        check.non_negative("--eta", args.eta, "(0 runs GAP)")
+    check.positive("--t-e-us", args.t_e_us, "µs")
+    check.positive("--t-r-us", args.t_r_us, "µs")
 
     def pick(value, fallback):
         return fallback if value is None else value
@@ -62,16 +83,38 @@ def default_point(args):
         t_e=args.t_e_us * US, t_r=args.t_r_us * US)
 
 
+def check_sweeps(default, sweeps) -> None:
+    """Refuse a ``--sweep NAME=V1,V2`` value that makes no point around ``default`` (a ROI above
+    ``--shape``, ``cameras`` outside 1..8, an unknown regularizer or device, ...), naming it, before
+    anything runs. Sweeps without values take the built-in ones, which :func:`run_bench` may skip."""
+    from rsocl.bench.run import sweep_point
+
+    for name, values in sweeps or ():
+        for value in values or ():
+            try:
+                sweep_point(default, name, value)
+            except Exception as exc:  # noqa: BLE001 - a range check, the registry or the device lookup
+                raise ValueError(f"--sweep {name}={value}: {exc}") from None
+
+
 def cmd_bench(args) -> int:
-    """Run the sweeps and write the files; returns 0 (a ValueError when no point could be measured)."""
+    """Run the sweeps and write the files; returns 0, or 1 when no reconstruction point could be
+    measured (the reasons on stderr, no file written).
+
+    The options and the sweep values given are checked first (a ValueError naming the option).
+    """
     from rsocl.bench.report import _num
     from rsocl.bench.run import markdown, parse_sweep, picks, run_bench, write_outputs
 
     default = default_point(args)
     sweeps = None if not args.sweep else [parse_sweep(s) for s in args.sweep]
+    check_sweeps(default, sweeps)
     result = run_bench(default, sweeps, quick=args.quick, progress=not args.quiet)
-    if not result.rows:
-        raise ValueError("no point could be measured: " + "; ".join(result.notes))
+    if not any(not row["_point"].is_baseline for row in result.rows):
+        print("rsocl bench: error: no reconstruction point could be measured, nothing written:", file=sys.stderr)
+        for note in result.notes:
+            print(f"  {note}", file=sys.stderr)
+        return 1
     files = write_outputs(result, args.out)
     if not args.quiet:
         print(markdown(result))
@@ -83,4 +126,6 @@ def cmd_bench(args) -> int:
             text += (f"; quality: {quality['label']} {_num(quality['psnr'], '.2f')} dB; "
                      f"speed: {speed['label']} {_num(speed['psnr'], '.2f')} dB in {speed['seconds']:.2f} s")
         print(text)
+        for note in result.notes:                            # the table, which lists them, is not printed
+            print(f"rsocl bench: note: {note}", file=sys.stderr)
     return 0
