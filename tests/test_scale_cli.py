@@ -102,3 +102,31 @@ def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, 
     err = capsys.readouterr().err
     assert re.search(match, err), err
     assert not calls
+
+
+def test_workers_above_four_per_core_are_refused_before_a_cluster_starts(capture, tmp_path, monkeypatch, capsys):
+    import os
+
+    distributed = pytest.importorskip("distributed")
+    from rsocl.scale import runner
+
+    started = []
+
+    class NoCluster:                                 # --workers 100000 on 2 cores ran until killed
+        def __init__(self, *args, **kwargs):
+            started.append(kwargs)
+            raise RuntimeError("a LocalCluster was started")
+
+    monkeypatch.setattr(distributed, "LocalCluster", NoCluster)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    path = capture[0]
+    argv = ["reconstruct", str(path), "--out", str(tmp_path / "rec.zarr"), "--iterations", "2", "--fast",
+            "--workers"]
+    assert main(argv + ["100000"]) == 2
+    err = capsys.readouterr().err
+    assert f"workers must be an integer in [1, {4 * cores}]" in err and "got 100000" in err
+    assert main(argv + [str(4 * cores + 1)]) == 2
+    assert f"got {4 * cores + 1}" in capsys.readouterr().err
+    assert not started and not (tmp_path / "rec.zarr").exists()
+    assert runner.max_workers() == 4 * cores
+    assert runner.Engine(workers=4 * cores).workers == 4 * cores        # the cap itself is allowed

@@ -39,7 +39,8 @@ def add_reconstruct_tiling_args(p):
                    help="run the tiles on a running dask.distributed scheduler (default: RSOCL_SCHEDULER, else "
                         "Dask's local scheduler); its workers must see the capture and --out paths")
     g.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="start a local cluster of N worker processes (each its own OpenCL context)")
+                   help="start a local cluster of N worker processes (each its own OpenCL context), 1 to 4 per "
+                        "CPU core")
     g.add_argument("--retries", type=int, default=2, help="extra attempts of a failing tile (default 2)")
     g.add_argument("--window", type=int, default=None, metavar="F",
                    help="multi-frame capture (frames, t_d): reconstruct it as a stream of windows of F frames")

@@ -8,7 +8,8 @@
   unreachable address is a ValueError naming ``scheduler``. Its workers must be able to import
   rsocl and, for file inputs and Zarr output, see the same paths.
 * ``workers=N``: a ``LocalCluster`` of ``N`` worker processes (one thread each) on 127.0.0.1,
-  closed at the end.
+  closed at the end; ``N`` is at most :func:`max_workers`, :data:`WORKERS_PER_CORE` per CPU core
+  this process may run on (each worker is a Python process with its own OpenCL context).
 * Without Dask installed, the tasks run in this process, one after another.
 
 A task that raises is retried (``retries`` more times: Dask's own retries on a cluster, a loop
@@ -20,6 +21,7 @@ memory) has its task run again on another worker by Dask.
 from __future__ import annotations
 
 import logging
+import numbers
 import os
 import uuid
 from dataclasses import dataclass
@@ -27,12 +29,25 @@ from dataclasses import dataclass
 from rsocl.common import validation as check
 from rsocl.scale.work import solve_tile
 
-__all__ = ["SCHEDULER_ENV", "Failure", "Engine", "have_dask", "non_negative_int"]
+__all__ = ["SCHEDULER_ENV", "WORKERS_PER_CORE", "Failure", "Engine", "have_dask", "max_workers", "non_negative_int"]
 
 #: Environment variable read when no ``scheduler`` is given.
 SCHEDULER_ENV = "RSOCL_SCHEDULER"
 #: Seconds allowed to reach a scheduler.
 CONNECT_TIMEOUT = 10
+#: Local worker processes allowed per CPU core: more only queue for the cores (each task keeps
+#: its device busy), while each one costs a process, a Dask worker and an OpenCL context.
+WORKERS_PER_CORE = 4
+
+
+def max_workers() -> int:
+    """The most worker processes of a local cluster: :data:`WORKERS_PER_CORE` times the CPU cores
+    this process may run on (its affinity mask where the platform has one, else ``os.cpu_count()``)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    return WORKERS_PER_CORE * max(1, cores)
 
 
 def have_dask() -> bool:
@@ -82,14 +97,20 @@ class Engine:
         Address of a running ``dask.distributed`` scheduler (``tcp://host:port``); None reads
         ``RSOCL_SCHEDULER``, and an empty value means none.
     workers : int or None
-        Start a ``LocalCluster`` of this many worker processes (>= 1) on 127.0.0.1.
+        Start a ``LocalCluster`` of this many worker processes on 127.0.0.1: 1 to
+        :func:`max_workers` (4 per CPU core).
     """
 
     def __init__(self, scheduler=None, workers=None):
         if scheduler is None:
             scheduler = os.environ.get(SCHEDULER_ENV) or None
         if workers is not None:
-            workers = check.positive_int("workers", workers)
+            cap = max_workers()
+            if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or not 1 <= workers <= cap:
+                raise ValueError(f"workers must be an integer in [1, {cap}] (a local cluster of at most "
+                                 f"{WORKERS_PER_CORE} worker processes per CPU core, {cap // WORKERS_PER_CORE} "
+                                 f"core(s) here), got {workers!r}")
+            workers = int(workers)
         if scheduler is not None and workers is not None:
             raise ValueError(f"give scheduler (a running cluster, here {scheduler!r}) or workers (a local "
                              f"cluster of {workers}), not both")
