@@ -73,11 +73,13 @@ def test_the_drivers_noinline_notice_is_not_a_meaningful_log():
 
 def _build_with_log(device, monkeypatch, text, log):
     """Build a program whose source is ``text`` on ``device``, its build log read as ``log`` (None: as built)."""
+    import uuid
     import warnings
 
     import pyopencl as cl
 
     real = devmod.kernel_source
+    text = f"/* {uuid.uuid4().hex} */\n{text}"       # a new source each time: no driver's cache of built programs
     monkeypatch.setattr(devmod, "kernel_source", lambda name: text if name == "fake.cl" else real(name))
     if log is not None:
         monkeypatch.setattr(cl.Program, "get_build_info", lambda self, dev, what: log)
