@@ -180,3 +180,51 @@ def test_no_truth_keeps_the_truth_out_of_the_reconstruction(tmp_path, capsys, mo
         assert result.truth is None and "psnr" not in result.history
         with h5py.File(path, "r") as h5:
             assert "truth" not in h5
+
+
+def _unreadable_files(folder):
+    """Files whose suffix promises a video or frames but whose content is empty, truncated or not that format."""
+    np.savez(folder / "whole.npz", video=np.zeros((3, 8, 8)))
+    whole = (folder / "whole.npz").read_bytes()
+    files = {"empty.npz": b"", "truncated.npz": whole[:len(whole) // 2], "empty.gif": b"",
+             "corrupt.gif": b"GIF89a\x08\x00", "empty.npy": b"", "empty.tif": b"", "noise.gif": bytes(range(256))}
+    for name, data in files.items():
+        (folder / name).write_bytes(data)
+    np.savez(folder / "objects.npz", video=np.array([{"a": 1}], dtype=object))
+    np.save(folder / "single.npz.npy", np.zeros((3, 8, 8)))
+    (folder / "single.npz.npy").rename(folder / "single.npz")
+    (folder / "dir.npz").mkdir()
+    return sorted(list(files) + ["objects.npz", "single.npz", "dir.npz"])
+
+
+def test_an_unreadable_video_or_frames_file_is_a_one_line_error_naming_it(tmp_path, capsys, monkeypatch):
+    from rsocl.bench import run as bench_run
+
+    out = tmp_path / "cap.h5"
+    for name in _unreadable_files(tmp_path):
+        assert main(["simulate", str(tmp_path / name), "--out", str(out), "--shape", "8", "8"]) == 2, name
+        err = capsys.readouterr().err
+        assert err.startswith("rsocl simulate: error: path: ") and name in err, err
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+        assert not out.exists()
+    calls = []
+    monkeypatch.setattr(bench_run, "run_point", lambda *a, **k: calls.append(a))
+    for name in ("empty.npz", "corrupt.gif"):              # bench reads the scene before any point runs
+        assert main(["bench", "--scene", str(tmp_path / name), "--quick", "--shape", "8", "--iterations", "2",
+                     "--out", str(tmp_path / "b")]) == 2
+        err = capsys.readouterr().err
+        assert name in err and len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "b").exists() and not calls
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[rig]\nshape = [8, 8]\n\n[[camera]]\nbackend = "simulated"\nt_e = 1.8e-4\nt_r = 3.5e-5\n')
+    for name in ("empty.npz", "truncated.npz", "objects.npz", "single.npz", "empty.npy", "empty.gif"):
+        frames = tmp_path / name
+        if name == "empty.gif":                            # a folder of frames holding one unreadable image
+            (tmp_path / "frames").mkdir()
+            frames = tmp_path / "frames" / "camera0.png"
+            frames.write_bytes(b"")
+            frames = frames.parent
+        assert main(["calibrate", "--rig", str(rig), "--out", str(tmp_path / "new.toml"), "--flat", str(frames)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("rsocl calibrate: error: --flat: ") and len(err.strip().splitlines()) == 1, err
+        assert (name if frames.suffix else "camera0.png") in err and not (tmp_path / "new.toml").exists()

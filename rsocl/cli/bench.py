@@ -49,7 +49,7 @@ def default_point(args):
     ValueError
         Naming the option (``--lam``, ``--t-r-us``, ...) and its allowed range, before anything runs.
     FileNotFoundError
-        When ``--scene`` names no file.
+        When ``--scene`` names no file (a ValueError names a file that is no readable video).
     """
     from rsocl.bench.point import US, BenchPoint
     from rsocl.bench.run import canonical_device
@@ -57,8 +57,12 @@ def default_point(args):
     from rsocl.solver.reconstruct import DEFAULTS
 
     scene = args.scene
-    if scene != "builtin" and not Path(scene).exists():
-        raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
+    if scene != "builtin":
+        if not Path(scene).exists():
+            raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
+        from rsocl.model.scenes import load_video
+
+        load_video(scene)                   # an unreadable file is named now, not in every point's failure
     quick = bool(args.quick)
     for option, value, maximum in (("--cameras", args.cameras, 8), ("--shape", args.shape, None),
                                    ("--iterations", args.iterations, None),

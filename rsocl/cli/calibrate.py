@@ -67,12 +67,20 @@ def parse_points(tokens) -> np.ndarray:
     return out
 
 
-def _read_image(path: Path) -> np.ndarray:
+def _read_image(path: Path, what: str) -> np.ndarray:
+    from rsocl.common.validation import reading
+
     if path.suffix.lower() == ".npy":
-        return np.load(path, allow_pickle=False)
+        with reading(what, path, "a .npy array"):
+            array = np.load(path, allow_pickle=False)
+        if not isinstance(array, np.ndarray):
+            array.close()
+            raise ValueError(f"{what}: {str(path)!r} is an .npz archive, not one NumPy array (.npy)")
+        return array
     import imageio.v3 as iio
 
-    image = np.asarray(iio.imread(path))
+    with reading(what, path, "an image"):
+        image = np.asarray(iio.imread(path))
     if image.ndim == 3 and image.shape[-1] in (3, 4):      # colour image of a grey target
         image = image[..., :3].mean(axis=-1)
     return image
@@ -84,6 +92,8 @@ def load_frames(path, what="--frames"):
     ``frames`` is a list with one float64 array per camera: ``(rows, columns)``
     or ``(K, rows, columns)``. A 2-D ``.npy`` gives a one-element list.
     """
+    from rsocl.common.validation import reading
+
     path = Path(os.fspath(path))
     if not path.exists():
         raise FileNotFoundError(f"{what}: {str(path)!r} does not exist")
@@ -92,12 +102,21 @@ def load_frames(path, what="--frames"):
         files = sorted(p for p in path.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES and p.is_file())
         if not files:
             raise ValueError(f"{what}: folder {str(path)!r} holds no {', '.join(_IMAGE_SUFFIXES)} file")
-        frames = [_read_image(p) for p in files]
+        frames = [_read_image(p, what) for p in files]
     elif path.suffix.lower() == ".npz":
-        with np.load(path, allow_pickle=False) as data:
+        with reading(what, path, "an .npz archive"):
+            data = np.load(path, allow_pickle=False)
+        if not hasattr(data, "files"):
+            raise ValueError(f"{what}: {str(path)!r} holds one NumPy array (.npy), not an .npz archive")
+        with data:
             keys = list(data.keys())
+
+            def array(key):
+                with reading(what, path, f"an .npz archive (array {key!r})"):
+                    return np.asarray(data[key])
+
             if "frames" in keys:
-                frames = list(np.asarray(data["frames"]))
+                frames = list(array("frames"))
             else:
                 cameras = sorted((k for k in keys if k.startswith("camera") and k[6:].isdigit()),
                                  key=lambda k: int(k[6:]))
@@ -107,10 +126,10 @@ def load_frames(path, what="--frames"):
                 if [int(k[6:]) for k in cameras] != list(range(len(cameras))):
                     raise ValueError(f"{what}: {str(path)!r} has keys {cameras}; expected camera0 .. "
                                      f"camera{len(cameras) - 1}")
-                frames = [np.asarray(data[k]) for k in cameras]
-            extras = {k: np.asarray(data[k]) for k in keys if k != "frames" and not k.startswith("camera")}
+                frames = [array(k) for k in cameras]
+            extras = {k: array(k) for k in keys if k != "frames" and not k.startswith("camera")}
     elif path.suffix.lower() in _IMAGE_SUFFIXES:
-        array = _read_image(path)
+        array = _read_image(path, what)
         frames = [array] if array.ndim == 2 else list(array)
     else:
         raise ValueError(f"{what}: {str(path)!r} must be a .npz, .npy or image file, or a folder of them")

@@ -7,12 +7,14 @@ allowed range.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import numbers
 
 import numpy as np
 
-__all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "choice", "finite_array", "grid_shape"]
+__all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "choice", "finite_array", "grid_shape",
+           "reading"]
 
 
 def finite(name: str, value) -> float:
@@ -96,3 +98,26 @@ def finite_array(name: str, array) -> np.ndarray:
         bad = int(np.count_nonzero(~np.isfinite(array)))
         raise ValueError(f"{name} contains {bad} NaN or inf value(s); all values must be finite")
     return array
+
+
+@contextlib.contextmanager
+def reading(name: str, path, what: str):
+    """Context manager around a library's read of file ``path``: a failure to parse it (empty,
+    truncated or corrupt, not the format its suffix says, a folder) becomes a one-line
+    ``ValueError`` naming the parameter ``name``, the file and ``what`` it was read as, with the
+    cause's first line. ``MemoryError`` (and ``KeyboardInterrupt``) pass unchanged.
+
+    Examples
+    --------
+    >>> with reading("--scene", "empty.npz", "a NumPy .npz archive"):     # doctest: +SKIP
+    ...     archive = np.load("empty.npz")
+    ValueError: --scene: cannot read 'empty.npz' as a NumPy .npz archive (EOFError: No data left in file)
+    """
+    try:
+        yield
+    except MemoryError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - zipfile, EOFError, OSError, PIL's SyntaxError, imageio's, ...
+        lines = str(exc).strip().splitlines()
+        cause = f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+        raise ValueError(f"{name}: cannot read {str(path)!r} as {what} ({cause})") from None

@@ -184,9 +184,14 @@ def _read_tiff(path: Path) -> np.ndarray:
     import tifffile  # a dependency of scikit-image
 
     stacks = []
-    with tifffile.TiffFile(path) as tif:
-        for series in tif.series:
-            data = series.asarray()
+    with check.reading("path", path, "a TIFF video"):
+        tif = tifffile.TiffFile(path)
+    with tif:
+        with check.reading("path", path, "a TIFF video"):
+            all_series = list(tif.series)
+        for series in all_series:
+            with check.reading("path", path, "a TIFF video"):
+                data = series.asarray()
             axes = series.axes
             if "S" in axes:                              # samples (RGB) axis: move last, then gray
                 data = np.moveaxis(data, axes.index("S"), -1)
@@ -240,9 +245,10 @@ def load_video(path, *, key="video") -> np.ndarray:
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If the suffix is not supported, ``key`` is missing from the archive,
-        or the array is not ``[frames, h, w]`` (or RGB of that), is empty, or
-        is not real-valued.
+        If the suffix is not supported, the file cannot be read as its suffix
+        says (empty, truncated, corrupt, a folder; the message names the file),
+        ``key`` is missing from the archive, or the array is not
+        ``[frames, h, w]`` (or RGB of that), is empty, or is not real-valued.
     """
     path = Path(os.fspath(path))
     if not path.exists():
@@ -250,19 +256,30 @@ def load_video(path, *, key="video") -> np.ndarray:
     suffix = path.suffix.lower()
     source = str(path)
     if suffix == ".npz":
-        with np.load(path, allow_pickle=False) as archive:
+        with check.reading("path", source, "an .npz video archive"):
+            archive = np.load(path, allow_pickle=False)
+        if not hasattr(archive, "files"):
+            raise ValueError(f"path: {source!r} holds one NumPy array (.npy), not an .npz archive; name it .npy")
+        with archive:
             if key not in archive.files:
                 raise ValueError(f"key {key!r} not found in {source}; the archive holds {sorted(archive.files)}")
-            video = archive[key]
+            with check.reading("path", source, f"an .npz video archive (array {key!r})"):
+                video = archive[key]
         return _to_frames(video, f"{source}[{key!r}]", rgb_last=True)
     if suffix == ".npy":
-        return _to_frames(np.load(path, allow_pickle=False), source, rgb_last=True)
+        with check.reading("path", source, "a .npy video array"):
+            video = np.load(path, allow_pickle=False)
+        if not isinstance(video, np.ndarray):
+            video.close()
+            raise ValueError(f"path: {source!r} is an .npz archive, not one NumPy array (.npy); name it .npz")
+        return _to_frames(video, source, rgb_last=True)
     if suffix in (".tif", ".tiff"):
         return _to_frames(_read_tiff(path), source, rgb_last=False)
     if suffix == ".gif":
         import imageio.v3 as iio
 
-        video = np.asarray(iio.imread(path, index=None, extension=".gif"))
+        with check.reading("path", source, "a GIF video"):
+            video = np.asarray(iio.imread(path, index=None, extension=".gif"))
         if video.ndim == 2 or (video.ndim == 3 and video.shape[-1] in (3, 4)):
             video = video[None]                       # a single frame
         return _to_frames(video, source, rgb_last=True)
