@@ -228,3 +228,43 @@ def test_an_unreadable_video_or_frames_file_is_a_one_line_error_naming_it(tmp_pa
         err = capsys.readouterr().err
         assert err.startswith("rsocl calibrate: error: --flat: ") and len(err.strip().splitlines()) == 1, err
         assert (name if frames.suffix else "camera0.png") in err and not (tmp_path / "new.toml").exists()
+
+
+def test_a_shape_beyond_the_host_memory_is_refused_before_allocating(tmp_path, capsys, monkeypatch):
+    from rsocl.cli import options
+    from rsocl.model import scenes
+
+    monkeypatch.setattr(options, "host_memory_bytes", lambda: 2**30, raising=False)     # a 1 GiB machine
+    for argv in (["info"], ["plan", "--no-measure"], ["simulate", "builtin", "--out", str(tmp_path / "c.h5")],
+                 ["demo", "--out", str(tmp_path / "demo"), "--fast"]):
+        assert main(argv + ["--shape", "100000", "100000"]) == 2, argv     # was a MemoryError traceback
+        err = capsys.readouterr().err
+        assert "--shape 100000 100000: a rig of 4 camera(s) on 100000 x 100000 pixels" in err, err
+        assert "at least 745.1 GiB of host memory, more than this machine's 1.0 GiB" in err
+        assert len(err.strip().splitlines()) == 1
+    # the rig fits, its T x 400 x 400 datacube does not (at least 4 T 400^2 bytes as float32)
+    import rsocl
+
+    T = rsocl.Rig.paper_array(2, (400, 400), t_e=180e-6, t_r=35e-6).T
+    monkeypatch.setattr(options, "host_memory_bytes", lambda: 128 * 2**20, raising=False)
+    small = ["--shape", "400", "400", "--cameras", "2"]
+    assert main(["simulate", "builtin", "--out", str(tmp_path / "c.h5")] + small) == 2
+    err = capsys.readouterr().err
+    assert f"--shape 400 400: the {T} x 400 x 400 float32 datacube" in err, err
+    assert f"at least {4 * T * 400 * 400 / 2**20:.1f} MiB of host memory, more than this machine's 128.0 MiB" in err
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--fast"] + small) == 2
+    assert f"--shape 400 400: the {T} x 400 x 400 float32 datacube" in capsys.readouterr().err
+    assert main(["bench", "--shape", "400", "--cameras", "2", "--out", str(tmp_path / "b")]) == 2
+    assert f"--shape 400: the {T} x 400 x 400 float32 datacube" in capsys.readouterr().err
+    assert not [p for p in tmp_path.iterdir()]
+    # memory that runs out part way anyway: one line, exit 1
+    monkeypatch.undo()
+
+    def exhausted(*args, **kwargs):
+        raise MemoryError("Unable to allocate 3.00 GiB for an array")
+
+    monkeypatch.setattr(scenes, "load_scene", exhausted)
+    assert main(["simulate", "builtin", "--out", str(tmp_path / "c.h5"), "--shape", "8", "8"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("rsocl simulate: error: out of host memory (Unable to allocate 3.00 GiB for an array)")
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "c.h5").exists()

@@ -53,6 +53,7 @@ def default_point(args):
     """
     from rsocl.bench.point import US, BenchPoint
     from rsocl.bench.run import canonical_device
+    from rsocl.cli.options import RIG_BYTES_PER_PIXEL, check_datacube_memory, check_host_memory
     from rsocl.common import validation as check
     from rsocl.solver.reconstruct import DEFAULTS
 
@@ -79,12 +80,17 @@ def default_point(args):
     def pick(value, fallback):
         return fallback if value is None else value
 
-    return BenchPoint(
+    point = BenchPoint(
         scene=scene, cameras=pick(args.cameras, 4), shape=pick(args.shape, 32 if quick else 64),
         iterations=pick(args.iterations, 100 if quick else DEFAULTS["iterations"]),
         tv_iterations=pick(args.tv_iterations, DEFAULTS["tv_iterations"]),
         device=canonical_device(args.device), lam=pick(args.lam, DEFAULTS["lam"]), eta=pick(args.eta, DEFAULTS["eta"]),
         t_e=args.t_e_us * US, t_r=args.t_r_us * US)
+    side = point.shape                      # the default point's rig and datacube must fit this machine first
+    check_host_memory(point.cameras * side * side * RIG_BYTES_PER_PIXEL, f"--shape {side}",
+                      f"a rig of {point.cameras} camera(s) on {side} x {side} pixels", "choose a smaller --shape")
+    check_datacube_memory(point.rig(), f"--shape {side}", "choose a smaller --shape")
+    return point
 
 
 def check_sweeps(default, sweeps) -> None:

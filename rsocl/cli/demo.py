@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rsocl.cli.options import add_device_args, add_rig_args, add_solver_args, quality_line, rig_from, \
-    run_reconstruction, say
+from rsocl.cli.options import add_device_args, add_rig_args, add_solver_args, check_datacube_memory, quality_line, \
+    rig_from, run_reconstruction, say
 
 __all__ = ["add_parser", "cmd_demo"]
 
@@ -30,6 +30,7 @@ def cmd_demo(args) -> int:
     from rsocl.model.scenes import builtin_scene
 
     rig = rig_from(args)
+    check_datacube_memory(rig)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     truth = builtin_scene(rig.shape, rig.T)

@@ -34,8 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Run ``rsocl`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status.
 
-    0: done; 1: the command reports a failure of its own (no OpenCL device, a camera failed);
-    2: bad arguments or input (the message names them); 130: interrupted.
+    0: done; 1: the command reports a failure of its own (no OpenCL device, a camera failed, the host
+    memory ran out part way: sizes that cannot fit are refused first, with 2); 2: bad arguments or input
+    (the message names them); 130: interrupted.
     """
     from rsocl.device.context import NoOpenCLError
 
@@ -45,6 +46,10 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError, NoOpenCLError, FloatingPointError) as exc:
         print(f"rsocl {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except MemoryError as exc:
+        print(f"rsocl {args.command}: error: out of host memory ({str(exc).strip() or 'MemoryError'}); "
+              "a smaller grid, fewer sets or tiles (rsocl plan) need less", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"rsocl {args.command}: interrupted", file=sys.stderr)
         return 130

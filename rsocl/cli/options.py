@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
-__all__ = ["US", "add_rig_args", "rig_from", "add_device_args", "add_solver_args", "reg_options", "say",
-           "run_reconstruction", "quality_line"]
+import os
+
+__all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "host_memory_bytes", "check_host_memory",
+           "check_datacube_memory", "add_device_args", "add_solver_args", "reg_options", "say", "run_reconstruction",
+           "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
+#: Host bytes a :class:`~rsocl.model.rig.Rig` keeps per camera and reference pixel: its row map
+#: (float64) and exposure windows (int32 index, float64 fraction); building it takes about twice that.
+RIG_BYTES_PER_PIXEL = 20
 
 
 def add_rig_args(p, cameras=4, shape=(64, 64)):
@@ -22,12 +28,79 @@ def add_rig_args(p, cameras=4, shape=(64, 64)):
 
 
 def rig_from(args):
-    """The :class:`~rsocl.model.rig.Rig` of the arguments :func:`add_rig_args` added."""
+    """The :class:`~rsocl.model.rig.Rig` of the arguments :func:`add_rig_args` added.
+
+    A ``--shape`` whose rig alone would not fit this machine's memory (:func:`check_host_memory`)
+    is refused before anything is allocated.
+    """
+    from rsocl.common import validation as check
     from rsocl.model.rig import Rig
 
+    m, n = check.grid_shape("--shape", args.shape)
+    cameras = min(max(int(args.cameras), 1), 8)           # the count itself is checked by Rig.paper_array
+    check_host_memory(cameras * m * n * RIG_BYTES_PER_PIXEL, f"--shape {m} {n}",
+                      f"a rig of {cameras} camera(s) on {m} x {n} pixels ({RIG_BYTES_PER_PIXEL} bytes per camera "
+                      "and pixel: row maps and exposure windows)")
     dt = None if args.dt_us is None else args.dt_us * US
     return Rig.paper_array(args.cameras, tuple(args.shape), t_e=args.t_e_us * US, t_r=args.t_r_us * US,
                            dt=dt, mask=args.mask)
+
+
+def host_memory_bytes():
+    """This machine's memory for one process, bytes: the physical memory, or the control group's
+    limit when lower (a container); None where neither can be read."""
+    from pathlib import Path
+
+    total = None
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        pass
+    for limit in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(limit).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            total = int(text) if total is None else min(total, int(text))
+    return total
+
+
+def _size(nbytes) -> str:
+    for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{nbytes / 2**10:.1f} KiB"
+
+
+def check_host_memory(need, option: str, what: str, hint: str = "choose a smaller grid") -> None:
+    """Refuse, naming ``option``, an input whose arrays alone (``need`` bytes, a lower bound) exceed
+    :func:`host_memory_bytes`, before they are allocated (numpy would raise a MemoryError, or the
+    system kill the process, part way through).
+
+    Parameters
+    ----------
+    need : int
+        Bytes ``what`` takes at least.
+    option : str
+        The option and value to name, e.g. ``"--shape 100000 100000"``.
+    what : str
+        What takes the memory, for the message.
+    hint : str
+        The way out, for the message.
+    """
+    limit = host_memory_bytes()
+    if limit is not None and need > limit:
+        raise ValueError(f"{option}: {what} needs at least {_size(need)} of host memory, more than this machine's "
+                         f"{_size(limit)}; {hint}")
+
+
+def check_datacube_memory(rig, option=None, hint="choose a smaller grid or a longer --dt-us (fewer sub-frames)"):
+    """Refuse a rig whose ``(T, m, n)`` float32 datacube (a scene, a reconstruction) alone exceeds
+    :func:`host_memory_bytes`, naming ``option`` (default ``--shape M N``)."""
+    m, n = rig.shape
+    check_host_memory(4 * rig.T * m * n, option or f"--shape {m} {n}",
+                      f"the {rig.T} x {m} x {n} float32 datacube (T sub-frames x rows x columns)", hint)
 
 
 def add_device_args(p):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from rsocl.cli.options import add_device_args, add_rig_args, rig_from, say
+from rsocl.cli.options import add_device_args, add_rig_args, check_datacube_memory, rig_from, say
 
 __all__ = ["add_parser", "cmd_simulate"]
 
@@ -32,6 +32,7 @@ def cmd_simulate(args) -> int:
 
     output_path(args.out, "--out", inputs=(("scene", None if args.scene == "builtin" else args.scene),))
     rig = rig_from(args)
+    check_datacube_memory(rig)
     truth = load_scene(args.scene, rig.shape, rig.T)
     g = simulate(truth, rig, noise=args.noise, sigma=args.sigma, photons=args.photons, bit_depth=args.bit_depth,
                  seed=args.seed, device=args.device)
