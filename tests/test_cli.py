@@ -268,3 +268,21 @@ def test_a_shape_beyond_the_host_memory_is_refused_before_allocating(tmp_path, c
     err = capsys.readouterr().err
     assert err.startswith("rsocl simulate: error: out of host memory (Unable to allocate 3.00 GiB for an array)")
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "c.h5").exists()
+
+
+def test_an_out_folder_that_is_a_file_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    from rsocl.bench import run as bench_run
+
+    calls = []
+    monkeypatch.setattr("rsocl.cli.demo.run_reconstruction", lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(bench_run, "run_point", lambda *a, **k: calls.append(a))
+    existing = tmp_path / "results"
+    existing.write_text("keep me")
+    for out, match in ((existing, f"--out must name a folder (several files are written into it), "
+                                  f"{str(existing)!r} is a file"),
+                       (existing / "sub", f"--out: {str(existing)!r} is a file, so the folder")):
+        for argv in (["demo", "--shape", "8", "8", "--fast"], ["bench", "--quick", "--shape", "8"]):
+            assert main(argv + ["--out", str(out)]) == 2, argv           # was a FileExistsError traceback
+            err = capsys.readouterr().err
+            assert err.startswith(f"rsocl {argv[0]}: error: {match}") and len(err.strip().splitlines()) == 1, err
+    assert not calls and existing.read_text() == "keep me"

@@ -111,11 +111,14 @@ def cmd_bench(args) -> int:
     """Run the sweeps and write the files; returns 0, or 1 when no reconstruction point could be
     measured (the reasons on stderr, no file written).
 
-    The options and the sweep values given are checked first (a ValueError naming the option).
+    The options, the ``--out`` folder and the sweep values given are checked first (a ValueError
+    naming the option).
     """
     from rsocl.bench.report import _num
     from rsocl.bench.run import markdown, parse_sweep, picks, run_bench, write_outputs
+    from rsocl.files.atomic import output_folder
 
+    output_folder(args.out, "--out")
     default = default_point(args)
     sweeps = None if not args.sweep else [parse_sweep(s) for s in args.sweep]
     check_sweeps(default, sweeps)

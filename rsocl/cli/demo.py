@@ -25,13 +25,14 @@ def cmd_demo(args) -> int:
     """Write ``demo.h5``, ``demo.gif``, ``snapshots.png``, ``subframes.png`` and (unless ``--fast``)
     ``demo-tuning.png``, the parameter search, to ``--out``; returns 0."""
     from rsocl.analysis.visual import comparison_gif, datacube_montage, snapshot_montage
+    from rsocl.files.atomic import output_folder
     from rsocl.files.hdf5 import save_reconstruction
     from rsocl.model.operator import RollingShutterOperator
     from rsocl.model.scenes import builtin_scene
 
+    out = output_folder(args.out, "--out")
     rig = rig_from(args)
     check_datacube_memory(rig)
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     truth = builtin_scene(rig.shape, rig.T)
     op = RollingShutterOperator(rig, device=args.device, dtype=args.dtype)

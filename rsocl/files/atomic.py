@@ -15,7 +15,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "output_path"]
+__all__ = ["atomic_path", "output_path", "output_folder"]
 
 
 def _default_mode() -> int:
@@ -65,6 +65,29 @@ def output_path(path, name: str = "path", inputs=()) -> Path:
         fd, probe = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=".probe")
     except OSError as err:
         raise ValueError(f"{name}: cannot create files in {str(directory)!r} ({err.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
+    return path
+
+
+def output_folder(path, name: str = "path") -> Path:
+    """``path`` as a Path of a folder that exists, or can be made, and takes new files; nothing is created.
+
+    Raises ``ValueError`` naming the parameter ``name`` when ``path`` (or the nearest of its parents
+    that exists) is a file rather than a folder, or when no file can be created in that folder.
+    """
+    path = Path(os.fspath(path))
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{name} must name a folder (several files are written into it), {str(path)!r} is a file")
+    existing = path
+    while not existing.exists():                 # the folder (and its parents) are made by the writer
+        existing = existing.parent
+    if not existing.is_dir():
+        raise ValueError(f"{name}: {str(existing)!r} is a file, so the folder {str(path)!r} cannot be made")
+    try:
+        fd, probe = tempfile.mkstemp(dir=existing, prefix=".rsocl.", suffix=".probe")
+    except OSError as err:
+        raise ValueError(f"{name}: cannot create files in {str(existing)!r} ({err.strerror})") from None
     os.close(fd)
     os.unlink(probe)
     return path
