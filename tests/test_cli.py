@@ -286,3 +286,32 @@ def test_an_out_folder_that_is_a_file_is_refused_before_any_work(tmp_path, capsy
             err = capsys.readouterr().err
             assert err.startswith(f"rsocl {argv[0]}: error: {match}") and len(err.strip().splitlines()) == 1, err
     assert not calls and existing.read_text() == "keep me"
+
+
+def test_reg_opt_iterations_and_tv_iterations_that_disagree_are_refused(tmp_path, capsys, monkeypatch):
+    cap = tmp_path / "cap.h5"
+    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "8", "8", "--cameras", "2", "--quiet"]) == 0
+    from rsocl.cli import options
+
+    runs = []
+
+    def spy(args, *rest):
+        runs.append(args)
+        return options.run_reconstruction(args, *rest)
+
+    monkeypatch.setattr("rsocl.cli.demo.run_reconstruction", spy)
+    monkeypatch.setattr("rsocl.cli.reconstruct.run_reconstruction", spy)
+    commands = (["demo", "--out", str(tmp_path / "demo"), "--shape", "8", "8", "--cameras", "2"],
+                ["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5")])
+    for argv in commands:                          # TV ran 5 inner iterations, --tv-iterations 3 was ignored
+        assert main(argv + ["--iterations", "2", "--fast", "--reg-opt", "iterations=5", "--tv-iterations", "3"]) == 2
+        err = capsys.readouterr().err
+        assert (f"rsocl {argv[0]}: error: --reg-opt iterations=5 and --tv-iterations 3 both set the regularizer's "
+                "inner iterations, to different values; give one of them") in err, err
+    assert not runs and not (tmp_path / "rec.h5").exists() and not (tmp_path / "demo").exists()
+    for argv in commands:                          # the same value twice is no conflict
+        assert main(argv + ["--iterations", "2", "--fast", "--reg-opt", "iterations=3", "--tv-iterations", "3",
+                            "--quiet"]) == 0
+        capsys.readouterr()
+    assert [a.tv_iterations for a in runs] == [3, 3]
+    assert load_reconstruction(tmp_path / "rec.h5").params["regularizer_options"]["iterations"] == 3

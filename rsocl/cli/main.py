@@ -42,6 +42,9 @@ def main(argv=None) -> int:
 
     args = build_parser().parse_args(argv)
     try:
+        check_options = getattr(args, "check_options", None)    # combinations of shared options, checked first
+        if check_options is not None:
+            check_options(args)
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, NoOpenCLError, FloatingPointError) as exc:
         print(f"rsocl {args.command}: error: {exc}", file=sys.stderr)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import os
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "host_memory_bytes", "check_host_memory",
-           "check_datacube_memory", "add_device_args", "add_solver_args", "reg_options", "say", "run_reconstruction",
-           "quality_line"]
+           "check_datacube_memory", "add_device_args", "add_solver_args", "check_solver_args", "reg_options", "say",
+           "run_reconstruction", "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
@@ -126,11 +126,29 @@ def add_solver_args(p):
     g.add_argument("--projection", choices=["exact", "paper"], default="exact")
     g.add_argument("--regularizer", default="tv", help="regularizer name (see 'rsocl plugins')")
     g.add_argument("--reg-opt", action="append", default=[], metavar="KEY=VALUE",
-                   help="regularizer option, repeatable")
+                   help="regularizer option, repeatable (iterations=N is --tv-iterations N: give one of them)")
     g.add_argument("--fast", action="store_true",
                    help="skip the parameter search: fixed lam and regularizer options, zero start (by default "
                         "the values not given are chosen from the snapshots by cross-validation: a tuned run takes "
                         "2-3x the time of a fixed one; a tiled run chooses once, on the centre tile, for every tile)")
+    p.set_defaults(check_options=check_solver_args)
+
+
+def check_solver_args(args) -> None:
+    """Refuse solver options that contradict each other, before the command runs (``rsocl.cli.main``
+    calls it): ``--reg-opt iterations=N`` with a different ``--tv-iterations M`` (one of them was
+    silently ignored); a ``--reg-opt`` that is not ``KEY=VALUE``."""
+    options = reg_options(args.reg_opt)
+    if args.tv_iterations is None or "iterations" not in options:
+        return
+    given = options["iterations"]
+    try:
+        same = int(given) == args.tv_iterations
+    except ValueError:
+        same = False
+    if not same:
+        raise ValueError(f"--reg-opt iterations={given} and --tv-iterations {args.tv_iterations} both set the "
+                         "regularizer's inner iterations, to different values; give one of them")
 
 
 def reg_options(pairs):
