@@ -315,3 +315,27 @@ def test_reg_opt_iterations_and_tv_iterations_that_disagree_are_refused(tmp_path
         capsys.readouterr()
     assert [a.tv_iterations for a in runs] == [3, 3]
     assert load_reconstruction(tmp_path / "rec.h5").params["regularizer_options"]["iterations"] == 3
+
+
+@pytest.mark.parametrize("extra, match", [
+    (["--noise", "gaussian"], "--noise gaussian needs --sigma (the standard deviation as a fraction of full scale, "
+                              ">= 0); it has no default"),
+    (["--noise", "poisson"], "--noise poisson needs --photons (photo-electrons at full scale, > 0); it has no default"),
+    (["--sigma", "0.01"], "--sigma applies to --noise gaussian only; with --noise none it would be ignored"),
+    (["--noise", "poisson", "--photons", "100", "--sigma", "0.01"], "--sigma applies to --noise gaussian only"),
+    (["--noise", "gaussian", "--sigma", "0.01", "--photons", "100"], "--photons applies to --noise poisson only"),
+    (["--noise", "gaussian", "--sigma", "-0.1"], "--sigma must be >= 0 (fraction of full scale), got -0.1"),
+    (["--noise", "poisson", "--photons", "0"], "--photons must be > 0 photo-electrons, got 0.0"),
+    (["--bit-depth", "40"], "--bit-depth must be an integer >= 1 and <= 32, got 40"),
+])
+def test_simulate_noise_options_are_complete_and_consistent_before_any_work(tmp_path, capsys, monkeypatch, extra,
+                                                                            match):
+    from rsocl.model import scenes
+
+    calls, real = [], scenes.load_scene
+    monkeypatch.setattr(scenes, "load_scene", lambda *a, **k: calls.append(a) or real(*a, **k))
+    out = tmp_path / "c.h5"
+    assert main(["simulate", "builtin", "--out", str(out), "--shape", "8", "8"] + extra) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"rsocl simulate: error: {match}"), err
+    assert len(err.strip().splitlines()) == 1 and not calls and not out.exists()
