@@ -74,7 +74,7 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
 
 def test_errors_are_reported_not_raised(tmp_path, capsys):
     assert main(["info", "--t-r-us", "0"]) == 2
-    assert "t_r must be > 0" in capsys.readouterr().err
+    assert "--t-r-us must be > 0 µs, got 0.0" in capsys.readouterr().err
     assert main(["info", "--cameras", "9"]) == 2
     assert "n_cameras" in capsys.readouterr().err
     assert main(["reconstruct", str(tmp_path / "missing.h5"), "--out", str(tmp_path / "x.h5")]) == 2
@@ -339,3 +339,18 @@ def test_simulate_noise_options_are_complete_and_consistent_before_any_work(tmp_
     err = capsys.readouterr().err
     assert err.startswith(f"rsocl simulate: error: {match}"), err
     assert len(err.strip().splitlines()) == 1 and not calls and not out.exists()
+
+
+@pytest.mark.parametrize("extra, match", [
+    (["--t-r-us", "-3"], "--t-r-us must be > 0 µs, got -3.0"),         # was 't_r must be > 0 seconds, got -3e-06'
+    (["--t-e-us", "0"], "--t-e-us must be > 0 µs, got 0.0"),
+    (["--t-e-us", "inf"], "--t-e-us must be finite, got inf"),
+    (["--dt-us", "-1"], "--dt-us must be > 0 µs, got -1.0"),
+    (["--dt-us", "20"], "--dt-us must be >= --t-r-us = 35 µs (a sub-frame lasts at least one row time), got 20"),
+    (["--t-r-us", "10", "--dt-us", "9.5"], "--dt-us must be >= --t-r-us = 10 µs"),
+])
+def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
+    for command in (["info"], ["plan", "--no-measure"]):
+        assert main(command + ["--shape", "8", "8"] + extra) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"rsocl {command[0]}: error: {match}") and "seconds" not in err, err

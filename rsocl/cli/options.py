@@ -21,21 +21,29 @@ def add_rig_args(p, cameras=4, shape=(64, 64)):
     g.add_argument("--cameras", type=int, default=cameras, help=f"number of cameras, 1..8 (default {cameras})")
     g.add_argument("--shape", type=int, nargs=2, default=list(shape), metavar=("M", "N"),
                    help=f"ROI rows and columns, pixels (default {shape[0]} {shape[1]})")
-    g.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs (default 180)")
-    g.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs (default 35)")
-    g.add_argument("--dt-us", type=float, default=None, help="sub-frame duration, µs (default t_r)")
+    g.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs, > 0 (default 180)")
+    g.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs, > 0 (default 35)")
+    g.add_argument("--dt-us", type=float, default=None, help="sub-frame duration, µs, >= --t-r-us (default t_r)")
     g.add_argument("--mask", choices=["exact", "binary"], default="exact", help="shutter weights (default exact)")
 
 
 def rig_from(args):
     """The :class:`~rsocl.model.rig.Rig` of the arguments :func:`add_rig_args` added.
 
-    A ``--shape`` whose rig alone would not fit this machine's memory (:func:`check_host_memory`)
-    is refused before anything is allocated.
+    The times are checked in the µs the options are given in, naming the option; a ``--shape`` whose
+    rig alone would not fit this machine's memory (:func:`check_host_memory`) is refused before
+    anything is allocated.
     """
     from rsocl.common import validation as check
-    from rsocl.model.rig import Rig
+    from rsocl.model.rig import SNAP, Rig
 
+    check.positive("--t-e-us", args.t_e_us, "µs")
+    t_r = check.positive("--t-r-us", args.t_r_us, "µs")
+    if args.dt_us is not None:
+        dt = check.positive("--dt-us", args.dt_us, "µs")
+        if dt < t_r * (1 - SNAP):
+            raise ValueError(f"--dt-us must be >= --t-r-us = {t_r:g} µs (a sub-frame lasts at least one row time), "
+                             f"got {dt:g}")
     m, n = check.grid_shape("--shape", args.shape)
     cameras = min(max(int(args.cameras), 1), 8)           # the count itself is checked by Rig.paper_array
     check_host_memory(cameras * m * n * RIG_BYTES_PER_PIXEL, f"--shape {m} {n}",
