@@ -66,3 +66,13 @@ def test_plan_checks_every_option_before_printing_or_measuring(capsys, monkeypat
     captured = capsys.readouterr()
     assert re.search(match, captured.err), captured.err
     assert captured.out == "" and not calls
+
+
+def test_plan_in_python_checks_iterations_and_blur():
+    from rsocl.solver.plan import plan
+
+    rig = rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6)
+    with pytest.raises(ValueError, match="iterations"):
+        plan(rig, iterations=-3, measure=False)
+    with pytest.raises(ValueError, match="blur_pixels"):
+        plan(rig, blur_pixels=0, measure=False)

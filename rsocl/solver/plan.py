@@ -141,6 +141,8 @@ def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iteration
     blur_pixels : float
         Motion allowed within one sub-frame, pixels.
     """
+    iterations = check.positive_int("iterations", iterations)
+    blur_pixels = check.positive("blur_pixels", blur_pixels, "(pixels)")
     notes = []
     t_r = max(cam.t_r for cam in rig.cameras)
     bound = math.inf

@@ -50,7 +50,13 @@ def make_regularizer(regularizer, options=None, tv_iterations=None) -> Regulariz
     if tv_iterations is not None:
         if "iterations" not in getattr(cls, "options", {}):
             raise ValueError(f"tv_iterations applies to iterative denoisers; {regularizer!r} has no 'iterations'")
-        options.setdefault("iterations", tv_iterations)
+        if "iterations" in options:
+            made = cls(**options)
+            if made.iterations != tv_iterations:
+                raise ValueError(f"tv_iterations = {tv_iterations!r} and regularizer_options['iterations'] = "
+                                 f"{options['iterations']!r} disagree; give the inner iterations once")
+            return made
+        options["iterations"] = tv_iterations
     return cls(**options)
 
 
