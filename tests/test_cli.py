@@ -6,6 +6,8 @@ import sys
 import numpy as np
 import pytest
 
+import rsocl
+
 from rsocl.cli.main import main
 from rsocl.files.hdf5 import load_capture, load_reconstruction
 
@@ -354,3 +356,38 @@ def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
         assert main(command + ["--shape", "8", "8"] + extra) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"rsocl {command[0]}: error: {match}") and "seconds" not in err, err
+
+
+def test_options_that_contradict_each_other_on_a_capture_are_refused_before_any_work(tmp_path, capsys):
+    from rsocl.cli.main import main
+
+    sets, one = tmp_path / "sets.h5", tmp_path / "one.h5"
+    _capture_with_truth(sets, "sets")
+    _capture_with_truth(one, "one")
+    cases = [
+        ([str(sets), "--out", str(tmp_path / "a.zarr"), "--sets", "--first-set-only"],
+         "--sets and --first-set-only contradict each other"),
+        ([str(one), "--out", str(tmp_path / "c.h5"), "--window", "1", "--workers", "2"], "--workers: the windows"),
+    ]
+    for extra, message in cases:
+        capsys.readouterr()
+        assert main(["reconstruct", *extra, "--iterations", "2", "--fast", "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, err
+    assert not any(p.suffix == ".zarr" for p in tmp_path.iterdir())          # nothing was started
+    pytest.importorskip("zarr")
+    run = ["--halo", "2", "--iterations", "2", "--fast", "--quiet"]
+    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "d.zarr"), *run]) == 0
+    assert "the capture holds 3 sets; the store gets set 0" in capsys.readouterr().err     # said, even --quiet
+    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "e.zarr"), "--first-set-only", *run]) == 0
+    assert "3 sets" not in capsys.readouterr().err
+
+
+def test_inner_iterations_given_twice_must_agree_in_python(device):
+    rig = rsocl.Rig.paper_array(4, (8, 8), t_e=0.18e-3, t_r=35e-6)
+    g = np.ones((4, 8, 8))
+    with pytest.raises(ValueError, match=r"tv_iterations = 3 and regularizer_options\['iterations'\] = 5 disagree"):
+        rsocl.reconstruct(g, rig, iterations=1, tv_iterations=3, regularizer_options={"iterations": 5}, tune=False,
+                          device=device)
+    assert rsocl.reconstruct(g, rig, iterations=1, tv_iterations=5, regularizer_options={"iterations": 5},
+                             tune=False, device=device).params["regularizer_options"]["iterations"] == 5

@@ -11,6 +11,7 @@ proposal when the problem does not fit one device, or for ``--tile``.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,19 @@ def check_outputs(args) -> None:
     if args.window is not None and (_is_zarr(args.out) or args.sets):
         raise ValueError("--window: a stream of frame windows is written to an HDF5 file (--out NAME.h5), "
                          "one set at a time")
+    if args.window is not None and args.workers is not None:
+        raise ValueError("--workers: the windows of --window run one after another in this process (their tiles "
+                         "on Dask's local scheduler or --scheduler); leave out --workers")
+    if args.sets and getattr(args, "first_set_only", False):
+        raise ValueError("--sets and --first-set-only contradict each other: --sets reconstructs every set into a "
+                         "Zarr store, --first-set-only set 0 only; give one of them")
+    if _is_zarr(args.out) and not args.sets and not getattr(args, "first_set_only", False):
+        from rsocl.files.hdf5 import snapshot_set_count
+
+        count = snapshot_set_count(args.capture)
+        if count > 1:
+            print(f"rsocl reconstruct: note: the capture holds {count} sets; the store gets set 0 "
+                  "(--sets: every set; --first-set-only says set 0 and silences this)", file=sys.stderr, flush=True)
     if _is_zarr(args.out):
         from rsocl.scale.store import check_store_path, require_zarr
 

@@ -31,7 +31,7 @@ from rsocl.files.atomic import atomic_path
 from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, open_checked, read_rig, str_attr, write_header
 from rsocl.model.rig import Rig
 
-__all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_snapshot_sets",
+__all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_snapshot_sets", "snapshot_set_count",
            "save_reconstruction", "load_reconstruction", "FORMAT_VERSION"]
 
 
@@ -182,6 +182,12 @@ def load_capture(path) -> Capture:
             raise ValueError(f"{source}: dataset 'snapshots' is missing")
         return Capture(snapshots=h5["snapshots"][()], rig=rig, truth=_optional(h5, "truth"),
                        meta=json.loads(str_attr(h5, "meta", source)))
+
+
+def snapshot_set_count(path) -> int:
+    """How many sets a capture holds (the length of ``snapshot_sets``; 1 without it), reading no data."""
+    with open_checked(path, "capture") as h5:
+        return int(h5["snapshot_sets"].shape[0]) if "snapshot_sets" in h5 else 1
 
 
 def load_snapshot_sets(path) -> np.ndarray | None:
