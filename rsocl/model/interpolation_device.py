@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rsocl.device.context import c_type
 from rsocl.device.launch import batch_launches
 from rsocl.model.interpolation import samples
 
@@ -74,8 +75,6 @@ def interp3d_device(op, g, valid=None, solved=None, *, out=None):
         raise ValueError(f"out must hold {want[1:] if one else want} values of {dtype.name}, got {out.shape} {out.dtype}")
     up = [cla.to_device(queue, np.ascontiguousarray(a, dtype=t))
           for a, t in ((times, dtype), (values, dtype), (inverse, dtype), (count, np.int32), (fallback, dtype))]
-    from rsocl.device.context import c_type
-
     prog = op.device.program(["interp.cl"], REAL=c_type(dtype), NCH=K)
     kernel = prog.interp3d
     per_set = length * mn
