@@ -53,7 +53,7 @@ def default_point(args):
     """
     from rsocl.bench.point import US, BenchPoint
     from rsocl.bench.run import canonical_device
-    from rsocl.cli.options import RIG_BYTES_PER_PIXEL, check_datacube_memory, check_host_memory
+    from rsocl.cli.options import check_datacube_memory, check_rig_memory
     from rsocl.common import validation as check
     from rsocl.solver.reconstruct import DEFAULTS
 
@@ -87,8 +87,7 @@ def default_point(args):
         device=canonical_device(args.device), lam=pick(args.lam, DEFAULTS["lam"]), eta=pick(args.eta, DEFAULTS["eta"]),
         t_e=args.t_e_us * US, t_r=args.t_r_us * US)
     side = point.shape                      # the default point's rig and datacube must fit this machine first
-    check_host_memory(point.cameras * side * side * RIG_BYTES_PER_PIXEL, f"--shape {side}",
-                      f"a rig of {point.cameras} camera(s) on {side} x {side} pixels", "choose a smaller --shape")
+    check_rig_memory(point.cameras, (side, side), f"--shape {side}", "choose a smaller --shape")
     check_datacube_memory(point.rig(), f"--shape {side}", "choose a smaller --shape")
     return point
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import os
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "host_memory_bytes", "check_host_memory",
-           "check_datacube_memory", "add_device_args", "add_solver_args", "check_solver_args", "reg_options", "say",
-           "run_reconstruction", "quality_line"]
+           "check_rig_memory", "check_datacube_memory", "add_device_args", "add_solver_args", "check_solver_args",
+           "reg_options", "say", "run_reconstruction", "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
@@ -46,9 +46,7 @@ def rig_from(args):
                              f"got {dt:g}")
     m, n = check.grid_shape("--shape", args.shape)
     cameras = min(max(int(args.cameras), 1), 8)           # the count itself is checked by Rig.paper_array
-    check_host_memory(cameras * m * n * RIG_BYTES_PER_PIXEL, f"--shape {m} {n}",
-                      f"a rig of {cameras} camera(s) on {m} x {n} pixels ({RIG_BYTES_PER_PIXEL} bytes per camera "
-                      "and pixel: row maps and exposure windows)")
+    check_rig_memory(cameras, (m, n), f"--shape {m} {n}")
     dt = None if args.dt_us is None else args.dt_us * US
     return Rig.paper_array(args.cameras, tuple(args.shape), t_e=args.t_e_us * US, t_r=args.t_r_us * US,
                            dt=dt, mask=args.mask)
@@ -101,6 +99,16 @@ def check_host_memory(need, option: str, what: str, hint: str = "choose a smalle
     if limit is not None and need > limit:
         raise ValueError(f"{option}: {what} needs at least {_size(need)} of host memory, more than this machine's "
                          f"{_size(limit)}; {hint}")
+
+
+def check_rig_memory(cameras, shape, option, hint="choose a smaller grid") -> None:
+    """Refuse, naming ``option``, a rig of ``cameras`` cameras on ``shape`` (rows, columns) pixels whose
+    row maps and exposure windows alone (:data:`RIG_BYTES_PER_PIXEL`) exceed :func:`host_memory_bytes`,
+    before it is built."""
+    m, n = shape
+    check_host_memory(cameras * m * n * RIG_BYTES_PER_PIXEL, option,
+                      f"a rig of {cameras} camera(s) on {m} x {n} pixels ({RIG_BYTES_PER_PIXEL} bytes per camera "
+                      "and pixel: row maps and exposure windows)", hint)
 
 
 def check_datacube_memory(rig, option=None, hint="choose a smaller grid or a longer --dt-us (fewer sub-frames)"):
