@@ -72,7 +72,8 @@ def interp3d_device(op, g, valid=None, solved=None, *, out=None):
     if out is None:
         out = cla.empty(queue, want[1:] if one else want, dtype)
     elif out.dtype != dtype or out.size != int(np.prod(want)):
-        raise ValueError(f"out must hold {want[1:] if one else want} values of {dtype.name}, got {out.shape} {out.dtype}")
+        raise ValueError(f"out must hold {want[1:] if one else want} values of {dtype.name}, "
+                         f"got {out.shape} {out.dtype}")
     up = [cla.to_device(queue, np.ascontiguousarray(a, dtype=t))
           for a, t in ((times, dtype), (values, dtype), (inverse, dtype), (count, np.int32), (fallback, dtype))]
     prog = op.device.program(["interp.cl"], REAL=c_type(dtype), NCH=K)
