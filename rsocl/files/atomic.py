@@ -61,12 +61,7 @@ def output_path(path, name: str = "path", inputs=()) -> Path:
     for option, source in inputs:
         if source is not None and _same_file(path, Path(os.fspath(source))):
             raise ValueError(f"{name} {str(path)!r} is the {option} it reads; writing it would replace the input")
-    try:                                   # the folder takes a new file (read-only mounts, root with chattr +i)
-        fd, probe = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=".probe")
-    except OSError as err:
-        raise ValueError(f"{name}: cannot create files in {str(directory)!r} ({err.strerror})") from None
-    os.close(fd)
-    os.unlink(probe)
+    _check_takes_files(directory, name, prefix=f".{path.name}.")
     return path
 
 
@@ -84,13 +79,19 @@ def output_folder(path, name: str = "path") -> Path:
         existing = existing.parent
     if not existing.is_dir():
         raise ValueError(f"{name}: {str(existing)!r} is a file, so the folder {str(path)!r} cannot be made")
+    _check_takes_files(existing, name, prefix=".rsocl.")
+    return path
+
+
+def _check_takes_files(directory: Path, name: str, prefix: str) -> None:
+    """Raise a ``ValueError`` naming ``name`` when no new file can be created in ``directory`` (a
+    read-only mount, root with ``chattr +i``): a probe file is created and removed."""
     try:
-        fd, probe = tempfile.mkstemp(dir=existing, prefix=".rsocl.", suffix=".probe")
+        fd, probe = tempfile.mkstemp(dir=directory, prefix=prefix, suffix=".probe")
     except OSError as err:
-        raise ValueError(f"{name}: cannot create files in {str(existing)!r} ({err.strerror})") from None
+        raise ValueError(f"{name}: cannot create files in {str(directory)!r} ({err.strerror})") from None
     os.close(fd)
     os.unlink(probe)
-    return path
 
 
 def _same_file(a: Path, b: Path) -> bool:
