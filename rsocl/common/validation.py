@@ -2,19 +2,22 @@
 
 Every public constructor in rsocl validates through these helpers so that
 messages look the same everywhere: the parameter's name, its value and the
-allowed range.
+allowed range. :func:`unknown_keys` only warns: a settings table may carry
+keys an older or newer version reads.
 """
 
 from __future__ import annotations
 
 import contextlib
+import difflib
 import math
 import numbers
+import warnings
 
 import numpy as np
 
 __all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "choice", "finite_array", "grid_shape",
-           "reading"]
+           "reading", "unknown_keys"]
 
 
 def finite(name: str, value) -> float:
@@ -76,6 +79,33 @@ def choice(name: str, value, allowed) -> str:
     if value not in allowed:
         raise ValueError(f"{name} must be one of {sorted(allowed)}, got {value!r}")
     return value
+
+
+def unknown_keys(name: str, table, known, stacklevel: int = 2) -> list:
+    """Warn (``UserWarning``) about the keys of ``table`` that are not in ``known``; they are ignored.
+
+    The message names ``name`` and each unknown key, the closest known key when one is close
+    (``difflib.get_close_matches``: ``'adress'`` -> did you mean ``'address'``?) and the
+    accepted keys. ``stacklevel`` is as for :func:`warnings.warn`, counted from the caller
+    (2: the caller's caller). Returns the unknown keys, sorted (``[]``: no warning).
+
+    Examples
+    --------
+    >>> unknown_keys("v4l2 /dev/video0: config", {"adress": 2}, ["address", "buffers"])  # doctest: +SKIP
+    UserWarning: v4l2 /dev/video0: config: unknown key 'adress' (did you mean 'address'?) is ignored;
+    accepted keys: ['address', 'buffers']
+    """
+    known = sorted(str(key) for key in known)
+    unknown = sorted((key for key in table if key not in known), key=str)
+    if unknown:
+        named = []
+        for key in unknown:
+            close = difflib.get_close_matches(str(key), known, n=1)
+            named.append(f"{key!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+        keys = f"key {named[0]} is" if len(named) == 1 else f"keys {', '.join(named)} are"
+        warnings.warn(f"{name}: unknown {keys} ignored; accepted keys: {known}", UserWarning,
+                      stacklevel=stacklevel + 1)
+    return unknown
 
 
 def real_dtype(name: str, dtype) -> np.dtype:
