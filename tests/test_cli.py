@@ -20,6 +20,29 @@ def test_info_paper_figures(capsys):
     assert "13.75x" in out
 
 
+def test_info_capture_reads_the_rig_of_the_capture_and_refuses_rig_options(tmp_path, capsys):
+    import rsocl
+    from rsocl.files.hdf5 import save_capture
+
+    rig = rsocl.Rig.paper_array(2, (9, 7), t_e=1e-4, t_r=3e-5)
+    cap = tmp_path / "cap.h5"
+    save_capture(cap, np.zeros((rig.n_channels,) + rig.shape), rig)
+    assert main(["info", "--capture", str(cap), "--camera-fps", "30"]) == 0
+    out = capsys.readouterr().out
+    assert "ROI                      9 x 7 pixels" in out and "cameras                  2 " in out
+    assert "effective fps at 30 fps" in out
+    # a rig option would be ignored: refused, named, even at its default value (--shape 50 50)
+    for extra, named in ((["--shape", "50", "50"], "--shape"), (["--cameras=2"], "--cameras"),
+                         (["--t-e-us", "100", "--mask", "binary", "--t-e-us", "90"], "--t-e-us, --mask"),
+                         (["--sha", "9", "7"], "--shape"), (["--dt-us", "30", "--t-r-us", "30"], "--dt-us, --t-r-us")):
+        assert main(["info", "--capture", str(cap), *extra]) == 2
+        captured = capsys.readouterr()
+        assert captured.err.startswith(f"rsocl info: error: {named} cannot be used with --capture: ")
+        assert captured.err.count("\n") == 1 and not captured.out, captured.err
+    assert main(["info", "--shape", "9", "7", "--cameras", "2"]) == 0           # without --capture they apply
+    assert "9 x 7 pixels" in capsys.readouterr().out
+
+
 def test_an_output_that_would_replace_the_input_or_cannot_be_made_is_refused_first(tmp_path, capsys, monkeypatch):
     import os
     import tempfile

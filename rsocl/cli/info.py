@@ -1,20 +1,33 @@
-"""``rsocl info``: the numbers of a rig (T, N_s, T_se, compression ratio, effective frame rate, memory)."""
+"""``rsocl info``: the numbers of a rig (T, N_s, T_se, compression ratio, effective frame rate, memory).
+
+The rig is the paper's array of the rig options, or, with ``--capture``, the rig stored in a capture
+file: the one ``rsocl reconstruct`` uses, as it is. The rig options cannot change a capture's rig
+(its snapshots were taken with it), so they are refused with ``--capture`` rather than ignored.
+"""
 
 from __future__ import annotations
 
-from rsocl.cli.options import US, add_rig_args, rig_from
+from rsocl.cli.options import US, add_rig_args, refuse_rig_args, rig_from
 
-__all__ = ["add_parser", "cmd_info"]
+__all__ = ["add_parser", "check_info_args", "cmd_info"]
 
 
 def add_parser(subparsers):
     """Add ``info`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser("info", help="T, N_s, T_se, compression ratio and effective fps of a rig")
     add_rig_args(p, shape=(50, 50))
-    p.add_argument("--capture", default=None, help="read the rig from this capture file instead")
+    p.add_argument("--capture", default=None,
+                   help="read the rig from this capture file instead (the rig options cannot be given with it)")
     p.add_argument("--camera-fps", type=float, default=67.0, help="camera frame rate, Hz (default 67)")
-    p.set_defaults(func=cmd_info)
+    p.set_defaults(func=cmd_info, check_options=check_info_args)
     return p
+
+
+def check_info_args(args) -> None:
+    """Refuse rig options given with ``--capture`` (``rsocl.cli.main`` calls it before :func:`cmd_info`)."""
+    if args.capture:
+        refuse_rig_args(args, "--capture", "the capture file holds the rig its snapshots were taken with, "
+                                           "which rsocl reconstruct uses as it is")
 
 
 def cmd_info(args) -> int:

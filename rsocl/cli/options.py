@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 
-__all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "host_memory_bytes", "check_host_memory",
-           "check_rig_memory", "check_datacube_memory", "add_device_args", "add_solver_args", "check_solver_args",
-           "reg_options", "say", "run_reconstruction", "quality_line"]
+__all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
+           "check_host_memory", "check_rig_memory", "check_datacube_memory", "add_device_args", "add_solver_args",
+           "check_solver_args", "reg_options", "say", "run_reconstruction", "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
@@ -15,16 +16,47 @@ US = 1e-6
 RIG_BYTES_PER_PIXEL = 20
 
 
+class _RigOption(argparse.Action):
+    """Store the value, as argparse's default action does, and note the option (its first name) in
+    ``args.rig_options_given``: the rig options given on the command line, even at their default value."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        given = getattr(namespace, "rig_options_given", ())
+        if self.option_strings[0] not in given:
+            namespace.rig_options_given = (*given, self.option_strings[0])
+
+
 def add_rig_args(p, cameras=4, shape=(64, 64)):
-    """Add the rig group (cameras, ROI, t_e, t_r, dt in µs, mask) to parser ``p``."""
+    """Add the rig group (cameras, ROI, t_e, t_r, dt in µs, mask) to parser ``p``.
+
+    ``args.rig_options_given`` lists the ones given on the command line (``()``: none), for
+    :func:`refuse_rig_args`.
+    """
     g = p.add_argument_group("rig (the paper's array: angles 0, 90, 180, 270, 45, 135, 225, 315)")
-    g.add_argument("--cameras", type=int, default=cameras, help=f"number of cameras, 1..8 (default {cameras})")
-    g.add_argument("--shape", type=int, nargs=2, default=list(shape), metavar=("M", "N"),
+    g.add_argument("--cameras", type=int, default=cameras, action=_RigOption,
+                   help=f"number of cameras, 1..8 (default {cameras})")
+    g.add_argument("--shape", type=int, nargs=2, default=list(shape), metavar=("M", "N"), action=_RigOption,
                    help=f"ROI rows and columns, pixels (default {shape[0]} {shape[1]})")
-    g.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs, > 0 (default 180)")
-    g.add_argument("--t-r-us", type=float, default=35.0, help="row readout time, µs, > 0 (default 35)")
-    g.add_argument("--dt-us", type=float, default=None, help="sub-frame duration, µs, >= --t-r-us (default t_r)")
-    g.add_argument("--mask", choices=["exact", "binary"], default="exact", help="shutter weights (default exact)")
+    g.add_argument("--t-e-us", type=float, default=180.0, action=_RigOption,
+                   help="exposure time, µs, > 0 (default 180)")
+    g.add_argument("--t-r-us", type=float, default=35.0, action=_RigOption,
+                   help="row readout time, µs, > 0 (default 35)")
+    g.add_argument("--dt-us", type=float, default=None, action=_RigOption,
+                   help="sub-frame duration, µs, >= --t-r-us (default t_r)")
+    g.add_argument("--mask", choices=["exact", "binary"], default="exact", action=_RigOption,
+                   help="shutter weights (default exact)")
+    p.set_defaults(rig_options_given=())
+
+
+def refuse_rig_args(args, option: str, why: str) -> None:
+    """Refuse the rig options of :func:`add_rig_args` given together with ``option``, which brings its
+    own rig (``why`` says where it comes from): a ``ValueError`` naming them (the CLI's exit status 2),
+    rather than ignoring them."""
+    given = getattr(args, "rig_options_given", ())
+    if given:
+        raise ValueError(f"{', '.join(given)} cannot be used with {option}: {why}; "
+                         f"leave {'it' if len(given) == 1 else 'them'} out")
 
 
 def rig_from(args):
