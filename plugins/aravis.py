@@ -44,6 +44,7 @@ from __future__ import annotations
 import numbers
 import time
 
+from rsocl.common.validation import unknown_keys
 from rsocl.hardware.backend import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
 from rsocl_plugins.aravis_discovery import check_interfaces, import_aravis, select_interfaces
 from rsocl_plugins.aravis_formats import BY_CODE, PIXEL_FORMATS, convert_buffer
@@ -71,9 +72,7 @@ class AravisCamera(AravisSettings, CameraBackend):
     def __init__(self, config=None, name=None):
         super().__init__(config, name)
         cfg = self.config
-        unknown = sorted(set(cfg) - _CONFIG_KEYS)
-        if unknown:
-            raise ValueError(f"{self.name}: unknown config key(s) {unknown}; known: {sorted(_CONFIG_KEYS)}")
+        unknown_keys(self.name, cfg, _CONFIG_KEYS)
         k = lambda key: f"{self.name}: config[{key!r}]"  # noqa: E731
         address = cfg.get("address")
         if address is not None and (not isinstance(address, str) or not address.strip()):

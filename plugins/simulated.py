@@ -129,9 +129,7 @@ class SimulatedCamera(CameraBackend):
         return f"{self.name}: config[{key!r}]"
 
     def _parse(self, cfg):
-        unknown = sorted(set(cfg) - _CONFIG_KEYS)
-        if unknown:
-            raise ValueError(f"{self.name}: unknown config key(s) {unknown}; known: {sorted(_CONFIG_KEYS)}")
+        check.unknown_keys(self.name, cfg, _CONFIG_KEYS)
         k = self._key
         for key in ("t_e", "t_r"):
             if cfg.get(key) is None:
@@ -193,9 +191,7 @@ class SimulatedCamera(CameraBackend):
         sensor = cfg.get("sensor") or {}
         if not isinstance(sensor, dict):
             raise ValueError(f"{k('sensor')} must be a table of sensor options, got {sensor!r}")
-        unknown = sorted(set(sensor) - _SENSOR_KEYS)
-        if unknown:
-            raise ValueError(f"{self.name}: unknown sensor option(s) {unknown}; known: {sorted(_SENSOR_KEYS)}")
+        check.unknown_keys(self.name, sensor, _SENSOR_KEYS, what="sensor option")
         s = {key: sensor.get(key) for key in _SENSOR_KEYS}
         sk = lambda key: f"{self.name}: sensor[{key!r}]"  # noqa: E731
         if s["shot_noise_photons"] is not None:

@@ -14,7 +14,7 @@ Configuration (the ``[camera.config]`` table of a ``backend = "v4l2"`` camera in
     width = 640                # optional requested frame size; the driver picks the nearest it has
     height = 480
 
-Any other key (a typo such as ``adress``) is ignored with a ``UserWarning`` that names it,
+Any other key (a typo such as ``adress``) is refused with a ``ValueError`` that names it,
 suggests the closest accepted key and lists them all.
 
 Trigger
@@ -49,7 +49,7 @@ from rsocl_plugins.v4l2_stream import V4L2Stream
 __all__ = ["V4L2Camera", "EXPOSURE_UNIT", "PIXEL_FORMATS"]
 
 _MAX_BUFFERS = 32
-#: The keys of a camera's config this backend reads; any other is ignored with a warning.
+#: The keys of a camera's config this backend reads; any other is refused.
 _CONFIG_KEYS = ("device", "address", "pixel_format", "buffers", "width", "height")
 
 
@@ -63,8 +63,8 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         ``address`` arrives here as ``address``; both may be given only when they name
         the same node), ``pixel_format`` (``GREY``/``Y16``/``YUYV``, default the first
         the device offers in that order), ``buffers`` (default 4), optional ``width`` /
-        ``height``. See the module documentation for behaviour. Other keys are ignored with a
-        ``UserWarning`` naming them.
+        ``height``. See the module documentation for behaviour. Other keys are refused
+        (``ValueError`` naming them).
     name : str
         Name used in errors (default ``"v4l2 /dev/videoN"``).
 
@@ -82,7 +82,7 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         self.path = self._device_node()
         if name is None:
             self.name = f"v4l2 {self.path}"
-        unknown_keys(f"{self.name} config", self.config, _CONFIG_KEYS)
+        unknown_keys(self.name, self.config, _CONFIG_KEYS)
         buffers = self.config.get("buffers", 4)
         if isinstance(buffers, bool) or not isinstance(buffers, int) or not 1 <= buffers <= _MAX_BUFFERS:
             raise ValueError(f"{self.name}: buffers must be an integer in 1..{_MAX_BUFFERS}, got {buffers!r}")

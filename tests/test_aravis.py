@@ -143,7 +143,8 @@ def test_config_validation():
                         "packet_size": 9000}, name="c")
     assert (cam.address, cam.interfaces, cam.buffers, cam.packet_size) == ("10.0.0.2", ["GigEVision"], 3, 9000)
     assert AravisCamera().buffers == 8 and AravisCamera().address is None
-    for bad, match in (({"adress": "x"}, "unknown config key"), ({"address": 5}, "address"),
+    for bad, match in (({"adress": "x"}, r"unknown config key 'adress' \(did you mean 'address'\?\)"),
+                       ({"address": 5}, "address"),
                        ({"interfaces": "Fake"}, "interfaces"), ({"interfaces": []}, "interfaces"),
                        ({"buffers": 0}, "buffers"), ({"buffers": True}, "buffers"),
                        ({"packet_size": 100}, "packet_size")):

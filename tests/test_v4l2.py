@@ -556,21 +556,18 @@ def test_bad_config(config):
         V4L2Camera(config)
 
 
-def test_unknown_config_key_warns_with_the_closest_key_and_the_accepted_ones():
-    with pytest.warns(UserWarning, match=r"v4l2 /dev/video0 config: unknown key 'adress' \(did you mean "
-                                         r"'address'\?\) is ignored; accepted keys: \[") as record:
-        cam = V4L2Camera({"adress": "/dev/video2", "buffers": 2})
-    assert len(record) == 1 and record[0].filename == __file__  # points at the caller, not the plugin
-    message = str(record[0].message)
+def test_unknown_config_key_is_refused_with_the_closest_key_and_the_known_ones():
+    with pytest.raises(ValueError, match=r"^v4l2 /dev/video0: unknown config key 'adress' \(did you mean "
+                                         r"'address'\?\); known: \[") as info:
+        V4L2Camera({"adress": "/dev/video2", "buffers": 2})
     for key in ("address", "buffers", "device", "height", "pixel_format", "width"):
-        assert repr(key) in message.split("accepted keys:")[1]
-    assert cam.path == "/dev/video0" and cam.n_buffers == 2  # ignored, not raised: the rest is read
-    with pytest.warns(UserWarning, match=r"^left config: unknown keys 'bufers' \(did you mean 'buffers'\?\), "
-                                         r"'zzz' are ignored; accepted keys"):
+        assert repr(key) in str(info.value).split("known:")[1]
+    with pytest.raises(ValueError, match=r"^left: unknown config keys 'bufers' \(did you mean 'buffers'\?\), "
+                                         r"'zzz'; known"):
         V4L2Camera({"zzz": 1, "bufers": 3}, name="left")
 
 
-def test_known_config_keys_do_not_warn(recwarn):
+def test_known_config_keys_are_accepted(recwarn):
     V4L2Camera({"device": 1, "address": 1, "pixel_format": "GREY", "buffers": 2, "width": 640, "height": 480})
     assert not [w for w in recwarn if issubclass(w.category, UserWarning)]
 

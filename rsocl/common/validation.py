@@ -2,8 +2,7 @@
 
 Every public constructor in rsocl validates through these helpers so that
 messages look the same everywhere: the parameter's name, its value and the
-allowed range. :func:`unknown_keys` only warns: a settings table may carry
-keys an older or newer version reads.
+allowed range.
 """
 
 from __future__ import annotations
@@ -12,7 +11,6 @@ import contextlib
 import difflib
 import math
 import numbers
-import warnings
 
 import numpy as np
 
@@ -81,19 +79,19 @@ def choice(name: str, value, allowed) -> str:
     return value
 
 
-def unknown_keys(name: str, table, known, stacklevel: int = 2) -> list:
-    """Warn (``UserWarning``) about the keys of ``table`` that are not in ``known``; they are ignored.
+def unknown_keys(name: str, table, known, what: str = "config key") -> None:
+    """Refuse (``ValueError``) a ``table`` with keys not in ``known``.
 
-    The message names ``name`` and each unknown key, the closest known key when one is close
-    (``difflib.get_close_matches``: ``'adress'`` -> did you mean ``'address'``?) and the
-    accepted keys. ``stacklevel`` is as for :func:`warnings.warn`, counted from the caller
-    (2: the caller's caller). Returns the unknown keys, sorted (``[]``: no warning).
+    The message names ``name``, each unknown key with the closest known one when one is close
+    (``difflib.get_close_matches``: ``'adress'`` -> did you mean ``'address'``?) and the known
+    keys; ``what`` says what the keys are (``"config key"``, ``"sensor option"``).
 
     Examples
     --------
-    >>> unknown_keys("v4l2 /dev/video0: config", {"adress": 2}, ["address", "buffers"])  # doctest: +SKIP
-    UserWarning: v4l2 /dev/video0: config: unknown key 'adress' (did you mean 'address'?) is ignored;
-    accepted keys: ['address', 'buffers']
+    >>> unknown_keys("v4l2 /dev/video0", {"adress": 2}, ["address", "buffers"])
+    Traceback (most recent call last):
+    ...
+    ValueError: v4l2 /dev/video0: unknown config key 'adress' (did you mean 'address'?); known: ['address', 'buffers']
     """
     known = sorted(str(key) for key in known)
     unknown = sorted((key for key in table if key not in known), key=str)
@@ -102,10 +100,7 @@ def unknown_keys(name: str, table, known, stacklevel: int = 2) -> list:
         for key in unknown:
             close = difflib.get_close_matches(str(key), known, n=1)
             named.append(f"{key!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
-        keys = f"key {named[0]} is" if len(named) == 1 else f"keys {', '.join(named)} are"
-        warnings.warn(f"{name}: unknown {keys} ignored; accepted keys: {known}", UserWarning,
-                      stacklevel=stacklevel + 1)
-    return unknown
+        raise ValueError(f"{name}: unknown {what}{'s' if len(named) > 1 else ''} {', '.join(named)}; known: {known}")
 
 
 def real_dtype(name: str, dtype) -> np.dtype:
