@@ -44,7 +44,7 @@ def test_holdout_keeps_all_but_one_channel_per_pixel():
 @pytest.mark.parametrize("channels", range(1, 13))
 @pytest.mark.parametrize("shape", [(16, 16), (24, 40), (48, 32), (8, 200)])
 def test_default_folds_hold_out_every_camera_with_as_few_patterns_as_that_takes(channels, shape):
-    from rsocl.solver.tuning import default_folds
+    from rsocl.solver.tuning import FOLDS, default_folds
 
     period = max(channels, 2)
 
@@ -55,21 +55,63 @@ def test_default_folds_hold_out_every_camera_with_as_few_patterns_as_that_takes(
         return held.all()
 
     folds = default_folds(shape, channels)
-    assert 1 <= folds <= period and covered(folds)
-    assert folds == 1 or not covered(folds - 1)
+    assert FOLDS <= folds <= period and covered(folds)
+    assert folds == FOLDS or not covered(folds - 1)
 
 
-def test_more_cameras_than_one_pattern_holds_out_are_tuned_on_two_folds():
-    """8 cameras on 16x16: one pattern of 2x2 blocks holds out 4 of them; the search pools two
-    patterns (every camera held out once) and records it; 4 cameras keep one."""
+def test_the_search_pools_the_default_folds_and_records_them():
+    """16x16 pixels (blocks of 8x8): one pattern holds out each of 4 cameras, one camera of each
+    pixel; 8 cameras take two patterns, 12 cameras on 4x4 pixels (2x2 blocks of 2x2) three."""
     from rsocl.model.scenes import builtin_scene
+    from rsocl.solver.tuning import default_folds
 
     for cameras, folds in [(8, 2), (4, 1)]:
         rig = rsocl.Rig.paper_array(cameras, (16, 16), t_e=0.18e-3, t_r=35e-6)
         record = rsocl.reconstruct(ref.forward(rig, builtin_scene(rig.shape, rig.T)), rig,
                                    iterations=12).params["tuning"]
-        assert record["folds"] == folds
+        assert record["folds"] == folds and record["block"] == 8
         assert record["held_out_pixels"] == folds * 16 * 16          # one camera of each pixel per fold
+    assert default_folds((4, 4), 12) == 3
+
+
+def test_default_blocks_are_a_quarter_of_the_side_within_16_px_and_half_the_side():
+    from rsocl.solver.tuning import MIN_BLOCK, default_block
+
+    assert MIN_BLOCK == 16
+    sides = {(3, 3): 2, (4, 4): 2, (16, 16): 8, (24, 40): 12, (48, 32): 16, (48, 48): 16, (64, 64): 16,
+             (100, 64): 16, (128, 128): 32, (1024, 1280): 256}
+    assert {shape: default_block(shape) for shape in sides} == sides
+
+
+def test_default_patterns_take_each_scale_once():
+    from rsocl.solver.tuning import default_block, default_patterns
+
+    assert default_patterns((16, 16), 4) == [(default_block((16, 16)), 0)]
+    assert default_patterns((16, 16), 4, scales=((0.5, 1), (0.25, 2))) == [(8, 0), (4, 0), (4, 2)]
+    assert default_patterns((4, 4), 4, scales=((0.5, 1), (0.25, 1))) == [(2, 0)]      # both scales: 2x2 blocks
+
+
+def test_the_search_pools_given_patterns_of_several_block_sizes():
+    from rsocl.solver.problem import check_problem, check_settings, stage_on_device
+    from rsocl.solver.reconstruct import make_regularizer
+
+    rig = _rig()
+    g = ref.forward(rig, _static(rig))
+    tv = make_regularizer("tv")
+    problem = check_problem(g, rig)
+    settings = check_settings(iterations=20).settled_for(tv, "float32", scale=default_scale(rig))
+    staged = stage_on_device(problem, tv, settings, start=True)
+    args = (staged.op, staged.g, problem.g, rig, lambda options: make_regularizer("tv", options))
+    kwargs = dict(tunable={"temporal_weight": (1.0, 30.0)}, lam=settings.lam, eta=settings.eta, iterations=10)
+    record = tune_parameters(*args, patterns=[(12, 0), (6, 0), (6, 2)], **kwargs)
+    assert record.block == [12, 6] and record.folds == 3 and record.held_out == 3 * SHAPE[0] * SHAPE[1]
+    assert record.chosen["temporal_weight"] == 30.0                        # a static scene
+    with pytest.raises(ValueError, match="not both"):
+        tune_parameters(*args, patterns=[(6, 0)], block=6, **kwargs)
+    with pytest.raises(ValueError, match="at least one"):
+        tune_parameters(*args, patterns=[], **kwargs)
+    with pytest.raises(ValueError, match="pattern block"):
+        tune_parameters(*args, patterns=[(0, 0)], **kwargs)
 
 
 def test_static_scene_picks_a_strong_temporal_weight():
@@ -263,7 +305,7 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
     assert peak["search"] <= search_count + small
     assert peak["run"] <= run_count + small
     folds = result.params["tuning"]["folds"]
-    assert folds == (2 if cameras == 8 else 1)
+    assert folds == len(tuning.default_patterns(rig.shape, rig.n_channels))
     assert search_count - peak["search"] <= snap * (folds if batch is None else 0) + small
     assert run_count - peak["run"] <= (0 if saturated else sets * snap) + small
     if batch is not None:                           # the run's own check covers its search
@@ -275,6 +317,7 @@ def test_the_tuned_default_beats_interpolation_on_other_rigs(cameras, shape):
     """Arrays other than the paper's four cameras, non-square grids: the search runs, records a
     choice among its candidates, and the result is closer to the truth than interp3d."""
     from rsocl.analysis.metrics import psnr
+    from rsocl.solver.tuning import default_block
     from rsocl.model.interpolation import interp3d
     from rsocl.model.scenes import builtin_scene
 
@@ -283,7 +326,7 @@ def test_the_tuned_default_beats_interpolation_on_other_rigs(cameras, shape):
     g = ref.forward(rig, truth)
     res = rsocl.reconstruct(g, rig, iterations=40)
     record = res.params["tuning"]
-    assert record["block"] == min(shape) // 2 and record["held_out_pixels"] > 0
+    assert record["block"] == default_block(shape) and record["held_out_pixels"] > 0
     assert any(c["lam"] == record["chosen"]["lam"] and c["temporal_weight"] == record["chosen"]["temporal_weight"]
                for c in record["candidates"])
     assert psnr(res.datacube, truth) > psnr(interp3d(g, rig), truth) + 0.5
@@ -301,5 +344,7 @@ def test_the_search_summary_says_how_pixels_were_held_out(tmp_path):
     assert f"{len(record['candidates'])} candidates" in line and line.endswith(" s")
     one = {**record, "folds": 1, "iterations_per_candidate": 20}
     assert "1 hold-out fold, 512 held-out pixels, 20 iterations per candidate, " in search_summary(one)
+    sizes = {**record, "block": [8, 4]}
+    assert search_summary(sizes).startswith("blocks of 8 and 4 px, 2 hold-out folds")
     assert "fold" in search_summary({"candidates": []})                 # an older record without these keys
     assert tuning_plot(tmp_path / "t.png", record).stat().st_size > 0

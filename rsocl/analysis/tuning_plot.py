@@ -20,8 +20,10 @@ def search_summary(record) -> str:
     held-out pixels, ADMM iterations per candidate and per fold, candidates and seconds (what the
     record has of them)."""
     parts = []
-    if record.get("block"):
-        parts.append(f"blocks of {record['block']} px")
+    block = record.get("block")
+    if block:
+        sides = [block] if isinstance(block, (int, float)) else list(block)
+        parts.append(f"blocks of {' and '.join(str(b) for b in sides)} px")
     folds = int(record.get("folds", 1) or 1)
     parts.append(f"{folds} hold-out fold" + ("s" if folds > 1 else ""))
     if record.get("held_out_pixels"):

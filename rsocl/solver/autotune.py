@@ -19,7 +19,7 @@ from rsocl.solver.admm import state_bytes
 from rsocl.solver.batch import memory_bytes, problem_bytes, workspace_memory
 from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
-from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, can_hold_out, default_folds, tune_parameters
+from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, can_hold_out, default_patterns, tune_parameters
 
 __all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options", "search_memory", "search_peak",
            "starts_from_interpolation", "interpolation_start"]
@@ -83,7 +83,7 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     (None: searched). ``lam`` candidates are the settled ``lam`` times
     :data:`~rsocl.solver.tuning.LAM_FACTORS`; each candidate runs
     :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations``, split among the
-    hold-out folds (:func:`~rsocl.solver.tuning.default_folds`; at least 10 per fold). When the
+    hold-out patterns (:func:`~rsocl.solver.tuning.default_patterns`; at least 10 per pattern). When the
     folds leave no pixels to fit or to score (:func:`~rsocl.solver.tuning.can_hold_out`: one camera
     on 2x2 pixels or fewer, or too few valid pixels) a warning says so and None is returned.
     Unless ``checked`` (the caller did it, for a batch), the search's memory beside the staged
@@ -101,12 +101,12 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     tunable, lam, fixed = search
     if not checked:
         _check_search_fits(problem, staged, settings, reg)
-    folds = default_folds(problem.rig.shape, problem.rig.n_channels)
+    folds = len(default_patterns(problem.rig.shape, problem.rig.n_channels))
     return tune_parameters(
         staged.op, staged.g, problem.g, problem.rig,
         lambda options: with_options(regularizer, reg, user_options, options, settings.tv_iterations, make),
         tunable=tunable, lam=lam, eta=_first(settings.eta), projection=settings.projection, valid=problem.valid,
-        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / folds)), folds=folds, fixed=fixed,
+        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / folds)), fixed=fixed,
         progress=progress)
 
 
@@ -117,7 +117,7 @@ def interpolation_start(problem, staged):
 
 def search_memory(op, reg, projection: str, batch) -> int:
     """Device bytes the search allocates beside the staged problem, freed before the run's solver is
-    made: per hold-out fold (:func:`~rsocl.solver.tuning.default_folds`) one set's ADMM arrays, its
+    made: per hold-out pattern (:func:`~rsocl.solver.tuning.default_patterns`) one set's ADMM arrays, its
     warm start, held-out weights and regularizer workspace (a fold's solver keeps the previous
     candidate's regularizer until its own turn); and for a batch (``batch`` sets, None: one set)
     the first set staged on its own (operator geometry and snapshots)."""
@@ -126,7 +126,7 @@ def search_memory(op, reg, projection: str, batch) -> int:
     snap = op.K * int(np.prod(cube[1:])) * itemsize
     per_fold = (state_bytes(cube, op.K, op.dtype, projection, 1) + int(np.prod(cube)) * itemsize + snap
                 + workspace_memory(cube, op.dtype, reg, 1))
-    extra = default_folds(op.rig.shape, op.K) * per_fold
+    extra = len(default_patterns(op.rig.shape, op.K)) * per_fold
     if batch is not None:
         extra += problem_bytes(cube, op.K, op.dtype, 1)
     return extra

@@ -7,9 +7,9 @@ The reference grid is cut into square blocks of ``block`` pixels; in each block 
 (:func:`holdout`). An ADMM run on the remaining snapshot pixels, with candidate parameters,
 predicts the held-out ones as ``H theta``; the criterion is the relative prediction error
 ``‖g - H theta‖ / ‖g‖`` over the held-out pixels. No ground truth enters: only the snapshots,
-the rig and the saturation mask. When one pattern of blocks holds out fewer cameras than the rig
-has (6 or 8 cameras on 2x2 blocks), patterns with the held-out channels shifted are pooled until
-every camera is held out somewhere (:func:`default_folds`).
+the rig and the saturation mask. When one pattern of blocks leaves a camera never held out (more
+cameras than the pattern's blocks hold out), patterns with the held-out channels shifted are
+pooled until every camera is held out somewhere (:func:`default_patterns`).
 
 Why blocks of one channel: a camera reads a whole line at one instant, so a held-out pixel
 whose line neighbours were fitted is predicted from them (same instant, one pixel away)
@@ -47,58 +47,67 @@ from rsocl.device.reduction import sum_sq_diff
 from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import ADMM
 
-__all__ = ["LAM_FACTORS", "FOLDS", "CANDIDATE_FRACTION", "holdout", "default_block", "default_folds", "fold_masks",
-           "can_hold_out", "Tuning", "tune_parameters"]
+__all__ = ["LAM_FACTORS", "FOLDS", "MIN_BLOCK", "CANDIDATE_FRACTION", "holdout", "default_block", "default_folds",
+           "fold_patterns", "default_patterns", "fold_masks", "can_hold_out", "Tuning", "tune_parameters"]
 
 #: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
 LAM_FACTORS = (0.3, 1.0, 3.0)
-#: Hold-out patterns when one pattern already holds out every camera (:func:`default_folds`). Two
-#: folds (a camera, then the opposite one) were measured no better on the tuning set of
-#: ``benchmarks/quality.py`` (4 cameras, 64x64; PSNR in dB, one fold / two): built-in 18.13 / 18.08,
-#: twice as fast 16.11 / 16.11, Runner at 1 21.48 / 21.16, at 0.5 24.30 / 24.30, Traffic 17.69 /
-#: 17.69, for twice the cost.
+#: Hold-out patterns pooled at least (:func:`default_folds`; more when one pattern leaves a camera
+#: never held out): fold ``k`` shifts the held-out cameras by ``k*P // folds``.
 FOLDS = 1
-#: ADMM iterations per candidate, as a fraction of the final run's iterations (at least 10):
-#: seven candidates cost about 1.75 final runs.
+#: Smallest hold-out block side, pixels, where the grid allows (:func:`default_block`).
+MIN_BLOCK = 16
+#: ADMM iterations per candidate, as a fraction of the final run's iterations, split among the
+#: hold-out patterns (at least 10 each): at the default 200 iterations, 50; the search's 8
+#: candidates cost about 2 final runs.
 CANDIDATE_FRACTION = 0.25
 
 
 def default_block(shape) -> int:
-    """Side of the hold-out blocks, pixels: half the grid's smaller side, at least 2.
+    """Side of the hold-out blocks, pixels: a quarter of the grid's smaller side, but at least
+    :data:`MIN_BLOCK` pixels and at most half the side (and at least 2).
 
-    With 4 cameras each one is held out of one quadrant. Measured in ``benchmarks/quality.py``'s
-    tuning set (64x64, noiseless; PSNR in dB of the tuned run for blocks of 1/2, 1/4 and 1/8 of
-    the side): Runner at 0.5 frames per sub-frame 24.30 / 23.79 / 24.30, Runner at 1 21.48 /
-    21.16 / 20.39, Traffic 17.70 / 17.70 / 17.70, the built-in scene 18.19 / 18.19 / 18.13.
+    Blocks of a quarter of the side spread each camera's held-out pixels over the image, so every
+    camera is tested on moving and on still parts of the scene; with blocks of half the side, each
+    of 4 cameras is held out of one quadrant only and the choice follows that quadrant's content.
+    Blocks of a few pixels let the held-out pixels be predicted from fitted neighbours, which
+    rewards spatial smoothing, hence the floor. Measured with ``benchmarks/tuning_design.py`` and
+    the quality benchmarks at equal search cost (the choice's PSNR minus the best point of the
+    grid, mean / worst; a quarter of the side against half of it, the previous rule):
+
+    - 16 cases at 64x64 with 200 iterations, rigs rotated other than the paper's 0/90/180/270
+      degrees and 3 or 7 cameras (``docs/tuning_design_64.md``): -0.10 / -0.41 dB against
+      -0.17 / -1.03 dB;
+    - ``benchmarks/quality.py`` (paper array, 64x64 and 128x128, 16 cases): -0.03 / -0.52 dB
+      against -0.07 / -0.76 dB;
+    - 64 cases at 48x48, 100 iterations (``docs/tuning_design.md``, where the floor gives blocks
+      of a third of the side): a quarter -0.07 / -0.62 dB, a third -0.09 / -1.10 dB, half
+      -0.11 / -1.14 dB;
+    - ``benchmarks/tuning_configs.py`` (16x16 to 48x32 pixels, where the floor keeps the blocks
+      of the previous rule): a quarter of the side lost to the fixed defaults by up to 1.41 dB
+      (mean +0.02 dB over them) against up to 0.62 dB (mean +0.26 dB) with the floor.
     """
-    return max(2, int(round(min(shape) / 2)))
+    return max(2, min(int(round(min(shape) / 2)), max(MIN_BLOCK, int(round(min(shape) / 4)))))
 
 
-def default_folds(shape, channels: int, block: int | None = None) -> int:
-    """Hold-out patterns :func:`tune_parameters` pools by default: :data:`FOLDS`, or more until every
-    camera is held out of some block (fold ``k`` shifts the held-out channels by ``k*P // folds``).
+def default_folds(shape, channels: int, block: int | None = None, minimum: int = None) -> int:
+    """Hold-out patterns :func:`tune_parameters` pools by default: ``minimum`` (None: :data:`FOLDS`),
+    or more until every camera is held out of some block (fold ``k`` shifts the held-out channels by
+    ``k*P // folds``). A camera never held out would never test the candidates.
 
-    With 4 cameras and 2x2 blocks one pattern holds out each camera once; with 6 or 8 cameras it
-    holds out only 4 of them, and a camera never held out never tests the candidates. The search
-    (:func:`rsocl.solver.autotune.choose_unset`) splits the candidate iterations among the folds,
-    so it takes about what one fold did (1.04x and 1.09x the search time of one fold, 6 cameras
-    at 48x32 and 8 at 64x64, medians of 5 alternating rounds).
-
-    Measured (``benchmarks/tuning_configs.py`` rigs, 6 and 8 cameras on 16x16 and 48x32, 100
-    iterations; 36 cases: the built-in scene at three speeds and with noise, Runner and Traffic at
-    several speeds, a zoomed crop and with noise), two folds of half the iterations each against
-    one fold: the tuned run's PSNR +0.14 dB on average (from -0.76 to +1.16 dB; 17 cases
-    unchanged; the built-in scene +0.41 dB, the videos -0.00 dB). On the 12 of them also run on a
-    fixed grid (temporal weight 1, 3, 10 x lam 0.03, 0.1, 0.3; built-in scene, Runner and Traffic
-    at 1 frame per sub-frame) the largest loss to the grid's best setting falls from 1.89 to
-    0.73 dB. Two folds of the full iterations gave +0.09 dB on average for about 1.5x the time.
+    One pattern by default: splitting the same candidate iterations between two patterns (each
+    camera tested on twice the blocks, each run half as long) was no better across sizes in
+    ``benchmarks/tuning_design.py`` (mean / worst loss to the grid's best, blocks of a quarter of
+    the side: -0.07 / -0.51 dB at 48x48, -0.19 / -0.78 dB at 64x64, against -0.07 / -0.62 and
+    -0.10 / -0.41 dB with one pattern), nor was pooling blocks of half and of a quarter of the side.
     """
     m, n = check.grid_shape("shape", shape)
     channels = check.positive_int("channels", channels)
     block = default_block((m, n)) if block is None else check.positive_int("block", block)
     blocks = (-(-m // block), -(-n // block))              # the pattern on the grid of blocks
     period = max(channels, 2)
-    for folds in range(FOLDS, period + 1):
+    minimum = FOLDS if minimum is None else check.positive_int("minimum", minimum)
+    for folds in range(min(minimum, period), period + 1):
         covered = np.zeros(channels, bool)
         for k in range(folds):
             covered |= holdout(blocks, channels, 1, shift=(k * period) // folds).any(axis=(1, 2))
@@ -126,23 +135,48 @@ def holdout(shape, channels: int, block: int | None = None, shift: int = 0) -> n
     return np.stack([which == k for k in range(channels)])
 
 
-def fold_masks(shape, channels: int, usable, block: int, folds: int):
-    """Per hold-out fold, ``(fit, scored)``: the usable snapshot pixels (``(channels, m, n)`` bool)
-    that fit the candidates and those held out to score them."""
+def fold_patterns(channels: int, block: int, folds: int) -> list:
+    """``folds`` hold-out patterns of blocks of ``block`` pixels, ``[(block, shift), ...]``: fold ``k``
+    shifts the held-out channels by ``k*P // folds`` (:func:`holdout`)."""
     period = max(channels, 2)
-    for k in range(folds):
-        held = holdout(shape, channels, block, shift=(k * period) // folds)
+    return [(int(block), (k * period) // int(folds)) for k in range(int(folds))]
+
+
+def default_patterns(shape, channels: int, scales=None) -> list:
+    """The hold-out patterns :func:`tune_parameters` pools by default, ``[(block, shift), ...]``:
+    :func:`default_folds` patterns of :func:`default_block` blocks. ``scales`` (``(fraction,
+    count)`` pairs, for comparing designs) pools instead, per scale, blocks of that fraction of the
+    grid's smaller side (at least 2 pixels) in :func:`default_folds` patterns (at least ``count``);
+    a pattern two scales share (small grids) is used once."""
+    m, n = check.grid_shape("shape", shape)
+    channels = check.positive_int("channels", channels)
+    if scales is None:
+        block = default_block((m, n))
+        return fold_patterns(channels, block, default_folds((m, n), channels, block))
+    patterns = []
+    for fraction, count in scales:
+        block = max(2, int(round(min(m, n) * fraction)))
+        for pattern in fold_patterns(channels, block, default_folds((m, n), channels, block, minimum=count)):
+            if pattern not in patterns:
+                patterns.append(pattern)
+    return patterns
+
+
+def fold_masks(shape, channels: int, usable, patterns):
+    """Per hold-out pattern ``(block, shift)``, ``(fit, scored)``: the usable snapshot pixels
+    (``(channels, m, n)`` bool) that fit the candidates and those held out to score them."""
+    for block, shift in patterns:
+        held = holdout(shape, channels, block, shift=shift)
         yield usable & ~held, usable & held
 
 
 def can_hold_out(shape, channels: int, valid=None) -> bool:
-    """Whether every default hold-out fold (:func:`default_block`, :func:`default_folds`) keeps
-    snapshot pixels both to fit and to score, among the ``valid`` ones (None: all). Not so for one
-    camera on a grid of 2x2 pixels or fewer, whose one block holds the only camera out."""
-    block = default_block(shape)
+    """Whether every default hold-out pattern (:func:`default_patterns`) keeps snapshot pixels both
+    to fit and to score, among the ``valid`` ones (None: all). Not so for one camera on a grid of
+    2x2 pixels or fewer, whose one block holds the only camera out."""
     usable = np.ones((channels,) + tuple(shape), bool) if valid is None else np.asarray(valid, bool)
     return all(fit.any() and scored.any()
-               for fit, scored in fold_masks(shape, channels, usable, block, default_folds(shape, channels, block)))
+               for fit, scored in fold_masks(shape, channels, usable, default_patterns(shape, channels)))
 
 
 @dataclass
@@ -160,12 +194,13 @@ class Tuning:
         Parameters the caller fixed (not searched).
     iterations : int
         ADMM iterations per candidate.
-    block : int
-        Side of the hold-out blocks, pixels.
+    block : int or list of int
+        Side of the hold-out blocks, pixels (the sides, largest first, when patterns of several
+        sides were pooled).
     held_out : int
         Snapshot pixels held out (over all folds).
     folds : int
-        Hold-out patterns pooled (:func:`default_folds`).
+        Hold-out patterns pooled (:func:`default_patterns`).
     seconds : float
         Wall time of the whole search, seconds.
     """
@@ -174,7 +209,7 @@ class Tuning:
     candidates: list = field(default_factory=list)
     fixed: dict = field(default_factory=dict)
     iterations: int = 0
-    block: int = 0
+    block: int | list = 0
     held_out: int = 0
     seconds: float = 0.0
     folds: int = 1
@@ -209,7 +244,8 @@ def _midpoints(values, best):
 
 
 def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta, projection="exact",
-                    valid=None, iterations=60, block=None, folds=None, fixed=None, progress=False) -> Tuning:
+                    valid=None, iterations=60, block=None, folds=None, patterns=None, fixed=None,
+                    progress=False) -> Tuning:
     """Search the parameters that predict held-out snapshot pixels best (see the module doc).
 
     Parameters
@@ -232,13 +268,15 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
     valid : ndarray of bool or None
         Snapshot pixels usable at all (saturated ones left out).
     iterations : int
-        ADMM iterations per candidate.
-    block : int or None
-        Side of the hold-out blocks (default :func:`default_block`).
-    folds : int or None
-        Hold-out patterns (default :func:`default_folds`); fold ``k`` shifts the held-out channels by ``k*P // folds``
+        ADMM iterations per candidate and hold-out pattern.
+    block, folds : int or None
+        Blocks of ``block`` pixels (default :func:`default_block`) in ``folds`` patterns (default
+        :func:`default_folds`); fold ``k`` shifts the held-out channels by ``k*P // folds``
         (:func:`holdout`), so with 2 folds and 4 cameras each block leaves out a camera and
-        then the opposite one. The criterion pools the held-out errors of all folds.
+        then the opposite one. Both None (and no ``patterns``): :func:`default_patterns`.
+    patterns : list of (int, int) or None
+        The hold-out patterns as ``(block, shift)`` pairs, instead of ``block`` and ``folds``.
+        The criterion pools the held-out errors of all patterns.
     fixed : dict or None
         Parameters the caller fixed, recorded in the result.
     progress : bool
@@ -252,14 +290,24 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
 
     start = time.perf_counter()
     iterations = check.positive_int("tuning iterations", iterations)
-    block = default_block(rig.shape) if block is None else check.positive_int("block", block)
     lams = [float(lam)] if np.isscalar(lam) else [float(v) for v in lam]
-    folds = check.positive_int("folds", default_folds(rig.shape, rig.n_channels, block) if folds is None else folds)
+    if patterns is None and block is None and folds is None:
+        patterns = default_patterns(rig.shape, rig.n_channels)
+    elif patterns is None:
+        block = default_block(rig.shape) if block is None else check.positive_int("block", block)
+        folds = default_folds(rig.shape, rig.n_channels, block) if folds is None else folds
+        patterns = fold_patterns(rig.n_channels, block, check.positive_int("folds", folds))
+    elif block is not None or folds is not None:
+        raise ValueError("give the hold-out patterns or block and folds, not both")
+    patterns = [(check.positive_int("pattern block", b), int(shift)) for b, shift in patterns]
+    if not patterns:
+        raise ValueError("patterns must hold at least one (block, shift) pair, got none")
+    blocks = sorted({b for b, _ in patterns}, reverse=True)
     held_out = 0
     usable = np.ones((rig.n_channels,) + rig.shape, bool) if valid is None else np.asarray(valid, bool)
     solved = _solved(rig, op)
     parts = []                    # per fold: fitted pixels, their warm start, the held-out weights
-    for fit, scored in fold_masks(rig.shape, rig.n_channels, usable, block, folds):
+    for (block, _), (fit, scored) in zip(patterns, fold_masks(rig.shape, rig.n_channels, usable, patterns)):
         if not scored.any() or not fit.any():
             raise ValueError(f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
                              f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}"
@@ -324,7 +372,8 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
         if bar is not None:
             bar.close()
     return Tuning(chosen=dict(current), candidates=candidates, fixed=dict(fixed or {}), iterations=iterations,
-                  block=block, held_out=held_out, seconds=time.perf_counter() - start, folds=folds)
+                  block=blocks[0] if len(blocks) == 1 else blocks, held_out=held_out,
+                  seconds=time.perf_counter() - start, folds=len(patterns))
 
 
 def _solved(rig, op) -> slice:
