@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from rsocl.files.atomic import atomic_path
-from rsocl.files.hdf5 import (Capture, Reconstruction, load_capture, load_reconstruction, save_capture,
-                      save_reconstruction)
+from rsocl.files.hdf5 import (Capture, Reconstruction, load_capture, load_capture_rig, load_reconstruction,
+                              save_capture, save_reconstruction)
 from rsocl.model.rig import Camera, Rig
 
 SHAPE = (9, 7)
@@ -97,6 +97,22 @@ def test_capture_validation(tmp_path, rig, snapshots, truth):
     with pytest.raises(ValueError, match="rig"):
         save_capture(path, snapshots, rig.to_dict())
     assert _listing(tmp_path) == []
+
+
+def test_capture_rig_is_read_without_the_snapshots(tmp_path, rig, snapshots, truth):
+    path = save_capture(tmp_path / "cap.h5", snapshots, rig, truth=truth)
+    header = load_capture_rig(path)
+    assert header == load_capture(path).rig == rig
+    np.testing.assert_array_equal(header.cameras[1].row_map, rig.cameras[1].row_map)
+    with h5py.File(path, "a") as h5:                    # no snapshots at all: the rig is still read
+        del h5["snapshots"]
+    assert load_capture_rig(path) == rig
+    with pytest.raises(ValueError, match="snapshots"):
+        load_capture(path)
+    with pytest.raises(ValueError, match="reconstruction"):
+        load_capture_rig(save_reconstruction(tmp_path / "rec.h5", truth, rig))
+    with pytest.raises(FileNotFoundError):
+        load_capture_rig(tmp_path / "missing.h5")
 
 
 def test_load_rejects_wrong_files(tmp_path, rig, snapshots, truth):

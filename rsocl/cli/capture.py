@@ -37,9 +37,9 @@ def cmd_capture(args) -> int:
         print(f"rsocl capture: error: {exc}", file=sys.stderr)
         return 1
     if not quiet:
-        from rsocl.files.hdf5 import load_capture
+        from rsocl.files.hdf5 import load_capture_rig
 
-        rig = load_capture(path).rig
+        rig = load_capture_rig(path)
         print(f"wrote {path}: {args.sets} set(s) from {rig.C} camera(s), {rig.shape[0]}x{rig.shape[1]}, "
               f"T = {rig.T} sub-frames", flush=True)
     return 0

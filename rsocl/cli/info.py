@@ -32,9 +32,9 @@ def check_info_args(args) -> None:
 
 def cmd_info(args) -> int:
     """Print one ``key  value`` line per quantity of the rig; returns 0."""
-    from rsocl.files.hdf5 import load_capture
+    from rsocl.files.hdf5 import load_capture_rig
 
-    rig = load_capture(args.capture).rig if args.capture else rig_from(args)
+    rig = load_capture_rig(args.capture) if args.capture else rig_from(args)
     m, n = rig.shape
     rows = [
         ("cameras", f"{rig.C} ({rig.n_channels} snapshots)"),

@@ -31,7 +31,8 @@ from rsocl.files.atomic import atomic_path
 from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, open_checked, read_rig, str_attr, write_header
 from rsocl.model.rig import Rig
 
-__all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_snapshot_sets", "snapshot_set_count",
+__all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_capture_rig", "load_snapshot_sets",
+           "snapshot_set_count",
            "save_reconstruction", "load_reconstruction", "FORMAT_VERSION"]
 
 
@@ -182,6 +183,16 @@ def load_capture(path) -> Capture:
             raise ValueError(f"{source}: dataset 'snapshots' is missing")
         return Capture(snapshots=h5["snapshots"][()], rig=rig, truth=_optional(h5, "truth"),
                        meta=json.loads(str_attr(h5, "meta", source)))
+
+
+def load_capture_rig(path) -> Rig:
+    """The rig of a capture file (as :func:`load_capture` returns it), reading no snapshots.
+
+    Raises the errors of :func:`load_capture` for a missing file, another kind of file or a
+    damaged rig description.
+    """
+    with open_checked(path, "capture") as h5:
+        return read_rig(h5, str(path))
 
 
 def snapshot_set_count(path) -> int:
