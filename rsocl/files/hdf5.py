@@ -32,8 +32,7 @@ from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, open_checked, re
 from rsocl.model.rig import Rig
 
 __all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_capture_rig", "load_snapshot_sets",
-           "snapshot_set_count",
-           "save_reconstruction", "load_reconstruction", "FORMAT_VERSION"]
+           "snapshot_set_count", "save_reconstruction", "load_reconstruction", "FORMAT_VERSION"]
 
 
 @dataclass(frozen=True)

@@ -101,13 +101,13 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     tunable, lam, fixed = search
     if not checked:
         _check_search_fits(problem, staged, settings, reg)
-    folds = len(default_patterns(problem.rig.shape, problem.rig.n_channels))
+    patterns = default_patterns(problem.rig.shape, problem.rig.n_channels)
     return tune_parameters(
         staged.op, staged.g, problem.g, problem.rig,
         lambda options: with_options(regularizer, reg, user_options, options, settings.tv_iterations, make),
         tunable=tunable, lam=lam, eta=_first(settings.eta), projection=settings.projection, valid=problem.valid,
-        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / folds)), fixed=fixed,
-        progress=progress)
+        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / len(patterns))), patterns=patterns,
+        fixed=fixed, progress=progress)
 
 
 def interpolation_start(problem, staged):

@@ -109,8 +109,8 @@ def default_folds(shape, channels: int, block: int | None = None, minimum: int =
     minimum = FOLDS if minimum is None else check.positive_int("minimum", minimum)
     for folds in range(min(minimum, period), period + 1):
         covered = np.zeros(channels, bool)
-        for k in range(folds):
-            covered |= holdout(blocks, channels, 1, shift=(k * period) // folds).any(axis=(1, 2))
+        for _, shift in fold_patterns(channels, 1, folds):
+            covered |= holdout(blocks, channels, 1, shift=shift).any(axis=(1, 2))
         if covered.all():
             return folds
     return period
