@@ -102,8 +102,8 @@ def run_baseline(g, rig, truth, dtype, params):
 
 
 def rsocl_params(params):
-    # the baseline's TV is scikit-image's 3-D TV: the same algorithm is temporal_weight 1
-    return dict(params, regularizer_options={"temporal_weight": 1.0}, tune=False)
+    # the baseline's TV is scikit-image's 3-D TV: the same algorithm is temporal_weight 1 at scikit-image's step
+    return dict(params, regularizer_options={"temporal_weight": 1.0, "step": 1.0}, tune=False)
 
 
 def run_rsocl(g, rig, truth, dtype, params, device):

@@ -83,7 +83,7 @@ def denoise(image, weight, iterations, a, b, w, p):
     from ``p = 0`` and with ``a = 0`` this is :func:`rsocl.model.reference.tv_chambolle`.
 
     The step ``tau = 2 / |K|²`` with ``|K|² <= 16 a² + 4 max(b w)² + 8``: for ``a = 0`` and a
-    uniform ``w`` it is rsocl's TV step ``1 / (2 (2 + (b w)²))``.
+    uniform ``w`` it is scikit-image's step ``1 / (2 (2 + (b w)²))`` (rsocl's TV with ``step=1``).
     """
     tau = 1.0 / (8.0 * a * a + 2.0 * float(np.max(b * w)) ** 2 + 4.0)
     for i in range(iterations):

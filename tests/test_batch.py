@@ -7,6 +7,7 @@ import rsocl
 from rsocl.model import reference as ref
 from rsocl.model.interpolation import interp3d
 from rsocl.solver.sets import batch_size, reconstruct_sets
+from rsocl_plugins.tv import STEP
 
 from conftest import SMALL
 
@@ -52,7 +53,7 @@ def test_batch_matches_the_numpy_reference(sets, dtype):
     got = rsocl.reconstruct(g, rig, dtype=dtype, regularizer_options={"temporal_weight": 2.0}, tune=False,
                             **kw).datacube
     for i in range(3):
-        want = ref.admm(rig, g[i], temporal_weight=2.0, **kw)
+        want = ref.admm(rig, g[i], temporal_weight=2.0, step=STEP, **kw)
         np.testing.assert_allclose(got[i], want, atol=(2e-4 if dtype == "float32" else 1e-10) * np.abs(want).max())
 
 
@@ -103,12 +104,12 @@ def test_operator_and_tv_take_a_batch_in_one_call(device, dtype, rng):
     x[1, 0] = 0.75                                          # an edge in time inside the second set
     tv = TV(iterations=6, temporal_weight=1.5)
     out = tv.denoise(cla.to_device(device.queue, x), [0.2, 0.0]).get()
-    want = ref.tv_chambolle(x[0], 0.2, 6, 1.5)
+    want = ref.tv_chambolle(x[0], 0.2, 6, 1.5, STEP)
     np.testing.assert_allclose(out[0], want, atol=1e-4 if dtype == "float32" else 1e-10)
     np.testing.assert_array_equal(out[1], x[1])             # weight 0: the set is copied
     both = tv.denoise(cla.to_device(device.queue, x), 0.3).get()
     for i in range(2):
-        np.testing.assert_allclose(both[i], ref.tv_chambolle(x[i], 0.3, 6, 1.5),
+        np.testing.assert_allclose(both[i], ref.tv_chambolle(x[i], 0.3, 6, 1.5, STEP),
                                    atol=1e-4 if dtype == "float32" else 1e-10)
 
 

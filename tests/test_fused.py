@@ -8,7 +8,7 @@ import pytest
 import rsocl
 from rsocl.model import reference as ref
 from rsocl.testing import check_regularizer
-from rsocl_plugins.tv import TV
+from rsocl_plugins.tv import STEP, TV
 
 #: Local memory and work-group limits of a small device: tiles of a few hundred voxels with halos.
 SMALL_GROUP = dict(max_work_group_size=16, max_work_item_sizes=(8, 8, 8))
@@ -49,7 +49,7 @@ def test_fused_tv_equals_plain_tv(device, dtype, rng, shape, local_bytes, tempor
     assert plan.local[0] * plan.local[1] <= 16 and max(plan.local) <= 8
     assert plan.local_values() * x.itemsize <= local_bytes
     np.testing.assert_allclose(fused, plain, rtol=0, atol=_tol(dtype))
-    want = ref.tv_chambolle(x[0] if x.ndim == 4 else x, 0.2, 7, temporal_weight)
+    want = ref.tv_chambolle(x[0] if x.ndim == 4 else x, 0.2, 7, temporal_weight, STEP)
     np.testing.assert_allclose(fused[0] if x.ndim == 4 else fused, want, atol=1e-4 if dtype == "float32" else 1e-10)
 
 

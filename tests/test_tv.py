@@ -5,7 +5,7 @@ import pytest
 from skimage.restoration import denoise_tv_chambolle
 
 from rsocl.model import reference as ref
-from rsocl_plugins.tv import TV
+from rsocl_plugins.tv import STEP, TV
 
 
 def _denoise(device, x, weight, dtype, **options):
@@ -20,7 +20,7 @@ def _denoise(device, x, weight, dtype, **options):
 @pytest.mark.parametrize("iterations", [1, 2, 15])
 def test_3d_matches_skimage(device, dtype, rng, shape, iterations):
     x = rng.random(shape)
-    got = _denoise(device, x, 0.25, dtype, iterations=iterations, temporal_weight=1.0)
+    got = _denoise(device, x, 0.25, dtype, iterations=iterations, temporal_weight=1.0, step=1.0)
     want = denoise_tv_chambolle(x.astype(dtype), weight=0.25, eps=0, max_num_iter=iterations)
     np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
 
@@ -28,17 +28,34 @@ def test_3d_matches_skimage(device, dtype, rng, shape, iterations):
 @pytest.mark.parametrize("iterations", [1, 3, 20])
 def test_2d_per_subframe_matches_skimage(device, dtype, rng, iterations):
     x = rng.random((5, 12, 10))
-    got = _denoise(device, x, 0.4, dtype, iterations=iterations, temporal_weight=0.0)
+    got = _denoise(device, x, 0.4, dtype, iterations=iterations, temporal_weight=0.0, step=1.0)
     want = np.stack([denoise_tv_chambolle(f.astype(dtype), weight=0.4, eps=0, max_num_iter=iterations) for f in x])
     np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
 
 
-@pytest.mark.parametrize("temporal_weight", [0.3, 2.0])
-def test_temporal_weight_matches_reference(device, dtype, rng, temporal_weight):
+@pytest.mark.parametrize("temporal_weight, step", [(0.3, STEP), (2.0, STEP), (2.0, 0.4), (1.0, 1.0)])
+def test_temporal_weight_and_step_match_reference(device, dtype, rng, temporal_weight, step):
     x = rng.random((6, 8, 9))
-    got = _denoise(device, x, 0.2, dtype, iterations=12, temporal_weight=temporal_weight)
-    want = ref.tv_chambolle(x, 0.2, 12, temporal_weight)
+    options = {} if step == STEP else {"step": step}
+    got = _denoise(device, x, 0.2, dtype, iterations=12, temporal_weight=temporal_weight, **options)
+    want = ref.tv_chambolle(x, 0.2, 12, temporal_weight, step)
     np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
+
+
+@pytest.mark.parametrize("temporal_weight", [0.0, 30.0])
+def test_default_step_damps_the_most_oscillating_mode(device, rng, temporal_weight):
+    """At a weight large against the image's differences, scikit-image's step (at the edge of
+    stability) leaves the mode alternating between neighbours undamped; the default step removes it."""
+    shape = (8, 6, 6)
+    if temporal_weight:
+        x = np.where(np.arange(shape[0]) % 2 == 0, 1.0, -1.0)[:, None, None] * np.ones(shape)
+    else:
+        x = np.where(np.indices(shape[1:]).sum(axis=0) % 2 == 0, 1.0, -1.0) * np.ones(shape)
+    x += 0.01 * rng.random(shape)
+    options = dict(iterations=10, temporal_weight=temporal_weight)
+    edge = _denoise(device, x, 100.0, "float64", step=1.0, **options)
+    default = _denoise(device, x, 100.0, "float64", **options)
+    assert np.abs(default).max() < 0.2 and np.abs(edge).max() > 0.35      # the input's amplitude: 1
 
 
 def test_more_weight_smooths_more(device, rng):
@@ -53,6 +70,8 @@ def test_weight_zero_is_identity(device, rng):
 
 
 def test_options_are_validated():
+    with pytest.raises(ValueError, match=r"option step must be in \[0.01, 1.0\], got 1.5"):
+        TV(step=1.5)
     with pytest.raises(ValueError, match="iterations"):
         TV(iterations=0)
     with pytest.raises(ValueError, match="temporal_weight"):

@@ -71,19 +71,20 @@ def project(rig: Rig, v, g, eta: float, projection: str = "exact") -> np.ndarray
     return np.asarray(v, dtype=np.float64) + adjoint(rig, z)
 
 
-def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float = 1.0) -> np.ndarray:
+def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float = 1.0,
+                 step: float = 1.0) -> np.ndarray:
     """Chambolle's isotropic TV of a ``(T, m, n)`` array, as ``skimage.restoration.denoise_tv_chambolle``.
 
-    With ``temporal_weight = 1`` this is scikit-image's 3-D algorithm (``eps = 0``:
-    exactly ``iterations`` iterations); with ``0`` it is its 2-D algorithm on each
-    sub-frame. Other values scale the temporal finite difference, with the step
-    ``tau = 1 / (2 (2 + temporal_weight²))``.
+    With ``temporal_weight = 1`` and ``step = 1`` this is scikit-image's 3-D algorithm
+    (``eps = 0``: exactly ``iterations`` iterations); with ``0`` it is its 2-D algorithm on
+    each sub-frame. Other values scale the temporal finite difference, with the step
+    ``tau = step / (2 (2 + temporal_weight²))`` (rsocl's TV plugin takes ``step`` 0.75 by default).
     """
     image = np.asarray(image, dtype=np.float64)
     if weight == 0:
         return image.copy()
     axis_weight = (float(temporal_weight), 1.0, 1.0)
-    tau = 1.0 / (2.0 * (2.0 + axis_weight[0] ** 2))
+    tau = float(step) / (2.0 * (2.0 + axis_weight[0] ** 2))
     p = np.zeros((3,) + image.shape)
     out = image
     for i in range(iterations):
@@ -103,10 +104,11 @@ def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float =
 
 
 def admm(rig: Rig, g, *, iterations: int, lam: float, eta: float, tv_iterations: int,
-         temporal_weight: float = 1.0, projection: str = "exact", x0=None) -> np.ndarray:
+         temporal_weight: float = 1.0, projection: str = "exact", x0=None, step: float = 1.0) -> np.ndarray:
     """The ADMM-TV of MODEL.md with the reference pieces above; returns ``theta``.
 
-    ``eta = 0`` is GAP: the dual ``b`` stays zero and the TV weight is ``lam``.
+    ``eta = 0`` is GAP: the dual ``b`` stays zero and the TV weight is ``lam``. ``step``: the TV
+    step of :func:`tv_chambolle`.
     """
     theta = np.zeros((rig.T,) + rig.shape) if x0 is None else np.asarray(x0, dtype=np.float64).copy()
     b = np.zeros_like(theta)
@@ -114,7 +116,7 @@ def admm(rig: Rig, g, *, iterations: int, lam: float, eta: float, tv_iterations:
     for _ in range(iterations):
         v = theta + b
         f = project(rig, v, g, eta, projection)
-        theta = tv_chambolle(f - b, weight, tv_iterations, temporal_weight)
+        theta = tv_chambolle(f - b, weight, tv_iterations, temporal_weight, step)
         if eta > 0:
             b = b - (f - theta)
     return theta
