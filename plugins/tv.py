@@ -60,7 +60,7 @@ class TV(Regularizer):
     the built-in scene and Runner, self-tuned) 0.75 gained +0.19 dB on average and removed the
     runs far below ``interp3d`` (worst -14.2 dB against it, now -3.3 dB, a single camera); on
     the paper array (64x64 and 128x128, 14 scenes) it stayed within 0.05 dB of scikit-image's
-    step, and half the step (Chambolle's proven bound) lost up to 0.53 dB there
+    step, and half the step (Chambolle's proven bound) lost up to 0.54 dB there
     (``benchmarks/tv_step.py``, ``docs/tv_step.md``).
 
     A batch ``(B, T, m, n)`` is denoised in the same launches as one set, each set on its own
