@@ -10,7 +10,11 @@ Three parts, each run at every ``--steps`` value:
   Runner at 1 frame per sub-frame (``../shared/data``; skipped without it); the self-tuned
   default (200 ADMM iterations), its PSNR against ``interp3d``'s;
 - **paper array**: 4 cameras, ``t_e`` = 180 µs, ``t_r`` = 35 µs, every scene of
-  ``benchmarks/quality_scenes.py`` at 64x64 and three at 128x128, self-tuned default;
+  ``benchmarks/quality_scenes.py`` at 64x64 and three at 128x128, self-tuned default (which starts
+  from ``interp3d``);
+- **fixed settings from zeros**: the same array, three scenes at each size, ``tune=False``
+  (``rsocl reconstruct --fast``: temporal weight 3, ``lam`` 0.1, start from zeros), where the
+  step sets how far 200 iterations get;
 - **large denoising weight**: a 7-camera rig of 41x11 pixels with exposures as short as a row
   (``lam`` 3, so ``lam / eta`` = 112), fixed settings, 200 iterations, four temporal weights.
 
@@ -32,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 from quality_scenes import DATA, make_scene, scene_names  # noqa: E402
 
-STEPS = (1.0, 0.75, 0.5)
+STEPS = (1.0, 0.9, 0.75, 0.5)
 PAPER_128 = ("builtin", "runner40@1", "traffic48@1")
 LARGE_WEIGHT_ANGLES = (215, 284, 328, 248, 68, 353, 103)
 
@@ -81,8 +85,9 @@ def chosen(result):
     return f"{tuning['chosen']['temporal_weight']:.3g} / {tuning['chosen']['lam']:.2g}"
 
 
-def tuned_cases(cases, steps, device):
-    """Self-tuned runs: one row per case, ``(name, interp3d, [(psnr, choice) per step])``."""
+def tuned_cases(cases, steps, device, **kw):
+    """Self-tuned runs (or as ``kw`` says, e.g. ``tune=False``): one row per case,
+    ``(name, interp3d, [(psnr, choice) per step])``."""
     import rsocl
     from rsocl.analysis.metrics import psnr
     from rsocl.model.interpolation import interp3d
@@ -94,7 +99,7 @@ def tuned_cases(cases, steps, device):
         base = psnr(interp3d(g, rig), truth, data_range=1.0)
         per = []
         for step in steps:
-            value, result = run(g, rig, truth, step, device)
+            value, result = run(g, rig, truth, step, device, **kw)
             per.append((value, chosen(result)))
         rows.append((name, base, per))
         print(f"{name}: interp3d {base:.2f} " + " ".join(f"{s:g}: {v:.2f}" for s, (v, _) in zip(steps, per)),
@@ -150,14 +155,16 @@ def main(argv=None):
         rig = random_rig(seed)
         for scene in rig_scenes:
             random_cases.append((f"seed {seed}: {rig.n_channels} cam, {rig.shape[0]}x{rig.shape[1]}, {scene}", rig, scene))
-    paper_cases = []
+    paper_cases, fixed_cases = [], []
     for size in args.sizes:
         rig = rsocl.Rig.paper_array(4, shape=(size, size), t_e=180e-6, t_r=35e-6)
         for scene in (scene_names() if size <= 64 else PAPER_128):
             if has_video(scene):
                 paper_cases.append((f"paper {size}x{size}, {scene}", rig, scene))
+        fixed_cases += [(f"paper {size}x{size}, {scene}", rig, scene) for scene in PAPER_128 if has_video(scene)]
     random_rows = tuned_cases(random_cases, args.steps, device)
     paper_rows = tuned_cases(paper_cases, args.steps, device)
+    fixed_rows = tuned_cases(fixed_cases, args.steps, device, tune=False)
 
     rig = rsocl.Rig([rsocl.Camera(angle=a, t_e=21e-6, t_r=21e-6) for a in LARGE_WEIGHT_ANGLES], shape=(41, 11))
     truth = builtin_scene(rig.shape, rig.T)
@@ -183,6 +190,9 @@ def main(argv=None):
         page += [f"## Random rigs ({len(random_rows)} cases)", ""] + summary(random_rows, args.steps) + [""]
     if paper_rows:
         page += [f"## Paper array ({len(paper_rows)} cases)", ""] + summary(paper_rows, args.steps) + [""]
+    if fixed_rows:
+        page += [f"## Fixed settings from zeros ({len(fixed_rows)} cases)", ""] + summary(fixed_rows, args.steps)
+        page += [""] + per_case(fixed_rows, args.steps) + [""]
     page += [f"## Large denoising weight (lam 3, eta {eta:.3g}, lam / eta = {3.0 / eta:.0f})", ""] + large + [""]
     if random_rows:
         page += ["## Random rigs, per case", ""] + per_case(random_rows, args.steps) + [""]
