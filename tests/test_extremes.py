@@ -117,8 +117,8 @@ def test_a_large_denoising_weight_stays_bounded(dtype, temporal_weight):
                             iterations=200, dtype=dtype)
     assert res.params["lam"] / res.params["eta"] > 100
     cube = res.datacube
-    assert -0.25 < cube.min() and cube.max() < 1.25
-    assert psnr(cube, truth, data_range=1.0) > 18.0
+    assert -0.5 < cube.min() and cube.max() < 1.5
+    assert psnr(cube, truth, data_range=1.0) > 15.0
 
 
 @pytest.mark.parametrize("eta", [0.0, 1e9])

@@ -78,7 +78,7 @@ def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float =
     With ``temporal_weight = 1`` and ``step = 1`` this is scikit-image's 3-D algorithm
     (``eps = 0``: exactly ``iterations`` iterations); with ``0`` it is its 2-D algorithm on
     each sub-frame. Other values scale the temporal finite difference, with the step
-    ``tau = step / (2 (2 + temporal_weight²))`` (rsocl's TV plugin takes ``step`` 0.75 by default).
+    ``tau = step / (2 (2 + temporal_weight²))`` (rsocl's TV plugin takes ``step`` 0.9 by default).
     """
     image = np.asarray(image, dtype=np.float64)
     if weight == 0:
