@@ -343,6 +343,26 @@ def test_reg_opt_iterations_and_tv_iterations_that_disagree_are_refused(tmp_path
 
 
 @pytest.mark.parametrize("extra, match", [
+    (["--reg-opt", "step=1.5"], "option step must be in [0.01, 1.0], got '1.5'"),
+    (["--reg-opt", "temporal_wieght=3"], "unknown option"),
+    (["--regularizer", "nope"], "unknown regularizer 'nope'"),
+    (["--regularizer", "dct", "--tv-iterations", "3"], "tv_iterations applies to iterative denoisers"),
+])
+def test_regularizer_and_its_options_are_checked_before_any_work(tmp_path, capsys, extra, match):
+    cap = tmp_path / "cap.h5"
+    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "8", "8", "--cameras", "2", "--quiet"]) == 0
+    commands = (["demo", "--out", str(tmp_path / "demo"), "--shape", "8", "8"],
+                ["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5")])
+    for argv in commands:                          # the demo simulated and printed its rig first
+        assert main(argv + extra) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "", captured.out
+        err = captured.err
+        assert err.startswith(f"rsocl {argv[0]}: error: ") and match in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "demo").exists() and not (tmp_path / "rec.h5").exists()
+
+
+@pytest.mark.parametrize("extra, match", [
     (["--noise", "gaussian"], "--noise gaussian needs --sigma (the standard deviation as a fraction of full scale, "
                               ">= 0); it has no default"),
     (["--noise", "poisson"], "--noise poisson needs --photons (photo-electrons at full scale, > 0); it has no default"),

@@ -185,18 +185,21 @@ def add_solver_args(p):
 def check_solver_args(args) -> None:
     """Refuse solver options that contradict each other, before the command runs (``rsocl.cli.main``
     calls it): ``--reg-opt iterations=N`` with a different ``--tv-iterations M`` (one of them was
-    silently ignored); a ``--reg-opt`` that is not ``KEY=VALUE``."""
+    silently ignored); a ``--reg-opt`` that is not ``KEY=VALUE``; an unknown ``--regularizer`` or an
+    option it refuses (name or range), before anything is simulated, loaded or run."""
+    from rsocl.solver.reconstruct import make_regularizer
+
     options = reg_options(args.reg_opt)
-    if args.tv_iterations is None or "iterations" not in options:
-        return
-    given = options["iterations"]
-    try:
-        same = int(given) == args.tv_iterations
-    except ValueError:
-        same = False
-    if not same:
-        raise ValueError(f"--reg-opt iterations={given} and --tv-iterations {args.tv_iterations} both set the "
-                         "regularizer's inner iterations, to different values; give one of them")
+    if args.tv_iterations is not None and "iterations" in options:
+        given = options["iterations"]
+        try:
+            same = int(given) == args.tv_iterations
+        except ValueError:
+            same = False
+        if not same:
+            raise ValueError(f"--reg-opt iterations={given} and --tv-iterations {args.tv_iterations} both set the "
+                             "regularizer's inner iterations, to different values; give one of them")
+    make_regularizer(args.regularizer, options, args.tv_iterations)
 
 
 def reg_options(pairs):
