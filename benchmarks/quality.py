@@ -33,7 +33,7 @@ from rsocl.model.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality_scenes import DATA, make_scene, noisy  # noqa: E402
+from quality_scenes import available, make_scene, noisy  # noqa: E402
 
 WEIGHTS = (1.0, 3.0, 10.0, 30.0)
 LAMS = (0.03, 0.1, 0.3)
@@ -141,7 +141,7 @@ def main(argv=None):
     for scene, size, noise in CASES:
         if size not in args.sizes:
             continue
-        if "@" in scene and not (DATA / f"{scene.split('@')[0].replace('-crop', '')}.npz").exists():
+        if not available(scene):
             skipped.append(scene)
             continue
         text, figures = row(scene, size, noise, run_case(scene, size, noise, args, cache))

@@ -92,14 +92,24 @@ def make_scene(name, shape, T) -> np.ndarray:
         half = builtin_scene(shape, (T + 1) // 2)
         return np.concatenate([half, half[::-1]])[:T]
     video, _, speed = name.partition("@")
-    crop = None
-    if video.endswith("-crop"):
-        video = video[:-len("-crop")]
-        crop = CROPS[video]
-    path = DATA / f"{video}.npz"
+    crop = CROPS[video[:-len("-crop")]] if video.endswith("-crop") else None
+    path = video_path(name)
     if not path.exists():
         raise FileNotFoundError(f"scene {name!r} needs {path}")
     return video_at_speed(load_video(path), shape, T, float(speed), crop)
+
+
+def video_path(name) -> Path | None:
+    """The video file scene ``name`` is made from (``DATA/VIDEO.npz``), None for the built-in scenes."""
+    if "@" not in name:
+        return None
+    return DATA / f"{name.partition('@')[0].removesuffix('-crop')}.npz"
+
+
+def available(name) -> bool:
+    """Whether scene ``name`` can be made here: a built-in scene, or a video found in ``../shared/data``."""
+    path = video_path(name)
+    return path is None or path.exists()
 
 
 def noisy(g, rig, *, photons=1000.0, read=0.01, seed=0) -> np.ndarray:

@@ -32,7 +32,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality_scenes import DATA, make_scene  # noqa: E402
+from quality_scenes import available, make_scene  # noqa: E402
 
 SCENES = ("builtin", "builtin-fast", "runner40@0.5", "runner40@1", "traffic48@1")
 #: Method name -> description for the page. ``tv W``: rsocl's TV maths with temporal weight W.
@@ -145,7 +145,7 @@ def main(argv=None):
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-time-priors.json")
     parser.add_argument("--out", type=Path, default=DOCS / "time_priors.md")
     args = parser.parse_args(argv)
-    scenes = [s for s in args.scenes if "@" not in s or (DATA / f"{s.split('@')[0]}.npz").exists()]
+    scenes = [s for s in args.scenes if available(s)]
     done = json.loads(args.cache.read_text()) if args.cache.exists() else {}
 
     def save():

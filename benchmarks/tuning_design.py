@@ -36,7 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality_scenes import DATA, make_scene  # noqa: E402
+from quality_scenes import available, make_scene  # noqa: E402
 
 WEIGHTS = (1.0, math.sqrt(3.0), 3.0, math.sqrt(30.0), 10.0, math.sqrt(300.0), 30.0)
 COARSE = (1.0, 3.0, 10.0, 30.0)
@@ -153,7 +153,7 @@ def main(argv=None):
     cases, skipped = [], set()
     for rig_name in args.rigs:
         for scene in args.scenes:
-            if "@" in scene and not (DATA / f"{scene.split('@')[0].replace('-crop', '')}.npz").exists():
+            if not available(scene):
                 skipped.add(scene)
                 continue
             case_key = f"{rig_name}|{scene}|{args.size}|{args.iterations}"

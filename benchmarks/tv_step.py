@@ -34,7 +34,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality_scenes import DATA, make_scene, scene_names  # noqa: E402
+from quality_scenes import available, make_scene, scene_names  # noqa: E402
 
 STEPS = (1.0, 0.9, 0.75, 0.5)
 PAPER_128 = ("builtin", "runner40@1", "traffic48@1")
@@ -54,16 +54,6 @@ def random_rig(seed):
     cameras = [rsocl.Camera(angle=a, t_e=t_e, t_r=t_r, t_a=float(rng.uniform(0, 3) * t_r) if rng.random() < 0.3 else 0.0,
                             gain=float(rng.uniform(0.5, 2)) if rng.random() < 0.2 else 1.0) for a in angles]
     return rsocl.Rig(cameras, shape=(m, n), mask="binary" if rng.random() < 0.2 else "exact")
-
-
-def has_video(scene):
-    return "@" not in scene or (DATA / f"{scene.split('@')[0].replace('-crop', '')}.npz").exists()
-
-
-def scene_cube(scene, rig):
-    from rsocl.model.scenes import builtin_scene
-
-    return builtin_scene(rig.shape, rig.T) if scene == "builtin" else make_scene(scene, rig.shape, rig.T)
 
 
 def run(g, rig, truth, step, device, **kw):
@@ -94,7 +84,7 @@ def tuned_cases(cases, steps, device, **kw):
 
     rows = []
     for name, rig, scene in cases:
-        truth = scene_cube(scene, rig)
+        truth = make_scene(scene, rig.shape, rig.T)
         g = rsocl.RollingShutterOperator(rig).forward(truth)
         base = psnr(interp3d(g, rig), truth, data_range=1.0)
         per = []
@@ -145,11 +135,10 @@ def main(argv=None):
     import rsocl
     from rsocl.analysis.metrics import psnr
     from rsocl.model.interpolation import interp3d
-    from rsocl.model.scenes import builtin_scene
 
     device = rsocl.device.get_device(args.device)
     start = time.perf_counter()
-    rig_scenes = [s for s in ("builtin", "runner40@1") if has_video(s)]
+    rig_scenes = [s for s in ("builtin", "runner40@1") if available(s)]
     random_cases = []
     for seed in range(100, 100 + args.rigs):
         rig = random_rig(seed)
@@ -159,15 +148,15 @@ def main(argv=None):
     for size in args.sizes:
         rig = rsocl.Rig.paper_array(4, shape=(size, size), t_e=180e-6, t_r=35e-6)
         for scene in (scene_names() if size <= 64 else PAPER_128):
-            if has_video(scene):
+            if available(scene):
                 paper_cases.append((f"paper {size}x{size}, {scene}", rig, scene))
-        fixed_cases += [(f"paper {size}x{size}, {scene}", rig, scene) for scene in PAPER_128 if has_video(scene)]
+        fixed_cases += [(f"paper {size}x{size}, {scene}", rig, scene) for scene in PAPER_128 if available(scene)]
     random_rows = tuned_cases(random_cases, args.steps, device)
     paper_rows = tuned_cases(paper_cases, args.steps, device)
     fixed_rows = tuned_cases(fixed_cases, args.steps, device, tune=False)
 
     rig = rsocl.Rig([rsocl.Camera(angle=a, t_e=21e-6, t_r=21e-6) for a in LARGE_WEIGHT_ANGLES], shape=(41, 11))
-    truth = builtin_scene(rig.shape, rig.T)
+    truth = make_scene("builtin", rig.shape, rig.T)
     g = rsocl.RollingShutterOperator(rig).forward(truth)
     large = [f"interp3d: {psnr(interp3d(g, rig), truth, data_range=1.0):.2f} dB; T = {rig.T}.", "",
              "| temporal weight | " + " | ".join(f"step {s:g}: PSNR (min, max)" for s in args.steps) + " |",
@@ -198,7 +187,7 @@ def main(argv=None):
         page += ["## Random rigs, per case", ""] + per_case(random_rows, args.steps) + [""]
     if paper_rows:
         page += ["## Paper array, per case", ""] + per_case(paper_rows, args.steps) + [""]
-    if not has_video("runner40@1"):
+    if not available("runner40@1"):
         page += ["Video scenes skipped: ../shared/data not found."]
     write_page(args.out, page)
 
