@@ -1,7 +1,8 @@
 """Running the ADMM iterations of a staged problem, and collecting the result.
 
 :func:`run_iterations` books each iteration's residual (and PSNR with a ground truth) in a
-history, drives the progress bar, the callback and the ``tol`` stop; :func:`collect` reads the
+history, drives the progress bar, the callback and the ``tol`` stop, raises on divergence and warns
+when the run ends unstable though bounded; :func:`collect` reads the
 estimate back and assembles the :class:`~rsocl.solver.result.Result`. For a batch of sets every
 record is one value per set, and ``tol`` stops the batch when every set has met it.
 """
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 
 import numpy as np
 
@@ -22,6 +24,9 @@ __all__ = ["run_iterations", "collect"]
 #: A run whose residual exceeds this many times the smallest one it had so far (or than 1, the
 #: residual of a zero estimate, if that is larger) has diverged, though still finite.
 GROWTH = 1e3
+#: A run that ends with a residual above 1 (its estimate explains the snapshots worse than zeros do)
+#: and this many times the smallest residual it had is unstable though bounded: it gets a warning.
+END_GROWTH = 10.0
 
 
 class _History:
@@ -47,13 +52,31 @@ class _History:
             self.lowest = np.where(np.isfinite(residual), residual, np.inf)
         return bad
 
-    def _diverged(self, it, residual, bad):
+    def _hint(self) -> str:
         if self.settings.projection == "paper":
             psi = float(self.staged.op.psi.max())
-            hint = (" The paper's diagonal step (projection='paper') is stable only when eta is large "
+            return (" The paper's diagonal step (projection='paper') is stable only when eta is large "
                     f"against psi (max psi = {psi:.3g}); use projection='exact' or raise eta.")
-        else:
-            hint = " Check lam, eta and the data scale."
+        return " Check lam, eta and the data scale."
+
+    def check_end(self):
+        """Warn when the last residual (per set) is above 1 and :data:`END_GROWTH` times the smallest:
+        the run stayed finite and below :data:`GROWTH` but ended far from the data."""
+        if not self.values["residual"]:
+            return
+        last = np.atleast_1d(np.asarray(self.values["residual"][-1], dtype=np.float64))
+        lowest = np.atleast_1d(np.asarray(self.lowest, dtype=np.float64))
+        bad = (last > 1.0) & (last > END_GROWTH * lowest)
+        if not bad.any():
+            return
+        where = f" in set(s) {np.flatnonzero(bad).tolist()}" if np.ndim(self.values["residual"][-1]) else ""
+        warnings.warn(f"ADMM ended unstable{where}: the last residual {np.round(last[bad], 4).tolist()} is above 1 "
+                      "(the snapshots are fitted worse than by zeros) and more than "
+                      f"{END_GROWTH:g} times the smallest of the run, {np.round(lowest[bad], 4).tolist()}; "
+                      f"the result does not reconstruct the data.{self._hint()}", RuntimeWarning, stacklevel=4)
+
+    def _diverged(self, it, residual, bad):
+        hint = self._hint()
         lowest = self.lowest
         why = (f" (more than {GROWTH:g} times the smallest residual so far, or than 1, the residual of a zero "
                f"estimate)")
@@ -132,6 +155,7 @@ def run_iterations(solver, staged, settings, *, progress=False) -> dict:
                 pending = current
         if pending is not None:                     # pipelined: the last iteration's residual
             history.record(settings.iterations - 1, pending.result())
+        history.check_end()
     finally:
         if bar is not None:
             bar.close()

@@ -102,6 +102,10 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         Choose ``lam`` and the tunable options (TV: ``temporal_weight``) the caller left unset
         from the snapshots alone (:mod:`rsocl.solver.autotune`); a ``Tuning``: run with that
         earlier choice, without a search; False: fixed defaults.
+
+    A run whose residual ``‖g - H theta‖ / ‖g‖`` turns NaN or grows past 1000 times its smallest
+    raises ``FloatingPointError``; one that stays bounded but ends above 1 and 10 times its
+    smallest (the paper's diagonal step at small ``eta``) returns with a ``RuntimeWarning``.
     """
     interpolate = isinstance(x0, str)
     if interpolate and x0 != "interp3d":
