@@ -6,6 +6,7 @@ import pytest
 import rsocl
 from rsocl.model import reference as ref
 from rsocl.model.interpolation import interp3d
+from rsocl.model.scenes import builtin_scene
 from rsocl.solver.sets import batch_size, reconstruct_sets
 from rsocl_plugins.tv import STEP
 
@@ -326,3 +327,17 @@ def test_batch_size_on_a_gpu_goes_past_max_batch_up_to_its_voxels(sets, monkeypa
     memory = (total(57) + total(58)) / 2 / 0.8
     monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(memory)))
     assert batch_size(rig, device=device) == 57
+
+
+def test_a_gap_set_in_a_batch_gets_the_default_lam_it_gets_alone():
+    # the default lam is scaled by the rig's curvature for ADMM sets but not for GAP (eta = 0) sets,
+    # whose denoiser weight is lam itself: in a batch mixing both, each set keeps its own default
+    rig = rsocl.Rig([rsocl.Camera(a, t_e=9 * 35e-6, t_r=35e-6) for a in (0, 120, 240)], (7, 31))
+    g = np.stack([ref.forward(rig, builtin_scene(rig.shape, rig.T, seed=s, dtype=np.float64)) for s in range(2)])
+    kw = dict(iterations=3, tune=False, dtype="float64")
+    batch = rsocl.reconstruct(g, rig, eta=[0.2, 0.0], **kw)
+    alone = [rsocl.reconstruct(g[i], rig, eta=eta, **kw) for i, eta in enumerate((0.2, 0.0))]
+    assert alone[0].params["lam"] != pytest.approx(alone[1].params["lam"])       # scaled, unscaled
+    assert batch.params["lam"] == pytest.approx([one.params["lam"] for one in alone])
+    for i, one in enumerate(alone):
+        np.testing.assert_allclose(batch.datacube[i], one.datacube, atol=1e-12)

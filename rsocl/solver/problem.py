@@ -62,7 +62,9 @@ class Settings:
         """``lam``/``eta`` filled from the regularizer's recommendation, else :data:`DEFAULTS`, times
         ``scale`` (:func:`rsocl.model.curvature.default_scale` of the rig: the data term's curvature
         against the paper's configuration, for which the defaults hold). A default ``lam`` is not
-        scaled when the caller runs GAP (``eta = 0``), whose denoiser weight is ``lam`` itself.
+        scaled for a set the caller runs as GAP (``eta = 0``), whose denoiser weight is ``lam``
+        itself: with per-set ``eta`` mixing GAP and ADMM sets, the default ``lam`` is per set too,
+        so each set gets the ``lam`` it gets on its own.
 
         Raises ValueError when the regularizer does not support ``dtype``.
         """
@@ -72,8 +74,10 @@ class Settings:
                              f"supported: {list(reg.dtypes)}")
         recommended = {**DEFAULTS, **getattr(reg, "recommended", {})}
         eta = recommended["eta"] * scale if self.eta is None else self.eta
-        gap = self.eta is not None and np.all(np.asarray(self.eta) == 0)
-        lam = recommended["lam"] * (1.0 if gap else scale) if self.lam is None else self.lam
+        lam = self.lam
+        if lam is None:
+            lams = recommended["lam"] * np.where(np.asarray(eta, dtype=np.float64) == 0, 1.0, scale)  # GAP: unscaled
+            lam = float(lams.flat[0]) if np.all(lams == lams.flat[0]) else tuple(float(v) for v in lams)
         return replace(self, lam=lam, eta=eta)
 
     def for_batch(self, batch) -> "Settings":
