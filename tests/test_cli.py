@@ -97,6 +97,19 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
     assert load_reconstruction(fast).params["tuning"] is None and not (tmp_path / "fast-tuning.png").exists()
 
 
+def test_a_warning_is_one_line_naming_the_command(tmp_path, capsys):
+    # the paper's diagonal step at eta = 1e-3 ends unstable: the run finishes, writes its files and
+    # says so on one line, as errors are said (no source file, no line of code)
+    cap, rec = tmp_path / "cap.h5", tmp_path / "rec.h5"
+    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "16", "16", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["reconstruct", str(cap), "--out", str(rec), "--iterations", "30", "--fast", "--quiet",
+                 "--projection", "paper", "--eta", "0.001"]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("rsocl reconstruct: warning: ADMM ended unstable: the last residual") and err.count("\n") == 1
+    assert rec.exists()
+
+
 def test_errors_are_reported_not_raised(tmp_path, capsys):
     assert main(["info", "--t-r-us", "0"]) == 2
     assert "--t-r-us must be > 0 µs, got 0.0" in capsys.readouterr().err

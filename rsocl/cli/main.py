@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 from rsocl.cli import bench, calibrate, capture, demo, devices, info, plan, plugins, reconstruct, simulate
 
@@ -31,6 +32,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _warning_line(command, shown=None):
+    """A ``warnings.showwarning`` that writes ``rsocl COMMAND: warning: MESSAGE`` (one line per
+    warning, no source line) to stderr, as errors are written. Deprecation warnings (meant for
+    developers, from the libraries underneath) keep ``shown``'s form (None: the current one)."""
+    shown = warnings.showwarning if shown is None else shown
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, (DeprecationWarning, PendingDeprecationWarning)):
+            return shown(message, category, filename, lineno, file, line)
+        print(f"rsocl {command}: warning: {message}", file=sys.stderr if file is None else file)
+    return show
+
+
 def main(argv=None) -> int:
     """Run ``rsocl`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status.
 
@@ -42,10 +56,12 @@ def main(argv=None) -> int:
 
     args = build_parser().parse_args(argv)
     try:
-        check_options = getattr(args, "check_options", None)    # combinations of shared options, checked first
-        if check_options is not None:
-            check_options(args)
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _warning_line(args.command)
+            check_options = getattr(args, "check_options", None)    # combinations of shared options, checked first
+            if check_options is not None:
+                check_options(args)
+            return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, NoOpenCLError, FloatingPointError) as exc:
         print(f"rsocl {args.command}: error: {exc}", file=sys.stderr)
         return 2
