@@ -162,6 +162,12 @@ def test_an_unreachable_scheduler_is_an_error_before_anything_runs(monkeypatch, 
     monkeypatch.setenv("RSOCL_SCHEDULER", "tcp://127.0.0.1:9")
     with pytest.raises(ValueError, match="cannot reach"):
         reconstruct_tiled(g, rig, tile=(8, 8))
+    monkeypatch.delenv("RSOCL_SCHEDULER")
+    # a malformed address is refused before any connection is tried
+    for address in ("synchronous", "tcp://localhost", "127.0.0.1"):
+        with pytest.raises(ValueError, match=rf"scheduler must be the address .*got '{address}' \(missing port"):
+            reconstruct_tiled(g, rig, tile=(8, 8), scheduler=address)
+    assert not calls
 
 
 def test_rsocl_reconstruct_on_the_cluster_of_rsocl_scheduler_and_on_its_own_workers(cluster, tmp_path, monkeypatch,

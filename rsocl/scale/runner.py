@@ -26,7 +26,6 @@ import os
 import uuid
 from dataclasses import dataclass
 
-from rsocl.common import validation as check
 from rsocl.scale.work import solve_tile
 
 __all__ = ["SCHEDULER_ENV", "WORKERS_PER_CORE", "Failure", "Engine", "have_dask", "max_workers", "non_negative_int"]
@@ -74,6 +73,23 @@ class Failure:
         return f"{self.label} failed after {self.attempts} attempt(s): {self.cause}"
 
 
+def _check_address(address):
+    """ValueError naming ``scheduler`` unless ``address`` parses as a scheduler address (``tcp://host:port``,
+    ``host:port``, another dask scheme). Checked before any connection: a ``distributed.Client`` that
+    fails in its constructor on a malformed address spends 20 s closing itself when it is collected."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        if not isinstance(address, str):
+            raise TypeError(f"a {type(address).__name__}")
+        scheme, location = parse_address(address)
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            parse_host_port(location)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"scheduler must be the address of a dask.distributed scheduler, tcp://host:port (or "
+                         f"host:port), got {address!r} ({exc})") from None
+
+
 def _cause(exc) -> str:
     return f"{type(exc).__name__}: {exc}"
 
@@ -118,6 +134,8 @@ class Engine:
             what = "scheduler" if scheduler is not None else "workers"
             raise ValueError(f"{what}: running on a Dask cluster needs dask[distributed]: "
                              "pip install 'rsocl[dask]'")
+        if scheduler is not None:
+            _check_address(scheduler)
         self.scheduler, self.workers = scheduler, workers
         self.mode = "distributed" if scheduler or workers else ("local" if have_dask() else "process")
         self.client = self.cluster = None
