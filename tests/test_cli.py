@@ -167,6 +167,11 @@ def test_a_capture_of_several_sets_is_reconstructed_in_batches(tmp_path, capsys)
     assert (tmp_path / "rec.gif").exists() and not rec.exists()
     assert main(["reconstruct", str(cap), "--out", str(rec), "--batch", "0"]) == 2
     assert "--batch must be >= 1" in capsys.readouterr().err
+    one_set = tmp_path / "one.h5"                      # refused on a capture of one set too, before any work
+    save_capture(one_set, sets[0], rig)
+    assert main(["reconstruct", str(one_set), "--out", str(tmp_path / "one-rec.h5"), "--batch", "-1"]) == 2
+    captured = capsys.readouterr()
+    assert "--batch must be >= 1" in captured.err and not captured.out and not (tmp_path / "one-rec.h5").exists()
 
 
 def _capture_with_truth(path, mode):

@@ -49,6 +49,8 @@ def cmd_reconstruct(args) -> int:
     from rsocl.analysis.visual import comparison_gif
     from rsocl.files.hdf5 import load_capture, load_snapshot_sets, save_reconstruction
 
+    if args.batch is not None and args.batch < 1:          # before anything runs, whatever the capture holds
+        raise ValueError(f"--batch must be >= 1 (sets per batch), got {args.batch}")
     check_outputs(args)
     code = reconstruct_tiled_if_needed(args)
     if code is not None:
@@ -96,8 +98,6 @@ def _reconstruct_sets(args, sets, rig):
     """:func:`rsocl.solver.sets.reconstruct_sets` of every set with the solver and device arguments."""
     from rsocl.solver.sets import reconstruct_sets
 
-    if args.batch is not None and args.batch < 1:
-        raise ValueError(f"--batch must be >= 1, got {args.batch}")
     return reconstruct_sets(sets, rig, batch=args.batch, regularizer=args.regularizer,
                             regularizer_options=reg_options(args.reg_opt), iterations=args.iterations,
                             lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
