@@ -114,12 +114,20 @@ def test_errors_are_reported_not_raised(tmp_path, capsys):
     assert main(["info", "--t-r-us", "0"]) == 2
     assert "--t-r-us must be > 0 µs, got 0.0" in capsys.readouterr().err
     assert main(["info", "--cameras", "9"]) == 2
-    assert "n_cameras" in capsys.readouterr().err
+    assert "--cameras must be an integer >= 1 and <= 8, got 9" in capsys.readouterr().err
+    assert main(["simulate", "builtin", "--out", str(tmp_path / "c.h5"), "--cameras", "0"]) == 2
+    assert "--cameras must be an integer >= 1 and <= 8, got 0" in capsys.readouterr().err
     assert main(["reconstruct", str(tmp_path / "missing.h5"), "--out", str(tmp_path / "x.h5")]) == 2
     assert "missing.h5" in capsys.readouterr().err
     assert main(["simulate", "builtin", "--out", str(tmp_path / "c.h5"), "--noise", "poisson"]) == 2
     assert "photons" in capsys.readouterr().err
     assert not (tmp_path / "c.h5").exists()
+
+
+def test_ssim_of_frames_too_small_for_it_is_said_not_printed_as_nan(tmp_path, capsys):
+    assert main(["demo", "--shape", "2", "2", "--iterations", "5", "--out", str(tmp_path), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "SSIM n/a (frames under 3 pixels a side)" in out and "nan" not in out
 
 
 def test_devices_and_plugins_list(capsys):

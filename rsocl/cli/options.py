@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
@@ -77,7 +78,7 @@ def rig_from(args):
             raise ValueError(f"--dt-us must be >= --t-r-us = {t_r:g} µs (a sub-frame lasts at least one row time), "
                              f"got {dt:g}")
     m, n = check.grid_shape("--shape", args.shape)
-    cameras = min(max(int(args.cameras), 1), 8)           # the count itself is checked by Rig.paper_array
+    cameras = check.positive_int("--cameras", args.cameras, maximum=8)
     check_rig_memory(cameras, (m, n), f"--shape {m} {n}")
     dt = None if args.dt_us is None else args.dt_us * US
     return Rig.paper_array(args.cameras, tuple(args.shape), t_e=args.t_e_us * US, t_r=args.t_r_us * US,
@@ -237,5 +238,6 @@ def quality_line(result, truth):
     text = f"{result.iterations} iterations in {seconds:.2f} s ({seconds / result.iterations * 1e3:.1f} ms/iteration)"
     if truth is not None:
         mean_ssim, _ = ssim(result.datacube, truth)
-        text = f"PSNR {psnr(result.datacube, truth):.2f} dB, SSIM {mean_ssim:.3f}, " + text
+        shown = f"{mean_ssim:.3f}" if math.isfinite(mean_ssim) else "n/a (frames under 3 pixels a side)"
+        text = f"PSNR {psnr(result.datacube, truth):.2f} dB, SSIM {shown}, " + text
     return text
