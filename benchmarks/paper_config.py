@@ -125,6 +125,11 @@ SETTINGS = ((200, 10, "zeros"), (100, 10, "zeros"), (100, 5, "zeros"), (50, 5, "
             (25, 3, "zeros"), (100, 10, "interp3d"), (50, 10, "interp3d"), (25, 10, "interp3d"))
 
 
+def _named(key) -> str:
+    """A setting of :data:`SETTINGS` in words."""
+    return f"{key[0]} ADMM x {key[1]} TV iterations from {key[2]}"
+
+
 def _run(one, g, rig, key, device):
     """The datacube of ``g`` at the setting ``key`` (:data:`SETTINGS`): one set, or sets in batches."""
     from rsocl.solver.sets import reconstruct_sets
@@ -182,11 +187,11 @@ def settings_trade(device, batch, rounds):
                      f"{quality[key] - quality[base]:+.2f} |"
                      + "".join(f" {v[key] - v[base]:+.2f} |" for v in videos.values()))
     fast = [k for k in SETTINGS if np.median(rates[k]) >= 10]
-    lines += ["", ("- 10 sets/s or more: " + ", ".join(f"{a} ADMM x {b} TV iterations from {c}" for a, b, c in fast))
+    lines += ["", ("- 10 sets/s or more: " + ", ".join(map(_named, fast)))
               if fast else "- no setting of the table reaches 10 sets/s", ""]
     within = [k for k in fast if all(abs(q[k] - q[base]) <= 0.1 for q in (quality, *videos.values()))]
     lines += [("- of those, PSNR within 0.1 dB of the default on every scene of the table: "
-               + ", ".join(f"{a} ADMM x {b} TV iterations from {c}" for a, b, c in within)) if within
+               + ", ".join(map(_named, within))) if within
               else "- none of those keeps the PSNR within 0.1 dB of the default on every scene of the table", ""]
     return lines
 

@@ -81,7 +81,7 @@ def rig_from(args):
     cameras = check.positive_int("--cameras", args.cameras, maximum=8)
     check_rig_memory(cameras, (m, n), f"--shape {m} {n}")
     dt = None if args.dt_us is None else args.dt_us * US
-    return Rig.paper_array(args.cameras, tuple(args.shape), t_e=args.t_e_us * US, t_r=args.t_r_us * US,
+    return Rig.paper_array(cameras, (m, n), t_e=args.t_e_us * US, t_r=args.t_r_us * US,
                            dt=dt, mask=args.mask)
 
 
