@@ -225,13 +225,12 @@ def test_saturation_that_leaves_nothing_is_refused():
         rsocl.reconstruct(np.ones((2, 4, 4)), rig, saturation=0.5)
 
 
-def test_subframes_no_camera_samples_are_not_modelled(device):
+def test_subframes_no_camera_samples_are_not_modelled_and_hold_the_first_solved_one(device):
     # every camera triggers 40 sub-frames late: those 40 carry no information
     cams = [rsocl.Camera(a, t_e=1e-4, t_r=3e-5, t_a=40 * 3e-5) for a in (0, 90, 180, 270)]
     rig = rsocl.Rig(cams, (10, 10))
     assert rig.sampled_range().start == 40 and rig.T == rig.sampled_range().stop
-    truth = np.zeros((rig.T, 10, 10))
-    truth[40:] = _scene(rsocl.Rig.paper_array(4, (10, 10), t_e=1e-4, t_r=3e-5))[: rig.T - 40]
+    truth = _scene(rig)                                          # it changes before the cameras start too
     g = ref.forward(rig, truth)
     op = RollingShutterOperator(rig, device=device, dtype="float64", subframes=rig.sampled_range())
     assert op.domain_shape == (rig.T - 40, 10, 10)
@@ -239,9 +238,19 @@ def test_subframes_no_camera_samples_are_not_modelled(device):
     np.testing.assert_allclose(op.adjoint(g), ref.adjoint(rig, g)[40:], rtol=1e-12)
     res = rsocl.reconstruct(g, rig, iterations=30, lam=0.01, truth=truth, dtype="float64")
     assert res.params["solved_subframes"] == [40, rig.T]
-    assert not res.datacube[:40].any()
+    np.testing.assert_array_equal(res.datacube[:40], np.broadcast_to(res.datacube[40], (40, 10, 10)))
+    assert res.datacube[40].any()
+    # the history's PSNR is the returned datacube's, held sub-frames included
     assert res.history["psnr"][-1] == pytest.approx(rsocl.analysis.metrics.psnr(res.datacube, truth), abs=1e-6)
     assert res.history["residual"][-1] < 0.05
+    # a batch of two sets: each set's history is its datacube's PSNR
+    sets = np.stack([g, ref.forward(rig, truth[::-1].copy())])
+    truths = np.stack([truth, truth[::-1]])
+    batch = rsocl.reconstruct(sets, rig, iterations=30, lam=0.01, truth=truths, dtype="float64")
+    for s in range(2):
+        np.testing.assert_array_equal(batch.datacube[s, :40], np.broadcast_to(batch.datacube[s, 40], (40, 10, 10)))
+        assert batch.history["psnr"][-1, s] == pytest.approx(
+            rsocl.analysis.metrics.psnr(batch.datacube[s], truths[s]), abs=1e-6)
 
 
 def test_gap_in_float32_on_nearly_singular_blocks_stays_sound():

@@ -64,3 +64,22 @@ def test_rsocl_reconstruct_window(tmp_path, capsys):
     assert back.datacube.shape == (rig.T,) + rig.shape and back.params["windows"] == [[0, 2], [1, 3]]
     assert main(["reconstruct", str(tmp_path / "cap.h5"), "--out", str(tmp_path / "s.zarr"), "--window", "2"]) == 2
     assert "--window: a stream of frame windows is written to an HDF5 file" in capsys.readouterr().err
+
+
+def test_a_stream_with_gaps_between_frames_fills_every_subframe_from_the_nearest_window():
+    # frames 3 readouts apart and every camera late by 5 rows: sub-frames before the first exposure
+    # and between frames are sampled by no window; each holds its nearest window's modelled sub-frame
+    t_r, t_e, shape = 3.5e-5, 1.8e-4, (12, 12)
+    rig = Rig([Camera(a, t_e=t_e, t_r=t_r, t_a=5 * t_r, t_d=3 * shape[0] * t_r, frames=3) for a in (0, 90, 180, 270)],
+              shape)
+    g = rsocl.RollingShutterOperator(rig).forward(builtin_scene(rig.shape, rig.T, seed=3))
+    stream = reconstruct_stream(g, rig, window=1, overlap=0, iterations=10, tune=False)
+    assert np.all(stream.owner >= 0) and stream.datacube.shape == (rig.T,) + shape
+    first = stream.spans[0][0]
+    assert first == 5
+    np.testing.assert_array_equal(stream.datacube[:first], np.broadcast_to(stream.datacube[first], (first,) + shape))
+    gaps = [s for s in range(first, rig.T) if not any(a <= s < b for a, b in stream.spans)]
+    assert gaps                                       # the rig leaves sub-frames between frames unsampled
+    for s in gaps:
+        a, b = stream.spans[stream.owner[s]]
+        np.testing.assert_array_equal(stream.datacube[s], stream.datacube[min(max(s, a), b - 1)])

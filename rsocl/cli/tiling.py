@@ -32,8 +32,9 @@ def add_reconstruct_tiling_args(p):
     g.add_argument("--tile", type=int, nargs=2, metavar=("H", "W"), default=None,
                    help="reconstruct in tiles of H x W reference pixels (default: one piece when it fits the "
                         "device, else the tile 'rsocl plan' proposes)")
-    g.add_argument("--halo", type=int, default=DEFAULT_HALO,
-                   help=f"pixels added on every side of a tile, cropped off after (default {DEFAULT_HALO})")
+    g.add_argument("--halo", type=int, default=None,
+                   help=f"pixels added on every side of a tile, cropped off after (default {DEFAULT_HALO}, or the "
+                        "grid's larger side where that is smaller)")
     g.add_argument("--sets", action="store_true",
                    help="reconstruct every set of the capture (snapshot_sets) into a [S, T, m, n] Zarr array")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -189,7 +190,8 @@ def add_plan_tiling_args(p):
 
     g = p.add_argument_group("tiling (proposed when the problem does not fit one device)")
     g.add_argument("--tile", type=int, nargs=2, metavar=("H", "W"), default=None, help="cost this tile instead")
-    g.add_argument("--halo", type=int, default=DEFAULT_HALO, help=f"halo, pixels (default {DEFAULT_HALO})")
+    g.add_argument("--halo", type=int, default=None,
+                   help=f"halo, pixels (default {DEFAULT_HALO}, or the grid's larger side where that is smaller)")
     g.add_argument("--sets", type=int, default=1, help="sets to reconstruct (default 1)")
     g.add_argument("--memory-mib", type=float, default=None,
                    help="device memory one task may use, MiB (default: half the device's)")

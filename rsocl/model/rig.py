@@ -284,7 +284,8 @@ class Rig:
     def sampled_range(self) -> slice:
         """Sub-frames some camera samples at some pixel: ``slice(first, last + 1)``.
 
-        Sub-frames outside it carry no information; the solver leaves them out.
+        Sub-frames outside it carry no information; the solver leaves them out and gives them the
+        nearest sub-frame it solved (:mod:`rsocl.solver.held`).
         """
         first, last = self.sampled_window()
         return slice(int(first.min()), int(last.max()) + 1)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from rsocl.device.context import get_device
 from rsocl.model.rig import Rig
-from rsocl.scale.tiles import DEFAULT_HALO, check_halo, check_tile, tile_grid, tile_rig
+from rsocl.scale.tiles import check_halo, check_tile, tile_grid, tile_rig
 from rsocl.solver.plan import estimate, memory_need
 
 __all__ = ["CANDIDATES", "Tiling", "tiling_cost", "propose_tiling", "format_tiling"]
@@ -77,7 +77,7 @@ def tiling_cost(rig: Rig, tile, halo, *, regularizer="tv", dtype="float32", proj
     return total, largest, voxels, t, v
 
 
-def propose_tiling(rig: Rig, *, tile=None, halo=DEFAULT_HALO, sets=1, iterations=200, regularizer="tv",
+def propose_tiling(rig: Rig, *, tile=None, halo=None, sets=1, iterations=200, regularizer="tv",
                    dtype="float32", projection="exact", device=None, budget_bytes=None, measure=True) -> Tiling:
     """The tiling of ``rig`` for ``device``: ``tile`` checked, or the largest that fits proposed.
 
@@ -85,8 +85,8 @@ def propose_tiling(rig: Rig, *, tile=None, halo=DEFAULT_HALO, sets=1, iterations
     ----------
     tile : (int, int) or None
         Tile to cost; None proposes one.
-    halo : int
-        Pixels on every side of a tile.
+    halo : int or None
+        Pixels on every side of a tile (None: :func:`rsocl.scale.tiles.check_halo`'s default).
     sets : int
         Sets to reconstruct (each the same tasks).
     budget_bytes : int or None
@@ -150,5 +150,5 @@ def format_tiling(t: Tiling) -> str:
                      f"all {t.tasks} tasks x {t.iterations} iterations on one device: about {t.seconds:.0f} s "
                      f"({t.seconds / 60:.1f} min); N devices (--workers N): about 1/N of it")
     lines.append(f"run it: rsocl reconstruct CAPTURE --out rec.zarr --tile {t.tile[0]} {t.tile[1]}"
-                 + (f" --halo {t.halo}" if t.halo != DEFAULT_HALO else ""))
+                 + (f" --halo {t.halo}" if t.halo != check_halo(None, t.rig.shape) else ""))
     return "\n".join(lines)

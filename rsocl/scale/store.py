@@ -163,16 +163,15 @@ def _arrays(path: str):
 
 
 def write_piece(path: str, tile, piece, span: tuple) -> None:
-    """Write a solved tile's chunks over the sampled sub-frames ``span`` (:func:`expand`), then
-    mark it done (run by the task itself)."""
+    """Write a solved tile's core over every sub-frame (:func:`expand`: its first and last modelled
+    sub-frames held before and after them; ``span``, the capture's sampled sub-frames, checks the
+    piece), then mark it done (run by the task itself)."""
     datacube, marks = _arrays(path)
     prefix = () if piece.set_index is None else (piece.set_index,)
-    tc = datacube.chunks[len(prefix)]
     T = datacube.shape[len(prefix)]
-    lo, hi = (span[0] // tc) * tc, min(T, -(-span[1] // tc) * tc)
     rows, cols = tile.core_slices
-    block = expand(np.asarray(piece.block, dtype=datacube.dtype), piece.start, lo, hi, span)
-    datacube[prefix + (slice(lo, hi), rows, cols)] = block
+    block = expand(np.asarray(piece.block, dtype=datacube.dtype), piece.start, 0, T, span)
+    datacube[prefix + (slice(0, T), rows, cols)] = block
     s = piece.set_index or 0
     marks[(s,) + tuple(tile.index)] = np.array([1, piece.start, piece.stop, piece.seconds, piece.iterations,
                                                 piece.residual], dtype=np.float64)

@@ -71,7 +71,8 @@ def window_channels(rig: Rig, k0: int, k1: int) -> list:
 class StreamResult:
     """A stream: ``datacube`` ``(T, m, n)`` on the capture's sub-frame grid; ``windows`` ``[(k0, k1)]``;
     ``spans`` the sub-frames each window modelled; ``owner[s]`` the window sub-frame ``s`` comes from
-    (-1 where no exposure reaches); ``results`` each window's :class:`rsocl.scale.TiledResult`."""
+    (where no exposure reaches, the window with the nearest modelled sub-frame, which it holds:
+    :mod:`rsocl.solver.held`); ``results`` each window's :class:`rsocl.scale.TiledResult`."""
 
     datacube: np.ndarray
     rig: Rig
@@ -112,11 +113,9 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=2, overlap=1, tile=None, p
     rigs = [window_rig(rig, k0, k1) for k0, k1 in windows]
     spans = [r.sampled_range() for r in rigs]
     T = rig.T
-    depth = np.full((len(windows), T), -1, dtype=np.int64)
-    for w, span in enumerate(spans):
-        s = np.arange(span.start, span.stop)
-        depth[w, span.start:span.stop] = np.minimum(s - span.start, span.stop - 1 - s)
-    owner = np.where(depth.max(axis=0) >= 0, depth.argmax(axis=0), -1)
+    s = np.arange(T)
+    depth = np.stack([np.minimum(s - span.start, span.stop - 1 - s) for span in spans])   # < 0 outside a span
+    owner = depth.argmax(axis=0)
     tile = rig.shape if tile is None else tile
     datacube, results = None, []
     for w, ((k0, k1), sub) in enumerate(zip(windows, rigs)):
@@ -132,6 +131,6 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=2, overlap=1, tile=None, p
         cube = np.asarray(result.datacube)
         if datacube is None:
             datacube = np.zeros((T,) + rig.shape, dtype=cube.dtype)
-        mine = np.nonzero(owner[:cube.shape[0]] == w)[0]
-        datacube[mine] = cube[mine]
+        mine = np.nonzero(owner == w)[0]
+        datacube[mine] = cube[np.minimum(mine, cube.shape[0] - 1)]    # past the window's T: its last, held
     return StreamResult(datacube, rig, windows, [(s.start, s.stop) for s in spans], owner, results)

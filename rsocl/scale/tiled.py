@@ -19,7 +19,7 @@ from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
 from rsocl.scale.runner import Engine
-from rsocl.scale.tiles import DEFAULT_HALO, check_halo, place, tile_grid, tile_rig
+from rsocl.scale.tiles import check_halo, place, tile_grid, tile_rig
 from rsocl.scale.tuned import tune_tiles, tuned_options
 from rsocl.scale.work import Job, RigPayload, TileSettings
 from rsocl.solver.plan import device_limit, memory_need
@@ -121,7 +121,7 @@ def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtyp
     return settings, params
 
 
-def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAULT_HALO, iterations=None,
+def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None, iterations=None,
                       lam=None, eta=None, tv_iterations=None, projection="exact", device=None, dtype="float32",
                       regularizer_options=None, saturation=None, out=None, scheduler=None, workers=None,
                       retries=2, tune=True, progress=False) -> TiledResult:
@@ -138,7 +138,8 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=DEFAU
     tile : (int, int)
         Core of a tile, ``(H, W)`` pixels: ``1 <= H <= m``, ``1 <= W <= n``.
     halo : int
-        Pixels added on every side of a tile and cropped off after (default 16).
+        Pixels added on every side of a tile and cropped off after (default None: 16, or the grid's
+        larger side where that is smaller).
     iterations, lam, eta, tv_iterations, projection, dtype, regularizer_options, saturation
         As :func:`rsocl.reconstruct`, for every tile.
     device : str or None

@@ -10,10 +10,10 @@ camera's row map is the full one, cut, so each pixel keeps the exposure start
 ``t_a + r*t_r + k*t_d`` it has in the whole capture and the sub-frame indices of the tile are
 those of the whole datacube. Only the sub-frames that the tile's exposure windows touch
 (:meth:`rsocl.model.rig.Rig.sampled_range` of the tile's rig) are modelled; the tile's result
-is that range, at its offset in the global ``T``. Within the sub-frames the whole capture
-samples, each pixel of the tile holds the first modelled sub-frame's value before that range and
-the last one's after it (nothing is measured there; a constant continuation adds no temporal
-variation); outside them the datacube is zero, as in an untiled reconstruction.
+is that range, at its offset in the global ``T``. Each pixel of the tile holds the first modelled
+sub-frame's value before that range and the last one's after it (nothing is measured there; a
+constant continuation adds no temporal variation), as an untiled reconstruction holds its solved
+range (:mod:`rsocl.solver.held`).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rsocl.model.rig import Rig
+from rsocl.solver.held import held_index
 from rsocl.solver.plan import crop_rig
 
 __all__ = ["DEFAULT_HALO", "Tile", "TileGrid", "tile_grid", "check_tile", "check_halo", "tile_rig", "place", "expand", "core_block"]
@@ -143,8 +144,12 @@ def check_tile(tile, shape, name="tile") -> tuple:
 
 
 def check_halo(halo, shape, name="halo") -> int:
-    """``halo`` as an int in ``[0, max(m, n)]`` pixels; ValueError naming ``name``."""
+    """``halo`` as an int in ``[0, max(m, n)]`` pixels; ValueError naming ``name``. None: the default,
+    :data:`DEFAULT_HALO` or the grid's larger side where that is smaller (a halo is clipped at the
+    grid's edges, so more would change nothing)."""
     limit = max(shape)
+    if halo is None:
+        return min(DEFAULT_HALO, limit)
     try:
         value = int(halo)
         ok = float(halo) == value
@@ -155,7 +160,7 @@ def check_halo(halo, shape, name="halo") -> int:
     return value
 
 
-def tile_grid(shape, tile, halo=DEFAULT_HALO) -> TileGrid:
+def tile_grid(shape, tile, halo=None) -> TileGrid:
     """The :class:`TileGrid` of ``tile = (H, W)`` pixels with ``halo`` pixels on every side."""
     shape = tuple(int(v) for v in shape)
     return TileGrid(shape, check_tile(tile, shape), check_halo(halo, shape))
@@ -167,26 +172,15 @@ def tile_rig(rig: Rig, tile: Tile) -> Rig:
 
 
 def expand(block, start: int, lo: int, hi: int, span: tuple) -> np.ndarray:
-    """``block`` (sub-frames ``start..start+len(block)-1``) over sub-frames ``lo..hi-1``.
-
-    Inside ``span = (first, stop)``, the capture's sampled sub-frames, the first sub-frame of the
-    block is held before it and the last after it; outside ``span`` the values are zero.
+    """``block`` (sub-frames ``start..start+len(block)-1``) over sub-frames ``lo..hi-1``: the first
+    sub-frame of the block is held before it and the last after it (:func:`rsocl.solver.held.held_index`).
+    The block must lie within ``span = (first, stop)``, the capture's sampled sub-frames.
     """
     stop = start + block.shape[0]
     first, last = span
     if not (first <= start < stop <= last):
         raise ValueError(f"block sub-frames {start}..{stop - 1} lie outside the sampled {first}..{last - 1}")
-    out = np.zeros((hi - lo,) + block.shape[1:], dtype=block.dtype)
-    a, b = max(lo, start), min(hi, stop)
-    if a < b:
-        out[a - lo:b - lo] = block[a - start:b - start]
-    a, b = max(lo, first), min(hi, start)
-    if a < b:
-        out[a - lo:b - lo] = block[0]
-    a, b = max(lo, stop), min(hi, last)
-    if a < b:
-        out[a - lo:b - lo] = block[-1]
-    return out
+    return block[held_index(hi, slice(start, stop))[lo:hi]]
 
 
 def place(datacube, tile: Tile, start: int, block, span: tuple) -> None:

@@ -16,6 +16,7 @@ import warnings
 import numpy as np
 
 from rsocl.device.reduction import sum_sq_diff
+from rsocl.solver.held import hold
 from rsocl.solver.result import Result
 
 __all__ = ["run_iterations", "collect"]
@@ -91,7 +92,10 @@ class _History:
     def _psnr(self):
         staged, solver = self.staged, self.solver
         sets = solver.sets if solver.batched else None
-        mse = (sum_sq_diff(solver.theta, staged.truth, sets=sets) + staged.unsolved_sq) / self.total_size
+        mse = sum_sq_diff(solver.theta, staged.truth, sets=sets)
+        if staged.held:
+            mse = mse + staged.held(solver.theta)
+        mse = mse / self.total_size
         with np.errstate(divide="ignore"):
             db = 10 * np.log10(np.asarray(staged.data_range, dtype=np.float64) ** 2 / np.asarray(mse))
         return np.where(np.asarray(mse) > 0, db, math.inf) if sets else (float(db) if mse > 0 else math.inf)
@@ -163,11 +167,11 @@ def run_iterations(solver, staged, settings, *, progress=False) -> dict:
 
 
 def collect(solver, staged, problem, settings, reg, history) -> Result:
-    """The datacube (unsolved sub-frames zero), checked finite, with the run's parameters."""
+    """The datacube (sub-frames outside the solved ones hold the nearest solved one:
+    :mod:`rsocl.solver.held`), checked finite, with the run's parameters."""
     op, solved, rig = staged.op, staged.solved, problem.rig
     batch = () if problem.batch is None else (problem.batch,)
-    datacube = np.zeros(batch + (rig.T,) + rig.shape, dtype=op.dtype)
-    datacube[..., solved, :, :] = solver.theta.get()
+    datacube = np.ascontiguousarray(hold(solver.theta.get(), solved, rig.T))
     finite = np.isfinite(datacube).reshape(problem.batch or 1, -1).all(axis=1)
     if not finite.all():
         where = "" if not batch else f" in set(s) {np.flatnonzero(~finite).tolist()}"

@@ -17,6 +17,7 @@ from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
 from rsocl.solver.batch import match_batch, memory_bytes, per_set_value
+from rsocl.solver.held import HeldError
 
 __all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_settings", "check_representable",
            "stage_on_device"]
@@ -147,8 +148,9 @@ def check_settings(*, iterations=None, lam=None, eta=None, tv_iterations=None, p
 class Staged:
     """A problem on the device: the operator over the ``solved`` sub-frames and its arrays.
 
-    ``truth``, ``data_range`` and ``unsolved_sq`` (the squared error of the sub-frames left
-    at zero) are set only when a ground truth was given; for a batch they are one per set.
+    ``truth``, ``data_range`` and ``held`` (the error of the sub-frames outside ``solved``, which
+    hold the nearest solved one: :class:`~rsocl.solver.held.HeldError`) are set only when a ground
+    truth was given; for a batch ``data_range`` is one per set.
     """
 
     op: RollingShutterOperator
@@ -157,7 +159,7 @@ class Staged:
     x0: object = None
     truth: object = None
     data_range: float = 1.0
-    unsolved_sq: float = 0.0
+    held: object = None
 
 
 def check_representable(problem: Problem, dtype):
@@ -177,7 +179,8 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
                     start=False) -> Staged:
     """Build the operator for the sampled sub-frames, check the memory, upload the arrays.
 
-    Only the sub-frames some camera samples are modelled; the others stay zero in the result.
+    Only the sub-frames some camera samples are modelled; the others hold the nearest modelled one
+    in the result (:mod:`rsocl.solver.held`).
     Raises an error naming the sizes when the run would not fit the device; the count
     (:func:`~rsocl.solver.batch.memory_bytes`) includes a start cube per set when the problem has
     an ``x0`` or ``start`` says one will be made after staging (the self-tuned run's ``interp3d`` start).
@@ -205,11 +208,9 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     truth = problem.truth
     if truth is not None:
         staged.truth = upload(truth[cut])
-        outside = (Ellipsis, np.r_[0:solved.start, solved.stop:rig.T], slice(None), slice(None))
-        unsolved = np.sum(truth[outside].astype(np.float64) ** 2, axis=(-3, -2, -1))
+        staged.held = HeldError(truth, solved, rig.T)
         if problem.batch is None:
-            staged.data_range, staged.unsolved_sq = default_data_range(truth), float(unsolved)
+            staged.data_range = default_data_range(truth)
         else:
             staged.data_range = np.array([default_data_range(t) for t in truth])
-            staged.unsolved_sq = unsolved
     return staged
