@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 from rsocl.cli.options import add_device_args, add_rig_args, add_solver_args, check_datacube_memory, quality_line, \
     rig_from, run_reconstruction, say
 
