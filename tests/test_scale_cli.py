@@ -71,6 +71,10 @@ def test_tiles_into_an_hdf5_file(capture, tmp_path):
     assert main(["reconstruct", str(path), "--out", str(out), "--tile", "10", "26", "--iterations", "3",
                  "--quiet"]) == 0
     assert load_reconstruction(out).datacube.shape == (rig.T,) + rig.shape and out.with_suffix(".gif").is_file()
+    assert (tmp_path / "rec-tuning.png").is_file()            # tuned (no --fast): the search's plot, as untiled
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "t.zarr"), "--tile", "10", "26", "--iterations",
+                 "3", "--quiet"]) == 0
+    assert (tmp_path / "t-tuning.png").is_file()
 
 
 @pytest.mark.parametrize("extra, match", [

@@ -49,6 +49,15 @@ def test_a_stream_of_windows_matches_the_whole_capture():
                                                                   iterations=20, tune=False).datacube)
 
 
+def test_default_windows_fit_any_capture():
+    assert frame_windows(1) == [(0, 1)] and frame_windows(3) == [(0, 2), (1, 3)]
+    assert frame_windows(3, 1) == [(0, 1), (1, 2), (2, 3)]
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1.8e-4, t_r=3.5e-5)          # one frame per camera
+    g = rsocl.RollingShutterOperator(rig).forward(builtin_scene(rig.shape, rig.T, seed=4))
+    stream = reconstruct_stream(g, rig, iterations=5, tune=False)
+    np.testing.assert_array_equal(stream.datacube, rsocl.reconstruct(g, rig, iterations=5, tune=False).datacube)
+
+
 def test_rsocl_reconstruct_window(tmp_path, capsys):
     from rsocl.cli.main import main
     from rsocl.files.hdf5 import load_reconstruction, save_capture
@@ -62,6 +71,10 @@ def test_rsocl_reconstruct_window(tmp_path, capsys):
     assert "2 window(s) of 2 frame(s)" in capsys.readouterr().out
     back = load_reconstruction(out)
     assert back.datacube.shape == (rig.T,) + rig.shape and back.params["windows"] == [[0, 2], [1, 3]]
+    assert (tmp_path / "stream-tuning.png").is_file()
+    assert main(["reconstruct", str(tmp_path / "cap.h5"), "--out", str(tmp_path / "one.h5"), "--window", "1",
+                 "--iterations", "3", "--fast", "--quiet"]) == 0                # the default overlap follows --window
+    assert load_reconstruction(tmp_path / "one.h5").params["overlap"] == 0
     assert main(["reconstruct", str(tmp_path / "cap.h5"), "--out", str(tmp_path / "s.zarr"), "--window", "2"]) == 2
     assert "--window: a stream of frame windows is written to an HDF5 file" in capsys.readouterr().err
 

@@ -220,6 +220,21 @@ def say(args, *text):
         print(*text, flush=True)
 
 
+def tuning_plot_files(args, params, gif) -> list:
+    """Say the values chosen from the snapshots and plot the criterion next to ``gif`` (as
+    ``NAME-tuning.png``); the files written (none when nothing was tuned)."""
+    if not params.get("tuning"):
+        return []
+    from pathlib import Path
+
+    from rsocl.analysis.tuning_plot import tuning_plot
+
+    chosen = ", ".join(f"{k} = {v:.3g}" for k, v in params["tuning"]["chosen"].items())
+    say(args, f"chosen from the snapshots: {chosen}")
+    gif = Path(gif)
+    return [tuning_plot(gif.with_name(gif.stem + "-tuning.png"), params["tuning"])]
+
+
 def run_reconstruction(args, g, rig, truth=None):
     """:func:`rsocl.reconstruct` of snapshots ``g`` with the solver and device arguments."""
     from rsocl.solver.reconstruct import reconstruct

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rsocl.cli.options import add_device_args, add_solver_args, quality_line, reg_options, run_reconstruction, say
+from rsocl.cli.options import add_device_args, add_solver_args, quality_line, reg_options, run_reconstruction, say, \
+    tuning_plot_files
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
 __all__ = ["add_parser", "cmd_reconstruct", "set_path"]
@@ -67,7 +68,7 @@ def cmd_reconstruct(args) -> int:
         save_reconstruction(out, result.datacube, capture.rig, params=result.params, history=result.history,
                             truth=truth)
         comparison_gif(gif, truth, result.datacube)
-        say(args, "wrote " + ", ".join(str(p) for p in [out, gif, *_tuning_plot(args, result.params, gif)]))
+        say(args, "wrote " + ", ".join(str(p) for p in [out, gif, *tuning_plot_files(args, result.params, gif)]))
         return 0
     batch = _reconstruct_sets(args, sets, capture.rig)
     say(args, f"{sets.shape[0]} sets in batches of {batch.params['batch']}")
@@ -78,20 +79,9 @@ def cmd_reconstruct(args) -> int:
         save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history,
                             truth=known)
     comparison_gif(gif, truth, batch.set(0).datacube)
-    plots = _tuning_plot(args, batch.set(0).params, gif)
+    plots = tuning_plot_files(args, batch.set(0).params, gif)
     say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, " + ", ".join(map(str, [gif, *plots])))
     return 0
-
-
-def _tuning_plot(args, params, gif) -> list:
-    """Say the values chosen from the snapshots and plot the criterion next to the GIF; the files written."""
-    if not params.get("tuning"):
-        return []
-    from rsocl.analysis.tuning_plot import tuning_plot
-
-    chosen = ", ".join(f"{k} = {v:.3g}" for k, v in params["tuning"]["chosen"].items())
-    say(args, f"chosen from the snapshots: {chosen}")
-    return [tuning_plot(gif.with_name(gif.stem + "-tuning.png"), params["tuning"])]
 
 
 def _reconstruct_sets(args, sets, rig):

@@ -46,8 +46,9 @@ def add_reconstruct_tiling_args(p):
     g.add_argument("--retries", type=int, default=2, help="extra attempts of a failing tile (default 2)")
     g.add_argument("--window", type=int, default=None, metavar="F",
                    help="multi-frame capture (frames, t_d): reconstruct it as a stream of windows of F frames")
-    g.add_argument("--overlap", type=int, default=1, metavar="V",
-                   help="frames shared by consecutive windows (default 1; 0 when the readout has gaps)")
+    g.add_argument("--overlap", type=int, default=None, metavar="V",
+                   help="frames shared by consecutive windows (default 1, or 0 with --window 1; 0 when the "
+                        "readout has gaps)")
 
 
 def check_outputs(args) -> None:
@@ -102,7 +103,7 @@ def _wants_tiles(args, capture) -> bool:
 
 def reconstruct_tiled_if_needed(args):
     """Run ``rsocl reconstruct`` tiled when it should be (see the module); the exit code, or None."""
-    from rsocl.cli.options import reg_options, say
+    from rsocl.cli.options import reg_options, say, tuning_plot_files
     from rsocl.scale.inputs import CaptureSets
 
     capture = CaptureSets(args.capture, all_sets=args.sets)
@@ -139,7 +140,8 @@ def reconstruct_tiled_if_needed(args):
         text = f"PSNR {psnr(result.datacube, truth):.2f} dB, " + text
     print(text, flush=True)
     if zarr_out:
-        say(args, f"wrote {args.out}")
+        plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
+        say(args, "wrote " + ", ".join(map(str, [args.out, *plots])))
         return 0
     from rsocl.analysis.visual import comparison_gif
     from rsocl.files.hdf5 import save_reconstruction
@@ -150,14 +152,14 @@ def reconstruct_tiled_if_needed(args):
                         truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     comparison_gif(gif, truth, result.datacube)
-    say(args, f"wrote {args.out} and {gif}")
+    say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, result.params, gif)])))
     return 0
 
 
 def _stream(args, capture):
     """``--window``: the capture as a stream of overlapping frame windows, into an HDF5 file."""
     from rsocl.analysis.visual import comparison_gif
-    from rsocl.cli.options import reg_options, say
+    from rsocl.cli.options import reg_options, say, tuning_plot_files
     from rsocl.files.hdf5 import load_capture, save_reconstruction
     from rsocl.scale.stream import reconstruct_stream
 
@@ -175,12 +177,13 @@ def _stream(args, capture):
 
         text = f"PSNR {psnr(stream.datacube, truth):.2f} dB, " + text
     print(text, flush=True)
-    params = dict(stream.results[0].params, window=args.window, overlap=args.overlap,
+    overlap = min(1, args.window - 1) if args.overlap is None else args.overlap
+    params = dict(stream.results[0].params, window=args.window, overlap=overlap,
                   windows=[list(w) for w in stream.windows])
     save_reconstruction(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     comparison_gif(gif, truth, stream.datacube)
-    say(args, f"wrote {args.out} and {gif}")
+    say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, params, gif)])))
     return 0
 
 

@@ -32,13 +32,15 @@ def _frames(rig: Rig) -> int:
     return counts.pop()
 
 
-def frame_windows(frames: int, window: int, overlap: int) -> list:
+def frame_windows(frames: int, window=None, overlap=None) -> list:
     """``[(k0, k1), ...]``: frames ``k0..k1-1`` of each window, covering ``0..frames-1``.
 
     ``1 <= window <= frames`` and ``0 <= overlap < window`` (ValueErrors name them); the last
-    window ends at the last frame (it may overlap its neighbour by more).
+    window ends at the last frame (it may overlap its neighbour by more). Defaults: ``window``
+    2 frames (1 for a capture of one frame), ``overlap`` 1 frame (0 for windows of one frame).
     """
-    window = check.positive_int("window", window, maximum=frames)
+    window = min(2, int(frames)) if window is None else check.positive_int("window", window, maximum=frames)
+    overlap = min(1, window - 1) if overlap is None else overlap
     try:
         ok = int(overlap) == float(overlap) and 0 <= int(overlap) < window
     except (TypeError, ValueError):
@@ -82,7 +84,7 @@ class StreamResult:
     results: list = field(default_factory=list)
 
 
-def reconstruct_stream(snapshots, rig: Rig, *, window=2, overlap=1, tile=None, progress=False, **kwargs):
+def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=None, progress=False, **kwargs):
     """Reconstruct a multi-frame capture window by window (each window tiled and run as Dask tasks).
 
     Parameters
@@ -91,10 +93,11 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=2, overlap=1, tile=None, p
         Every camera's frames, camera-major (``rig.channels``).
     rig : Rig
         Cameras with the same ``frames`` (>= 1) each.
-    window : int
-        Frames per window, ``1..frames``.
-    overlap : int
-        Frames shared by consecutive windows, ``0..window-1`` (1 when the readout is continuous).
+    window : int or None
+        Frames per window, ``1..frames`` (None: 2, or 1 for a capture of one frame).
+    overlap : int or None
+        Frames shared by consecutive windows, ``0..window-1`` (1 when the readout is continuous;
+        None: 1, or 0 for windows of one frame).
     tile : (int, int) or None
         Tile of each window (None: the whole grid, one task per window).
     **kwargs
