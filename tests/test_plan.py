@@ -68,6 +68,15 @@ def test_plan_checks_every_option_before_printing_or_measuring(capsys, monkeypat
     assert captured.out == "" and not calls
 
 
+def test_plan_with_a_memory_budget_proposes_tiles_even_when_the_grid_fits_the_device(capsys):
+    assert main(["plan", "--shape", "48", "48", "--no-measure", "--memory-mib", "2", "--halo", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "tiling:" in out and "budget 2.0 MiB" in out
+    assert main(["plan", "--shape", "48", "48", "--no-measure", "--memory-mib", "0.001"]) == 2
+    err = capsys.readouterr().err
+    assert "fits the budget of 0.0 MiB per task" in err and "--memory-mib" in err and "tile:" not in err
+
+
 def test_plan_in_python_checks_iterations_and_blur():
     from rsocl.solver.plan import plan
 

@@ -223,11 +223,11 @@ def check_plan_tiling_args(args, shape) -> None:
 
 
 def print_plan_tiling(args, p) -> None:
-    """After ``rsocl plan``'s table: the tiling, when the proposal does not fit or ``--tile`` asks
-    (the arguments checked first by :func:`check_plan_tiling_args`)."""
+    """After ``rsocl plan``'s table: the tiling, when the proposal does not fit or ``--tile``, ``--sets``
+    or ``--memory-mib`` asks (the arguments checked first by :func:`check_plan_tiling_args`)."""
     from rsocl.scale.proposal import format_tiling, propose_tiling
 
-    if args.tile is None and p.proposed.fits and args.sets == 1:
+    if args.tile is None and p.proposed.fits and args.sets == 1 and args.memory_mib is None:
         return
     budget = None if args.memory_mib is None else int(args.memory_mib * 2**20)
     tiling = propose_tiling(p.proposed.rig, tile=args.tile, halo=args.halo, sets=args.sets,

@@ -124,8 +124,10 @@ def propose_tiling(rig: Rig, *, tile=None, halo=None, sets=1, iterations=200, re
             if fits(cost):
                 break
         else:
-            raise ValueError(f"tile: no tile of {CANDIDATES[-1]} pixels or more fits {budget / 2**20:.1f} MiB "
-                             f"on {dev.name}; raise dt or lower the budget's users")
+            hint = ("raise budget_bytes (rsocl plan --memory-mib) or dt (fewer sub-frames)" if budget_bytes is not None
+                    else "raise dt (fewer sub-frames) or use a device with more memory")
+            raise ValueError(f"no tile of {CANDIDATES[-1]} pixels a side or more fits the budget of "
+                             f"{budget / 2**20:.1f} MiB per task on {dev.name}; {hint}")
     total, largest, voxels, worst, worst_voxels = cost
     untiled = rig.sampled_range()
     result = Tiling(rig, tile, halo, tile_grid(rig.shape, tile, halo).grid, sets, total, largest, voxels,
