@@ -236,6 +236,17 @@ def test_cmd_bench_quick_end_to_end(tmp_path, capsys):
     assert {int(r["roi"]) for r in rows} == {6, 9, 12}
 
 
+def test_ssim_of_an_roi_under_3_pixels_is_reported_as_not_available(tmp_path):
+    parser = argparse.ArgumentParser(prog="rsocl")
+    bench_cli.add_parser(parser.add_subparsers(dest="command"))
+    out = tmp_path / "b"
+    args = parser.parse_args(["bench", "--quick", "--shape", "12", "--iterations", "3", "--out", str(out),
+                              "--quiet", "--sweep", "roi=2"])
+    assert bench_cli.cmd_bench(args) == 0
+    text = (out / "bench.md").read_text()
+    assert "nan" not in text and "| n/a |" in text and "SSIM n/a: the ROI's frames are under 3 pixels" in text
+
+
 def test_cmd_bench_missing_scene(tmp_path):
     parser = argparse.ArgumentParser(prog="rsocl")
     bench_cli.add_parser(parser.add_subparsers(dest="command"))

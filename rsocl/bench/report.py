@@ -76,6 +76,11 @@ def _num(value, spec):
     return format(value, spec)
 
 
+def _ssim(value) -> str:
+    """SSIM as text: ``n/a`` where it is undefined (frames under 3 pixels a side, the smallest window)."""
+    return f"{value:.3f}" if value is not None and math.isfinite(value) else "n/a"
+
+
 def _ratio(a, b):
     return a / b if b else math.nan
 
@@ -100,7 +105,7 @@ def tradeoff_lines(result: BenchResult):
             f"memory ×{_ratio(row['peak_device_memory_bytes'], base['peak_device_memory_bytes']):.2f}; "
             f"PSNR {_num(row['psnr'], '.2f')} dB vs {_num(base['psnr'], '.2f')} dB "
             f"({row['psnr'] - base['psnr']:+.2f} dB against the same dt = t_r ground truth), "
-            f"SSIM {row['ssim_mean']:.3f} vs {base['ssim_mean']:.3f}.")
+            f"SSIM {_ssim(row['ssim_mean'])} vs {_ssim(base['ssim_mean'])}.")
     for row in _varied(result, "roi"):
         p = row["_point"]
         if p == result.default:
@@ -154,10 +159,12 @@ def markdown(result: BenchResult) -> str:
                  "–" if base else row["dtype"]]
         cells += [row["device"]] if show_device else []
         spi = row["seconds_per_iteration"]
-        cells += [str(row["T"]), _num(row["psnr"], ".2f"), f"{row['ssim_mean']:.3f}", f"{row['seconds']:.3g}",
+        cells += [str(row["T"]), _num(row["psnr"], ".2f"), f"{_ssim(row['ssim_mean'])}", f"{row['seconds']:.3g}",
                   "–" if spi is None else f"{spi * 1e3:.1f}",
                   f"{row['peak_device_memory_bytes'] / 2**20:.2f}"]
         lines.append("| " + " | ".join(cells) + " |")
+    if any(_ssim(row["ssim_mean"]) == "n/a" for row in result.rows):
+        lines += ["", "SSIM n/a: the ROI's frames are under 3 pixels a side, SSIM's smallest window."]
     lines += ["", "## What coarser dt and a tighter ROI buy", ""] + tradeoff_lines(result)
     speed, quality = picks(result)
     lines += ["", "## Which settings to pick", ""]
@@ -165,9 +172,9 @@ def markdown(result: BenchResult) -> str:
         lines.append("(no reconstruction of the default capture ran)")
     else:
         lines.append(f"- **pick for quality:** {quality['label']} — {_num(quality['psnr'], '.2f')} dB, "
-                     f"SSIM {quality['ssim_mean']:.3f}, {quality['seconds']:.2f} s.")
+                     f"SSIM {_ssim(quality['ssim_mean'])}, {quality['seconds']:.2f} s.")
         lines.append(f"- **pick for speed:** {speed['label']} — the fastest point of the Pareto front within "
-                     f"{SPEED_PICK_DB:g} dB of the best: {_num(speed['psnr'], '.2f')} dB, SSIM {speed['ssim_mean']:.3f}, "
+                     f"{SPEED_PICK_DB:g} dB of the best: {_num(speed['psnr'], '.2f')} dB, SSIM {_ssim(speed['ssim_mean'])}, "
                      f"{speed['seconds']:.2f} s.")
         coarse = [r for r in (quality, speed) if r["_point"].dt_factor > 1]
         if coarse:
@@ -178,7 +185,7 @@ def markdown(result: BenchResult) -> str:
         interp = [r for r in result.rows if r["_point"].is_baseline and _comparable(r, d)]
         if interp:
             b = interp[0]
-            lines.append(f"- the baseline `interp3d` gives {_num(b['psnr'], '.2f')} dB (SSIM {b['ssim_mean']:.3f}) in "
+            lines.append(f"- the baseline `interp3d` gives {_num(b['psnr'], '.2f')} dB (SSIM {_ssim(b['ssim_mean'])}) in "
                          f"{b['seconds'] * 1e3:.1f} ms: the reconstruction buys "
                          f"{quality['psnr'] - b['psnr']:+.2f} dB at best, {speed['psnr'] - b['psnr']:+.2f} dB "
                          "with the speed pick.")
