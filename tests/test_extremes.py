@@ -5,8 +5,10 @@ import pytest
 
 import rsocl
 from rsocl.model import reference as ref
+from rsocl.model.interpolation import interp3d
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.scenes import builtin_scene
+from rsocl.solver.tuning import Tuning
 
 
 def _scene(rig, seed=0):
@@ -271,3 +273,22 @@ def test_gap_in_float32_on_nearly_singular_blocks_stays_sound():
     assert close.mean() > 0.99
     res = rsocl.reconstruct(g, rig, iterations=30, eta=0.0, tune=False)
     assert res.history["residual"][-1] < 0.2 and np.abs(res.datacube).max() < 1.5
+
+
+def test_a_mistyped_call_is_a_value_error_naming_the_argument():
+    rig = rsocl.Rig.paper_array(4, (8, 8), t_e=1.8e-4, t_r=3.5e-5)
+    g = ref.forward(rig, _scene(rig))
+    with pytest.raises(ValueError, match="rig must be an rsocl.Rig, got NoneType"):
+        interp3d(g, None)
+    with pytest.raises(ValueError, match="g contains 256 NaN"):
+        interp3d(np.full(g.shape, np.nan), rig)
+    with pytest.raises(ValueError, match=r"cameras must be a list of Camera, got one Camera; pass \[camera\]"):
+        rsocl.Rig(rsocl.Camera(0, t_e=1e-4, t_r=1e-5), (5, 5))
+    with pytest.raises(ValueError, match="cameras must be a list of Camera, got NoneType"):
+        rsocl.Rig(None, (5, 5))
+    # a 0-d array is its one value
+    assert rsocl.reconstruct(g, rig, lam=np.array(0.1), iterations=2, tune=False).params["lam"] == pytest.approx(0.1)
+    # an earlier choice of TV's options does not apply to another regularizer: said before any run
+    tuning = Tuning.from_params(rsocl.reconstruct(g, rig, iterations=2).params["tuning"])
+    with pytest.raises(ValueError, match=r"tune: the earlier Tuning chose \['temporal_weight'\], options 'wavelet'"):
+        rsocl.reconstruct(g, rig, "wavelet", tune=tuning)

@@ -87,6 +87,7 @@ def test_tiles_into_an_hdf5_file(capture, tmp_path):
     (["--out", "{capture}"], r"--out .*cap.h5' is the capture it reads"),
     (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/rec.h5"], r"--gif .*rec.h5' is the --out file"),
     (["--out", "{tmp}/rec.h5", "--gif", "{capture}"], r"--gif .*is the capture it reads"),
+    (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/anim.png"], r"--gif must name a \.gif file .*anim.png"),
 ])
 def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, tmp_path, monkeypatch, capsys,
                                                                        extra, match):

@@ -86,6 +86,8 @@ def check_outputs(args) -> None:
     gif = output_path(Path(args.gif) if args.gif else out.with_suffix(".gif"), "--gif", inputs=reads)
     if gif.resolve() == out.resolve():
         raise ValueError(f"--gif {str(gif)!r} is the --out file; give the GIF another name")
+    if gif.suffix.lower() != ".gif":
+        raise ValueError(f"--gif must name a .gif file (the animation is written as a GIF), got {args.gif!r}")
 
 
 def _wants_tiles(args, capture) -> bool:

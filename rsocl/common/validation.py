@@ -19,7 +19,10 @@ __all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "ch
 
 
 def finite(name: str, value) -> float:
-    """Return ``value`` as a float, or raise if it is not a finite real number."""
+    """Return ``value`` as a float, or raise if it is not a finite real number (a 0-d real NumPy
+    array counts as its one value)."""
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf":
+        value = value.item()
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be a finite real number, got {value!r}")
     value = float(value)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rsocl.common import validation as check
 from rsocl.model.curvature import binary_span
 
 __all__ = ["interp3d", "samples", "evaluate", "Samples"]
@@ -41,7 +42,11 @@ def interp3d(g, rig, valid=None) -> np.ndarray:
     -------
     ndarray of float64, shape (T, m, n)
     """
-    g = np.asarray(g, dtype=np.float64)
+    from rsocl.model.rig import Rig
+
+    if not isinstance(rig, Rig):
+        raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
+    g = check.finite_array("g", g).astype(np.float64, copy=False)
     K = rig.n_channels
     if g.shape != (K,) + rig.shape:
         raise ValueError(f"g must have shape (K, m, n) = {(K,) + rig.shape}, got {g.shape}")

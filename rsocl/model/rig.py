@@ -173,7 +173,12 @@ class Rig:
     """
 
     def __init__(self, cameras, shape, dt=None, mask="exact"):
-        cameras = list(cameras)
+        if isinstance(cameras, Camera):
+            raise ValueError("cameras must be a list of Camera, got one Camera; pass [camera]")
+        try:
+            cameras = list(cameras)
+        except TypeError:
+            raise ValueError(f"cameras must be a list of Camera, got {type(cameras).__name__}") from None
         if not cameras:
             raise ValueError("cameras must hold at least one Camera, got an empty list")
         for i, cam in enumerate(cameras):

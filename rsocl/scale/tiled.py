@@ -180,6 +180,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
     checked = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                              projection=projection)
     reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
+    tune = check_tune(tune, reg)
     fixed_lam = checked.lam
     checked = checked.settled_for(reg, dtype, scale=default_scale(rig))
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))

@@ -115,6 +115,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                               projection=projection, tol=tol, callback=callback)
     reg = make_regularizer(regularizer, regularizer_options, settings.tv_iterations)
+    tune = check_tune(tune, reg)
     fixed_lam = settings.lam
     settings = settings.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(problem.batch)
     start = interpolate or starts_from_interpolation(tune, settings, regularizer, reg, regularizer_options, fixed_lam)
