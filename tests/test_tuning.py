@@ -348,3 +348,33 @@ def test_the_search_summary_says_how_pixels_were_held_out(tmp_path):
     assert search_summary(sizes).startswith("blocks of 8 and 4 px, 2 hold-out folds")
     assert "fold" in search_summary({"candidates": []})                 # an older record without these keys
     assert tuning_plot(tmp_path / "t.png", record).stat().st_size > 0
+
+
+def test_one_snapshot_per_pixel_sets_the_temporal_weight_and_searches_lam_only(tmp_path, capsys):
+    """With one camera a held-out block of the only snapshot is predicted across space alone: the
+    temporal weight comes from ``TV.one_snapshot``, not from the criterion; lam is still searched."""
+    from rsocl.cli.main import main
+    from rsocl.solver.tuning import Tuning
+    from rsocl_plugins.tv import TV
+
+    weight = TV.one_snapshot["temporal_weight"]
+    rig = rsocl.Rig([rsocl.Camera(30, t_e=0.18e-3, t_r=35e-6)], SHAPE)
+    g = ref.forward(rig, _static(rig))
+    record = rsocl.reconstruct(g, rig, iterations=20).params["tuning"]
+    assert record["preset"] == {"temporal_weight": weight} and record["chosen"]["temporal_weight"] == weight
+    assert {c["temporal_weight"] for c in record["candidates"]} == {weight} and len(record["candidates"]) == 3
+    assert Tuning.from_params(record).preset == {"temporal_weight": weight}
+    # the caller's weight wins; with lam fixed too nothing is searched, and the run uses the preset weight
+    given = rsocl.reconstruct(g, rig, iterations=5, regularizer_options={"temporal_weight": 2.0})
+    assert given.params["regularizer_options"]["temporal_weight"] == 2.0 and not given.params["tuning"]["preset"]
+    fixed = rsocl.reconstruct(g, rig, iterations=5, lam=0.1)
+    assert fixed.params["tuning"]["candidates"] == [] and fixed.params["regularizer_options"]["temporal_weight"] == weight
+    # two cameras: the weight is searched as always
+    two = rsocl.Rig.paper_array(2, SHAPE, t_e=0.18e-3, t_r=35e-6)
+    searched = rsocl.reconstruct(ref.forward(two, _static(two)), two, iterations=20).params["tuning"]
+    assert len({c["temporal_weight"] for c in searched["candidates"]}) > 1 and not searched["preset"]
+    # the CLI says what was set and plots only a search it ran
+    cap = tmp_path / "one.h5"
+    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "16", "16", "--cameras", "1"]) == 0
+    assert main(["reconstruct", str(cap), "--out", str(tmp_path / "r.h5"), "--iterations", "5", "--lam", "0.1"]) == 0
+    assert f"temporal_weight = {weight:.3g}" in capsys.readouterr().out and not (tmp_path / "r-tuning.png").exists()

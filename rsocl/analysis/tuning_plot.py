@@ -32,6 +32,9 @@ def search_summary(record) -> str:
         per = " and fold" if folds > 1 else ""
         parts.append(f"{record['iterations_per_candidate']} iterations per candidate{per}")
     parts.append(f"{len(record.get('candidates', []))} candidates")
+    if record.get("preset"):
+        preset = ", ".join(f"{k} = {v:.3g}" for k, v in record["preset"].items())
+        parts.append(f"{preset} set, not searched (one snapshot per pixel)")
     if record.get("seconds"):
         parts.append(f"{record['seconds']:.2f} s")
     return ", ".join(parts)

@@ -231,6 +231,8 @@ def tuning_plot_files(args, params, gif) -> list:
 
     chosen = ", ".join(f"{k} = {v:.3g}" for k, v in params["tuning"]["chosen"].items())
     say(args, f"chosen from the snapshots: {chosen}")
+    if not params["tuning"].get("candidates"):
+        return []                                   # set without a search (one snapshot per pixel): no criterion
     gif = Path(gif)
     return [tuning_plot(gif.with_name(gif.stem + "-tuning.png"), params["tuning"])]
 

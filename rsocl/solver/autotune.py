@@ -93,7 +93,9 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     folds leave no pixels to fit or to score (:func:`~rsocl.solver.tuning.can_hold_out`: one camera
     on 2x2 pixels or fewer, or too few valid pixels) a warning says so and None is returned.
     Unless ``checked`` (the caller did it, for a batch), the search's memory beside the staged
-    problem (:func:`search_peak`) is checked against the device before anything runs.
+    problem (:func:`search_peak`) is checked against the device before anything runs. A rig with
+    one snapshot per pixel gets the regularizer's
+    :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values instead of a search for them.
     """
     search = _to_search(settings, regularizer, reg, user_options, fixed_lam)
     if search is None:
@@ -105,6 +107,12 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
                       "silence this", UserWarning, stacklevel=5)
         return None
     tunable, lam, fixed = search
+    preset = {}
+    if problem.rig.n_channels == 1:         # one snapshot per pixel: the criterion cannot rank priors in time
+        preset = {k: float(v) for k, v in getattr(reg, "one_snapshot", {}).items() if k in tunable}
+        tunable = {k: v for k, v in tunable.items() if k not in preset}
+        if not tunable and np.isscalar(lam):                           # the caller fixed lam: nothing to search
+            return Tuning(chosen={**preset, "lam": float(lam)}, fixed=fixed, preset=preset)
     if not checked:
         _check_search_fits(problem, staged, settings, reg)
     patterns = default_patterns(problem.rig.shape, problem.rig.n_channels)
@@ -113,7 +121,7 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
         lambda options: with_options(regularizer, reg, user_options, options, settings.tv_iterations, make),
         tunable=tunable, lam=lam, eta=_first(settings.eta), projection=settings.projection, valid=problem.valid,
         iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / len(patterns))), patterns=patterns,
-        fixed=fixed, progress=progress)
+        fixed=fixed, preset=preset, progress=progress)
 
 
 def interpolation_start(problem, staged):

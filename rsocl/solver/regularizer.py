@@ -70,6 +70,11 @@ class Regularizer:
     tunable : dict of str -> tuple of float
         Options that :func:`rsocl.solver.tuning.tune_parameters` may choose from the data,
         with their coarse candidate values (positive, log spaced); empty: only ``lam`` is tuned.
+    one_snapshot : dict of str -> float
+        Values of tunable options for a rig with one snapshot per pixel (one camera, one frame):
+        the search then sets them instead of choosing them (:func:`rsocl.solver.autotune.choose_unset`),
+        because held-out pixels of the only snapshot are predicted across space alone and the
+        criterion cannot rank priors in time. Measured per regularizer; empty: searched as always.
 
     batched : bool
         True when ``_denoise`` takes a batch ``(B, T, m, n)`` with a float64 array of ``B``
@@ -90,6 +95,7 @@ class Regularizer:
     batched = False
     fuses_dual = False
     tunable: dict = {}
+    one_snapshot: dict = {}
 
     def __init__(self, **options):
         unknown = sorted(set(options) - set(self.options))

@@ -203,6 +203,9 @@ class Tuning:
         Hold-out patterns pooled (:func:`default_patterns`).
     seconds : float
         Wall time of the whole search, seconds.
+    preset : dict
+        Options set without a search (in ``chosen`` too): a rig with one snapshot per pixel gets
+        the regularizer's :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values.
     """
 
     chosen: dict
@@ -213,6 +216,7 @@ class Tuning:
     held_out: int = 0
     seconds: float = 0.0
     folds: int = 1
+    preset: dict = field(default_factory=dict)
 
     @classmethod
     def from_params(cls, record: dict) -> "Tuning":
@@ -221,7 +225,8 @@ class Tuning:
                       for c in record.get("candidates", [])]
         return cls(dict(record["chosen"]), candidates, dict(record.get("fixed", {})),
                    record.get("iterations_per_candidate", 0), record.get("block", 0),
-                   record.get("held_out_pixels", 0), record.get("seconds", 0.0), record.get("folds", 1))
+                   record.get("held_out_pixels", 0), record.get("seconds", 0.0), record.get("folds", 1),
+                   dict(record.get("preset", {})))
 
     def as_params(self) -> dict:
         """A JSON-ready record for :attr:`rsocl.solver.result.Result.params`."""
@@ -229,7 +234,7 @@ class Tuning:
                 "chosen": dict(self.chosen), "fixed": dict(self.fixed),
                 "candidates": [{k: (v if math.isfinite(v) else None) for k, v in c.items()} for c in self.candidates],
                 "iterations_per_candidate": self.iterations, "block": self.block, "held_out_pixels": self.held_out,
-                "folds": self.folds, "seconds": self.seconds}
+                "folds": self.folds, "seconds": self.seconds, "preset": dict(self.preset)}
 
 
 def _midpoints(values, best):
@@ -244,7 +249,7 @@ def _midpoints(values, best):
 
 
 def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta, projection="exact",
-                    valid=None, iterations=60, block=None, folds=None, patterns=None, fixed=None,
+                    valid=None, iterations=60, block=None, folds=None, patterns=None, fixed=None, preset=None,
                     progress=False) -> Tuning:
     """Search the parameters that predict held-out snapshot pixels best (see the module doc).
 
@@ -279,6 +284,9 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
         The criterion pools the held-out errors of all patterns.
     fixed : dict or None
         Parameters the caller fixed, recorded in the result.
+    preset : dict or None
+        Regularizer options set without a search: given to every candidate, recorded in the
+        result's ``chosen`` and ``preset``.
     progress : bool
         Show a progress bar (tqdm) over the candidates.
 
@@ -290,6 +298,7 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
 
     start = time.perf_counter()
     iterations = check.positive_int("tuning iterations", iterations)
+    preset = dict(preset or {})
     lams = [float(lam)] if np.isscalar(lam) else [float(v) for v in lam]
     if patterns is None and block is None and folds is None:
         patterns = default_patterns(rig.shape, rig.n_channels)
@@ -332,7 +341,7 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
         key = tuple(sorted(point.items()))
         if key in scores:
             return scores[key]
-        reg = make_regularizer({k: v for k, v in point.items() if k != "lam"})
+        reg = make_regularizer({**preset, **{k: v for k, v in point.items() if k != "lam"}})
         err = 0.0
         for part in parts:
             fit, x0, weights, solver = part
@@ -349,7 +358,7 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
         if not math.isfinite(value):
             value = math.inf
         scores[key] = value
-        candidates.append({**point, "score": value})
+        candidates.append({**preset, **point, "score": value})
         if bar is not None:
             bar.update(1)
             bar.set_postfix(best=f"{min(scores.values()):.4g}")
@@ -371,9 +380,9 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
     finally:
         if bar is not None:
             bar.close()
-    return Tuning(chosen=dict(current), candidates=candidates, fixed=dict(fixed or {}), iterations=iterations,
+    return Tuning(chosen={**preset, **current}, candidates=candidates, fixed=dict(fixed or {}), iterations=iterations,
                   block=blocks[0] if len(blocks) == 1 else blocks, held_out=held_out,
-                  seconds=time.perf_counter() - start, folds=len(patterns))
+                  seconds=time.perf_counter() - start, folds=len(patterns), preset=preset)
 
 
 def _solved(rig, op) -> slice:
