@@ -225,6 +225,10 @@ def test_saturation_that_leaves_nothing_is_refused():
     rig = rsocl.Rig.paper_array(2, (4, 4), t_e=1e-4, t_r=3e-5)
     with pytest.raises(ValueError, match="saturation"):
         rsocl.reconstruct(np.ones((2, 4, 4)), rig, saturation=0.5)
+    g = np.ones((2, 4, 4))
+    g[0, 0, :2] = 0.0                                  # only dark pixels stay below the level
+    with pytest.warns(UserWarning, match=r"keeps only snapshot pixels that are 0 \(the brightest is 1\)"):
+        rsocl.reconstruct(g, rig, saturation=0.5, iterations=2, tune=False)
 
 
 def test_subframes_no_camera_samples_are_not_modelled_and_hold_the_first_solved_one(device):

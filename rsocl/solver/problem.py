@@ -7,6 +7,7 @@ for the sampled sub-frames, checks that the run fits the device, and uploads the
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -123,6 +124,12 @@ def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
         if empty.any():
             which = "" if batch is None else f" of set(s) {np.flatnonzero(empty).tolist()}"
             raise ValueError(f"every snapshot pixel{which} is >= saturation = {saturation!r}: nothing left to fit")
+        dark = ~np.where(valid, g != 0, False).reshape(batch or 1, -1).any(axis=1)
+        if dark.any():
+            which = "" if batch is None else f" of set(s) {np.flatnonzero(dark).tolist()}"
+            warnings.warn(f"saturation = {saturation!r} keeps only snapshot pixels that are 0{which} (the brightest is "
+                          f"{float(np.max(g)):.4g}): the reconstruction will be zero; saturation is in snapshot units",
+                          UserWarning, stacklevel=3)
     cube = (rig.T,) + rig.shape
     return Problem(g, rig, valid, _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch), saturation,
                    batch)
