@@ -408,3 +408,18 @@ def test_calibrate_reads_folders_and_given_marker_coordinates(calibration_files)
         assert calibrated.cameras[c]["gain"] == pytest.approx(gains[c], rel=0.01)
     with pytest.raises(ValueError, match="must have the rig's shape"):
         _calibrate(["--rig", folder / "rig.toml", "--frames", folder / "markers.npz"])
+
+
+def test_calibrate_refuses_an_output_that_is_an_input_before_any_work(calibration_files, monkeypatch):
+    import rsocl.cli.calibrate as calibrate_cli
+
+    folder, *_ = calibration_files
+    flats = (folder / "flats.npz").read_bytes()
+    monkeypatch.setattr(calibrate_cli, "_gains", lambda *a: pytest.fail("calibrated before checking --out"))
+    with pytest.raises(ValueError, match=r"--out .*flats.npz' is the --flat it reads"):
+        _calibrate(["--rig", folder / "rig.toml", "--flat", folder / "flats.npz", "--out", folder / "flats.npz"])
+    with pytest.raises(FileNotFoundError, match="--out: directory .*missing"):
+        _calibrate(["--rig", folder / "rig.toml", "--flat", folder / "flats.npz", "--out", folder / "missing" / "r.toml"])
+    with pytest.raises(ValueError, match=r"--png .*markers.npz' is the --frames it reads"):
+        _calibrate(["--rig", folder / "rig.toml", "--frames", folder / "markers.npz", "--png", folder / "markers.npz"])
+    assert (folder / "flats.npz").read_bytes() == flats

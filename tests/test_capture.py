@@ -183,3 +183,18 @@ def test_cmd_capture(tmp_path, capsys):
     captured = capsys.readouterr()
     assert captured.out == "" and "rsocl capture: error: camera 0 (simulated): read failed in set 1" in captured.err
     assert load_raw(tmp_path / "f.h5").status == "failed"
+
+
+def test_an_output_that_is_an_input_is_refused_before_any_camera_opens(tmp_path):
+    from rsocl.cli.main import main
+
+    rig_path = tmp_path / "rig.toml"
+    save_rigfile(rig_path, _rigfile())
+    before = rig_path.read_bytes()
+    with pytest.raises(ValueError, match=r"out .*rig.toml' is the rig file it reads"):
+        capture_sets(rig_path, rig_path, sets=1)
+    assert main(["capture", "--rig", str(rig_path), "--out", str(rig_path), "--quiet"]) == 2
+    assert rig_path.read_bytes() == before
+    (tmp_path / "c.h5.partial").mkdir()                  # the partial file's name taken by a folder
+    with pytest.raises(ValueError, match=r"out must name a file, .*c.h5.partial' is a directory"):
+        capture_sets(rig_path, tmp_path / "c.h5", sets=1)

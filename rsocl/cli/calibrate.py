@@ -339,6 +339,14 @@ def cmd_calibrate(args) -> int:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
     if args.flicker_hz is not None and args.flicker is None:
         raise ValueError("--flicker-hz needs --flicker (frames of the flickering light)")
+    from rsocl.files.atomic import output_path
+
+    reads = (("--frames", args.frames), ("--flicker", args.flicker), ("--flat", args.flat))
+    out = output_path(Path(args.out) if args.out else Path(args.rig), "--out", inputs=reads)   # before any work
+    png = None
+    if args.frames is not None:
+        png = output_path(Path(args.png) if args.png else out.with_name(out.stem + "-calibration.png"), "--png",
+                          inputs=reads + (("--rig", args.rig), ("--out", out)))
     rigfile = load_rigfile(args.rig)
     updates = [{} for _ in rigfile.cameras]
     overlay = _register(args, rigfile, updates) if args.frames is not None else None
@@ -347,10 +355,8 @@ def cmd_calibrate(args) -> int:
     if args.flat is not None:
         _gains(args, rigfile, updates)
     calibrated = _updated(rigfile, updates)
-    out = Path(args.out) if args.out else Path(args.rig)
     written = []
     if overlay is not None:
-        png = Path(args.png) if args.png else out.with_name(out.stem + "-calibration.png")
         frames, detected, reprojected, outlines, titles = overlay
         written.append(marker_overlay_png(png, frames, detected, reprojected, outlines=outlines, titles=titles))
     written.insert(0, save_rigfile(out, calibrated))

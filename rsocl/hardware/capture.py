@@ -31,6 +31,8 @@ must then equal the rig's). Integer frames are converted to model units as
 
 from __future__ import annotations
 
+import os
+
 from pathlib import Path
 
 import numpy as np
@@ -144,8 +146,11 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
     for i, cam in enumerate(rig.cameras):
         if cam.frames != 1:
             raise ValueError(f"camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger")
-    out = output_path(out_path, "out")
-    partial = out.with_name(out.name + PARTIAL_SUFFIX)
+    folder = Path(rigfile.path).parent if rigfile.path is not None else Path(".")
+    reads = [("rig file", rigfile.path)] + [("row_map_file", folder / cam["row_map_file"]) for cam in rigfile.cameras
+                                           if isinstance(cam.get("row_map_file"), (str, os.PathLike))]
+    out = output_path(out_path, "out", inputs=reads)
+    partial = output_path(out.with_name(out.name + PARTIAL_SUFFIX), "out", inputs=reads)
 
     backends = rigfile.backends()
     labels = [_label(i, b, c) for i, (b, c) in enumerate(backends)]
