@@ -1,5 +1,6 @@
 import json
 import os
+import re
 
 import h5py
 import numpy as np
@@ -242,3 +243,47 @@ def test_atomic_path_success_and_failure(tmp_path):
     with pytest.raises(FileNotFoundError):
         with atomic_path(tmp_path / "no" / "such" / "dir.bin"):
             pass
+
+
+@pytest.mark.parametrize("damage, match", [
+    (lambda h5: h5.attrs.__delitem__("rig"), "attribute 'rig' is missing"),
+    (lambda h5: h5.attrs.__setitem__("rig", "[1]"), "the stored rig description is damaged"),
+    (lambda h5: h5.attrs.__setitem__("rig", 5), "the stored rig description is damaged"),
+    (lambda h5: h5.attrs.__setitem__("rig", "{bad"), "the stored rig description is damaged"),
+    (lambda h5: h5.attrs.__setitem__("rig", re.sub(r'"t_e": [-+.e0-9]+', '"t_e": -1.0', h5.attrs["rig"], count=1)),
+     "the stored rig is not valid: .*t_e must be > 0"),
+    (lambda h5: h5.attrs.__setitem__("meta", "{bad"), "attribute 'meta' is not valid JSON"),
+    (lambda h5: (h5.__delitem__("snapshots"), h5.create_group("snapshots")), "'snapshots' must be a dataset"),
+    (lambda h5: (h5.__delitem__("snapshots"), h5.create_dataset("snapshots", data=np.full((2, 3), b"x"))),
+     "'snapshots' must hold real numbers"),
+    (lambda h5: (h5.__delitem__("snapshots"), h5.create_dataset("snapshots", data=np.zeros((3, 4)))),
+     r"'snapshots' has shape \(3, 4\), the rig needs"),
+])
+def test_a_damaged_capture_is_a_value_error_naming_the_file(tmp_path, rig, snapshots, damage, match):
+    from rsocl.cli.main import main
+    from rsocl.scale.inputs import CaptureSets
+
+    cap = save_capture(tmp_path / "cap.h5", snapshots, rig)
+    with h5py.File(cap, "a") as h5:
+        damage(h5)
+    with pytest.raises(ValueError, match=match) as info:
+        load_capture(cap)
+    assert "cap.h5" in str(info.value)
+    if "snapshots" not in match and "meta" not in match:             # the rig: the reader of tiled runs too
+        with pytest.raises(ValueError, match=match):
+            CaptureSets(cap)
+    assert main(["reconstruct", str(cap), "--out", str(tmp_path / "r.h5"), "--iterations", "2", "--fast"]) == 2
+
+
+def test_a_damaged_reconstruction_is_a_value_error_naming_the_file(tmp_path, rig, truth):
+    rec = save_reconstruction(tmp_path / "rec.h5", truth, rig, params={"lam": 0.1}, history={"psnr": np.ones(3)})
+    with h5py.File(rec, "a") as h5:
+        h5.attrs["params"] = "{bad"
+    with pytest.raises(ValueError, match="rec.h5: attribute 'params' is not valid JSON"):
+        load_reconstruction(rec)
+    rec = save_reconstruction(tmp_path / "rec2.h5", truth, rig, history={"psnr": np.ones(3)})
+    with h5py.File(rec, "a") as h5:
+        del h5["history"]
+        h5["history"] = np.ones(3)
+    with pytest.raises(ValueError, match="'history' must be a group of datasets"):
+        load_reconstruction(rec)

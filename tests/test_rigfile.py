@@ -195,6 +195,9 @@ def test_row_map_file_is_checked(tmp_path):
     path.write_text(BASE.replace("angle = 90", 'row_map_file = "rows.npy"'))
     with pytest.raises(ValueError, match=r"camera\[1\]\.row_map_file has shape \(3, 3\)"):
         load_rigfile(path)
+    (tmp_path / "rows.npy").write_bytes(b"")                         # an empty file
+    with pytest.raises(ValueError, match=r"camera\[1\]\.row_map_file: .*rows.npy' is not a readable .npy array"):
+        load_rigfile(path)
     np.save(tmp_path / "rows.npy", np.arange(63.0).reshape(9, 7))
     assert load_rigfile(path).rig().row_map(1)[8, 6] == 62.0
     with pytest.raises(FileNotFoundError):

@@ -19,7 +19,6 @@ shape), attribute ``params`` (JSON object), group ``history`` of 1-D datasets
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +27,8 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.files.atomic import atomic_path
-from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, open_checked, read_rig, str_attr, write_header
+from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, json_attr, open_checked, read_array, read_rig, \
+    write_header
 from rsocl.model.rig import Rig
 
 __all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_capture_rig", "load_snapshot_sets",
@@ -98,8 +98,8 @@ def _check_rig(rig) -> Rig:
     return rig
 
 
-def _optional(h5, name):
-    return h5[name][()] if name in h5 else None
+def _optional(h5, name, source, tail=None):
+    return read_array(h5, name, source, tail) if name in h5 else None
 
 
 # ---------------------------------------------------------------------- capture
@@ -178,10 +178,9 @@ def load_capture(path) -> Capture:
     source = str(path)
     with open_checked(path, "capture") as h5:
         rig = read_rig(h5, source)
-        if "snapshots" not in h5:
-            raise ValueError(f"{source}: dataset 'snapshots' is missing")
-        return Capture(snapshots=h5["snapshots"][()], rig=rig, truth=_optional(h5, "truth"),
-                       meta=json.loads(str_attr(h5, "meta", source)))
+        snapshots = read_array(h5, "snapshots", source, (rig.n_channels,) + rig.shape)
+        return Capture(snapshots=snapshots, rig=rig, truth=_optional(h5, "truth", source, rig.shape),
+                       meta=json_attr(h5, "meta", source))
 
 
 def load_capture_rig(path) -> Rig:
@@ -308,12 +307,12 @@ def load_reconstruction(path) -> Reconstruction:
     source = str(path)
     with open_checked(path, "reconstruction") as h5:
         rig = read_rig(h5, source)
-        if "datacube" not in h5:
-            raise ValueError(f"{source}: dataset 'datacube' is missing")
+        datacube = read_array(h5, "datacube", source, rig.shape)
         history = {}
         if "history" in h5:
-            for name, dataset in h5["history"].items():
-                history[name] = dataset[()]
-        return Reconstruction(datacube=h5["datacube"][()], rig=rig,
-                              params=json.loads(str_attr(h5, "params", source)),
-                              history=history, truth=_optional(h5, "truth"))
+            if not hasattr(h5["history"], "items"):
+                raise ValueError(f"{source}: 'history' must be a group of datasets")
+            for name in h5["history"]:
+                history[name] = read_array(h5, f"history/{name}", source)
+        return Reconstruction(datacube=datacube, rig=rig, params=json_attr(h5, "params", source),
+                              history=history, truth=_optional(h5, "truth", source, rig.shape))

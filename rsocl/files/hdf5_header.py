@@ -91,9 +91,39 @@ def read_rig(h5, source: str) -> Rig:
             ref = camera.get("row_map")
             if isinstance(ref, dict):
                 camera["row_map"] = np.asarray(h5[ref["dataset"]][()], dtype=np.float64)
-        return Rig.from_dict(data)
-    except (KeyError, TypeError, json.JSONDecodeError) as exc:
+        rig = Rig.from_dict(data)
+    except (KeyError, TypeError, AttributeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{source}: the stored rig description is damaged ({exc!r})") from None
+    except ValueError as exc:
+        raise ValueError(f"{source}: the stored rig is not valid: {exc}") from None
+    return rig
+
+
+def json_attr(h5, name: str, source: str):
+    """Root attribute ``name`` of ``h5`` decoded from JSON; a ValueError naming ``source`` and the
+    attribute when it is missing or not JSON."""
+    try:
+        return json.loads(str_attr(h5, name, source))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{source}: attribute {name!r} is not valid JSON ({exc})") from None
+
+
+def read_array(h5, name: str, source: str, tail=None):
+    """Dataset ``name`` of ``h5`` as a real-valued array; a ValueError naming ``source`` when it is
+    missing, not a dataset, not real numbers or (``tail``: the expected trailing axes) of another shape."""
+    import h5py
+
+    if name not in h5:
+        raise ValueError(f"{source}: dataset {name!r} is missing")
+    item = h5[name]
+    if not isinstance(item, h5py.Dataset):
+        raise ValueError(f"{source}: {name!r} must be a dataset, it is a {type(item).__name__}")
+    if item.dtype.kind not in "biuf":
+        raise ValueError(f"{source}: dataset {name!r} must hold real numbers, it holds {item.dtype}")
+    if tail is not None and tuple(item.shape[-len(tail):]) != tuple(tail):
+        raise ValueError(f"{source}: dataset {name!r} has shape {item.shape}, the rig needs (..., "
+                         f"{', '.join(map(str, tail))})")
+    return item[()]
 
 
 # ---------------------------------------------------------------------- header

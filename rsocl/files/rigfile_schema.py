@@ -157,7 +157,7 @@ def _load_row_map(i, path, shape):
         raise ValueError(f"{_where(i, 'row_map_file')}: file {str(path)!r} does not exist")
     try:
         array = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
+    except (OSError, ValueError, EOFError) as exc:                # EOFError: an empty file
         raise ValueError(f"{_where(i, 'row_map_file')}: {str(path)!r} is not a readable .npy array ({exc})") from None
     return _check_row_map(i, "row_map_file", array, shape)
 

@@ -8,13 +8,13 @@ input) and counts the saturated pixels.
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.files.hdf5_header import read_rig
 from rsocl.model.rig import Rig
 from rsocl.scale.work import FileBlock
 
@@ -86,17 +86,16 @@ class CaptureSets:
             kind = kind.decode() if isinstance(kind, bytes) else kind
             if kind != "capture":
                 raise ValueError(f"{name}: {str(self.path)!r} is not an rsocl capture file")
-            data = json.loads(h5.attrs["rig"])
-            for camera in data["cameras"]:
-                ref = camera.get("row_map")
-                if isinstance(ref, dict):
-                    camera["row_map"] = np.asarray(h5[ref["dataset"]][()], dtype=np.float64)
-            self.rig = Rig.from_dict(data)
+            self.rig = read_rig(h5, f"{name}: {str(self.path)!r}")
             self.dataset = "snapshot_sets" if all_sets else "snapshots"
             if self.dataset not in h5:
                 hint = " (it holds one set: leave out --sets)" if all_sets else ""
                 raise ValueError(f"{name}: {str(self.path)!r} has no dataset {self.dataset!r}{hint}")
-            shape = h5[self.dataset].shape
+            item = h5[self.dataset]
+            if not isinstance(item, h5py.Dataset) or item.dtype.kind not in "biuf":
+                raise ValueError(f"{name}: {str(self.path)!r}: {self.dataset!r} must be a dataset of real numbers, "
+                                 f"got {type(item).__name__} {getattr(item, 'dtype', '')}".rstrip())
+            shape = item.shape
             self.has_truth = "truth" in h5
         expected = (self.rig.n_channels,) + self.rig.shape
         if shape[-3:] != expected:
