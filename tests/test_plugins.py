@@ -1,5 +1,6 @@
 """The plugin registry, the regularizer conformance check, and a real third-party distribution."""
 
+import re
 import shutil
 import subprocess
 import sys
@@ -82,13 +83,33 @@ def test_broken_plugin_is_reported_and_others_keep_working(tmp_path, monkeypatch
     assert rsocl.reconstruct(g, rig, iterations=2).datacube.shape == (rig.T, 6, 6)
 
 
-def test_two_distributions_claiming_one_name_is_an_error(tmp_path, monkeypatch):
+def test_two_distributions_claiming_one_name_is_an_error_for_that_name_only(tmp_path, monkeypatch):
     _fake_distribution(tmp_path, "impostor-tv", "tv", "impostor_tv", "Thing = object\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     with pytest.raises(plugins.PluginError, match=r"'tv'.*impostor-tv.*rsocl|'tv'.*rsocl.*impostor-tv"):
-        plugins.available("rsocl.regularizers")
+        plugins.load("rsocl.regularizers", "tv")
+    assert "tv" not in plugins.available("rsocl.regularizers")
+    assert plugins.load("rsocl.regularizers", "dct").name == "dct"            # the others stay usable
     rows = [state for info, name, state in plugins.status("rsocl.regularizers") if name == "tv"]
     assert len(rows) == 2 and all("claimed by" in s for s in rows)
+
+
+@pytest.mark.parametrize("body, cause", [
+    ("import sys\nsys.exit(3)\n", "SystemExit: 3"),
+    ("Thing = 42\n", "TypeError: .* is 42, not a subclass of rsocl.solver.regularizer.Regularizer"),
+    ("def Thing(**kw):\n    return 'x'\n", "not a subclass of rsocl.solver.regularizer.Regularizer"),
+])
+def test_a_plugin_that_exits_or_is_not_a_regularizer_is_broken_and_the_others_work(tmp_path, monkeypatch, body, cause):
+    _fake_distribution(tmp_path, "odd-plugin", "odd", "odd_rsocl_module", body)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    rows = {name: state for info, name, state in plugins.status("rsocl.regularizers")}
+    assert re.search(cause, rows["odd"]) and rows["tv"] == "ok"
+    with pytest.raises(plugins.PluginError, match="odd-plugin.*" + cause):
+        plugins.load("rsocl.regularizers", "odd")
+    rig = rsocl.Rig.paper_array(2, (6, 6), t_e=1e-4, t_r=3e-5)
+    g = rsocl.RollingShutterOperator(rig).forward(np.ones((rig.T, 6, 6)))
+    with pytest.raises(ValueError, match="odd-plugin"):
+        rsocl.reconstruct(g, rig, "odd", iterations=2)
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from importlib import metadata
 
-__all__ = ["GROUPS", "PluginInfo", "available", "load", "status", "PluginError"]
+__all__ = ["GROUPS", "BASES", "PluginInfo", "available", "load", "status", "PluginError"]
 
 GROUPS = ("rsocl.regularizers", "rsocl.cameras")
 
@@ -32,11 +32,35 @@ class PluginInfo:
     entry_point: object
 
     def load(self):
+        """Import the plugin and check that it is a class of its group's base (:data:`BASES`)."""
         try:
-            return self.entry_point.load()
-        except Exception as exc:  # a broken plugin must never break the others
+            obj = self.entry_point.load()
+        except (Exception, SystemExit) as exc:  # a broken plugin must never break the others
             raise PluginError(f"plugin {self.name!r} ({self.group}) from distribution {self.distribution} "
                               f"{self.version} failed to load: {type(exc).__name__}: {exc}") from exc
+        base = _base(self.group)
+        if not (isinstance(obj, type) and issubclass(obj, base)):
+            exc = TypeError(f"{self.value} is {obj!r}, not a subclass of {base.__module__}.{base.__name__}")
+            raise PluginError(f"plugin {self.name!r} ({self.group}) from distribution {self.distribution} "
+                              f"{self.version} failed to load: TypeError: {exc}") from exc
+        return obj
+
+
+#: The class every plugin of a group must subclass, as ``module:name`` (imported on first use).
+BASES = {"rsocl.regularizers": "rsocl.solver.regularizer:Regularizer",
+         "rsocl.cameras": "rsocl.hardware.backend:CameraBackend"}
+
+
+def _base(group: str) -> type:
+    import importlib
+
+    module, name = BASES[group].split(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def _claimed(group: str, name: str, by_dist: dict) -> str:
+    dists = " and ".join(f"{d} {i.version}" for d, i in sorted(by_dist.items()))
+    return f"plugin name {name!r} in group {group} is claimed by two distributions: {dists}; uninstall one of them"
 
 
 def _check_group(group):
@@ -65,22 +89,23 @@ def _entries(group):
 def available(group: str = "rsocl.regularizers") -> dict:
     """Plugin names of ``group`` -> :class:`PluginInfo`, without importing any plugin.
 
-    Raises :class:`PluginError` when two distributions claim one name.
+    A name two distributions claim is left out (:func:`load` of it raises, naming both; the other
+    names stay usable).
     """
     _check_group(group)
-    out = {}
-    for name, by_dist in sorted(_entries(group).items()):
-        if len(by_dist) > 1:
-            dists = " and ".join(f"{d} {i.version}" for d, i in sorted(by_dist.items()))
-            raise PluginError(f"plugin name {name!r} in group {group} is claimed by two distributions: {dists}; "
-                              "uninstall one of them")
-        out[name] = next(iter(by_dist.values()))
-    return out
+    return {name: next(iter(by_dist.values())) for name, by_dist in sorted(_entries(group).items())
+            if len(by_dist) == 1}
 
 
 def load(group: str, name: str):
-    """Import and return the object registered as ``name`` in ``group``."""
-    plugins = available(group)
+    """Import and return the class registered as ``name`` in ``group``; a :class:`PluginError` when
+    the name is unknown, claimed by two distributions, fails to import or is not a class of the
+    group's base (:data:`BASES`)."""
+    _check_group(group)
+    entries = _entries(group)
+    if len(entries.get(name, {})) > 1:
+        raise PluginError(_claimed(group, name, entries[name]))
+    plugins = {n: next(iter(d.values())) for n, d in entries.items() if len(d) == 1}
     if name not in plugins:
         raise PluginError(f"unknown {group.split('.')[-1][:-1]} {name!r}; available: {sorted(plugins) or 'none'}")
     return plugins[name].load()
