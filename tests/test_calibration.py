@@ -419,7 +419,8 @@ def test_calibrate_refuses_an_output_that_is_an_input_before_any_work(calibratio
     with pytest.raises(ValueError, match=r"--out .*flats.npz' is the --flat it reads"):
         _calibrate(["--rig", folder / "rig.toml", "--flat", folder / "flats.npz", "--out", folder / "flats.npz"])
     with pytest.raises(FileNotFoundError, match="--out: directory .*missing"):
-        _calibrate(["--rig", folder / "rig.toml", "--flat", folder / "flats.npz", "--out", folder / "missing" / "r.toml"])
+        _calibrate(["--rig", folder / "rig.toml", "--flat", folder / "flats.npz",
+                    "--out", folder / "missing" / "r.toml"])
     with pytest.raises(ValueError, match=r"--png .*markers.npz' is the --frames it reads"):
         _calibrate(["--rig", folder / "rig.toml", "--frames", folder / "markers.npz", "--png", folder / "markers.npz"])
     assert (folder / "flats.npz").read_bytes() == flats
