@@ -290,6 +290,8 @@ def test_a_mistyped_call_is_a_value_error_naming_the_argument():
         rsocl.Rig(rsocl.Camera(0, t_e=1e-4, t_r=1e-5), (5, 5))
     with pytest.raises(ValueError, match="cameras must be a list of Camera, got NoneType"):
         rsocl.Rig(None, (5, 5))
+    with pytest.raises(ValueError, match="dt = 10000000000.0 s is so long .* that the rig has no sub-frame"):
+        rsocl.Rig([rsocl.Camera(0, t_e=1.8e-4, t_r=3.5e-5)], (8, 8), dt=1e10)
     # a 0-d array is its one value
     assert rsocl.reconstruct(g, rig, lam=np.array(0.1), iterations=2, tune=False).params["lam"] == pytest.approx(0.1)
     # an earlier choice of TV's options does not apply to another regularizer: said before any run

@@ -88,6 +88,7 @@ def test_tiles_into_an_hdf5_file(capture, tmp_path):
     (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/rec.h5"], r"--gif .*rec.h5' is the --out file"),
     (["--out", "{tmp}/rec.h5", "--gif", "{capture}"], r"--gif .*is the capture it reads"),
     (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/anim.png"], r"--gif must name a \.gif file .*anim.png"),
+    (["--out", "{tmp}/taken.h5"], r"--gif's NAME-tuning.png must name a file, .*taken-tuning.png' is a directory"),
 ])
 def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, tmp_path, monkeypatch, capsys,
                                                                        extra, match):
@@ -100,6 +101,7 @@ def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, 
     monkeypatch.setattr("rsocl.cli.reconstruct.run_reconstruction", lambda *a: calls.append(a))
     path = capture[0]
     before = path.read_bytes()
+    (tmp_path / "taken-tuning.png").mkdir()
     argv = ["reconstruct", str(path), "--iterations", "2"] + [e.replace("{tmp}", str(tmp_path))
                                                               .replace("{capture}", str(path)) for e in extra]
     assert main(argv) == 2

@@ -88,6 +88,8 @@ def check_outputs(args) -> None:
         raise ValueError(f"--gif {str(gif)!r} is the --out file; give the GIF another name")
     if gif.suffix.lower() != ".gif":
         raise ValueError(f"--gif must name a .gif file (the animation is written as a GIF), got {args.gif!r}")
+    if not getattr(args, "fast", False):              # the search's plot goes next to the GIF
+        output_path(gif.with_name(gif.stem + "-tuning.png"), "--gif's NAME-tuning.png", inputs=reads)
 
 
 def _wants_tiles(args, capture) -> bool:

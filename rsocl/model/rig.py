@@ -204,6 +204,10 @@ class Rig:
         self._windows = self._compute_windows()
         ends = self._windows.end
         self.T = int(math.ceil(float(_snap(ends.max()))))
+        if self.T < 1:
+            raise ValueError(f"dt = {self.dt!r} s is so long against the exposures (longest t_e = "
+                             f"{max(c.t_e for c in cameras):g} s) that the rig has no sub-frame; choose a dt "
+                             "near the row time t_r")
 
     # ------------------------------------------------------------------ construction
     @classmethod
