@@ -60,10 +60,10 @@ class TV(Regularizer):
     Over 120 random rigs (1-8 cameras at any angle, 6-48 pixels a side, the built-in scene and
     Runner, self-tuned) 0.9 gained +0.21 dB on average against scikit-image's step (worst -0.36 dB)
     and removed the runs far below ``interp3d`` (worst -14.2 dB against it, now -3.1 dB: 8 cameras
-    on 40x24 pixels, where the search picks too low a temporal weight). On the paper array, self-tuned (14 scenes at 64x64 and 128x128), it stays within
-    0.02 dB of scikit-image's step; fixed settings from zeros at 128x128, where 200 iterations are
-    far from converged, lose up to 0.16 dB (0.48 dB at a step of 0.75 and 1.31 dB at half the
-    step, Chambolle's proven bound). ``benchmarks/tv_step.py``, ``docs/tv_step.md``.
+    on 40x24 pixels, where the search picks too low a temporal weight). On the paper array,
+    self-tuned (14 scenes at 64x64 and 128x128), it stays within 0.02 dB of scikit-image's step;
+    fixed settings from zeros at 128x128, where 200 iterations are far from converged, lose up to
+    0.16 dB (0.48 dB at a step of 0.75 and 1.31 dB at half the step, Chambolle's proven bound). ``benchmarks/tv_step.py``, ``docs/tv_step.md``.
 
     A batch ``(B, T, m, n)`` is denoised in the same launches as one set, each set on its own
     (no temporal difference across a set boundary) with its own weight.

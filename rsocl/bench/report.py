@@ -159,7 +159,7 @@ def markdown(result: BenchResult) -> str:
                  "–" if base else row["dtype"]]
         cells += [row["device"]] if show_device else []
         spi = row["seconds_per_iteration"]
-        cells += [str(row["T"]), _num(row["psnr"], ".2f"), f"{_ssim(row['ssim_mean'])}", f"{row['seconds']:.3g}",
+        cells += [str(row["T"]), _num(row["psnr"], ".2f"), _ssim(row["ssim_mean"]), f"{row['seconds']:.3g}",
                   "–" if spi is None else f"{spi * 1e3:.1f}",
                   f"{row['peak_device_memory_bytes'] / 2**20:.2f}"]
         lines.append("| " + " | ".join(cells) + " |")

@@ -8,7 +8,8 @@ import os
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
            "check_host_memory", "check_rig_memory", "check_datacube_memory", "add_device_args", "add_solver_args",
-           "check_solver_args", "reg_options", "say", "run_reconstruction", "quality_line"]
+           "check_solver_args", "reg_options", "say", "tuning_plot_path", "tuning_plot_files", "run_reconstruction",
+           "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
@@ -220,21 +221,26 @@ def say(args, *text):
         print(*text, flush=True)
 
 
+def tuning_plot_path(gif):
+    """Where the search's plot goes: ``NAME-tuning.png`` next to the GIF ``NAME.gif``."""
+    from pathlib import Path
+
+    gif = Path(gif)
+    return gif.with_name(gif.stem + "-tuning.png")
+
+
 def tuning_plot_files(args, params, gif) -> list:
     """Say the values chosen from the snapshots and plot the criterion next to ``gif`` (as
     ``NAME-tuning.png``); the files written (none when nothing was tuned)."""
     if not params.get("tuning"):
         return []
-    from pathlib import Path
-
     from rsocl.analysis.tuning_plot import tuning_plot
 
     chosen = ", ".join(f"{k} = {v:.3g}" for k, v in params["tuning"]["chosen"].items())
     say(args, f"chosen from the snapshots: {chosen}")
     if not params["tuning"].get("candidates"):
         return []                                   # set without a search (one snapshot per pixel): no criterion
-    gif = Path(gif)
-    return [tuning_plot(gif.with_name(gif.stem + "-tuning.png"), params["tuning"])]
+    return [tuning_plot(tuning_plot_path(gif), params["tuning"])]
 
 
 def run_reconstruction(args, g, rig, truth=None):

@@ -53,6 +53,7 @@ def add_reconstruct_tiling_args(p):
 
 def check_outputs(args) -> None:
     """Check ``--out`` (and ``--gif``) before anything is computed; errors name the option."""
+    from rsocl.cli.options import tuning_plot_path
     from rsocl.files.atomic import output_path
 
     if args.window is not None and (_is_zarr(args.out) or args.sets):
@@ -89,7 +90,7 @@ def check_outputs(args) -> None:
     if gif.suffix.lower() != ".gif":
         raise ValueError(f"--gif must name a .gif file (the animation is written as a GIF), got {args.gif!r}")
     if not getattr(args, "fast", False):              # the search's plot goes next to the GIF
-        output_path(gif.with_name(gif.stem + "-tuning.png"), "--gif's NAME-tuning.png", inputs=reads)
+        output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
 
 
 def _wants_tiles(args, capture) -> bool:
@@ -165,7 +166,7 @@ def _stream(args, capture):
     from rsocl.analysis.visual import comparison_gif
     from rsocl.cli.options import reg_options, say, tuning_plot_files
     from rsocl.files.hdf5 import load_capture, save_reconstruction
-    from rsocl.scale.stream import reconstruct_stream
+    from rsocl.scale.stream import default_overlap, reconstruct_stream
 
     loaded = load_capture(args.capture)
     stream = reconstruct_stream(
@@ -181,7 +182,7 @@ def _stream(args, capture):
 
         text = f"PSNR {psnr(stream.datacube, truth):.2f} dB, " + text
     print(text, flush=True)
-    overlap = min(1, args.window - 1) if args.overlap is None else args.overlap
+    overlap = default_overlap(args.window) if args.overlap is None else args.overlap
     params = dict(stream.results[0].params, window=args.window, overlap=overlap,
                   windows=[list(w) for w in stream.windows])
     save_reconstruction(args.out, stream.datacube, loaded.rig, params=params, truth=truth)

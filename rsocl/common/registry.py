@@ -36,14 +36,16 @@ class PluginInfo:
         try:
             obj = self.entry_point.load()
         except (Exception, SystemExit) as exc:  # a broken plugin must never break the others
-            raise PluginError(f"plugin {self.name!r} ({self.group}) from distribution {self.distribution} "
-                              f"{self.version} failed to load: {type(exc).__name__}: {exc}") from exc
+            raise self._broken(exc) from exc
         base = _base(self.group)
         if not (isinstance(obj, type) and issubclass(obj, base)):
             exc = TypeError(f"{self.value} is {obj!r}, not a subclass of {base.__module__}.{base.__name__}")
-            raise PluginError(f"plugin {self.name!r} ({self.group}) from distribution {self.distribution} "
-                              f"{self.version} failed to load: TypeError: {exc}") from exc
+            raise self._broken(exc) from exc
         return obj
+
+    def _broken(self, exc) -> "PluginError":
+        return PluginError(f"plugin {self.name!r} ({self.group}) from distribution {self.distribution} "
+                           f"{self.version} failed to load: {type(exc).__name__}: {exc}")
 
 
 #: The class every plugin of a group must subclass, as ``module:name`` (imported on first use).
@@ -93,8 +95,12 @@ def available(group: str = "rsocl.regularizers") -> dict:
     names stay usable).
     """
     _check_group(group)
-    return {name: next(iter(by_dist.values())) for name, by_dist in sorted(_entries(group).items())
-            if len(by_dist) == 1}
+    return _unclaimed(_entries(group))
+
+
+def _unclaimed(entries: dict) -> dict:
+    """``{name: PluginInfo}`` of the names in ``entries`` (:func:`_entries`) one distribution claims."""
+    return {name: next(iter(by_dist.values())) for name, by_dist in sorted(entries.items()) if len(by_dist) == 1}
 
 
 def load(group: str, name: str):
@@ -105,7 +111,7 @@ def load(group: str, name: str):
     entries = _entries(group)
     if len(entries.get(name, {})) > 1:
         raise PluginError(_claimed(group, name, entries[name]))
-    plugins = {n: next(iter(d.values())) for n, d in entries.items() if len(d) == 1}
+    plugins = _unclaimed(entries)
     if name not in plugins:
         raise PluginError(f"unknown {group.split('.')[-1][:-1]} {name!r}; available: {sorted(plugins) or 'none'}")
     return plugins[name].load()

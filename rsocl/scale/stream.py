@@ -21,7 +21,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.model.rig import Camera, Rig
 
-__all__ = ["frame_windows", "window_rig", "window_channels", "reconstruct_stream", "StreamResult"]
+__all__ = ["default_overlap", "frame_windows", "window_rig", "window_channels", "reconstruct_stream", "StreamResult"]
 
 
 def _frames(rig: Rig) -> int:
@@ -32,6 +32,11 @@ def _frames(rig: Rig) -> int:
     return counts.pop()
 
 
+def default_overlap(window: int) -> int:
+    """Frames consecutive windows of ``window`` frames share by default: 1, or 0 for windows of one frame."""
+    return min(1, int(window) - 1)
+
+
 def frame_windows(frames: int, window=None, overlap=None) -> list:
     """``[(k0, k1), ...]``: frames ``k0..k1-1`` of each window, covering ``0..frames-1``.
 
@@ -40,7 +45,7 @@ def frame_windows(frames: int, window=None, overlap=None) -> list:
     2 frames (1 for a capture of one frame), ``overlap`` 1 frame (0 for windows of one frame).
     """
     window = min(2, int(frames)) if window is None else check.positive_int("window", window, maximum=frames)
-    overlap = min(1, window - 1) if overlap is None else overlap
+    overlap = default_overlap(window) if overlap is None else overlap
     try:
         ok = int(overlap) == float(overlap) and 0 <= int(overlap) < window
     except (TypeError, ValueError):

@@ -29,7 +29,7 @@ def check_tune(tune, reg=None):
     """``tune`` checked: ``True``/``False`` (a bool), or an earlier :class:`Tuning` to run with; with
     ``reg`` (the regularizer to run), a Tuning must have chosen options ``reg`` has."""
     if isinstance(tune, Tuning):
-        foreign = sorted(set(chosen_options(tune)) - set(getattr(reg, "values", {}))) if reg is not None else []
+        foreign = sorted(set(chosen_options(tune)) - set(reg.values)) if reg is not None else []
         if foreign:
             raise ValueError(f"tune: the earlier Tuning chose {foreign}, options {reg.name!r} does not have "
                              f"(it has {sorted(reg.values)}); pass tune=True to choose for {reg.name!r}, or "

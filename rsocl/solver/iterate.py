@@ -171,7 +171,7 @@ def collect(solver, staged, problem, settings, reg, history) -> Result:
     :mod:`rsocl.solver.held`), checked finite, with the run's parameters."""
     op, solved, rig = staged.op, staged.solved, problem.rig
     batch = () if problem.batch is None else (problem.batch,)
-    datacube = np.ascontiguousarray(hold(solver.theta.get(), solved, rig.T))
+    datacube = hold(solver.theta.get(), solved, rig.T)
     finite = np.isfinite(datacube).reshape(problem.batch or 1, -1).all(axis=1)
     if not finite.all():
         where = "" if not batch else f" in set(s) {np.flatnonzero(~finite).tolist()}"
