@@ -36,7 +36,10 @@ scene gives it), ``angle`` (0) or ``row_map`` (``(m, n)`` rows), ``t_e``, ``t_r`
 else ``Mono8``/``Mono16``), ``sensor`` (below), ``fail_after``, ``device`` and
 ``dtype`` (OpenCL device spec, default rsocl's default device; ``float64`` when
 the device has it), ``index`` (camera index in the rig, mixed into the noise
-seed so that cameras draw independent noise), ``address`` (ignored, a label).
+seed so that cameras draw independent noise), ``address`` (ignored, a label),
+``exposure_range`` ``[shortest, longest]`` (s; default: any exposure): as a real
+device does, :meth:`~rsocl.hardware.backend.CameraBackend.set_exposure` clamps to it,
+renders with the clamped exposure and returns it.
 
 Sensor model (``sensor`` table, each effect off by default)
 -----------------------------------------------------------
@@ -85,7 +88,7 @@ __all__ = ["SimulatedCamera"]
 
 _CONFIG_KEYS = {"scene", "scene_seed", "scene_frames", "scene_sets", "shape", "angle", "row_map", "t_e", "t_r",
                 "t_a", "gain", "dt", "mask", "pixel_format", "sensor", "fail_after", "device", "dtype", "index",
-                "address"}
+                "address", "exposure_range"}
 _SENSOR_KEYS = {"shot_noise_photons", "read_noise", "bit_depth", "saturation", "trigger_jitter", "seed"}
 
 
@@ -185,6 +188,19 @@ class SimulatedCamera(CameraBackend):
         self.index = _int(k("index"), cfg.get("index", 0), 0)
         fail_after = cfg.get("fail_after")
         self.fail_after = None if fail_after is None else _int(k("fail_after"), fail_after, 1)
+        self.exposure_range = None
+        if cfg.get("exposure_range") is not None:
+            try:
+                low, high = cfg["exposure_range"]
+            except (TypeError, ValueError):
+                raise ValueError(f"{k('exposure_range')} must be [shortest, longest] in seconds, "
+                                 f"got {cfg['exposure_range']!r}") from None
+            low = check.positive(k("exposure_range") + "[0]", low, "seconds")
+            high = check.positive(k("exposure_range") + "[1]", high, "seconds")
+            if high < low:
+                raise ValueError(f"{k('exposure_range')} must be [shortest, longest] with shortest <= longest, "
+                                 f"got {cfg['exposure_range']!r}")
+            self.exposure_range = (low, high)
         self.device_spec = cfg.get("device")
         self.dtype = cfg.get("dtype")
 
@@ -320,6 +336,8 @@ class SimulatedCamera(CameraBackend):
 
     def _set_exposure(self, seconds):
         self._alive()
+        if self.exposure_range is not None:
+            seconds = min(max(seconds, self.exposure_range[0]), self.exposure_range[1])
         self.t_e = seconds
         return seconds
 

@@ -198,3 +198,43 @@ def test_an_output_that_is_an_input_is_refused_before_any_camera_opens(tmp_path)
     (tmp_path / "c.h5.partial").mkdir()                  # the partial file's name taken by a folder
     with pytest.raises(ValueError, match=r"out must name a file, .*c.h5.partial' is a directory"):
         capture_sets(rig_path, tmp_path / "c.h5", sets=1)
+
+
+def test_the_capture_rig_holds_the_exposure_the_device_applied(tmp_path, capsys):
+    # camera 0 clamps the rig file's 180 µs to its longest exposure, 150 µs, and renders with it
+    rf = _rigfile(configs=[{"exposure_range": [1e-5, 150e-6]}, {}, {}, {}])
+    out = tmp_path / "c.h5"
+    with pytest.warns(UserWarning, match=r"camera 0: the device applied an exposure of 0\.00015 s where the rig "
+                                         r"file says t_e = 0\.00018 s; the capture's rig uses 0\.00015 s"):
+        capture_sets(rf, out, sets=2)
+    capture = load_capture(out)
+    assert [cam.t_e for cam in capture.rig.cameras] == [150e-6, T_E, T_E, T_E]
+    assert capture.meta["cameras"][0]["exposure"] == 150e-6 and len(capture.meta["warnings"]) == 1
+    # the snapshots are the stored rig's forward model of the scene: the rig reconstructs them
+    np.testing.assert_allclose(capture.snapshots, reference.forward(capture.rig, capture.truth), rtol=1e-5, atol=1e-5)
+    with h5py.File(out, "r") as h5:
+        assert h5["raw/0"].attrs["exposure"] == 150e-6
+
+    # a camera clamped to a shorter rig (T smaller than the rig file's): the scene's first T sub-frames are the truth
+    short = tmp_path / "short.h5"
+    rf = _rigfile(configs=[{"exposure_range": [1e-5, 100e-6]} for _ in range(4)])
+    with pytest.warns(UserWarning, match="applied an exposure of 0.0001 s"):
+        capture_sets(rf, short, sets=1)
+    capture = load_capture(short)
+    assert capture.rig.T < rf.rig().T and capture.truth.shape == (capture.rig.T,) + SHAPE
+    np.testing.assert_allclose(capture.snapshots, reference.forward(capture.rig, capture.truth), rtol=1e-5, atol=1e-5)
+
+    # rsocl capture prints the warning
+    from rsocl.cli.main import main
+
+    rig_path = tmp_path / "rig.toml"
+    save_rigfile(rig_path, _rigfile(configs=[{}, {"exposure_range": [200e-6, 1e-3]}, {}, {}]))
+    assert main(["capture", "--rig", str(rig_path), "--out", str(tmp_path / "cli.h5"), "--quiet"]) == 0
+    assert ("rsocl capture: warning: camera 1: the device applied an exposure of 0.0002 s where the rig file says "
+            "t_e = 0.00018 s") in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value", [[1e-3], [2e-3, 1e-3], [0, 1e-3], "1e-3", [1e-3, float("inf")]])
+def test_simulated_exposure_range_is_checked(value):
+    with pytest.raises(ValueError, match=r"config\['exposure_range'\]"):
+        SimulatedCamera({"shape": [4, 4], "t_e": T_E, "t_r": T_R, "exposure_range": value})

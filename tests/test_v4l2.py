@@ -604,9 +604,10 @@ def test_address_opens_the_named_node(fake):
         assert cam.frame_size == (12, 6)
 
 
-def test_rig_file_address_reaches_the_camera(fake, tmp_path):
+def _capture_from_webcam(fake, tmp_path, t_e, sets=2):
+    """capture_sets on a one-camera rig file of ``fake`` (6x12, t_r = 1 ms), which runs free with a frame every
+    5 ms; returns the capture file and the image the fake sends."""
     from rsocl.hardware.capture import capture_sets
-    from rsocl.hardware.capture_file import load_raw
 
     rig_path = tmp_path / "rig.toml"
     rig_path.write_text(f"""
@@ -617,28 +618,48 @@ shape = [6, 12]
 backend = "v4l2"
 address = "{fake.path}"
 angle = 0.0
-t_e = 0.01
+t_e = {t_e!r}
 t_r = 0.001
 """)
     image = sensor_image(fake)
     stop = threading.Event()
 
-    def sensor():  # a free-running webcam: a frame every 5 ms
+    def sensor():
         while not stop.wait(0.005):
             fake.emit(image)
 
     thread = threading.Thread(target=sensor, daemon=True)
     thread.start()
     try:
-        out = capture_sets(rig_path, tmp_path / "capture.h5", sets=2, timeout=2.0)
+        return capture_sets(rig_path, tmp_path / "capture.h5", sets=sets, timeout=2.0), image
     finally:
         stop.set()
         thread.join()
+
+
+def test_rig_file_address_reaches_the_camera(fake, tmp_path):
+    from rsocl.hardware.capture_file import load_raw
+
+    out, image = _capture_from_webcam(fake, tmp_path, 0.01)
     raw = load_raw(out)
     assert raw.status == "complete" and raw.sets_complete == 2
     assert raw.meta["cameras"][0]["name"] == f"camera 0 (v4l2 {fake.path})"
     assert raw.frames[0].shape == (2, 6, 12)
     np.testing.assert_array_equal(raw.frames[0][1], image)
+
+
+@pytest.mark.parametrize("t_e, applied", [(10.0, 2047 * EXPOSURE_UNIT), (0.01234, 123 * EXPOSURE_UNIT)])
+def test_the_capture_rig_holds_the_exposure_the_webcam_applied(fake, tmp_path, t_e, applied):
+    from rsocl.files.hdf5 import load_capture
+
+    with pytest.warns(UserWarning, match=rf"camera 0: the device applied an exposure of {applied!r} s where the rig "
+                                         rf"file says t_e = {t_e!r} s"):
+        out, image = _capture_from_webcam(fake, tmp_path, t_e, sets=1)
+    capture = load_capture(out)
+    assert capture.rig.cameras[0].t_e == pytest.approx(applied)
+    assert capture.rig.T == int(np.ceil(round((5 * 1e-3 + applied) / 1e-3, 6)))
+    # 8-bit frames in model units: full scale is the applied exposure over dt
+    np.testing.assert_allclose(capture.snapshots[0], image / 255 * (applied / 1e-3))
 
 
 def test_entry_point():

@@ -65,12 +65,15 @@ def dumps_json(name: str, data) -> str:
 
 # ---------------------------------------------------------------------- rig
 def write_rig(h5, rig: Rig) -> None:
-    """Store ``rig`` in the root of the open file ``h5`` (attributes + row-map datasets)."""
+    """Store ``rig`` in the root of the open file ``h5`` (attributes + row-map datasets), replacing a rig
+    stored there before."""
     data = rig.to_dict()
     for index, camera in enumerate(data["cameras"]):
         row_map = camera.get("row_map")
+        name = f"{_ROW_MAPS}/{index}"
+        if name in h5:
+            del h5[name]
         if row_map is not None:
-            name = f"{_ROW_MAPS}/{index}"
             h5.create_dataset(name, data=np.asarray(row_map, dtype=np.float64))
             camera["row_map"] = {"dataset": name}
     h5.attrs["rig"] = json.dumps(data, allow_nan=False)

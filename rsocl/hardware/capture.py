@@ -7,6 +7,13 @@ reads one frame per camera. Every raw frame is written to the file and flushed
 before the next frame is requested, so whatever happens later, everything
 already captured is on disk.
 
+A device may apply another exposure than ``t_e`` (rounded to its units, clamped to its range).
+The capture file's rig then holds, for that camera, the exposure the device applied (the
+frames' true exposure, which the reconstruction needs), and a warning names both values
+(``meta["warnings"]``, and a :class:`UserWarning` that ``rsocl capture`` prints). A readout
+time the device reports differently from ``t_r`` is only warned about: devices define it in
+different ways.
+
 Files and atomicity
 -------------------
 The capture is written incrementally to ``<out>.partial`` and renamed to
@@ -25,7 +32,7 @@ reference grid already. Other frames are warped onto it with the camera's
 bilinear, 0 outside the sensor; the ROI origin is subtracted) or, without one, taken as registered (their shape
 must then equal the rig's). Integer frames are converted to model units as
 ``image / (2**bit_depth - 1) * full_scale`` with ``full_scale`` from
-``frame.meta["full_scale"]`` when the backend reports it, else ``t_e/dt``
+``frame.meta["full_scale"]`` when the backend reports it, else ``t_e/dt`` (the applied exposure)
 (a white scene at unit gain fills the sensor); float frames are taken as they are.
 """
 
@@ -80,7 +87,7 @@ def _register(rigfile: RigFile, rig, index: int, frame) -> np.ndarray:
         levels = 2 ** int(frame.bit_depth) - 1
         full_scale = frame.meta.get("full_scale")
         if full_scale is None:
-            full_scale = cam["t_e"] / rig.dt
+            full_scale = rig.cameras[index].t_e / rig.dt        # the exposure the device applied
         value = image.astype(np.float64) * (float(full_scale) / levels)
     else:
         value = image.astype(np.float64)
@@ -201,12 +208,12 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
     for i, cam in enumerate(cameras):
         at(i, None, "open")
         cam.open()
+    exposures = []
     for i, cam in enumerate(cameras):
         at(i, None, "configure")
         spec = rigfile.cameras[i]
         exposure = cam.set_exposure(spec["t_e"])
-        if abs(exposure - spec["t_e"]) > 1e-3 * spec["t_e"]:
-            writer.warn(f"camera {i}: exposure is {exposure!r} s, the rig file says t_e = {spec['t_e']!r} s")
+        exposures.append(exposure)
         settings = {"exposure": exposure}
         if spec.get("roi"):
             cam.set_roi(*spec["roi"])
@@ -220,6 +227,8 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
         if readout is not None and abs(readout - spec["t_r"]) > 1e-3 * spec["t_r"]:
             writer.warn(f"camera {i}: the device reports t_r = {readout!r} s, the rig file says {spec['t_r']!r} s")
         writer.camera_settings(i, **settings)
+    at(None, None, "configure")
+    writer.use_exposures(exposures, [spec["t_e"] for spec in rigfile.cameras])
     for i, cam in enumerate(cameras):
         at(i, None, "start")
         cam.start()

@@ -6,7 +6,7 @@
 Layout
 ------
 A capture file of :mod:`rsocl.files.hdf5` (``rsocl_file = "capture"``, format 1, the
-rig, attribute ``meta``), readable by :func:`rsocl.files.hdf5.load_capture` once a
+rig with each camera's exposure as its device applied it, attribute ``meta``), readable by :func:`rsocl.files.hdf5.load_capture` once a
 first set is complete, plus:
 
 - ``snapshots`` ``(K, m, n)`` float64: set 0 registered on the reference grid,
@@ -32,6 +32,7 @@ import contextlib
 import json
 import os
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -106,8 +107,37 @@ class CaptureWriter:
         self._write_meta()
 
     def warn(self, text):
+        """Record ``text`` in ``meta["warnings"]`` and issue it as a :class:`UserWarning` (the CLI prints it)."""
         self.meta["warnings"].append(text)
         self._write_meta()
+        warnings.warn(text, stacklevel=2)
+
+    def use_exposures(self, exposures, rig_t_e, tolerance: float = 1e-3) -> None:
+        """Store the exposures (s, one per camera) the devices applied in the file's rig, where one differs
+        from the rig file's ``t_e`` (``rig_t_e``, s) by more than ``tolerance`` of it, and warn for each.
+
+        Devices round a requested exposure to their units and clamp it to their range (V4L2 in
+        units of 100 µs; 10 s asked of a webcam can give 0.2047 s). The frames were exposed for the
+        applied time, so the rig that reconstructs them must say so. Called before the first frame.
+        """
+        from rsocl.files.hdf5_header import write_rig
+        from rsocl.model.rig import Rig
+
+        data = self.rig.to_dict()
+        changed = []
+        for i, (camera, applied, asked) in enumerate(zip(data["cameras"], exposures, rig_t_e)):
+            if abs(applied - asked) > tolerance * asked:
+                camera["t_e"] = float(applied)
+                changed.append((i, applied, asked))
+        if not changed:
+            return
+        rig = Rig.from_dict(data)
+        write_rig(self.h5, rig)
+        self.rig = rig
+        self.h5.flush()
+        for i, applied, asked in changed:
+            self.warn(f"camera {i}: the device applied an exposure of {applied!r} s where the rig file says "
+                      f"t_e = {asked!r} s; the capture's rig uses {applied!r} s (T = {rig.T} sub-frames)")
 
     # ------------------------------------------------------------------ raw frames
     def add_raw(self, index: int, set_index: int, frame, camera) -> None:
@@ -182,6 +212,8 @@ class CaptureWriter:
         except Exception as exc:  # the truth is a bonus, never a reason to fail a capture
             self.warn(f"no ground truth: {type(exc).__name__}: {exc}")
             return None
+        if truth.ndim == 3 and truth.shape[0] > self.rig.T:   # the scene outlasts the exposures: its first T
+            truth = truth[:self.rig.T]
         if truth.shape != (self.rig.T,) + self.rig.shape:
             self.warn(f"no ground truth: the scene has shape {truth.shape}, the rig needs "
                       f"{(self.rig.T,) + self.rig.shape}")
