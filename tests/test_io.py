@@ -138,6 +138,27 @@ def test_load_rejects_wrong_files(tmp_path, rig, snapshots, truth):
         load_capture(tmp_path / "missing.h5")
 
 
+def test_a_directory_or_a_damaged_file_gets_a_one_line_error_naming_it(tmp_path):
+    from rsocl.files.rigfile import load_rigfile
+    from rsocl.model.scenes import load_scene
+    from rsocl.scale.inputs import CaptureSets
+
+    folder = tmp_path / "cap.h5"
+    folder.mkdir()
+    for call, message in ((load_capture, "path: '.*cap.h5' is a directory, not a capture file"),
+                          (load_reconstruction, "path: '.*cap.h5' is a directory, not a reconstruction file"),
+                          (CaptureSets, "capture: '.*cap.h5' is a directory, not a capture file"),
+                          (load_rigfile, "'.*cap.h5' is a directory, not a rig file"),
+                          (lambda p: load_scene(p, (8, 8), 4), "path: '.*cap.h5' is a directory, not a video file")):
+        with pytest.raises(ValueError, match=f"^{message}$"):
+            call(folder)
+    (tmp_path / "junk.h5").write_bytes(b"not hdf5 at all")
+    for call in (load_capture, CaptureSets):
+        with pytest.raises(ValueError, match=r"'.*junk.h5' is not a readable HDF5 file \(OSError: ") as info:
+            call(tmp_path / "junk.h5")
+        assert "\n" not in str(info.value)        # h5py's message has several lines: the first one is kept
+
+
 # ---------------------------------------------------------------------- reconstruction
 def test_reconstruction_round_trip(tmp_path, rig, truth):
     estimate = (truth + 0.01).astype(np.float32)

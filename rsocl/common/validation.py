@@ -11,11 +11,13 @@ import contextlib
 import difflib
 import math
 import numbers
+import os
+from pathlib import Path
 
 import numpy as np
 
 __all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "choice", "finite_array", "grid_shape",
-           "reading", "unknown_keys"]
+           "reading", "cause", "unknown_keys", "existing_file"]
 
 
 def finite(name: str, value) -> float:
@@ -128,6 +130,12 @@ def finite_array(name: str, array) -> np.ndarray:
     return array
 
 
+def cause(exc: BaseException) -> str:
+    """``"TypeName: first line of the message"`` of ``exc`` (libraries such as h5py write several lines)."""
+    lines = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
+
+
 @contextlib.contextmanager
 def reading(name: str, path, what: str):
     """Context manager around a library's read of file ``path``: a failure to parse it (empty,
@@ -146,6 +154,18 @@ def reading(name: str, path, what: str):
     except MemoryError:
         raise
     except Exception as exc:  # noqa: BLE001 - zipfile, EOFError, OSError, PIL's SyntaxError, imageio's, ...
-        lines = str(exc).strip().splitlines()
-        cause = f"{type(exc).__name__}: {lines[0]}" if lines else type(exc).__name__
-        raise ValueError(f"{name}: cannot read {str(path)!r} as {what} ({cause})") from None
+        raise ValueError(f"{name}: cannot read {str(path)!r} as {what} ({cause(exc)})") from None
+
+
+def existing_file(name: str, path, what: str) -> Path:
+    """``path`` as a :class:`~pathlib.Path`, or ``FileNotFoundError`` naming ``name`` and ``what`` the file
+    should be when nothing is there, ``ValueError`` when a directory (or another non-file) is."""
+    path = Path(os.fspath(path))
+    prefix = f"{name}: " if name else ""
+    if not path.exists():
+        raise FileNotFoundError(f"{prefix}{what} {str(path)!r} does not exist")
+    if path.is_dir():
+        raise ValueError(f"{prefix}{str(path)!r} is a directory, not a {what}")
+    if not path.is_file():
+        raise ValueError(f"{prefix}{str(path)!r} is not a regular file (expected a {what})")
+    return path

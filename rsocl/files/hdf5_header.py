@@ -18,11 +18,11 @@ from __future__ import annotations
 
 import json
 import numbers
-import os
 from pathlib import Path
 
 import numpy as np
 
+from rsocl.common import validation as check
 from rsocl.model.rig import Rig
 
 __all__ = ["FORMAT_VERSION", "json_default", "dumps_json", "write_rig", "read_rig", "str_attr", "write_header",
@@ -151,13 +151,11 @@ def open_checked(path, kind: str):
     """Open ``path`` read-only and check that it is an rsocl file of ``kind``."""
     import h5py
 
-    path = Path(os.fspath(path))
-    if not path.exists():
-        raise FileNotFoundError(f"path: {kind} file {str(path)!r} does not exist")
+    path = check.existing_file("path", path, f"{kind} file")
     try:
         h5 = h5py.File(path, "r")
     except OSError as exc:
-        raise ValueError(f"path: {str(path)!r} is not a readable HDF5 file ({exc})") from None
+        raise ValueError(f"path: {str(path)!r} is not a readable HDF5 file ({check.cause(exc)})") from None
     try:
         found = h5.attrs.get("rsocl_file")
         if isinstance(found, bytes):

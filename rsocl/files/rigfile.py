@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rsocl.common import validation as check
 from rsocl.files.atomic import atomic_path
 from rsocl.files.rigfile_schema import CAMERA_KEYS, check_camera, check_rig_table, resolve_path, to_camera
 from rsocl.files.toml_writer import dumps_toml
@@ -181,9 +182,7 @@ def load_rigfile(path) -> RigFile:
         If it is not valid TOML or its content breaks the schema; the message
         names the file, the camera index and the key.
     """
-    path = Path(os.fspath(path))
-    if not path.is_file():
-        raise FileNotFoundError(f"rig file {str(path)!r} does not exist")
+    path = check.existing_file("", path, "rig file")
     try:
         with open(path, "rb") as handle:
             data = tomllib.load(handle)

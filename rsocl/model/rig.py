@@ -211,14 +211,16 @@ class Rig:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def paper_array(cls, n_cameras=4, shape=(50, 50), t_e=0.18e-3, t_r=35e-6, **kwargs) -> "Rig":
+    def paper_array(cls, n_cameras=4, shape=(50, 50), t_e=0.18e-3, t_r=35e-6, dt=None, mask="exact") -> "Rig":
         """The paper's array: ``n_cameras`` (1..8) at angles 0, 90, 180, 270, 45, 135, 225, 315.
 
-        ``t_e`` and ``t_r`` in seconds; other keywords (``dt``, ``mask``) go to :class:`Rig`.
+        ``t_e``, ``t_r`` and ``dt`` in seconds (``dt`` and ``mask`` as in :class:`Rig`). Cameras with
+        other settings (offsets ``t_a``, gains, several frames) are built as :class:`Camera` and
+        given to :class:`Rig`.
         """
         n_cameras = check.positive_int("n_cameras", n_cameras, maximum=len(PAPER_ANGLES))
         cams = [Camera(angle, t_e=t_e, t_r=t_r) for angle in PAPER_ANGLES[:n_cameras]]
-        return cls(cams, shape, **kwargs)
+        return cls(cams, shape, dt=dt, mask=mask)
 
     # ------------------------------------------------------------------ channels
     @property

@@ -250,9 +250,7 @@ def load_video(path, *, key="video") -> np.ndarray:
         ``key`` is missing from the archive, or the array is not
         ``[frames, h, w]`` (or RGB of that), is empty, or is not real-valued.
     """
-    path = Path(os.fspath(path))
-    if not path.exists():
-        raise FileNotFoundError(f"path: video file {str(path)!r} does not exist")
+    path = check.existing_file("path", path, "video file")
     suffix = path.suffix.lower()
     source = str(path)
     if suffix == ".npz":

@@ -8,8 +8,6 @@ input) and counts the saturated pixels.
 from __future__ import annotations
 
 import hashlib
-import os
-from pathlib import Path
 
 import numpy as np
 
@@ -74,13 +72,11 @@ class CaptureSets:
     def __init__(self, path, all_sets=False, name="capture"):
         import h5py
 
-        self.path = Path(os.fspath(path))
-        if not self.path.is_file():
-            raise FileNotFoundError(f"{name}: capture file {str(self.path)!r} does not exist")
+        self.path = check.existing_file(name, path, "capture file")
         try:
             h5 = h5py.File(self.path, "r")
         except OSError as exc:
-            raise ValueError(f"{name}: {str(self.path)!r} is not a readable HDF5 file ({exc})") from None
+            raise ValueError(f"{name}: {str(self.path)!r} is not a readable HDF5 file ({check.cause(exc)})") from None
         with h5:
             kind = h5.attrs.get("rsocl_file")
             kind = kind.decode() if isinstance(kind, bytes) else kind
