@@ -243,6 +243,11 @@ def test_flat_field_gains_within_one_percent(rng):
     np.testing.assert_allclose(relative_to_mean, gains / gains.mean(), rtol=0.01)
     with pytest.raises(ValueError, match="must be > 0"):
         cal.flat_field_gain(flats, dark=10.0)
+    # flat fields near the top of the float range: the same gains, no overflow
+    huge = [f * 1e306 for f in flats]
+    np.testing.assert_allclose(cal.flat_field_gain(huge, dark=dark * 1e306, region=0.3), gains, rtol=0.01)
+    np.testing.assert_allclose(cal.flat_field_gain(huge, dark=dark * 1e306, region=0.3, relative_to="mean"),
+                               gains / gains.mean(), rtol=0.01)
 
 
 # ---------------------------------------------------------------------- picture

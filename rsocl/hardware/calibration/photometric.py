@@ -68,11 +68,13 @@ def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1) ->
         rows, cols = flat.shape[-2:]
         dr, dc = (rows - max(1, round(rows * region))) // 2, (cols - max(1, round(cols * region))) // 2
         centre = flat[..., dr:rows - dr, dc:cols - dc].astype(np.float64)
-        levels[c] = float(trim_mean(centre.ravel(), trim)) - darks[c]
+        scale = float(np.max(np.abs(centre))) or 1.0        # the mean of values near the float range's top
+        levels[c] = float(trim_mean(centre.ravel() / scale, trim)) * scale - darks[c]   # does not overflow
         if not levels[c] > 0:
             raise ValueError(f"camera {c}: flat-field level minus dark is {levels[c]:.6g}, must be > 0 "
                              f"(is the dark level right, is the light on?)")
     if relative_to == "mean":
+        levels = levels / levels.max()
         return levels / levels.mean()
     if isinstance(relative_to, bool) or not isinstance(relative_to, (int, np.integer)) or not 0 <= relative_to < C:
         raise ValueError(f"relative_to must be a camera index in [0, {C - 1}] or 'mean', got {relative_to!r}")
