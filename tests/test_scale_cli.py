@@ -89,6 +89,7 @@ def test_tiles_into_an_hdf5_file(capture, tmp_path):
     (["--out", "{tmp}/rec.h5", "--gif", "{capture}"], r"--gif .*is the capture it reads"),
     (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/anim.png"], r"--gif must name a \.gif file .*anim.png"),
     (["--out", "{tmp}/taken.h5"], r"--gif's NAME-tuning.png must name a file, .*taken-tuning.png' is a directory"),
+    (["--out", "{tmp}/taken.zarr"], r"--out's NAME-tuning.png must name a file, .*taken-tuning.png' is a directory"),
 ])
 def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, tmp_path, monkeypatch, capsys,
                                                                        extra, match):

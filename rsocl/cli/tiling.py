@@ -72,6 +72,8 @@ def check_outputs(args) -> None:
         if count > 1:
             print(f"rsocl reconstruct: note: the capture holds {count} sets; the store gets set 0 "
                   "(--sets: every set; --first-set-only says set 0 and silences this)", file=sys.stderr, flush=True)
+    reads = (("capture", args.capture),)
+    tuned = not getattr(args, "fast", False)          # the search's plot: NAME-tuning.png
     if _is_zarr(args.out):
         from rsocl.scale.store import check_store_path, require_zarr
 
@@ -79,17 +81,19 @@ def check_outputs(args) -> None:
         check_store_path(args.out, "--out")
         if args.gif:
             raise ValueError("--gif: a GIF is written next to an HDF5 result only, not for a Zarr store")
+        if tuned:
+            output_path(tuning_plot_path(Path(args.out).with_suffix(".gif")), "--out's NAME-tuning.png",
+                        inputs=reads)
         return
     if args.sets:
         raise ValueError(f"--out: every set (--sets) goes to a Zarr store (--out NAME.zarr), got {args.out!r}")
-    reads = (("capture", args.capture),)
     out = output_path(args.out, "--out", inputs=reads)
     gif = output_path(Path(args.gif) if args.gif else out.with_suffix(".gif"), "--gif", inputs=reads)
     if gif.resolve() == out.resolve():
         raise ValueError(f"--gif {str(gif)!r} is the --out file; give the GIF another name")
     if gif.suffix.lower() != ".gif":
         raise ValueError(f"--gif must name a .gif file (the animation is written as a GIF), got {args.gif!r}")
-    if not getattr(args, "fast", False):              # the search's plot goes next to the GIF
+    if tuned:                                         # next to the GIF
         output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
 
 
