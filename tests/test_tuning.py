@@ -350,9 +350,10 @@ def test_the_search_summary_says_how_pixels_were_held_out(tmp_path):
     assert tuning_plot(tmp_path / "t.png", record).stat().st_size > 0
 
 
-def test_one_snapshot_per_pixel_sets_the_temporal_weight_and_searches_lam_only(tmp_path, capsys):
+def test_one_snapshot_per_pixel_sets_the_temporal_weight_and_runs_no_search(tmp_path, capsys):
     """With one camera a held-out block of the only snapshot is predicted across space alone: the
-    temporal weight comes from ``TV.one_snapshot``, not from the criterion; lam is still searched."""
+    temporal weight comes from ``TV.one_snapshot``, not from the criterion; lam, which hardly matters
+    then, keeps its default: no search runs."""
     from rsocl.cli.main import main
     from rsocl.solver.tuning import Tuning
     from rsocl_plugins.tv import TV
@@ -360,10 +361,15 @@ def test_one_snapshot_per_pixel_sets_the_temporal_weight_and_searches_lam_only(t
     weight = TV.one_snapshot["temporal_weight"]
     rig = rsocl.Rig([rsocl.Camera(30, t_e=0.18e-3, t_r=35e-6)], SHAPE)
     g = ref.forward(rig, _static(rig))
-    record = rsocl.reconstruct(g, rig, iterations=20).params["tuning"]
+    tuned = rsocl.reconstruct(g, rig, iterations=20)
+    record = tuned.params["tuning"]
     assert record["preset"] == {"temporal_weight": weight} and record["chosen"]["temporal_weight"] == weight
-    assert {c["temporal_weight"] for c in record["candidates"]} == {weight} and len(record["candidates"]) == 3
+    assert record["candidates"] == [] and tuned.params["lam"] == rsocl.reconstruct(g, rig, iterations=1,
+                                                                                   tune=False).params["lam"]
     assert Tuning.from_params(record).preset == {"temporal_weight": weight}
+    # a regularizer without a one-snapshot preset still has lam searched
+    dct = rsocl.reconstruct(g, rig, "dct", iterations=20).params["tuning"]
+    assert not dct["preset"] and len({c["lam"] for c in dct["candidates"]}) == 3
     # the caller's weight wins; with lam fixed too nothing is searched, and the run uses the preset weight
     given = rsocl.reconstruct(g, rig, iterations=5, regularizer_options={"temporal_weight": 2.0})
     assert given.params["regularizer_options"]["temporal_weight"] == 2.0 and not given.params["tuning"]["preset"]

@@ -74,7 +74,8 @@ class Regularizer:
         Values of tunable options for a rig with one snapshot per pixel (one camera, one frame):
         the search then sets them instead of choosing them (:func:`rsocl.solver.autotune.choose_unset`),
         because held-out pixels of the only snapshot are predicted across space alone and the
-        criterion cannot rank priors in time. Measured per regularizer; empty: searched as always.
+        criterion cannot rank priors in time. When they leave only ``lam`` unset, ``lam`` keeps its
+        default and nothing is searched. Measured per regularizer; empty: searched as always.
 
     batched : bool
         True when ``_denoise`` takes a batch ``(B, T, m, n)`` with a float64 array of ``B``
