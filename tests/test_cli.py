@@ -130,6 +130,16 @@ def test_ssim_of_frames_too_small_for_it_is_said_not_printed_as_nan(tmp_path, ca
     assert "SSIM n/a (frames under 3 pixels a side)" in out and "nan" not in out
 
 
+def test_demo_of_one_camera_writes_no_search_plot_where_no_search_ran(tmp_path, capsys):
+    # one snapshot per pixel: TV's preset weight and the default lam, no candidates to plot
+    assert main(["demo", "--cameras", "1", "--shape", "12", "12", "--iterations", "5", "--out", str(tmp_path)]) == 0
+    assert "chosen from the snapshots: temporal_weight = 10" in capsys.readouterr().out
+    assert (tmp_path / "demo.h5").is_file() and not (tmp_path / "demo-tuning.png").exists()
+    assert main(["demo", "--cameras", "2", "--shape", "12", "12", "--iterations", "5", "--out", str(tmp_path / "two"),
+                 "--quiet"]) == 0
+    assert (tmp_path / "two" / "demo-tuning.png").is_file()
+
+
 def test_devices_and_plugins_list(capsys):
     assert main(["devices"]) == 0
     assert "0:0" in capsys.readouterr().out

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from rsocl.cli.options import add_device_args, add_rig_args, add_solver_args, check_datacube_memory, quality_line, \
-    rig_from, run_reconstruction, say
+    rig_from, run_reconstruction, say, tuning_plot_files
 
 __all__ = ["add_parser", "cmd_demo"]
 
@@ -44,9 +44,6 @@ def cmd_demo(args) -> int:
              comparison_gif(out / "demo.gif", truth, result.datacube),
              snapshot_montage(out / "snapshots.png", g, rig=rig),
              datacube_montage(out / "subframes.png", result.datacube, truth=truth)]
-    if result.params.get("tuning"):
-        from rsocl.analysis.tuning_plot import tuning_plot
-
-        files.append(tuning_plot(out / "demo-tuning.png", result.params["tuning"]))
+    files += tuning_plot_files(args, result.params, out / "demo.gif")      # demo-tuning.png, after a search
     say(args, "wrote " + ", ".join(str(f) for f in files))
     return 0
