@@ -460,6 +460,14 @@ def test_options_that_contradict_each_other_on_a_capture_are_refused_before_any_
     assert "the capture holds 3 sets; the store gets set 0" in capsys.readouterr().err     # said, even --quiet
     assert main(["reconstruct", str(sets), "--out", str(tmp_path / "e.zarr"), "--first-set-only", *run]) == 0
     assert "3 sets" not in capsys.readouterr().err
+    # tiles into an HDF5 file, and a stream of windows, take set 0 too: said as well
+    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "f.h5"), "--tile", "8", "8", *run]) == 0
+    assert "the capture holds 3 sets; a tiled run into an HDF5 file reconstructs set 0" in capsys.readouterr().err
+    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "g.h5"), "--window", "1", *run]) == 0
+    assert "the capture holds 3 sets; --window reconstructs set 0" in capsys.readouterr().err
+    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "h.h5"), "--window", "1", "--first-set-only",
+                 *run]) == 0
+    assert "3 sets" not in capsys.readouterr().err
 
 
 def test_inner_iterations_given_twice_must_agree_in_python(device):

@@ -65,13 +65,9 @@ def check_outputs(args) -> None:
     if args.sets and getattr(args, "first_set_only", False):
         raise ValueError("--sets and --first-set-only contradict each other: --sets reconstructs every set into a "
                          "Zarr store, --first-set-only set 0 only; give one of them")
-    if _is_zarr(args.out) and not args.sets and not getattr(args, "first_set_only", False):
-        from rsocl.files.hdf5 import snapshot_set_count
-
-        count = snapshot_set_count(args.capture)
-        if count > 1:
-            print(f"rsocl reconstruct: note: the capture holds {count} sets; the store gets set 0 "
-                  "(--sets: every set; --first-set-only says set 0 and silences this)", file=sys.stderr, flush=True)
+    if _is_zarr(args.out) and not args.sets:
+        _note_first_set(args, "the store gets set 0 (--sets: every set; --first-set-only says set 0 and "
+                              "silences this)")
     reads = (("capture", args.capture),)
     tuned = not getattr(args, "fast", False)          # the search's plot: NAME-tuning.png
     if _is_zarr(args.out):
@@ -97,6 +93,17 @@ def check_outputs(args) -> None:
         output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
 
 
+def _note_first_set(args, what: str) -> None:
+    """Say on stderr that a capture of several sets gets only set 0 (``what``), unless ``--first-set-only``."""
+    if getattr(args, "first_set_only", False):
+        return
+    from rsocl.files.hdf5 import snapshot_set_count
+
+    count = snapshot_set_count(args.capture)
+    if count > 1:
+        print(f"rsocl reconstruct: note: the capture holds {count} sets; {what}", file=sys.stderr, flush=True)
+
+
 def _wants_tiles(args, capture) -> bool:
     from rsocl.device.context import get_device
     from rsocl.scale.runner import SCHEDULER_ENV
@@ -117,9 +124,13 @@ def reconstruct_tiled_if_needed(args):
 
     capture = CaptureSets(args.capture, all_sets=args.sets)
     if args.window is not None:
+        _note_first_set(args, "--window reconstructs set 0 (--first-set-only says set 0 and silences this)")
         return _stream(args, capture)
     if not _wants_tiles(args, capture):
         return None
+    if not _is_zarr(args.out):
+        _note_first_set(args, "a tiled run into an HDF5 file reconstructs set 0 (--out NAME.zarr --sets: every "
+                              "set, in tiles; --first-set-only says set 0 and silences this)")
     from rsocl.scale.proposal import propose_tiling
     from rsocl.scale.tiled import TilesFailed, reconstruct_tiled
 
