@@ -161,6 +161,9 @@ def test_a_failing_tile_is_retried_then_reported_and_the_others_are_kept():
     (dict(tile=(8, 8), retries=-1), "retries must be a whole number >= 0"),
     (dict(tile=(8, 8), regularizer="nope"), "nope"),
     (dict(tile=(8, 8), lam=-1), "lam must be"),
+    (dict(tile=(8, 8), saturation=-1, tune=False), r"saturation must be > 0 \(snapshot units\), got -1"),
+    (dict(tile=(8, 8), saturation=float("nan"), tune=False), "saturation must be finite"),
+    (dict(tile=(8, 8), saturation="x", tune=False), "saturation must be a finite real number, got 'x'"),
 ])
 def test_bad_input_names_the_parameter(kwargs, match):
     rig = rsocl.Rig.paper_array(4, (20, 24), t_e=1.8e-4, t_r=3.5e-5)
@@ -171,6 +174,14 @@ def test_bad_input_names_the_parameter(kwargs, match):
         reconstruct_tiled(g, rig, **kwargs)
     with pytest.raises(ValueError, match=r"g must have shape \(K, m, n\) = \(4, 20, 24\) or \(S, K, m, n\)"):
         reconstruct_tiled(np.zeros((3, 20, 24)), rig, tile=(8, 8))
+
+
+def test_bad_retries_leave_no_store_behind(tmp_path):
+    pytest.importorskip("zarr")
+    rig = rsocl.Rig.paper_array(4, (20, 24), t_e=1.8e-4, t_r=3.5e-5)
+    with pytest.raises(ValueError, match="retries must be a whole number >= 0"):
+        reconstruct_tiled(np.zeros((4, 20, 24)), rig, tile=(8, 8), retries=-1, tune=False, out=tmp_path / "a.zarr")
+    assert not (tmp_path / "a.zarr").exists()
 
 
 def test_the_fits_message_suggests_float32_only_for_float64(device):

@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from rsocl.common import validation as check
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
-from rsocl.scale.runner import Engine
+from rsocl.scale.runner import Engine, non_negative_int
 from rsocl.scale.tiles import check_halo, place, tile_grid, tile_rig
 from rsocl.scale.tuned import tune_tiles, tuned_options
 from rsocl.scale.work import Job, RigPayload, TileSettings
@@ -177,6 +178,9 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         raise ValueError(f"regularizer must be a registry name for a tiled reconstruction (each task builds its "
                          f"own), got {regularizer!r}")
     tune = check_tune(tune)
+    retries = non_negative_int("retries", retries)
+    if saturation is not None:
+        saturation = check.positive("saturation", saturation, "(snapshot units)")
     checked = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
                              projection=projection)
     reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
