@@ -147,25 +147,26 @@ def write_header(h5, kind: str, rig: Rig) -> None:
     write_rig(h5, rig)
 
 
-def open_checked(path, kind: str):
-    """Open ``path`` read-only and check that it is an rsocl file of ``kind``."""
+def open_checked(path, kind: str, name: str = "path"):
+    """Open ``path`` read-only and check that it is an rsocl file of ``kind``; errors name the parameter
+    ``name``."""
     import h5py
 
-    path = check.existing_file("path", path, f"{kind} file")
+    path = check.existing_file(name, path, f"{kind} file")
     try:
         h5 = h5py.File(path, "r")
     except OSError as exc:
-        raise ValueError(f"path: {str(path)!r} is not a readable HDF5 file ({check.cause(exc)})") from None
+        raise ValueError(f"{name}: {str(path)!r} is not a readable HDF5 file ({check.cause(exc)})") from None
     try:
         found = h5.attrs.get("rsocl_file")
         if isinstance(found, bytes):
             found = found.decode("utf-8")
         if found != kind:
             what = "not an rsocl file" if found is None else f"an rsocl {found!r} file"
-            raise ValueError(f"path: {str(path)!r} is {what}, expected an rsocl {kind!r} file")
+            raise ValueError(f"{name}: {str(path)!r} is {what}, expected an rsocl {kind!r} file")
         version = h5.attrs.get("format_version")
         if version is None or not isinstance(version, numbers.Integral) or not 1 <= int(version) <= FORMAT_VERSION:
-            raise ValueError(f"path: {str(path)!r} has format_version {version!r}; this rsocl reads 1.."
+            raise ValueError(f"{name}: {str(path)!r} has format_version {version!r}; this rsocl reads 1.."
                              f"{FORMAT_VERSION}")
     except BaseException:
         h5.close()

@@ -8,11 +8,12 @@ input) and counts the saturated pixels.
 from __future__ import annotations
 
 import hashlib
+from pathlib import Path
 
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.files.hdf5_header import read_rig
+from rsocl.files.hdf5_header import open_checked, read_rig
 from rsocl.model.rig import Rig
 from rsocl.scale.work import FileBlock
 
@@ -72,16 +73,8 @@ class CaptureSets:
     def __init__(self, path, all_sets=False, name="capture"):
         import h5py
 
-        self.path = check.existing_file(name, path, "capture file")
-        try:
-            h5 = h5py.File(self.path, "r")
-        except OSError as exc:
-            raise ValueError(f"{name}: {str(self.path)!r} is not a readable HDF5 file ({check.cause(exc)})") from None
-        with h5:
-            kind = h5.attrs.get("rsocl_file")
-            kind = kind.decode() if isinstance(kind, bytes) else kind
-            if kind != "capture":
-                raise ValueError(f"{name}: {str(self.path)!r} is not an rsocl capture file")
+        with open_checked(path, "capture", name) as h5:
+            self.path = Path(h5.filename)
             self.rig = read_rig(h5, f"{name}: {str(self.path)!r}")
             self.dataset = "snapshot_sets" if all_sets else "snapshots"
             if self.dataset not in h5:
