@@ -228,7 +228,7 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
             writer.warn(f"camera {i}: the device reports t_r = {readout!r} s, the rig file says {spec['t_r']!r} s")
         writer.camera_settings(i, **settings)
     at(None, None, "configure")
-    writer.use_exposures(exposures, [spec["t_e"] for spec in rigfile.cameras])
+    writer.use_exposures(exposures)
     for i, cam in enumerate(cameras):
         at(i, None, "start")
         cam.start()

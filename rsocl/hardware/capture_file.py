@@ -112,9 +112,9 @@ class CaptureWriter:
         self._write_meta()
         warnings.warn(text, stacklevel=2)
 
-    def use_exposures(self, exposures, rig_t_e, tolerance: float = 1e-3) -> None:
+    def use_exposures(self, exposures, tolerance: float = 1e-3) -> None:
         """Store the exposures (s, one per camera) the devices applied in the file's rig, where one differs
-        from the rig file's ``t_e`` (``rig_t_e``, s) by more than ``tolerance`` of it, and warn for each.
+        from the rig's ``t_e`` (the rig file's) by more than ``tolerance`` of it, and warn for each.
 
         Devices round a requested exposure to their units and clamp it to their range (V4L2 in
         units of 100 µs; 10 s asked of a webcam can give 0.2047 s). The frames were exposed for the
@@ -125,7 +125,8 @@ class CaptureWriter:
 
         data = self.rig.to_dict()
         changed = []
-        for i, (camera, applied, asked) in enumerate(zip(data["cameras"], exposures, rig_t_e)):
+        for i, (camera, applied) in enumerate(zip(data["cameras"], exposures)):
+            asked = camera["t_e"]
             if abs(applied - asked) > tolerance * asked:
                 camera["t_e"] = float(applied)
                 changed.append((i, applied, asked))
