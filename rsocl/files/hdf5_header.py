@@ -26,7 +26,7 @@ from rsocl.common import validation as check
 from rsocl.model.rig import Rig
 
 __all__ = ["FORMAT_VERSION", "json_default", "dumps_json", "write_rig", "read_rig", "str_attr", "write_header",
-           "open_checked"]
+           "open_checked", "json_attr", "read_array", "real_dataset"]
 
 #: Version written to the ``format_version`` attribute; files with a larger
 #: version are refused.
@@ -112,8 +112,13 @@ def json_attr(h5, name: str, source: str):
 
 
 def read_array(h5, name: str, source: str, tail=None):
-    """Dataset ``name`` of ``h5`` as a real-valued array; a ValueError naming ``source`` when it is
-    missing, not a dataset, not real numbers or (``tail``: the expected trailing axes) of another shape."""
+    """Dataset ``name`` of ``h5`` as a real-valued array, checked by :func:`real_dataset`."""
+    return real_dataset(h5, name, source, tail)[()]
+
+
+def real_dataset(h5, name: str, source: str, tail=None):
+    """Dataset ``name`` of ``h5`` (not read); a ValueError naming ``source`` when it is missing, not a
+    dataset, not real numbers or (``tail``: the expected trailing axes) of another shape."""
     import h5py
 
     if name not in h5:
@@ -126,7 +131,7 @@ def read_array(h5, name: str, source: str, tail=None):
     if tail is not None and tuple(item.shape[-len(tail):]) != tuple(tail):
         raise ValueError(f"{source}: dataset {name!r} has shape {item.shape}, the rig needs (..., "
                          f"{', '.join(map(str, tail))})")
-    return item[()]
+    return item
 
 
 # ---------------------------------------------------------------------- header

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.files.hdf5_header import open_checked, read_rig
+from rsocl.files.hdf5_header import open_checked, read_rig, real_dataset
 from rsocl.model.rig import Rig
 from rsocl.scale.work import FileBlock
 
@@ -71,8 +71,6 @@ class CaptureSets:
     """
 
     def __init__(self, path, all_sets=False, name="capture"):
-        import h5py
-
         with open_checked(path, "capture", name) as h5:
             self.path = Path(h5.filename)
             self.rig = read_rig(h5, f"{name}: {str(self.path)!r}")
@@ -80,15 +78,9 @@ class CaptureSets:
             if self.dataset not in h5:
                 hint = " (it holds one set: leave out --sets)" if all_sets else ""
                 raise ValueError(f"{name}: {str(self.path)!r} has no dataset {self.dataset!r}{hint}")
-            item = h5[self.dataset]
-            if not isinstance(item, h5py.Dataset) or item.dtype.kind not in "biuf":
-                raise ValueError(f"{name}: {str(self.path)!r}: {self.dataset!r} must be a dataset of real numbers, "
-                                 f"got {type(item).__name__} {getattr(item, 'dtype', '')}".rstrip())
-            shape = item.shape
+            shape = real_dataset(h5, self.dataset, f"{name}: {str(self.path)!r}",
+                                 (self.rig.n_channels,) + self.rig.shape).shape
             self.has_truth = "truth" in h5
-        expected = (self.rig.n_channels,) + self.rig.shape
-        if shape[-3:] != expected:
-            raise ValueError(f"{name}: {self.dataset} has shape {shape}, the rig needs (..., {expected})")
         self.n_sets = shape[0] if all_sets else None
 
     def sets(self):
