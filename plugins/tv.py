@@ -63,7 +63,8 @@ class TV(Regularizer):
     on 40x24 pixels, where the search picks too low a temporal weight). On the paper array,
     self-tuned (14 scenes at 64x64 and 128x128), it stays within 0.02 dB of scikit-image's step;
     fixed settings from zeros at 128x128, where 200 iterations are far from converged, lose up to
-    0.16 dB (0.48 dB at a step of 0.75 and 1.31 dB at half the step, Chambolle's proven bound). ``benchmarks/tv_step.py``, ``docs/tv_step.md``.
+    0.16 dB (0.48 dB at a step of 0.75 and 1.31 dB at half the step, Chambolle's proven bound).
+    ``benchmarks/tv_step.py``, ``docs/tv_step.md``.
 
     A batch ``(B, T, m, n)`` is denoised in the same launches as one set, each set on its own
     (no temporal difference across a set boundary) with its own weight.

@@ -374,7 +374,8 @@ def test_one_snapshot_per_pixel_sets_the_temporal_weight_and_runs_no_search(tmp_
     given = rsocl.reconstruct(g, rig, iterations=5, regularizer_options={"temporal_weight": 2.0})
     assert given.params["regularizer_options"]["temporal_weight"] == 2.0 and not given.params["tuning"]["preset"]
     fixed = rsocl.reconstruct(g, rig, iterations=5, lam=0.1)
-    assert fixed.params["tuning"]["candidates"] == [] and fixed.params["regularizer_options"]["temporal_weight"] == weight
+    assert fixed.params["tuning"]["candidates"] == []
+    assert fixed.params["regularizer_options"]["temporal_weight"] == weight
     # two cameras: the weight is searched as always
     two = rsocl.Rig.paper_array(2, SHAPE, t_e=0.18e-3, t_r=35e-6)
     searched = rsocl.reconstruct(ref.forward(two, _static(two)), two, iterations=20).params["tuning"]

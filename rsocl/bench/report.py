@@ -174,7 +174,8 @@ def markdown(result: BenchResult) -> str:
         lines.append(f"- **pick for quality:** {quality['label']} — {_num(quality['psnr'], '.2f')} dB, "
                      f"SSIM {_ssim(quality['ssim_mean'])}, {quality['seconds']:.2f} s.")
         lines.append(f"- **pick for speed:** {speed['label']} — the fastest point of the Pareto front within "
-                     f"{SPEED_PICK_DB:g} dB of the best: {_num(speed['psnr'], '.2f')} dB, SSIM {_ssim(speed['ssim_mean'])}, "
+                     f"{SPEED_PICK_DB:g} dB of the best: {_num(speed['psnr'], '.2f')} dB, "
+                     f"SSIM {_ssim(speed['ssim_mean'])}, "
                      f"{speed['seconds']:.2f} s.")
         coarse = [r for r in (quality, speed) if r["_point"].dt_factor > 1]
         if coarse:
@@ -185,7 +186,8 @@ def markdown(result: BenchResult) -> str:
         interp = [r for r in result.rows if r["_point"].is_baseline and _comparable(r, d)]
         if interp:
             b = interp[0]
-            lines.append(f"- the baseline `interp3d` gives {_num(b['psnr'], '.2f')} dB (SSIM {_ssim(b['ssim_mean'])}) in "
+            lines.append(f"- the baseline `interp3d` gives {_num(b['psnr'], '.2f')} dB "
+                         f"(SSIM {_ssim(b['ssim_mean'])}) in "
                          f"{b['seconds'] * 1e3:.1f} ms: the reconstruction buys "
                          f"{quality['psnr'] - b['psnr']:+.2f} dB at best, {speed['psnr'] - b['psnr']:+.2f} dB "
                          "with the speed pick.")

@@ -6,8 +6,8 @@
 Layout
 ------
 A capture file of :mod:`rsocl.files.hdf5` (``rsocl_file = "capture"``, format 1, the
-rig with each camera's exposure as its device applied it, attribute ``meta``), readable by :func:`rsocl.files.hdf5.load_capture` once a
-first set is complete, plus:
+rig with each camera's exposure as its device applied it, attribute ``meta``), readable by
+:func:`rsocl.files.hdf5.load_capture` once a first set is complete, plus:
 
 - ``snapshots`` ``(K, m, n)`` float64: set 0 registered on the reference grid,
   in model units (written when set 0 is complete);
