@@ -6,6 +6,9 @@ One cluster of 2 worker processes serves the whole module (starting one costs se
 import logging
 import os
 import signal
+import socket
+import subprocess
+import sys
 import threading
 import time
 
@@ -88,6 +91,33 @@ def test_a_partly_written_store_resumes_and_matches_a_clean_run(tmp_path):
     np.testing.assert_array_equal(np.asarray(resumed.datacube[...]), np.asarray(clean.datacube[...]))
     with pytest.raises(ValueError, match="holds another reconstruction .*params.iterations"):
         reconstruct_tiled(g, rig, out=partial, **{**kwargs, "iterations": 7})
+
+
+def test_a_store_cut_short_while_created_is_absent_and_a_rerun_makes_it(tmp_path, monkeypatch):
+    rig, g = _problem((20, 20))
+    kwargs = dict(tile=(10, 10), halo=4, iterations=3, tune=False)
+    store = tmp_path / "rec.zarr"
+
+    def killed(*args, **kwargs):
+        raise RuntimeError("killed while writing the attributes")
+
+    monkeypatch.setattr(zarr.Group, "update_attributes", killed)
+    with pytest.raises(RuntimeError, match="killed"):
+        reconstruct_tiled(g, rig, out=store, **kwargs)
+    monkeypatch.undo()
+    assert list(tmp_path.iterdir()) == []
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
+                           check=True)
+    prefix = f".rec.zarr.partial-{socket.gethostname()}-"
+    dead = tmp_path / f"{prefix}{int(ended.stdout)}-0123abcd"     # left by a killed run
+    alive = tmp_path / f"{prefix}{os.getpid()}-4567abcd"          # a run creating the store now
+    for leftover in (dead, alive):
+        leftover.mkdir()
+        (leftover / "zarr.json").write_text("{}")
+    result = reconstruct_tiled(g, rig, out=store, **kwargs)
+    assert load_store(store).complete and len(result.pieces) == 4
+    np.testing.assert_array_equal(np.asarray(result.datacube[...]), reconstruct_tiled(g, rig, **kwargs).datacube)
+    assert not dead.exists() and alive.exists()
 
 
 def _tiles_done(store) -> int:

@@ -22,17 +22,27 @@ file is written to a temporary name and renamed): a tile reads as done only once
 complete. Running the same reconstruction on an existing store redoes only the tiles not
 done; a store of another reconstruction (different rig, settings, tiling or snapshots) is
 refused.
+
+A new store is built under a hidden sibling name, ``.NAME.partial-<host>-<pid>-<random>``, and
+renamed to ``NAME`` once its arrays and attributes are written, so the path holds either nothing
+or a complete store whatever moment the run is killed at; such a sibling left by a killed run is
+removed by the next run on the same host, and never blocks one.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
+import secrets
+import shutil
+import socket
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from rsocl.files.atomic import _fsync_directory, _fsync_file
 from rsocl.files.hdf5 import FORMAT_VERSION
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import expand
@@ -120,34 +130,93 @@ def prepare_store(path, spec: StoreSpec, name="out") -> np.ndarray:
     """
     zarr = require_zarr(name)
     path = check_store_path(path, name)
-    attrs = spec.attributes()
     marks = (spec.sets or 1,) + tuple(spec.grid)
-    if path.exists() and any(path.iterdir()):
+    if not _holds_files(path):
+        _remove_leftovers(path)
+        if _create(zarr, path, spec):
+            return np.zeros(marks, dtype=bool)
+    return _resume(zarr, path, spec, name)
+
+
+def _holds_files(path: Path) -> bool:
+    return path.is_dir() and any(path.iterdir())
+
+
+def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> np.ndarray:
+    """The ``done`` marks of the store at ``path``; ValueError naming ``name`` unless it is ``spec``'s."""
+    try:
+        group = zarr.open_group(str(path), mode="r+")
+    except Exception as exc:
+        raise ValueError(f"{name}: {str(path)!r} exists and is not a Zarr store ({exc})") from None
+    found, attrs = dict(group.attrs), spec.attributes()
+    if found.get("rsocl_file") != "reconstruction":
+        raise ValueError(f"{name}: {str(path)!r} is not an rsocl reconstruction store; choose another path")
+    differ = [key for key in _IDENTITY if found.get(key) != attrs[key]]
+    old_params, new_params = json.loads(found.get("params", "{}")), spec.params
+    differ += [f"params.{k}" for k in sorted(set(old_params) | set(new_params))
+               if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)]
+    if differ:
+        raise ValueError(f"{name}: {str(path)!r} holds another reconstruction (it differs in "
+                         f"{', '.join(differ)}); remove it or choose another path")
+    return np.asarray(group["tiles"][..., 0]) > 0
+
+
+def _partial_prefix(path: Path) -> str:
+    return f".{path.name}.partial-{socket.gethostname()}-"
+
+
+def _create(zarr, path: Path, spec: StoreSpec) -> bool:
+    """Build the store beside ``path`` and rename it there; False when another process made one first."""
+    tmp = path.with_name(f"{_partial_prefix(path)}{os.getpid()}-{secrets.token_hex(4)}")
+    os.mkdir(tmp)
+    try:
+        group = zarr.open_group(str(tmp), mode="w")
+        shape = spec.prefix_shape + (spec.rig.T,) + spec.rig.shape
+        group.create_array("datacube", shape=shape, chunks=spec.chunks(), dtype=spec.dtype, fill_value=0)
+        marks = (spec.sets or 1,) + tuple(spec.grid)
+        group.create_array("tiles", shape=marks + (len(TILE_FIELDS),), chunks=(1, 1, 1, len(TILE_FIELDS)),
+                           dtype="float64", fill_value=0)
+        for index, camera in enumerate(spec.rig.cameras):
+            if camera.row_map is not None:
+                group.create_array(f"{_ROW_MAPS}/{index}", data=spec.rig.row_map(index))
+        group.attrs.put(spec.attributes())
+        for folder, _, files in os.walk(tmp):
+            for file in files:
+                _fsync_file(Path(folder) / file)
         try:
-            group = zarr.open_group(str(path), mode="r+")
-        except Exception as exc:
-            raise ValueError(f"{name}: {str(path)!r} exists and is not a Zarr store ({exc})") from None
-        found = dict(group.attrs)
-        if found.get("rsocl_file") != "reconstruction":
-            raise ValueError(f"{name}: {str(path)!r} is not an rsocl reconstruction store; choose another path")
-        differ = [key for key in _IDENTITY if found.get(key) != attrs[key]]
-        old_params, new_params = json.loads(found.get("params", "{}")), spec.params
-        differ += [f"params.{k}" for k in sorted(set(old_params) | set(new_params))
-                   if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)]
-        if differ:
-            raise ValueError(f"{name}: {str(path)!r} holds another reconstruction (it differs in "
-                             f"{', '.join(differ)}); remove it or choose another path")
-        return np.asarray(group["tiles"][..., 0]) > 0
-    group = zarr.open_group(str(path), mode="w")
-    shape = spec.prefix_shape + (spec.rig.T,) + spec.rig.shape
-    group.create_array("datacube", shape=shape, chunks=spec.chunks(), dtype=spec.dtype, fill_value=0)
-    group.create_array("tiles", shape=marks + (len(TILE_FIELDS),), chunks=(1, 1, 1, len(TILE_FIELDS)),
-                       dtype="float64", fill_value=0)
-    for index, camera in enumerate(spec.rig.cameras):
-        if camera.row_map is not None:
-            group.create_array(f"{_ROW_MAPS}/{index}", data=spec.rig.row_map(index))
-    group.attrs.update(attrs)            # last: a store with attributes has all its arrays
-    return np.zeros(marks, dtype=bool)
+            os.replace(tmp, path)
+        except OSError:
+            if not _holds_files(path):
+                raise
+            shutil.rmtree(tmp, ignore_errors=True)
+            return False
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    _fsync_directory(path.parent)
+    return True
+
+
+def _remove_leftovers(path: Path) -> None:
+    """Remove the partial stores of ``path`` left by runs on this host whose process is gone (POSIX)."""
+    if os.name != "posix":
+        return
+    prefix = _partial_prefix(path)
+    for entry in path.parent.iterdir():
+        found = entry.name.startswith(prefix) and re.fullmatch(r"(\d+)-[0-9a-f]{8}", entry.name[len(prefix):])
+        if found and not _running(int(found.group(1))):
+            shutil.rmtree(entry, ignore_errors=True)
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists on this host (another user's included)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
 
 
 _OPEN: dict = {}
