@@ -137,6 +137,25 @@ def test_sets_and_the_in_process_loop_give_the_same_numbers(monkeypatch):
     np.testing.assert_array_equal(reconstruct_tiled(sets, rig, **kwargs).datacube, local.datacube)
 
 
+def test_trimmed_keeps_the_subframes_of_every_set(tmp_path):
+    delays = (0, 12, 24, 36)                          # rows each camera starts late: the ends are trimmed
+    rig = Rig([Camera(a, t_e=1.8e-4, t_r=3.5e-5, t_a=d * 3.5e-5) for a, d in zip((0, 90, 180, 270), delays)], (16, 18))
+    kept = rig.kept_subframes()
+    assert 0 < kept.start and kept.stop < rig.T
+    sets = np.stack([_problem(rig, seed=s)[0] for s in range(2)])
+    kwargs = dict(tile=(8, 9), halo=4, iterations=3, tune=False)
+    results = [reconstruct_tiled(sets, rig, **kwargs)]
+    if importlib.util.find_spec("zarr") is not None:
+        results.append(reconstruct_tiled(sets, rig, out=tmp_path / "sets.zarr", **kwargs))
+    for result in results:
+        trimmed = np.asarray(result.trimmed)
+        assert trimmed.shape == (2, rig.T_se) + rig.shape
+        for s in range(2):
+            np.testing.assert_array_equal(trimmed[s], np.asarray(result.datacube[s])[kept])
+    one = reconstruct_tiled(sets[1], rig, **kwargs)
+    np.testing.assert_array_equal(one.trimmed, one.datacube[kept])
+
+
 def test_a_failing_tile_is_retried_then_reported_and_the_others_are_kept():
     rig = rsocl.Rig.paper_array(4, (32, 32), t_e=1.8e-4, t_r=3.5e-5)
     g, _ = _problem(rig)

@@ -69,8 +69,8 @@ class TiledResult:
 
     @property
     def trimmed(self):
-        """The ``T_se`` sub-frames kept by the rig's trimming rule (one set)."""
-        return self.datacube[self.rig.kept_subframes()]
+        """The ``T_se`` sub-frames kept by the rig's trimming rule (of every set)."""
+        return self.datacube[..., self.rig.kept_subframes(), :, :]
 
 
 class TilesFailed(RuntimeError):
