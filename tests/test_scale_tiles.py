@@ -85,6 +85,23 @@ def test_tiled_holds_the_subframes_before_every_camera_starts_as_untiled_does(tm
                                                     tune=False).datacube, untiled)
 
 
+def _assert_close_to_untiled(result, untiled, grid):
+    """Where a tile models the sub-frames, it is the untiled reconstruction (of its set) up to the
+    halo's crop; away from the first and last sub-frames a tile models (which few of its pixels
+    sample: within one exposure, window_length sub-frames, of an end that is not the capture's)
+    the difference is small."""
+    span, edge = result.rig.sampled_range(), result.rig.window_length
+    for piece in result.pieces:
+        rows, cols = grid[piece.index].core_slices
+        tiled = result.datacube if piece.set_index is None else result.datacube[piece.set_index]
+        expected = untiled if piece.set_index is None else untiled[piece.set_index]
+        cut = (slice(piece.start, piece.stop), rows, cols)
+        diff = np.abs(tiled[cut] - expected[cut])
+        lo = edge if piece.start > span.start else 0
+        hi = diff.shape[0] - (edge if piece.stop < span.stop else 0)
+        assert diff[lo:hi].max() < 3e-2 and diff.max() < 0.1, (piece.index, diff[lo:hi].max(), diff.max())
+
+
 @pytest.mark.parametrize("angles, shape, tile", [
     ((0, 90, 180, 270), (37, 45), (16, 20)),          # odd sizes, uneven last tiles
     ((0, 45, 135, 250), (34, 39), (17, 13)),          # oblique angles
@@ -97,16 +114,7 @@ def test_tiled_matches_untiled(angles, shape, tile):
     tiled = result.datacube
     assert tiled.shape == untiled.shape and tiled.dtype == untiled.dtype
     assert len(result.pieces) == len(tile_grid(shape, tile, 12)) and not result.failures
-    # where a tile models the sub-frames, it is the untiled reconstruction up to the halo's crop; away
-    # from the first and last sub-frames a tile models (which few of its pixels sample: within one
-    # exposure, window_length sub-frames, of an end that is not the capture's) the difference is small
-    span, edge = rig.sampled_range(), rig.window_length
-    for piece in result.pieces:
-        rows, cols = tile_grid(shape, tile, 12)[piece.index].core_slices
-        diff = np.abs(tiled[piece.start:piece.stop, rows, cols] - untiled[piece.start:piece.stop, rows, cols])
-        lo = edge if piece.start > span.start else 0
-        hi = diff.shape[0] - (edge if piece.stop < span.stop else 0)
-        assert diff[lo:hi].max() < 3e-2 and diff.max() < 0.1, (piece.index, diff[lo:hi].max(), diff.max())
+    _assert_close_to_untiled(result, untiled, tile_grid(shape, tile, 12))
     from rsocl.analysis.metrics import psnr
 
     assert psnr(tiled, truth) > psnr(untiled, truth) - 0.1
@@ -114,6 +122,24 @@ def test_tiled_matches_untiled(angles, shape, tile):
     scale = default_scale(rig)                     # the whole rig's, not a tile's
     assert result.params["lam"] == 0.1 * scale and result.params["eta"] == 0.2 * scale
     assert result.params["tile"] == list(tile)
+
+
+def test_each_set_s_tiles_run_with_that_set_s_lam_and_eta(tmp_path):
+    rig = Rig([Camera(a, t_e=1.8e-4, t_r=3.5e-5) for a in (0, 90, 180, 270)], (30, 34))
+    sets = np.stack([_problem(rig, seed=s)[0] for s in range(2)])
+    values = dict(lam=(0.02, 0.3), eta=(0.2, 0.4))
+    untiled = rsocl.reconstruct(sets, rig, iterations=ITER, tune=False, **values).datacube
+    kwargs = dict(tile=(15, 17), halo=12, iterations=ITER, tune=False, **values)
+    result = reconstruct_tiled(sets, rig, **kwargs)
+    assert len(result.pieces) == 8 and result.params["lam"] == (0.02, 0.3) and result.params["eta"] == (0.2, 0.4)
+    _assert_close_to_untiled(result, untiled, tile_grid(rig.shape, (15, 17), 12))
+    if importlib.util.find_spec("zarr") is not None:             # a store of per-set values resumes
+        reconstruct_tiled(sets, rig, out=tmp_path / "sets.zarr", **kwargs)
+        assert reconstruct_tiled(sets, rig, out=tmp_path / "sets.zarr", **kwargs).skipped == 8
+    with pytest.raises(ValueError, match=r"lam must have one value per set: 2 for this batch, got 3"):
+        reconstruct_tiled(sets, rig, **{**kwargs, "lam": (0.1, 0.2, 0.3)})
+    with pytest.raises(ValueError, match=r"eta has 2 values \(one per set\), but g holds one set"):
+        reconstruct_tiled(sets[0], rig, **{**kwargs, "lam": 0.1})
 
 
 def test_one_tile_covering_the_grid_is_the_untiled_reconstruction():

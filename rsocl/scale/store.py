@@ -152,7 +152,7 @@ def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> np.ndarray:
     if found.get("rsocl_file") != "reconstruction":
         raise ValueError(f"{name}: {str(path)!r} is not an rsocl reconstruction store; choose another path")
     differ = [key for key in _IDENTITY if found.get(key) != attrs[key]]
-    old_params, new_params = json.loads(found.get("params", "{}")), spec.params
+    old_params, new_params = json.loads(found.get("params", "{}")), json.loads(attrs["params"])
     differ += [f"params.{k}" for k in sorted(set(old_params) | set(new_params))
                if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)]
     if differ:

@@ -142,7 +142,8 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         Pixels added on every side of a tile and cropped off after (default None: 16, or the grid's
         larger side where that is smaller).
     iterations, lam, eta, tv_iterations, projection, dtype, regularizer_options, saturation
-        As :func:`rsocl.reconstruct`, for every tile.
+        As :func:`rsocl.reconstruct`, for every tile; ``lam`` and ``eta`` may give one value per
+        set (``S`` of them), every tile of a set running with that set's.
     device : str or None
         OpenCL device spec for every task; None lets each worker choose (:func:`worker_device`).
     out : str, os.PathLike or None
@@ -186,7 +187,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
     reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
     tune = check_tune(tune, reg)
     fixed_lam = checked.lam
-    checked = checked.settled_for(reg, dtype, scale=default_scale(rig))
+    checked = checked.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(source.n_sets)
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
     store = None

@@ -15,7 +15,7 @@ import hashlib
 import os
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -31,7 +31,8 @@ class TileSettings:
     """The solver settings of the whole capture, applied as they are to every tile.
 
     ``lam`` and ``eta`` are settled (never None) so that no tile picks its own; a self-tuned
-    run puts the values chosen once for the capture here (:mod:`rsocl.scale.tuned`). ``start``
+    run puts the values chosen once for the capture here (:mod:`rsocl.scale.tuned`). Either may
+    be one value per set (a tuple), of which each set's tasks take their own (:meth:`for_set`). ``start``
     is each tile's first iterate: ``"zeros"``, or ``"interp3d"`` (the
     :func:`~rsocl.model.interpolation.interp3d` interpolation of the tile's own snapshots over
     its rig, computed on the device; the start of a tuned :func:`rsocl.reconstruct`).
@@ -48,6 +49,13 @@ class TileSettings:
     saturation: float | None
     device: str | None
     start: str = "zeros"
+
+    def for_set(self, set_index) -> "TileSettings":
+        """The settings of set ``set_index``'s tasks: its own ``lam`` and ``eta`` where they are per set."""
+        def own(value):
+            return value[set_index] if isinstance(value, tuple) else value
+
+        return replace(self, lam=own(self.lam), eta=own(self.eta))
 
 
 @dataclass(frozen=True)
@@ -207,6 +215,7 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     from rsocl.solver.reconstruct import reconstruct
 
     rig = _rig_for(payload, job.tile)
+    settings = settings.for_set(job.set_index)
     solved = rig.sampled_range()
     g = job.snapshots()
     x0 = _start(settings)
