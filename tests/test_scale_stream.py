@@ -58,6 +58,15 @@ def test_default_windows_fit_any_capture():
     np.testing.assert_array_equal(stream.datacube, rsocl.reconstruct(g, rig, iterations=5, tune=False).datacube)
 
 
+def test_a_stream_into_a_zarr_store_is_refused_before_anything_runs(tmp_path):
+    rig = _rig(frames=3, shape=(12, 12))
+    g = rsocl.RollingShutterOperator(rig).forward(builtin_scene(rig.shape, rig.T, seed=1))
+    with pytest.raises(ValueError, match=r"out: a stream of frame windows is assembled in memory .*writes no Zarr "
+                                         r"store, got out='.*s.zarr'; leave out out"):
+        reconstruct_stream(g, rig, window=2, iterations=3, tune=False, out=str(tmp_path / "s.zarr"))
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_rsocl_reconstruct_window(tmp_path, capsys):
     from rsocl.cli.main import main
     from rsocl.files.hdf5 import load_reconstruction, save_capture

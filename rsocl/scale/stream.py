@@ -107,11 +107,18 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
         Tile of each window (None: the whole grid, one task per window).
     **kwargs
         As :func:`rsocl.scale.reconstruct_tiled` (``halo``, ``iterations``, ``scheduler``,
-        ``tune``, ...). With ``tune`` (the default) the first window chooses the unset
-        parameters and every later window runs with that choice (one capture, one setting).
+        ``tune``, ...), except ``out``: the windows are assembled in memory and no Zarr store
+        is written (save ``StreamResult.datacube``, e.g. with
+        :func:`rsocl.files.hdf5.save_reconstruction`). With ``tune`` (the default) the first
+        window chooses the unset parameters and every later window runs with that choice (one
+        capture, one setting).
     """
     from rsocl.scale.tiled import reconstruct_tiled
 
+    if kwargs.get("out") is not None:
+        raise ValueError(f"out: a stream of frame windows is assembled in memory (StreamResult.datacube) and "
+                         f"writes no Zarr store, got out={kwargs['out']!r}; leave out out and save the result "
+                         f"(e.g. rsocl.files.hdf5.save_reconstruction)")
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     g = check.finite_array("g", snapshots)
