@@ -109,3 +109,21 @@ def test_limits_are_validated(device):
     with pytest.raises(ValueError, match="local_mem_bytes"):
         device.limited(local_mem_bytes=-1)
     assert device.limited(max_work_group_size=1 << 40).max_work_group_size == device.max_work_group_size
+
+
+@pytest.mark.parametrize("fp64", [False, "no", "No", "false", np.False_])
+def test_fp64_no_hides_fp64_and_float64_is_refused(device, fp64):
+    dev = device.limited(fp64=fp64)
+    assert not dev.has_fp64 and dev.acc_dtype == np.float32
+    rig = rsocl.Rig.paper_array(4, (6, 5), t_e=1e-4, t_r=3e-5)
+    g = ref.forward(rig, np.random.default_rng(2).random((rig.T,) + rig.shape))
+    with pytest.raises(ValueError, match="dtype='float64' needs cl_khr_fp64"):
+        rsocl.reconstruct(g, rig, device=dev, dtype="float64", iterations=2, tune=False)
+
+
+def test_fp64_yes_keeps_what_the_device_has_and_other_values_are_refused(device):
+    for fp64 in (True, "yes", "TRUE"):
+        assert device.limited(fp64=fp64).has_fp64 == device.has_fp64
+    for fp64 in ("maybe", 0, 1, 2.0):
+        with pytest.raises(ValueError, match=r"fp64 must be True or False \(or 'yes' or 'no'\), got "):
+            device.limited(fp64=fp64)

@@ -115,9 +115,10 @@ class Device:
                 max_work_item_sizes=None) -> "Device":
         """This device as one with lower limits would present itself: its own queue and program cache.
 
-        ``fp64=False`` hides ``cl_khr_fp64``; the sizes (work items, bytes) cap what the device
-        reports. Every launch-size and local-memory decision of rsocl then follows the lower limits,
-        as on a GPU that has them; the kernels still run on this device.
+        ``fp64=False`` (or ``"no"``) hides ``cl_khr_fp64`` (``True``, ``"yes"``: as the device has
+        it); the sizes (work items, bytes) cap what the device reports. Every launch-size and
+        local-memory decision of rsocl then follows the lower limits, as on a GPU that has them;
+        the kernels still run on this device.
         """
         limits = dict(self.limits)
         given = {"fp64": fp64, "max_work_group_size": max_work_group_size, "local_mem_bytes": local_mem_bytes,
@@ -126,7 +127,7 @@ class Device:
             if value is None:
                 continue
             if name == "fp64":
-                limits[name] = bool(value)
+                limits[name] = _yes_or_no(name, value)
             elif name == "max_work_item_sizes":
                 limits[name] = tuple(check_positive(name, v) for v in value)
             else:
@@ -241,6 +242,18 @@ class Device:
         if key not in cache:
             cache[key] = _build(self.context, key[0], key[1])
         return cache[key]
+
+
+_WORDS = {"yes": True, "true": True, "no": False, "false": False}
+
+
+def _yes_or_no(name: str, value) -> bool:
+    """``value`` as a bool: True/False or the words yes/no, true/false (any case); ValueError naming ``name``."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, str) and value.strip().lower() in _WORDS:
+        return _WORDS[value.strip().lower()]
+    raise ValueError(f"{name} must be True or False (or 'yes' or 'no'), got {value!r}")
 
 
 def c_type(dtype) -> str:
