@@ -200,6 +200,25 @@ def test_an_unreachable_scheduler_is_an_error_before_anything_runs(monkeypatch, 
     assert not calls
 
 
+def test_a_device_object_is_refused_for_workers_and_serves_tasks_in_this_process(cluster, device, tmp_path,
+                                                                                  monkeypatch):
+    from rsocl.scale import runner
+
+    rig, g = _problem((16, 16))
+    kwargs = dict(tile=(8, 8), halo=4, iterations=2, tune=False, device=device)
+    calls = []
+    monkeypatch.setattr(runner, "solve_tile", lambda *a: calls.append(a))
+    for where in (dict(workers=1), dict(scheduler=cluster[0].scheduler_address)):
+        with pytest.raises(ValueError, match=r"device must be a device spec string for the workers of .*e.g. 'pocl', "
+                                             r"'0:0' or 'nvidia' .*got a Device \("):
+            reconstruct_tiled(g, rig, **kwargs, **where)
+    assert not calls
+    monkeypatch.undo()
+    stored = reconstruct_tiled(g, rig, out=tmp_path / "rec.zarr", **kwargs)
+    assert stored.params["device"] == device.name == load_store(tmp_path / "rec.zarr").params["device"]
+    np.testing.assert_array_equal(np.asarray(stored.datacube[...]), reconstruct_tiled(g, rig, **kwargs).datacube)
+
+
 def test_rsocl_reconstruct_on_the_cluster_of_rsocl_scheduler_and_on_its_own_workers(cluster, tmp_path, monkeypatch,
                                                                                       capsys):
     from rsocl.cli.main import main

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.device.context import Device
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
@@ -107,6 +108,15 @@ def _check_tile_memory(rig, grid, reg, dtype, projection, device):
                          f"({dev.name}); choose a smaller tile (rsocl plan proposes one)")
 
 
+def _check_device(device, engine):
+    """ValueError naming ``device`` when it is a :class:`~rsocl.device.Device` and the tasks run in
+    other processes (a cluster's workers), which open their own OpenCL contexts from a spec."""
+    if isinstance(device, Device) and engine.mode == "distributed":
+        raise ValueError(f"device must be a device spec string for the workers of {engine.description} (each "
+                         f"worker process opens its own OpenCL context), e.g. 'pocl', '0:0' or 'nvidia' (rsocl "
+                         f"devices lists them), or None to let each worker choose; got a Device ({device.name})")
+
+
 def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype, saturation, device):
     """Every task's :class:`TileSettings` and the run's ``params``, with ``tuning``'s choice (None: as given)."""
     options = tuned_options(tuning, regularizer_options)
@@ -117,7 +127,7 @@ def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtyp
                             checked.projection, str(np.dtype(dtype)), saturation, device, start)
     params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
               "lam": lam, "eta": checked.eta, "projection": checked.projection, "dtype": settings.dtype,
-              "device": device, "tol": None, "saturation": saturation,
+              "device": device.name if isinstance(device, Device) else device, "tol": None, "saturation": saturation,
               "tuning": None if tuning is None else tuning.as_params(), "start": start}
     return settings, params
 
@@ -144,8 +154,10 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
     iterations, lam, eta, tv_iterations, projection, dtype, regularizer_options, saturation
         As :func:`rsocl.reconstruct`, for every tile; ``lam`` and ``eta`` may give one value per
         set (``S`` of them), every tile of a set running with that set's.
-    device : str or None
+    device : str, Device or None
         OpenCL device spec for every task; None lets each worker choose (:func:`worker_device`).
+        A :class:`~rsocl.device.Device` serves tasks run in this process only (not with
+        ``scheduler`` or ``workers``: a ValueError).
     out : str, os.PathLike or None
         Zarr store to write (each task writes its own chunks; an existing store of the same
         reconstruction is resumed). None: the datacube is assembled in memory.
@@ -190,6 +202,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
     checked = checked.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(source.n_sets)
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
+    _check_device(device, engine)
     store = None
     if out is not None:
         from rsocl.scale.store import check_store_path, require_zarr
