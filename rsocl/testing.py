@@ -17,6 +17,7 @@ import contextlib
 
 import numpy as np
 
+from rsocl.common import validation as check
 from rsocl.device.context import get_device
 from rsocl.solver.regularizer import Option, Regularizer
 
@@ -58,6 +59,13 @@ def _instance(regularizer, options):
     raise AssertionError(f"{regularizer!r} is not an rsocl.solver.regularizer.Regularizer subclass or instance")
 
 
+def _weights(weights) -> tuple:
+    """``weights`` as a tuple of floats ``>= 0``, at least one; ValueError naming ``weights``."""
+    if isinstance(weights, (str, bytes)) or np.ndim(weights) != 1 or len(weights) == 0:
+        raise ValueError(f"weights must be a sequence of at least one denoising weight >= 0, got {weights!r}")
+    return tuple(check.non_negative(f"weights[{i}]", w) for i, w in enumerate(weights))
+
+
 def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 10), weights=(0.05, 0.5),
                       pairs=4, seed=0):
     """Check the regularizer contract on ``device`` in every dtype it and the device support.
@@ -66,10 +74,13 @@ def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 1
     default; ``name`` set; the output is a device array of the input's shape and dtype
     with finite values; the input is not modified; ``out=`` is honoured; weight 0 is the
     identity; the map is non-expansive (``‖D(x) - D(y)‖ <= ‖x - y‖``) on random pairs;
-    no device-to-host transfer happens inside ``denoise``. Returns the dtypes checked.
+    no device-to-host transfer happens inside ``denoise``. ``weights`` are the denoising
+    weights tried (at least one, each ``>= 0``; the last one serves the non-expansiveness pairs).
+    Returns the dtypes checked.
     """
     import pyopencl.array as cla
 
+    weights = _weights(weights)
     reg = _instance(regularizer, options)
     assert isinstance(reg.name, str) and reg.name and reg.name != "base", "the regularizer needs a name"
     for key, opt in type(reg).options.items():

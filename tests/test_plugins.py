@@ -46,6 +46,22 @@ def test_builtin_regularizers_conform(name, device):
     assert "float32" in checked
 
 
+@pytest.mark.parametrize("weights, match", [
+    ((), r"weights must be a sequence of at least one denoising weight >= 0, got \(\)"),
+    ([], r"weights must be a sequence of at least one denoising weight >= 0, got \[\]"),
+    (0.5, r"weights must be a sequence of at least one denoising weight >= 0, got 0.5"),
+    ("0.5", r"weights must be a sequence .*got '0.5'"),
+    ((0.1, -0.5), r"weights\[1\] must be >= 0, got -0.5"),
+    ((np.nan,), r"weights\[0\] must be finite"),
+])
+def test_conformance_check_refuses_bad_weights_before_running(weights, match, monkeypatch):
+    import rsocl.testing
+
+    monkeypatch.setattr(rsocl.testing, "get_device", lambda *a: pytest.fail("the device was reached"))
+    with pytest.raises(ValueError, match=match):
+        check_regularizer(plugins.load("rsocl.regularizers", "tv"), weights=weights)
+
+
 def test_conformance_check_catches_a_bad_regularizer(device):
     from rsocl.solver.regularizer import Regularizer
 
