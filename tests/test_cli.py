@@ -408,6 +408,9 @@ def test_regularizer_and_its_options_are_checked_before_any_work(tmp_path, capsy
     (["--noise", "gaussian", "--sigma", "-0.1"], "--sigma must be >= 0 (fraction of full scale), got -0.1"),
     (["--noise", "poisson", "--photons", "0"], "--photons must be > 0 photo-electrons, got 0.0"),
     (["--bit-depth", "40"], "--bit-depth must be an integer >= 1 and <= 32, got 40"),
+    (["--noise", "poisson", "--photons", "1e30"], "--photons must be in (0, 1e+18] photo-electrons at full scale "
+                                                  "(the Poisson sampler's largest mean), got 1e+30"),
+    (["--seed", "-1"], "--seed must be an integer >= 0, got -1"),
 ])
 def test_simulate_noise_options_are_complete_and_consistent_before_any_work(tmp_path, capsys, monkeypatch, extra,
                                                                             match):

@@ -18,9 +18,9 @@ def add_parser(subparsers):
     p.add_argument("--sigma", type=float, default=None,
                    help="gaussian noise standard deviation, fraction of full scale, >= 0 (no default)")
     p.add_argument("--photons", type=float, default=None,
-                   help="photo-electrons at full scale, > 0 (poisson noise; no default)")
+                   help="photo-electrons at full scale, > 0 and <= 1e18 (poisson noise; no default)")
     p.add_argument("--bit-depth", type=int, default=None, help="quantise to this many bits, 1..32")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the noise generator, >= 0 (default 0)")
     add_device_args(p)
     p.set_defaults(func=cmd_simulate)
     return p
@@ -29,8 +29,10 @@ def add_parser(subparsers):
 def check_noise_args(args) -> None:
     """The noise options, before anything is computed: ``--noise gaussian`` needs ``--sigma`` and
     ``--noise poisson`` needs ``--photons`` (neither has a default), each only with its model (given
-    with another they would be ignored), and ``--bit-depth`` is 1..32."""
+    with another they would be ignored), ``--photons`` is at most
+    :data:`~rsocl.model.simulate.MAX_PHOTONS`, ``--bit-depth`` is 1..32 and ``--seed`` >= 0."""
     from rsocl.common import validation as check
+    from rsocl.model.simulate import check_photons, check_seed
 
     needs = {"gaussian": ("--sigma", args.sigma, "the standard deviation as a fraction of full scale, >= 0"),
              "poisson": ("--photons", args.photons, "photo-electrons at full scale, > 0")}
@@ -43,9 +45,10 @@ def check_noise_args(args) -> None:
     if args.sigma is not None:
         check.non_negative("--sigma", args.sigma, "(fraction of full scale)")
     if args.photons is not None:
-        check.positive("--photons", args.photons, "photo-electrons")
+        check_photons("--photons", args.photons)
     if args.bit_depth is not None:
         check.positive_int("--bit-depth", args.bit_depth, maximum=32)
+    check_seed("--seed", args.seed)
 
 
 def cmd_simulate(args) -> int:

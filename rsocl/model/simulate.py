@@ -8,13 +8,36 @@ levels and values above it saturate.
 
 from __future__ import annotations
 
+import numbers
+
 import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 
-__all__ = ["simulate", "full_scale"]
+__all__ = ["simulate", "full_scale", "check_photons", "check_seed", "MAX_PHOTONS"]
+
+#: Most photo-electrons at full scale: NumPy's Poisson sampler draws means below about 9.2e18.
+MAX_PHOTONS = 1e18
+
+
+def check_photons(name: str, photons) -> float:
+    """``photons`` (photo-electrons at full scale) as a float in ``(0, MAX_PHOTONS]``; ValueError naming ``name``."""
+    photons = check.positive(name, photons, "photo-electrons")
+    if photons > MAX_PHOTONS:
+        raise ValueError(f"{name} must be in (0, {MAX_PHOTONS:g}] photo-electrons at full scale (the Poisson "
+                         f"sampler's largest mean), got {photons!r}")
+    return photons
+
+
+def check_seed(name: str, seed):
+    """``seed`` of the noise generator: an integer ``>= 0``, or None (fresh entropy); ValueError naming ``name``."""
+    if seed is None:
+        return None
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise ValueError(f"{name} must be an integer >= 0, got {seed!r}")
+    return int(seed)
 
 
 def full_scale(rig: Rig) -> float:
@@ -36,17 +59,18 @@ def simulate(truth, rig: Rig, *, noise="none", sigma=0.0, photons=None, bit_dept
     sigma : float
         Gaussian standard deviation, fraction of full scale (>= 0).
     photons : float
-        Photo-electrons at full scale for Poisson noise (> 0).
+        Photo-electrons at full scale for Poisson noise, ``0 < photons <=`` :data:`MAX_PHOTONS`.
     bit_depth : int or None
         Quantise to ``2**bit_depth`` levels over ``[0, full_scale]`` (1..32), with saturation.
-    seed : int
-        Seed of the noise generator.
+    seed : int or None
+        Seed of the noise generator, ``>= 0`` (None: fresh entropy).
     """
     truth = check.finite_array("truth", truth)
     expected = (rig.T,) + rig.shape
     if truth.shape != expected:
         raise ValueError(f"truth must have shape (T, m, n) = {expected} for this rig, got {truth.shape}")
     noise = check.choice("noise", noise, {"none", "gaussian", "poisson"})
+    seed = check_seed("seed", seed)
     g = RollingShutterOperator(rig, device=device, dtype=dtype).forward(truth).astype(np.float64)
     scale = full_scale(rig)
     rng = np.random.default_rng(seed)
@@ -56,7 +80,7 @@ def simulate(truth, rig: Rig, *, noise="none", sigma=0.0, photons=None, bit_dept
     elif noise == "poisson":
         if photons is None:
             raise ValueError("photons (photo-electrons at full scale, > 0) is required for noise='poisson'")
-        photons = check.positive("photons", photons)
+        photons = check_photons("photons", photons)
         if np.any(g < 0):
             raise ValueError("poisson noise needs a non-negative scene")
         g = rng.poisson(g * (photons / scale)) * (scale / photons)
