@@ -440,6 +440,30 @@ def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
         assert err.startswith(f"rsocl {command[0]}: error: {match}") and "seconds" not in err, err
 
 
+@pytest.mark.parametrize("capture, extra, match", [
+    ("one", ["--overlap", "1"], "--overlap applies to --window (the frames consecutive windows share)"),
+    ("one", ["--tile", "6", "10", "--overlap", "1"], "--overlap applies to --window"),
+    ("one", ["--halo", "2"], "--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a "
+                             "Zarr --out or a capture too large for the device) or windows (--window); this capture "
+                             "runs in one piece, where --halo would be ignored"),
+    ("sets", ["--tile", "6", "10", "--batch", "2"], "--batch applies to the sets of a capture reconstructed in one "
+                                                    "piece; a run in tiles runs every tile of every set"),
+    ("one", ["--window", "1", "--batch", "2"], "--batch applies to the sets of a capture reconstructed in one piece; "
+                                               "--window reconstructs set 0, window by window"),
+    ("one", ["--batch", "2"], "--batch applies to a capture of several sets reconstructed together; the capture "
+                              "holds one set, where --batch would be ignored"),
+    ("sets", ["--first-set-only", "--batch", "2"], "--batch applies to a capture of several sets reconstructed "
+                                                   "together; --first-set-only reconstructs set 0 only"),
+])
+def test_options_the_run_would_ignore_are_refused_before_any_work(tmp_path, capsys, capture, extra, match):
+    cap, out = tmp_path / f"{capture}.h5", tmp_path / "rec.h5"
+    _capture_with_truth(cap, capture)
+    assert main(["reconstruct", str(cap), "--out", str(out), "--iterations", "2", "--fast", "--quiet", *extra]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.startswith(f"rsocl reconstruct: error: {match}"), captured.err
+    assert not captured.out and sorted(p.name for p in tmp_path.iterdir()) == [cap.name]
+
+
 def test_options_that_contradict_each_other_on_a_capture_are_refused_before_any_work(tmp_path, capsys):
     from rsocl.cli.main import main
 

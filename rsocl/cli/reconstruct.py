@@ -25,7 +25,8 @@ def add_parser(subparsers):
                    help="ignore a ground truth stored in the capture: no PSNR/SSIM, none in the output")
     p.add_argument("--first-set-only", action="store_true", help="of a capture of several sets, set 0 only")
     p.add_argument("--batch", type=int, default=None,
-                   help="sets reconstructed together in one batch (default: as many as fit the device, up to 32)")
+                   help="sets of a capture of several sets, reconstructed in one piece, run together in one batch "
+                        "(default: as many as fit the device, up to 32)")
     add_solver_args(p)
     add_device_args(p)
     add_reconstruct_tiling_args(p)

@@ -33,8 +33,8 @@ def add_reconstruct_tiling_args(p):
                    help="reconstruct in tiles of H x W reference pixels (default: one piece when it fits the "
                         "device, else the tile 'rsocl plan' proposes)")
     g.add_argument("--halo", type=int, default=None,
-                   help=f"pixels added on every side of a tile, cropped off after (default {DEFAULT_HALO}, or the "
-                        "grid's larger side where that is smaller)")
+                   help=f"pixels added on every side of a tile, cropped off after, in a run in tiles or windows "
+                        f"(default {DEFAULT_HALO}, or the grid's larger side where that is smaller)")
     g.add_argument("--sets", action="store_true",
                    help="reconstruct every set of the capture (snapshot_sets) into a [S, T, m, n] Zarr array")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
@@ -47,8 +47,8 @@ def add_reconstruct_tiling_args(p):
     g.add_argument("--window", type=int, default=None, metavar="F",
                    help="multi-frame capture (frames, t_d): reconstruct it as a stream of windows of F frames")
     g.add_argument("--overlap", type=int, default=None, metavar="V",
-                   help="frames shared by consecutive windows (default 1, or 0 with --window 1; 0 when the "
-                        "readout has gaps)")
+                   help="with --window: frames shared by consecutive windows (default 1, or 0 with --window 1; 0 "
+                        "when the readout has gaps)")
 
 
 def check_outputs(args) -> None:
@@ -117,17 +117,48 @@ def _wants_tiles(args, capture) -> bool:
     return device_limit(get_device(args.device), largest, total) is not None
 
 
+def _check_applies(args, run: str) -> None:
+    """ValueError naming ``--overlap``, ``--halo`` or ``--batch`` when the run (``"window"``: a stream of
+    windows, ``"tiles"``, ``"whole"``: in one piece) would ignore it."""
+    if args.overlap is not None and run != "window":
+        raise ValueError("--overlap applies to --window (the frames consecutive windows share); without --window "
+                         "it would be ignored")
+    if args.halo is not None and run == "whole":
+        raise ValueError("--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a Zarr "
+                         "--out or a capture too large for the device) or windows (--window); this capture runs in "
+                         "one piece, where --halo would be ignored")
+    if args.batch is None:
+        return
+    if run != "whole":
+        how = ("--window reconstructs set 0, window by window" if run == "window" else
+               "a run in tiles runs every tile of every set as a task of its own")
+        raise ValueError(f"--batch applies to the sets of a capture reconstructed in one piece; {how}, where "
+                         "--batch would be ignored")
+    from rsocl.files.hdf5 import snapshot_set_count
+
+    if args.first_set_only or snapshot_set_count(args.capture) == 1:
+        which = "--first-set-only reconstructs set 0 only" if args.first_set_only else "the capture holds one set"
+        raise ValueError(f"--batch applies to a capture of several sets reconstructed together; {which}, where "
+                         "--batch would be ignored")
+
+
 def reconstruct_tiled_if_needed(args):
-    """Run ``rsocl reconstruct`` tiled when it should be (see the module); the exit code, or None."""
+    """Run ``rsocl reconstruct`` tiled when it should be (see the module); the exit code, or None.
+
+    ``--overlap``, ``--halo`` and ``--batch`` are refused, naming the option, where the run would
+    ignore them (:func:`_check_applies`)."""
     from rsocl.cli.options import reg_options, say, tuning_plot_files
     from rsocl.scale.inputs import CaptureSets
 
     capture = CaptureSets(args.capture, all_sets=args.sets)
     if args.window is not None:
+        _check_applies(args, "window")
         _note_first_set(args, "--window reconstructs set 0 (--first-set-only says set 0 and silences this)")
         return _stream(args, capture)
     if not _wants_tiles(args, capture):
+        _check_applies(args, "whole")
         return None
+    _check_applies(args, "tiles")
     if not _is_zarr(args.out):
         _note_first_set(args, "a tiled run into an HDF5 file reconstructs set 0 (--out NAME.zarr --sets: every "
                               "set, in tiles; --first-set-only says set 0 and silences this)")
