@@ -138,3 +138,25 @@ def test_workers_above_four_per_core_are_refused_before_a_cluster_starts(capture
     assert not started and not (tmp_path / "rec.zarr").exists()
     assert runner.max_workers() == 4 * cores
     assert runner.Engine(workers=4 * cores).workers == 4 * cores        # the cap itself is allowed
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_set_holding_nan_or_inf_is_refused_naming_it_before_any_tile_runs(capture, tmp_path, monkeypatch, capsys,
+                                                                            bad):
+    from rsocl.scale import runner
+
+    path, _, sets = capture
+    sets = sets.copy()
+    sets[1, 2, 3, 4] = bad
+    with h5py.File(path, "r+") as h5:
+        h5["snapshot_sets"][...] = sets
+    calls = []
+    monkeypatch.setattr(runner, "solve_tile", lambda *a: calls.append(a))
+    out = tmp_path / "rec.zarr"
+    assert main(["reconstruct", str(path), "--sets", "--out", str(out), "--tile", "10", "13", "--iterations", "2",
+                 "--fast", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "set 1 of dataset 'snapshot_sets' contains 1 NaN or inf value(s)" in err and "cap.h5" in err, err
+    assert not calls and not out.exists()
+    with pytest.raises(ValueError, match=r"g\[1\] \(set 1\) contains 1 NaN or inf value\(s\)"):
+        reconstruct_tiled(sets, rsocl.Rig.paper_array(4, (20, 26), t_e=1.8e-4, t_r=3.5e-5), tile=(10, 13))

@@ -2,7 +2,8 @@
 
 Either source hands each task only its tile's block (:meth:`block`), gives the SHA-256 digest
 of all its snapshots (a store records it, so that a resumed run is known to have the same
-input) and counts the saturated pixels.
+input) and counts the saturated pixels. :func:`scan` also refuses a set holding NaN or inf,
+naming the set (:meth:`where`), before any task runs.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ class ArraySets:
     """
 
     def __init__(self, g, rig: Rig, name="g"):
-        g = check.finite_array(name, g)
+        g = np.asarray(g)
         expected = (rig.n_channels,) + rig.shape
         if g.shape == expected:
             self.n_sets = None
@@ -42,7 +43,13 @@ class ArraySets:
         else:
             raise ValueError(f"{name} must have shape (K, m, n) = {expected} or (S, K, m, n) with S >= 1 sets "
                              f"for this rig, got {g.shape}")
-        self.g, self.rig = g, rig
+        self.g, self.rig, self.name = g, rig, name
+        for set_index, one in self.sets():
+            check.finite_array(self.where(set_index), one)
+
+    def where(self, set_index) -> str:
+        """The snapshots of set ``set_index`` (None: the only set) as an error message names them."""
+        return self.name if set_index is None else f"{self.name}[{set_index}] (set {set_index})"
 
     def sets(self):
         """``(set index or None, snapshots (K, m, n))`` for every set."""
@@ -83,6 +90,11 @@ class CaptureSets:
             self.has_truth = "truth" in h5
         self.n_sets = shape[0] if all_sets else None
 
+    def where(self, set_index) -> str:
+        """The snapshots of set ``set_index`` (None: dataset ``snapshots``) as an error message names them."""
+        which = f"dataset {self.dataset!r}" if set_index is None else f"set {set_index} of dataset {self.dataset!r}"
+        return f"capture {str(self.path)!r}: {which}"
+
     def sets(self):
         import h5py
 
@@ -109,9 +121,13 @@ class CaptureSets:
 
 
 def scan(source, saturation=None) -> tuple:
-    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count)``."""
+    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count)``.
+
+    A ValueError naming the set (:meth:`where`) when a set holds NaN or inf.
+    """
     digest, saturated = hashlib.sha256(), 0
-    for _, g in source.sets():
+    for set_index, g in source.sets():
+        check.finite_array(source.where(set_index), g)
         _digest_update(digest, g)
         if saturation is not None:
             saturated += int(np.count_nonzero(g >= saturation))
