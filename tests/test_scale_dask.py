@@ -166,14 +166,24 @@ def test_a_worker_killed_mid_run_and_every_chunk_is_still_correct(cluster, tmp_p
 
 
 def test_a_failing_tile_on_the_cluster_is_reported_with_its_index_and_cause(cluster, tmp_path):
+    from dataclasses import replace
+
+    from rsocl.files.hdf5 import save_capture
+    from rsocl.scale.inputs import CaptureSets
+
     rig, g = _problem((32, 32))
-    g = g.copy()
-    g[:, 12:, 12:] = 1e6                # tile (1, 1) with its halo: every pixel saturated
+    save_capture(tmp_path / "cap.h5", g, rig)
+
+    class Moved(CaptureSets):           # the workers look for tile (1, 1)'s snapshots in a missing file
+        def block(self, set_index, tile):
+            block = super().block(set_index, tile)
+            return replace(block, path=str(tmp_path / "moved.h5")) if tile.index == (1, 1) else block
+
     with pytest.raises(TilesFailed) as info:
-        reconstruct_tiled(g, rig, tile=(16, 16), halo=4, iterations=4, saturation=1e5, retries=1,
-                          out=tmp_path / "rec.zarr", scheduler=cluster[0].scheduler_address)
+        reconstruct_tiled(Moved(tmp_path / "cap.h5"), rig, tile=(16, 16), halo=4, iterations=4, retries=1,
+                          tune=False, out=tmp_path / "rec.zarr", scheduler=cluster[0].scheduler_address)
     assert "tile (1, 1) (rows 16..31, columns 16..31) failed after 2 attempt(s)" in str(info.value)
-    assert "every snapshot pixel is >= saturation" in str(info.value)
+    assert "moved.h5" in str(info.value)
     assert "run again to redo only the failed ones" in str(info.value)
     marks = load_store(tmp_path / "rec.zarr").tiles[0, ..., 0]
     np.testing.assert_array_equal(marks, [[1, 1], [1, 0]])

@@ -182,20 +182,55 @@ def test_trimmed_keeps_the_subframes_of_every_set(tmp_path):
     np.testing.assert_array_equal(one.trimmed, one.datacube[kept])
 
 
-def test_a_failing_tile_is_retried_then_reported_and_the_others_are_kept():
+def test_a_failing_tile_is_retried_then_reported_and_the_others_are_kept(monkeypatch):
     rig = rsocl.Rig.paper_array(4, (32, 32), t_e=1.8e-4, t_r=3.5e-5)
     g, _ = _problem(rig)
-    g = g.copy()
-    g[:, :20, :20] = 1e6          # tile (0, 0) with its halo: every pixel saturated, nothing to fit
+    solve = runner_module.solve_tile
+
+    def failing(job, *args):
+        if job.tile.index == (0, 0):
+            raise RuntimeError("out of device memory")
+        return solve(job, *args)
+
+    monkeypatch.setattr(runner_module, "solve_tile", failing)
     with pytest.raises(TilesFailed) as info:
-        reconstruct_tiled(g, rig, tile=(16, 16), halo=4, iterations=5, saturation=1e5, retries=1)
+        reconstruct_tiled(g, rig, tile=(16, 16), halo=4, iterations=5, retries=1)
     exc = info.value
     assert "tile (0, 0) (rows 0..15, columns 0..15) failed after 2 attempt(s)" in str(exc)
-    assert "every snapshot pixel is >= saturation" in str(exc) and "3 kept" in str(exc)
+    assert "RuntimeError: out of device memory" in str(exc) and "3 kept" in str(exc)
     result = exc.result
     assert [f.index for f in result.failures] == [(0, 0)]
     assert sorted(p.index for p in result.pieces) == [(0, 1), (1, 0), (1, 1)]
     assert np.all(result.datacube[:, :16, :16] == 0) and np.any(result.datacube[:, 16:, 16:] != 0)
+
+
+@pytest.mark.parametrize("tune", [False, True])
+def test_a_tile_with_every_pixel_saturated_holds_the_start_the_untiled_run_keeps_there(tune):
+    from rsocl.model.interpolation import interp3d
+
+    rig = rsocl.Rig.paper_array(4, (48, 48), t_e=1.8e-4, t_r=3.5e-5)
+    g, _ = _problem(rig)
+    g = g.copy()
+    g[:, :20, :20] = 1e6          # tile (0, 0) with its halo: every pixel saturated, nothing to fit
+    kwargs = dict(iterations=ITER, saturation=1e5, tune=tune)
+    untiled = rsocl.reconstruct(g, rig, **kwargs).datacube
+    result = reconstruct_tiled(g, rig, tile=(16, 16), halo=4, **kwargs)
+    assert not result.failures and len(result.pieces) == 9
+    held = next(p for p in result.pieces if p.index == (0, 0))
+    assert held.iterations == 0 and held.residual == 0.0
+    core = result.datacube[:, :16, :16]
+    if tune:      # the interpolation's value at pixels with no valid sample: the untiled start there
+        start = interp3d(g, rig, valid=g < 1e5)[:, :16, :16]
+        np.testing.assert_allclose(core, start, rtol=1e-6)
+        assert np.abs(untiled[:, :8, :8] - start[:, :8, :8]).max() < 0.1
+    else:         # the zero start, which the untiled run barely leaves there
+        assert np.all(core == 0) and np.abs(untiled[:, :8, :8]).max() < 0.1
+        grid = tile_grid(rig.shape, (16, 16), 4)
+        result.pieces = [p for p in result.pieces if max(p.index) == 2]
+        _assert_close_to_untiled(result, untiled, grid)         # the tiles whose halo keeps clear of it
+    sets = np.stack([np.full_like(g, 1e6), g])
+    with pytest.raises(ValueError, match=r"every snapshot pixel of g\[0\] \(set 0\) is >= saturation = 100000.0"):
+        reconstruct_tiled(sets, rig, tile=(16, 16), halo=4, **kwargs)
 
 
 @pytest.mark.parametrize("kwargs, match", [

@@ -3,7 +3,7 @@
 Either source hands each task only its tile's block (:meth:`block`), gives the SHA-256 digest
 of all its snapshots (a store records it, so that a resumed run is known to have the same
 input) and counts the saturated pixels. :func:`scan` also refuses a set holding NaN or inf,
-naming the set (:meth:`where`), before any task runs.
+or no pixel below saturation, naming the set (:meth:`where`), before any task runs.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.files.hdf5_header import open_checked, read_rig, real_dataset
+from rsocl.model.interpolation import samples
 from rsocl.model.rig import Rig
 from rsocl.scale.work import FileBlock
 
@@ -120,15 +121,34 @@ class CaptureSets:
 
 
 
-def scan(source, saturation=None) -> tuple:
-    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count)``.
+def _fill(g, rig: Rig, valid) -> float:
+    """The :func:`~rsocl.model.interpolation.interp3d` value of a pixel with no valid sample in the
+    set ``g``: the mean of the set's valid samples (0.0 when every pixel has one)."""
+    if valid.any(axis=0).all():
+        return 0.0
+    return float(samples(np.asarray(g, dtype=np.float64), rig, valid).fallback)
 
-    A ValueError naming the set (:meth:`where`) when a set holds NaN or inf.
+
+def scan(source, saturation=None) -> tuple:
+    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count, fills)``.
+
+    ``fills`` holds one value per set: where a tile has no snapshot pixel below ``saturation``,
+    the value its sub-frames take (:func:`_fill`, the untiled interpolation's value at pixels
+    with no valid sample). A ValueError naming the set (:meth:`where`) when a set holds NaN or
+    inf, or when none of its pixels is below ``saturation`` (nothing to fit, as
+    :func:`rsocl.reconstruct` refuses it).
     """
-    digest, saturated = hashlib.sha256(), 0
+    digest, saturated, fills = hashlib.sha256(), 0, []
     for set_index, g in source.sets():
         check.finite_array(source.where(set_index), g)
         _digest_update(digest, g)
-        if saturation is not None:
-            saturated += int(np.count_nonzero(g >= saturation))
-    return digest.hexdigest(), saturated
+        if saturation is None:
+            fills.append(0.0)
+            continue
+        valid = g < saturation
+        if not valid.any():
+            raise ValueError(f"every snapshot pixel of {source.where(set_index)} is >= saturation = "
+                             f"{saturation!r}: nothing left to fit")
+        saturated += int(valid.size - np.count_nonzero(valid))
+        fills.append(_fill(g, source.rig, valid))
+    return digest.hexdigest(), saturated, tuple(fills)

@@ -117,14 +117,16 @@ def _check_device(device, engine):
                          f"devices lists them), or None to let each worker choose; got a Device ({device.name})")
 
 
-def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype, saturation, device):
-    """Every task's :class:`TileSettings` and the run's ``params``, with ``tuning``'s choice (None: as given)."""
+def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype, saturation, device, fills):
+    """Every task's :class:`TileSettings` and the run's ``params``, with ``tuning``'s choice (None: as given);
+    ``fills`` the :func:`~rsocl.scale.inputs.scan` values: one number (one set) or one per set."""
     options = tuned_options(tuning, regularizer_options)
     reg = make_regularizer(regularizer, options, checked.tv_iterations)
     lam = checked.lam if tuning is None or fixed_lam is not None else tuning.chosen["lam"]
     start = "zeros" if tuning is None else "interp3d"
+    fill = 0.0 if start == "zeros" else fills
     settings = TileSettings(regularizer, options, checked.iterations, lam, checked.eta, checked.tv_iterations,
-                            checked.projection, str(np.dtype(dtype)), saturation, device, start)
+                            checked.projection, str(np.dtype(dtype)), saturation, device, start, fill)
     params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
               "lam": lam, "eta": checked.eta, "projection": checked.projection, "dtype": settings.dtype,
               "device": device.name if isinstance(device, Device) else device, "tol": None, "saturation": saturation,
@@ -153,7 +155,10 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         larger side where that is smaller).
     iterations, lam, eta, tv_iterations, projection, dtype, regularizer_options, saturation
         As :func:`rsocl.reconstruct`, for every tile; ``lam`` and ``eta`` may give one value per
-        set (``S`` of them), every tile of a set running with that set's.
+        set (``S`` of them), every tile of a set running with that set's. A set with no pixel
+        below ``saturation`` is refused (as untiled); a tile with none (its halo included) is not
+        solved and holds its start, as the untiled run does where no sample is valid
+        (:class:`~rsocl.scale.work.TileSettings` ``fill``).
     device : str, Device or None
         OpenCL device spec for every task; None lets each worker choose (:func:`worker_device`).
         A :class:`~rsocl.device.Device` serves tasks run in this process only (not with
@@ -214,13 +219,13 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
     span = rig.sampled_range()
     with engine:                        # a cluster is reached (or started) before the input is read
         began = time.perf_counter()
-        digest, saturated = scan(source, saturation)
+        digest, saturated, fills = scan(source, saturation)
         tuning = tune if isinstance(tune, Tuning) else None
         if tune is True:
             tuning = tune_tiles(source, rig, grid, regularizer, checked, fixed_lam, regularizer_options,
                                 device=device, dtype=dtype, saturation=saturation, progress=progress)
         settings, params = _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype,
-                                     saturation, device)
+                                     saturation, device, fills if source.n_sets else fills[0])
         params.update({"saturated_pixels": saturated, "solved_subframes": [span.start, span.stop],
                        "tile": list(grid.tile), "halo": grid.halo})
         done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)

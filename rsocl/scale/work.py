@@ -35,7 +35,12 @@ class TileSettings:
     be one value per set (a tuple), of which each set's tasks take their own (:meth:`for_set`). ``start``
     is each tile's first iterate: ``"zeros"``, or ``"interp3d"`` (the
     :func:`~rsocl.model.interpolation.interp3d` interpolation of the tile's own snapshots over
-    its rig, computed on the device; the start of a tuned :func:`rsocl.reconstruct`).
+    its rig, computed on the device; the start of a tuned :func:`rsocl.reconstruct`). ``fill``
+    (one value, or one per set) is what every voxel of a tile with no snapshot pixel below
+    ``saturation`` takes instead of a solve (nothing to fit): its first iterate, which the solver
+    would keep, as the untiled run keeps it at pixels with no valid sample (0.0 with the zero
+    start; with ``"interp3d"`` the interpolation's value there, the mean of the set's valid
+    samples, :func:`rsocl.scale.inputs.scan`).
     """
 
     regularizer: str
@@ -49,13 +54,14 @@ class TileSettings:
     saturation: float | None
     device: str | None
     start: str = "zeros"
+    fill: float | tuple = 0.0
 
     def for_set(self, set_index) -> "TileSettings":
-        """The settings of set ``set_index``'s tasks: its own ``lam`` and ``eta`` where they are per set."""
+        """The settings of set ``set_index``'s tasks: its own ``lam``, ``eta`` and ``fill`` where they are per set."""
         def own(value):
             return value[set_index] if isinstance(value, tuple) else value
 
-        return replace(self, lam=own(self.lam), eta=own(self.eta))
+        return replace(self, lam=own(self.lam), eta=own(self.eta), fill=own(self.fill))
 
 
 @dataclass(frozen=True)
@@ -210,8 +216,19 @@ def _start(settings: TileSettings):
     return None if settings.start == "zeros" else "interp3d"
 
 
+def _unfitted(job: Job, solved: slice, settings: TileSettings, device) -> Piece:
+    """The piece of a tile with no snapshot pixel below saturation: ``settings.fill`` everywhere."""
+    y0, y1, x0, x1 = job.tile.core
+    block = np.full((solved.stop - solved.start, y1 - y0, x1 - x0), settings.fill, dtype=settings.dtype)
+    return Piece(job.set_index, job.tile.index, solved.start, solved.stop, block, 0.0, 0, 0.0, device.name)
+
+
 def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
-    """Reconstruct ``job``'s tile with the capture's settings; write it to the store or return it."""
+    """Reconstruct ``job``'s tile with the capture's settings; write it to the store or return it.
+
+    A tile with no snapshot pixel below ``settings.saturation`` is not solved: it takes
+    ``settings.fill`` (:class:`TileSettings`), 0 iterations and residual 0.
+    """
     from rsocl.solver.reconstruct import reconstruct
 
     rig = _rig_for(payload, job.tile)
@@ -220,17 +237,20 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     g = job.snapshots()
     x0 = _start(settings)
     device = worker_device(settings.device)
-    with _lock_for(device):
-        began = time.perf_counter()
-        result = reconstruct(g, rig, settings.regularizer, iterations=settings.iterations, lam=settings.lam,
-                             eta=settings.eta, tv_iterations=settings.tv_iterations,
-                             projection=settings.projection, device=device, dtype=settings.dtype,
-                             regularizer_options=settings.options, saturation=settings.saturation, x0=x0,
-                             tune=False)  # the capture's settings, never a tile's own choice
-        seconds = time.perf_counter() - began
-    piece = Piece(job.set_index, job.tile.index, solved.start, solved.stop,
-                  core_block(result.datacube, job.tile, solved), seconds, result.iterations,
-                  float(result.history["residual"][-1]), device.name)
+    if settings.saturation is not None and not np.any(g < settings.saturation):
+        piece = _unfitted(job, solved, settings, device)
+    else:
+        with _lock_for(device):
+            began = time.perf_counter()
+            result = reconstruct(g, rig, settings.regularizer, iterations=settings.iterations, lam=settings.lam,
+                                 eta=settings.eta, tv_iterations=settings.tv_iterations,
+                                 projection=settings.projection, device=device, dtype=settings.dtype,
+                                 regularizer_options=settings.options, saturation=settings.saturation, x0=x0,
+                                 tune=False)  # the capture's settings, never a tile's own choice
+            seconds = time.perf_counter() - began
+        piece = Piece(job.set_index, job.tile.index, solved.start, solved.stop,
+                      core_block(result.datacube, job.tile, solved), seconds, result.iterations,
+                      float(result.history["residual"][-1]), device.name)
     if job.store is not None:
         from rsocl.scale.store import write_piece
 
