@@ -288,3 +288,49 @@ def test_plan_proposes_a_tiling_for_the_whole_sensor(capsys, monkeypatch, device
     assert "2 x 2 tiles x 3 sets = 12 tasks" in out and "ms/iteration measured on the largest tile" in out
     assert main(["plan", "--shape", "64", "64", "--tile", "65", "32", "--no-measure"]) == 2
     assert "tile must be (H, W)" in capsys.readouterr().err
+
+
+def _tiling_cost_of_tile_rigs(rig, tile, halo, **kwargs):
+    """:func:`rsocl.scale.proposal.tiling_cost` counted on every tile's own rig (:func:`tile_rig`)."""
+    from rsocl.solver.plan import memory_need
+
+    worst, voxels = (0, 0, None, 0), 0
+    for t in tile_grid(rig.shape, tile, halo):
+        sub = tile_rig(rig, t)
+        solved = sub.sampled_range()
+        v = (solved.stop - solved.start) * sub.shape[0] * sub.shape[1]
+        voxels += v
+        if v > worst[3]:
+            largest, total = memory_need(sub, **kwargs)
+            worst = (total, largest, t, v)
+    total, largest, t, v = worst
+    return total, largest, voxels, t, v
+
+
+@pytest.mark.parametrize("rig", [
+    rsocl.Rig.paper_array(4, (37, 45), t_e=1.8e-4, t_r=3.5e-5),
+    Rig([Camera(a, t_e=2.3e-4, t_r=3.1e-5, t_a=t_a) for a, t_a in ((0, 0), (45, 4e-5), (135, 1.1e-4), (250, 0))],
+        (34, 39), dt=7.3e-5, mask="binary"),
+    Rig([Camera(0, t_e=1e-4, t_r=3e-5, frames=2, t_d=1.2e-3),
+         Camera(row_map=np.random.default_rng(3).uniform(0, 50, (30, 41)), t_e=1.5e-4, t_r=3e-5, t_a=2e-5)],
+        (30, 41)),
+])
+def test_the_proposed_tiling_and_each_tile_s_range_are_those_of_the_tile_s_own_rig(rig, monkeypatch, device):
+    from rsocl.scale import proposal
+
+    for tile, halo in (((16, 20), 5), ((7, 9), 0), ((11, 13), 12), (rig.shape, 0)):
+        for t in tile_grid(rig.shape, tile, halo):
+            sub = tile_rig(rig, t)
+            assert rig.sampled_range(t.roi) == sub.sampled_range(), t
+            for c in range(rig.C):
+                np.testing.assert_array_equal(rig.row_map(c, t.roi), rig.row_map(c)[t.outer_slices])
+        for kwargs in (dict(), dict(regularizer="tv", dtype="float64", projection="paper")):
+            assert proposal.tiling_cost(rig, tile, halo, **kwargs) == _tiling_cost_of_tile_rigs(rig, tile, halo, **kwargs)
+    assert rig.sampled_range((0, 0) + rig.shape) == rig.sampled_range()
+    with pytest.raises(ValueError, match=r"roi must be \(y, x, height, width\) inside the"):
+        rig.sampled_range((1, 0) + rig.shape)
+    budget = proposal.tiling_cost(rig, (16, 16), 4)[0]          # the smallest candidate just fits
+    proposed = proposal.propose_tiling(rig, halo=4, device=device, budget_bytes=budget, measure=False)
+    monkeypatch.setattr(proposal, "tiling_cost", _tiling_cost_of_tile_rigs)
+    assert proposed == proposal.propose_tiling(rig, halo=4, device=device, budget_bytes=budget, measure=False)
+    assert proposed.tile == (16, 16)

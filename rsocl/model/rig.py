@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -247,9 +248,14 @@ class Rig:
             out[i] = cam.t_a + self._rows[c] * cam.t_r + k * (cam.t_d or 0.0)
         return out
 
-    def row_map(self, camera: int) -> np.ndarray:
-        """Row map ``r(y, x)`` of camera ``camera``, rows."""
-        return self._rows[camera].copy()
+    def row_map(self, camera: int, roi=None) -> np.ndarray:
+        """Row map ``r(y, x)`` of camera ``camera``, rows: a copy of the whole ``(m, n)`` map, or with
+        ``roi = (y, x, height, width)`` (pixels, inside the grid) of that block only."""
+        rows = self._rows[camera]
+        if roi is not None:
+            y, x, h, w = roi
+            rows = rows[y:y + h, x:x + w]
+        return rows.copy()
 
     def _compute_windows(self) -> ExposureWindows:
         start = _snap(self.start_times() / self.dt)
@@ -292,14 +298,38 @@ class Rig:
         last = np.clip(last, 0, self.T - 1).astype(np.int64)
         return first, last
 
-    def sampled_range(self) -> slice:
+    @cached_property
+    def _pixel_bounds(self) -> tuple:
+        """Per pixel, over the channels, ``(m, n)`` each: the first and the last sub-frame with a
+        non-zero weight (not clipped to ``[0, T-1]``) and the latest window end, sub-frames."""
+        w = self._windows
+        start, end = w.index + w.fraction, w.end
+        if self.mask == "exact":
+            first, last = np.floor(start), np.ceil(end) - 1
+        else:
+            first, last = np.ceil(start), np.floor(end)
+        return first.min(axis=0), last.max(axis=0), end.max(axis=0)
+
+    def sampled_range(self, roi=None) -> slice:
         """Sub-frames some camera samples at some pixel: ``slice(first, last + 1)``.
 
         Sub-frames outside it carry no information; the solver leaves them out and gives them the
-        nearest sub-frame it solved (:mod:`rsocl.solver.held`).
+        nearest sub-frame it solved (:mod:`rsocl.solver.held`). With ``roi = (y, x, height, width)``
+        (pixels, inside the grid): the sampled range of the rig cut to that block
+        (:func:`rsocl.solver.plan.crop_rig`, whose cameras keep every pixel's exposure times), without
+        building it.
         """
-        first, last = self.sampled_window()
-        return slice(int(first.min()), int(last.max()) + 1)
+        first, last, end = self._pixel_bounds
+        T = self.T
+        if roi is not None:
+            y, x, h, w = (int(v) for v in roi)
+            m, n = self.shape
+            if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
+                raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
+            block = (slice(y, y + h), slice(x, x + w))
+            first, last, end = first[block], last[block], end[block]
+            T = int(math.ceil(float(_snap(end.max()))))
+        return slice(int(np.clip(first.min(), 0, T - 1)), int(np.clip(last.max(), 0, T - 1)) + 1)
 
     @property
     def N_s(self) -> int:

@@ -62,19 +62,21 @@ class Tiling:
 
 
 def tiling_cost(rig: Rig, tile, halo, *, regularizer="tv", dtype="float32", projection="exact"):
-    """``(largest task's total bytes, its largest buffer, modelled voxels, the largest tile, its voxels)``."""
-    worst = (0, 0, None, 0)
-    voxels = 0
+    """``(largest task's total bytes, its largest buffer, modelled voxels, the largest tile, its voxels)``.
+
+    Each tile's sampled sub-frames come from the whole rig's windows (:meth:`Rig.sampled_range` of
+    the tile's ROI); only the largest tile's rig is built, for its memory.
+    """
+    worst, most, voxels = None, 0, 0
     for t in tile_grid(rig.shape, tile, halo):
-        sub = tile_rig(rig, t)
-        solved = sub.sampled_range()
-        v = (solved.stop - solved.start) * sub.shape[0] * sub.shape[1]
+        solved = rig.sampled_range(t.roi)          # the tile's rig's, from the whole rig's windows
+        h, w = t.outer_shape
+        v = (solved.stop - solved.start) * h * w
         voxels += v
-        if v > worst[3]:
-            largest, total = memory_need(sub, regularizer=regularizer, dtype=dtype, projection=projection)
-            worst = (total, largest, t, v)
-    total, largest, t, v = worst
-    return total, largest, voxels, t, v
+        if v > most:
+            worst, most = t, v
+    largest, total = memory_need(tile_rig(rig, worst), regularizer=regularizer, dtype=dtype, projection=projection)
+    return total, largest, voxels, worst, most
 
 
 def propose_tiling(rig: Rig, *, tile=None, halo=None, sets=1, iterations=200, regularizer="tv",

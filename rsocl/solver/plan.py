@@ -73,7 +73,7 @@ def crop_rig(rig: Rig, roi, dt=None) -> Rig:
     cams = []
     for c, cam in enumerate(rig.cameras):
         d = cam.to_dict()
-        d["row_map"] = rig.row_map(c)[y:y + h, x:x + w]
+        d["row_map"] = rig.row_map(c, (y, x, h, w))
         cams.append(Camera(**d))
     return Rig(cams, (h, w), dt=rig.dt if dt is None else dt, mask=rig.mask)
 
