@@ -432,6 +432,9 @@ def test_simulate_noise_options_are_complete_and_consistent_before_any_work(tmp_
     (["--dt-us", "-1"], "--dt-us must be > 0 µs, got -1.0"),
     (["--dt-us", "20"], "--dt-us must be >= --t-r-us = 35 µs (a sub-frame lasts at least one row time), got 20"),
     (["--t-r-us", "10", "--dt-us", "9.5"], "--dt-us must be >= --t-r-us = 10 µs"),
+    (["--t-e-us", "1e12"], "--t-e-us 1e+12 µs is 28,571,428,572 sub-frames of 35 µs: T would exceed the 16,777,216 "
+                           "a rig may span; give the exposure in µs"),
+    (["--t-e-us", "1e12", "--dt-us", "5e4"], "--t-e-us 1e+12 µs is 20,000,000 sub-frames of 50000 µs"),
 ])
 def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
     for command in (["info"], ["plan", "--no-measure"]):

@@ -113,6 +113,21 @@ def test_rig_validation():
         Camera(t_e=1e-4, t_r=1e-5, row_map=np.full((3, 3), np.nan))
 
 
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(t_e=1e6, t_r=35e-6), r"cameras\[1\].t_e = 1e\+06 s makes the rig span T = 28,571,428,\d+ sub-frames"),
+    (dict(t_e=1e-4, t_r=35e-6, t_a=1e3), r"cameras\[1\].t_a = 1000 s makes the rig span T = 28,571,\d+ sub-frames"),
+    (dict(t_e=1e-4, t_r=35e-6, frames=3, t_d=400), r"cameras\[1\].t_d x \(frames - 1\) = 800 s makes the rig span"),
+    (dict(t_e=1e-4, t_r=1e3), r"cameras\[1\].t_r x its 7 rows = 7000 s makes the rig span"),
+])
+def test_a_time_that_makes_T_absurd_is_refused_naming_it_and_T(kwargs, match):
+    from rsocl.model.rig import MAX_T
+
+    with pytest.raises(ValueError, match=match) as info:
+        Rig([Camera(0, t_e=1e-4, t_r=35e-6), Camera(0, **kwargs)], (8, 8), dt=35e-6)
+    assert f"above the {MAX_T:,} a rig may span" in str(info.value)
+    assert Rig([Camera(0, t_e=MAX_T * 1e-5, t_r=1e-5)], (1, 1)).T == MAX_T       # the bound itself is allowed
+
+
 def test_dt_binning_reduces_T():
     fine = Rig.paper_array(4, (40, 40), t_e=0.18e-3, t_r=35e-6)
     coarse = Rig.paper_array(4, (40, 40), t_e=0.18e-3, t_r=35e-6, dt=70e-6)

@@ -64,20 +64,25 @@ def refuse_rig_args(args, option: str, why: str) -> None:
 def rig_from(args):
     """The :class:`~rsocl.model.rig.Rig` of the arguments :func:`add_rig_args` added.
 
-    The times are checked in the µs the options are given in, naming the option; a ``--shape`` whose
-    rig alone would not fit this machine's memory (:func:`check_host_memory`) is refused before
-    anything is allocated.
+    The times are checked in the µs the options are given in, naming the option (an exposure of
+    more sub-frames than a rig may span, :data:`~rsocl.model.rig.MAX_T`, names ``--t-e-us`` and
+    T); a ``--shape`` whose rig alone would not fit this machine's memory
+    (:func:`check_host_memory`) is refused before anything is allocated.
     """
     from rsocl.common import validation as check
-    from rsocl.model.rig import SNAP, Rig
+    from rsocl.model.rig import MAX_T, SNAP, Rig
 
-    check.positive("--t-e-us", args.t_e_us, "µs")
+    t_e = check.positive("--t-e-us", args.t_e_us, "µs")
     t_r = check.positive("--t-r-us", args.t_r_us, "µs")
+    dt = t_r
     if args.dt_us is not None:
         dt = check.positive("--dt-us", args.dt_us, "µs")
         if dt < t_r * (1 - SNAP):
             raise ValueError(f"--dt-us must be >= --t-r-us = {t_r:g} µs (a sub-frame lasts at least one row time), "
                              f"got {dt:g}")
+    if t_e / dt > MAX_T:
+        raise ValueError(f"--t-e-us {t_e:g} µs is {math.ceil(t_e / dt):,} sub-frames of {dt:g} µs: T would exceed "
+                         f"the {MAX_T:,} a rig may span; give the exposure in µs (or a longer --dt-us)")
     m, n = check.grid_shape("--shape", args.shape)
     cameras = check.positive_int("--cameras", args.cameras, maximum=8)
     check_rig_memory(cameras, (m, n), f"--shape {m} {n}")

@@ -20,10 +20,18 @@ import numpy as np
 
 from rsocl.common import validation as check
 
-__all__ = ["Camera", "Rig", "ExposureWindows", "PAPER_ANGLES"]
+__all__ = ["Camera", "Rig", "ExposureWindows", "PAPER_ANGLES", "MAX_T"]
 
 #: The paper's camera order for arrays of 1..8 cameras (degrees).
 PAPER_ANGLES = (0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0)
+
+#: The most sub-frames ``T`` a rig may span. 2**24 sub-frames are 9.8 minutes at dt = 35 µs (a
+#: multi-frame capture of 39,000 frames at 67 fps); a datacube of one pixel over them is 64 MiB,
+#: and the per-sub-frame counts of trimming (:meth:`Rig.cameras_per_subframe`) stay small. The
+#: kernels index sub-frames with 32-bit integers (below 2**31). A larger ``T`` comes from a time
+#: in the wrong unit (an exposure, trigger offset or frame period in µs given as seconds), and is
+#: refused naming it before anything of size ``T`` is allocated.
+MAX_T = 2**24
 
 #: Relative tolerance under which a time, in units of ``dt``, is snapped to the
 #: nearest integer, so that e.g. ``t_e = 3*t_r`` gives window edges exactly on
@@ -205,10 +213,25 @@ class Rig:
         self._windows = self._compute_windows()
         ends = self._windows.end
         self.T = int(math.ceil(float(_snap(ends.max()))))
+        if self.T > MAX_T:
+            seconds, name = self._longest_time()
+            raise ValueError(f"{name} = {seconds:g} s makes the rig span T = {self.T:,} sub-frames of dt = "
+                             f"{self.dt:g} s, above the {MAX_T:,} a rig may span (rsocl.model.rig.MAX_T); "
+                             "times are in seconds: choose a shorter one or a longer dt")
         if self.T < 1:
             raise ValueError(f"dt = {self.dt!r} s is so long against the exposures (longest t_e = "
                              f"{max(c.t_e for c in cameras):g} s) that the rig has no sub-frame; choose a dt "
                              "near the row time t_r")
+
+    def _longest_time(self) -> tuple:
+        """``(seconds, name)`` of the longest of the times that add up to the latest exposure end:
+        a camera's ``t_e``, ``t_a``, ``(frames - 1) * t_d`` or readout of its rows."""
+        times = []
+        for i, (cam, rows) in enumerate(zip(self.cameras, self._rows)):
+            times += [(cam.t_e, f"cameras[{i}].t_e"), (cam.t_a, f"cameras[{i}].t_a"),
+                      ((cam.frames - 1) * (cam.t_d or 0.0), f"cameras[{i}].t_d x (frames - 1)"),
+                      (float(rows.max()) * cam.t_r, f"cameras[{i}].t_r x its {float(rows.max()):g} rows")]
+        return max(times, key=lambda item: item[0])
 
     # ------------------------------------------------------------------ construction
     @classmethod
