@@ -238,3 +238,22 @@ def test_the_capture_rig_holds_the_exposure_the_device_applied(tmp_path, capsys)
 def test_simulated_exposure_range_is_checked(value):
     with pytest.raises(ValueError, match=r"config\['exposure_range'\]"):
         SimulatedCamera({"shape": [4, 4], "t_e": T_E, "t_r": T_R, "exposure_range": value})
+
+
+def test_a_rig_file_shape_beyond_the_host_memory_is_refused_before_the_rig_is_built(tmp_path, capsys, monkeypatch):
+    from rsocl.cli import options
+    from rsocl.cli.main import main
+
+    monkeypatch.setattr(options, "host_memory_bytes", lambda: 2**30, raising=False)     # a 1 GiB machine
+    rig_path = tmp_path / "rig.toml"
+    rig_path.write_text('[rig]\nshape = [100000, 100000]\n\n'
+                        '[[camera]]\nbackend = "simulated"\nt_e = 1.8e-4\nt_r = 3.5e-5\n\n'
+                        '[[camera]]\nbackend = "simulated"\nrow_map_file = "rows.npy"\nt_e = 1.8e-4\nt_r = 3.5e-5\n')
+    for argv in (["capture", "--rig", str(rig_path), "--out", str(tmp_path / "c.h5")],
+                 ["calibrate", "--rig", str(rig_path), "--flat", str(tmp_path / "flat.png")]):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert "rig.toml: shape = [100000, 100000]: a rig of 2 camera(s) on 100000 x 100000 pixels" in err, err
+        assert "at least 372.5 GiB of host memory, more than this machine's 1.0 GiB" in err
+        assert len(err.strip().splitlines()) == 1
+    assert [p.name for p in tmp_path.iterdir()] == ["rig.toml"]

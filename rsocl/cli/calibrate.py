@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.cli.options import say
+from rsocl.cli.options import load_rig_file, say
 
 __all__ = ["add_parser", "cmd_calibrate", "load_frames", "parse_points"]
 
@@ -333,7 +333,7 @@ def cmd_calibrate(args) -> int:
     option and camera at fault; nothing is written then.
     """
     from rsocl.hardware.calibration import marker_overlay_png
-    from rsocl.files.rigfile import load_rigfile, save_rigfile
+    from rsocl.files.rigfile import save_rigfile
 
     if args.frames is None and args.flicker is None and args.flat is None:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
@@ -347,7 +347,7 @@ def cmd_calibrate(args) -> int:
     if args.frames is not None:
         png = output_path(Path(args.png) if args.png else out.with_name(out.stem + "-calibration.png"), "--png",
                           inputs=reads + (("--rig", args.rig), ("--out", out)))
-    rigfile = load_rigfile(args.rig)
+    rigfile = load_rig_file(args.rig)
     updates = [{} for _ in rigfile.cameras]
     overlay = _register(args, rigfile, updates) if args.frames is not None else None
     if args.flicker is not None:

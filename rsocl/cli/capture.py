@@ -28,11 +28,13 @@ def cmd_capture(args) -> int:
 
     Bad arguments or rig files raise ValueError / FileNotFoundError (the CLI's exit status 2).
     """
+    from rsocl.cli.options import load_rig_file
     from rsocl.hardware.capture import CaptureFailed, capture_sets
 
     quiet = bool(getattr(args, "quiet", False))
+    rigfile = load_rig_file(args.rig)                 # a shape beyond the host's memory: refused here
     try:
-        path = capture_sets(args.rig, args.out, sets=args.sets, timeout=args.timeout, progress=not quiet)
+        path = capture_sets(rigfile, args.out, sets=args.sets, timeout=args.timeout, progress=not quiet)
     except CaptureFailed as exc:
         print(f"rsocl capture: error: {exc}", file=sys.stderr)
         return 1

@@ -7,7 +7,7 @@ import math
 import os
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
-           "check_host_memory", "check_rig_memory", "check_datacube_memory", "add_device_args", "add_solver_args",
+           "check_host_memory", "check_rig_memory", "load_rig_file", "check_datacube_memory", "add_device_args", "add_solver_args",
            "check_solver_args", "reg_options", "say", "tuning_plot_path", "tuning_plot_files", "run_reconstruction",
            "quality_line"]
 
@@ -148,6 +148,19 @@ def check_rig_memory(cameras, shape, option, hint="choose a smaller grid") -> No
     check_host_memory(cameras * m * n * RIG_BYTES_PER_PIXEL, option,
                       f"a rig of {cameras} camera(s) on {m} x {n} pixels ({RIG_BYTES_PER_PIXEL} bytes per camera "
                       "and pixel: row maps and exposure windows)", hint)
+
+
+def load_rig_file(path):
+    """The :class:`~rsocl.files.rigfile.RigFile` at ``path`` (``--rig``); a ``[rig] shape`` whose rig alone
+    would not fit this machine's memory (:func:`check_rig_memory`) is refused, naming the file and the
+    shape, before any row map is read or the rig is built."""
+    from rsocl.files.rigfile import load_rigfile
+
+    def fits(shape, cameras):
+        m, n = shape
+        check_rig_memory(cameras, shape, f"shape = [{m}, {n}]", hint="choose a smaller [rig] shape")
+
+    return load_rigfile(path, check_shape=fits)
 
 
 def check_datacube_memory(rig, option=None, hint="choose a smaller grid or a longer --dt-us (fewer sub-frames)"):

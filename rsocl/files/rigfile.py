@@ -171,8 +171,17 @@ class RigFile:
 
 
 # ---------------------------------------------------------------------- files
-def load_rigfile(path) -> RigFile:
+def load_rigfile(path, check_shape=None) -> RigFile:
     """Read and check a TOML rig file (see the module docstring for the schema).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    check_shape : callable or None
+        Called as ``check_shape(shape, cameras)`` with the checked ``[rig] shape`` ``(m, n)`` and
+        the number of ``[[camera]]`` tables, before any row map is read or the rig is built (e.g.
+        to refuse a shape whose rig would not fit the host's memory); a ValueError it raises is
+        raised naming the file.
 
     Raises
     ------
@@ -198,6 +207,8 @@ def load_rigfile(path) -> RigFile:
         if not isinstance(cameras, list) or not cameras:
             raise ValueError("no camera: add at least one [[camera]] table")
         rig = check_rig_table(data["rig"])
+        if check_shape is not None:
+            check_shape(rig["shape"], len(cameras))
         for i, cam in enumerate(cameras):
             if isinstance(cam, dict) and "row_map" in cam:
                 raise ValueError(f"camera[{i}] has unknown key 'row_map'; use row_map_file = \"<file>.npy\"")
