@@ -8,6 +8,7 @@
  *                                             f += Hᵀ z     (window loops only)
  *                                             [difference = 1: then u = f - b over the block's column]
  *   admm_difference (one work item per voxel) u = f - b     (input of the denoiser)
+ *   admm_blend      (one work item per voxel) theta = x0 + alpha (theta - x0)  (after the last iteration)
  *
  * A batch of sets lies end to end (theta, b, f, u: [B][T][m][n]; g: [B][K][m][n]); every kernel
  * takes the whole batch in one launch, the set as the last grid dimension. Per set: eta, and
@@ -137,4 +138,12 @@ __kernel void admm_difference(__global const real *f, __global const real *b, __
 {
     size_t i = get_global_id(0);
     u[i] = f[i] - b[i];
+}
+
+/* The returned estimate moved back towards the start x0: theta = x0 + alpha (theta - x0). */
+__kernel void admm_blend(__global real *theta, __global const real *x0, real alpha)
+{
+    size_t i = get_global_id(0);
+    real start = x0[i];
+    theta[i] = start + alpha * (theta[i] - start);
 }

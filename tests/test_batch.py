@@ -242,7 +242,8 @@ def test_a_tuned_batch_applies_its_first_sets_choice_to_every_set(sets):
     first = rsocl.reconstruct(g[0], rig, **kw)
     assert first.params["tuning"]["chosen"] == chosen
     np.testing.assert_allclose(batch.datacube[0], first.datacube, atol=2e-6 * np.abs(first.datacube).max())
-    fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]})
+    fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]},
+                 blend=batch.params["blend"])                  # the search's blend too, towards the set's own start
     second = rsocl.reconstruct(g[1], rig, x0=interp3d(g[1], rig), tune=False, **fixed)
     np.testing.assert_allclose(batch.datacube[1], second.datacube, atol=2e-6 * np.abs(second.datacube).max())
 
@@ -252,7 +253,8 @@ def test_tuned_sets_in_several_batches_share_the_first_batchs_choice(sets):
     kw = dict(iterations=4, tv_iterations=3, eta=0.3)
     joined = reconstruct_sets(g, rig, batch=2, **kw)
     chosen = joined.params["tuning"]["chosen"]
-    fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]})
+    fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]},
+                 blend=joined.params["blend"])
     last = rsocl.reconstruct(g[2], rig, x0=interp3d(g[2], rig), tune=False, **fixed).datacube
     np.testing.assert_allclose(joined.datacube[2], last, atol=2e-6 * np.abs(last).max())
 

@@ -46,6 +46,20 @@ def test_a_single_tile_over_the_grid_is_the_untiled_tuned_reconstruction():
     np.testing.assert_allclose(tiled.datacube, untiled.datacube, atol=1e-5)
     fixed = rsocl.reconstruct(g, rig, iterations=ITER, tune=False).datacube
     assert np.abs(fixed - untiled.datacube).max() > 1e-3          # the tolerance above tells tuned from fixed
+    assert tiled.params["blend"] == untiled.params["blend"]
+
+
+def test_tiles_return_the_blend_the_search_chose():
+    """Shot noise on a still scene makes the search blend towards the interpolation; every tile returns
+    that blend of its own run, so one tile over the grid is still the untiled result."""
+    rig = rsocl.Rig([rsocl.Camera(a, t_e=3e-4, t_r=3e-5) for a in (0, 90, 180)], (24, 24))
+    truth = builtin_scene(rig.shape, 1)[0][None] * np.linspace(0.9, 1.1, rig.T)[:, None, None]
+    g = np.random.default_rng(3).poisson(rsocl.RollingShutterOperator(rig).forward(truth).clip(0) * 30) / 30
+    untiled = rsocl.reconstruct(g, rig, iterations=ITER)
+    assert untiled.params["blend"] < 0.9
+    tiled = reconstruct_tiled(g, rig, tile=rig.shape, halo=0, iterations=ITER)
+    assert tiled.params["blend"] == untiled.params["blend"] == tiled.params["tuning"]["blend"]
+    np.testing.assert_allclose(tiled.datacube, untiled.datacube, atol=1e-5)
 
 
 def test_every_tile_of_every_set_gets_the_choice_made_on_the_centre_tile_of_the_first_set(monkeypatch, tmp_path):

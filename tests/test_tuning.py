@@ -153,7 +153,7 @@ def test_values_the_caller_fixes_win():
     weight = rsocl.reconstruct(g, rig, iterations=12, regularizer_options={"temporal_weight": 2.0})
     assert weight.params["regularizer_options"]["temporal_weight"] == 2.0
     assert weight.params["tuning"]["fixed"] == {"temporal_weight": 2.0}
-    assert all(set(c) == {"lam", "score"} for c in weight.params["tuning"]["candidates"])      # only lam searched
+    assert all(set(c) == {"lam", "score", "blend"} for c in weight.params["tuning"]["candidates"])  # only lam searched
     lam = rsocl.reconstruct(g, rig, iterations=12, lam=0.05)
     assert lam.params["lam"] == 0.05 and {c["lam"] for c in lam.params["tuning"]["candidates"]} == {0.05}
     fast = rsocl.reconstruct(g, rig, iterations=12, tune=False)
@@ -211,6 +211,69 @@ def test_an_earlier_choice_runs_again_without_a_search():
     for bad in ("yes", 1, None):
         with pytest.raises(ValueError, match="tune must be True, False"):
             rsocl.reconstruct(g, rig, iterations=2, tune=bad)
+
+
+def test_the_blend_minimises_the_held_out_error_of_the_mix():
+    """``_blend`` from the three sums of squares is the arg-min over [0, 1] of the mix's held-out error."""
+    from rsocl.solver.tuning import _blend
+
+    rng = np.random.default_rng(4)
+    g, start = rng.random(200), rng.random(200)
+    for run in (g + 0.3 * (start - g) + 0.05 * rng.random(200), start + 2.0 * (g - start), start - 0.5 * (g - start)):
+        sums = (np.sum((g - start) ** 2), np.sum((run - start) ** 2), np.sum((g - run) ** 2))
+        alphas = np.linspace(0.0, 1.0, 100001)
+        errors = [np.sum((g - start - a * (run - start)) ** 2) for a in alphas[::1000]]
+        assert _blend(*sums) == pytest.approx(alphas[::1000][int(np.argmin(errors))], abs=0.01)
+    assert _blend(1.0, 2.0, 0.5) == pytest.approx(0.625)           # (1 + 2 - 0.5) / 2 / 2
+    assert _blend(1.0, 1.0, 4.0) == 0.0                             # moving away from the data: the start
+    assert _blend(1.0, 0.25, 0.0) == 1.0                            # clipped at the run's own result
+    assert _blend(1.0, 0.0, 1.0) == 1.0 and _blend(1.0, np.inf, np.inf) == 1.0
+
+
+def test_a_noisy_still_scene_blends_towards_the_interpolation():
+    """Shot noise on a scene that barely changes: the solver fits noise that the interpolation averages
+    out, the held-out pixels say so, and the returned estimate (recorded as the history's last entry)
+    is the mix, several dB above the solver's own result."""
+    from rsocl.analysis.metrics import psnr
+    from rsocl.model.scenes import builtin_scene
+    from rsocl.model.simulate import full_scale
+    from rsocl.solver.tuning import Tuning
+
+    rig = rsocl.Rig([rsocl.Camera(a, t_e=3e-4, t_r=3e-5) for a in (0, 90, 180)], SHAPE)
+    truth = builtin_scene(rig.shape, 1)[0][None] * np.linspace(0.9, 1.1, rig.T)[:, None, None]
+    scale = full_scale(rig)
+    g = np.random.default_rng(3).poisson(ref.forward(rig, truth).clip(0) * 300 / scale) * scale / 300
+    tuned = rsocl.reconstruct(g, rig, truth=truth, iterations=60)
+    blend = tuned.params["blend"]
+    assert tuned.params["tuning"]["blend"] == blend and 0.0 < blend < 0.6
+    assert tuned.history["psnr"][-1] == pytest.approx(psnr(tuned.datacube, truth), abs=1e-6)
+    choice = Tuning.from_params(tuned.params["tuning"])
+    assert choice.blend == blend
+    own = rsocl.reconstruct(g, rig, truth=truth, iterations=60, tune=choice, blend=1.0)
+    assert own.params["blend"] == 1.0 and psnr(tuned.datacube, truth) > psnr(own.datacube, truth) + 2.0
+    again = rsocl.reconstruct(g, rig, iterations=60, tune=choice)                # the recorded choice's blend
+    np.testing.assert_allclose(again.datacube, tuned.datacube, atol=1e-5)
+    # the same mix asked for by hand, from the same start, without a search
+    start = rsocl.model.interpolation.interp3d(g, rig)
+    fixed = dict(lam=tuned.params["lam"],
+                 regularizer_options={"temporal_weight": tuned.params["tuning"]["chosen"]["temporal_weight"]})
+    unmixed = rsocl.reconstruct(g, rig, iterations=60, tune=False, x0=start, **fixed).datacube
+    mixed = rsocl.reconstruct(g, rig, iterations=60, tune=False, x0=start, blend=blend, **fixed).datacube
+    np.testing.assert_allclose(mixed, start + blend * (unmixed - start), atol=1e-5)
+
+
+def test_blend_is_checked_and_needs_a_start():
+    rig = _rig()
+    g = ref.forward(rig, _static(rig))
+    for bad in (-0.1, 1.5, float("nan"), "half"):
+        with pytest.raises(ValueError, match=r"blend must be"):
+            rsocl.reconstruct(g, rig, iterations=2, blend=bad)
+    with pytest.raises(ValueError, match="blend = 0.5 moves the result towards the run's start"):
+        rsocl.reconstruct(g, rig, iterations=2, tune=False, blend=0.5)
+    assert rsocl.reconstruct(g, rig, iterations=2, tune=False).params["blend"] == 1.0
+    # a start of the caller's: the search's blend (measured against the interpolation) is not applied
+    given = rsocl.reconstruct(g, rig, iterations=12, x0=np.zeros((rig.T,) + rig.shape))
+    assert given.params["tuning"]["blend"] is not None and given.params["blend"] == 1.0
 
 
 def test_a_search_that_would_not_fit_is_refused_before_it_runs(monkeypatch):
@@ -347,6 +410,7 @@ def test_the_search_summary_says_how_pixels_were_held_out(tmp_path):
     sizes = {**record, "block": [8, 4]}
     assert search_summary(sizes).startswith("blocks of 8 and 4 px, 2 hold-out folds")
     assert "fold" in search_summary({"candidates": []})                 # an older record without these keys
+    assert "blend with the interpolation 0.25" in search_summary({**record, "blend": 0.25})
     assert tuning_plot(tmp_path / "t.png", record).stat().st_size > 0
 
 

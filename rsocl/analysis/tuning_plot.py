@@ -17,8 +17,8 @@ __all__ = ["tuning_plot", "search_summary"]
 
 def search_summary(record) -> str:
     """One line on how the search held pixels out and ran: block side (pixels), hold-out folds,
-    held-out pixels, ADMM iterations per candidate and per fold, candidates and seconds (what the
-    record has of them)."""
+    held-out pixels, ADMM iterations per candidate and per fold, candidates, the chosen blend with the
+    interpolation and seconds (what the record has of them)."""
     parts = []
     block = record.get("block")
     if block:
@@ -35,6 +35,8 @@ def search_summary(record) -> str:
     if record.get("preset"):
         preset = ", ".join(f"{k} = {v:.3g}" for k, v in record["preset"].items())
         parts.append(f"{preset} set, not searched (one snapshot per pixel)")
+    if record.get("blend") is not None:
+        parts.append(f"blend with the interpolation {record['blend']:.2f}")
     if record.get("seconds"):
         parts.append(f"{record['seconds']:.2f} s")
     return ", ".join(parts)

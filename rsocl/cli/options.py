@@ -255,6 +255,8 @@ def tuning_plot_files(args, params, gif) -> list:
     from rsocl.analysis.tuning_plot import tuning_plot
 
     chosen = ", ".join(f"{k} = {v:.3g}" for k, v in params["tuning"]["chosen"].items())
+    if params.get("blend") is not None and params["blend"] < 1:
+        chosen += f", blend with the interpolation {params['blend']:.2f}"
     say(args, f"chosen from the snapshots: {chosen}")
     if not params["tuning"].get("candidates"):
         return []                                   # set without a search (one snapshot per pixel): no criterion

@@ -125,12 +125,13 @@ def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtyp
     lam = checked.lam if tuning is None or fixed_lam is not None else tuning.chosen["lam"]
     start = "zeros" if tuning is None else "interp3d"
     fill = 0.0 if start == "zeros" else fills
+    blend = 1.0 if tuning is None or tuning.blend is None else tuning.blend
     settings = TileSettings(regularizer, options, checked.iterations, lam, checked.eta, checked.tv_iterations,
-                            checked.projection, str(np.dtype(dtype)), saturation, device, start, fill)
+                            checked.projection, str(np.dtype(dtype)), saturation, device, start, fill, blend)
     params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
               "lam": lam, "eta": checked.eta, "projection": checked.projection, "dtype": settings.dtype,
               "device": device.name if isinstance(device, Device) else device, "tol": None, "saturation": saturation,
-              "tuning": None if tuning is None else tuning.as_params(), "start": start}
+              "tuning": None if tuning is None else tuning.as_params(), "start": start, "blend": blend}
     return settings, params
 
 

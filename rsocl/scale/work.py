@@ -40,7 +40,8 @@ class TileSettings:
     ``saturation`` takes instead of a solve (nothing to fit): its first iterate, which the solver
     would keep, as the untiled run keeps it at pixels with no valid sample (0.0 with the zero
     start; with ``"interp3d"`` the interpolation's value there, the mean of the set's valid
-    samples, :func:`rsocl.scale.inputs.scan`).
+    samples, :func:`rsocl.scale.inputs.scan`). ``blend`` moves each tile's result back towards its
+    start (:func:`rsocl.reconstruct`'s ``blend``; 1: not at all), as the capture's search chose it.
     """
 
     regularizer: str
@@ -55,6 +56,7 @@ class TileSettings:
     device: str | None
     start: str = "zeros"
     fill: float | tuple = 0.0
+    blend: float = 1.0
 
     def for_set(self, set_index) -> "TileSettings":
         """The settings of set ``set_index``'s tasks: its own ``lam``, ``eta`` and ``fill`` where they are per set."""
@@ -246,7 +248,8 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
                                  eta=settings.eta, tv_iterations=settings.tv_iterations,
                                  projection=settings.projection, device=device, dtype=settings.dtype,
                                  regularizer_options=settings.options, saturation=settings.saturation, x0=x0,
-                                 tune=False)  # the capture's settings, never a tile's own choice
+                                 tune=False,  # the capture's settings, never a tile's own choice
+                                 blend=settings.blend if x0 is not None else None)
             seconds = time.perf_counter() - began
         piece = Piece(job.set_index, job.tile.index, solved.start, solved.stop,
                       core_block(result.datacube, job.tile, solved), seconds, result.iterations,

@@ -232,6 +232,19 @@ class ADMM:
             self.regularizer.denoise(self.u, self.weight, out=self.theta)
         self.iteration += 1
 
+    def blend_towards(self, x0, alpha: float):
+        """``theta = x0 + alpha (theta - x0)`` (enqueued): the estimate moved back towards the start ``x0``
+        (a device array of ``theta``'s shape), ``alpha`` in [0, 1] (1: unchanged)."""
+        if x0.shape != self.theta.shape or x0.dtype != self.theta.dtype:
+            raise ValueError(f"x0 must match theta ({self.theta.shape}, {self.theta.dtype}), got {x0.shape}, {x0.dtype}")
+        alpha = float(alpha)
+        if not 0.0 <= alpha <= 1.0:
+            raise ValueError(f"blend must be in [0, 1], got {alpha!r}")
+        dev, kernel = self.op.device, self.program.admm_blend
+        for gsize, lsize, offset in element_launches(self.sets * self.per_set, dev.group_limit(kernel, cap=64)):
+            kernel(self.op.queue, gsize, lsize, self.theta.data, x0.data, self.theta.dtype.type(alpha),
+                                    global_offset=offset)
+
     def residual(self):
         """Relative data residual ``‖g - H theta‖ / ‖g‖`` over the valid snapshot pixels (one per set
         for a batch). When ``g`` (of a set) is all zero the absolute ``‖H theta‖`` is returned.

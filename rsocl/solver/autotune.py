@@ -139,13 +139,14 @@ def interpolation_start(problem, staged):
 def search_memory(op, reg, projection: str, batch) -> int:
     """Device bytes the search allocates beside the staged problem, freed before the run's solver is
     made: per hold-out pattern (:func:`~rsocl.solver.tuning.default_patterns`) one set's ADMM arrays, its
-    warm start, held-out weights and regularizer workspace (a fold's solver keeps the previous
-    candidate's regularizer until its own turn); and for a batch (``batch`` sets, None: one set)
-    the first set staged on its own (operator geometry and snapshots)."""
+    warm start, its warm start's prediction of the snapshots, held-out weights and regularizer
+    workspace (a fold's solver keeps the previous candidate's regularizer until its own turn); and for
+    a batch (``batch`` sets, None: one set) the first set staged on its own (operator geometry and
+    snapshots)."""
     cube = op.domain_shape
     itemsize = np.dtype(op.dtype).itemsize
     snap = op.K * int(np.prod(cube[1:])) * itemsize
-    per_fold = (state_bytes(cube, op.K, op.dtype, projection, 1) + int(np.prod(cube)) * itemsize + snap
+    per_fold = (state_bytes(cube, op.K, op.dtype, projection, 1) + int(np.prod(cube)) * itemsize + 2 * snap
                 + workspace_memory(cube, op.dtype, reg, 1))
     extra = len(default_patterns(op.rig.shape, op.K)) * per_fold
     if batch is not None:

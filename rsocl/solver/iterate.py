@@ -100,6 +100,13 @@ class _History:
             db = 10 * np.log10(np.asarray(staged.data_range, dtype=np.float64) ** 2 / np.asarray(mse))
         return np.where(np.asarray(mse) > 0, db, math.inf) if sets else (float(db) if mse > 0 else math.inf)
 
+    def blend(self, alpha):
+        """Move the estimate towards the run's start by ``alpha`` and book the result as the last record."""
+        self.solver.blend_towards(self.staged.x0, alpha)
+        self.values["residual"][-1] = self.solver.residual()
+        if self.staged.truth is not None:
+            self.values["psnr"][-1] = self._psnr()
+
     def record(self, it, residual) -> bool:
         """Book iteration ``it``'s residual (one per set for a batch); True when the run should stop after it."""
         bad = self._grown(residual)
@@ -125,12 +132,14 @@ class _History:
         return False
 
 
-def run_iterations(solver, staged, settings, *, progress=False) -> dict:
+def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> dict:
     """Run up to ``settings.iterations`` ADMM steps; the history as a dict of arrays.
 
     With nothing to look at ``theta`` between iterations (no callback, no truth, no tol), the
     residual of iteration ``it`` is read while the device runs iteration ``it + 1``: the host
-    never waits on an idle device.
+    never waits on an idle device. With ``blend`` below 1 the estimate is then moved back towards
+    the run's start ``staged.x0`` (:meth:`~rsocl.solver.admm.ADMM.blend_towards`), and the last
+    record's residual and PSNR are those of the returned estimate.
     """
     bar = None
     if progress:
@@ -160,6 +169,8 @@ def run_iterations(solver, staged, settings, *, progress=False) -> dict:
         if pending is not None:                     # pipelined: the last iteration's residual
             history.record(settings.iterations - 1, pending.result())
         history.check_end()
+        if blend is not None and blend < 1 and history.values["residual"]:
+            history.blend(blend)
     finally:
         if bar is not None:
             bar.close()

@@ -21,6 +21,7 @@ options) are kept. The chosen values and every candidate's criterion are in
 
 from __future__ import annotations
 
+from rsocl.common import validation as check
 from rsocl.common.registry import load
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
@@ -62,7 +63,8 @@ def make_regularizer(regularizer, options=None, tv_iterations=None) -> Regulariz
 
 def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta=None, tv_iterations=None,
                 projection="exact", device=None, dtype="float32", callback=None, x0=None, tol=None,
-                truth=None, regularizer_options=None, saturation=None, tune=True, progress=False) -> Result:
+                truth=None, regularizer_options=None, saturation=None, tune=True, blend=None,
+                progress=False) -> Result:
     """Reconstruct the ``(T, m, n)`` datacube from snapshots ``g`` ``(K, m, n)`` with ADMM.
 
     For a batch of sets, ``g`` ``(B, K, m, n)`` -> ``(B, T, m, n)``; ``lam``, ``eta`` may then be one
@@ -102,6 +104,12 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         Choose ``lam`` and the tunable options (TV: ``temporal_weight``) the caller left unset
         from the snapshots alone (:mod:`rsocl.solver.autotune`); a ``Tuning``: run with that
         earlier choice, without a search; False: fixed defaults.
+    blend : float or None
+        In [0, 1]: return ``x0 + blend (theta - x0)``, the solver's result moved back towards the
+        run's start (which must be given: an array or ``"interp3d"``); 1 returns the solver's result
+        as it is. None (default): the blend the search chose on the same held-out pixels
+        (:mod:`rsocl.solver.tuning`) when the run starts from the interpolation, else 1. Recorded
+        in ``Result.params["blend"]``.
 
     A run whose residual ``‖g - H theta‖ / ‖g‖`` turns NaN or grows past 1000 times its smallest
     raises ``FloatingPointError``; one that stays bounded but ends above 1 and 10 times its
@@ -110,6 +118,11 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     interpolate = isinstance(x0, str)
     if interpolate and x0 != "interp3d":
         raise ValueError(f"x0 must be an array (T, m, n), 'interp3d' or None, got {x0!r}")
+    if blend is not None:
+        blend = check.in_range("blend", blend, 0.0, 1.0)
+        if blend < 1 and x0 is None:
+            raise ValueError(f"blend = {blend:g} moves the result towards the run's start, and x0 = None starts "
+                             "from zeros; give x0 (an array or 'interp3d'), or leave blend None")
     problem = check_problem(g, rig, x0=None if interpolate else x0, truth=truth, saturation=saturation)
     tune = check_tune(tune)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
@@ -129,8 +142,12 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         staged.x0 = interpolation_start(problem, staged)
     solver = ADMM(staged.op, staged.g, reg, lam=settings.lam, eta=settings.eta, projection=settings.projection,
                   x0=staged.x0, valid=problem.valid)
-    history = run_iterations(solver, staged, settings, progress=progress)
+    if blend is None:
+        from_interpolation = problem.x0 is None and staged.x0 is not None
+        blend = tuning.blend if tuning is not None and tuning.blend is not None and from_interpolation else 1.0
+    history = run_iterations(solver, staged, settings, progress=progress, blend=blend)
     result = collect(solver, staged, problem, settings, reg, history)
     result.params["tuning"] = tuning.as_params() if tuning is not None else None
+    result.params["blend"] = blend
     result.params["start"] = "x0" if problem.x0 is not None else ("interp3d" if staged.x0 is not None else "zeros")
     return result
