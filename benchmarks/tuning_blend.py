@@ -137,7 +137,8 @@ def main(argv=None):
                 os.replace(tmp, args.cache)
             r = dict(cache[name], photons=photons)
             results.append(r)
-            detail.append(f"| {group} | {key}, {rig.n_channels} cameras, {rig.shape[0]}x{rig.shape[1]} | {scene} | "
+            what = "paper array" if GROUPS[group][0] is None else f"{key}, {rig.n_channels} cameras"
+            detail.append(f"| {group} | {what}, {rig.shape[0]}x{rig.shape[1]} | {scene} | "
                           f"{'none' if photons is None else f'{photons:g}'} | {r['interp3d']:.2f} | "
                           f"{r['unblended']:.2f} | {r['tuned']:.2f} | {r['blend']:.2f} |")
             print(detail[-1], flush=True)
