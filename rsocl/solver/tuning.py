@@ -54,8 +54,8 @@ Poisson at N photo-electrons at full scale plus 1 % read noise):
   +2.34 dB, below ``interp3d`` 18 -> 10 of 74; noiseless +0.02 / -0.16 / +0.47 dB;
 - checked on seeds 140-159 x Runner at 2 and Traffic at 0.5: N = 1000, +0.21 / -0.65 / +2.14 dB
   (10 -> 6 of 30 below); N = 30, +0.25 / -0.03 / +1.36 dB (3 -> 1); noiseless -0.02 / -0.36 / +0.25 dB;
-- the paper array's 22 scenes of ``benchmarks/quality.py`` (64x64 and 128x128, noiseless and
-  N = 1000): +0.02 / -0.01 / +0.25 dB.
+- the paper array's 12 scenes of ``benchmarks/quality.py`` (64x64 and 128x128), noiseless and with
+  N = 1000: +0.02 / -0.01 / +0.25 dB (``benchmarks/tuning_blend.py``, ``docs/tuning_blend.md``).
 """
 
 from __future__ import annotations
