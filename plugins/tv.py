@@ -58,9 +58,9 @@ class TV(Regularizer):
     on Runner with an 8-camera rig of 11x8 pixels. At 0.9 the mode shrinks by 0.8 per iteration;
     the same runs reach 17.5 to 26.9 dB (values within [-0.3, 1.4]) and +2.5 dB over ``interp3d``.
     Over 120 random rigs (1-8 cameras at any angle, 6-48 pixels a side, the built-in scene and
-    Runner, self-tuned) 0.9 gained +0.21 dB on average against scikit-image's step (worst -0.36 dB)
-    and removed the runs far below ``interp3d`` (worst -14.2 dB against it, now -3.1 dB: 8 cameras
-    on 40x24 pixels, where the search picks too low a temporal weight). On the paper array,
+    Runner, self-tuned) 0.9 gained +0.15 dB on average against scikit-image's step (worst -0.36 dB)
+    and removed the runs far below ``interp3d`` (worst -14.2 dB against it with scikit-image's step,
+    -2.9 dB with 0.9: 8 cameras on 40x24 pixels, where the search picks too low a temporal weight). On the paper array,
     self-tuned (14 scenes at 64x64 and 128x128), it stays within 0.02 dB of scikit-image's step;
     fixed settings from zeros at 128x128, where 200 iterations are far from converged, lose up to
     0.16 dB (0.48 dB at a step of 0.75 and 1.31 dB at half the step, Chambolle's proven bound).
