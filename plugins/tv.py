@@ -78,12 +78,13 @@ class TV(Regularizer):
     and the kernel's own limits. The fused path moves a quarter of the plain path's bytes on PoCL's
     512 KiB of local memory and about 60 % with 48 KiB (counted). On a CPU device a work group is
     one work item, which runs each row of its tile as one contiguous loop; even so, on PoCL (2 CPU
-    cores, where the plain path's data stays in cache) a TV call takes 1.8-12x the plain path's time
-    (``benchmarks/tv_fused.py``, ``docs/tv_fused.md``): the halos' redundant updates (a region of
-    39x23x23 voxels for a 32x16x16 tile at 3 updates per launch) outweigh the saved bytes. On an
-    NVIDIA H100 a TV call takes 0.69-0.72x the plain path's time at 64x64x69, where launches
-    dominate, and 1.55-1.62x at 128x128x133 and 256x256x261 (``docs/gpu/tv_fused.md``). The
-    default is the plain path.
+    cores, where the plain path's data stays in cache) a TV call takes 1.8-6.9x the plain path's
+    time and a whole reconstruction of the paper configuration 1.6-3.0x (``benchmarks/tv_fused.py``,
+    ``docs/tv_fused.md``): the halos' redundant updates (a region of 39x39x23 voxels for a 32x32x16
+    tile at 3 updates per launch) outweigh the saved bytes. On an NVIDIA H100 a TV call takes
+    0.66-0.69x the plain path's time at 64x64x69, where launches dominate, and 1.55-1.60x at
+    128x128x133 and 256x256x261, and whole reconstructions 1.2-1.6x at every batch size
+    (``docs/gpu/tv_fused.md``). The default is the plain path.
     """
 
     name = "tv"
