@@ -28,7 +28,7 @@ from rsocl.solver.plan import device_limit, memory_need
 from rsocl.solver.autotune import check_tune
 from rsocl.solver.problem import check_settings
 from rsocl.solver.reconstruct import make_regularizer
-from rsocl.solver.tuning import Tuning
+from rsocl.solver.tuning import Tuning, applied_blend
 
 __all__ = ["reconstruct_tiled", "TiledResult", "TilesFailed"]
 
@@ -125,7 +125,7 @@ def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtyp
     lam = checked.lam if tuning is None or fixed_lam is not None else tuning.chosen["lam"]
     start = "zeros" if tuning is None else "interp3d"
     fill = 0.0 if start == "zeros" else fills
-    blend = 1.0 if tuning is None or tuning.blend is None else tuning.blend
+    blend = applied_blend(tuning)
     settings = TileSettings(regularizer, options, checked.iterations, lam, checked.eta, checked.tv_iterations,
                             checked.projection, str(np.dtype(dtype)), saturation, device, start, fill, blend)
     params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,

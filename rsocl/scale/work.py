@@ -249,7 +249,7 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
                                  projection=settings.projection, device=device, dtype=settings.dtype,
                                  regularizer_options=settings.options, saturation=settings.saturation, x0=x0,
                                  tune=False,  # the capture's settings, never a tile's own choice
-                                 blend=settings.blend if x0 is not None else None)
+                                 blend=settings.blend)
             seconds = time.perf_counter() - began
         piece = Piece(job.set_index, job.tile.index, solved.start, solved.stop,
                       core_block(result.datacube, job.tile, solved), seconds, result.iterations,

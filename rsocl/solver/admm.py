@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rsocl.common import validation as check
 from rsocl.device.context import c_type
 from rsocl.device.launch import batch_launches, element_launches
 from rsocl.model.operator import RollingShutterOperator
@@ -236,14 +237,12 @@ class ADMM:
         """``theta = x0 + alpha (theta - x0)`` (enqueued): the estimate moved back towards the start ``x0``
         (a device array of ``theta``'s shape), ``alpha`` in [0, 1] (1: unchanged)."""
         if x0.shape != self.theta.shape or x0.dtype != self.theta.dtype:
-            raise ValueError(f"x0 must match theta ({self.theta.shape}, {self.theta.dtype}), got {x0.shape}, {x0.dtype}")
-        alpha = float(alpha)
-        if not 0.0 <= alpha <= 1.0:
-            raise ValueError(f"blend must be in [0, 1], got {alpha!r}")
+            raise ValueError(f"x0 must match theta ({self.theta.shape}, {self.theta.dtype}), "
+                             f"got {x0.shape}, {x0.dtype}")
+        alpha = self.theta.dtype.type(check.in_range("blend", alpha, 0.0, 1.0))
         dev, kernel = self.op.device, self.program.admm_blend
         for gsize, lsize, offset in element_launches(self.sets * self.per_set, dev.group_limit(kernel, cap=64)):
-            kernel(self.op.queue, gsize, lsize, self.theta.data, x0.data, self.theta.dtype.type(alpha),
-                                    global_offset=offset)
+            kernel(self.op.queue, gsize, lsize, self.theta.data, x0.data, alpha, global_offset=offset)
 
     def residual(self):
         """Relative data residual ``‖g - H theta‖ / ‖g‖`` over the valid snapshot pixels (one per set

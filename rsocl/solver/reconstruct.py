@@ -31,6 +31,7 @@ from rsocl.solver.iterate import collect, run_iterations
 from rsocl.solver.problem import DEFAULTS, check_problem, check_settings, stage_on_device
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.result import Result
+from rsocl.solver.tuning import applied_blend
 
 __all__ = ["reconstruct", "make_regularizer", "Result", "DEFAULTS"]
 
@@ -143,8 +144,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     solver = ADMM(staged.op, staged.g, reg, lam=settings.lam, eta=settings.eta, projection=settings.projection,
                   x0=staged.x0, valid=problem.valid)
     if blend is None:
-        from_interpolation = problem.x0 is None and staged.x0 is not None
-        blend = tuning.blend if tuning is not None and tuning.blend is not None and from_interpolation else 1.0
+        blend = applied_blend(tuning) if problem.x0 is None and staged.x0 is not None else 1.0
     history = run_iterations(solver, staged, settings, progress=progress, blend=blend)
     result = collect(solver, staged, problem, settings, reg, history)
     result.params["tuning"] = tuning.as_params() if tuning is not None else None

@@ -72,7 +72,8 @@ from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import ADMM
 
 __all__ = ["LAM_FACTORS", "FOLDS", "MIN_BLOCK", "CANDIDATE_FRACTION", "holdout", "default_block", "default_folds",
-           "fold_patterns", "default_patterns", "fold_masks", "can_hold_out", "Tuning", "tune_parameters"]
+           "fold_patterns", "default_patterns", "fold_masks", "can_hold_out", "Tuning", "tune_parameters",
+           "applied_blend"]
 
 #: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
 LAM_FACTORS = (0.3, 1.0, 3.0)
@@ -347,7 +348,7 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
     held_out = 0
     usable = np.ones((rig.n_channels,) + rig.shape, bool) if valid is None else np.asarray(valid, bool)
     solved = _solved(rig, op)
-    parts = []       # per fold: fitted pixels, warm start, held-out weights, solver, H x0, |g - H x0|^2
+    parts = []                    # per fold: fitted pixels, warm start, held-out weights, solver, H x0
     for (block, _), (fit, scored) in zip(patterns, fold_masks(rig.shape, rig.n_channels, usable, patterns)):
         if not scored.any() or not fit.any():
             raise ValueError(f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
@@ -358,9 +359,9 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
         weights = cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype))
         start_prediction = cla.empty_like(g_device)
         op.forward_into(x0, start_prediction)
-        parts.append([fit, x0, weights, None, start_prediction,
-                      sum_sq_diff(g_device, start_prediction, weights=weights)])
+        parts.append([fit, x0, weights, None, start_prediction])
     scale = sum(sum_sq_diff(g_device, weights=part[2]) for part in parts)
+    start_err = sum(sum_sq_diff(g_device, part[4], weights=part[2]) for part in parts)     # |g - H x0|^2
     current = {"lam": lams[len(lams) // 2], **{name: float(sorted(values)[(len(values) - 1) // 2])
                                                 for name, values in tunable.items()}}
     scores, blends = {}, {}
@@ -378,9 +379,9 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
         if key in scores:
             return scores[key]
         reg = make_regularizer({**preset, **{k: v for k, v in point.items() if k != "lam"}})
-        err = moved = start_err = 0.0
+        err = moved = 0.0
         for part in parts:
-            fit, x0, weights, solver, start_prediction, start_sq = part
+            fit, x0, weights, solver, start_prediction = part
             if solver is None:
                 part[3] = solver = ADMM(op, g_device, reg, lam=point["lam"], eta=eta, projection=projection, x0=x0,
                                         valid=fit)
@@ -391,7 +392,6 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
             op.forward_into(solver.theta, solver.hx)
             err += sum_sq_diff(g_device, solver.hx, weights=weights)
             moved += sum_sq_diff(solver.hx, start_prediction, weights=weights)
-            start_err += start_sq
         value = float(math.sqrt(err / scale)) if scale > 0 else float(math.sqrt(err))
         if not math.isfinite(value):
             value = math.inf
@@ -423,6 +423,12 @@ def tune_parameters(op, g_device, g, rig, make_regularizer, *, tunable, lam, eta
                   block=blocks[0] if len(blocks) == 1 else blocks, held_out=held_out,
                   seconds=time.perf_counter() - start, folds=len(patterns), preset=preset,
                   blend=blends[tuple(sorted(current.items()))])
+
+
+def applied_blend(tuning) -> float:
+    """The blend a run that starts from the interpolation applies with ``tuning`` (a :class:`Tuning` or
+    None): the search's, or 1 (the solver's own result) without a search or a recorded blend."""
+    return 1.0 if tuning is None or tuning.blend is None else float(tuning.blend)
 
 
 def _blend(start_err: float, moved: float, err: float) -> float:
