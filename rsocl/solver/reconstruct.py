@@ -122,8 +122,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     if blend is not None:
         blend = check.in_range("blend", blend, 0.0, 1.0)
         if blend < 1 and x0 is None:
-            raise ValueError(f"blend = {blend:g} moves the result towards the run's start, and x0 = None starts "
-                             "from zeros; give x0 (an array or 'interp3d'), or leave blend None")
+            raise ValueError(f"blend = {blend:g} moves the result towards the run's start, which must then be given "
+                             "as x0 (an array or 'interp3d'); or leave blend None for the search's choice")
     problem = check_problem(g, rig, x0=None if interpolate else x0, truth=truth, saturation=saturation)
     tune = check_tune(tune)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
