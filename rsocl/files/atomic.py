@@ -15,10 +15,10 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "output_path", "output_folder"]
+__all__ = ["atomic_path", "output_path", "output_folder", "default_mode", "fsync_file", "fsync_directory"]
 
 
-def _default_mode() -> int:
+def default_mode() -> int:
     """Permission bits a newly created regular file gets: ``0o666`` minus the umask."""
     # os.umask can only be read by setting it; restore it at once.
     umask = os.umask(0o022)
@@ -26,13 +26,15 @@ def _default_mode() -> int:
     return 0o666 & ~umask
 
 
-def _fsync_file(path: Path) -> None:
+def fsync_file(path: Path) -> None:
+    """Flush the file at ``path`` to disk (``fsync``)."""
     with open(path, "rb+") as handle:
         os.fsync(handle.fileno())
 
 
-def _fsync_directory(directory: Path) -> None:
-    """Persist the rename itself (best effort: not every platform can open a directory)."""
+def fsync_directory(directory: Path) -> None:
+    """Flush ``directory`` to disk, which persists a rename in it (best effort: not every platform can
+    open a directory)."""
     try:
         fd = os.open(directory, os.O_RDONLY)
     except OSError:
@@ -142,17 +144,17 @@ def atomic_path(path):
     """
     path = output_path(path)
     directory = path.parent
-    mode = (path.stat().st_mode & 0o7777) if path.exists() else _default_mode()
+    mode = (path.stat().st_mode & 0o7777) if path.exists() else default_mode()
     fd, tmp_name = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=directory)
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         yield tmp
         os.chmod(tmp, mode)
-        _fsync_file(tmp)
+        fsync_file(tmp)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
-    _fsync_directory(directory)
+    fsync_directory(directory)

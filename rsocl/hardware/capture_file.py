@@ -237,13 +237,13 @@ class CaptureWriter:
 
 def publish(partial: Path, out: Path) -> None:
     """fsync ``partial`` and rename it to ``out`` (atomic on one file system)."""
-    from rsocl.files.atomic import _default_mode, _fsync_directory, _fsync_file
+    from rsocl.files.atomic import default_mode, fsync_directory, fsync_file
 
-    mode = (out.stat().st_mode & 0o7777) if out.exists() else _default_mode()
+    mode = (out.stat().st_mode & 0o7777) if out.exists() else default_mode()
     os.chmod(partial, mode)
-    _fsync_file(partial)
+    fsync_file(partial)
     os.replace(partial, out)
-    _fsync_directory(out.parent if str(out.parent) else Path("."))
+    fsync_directory(out.parent if str(out.parent) else Path("."))
 
 
 # ---------------------------------------------------------------------- reading

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.files.atomic import _fsync_directory, _fsync_file
+from rsocl.files.atomic import fsync_directory, fsync_file
 from rsocl.files.hdf5 import FORMAT_VERSION
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import expand
@@ -182,7 +182,7 @@ def _create(zarr, path: Path, spec: StoreSpec) -> bool:
         group.attrs.put(spec.attributes())
         for folder, _, files in os.walk(tmp):
             for file in files:
-                _fsync_file(Path(folder) / file)
+                fsync_file(Path(folder) / file)
         try:
             os.replace(tmp, path)
         except OSError:
@@ -193,7 +193,7 @@ def _create(zarr, path: Path, spec: StoreSpec) -> bool:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    _fsync_directory(path.parent)
+    fsync_directory(path.parent)
     return True
 
 
