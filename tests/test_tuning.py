@@ -260,6 +260,10 @@ def test_a_noisy_still_scene_blends_towards_the_interpolation():
     unmixed = rsocl.reconstruct(g, rig, iterations=60, tune=False, x0=start, **fixed).datacube
     mixed = rsocl.reconstruct(g, rig, iterations=60, tune=False, x0=start, blend=blend, **fixed).datacube
     np.testing.assert_allclose(mixed, start + blend * (unmixed - start), atol=1e-5)
+    # a blend of the caller's on a self-tuned run: towards the interpolation the run starts from
+    half = rsocl.reconstruct(g, rig, iterations=60, tune=choice, blend=0.5)
+    assert half.params["blend"] == 0.5 and half.params["start"] == "interp3d"
+    np.testing.assert_allclose(half.datacube, start + 0.5 * (own.datacube - start), atol=1e-5)
 
 
 def test_blend_is_checked_and_needs_a_start():
@@ -268,7 +272,8 @@ def test_blend_is_checked_and_needs_a_start():
     for bad in (-0.1, 1.5, float("nan"), "half"):
         with pytest.raises(ValueError, match=r"blend must be"):
             rsocl.reconstruct(g, rig, iterations=2, blend=bad)
-    with pytest.raises(ValueError, match="blend = 0.5 moves the result towards the run's start"):
+    with pytest.raises(ValueError, match="blend = 0.5 moves the result towards the run's start, and this run "
+                                         "starts from zeros"):
         rsocl.reconstruct(g, rig, iterations=2, tune=False, blend=0.5)
     assert rsocl.reconstruct(g, rig, iterations=2, tune=False).params["blend"] == 1.0
     # a start of the caller's: the search's blend (measured against the interpolation) is not applied

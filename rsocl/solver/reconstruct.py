@@ -107,8 +107,9 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         earlier choice, without a search; False: fixed defaults.
     blend : float or None
         In [0, 1]: return ``x0 + blend (theta - x0)``, the solver's result moved back towards the
-        run's start (which must be given: an array or ``"interp3d"``); 1 returns the solver's result
-        as it is. None (default): the blend the search chose on the same held-out pixels
+        run's start: ``x0`` when given, else the interpolation a self-tuned run starts from (a run
+        from zeros refuses a blend below 1); 1 returns the solver's result as it is. None
+        (default): the blend the search chose on the same held-out pixels
         (:mod:`rsocl.solver.tuning`) when the run starts from the interpolation, else 1. Recorded
         in ``Result.params["blend"]``.
 
@@ -121,9 +122,6 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         raise ValueError(f"x0 must be an array (T, m, n), 'interp3d' or None, got {x0!r}")
     if blend is not None:
         blend = check.in_range("blend", blend, 0.0, 1.0)
-        if blend < 1 and x0 is None:
-            raise ValueError(f"blend = {blend:g} moves the result towards the run's start, which must then be given "
-                             "as x0 (an array or 'interp3d'); or leave blend None for the search's choice")
     problem = check_problem(g, rig, x0=None if interpolate else x0, truth=truth, saturation=saturation)
     tune = check_tune(tune)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
@@ -133,6 +131,10 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     fixed_lam = settings.lam
     settings = settings.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(problem.batch)
     start = interpolate or starts_from_interpolation(tune, settings, regularizer, reg, regularizer_options, fixed_lam)
+    if blend is not None and blend < 1 and x0 is None and not start:
+        raise ValueError(f"blend = {blend:g} moves the result towards the run's start, and this run starts from "
+                         "zeros (tune=False, or nothing left to choose from the data): give the start as x0 (an "
+                         "array or 'interp3d'), or leave blend None")
     staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype, start=start)
     tuning = None
     if tune is not False:
