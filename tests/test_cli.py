@@ -449,6 +449,9 @@ def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
     ("one", ["--halo", "2"], "--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a "
                              "Zarr --out or a capture too large for the device) or windows (--window); this capture "
                              "runs in one piece, where --halo would be ignored"),
+    ("one", ["--retries", "1"], "--retries applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, "
+                                "a Zarr --out or a capture too large for the device) or windows (--window), whose "
+                                "tiles run as tasks; this capture runs in one piece, where --retries would be ignored"),
     ("sets", ["--tile", "6", "10", "--batch", "2"], "--batch applies to the sets of a capture reconstructed in one "
                                                     "piece; a run in tiles runs every tile of every set"),
     ("one", ["--window", "1", "--batch", "2"], "--batch applies to the sets of a capture reconstructed in one piece; "

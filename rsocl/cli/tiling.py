@@ -26,6 +26,7 @@ def _is_zarr(path) -> bool:
 
 # ---------------------------------------------------------------------- reconstruct
 def add_reconstruct_tiling_args(p):
+    from rsocl.scale.runner import RETRIES
     from rsocl.scale.tiles import DEFAULT_HALO
 
     g = p.add_argument_group("tiles, sets and Dask (pip install 'rsocl[dask]' for clusters and Zarr stores)")
@@ -43,7 +44,8 @@ def add_reconstruct_tiling_args(p):
     g.add_argument("--workers", type=int, default=None, metavar="N",
                    help="start a local cluster of N worker processes (each its own OpenCL context), 1 to 4 per "
                         "CPU core")
-    g.add_argument("--retries", type=int, default=2, help="extra attempts of a failing tile (default 2)")
+    g.add_argument("--retries", type=int, default=None,
+                   help=f"extra attempts of a failing tile, in a run in tiles or windows (default {RETRIES})")
     g.add_argument("--window", type=int, default=None, metavar="F",
                    help="multi-frame capture (frames, t_d): reconstruct it as a stream of windows of F frames")
     g.add_argument("--overlap", type=int, default=None, metavar="V",
@@ -117,12 +119,23 @@ def _wants_tiles(args, capture) -> bool:
     return device_limit(get_device(args.device), largest, total) is not None
 
 
+def _retries(args) -> int:
+    """``--retries``, or :data:`rsocl.scale.runner.RETRIES` when not given."""
+    from rsocl.scale.runner import RETRIES
+
+    return RETRIES if args.retries is None else args.retries
+
+
 def _check_applies(args, run: str) -> None:
     """ValueError naming ``--overlap``, ``--halo`` or ``--batch`` when the run (``"window"``: a stream of
     windows, ``"tiles"``, ``"whole"``: in one piece) would ignore it."""
     if args.overlap is not None and run != "window":
         raise ValueError("--overlap applies to --window (the frames consecutive windows share); without --window "
                          "it would be ignored")
+    if args.retries is not None and run == "whole":
+        raise ValueError("--retries applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a "
+                         "Zarr --out or a capture too large for the device) or windows (--window), whose tiles run "
+                         "as tasks; this capture runs in one piece, where --retries would be ignored")
     if args.halo is not None and run == "whole":
         raise ValueError("--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a Zarr "
                          "--out or a capture too large for the device) or windows (--window); this capture runs in "
@@ -177,7 +190,7 @@ def reconstruct_tiled_if_needed(args):
             lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations, projection=args.projection,
             device=args.device, dtype=args.dtype, regularizer_options=reg_options(args.reg_opt),
             out=args.out if zarr_out else None, scheduler=args.scheduler, workers=args.workers,
-            retries=args.retries, tune=not args.fast, progress=not args.quiet)
+            retries=_retries(args), tune=not args.fast, progress=not args.quiet)
     except TilesFailed as exc:
         print(f"rsocl reconstruct: error: {exc}", flush=True)
         return 1
@@ -219,7 +232,7 @@ def _stream(args, capture):
         loaded.snapshots, loaded.rig, window=args.window, overlap=args.overlap, tile=args.tile, halo=args.halo,
         regularizer=args.regularizer, iterations=args.iterations, lam=args.lam, eta=args.eta,
         tv_iterations=args.tv_iterations, projection=args.projection, device=args.device, dtype=args.dtype,
-        regularizer_options=reg_options(args.reg_opt), scheduler=args.scheduler, retries=args.retries,
+        regularizer_options=reg_options(args.reg_opt), scheduler=args.scheduler, retries=_retries(args),
         tune=not args.fast, progress=not args.quiet)
     truth = None if args.no_truth else loaded.truth
     text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"

@@ -28,10 +28,12 @@ from dataclasses import dataclass
 
 from rsocl.scale.work import solve_tile
 
-__all__ = ["SCHEDULER_ENV", "WORKERS_PER_CORE", "Failure", "Engine", "have_dask", "max_workers", "non_negative_int"]
+__all__ = ["SCHEDULER_ENV", "RETRIES", "WORKERS_PER_CORE", "Failure", "Engine", "have_dask", "max_workers", "non_negative_int"]
 
 #: Environment variable read when no ``scheduler`` is given.
 SCHEDULER_ENV = "RSOCL_SCHEDULER"
+#: Extra attempts of a failing task (a tile), by default.
+RETRIES = 2
 #: Seconds allowed to reach a scheduler.
 CONNECT_TIMEOUT = 10
 #: Local worker processes allowed per CPU core: more only queue for the cores (each task keeps
@@ -178,7 +180,7 @@ class Engine:
         return f"the dask.distributed scheduler at {self.scheduler}"
 
     # ------------------------------------------------------------------ running
-    def run(self, jobs, payload, settings, *, retries=2, progress=False, desc="tiles"):
+    def run(self, jobs, payload, settings, *, retries=RETRIES, progress=False, desc="tiles"):
         """Run every job; ``(pieces, failures)`` in completion order."""
         retries = non_negative_int("retries", retries)
         bar = None

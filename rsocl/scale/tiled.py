@@ -20,7 +20,7 @@ from rsocl.device.context import Device
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
-from rsocl.scale.runner import Engine, non_negative_int
+from rsocl.scale.runner import RETRIES, Engine, non_negative_int
 from rsocl.scale.tiles import check_halo, place, tile_grid, tile_rig
 from rsocl.scale.tuned import tune_tiles, tuned_options
 from rsocl.scale.work import Job, RigPayload, TileSettings
@@ -138,7 +138,7 @@ def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtyp
 def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None, iterations=None,
                       lam=None, eta=None, tv_iterations=None, projection="exact", device=None, dtype="float32",
                       regularizer_options=None, saturation=None, out=None, scheduler=None, workers=None,
-                      retries=2, tune=True, progress=False) -> TiledResult:
+                      retries=RETRIES, tune=True, progress=False) -> TiledResult:
     """Reconstruct ``snapshots`` tile by tile (and set by set) as tasks of a Dask graph.
 
     Parameters
