@@ -95,6 +95,29 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
     fast = tmp_path / "fast.h5"
     assert main(["reconstruct", str(cap), "--out", str(fast), "--iterations", "5", "--quiet", "--fast"]) == 0
     assert load_reconstruction(fast).params["tuning"] is None and not (tmp_path / "fast-tuning.png").exists()
+    # --blend: the caller's blend with the interpolation replaces the search's
+    for blend in ("1", "0.3"):
+        mixed = tmp_path / f"blend{blend}.h5"
+        assert main(["reconstruct", str(cap), "--out", str(mixed), "--iterations", "15", "--quiet",
+                     "--reg-opt", "temporal_weight=0.5", "--blend", blend]) == 0
+        assert load_reconstruction(mixed).params["blend"] == float(blend)
+
+
+@pytest.mark.parametrize("extra, match", [
+    (["--blend", "1.5"], "--blend must be in [0.0, 1.0], got 1.5"),
+    (["--blend", "nan"], "--blend must be finite"),
+    (["--fast", "--blend", "0.5"], "--blend 0.5 moves the result towards the interpolation a self-tuned run starts "
+                                   "from; --fast runs from zeros: leave out --fast or --blend"),
+    (["--lam", "0.1", "--reg-opt", "temporal_weight=3", "--blend", "0.5"],
+     "blend = 0.5 moves the result towards the run's start, and this run starts from zeros"),
+])
+def test_a_blend_is_checked_before_any_work(tmp_path, capsys, extra, match):
+    cap, out = tmp_path / "one.h5", tmp_path / "rec.h5"
+    _capture_with_truth(cap, "one")
+    assert main(["reconstruct", str(cap), "--out", str(out), "--iterations", "2", "--quiet", *extra]) == 2
+    captured = capsys.readouterr()
+    assert captured.err.startswith(f"rsocl reconstruct: error: {match}"), captured.err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [cap.name]
 
 
 def test_a_warning_is_one_line_naming_the_command(tmp_path, capsys):

@@ -60,6 +60,27 @@ def test_tiles_return_the_blend_the_search_chose():
     tiled = reconstruct_tiled(g, rig, tile=rig.shape, halo=0, iterations=ITER)
     assert tiled.params["blend"] == untiled.params["blend"] == tiled.params["tuning"]["blend"]
     np.testing.assert_allclose(tiled.datacube, untiled.datacube, atol=1e-5)
+    # the caller's blend replaces the search's, in every tile, as untiled
+    choice = rsocl.solver.tuning.Tuning.from_params(untiled.params["tuning"])
+    for blend in (1.0, 0.25):
+        mine = reconstruct_tiled(g, rig, tile=rig.shape, halo=0, iterations=ITER, tune=choice, blend=blend)
+        assert mine.params["blend"] == blend != untiled.params["blend"]
+        whole = rsocl.reconstruct(g, rig, iterations=ITER, tune=choice, blend=blend).datacube
+        np.testing.assert_allclose(mine.datacube, whole, atol=1e-5)
+        assert np.abs(whole - untiled.datacube).max() > 1e-3
+
+
+def test_a_blend_below_1_needs_the_interpolation_start():
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1.8e-4, t_r=3.5e-5)
+    g, _ = _problem(rig)
+    for bad in (-0.5, 2.0, float("nan")):
+        with pytest.raises(ValueError, match="blend must be"):
+            reconstruct_tiled(g, rig, tile=(6, 6), iterations=2, blend=bad)
+    for kwargs in (dict(tune=False), dict(lam=0.1, regularizer_options={"temporal_weight": 3.0})):
+        with pytest.raises(ValueError, match="blend = 0.5 moves the result towards the run's start, and this run "
+                                             "starts from zeros"):
+            reconstruct_tiled(g, rig, tile=(6, 6), iterations=2, blend=0.5, **kwargs)
+    assert reconstruct_tiled(g, rig, tile=(6, 6), iterations=2, tune=False, blend=1.0).params["blend"] == 1.0
 
 
 def test_every_tile_of_every_set_gets_the_choice_made_on_the_centre_tile_of_the_first_set(monkeypatch, tmp_path):

@@ -199,6 +199,10 @@ def add_solver_args(p):
                    help="skip the parameter search: fixed lam and regularizer options, zero start (by default "
                         "the values not given are chosen from the snapshots by cross-validation: a tuned run takes "
                         "2-3x the time of a fixed one; a tiled run chooses once, on the centre tile, for every tile)")
+    g.add_argument("--blend", type=float, default=None, metavar="B",
+                   help="in [0, 1]: return start + B (result - start), the solver's result moved back towards the "
+                        "interpolation a self-tuned run starts from; 1: the solver's own result (default: the "
+                        "blend chosen from the snapshots with the other values)")
     p.set_defaults(check_options=check_solver_args)
 
 
@@ -206,10 +210,17 @@ def check_solver_args(args) -> None:
     """Refuse solver options that contradict each other, before the command runs (``rsocl.cli.main``
     calls it): ``--reg-opt iterations=N`` with a different ``--tv-iterations M`` (one of them was
     silently ignored); a ``--reg-opt`` that is not ``KEY=VALUE``; an unknown ``--regularizer`` or an
-    option it refuses (name or range), before anything is simulated, loaded or run."""
+    option it refuses (name or range); ``--blend`` outside [0, 1], or below 1 with ``--fast`` (a zero
+    start), before anything is simulated, loaded or run."""
+    from rsocl.common import validation as check
     from rsocl.solver.reconstruct import make_regularizer
 
     options = reg_options(args.reg_opt)
+    if args.blend is not None:
+        check.in_range("--blend", args.blend, 0.0, 1.0)
+        if args.blend < 1 and args.fast:
+            raise ValueError(f"--blend {args.blend:g} moves the result towards the interpolation a self-tuned run "
+                             "starts from; --fast runs from zeros: leave out --fast or --blend")
     if args.tv_iterations is not None and "iterations" in options:
         given = options["iterations"]
         try:
@@ -270,7 +281,7 @@ def run_reconstruction(args, g, rig, truth=None):
     return reconstruct(g, rig, regularizer=args.regularizer, regularizer_options=reg_options(args.reg_opt),
                        iterations=args.iterations, lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
                        projection=args.projection, device=args.device, dtype=args.dtype, truth=truth,
-                       tune=not args.fast, progress=not args.quiet)
+                       tune=not args.fast, blend=args.blend, progress=not args.quiet)
 
 
 def quality_line(result, truth):

@@ -93,4 +93,4 @@ def _reconstruct_sets(args, sets, rig):
                             regularizer_options=reg_options(args.reg_opt), iterations=args.iterations,
                             lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
                             projection=args.projection, device=args.device, dtype=args.dtype,
-                            tune=not args.fast, progress=not args.quiet)
+                            tune=not args.fast, blend=args.blend, progress=not args.quiet)

@@ -190,7 +190,7 @@ def reconstruct_tiled_if_needed(args):
             lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations, projection=args.projection,
             device=args.device, dtype=args.dtype, regularizer_options=reg_options(args.reg_opt),
             out=args.out if zarr_out else None, scheduler=args.scheduler, workers=args.workers,
-            retries=_retries(args), tune=not args.fast, progress=not args.quiet)
+            retries=_retries(args), tune=not args.fast, blend=args.blend, progress=not args.quiet)
     except TilesFailed as exc:
         print(f"rsocl reconstruct: error: {exc}", flush=True)
         return 1
@@ -233,7 +233,7 @@ def _stream(args, capture):
         regularizer=args.regularizer, iterations=args.iterations, lam=args.lam, eta=args.eta,
         tv_iterations=args.tv_iterations, projection=args.projection, device=args.device, dtype=args.dtype,
         regularizer_options=reg_options(args.reg_opt), scheduler=args.scheduler, retries=_retries(args),
-        tune=not args.fast, progress=not args.quiet)
+        tune=not args.fast, blend=args.blend, progress=not args.quiet)
     truth = None if args.no_truth else loaded.truth
     text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
     if truth is not None:

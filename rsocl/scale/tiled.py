@@ -25,7 +25,7 @@ from rsocl.scale.tiles import check_halo, place, tile_grid, tile_rig
 from rsocl.scale.tuned import tune_tiles, tuned_options
 from rsocl.scale.work import Job, RigPayload, TileSettings
 from rsocl.solver.plan import device_limit, memory_need
-from rsocl.solver.autotune import check_tune
+from rsocl.solver.autotune import check_blend, check_tune, starts_from_interpolation
 from rsocl.solver.problem import check_settings
 from rsocl.solver.reconstruct import make_regularizer
 from rsocl.solver.tuning import Tuning, applied_blend
@@ -117,15 +117,17 @@ def _check_device(device, engine):
                          f"devices lists them), or None to let each worker choose; got a Device ({device.name})")
 
 
-def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype, saturation, device, fills):
+def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype, saturation, device, fills,
+              blend=None):
     """Every task's :class:`TileSettings` and the run's ``params``, with ``tuning``'s choice (None: as given);
-    ``fills`` the :func:`~rsocl.scale.inputs.scan` values: one number (one set) or one per set."""
+    ``fills`` the :func:`~rsocl.scale.inputs.scan` values: one number (one set) or one per set; ``blend``
+    the caller's (None: ``tuning``'s)."""
     options = tuned_options(tuning, regularizer_options)
     reg = make_regularizer(regularizer, options, checked.tv_iterations)
     lam = checked.lam if tuning is None or fixed_lam is not None else tuning.chosen["lam"]
     start = "zeros" if tuning is None else "interp3d"
     fill = 0.0 if start == "zeros" else fills
-    blend = applied_blend(tuning)
+    blend = applied_blend(tuning) if blend is None else blend
     settings = TileSettings(regularizer, options, checked.iterations, lam, checked.eta, checked.tv_iterations,
                             checked.projection, str(np.dtype(dtype)), saturation, device, start, fill, blend)
     params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
@@ -138,7 +140,7 @@ def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtyp
 def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None, iterations=None,
                       lam=None, eta=None, tv_iterations=None, projection="exact", device=None, dtype="float32",
                       regularizer_options=None, saturation=None, out=None, scheduler=None, workers=None,
-                      retries=RETRIES, tune=True, progress=False) -> TiledResult:
+                      retries=RETRIES, tune=True, blend=None, progress=False) -> TiledResult:
     """Reconstruct ``snapshots`` tile by tile (and set by set) as tasks of a Dask graph.
 
     Parameters
@@ -182,6 +184,10 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         earlier run's choice, e.g. the first window of a stream) is applied as it is. False:
         the fixed defaults, zero start. The record is in ``params["tuning"]`` (and a store's
         ``params`` attribute).
+    blend : float or None
+        As :func:`rsocl.reconstruct`: every tile returns ``start + blend (theta - start)``; None
+        (default): the search's choice (1 without a search). Below 1 it needs the interpolation
+        start of a self-tuned run.
     progress : bool
         A progress bar over the tuning candidates and the tasks.
 
@@ -206,6 +212,8 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
     tune = check_tune(tune, reg)
     fixed_lam = checked.lam
     checked = checked.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(source.n_sets)
+    blend = check_blend(blend, starts_from_interpolation(tune, checked, regularizer, reg, regularizer_options,
+                                                         fixed_lam))
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
     _check_device(device, engine)
@@ -226,7 +234,7 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
             tuning = tune_tiles(source, rig, grid, regularizer, checked, fixed_lam, regularizer_options,
                                 device=device, dtype=dtype, saturation=saturation, progress=progress)
         settings, params = _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype,
-                                     saturation, device, fills if source.n_sets else fills[0])
+                                     saturation, device, fills if source.n_sets else fills[0], blend)
         params.update({"saturated_pixels": saturated, "solved_subframes": [span.start, span.stop],
                        "tile": list(grid.tile), "halo": grid.halo})
         done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)

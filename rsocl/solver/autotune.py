@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from rsocl.common import validation as check
 from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import state_bytes
 from rsocl.solver.batch import memory_bytes, problem_bytes, workspace_memory
@@ -21,7 +22,7 @@ from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, can_hold_out, default_patterns, tune_parameters
 
-__all__ = ["check_tune", "tune_and_start", "choose_unset", "chosen_options", "search_memory", "search_peak",
+__all__ = ["check_tune", "check_blend", "tune_and_start", "choose_unset", "chosen_options", "search_memory", "search_peak",
            "starts_from_interpolation", "interpolation_start"]
 
 
@@ -38,6 +39,20 @@ def check_tune(tune, reg=None):
     if isinstance(tune, (bool, np.bool_)):
         return bool(tune)
     raise ValueError(f"tune must be True, False or an rsocl.solver.tuning.Tuning, got {tune!r}")
+
+
+def check_blend(blend, has_start: bool):
+    """``blend`` checked in [0, 1] (None: the search's choice, passes). A value below 1 moves the result
+    towards the run's start, so it needs one (``has_start``: ``x0`` given, or the interpolation a
+    self-tuned run starts from, :func:`starts_from_interpolation`); a run from zeros refuses it."""
+    if blend is None:
+        return None
+    blend = check.in_range("blend", blend, 0.0, 1.0)
+    if blend < 1 and not has_start:
+        raise ValueError(f"blend = {blend:g} moves the result towards the run's start, and this run starts from "
+                         "zeros (tune=False, or nothing left to choose from the data): give the start as x0 (an "
+                         "array or 'interp3d'), or leave blend None")
+    return blend
 
 
 def _first(value):

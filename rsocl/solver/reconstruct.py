@@ -21,12 +21,11 @@ options) are kept. The chosen values and every candidate's criterion are in
 
 from __future__ import annotations
 
-from rsocl.common import validation as check
 from rsocl.common.registry import load
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import ADMM
-from rsocl.solver.autotune import check_tune, interpolation_start, starts_from_interpolation, tune_and_start
+from rsocl.solver.autotune import check_blend, check_tune, interpolation_start, starts_from_interpolation, tune_and_start
 from rsocl.solver.iterate import collect, run_iterations
 from rsocl.solver.problem import DEFAULTS, check_problem, check_settings, stage_on_device
 from rsocl.solver.regularizer import Regularizer
@@ -120,8 +119,6 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     interpolate = isinstance(x0, str)
     if interpolate and x0 != "interp3d":
         raise ValueError(f"x0 must be an array (T, m, n), 'interp3d' or None, got {x0!r}")
-    if blend is not None:
-        blend = check.in_range("blend", blend, 0.0, 1.0)
     problem = check_problem(g, rig, x0=None if interpolate else x0, truth=truth, saturation=saturation)
     tune = check_tune(tune)
     settings = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
@@ -131,10 +128,7 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
     fixed_lam = settings.lam
     settings = settings.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(problem.batch)
     start = interpolate or starts_from_interpolation(tune, settings, regularizer, reg, regularizer_options, fixed_lam)
-    if blend is not None and blend < 1 and x0 is None and not start:
-        raise ValueError(f"blend = {blend:g} moves the result towards the run's start, and this run starts from "
-                         "zeros (tune=False, or nothing left to choose from the data): give the start as x0 (an "
-                         "array or 'interp3d'), or leave blend None")
+    blend = check_blend(blend, x0 is not None or start)
     staged = stage_on_device(problem, reg, settings, device=device, dtype=dtype, start=start)
     tuning = None
     if tune is not False:
