@@ -17,8 +17,6 @@ per run (``--cache``), so an interrupted run goes on where it stopped. Writes do
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import tempfile
 import time
@@ -32,6 +30,7 @@ from rsocl.model.interpolation import interp3d
 from rsocl.model.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 from quality_scenes import available, make_scene, noisy  # noqa: E402
 
@@ -48,22 +47,6 @@ CASES = ([(s, 64, "none") for s in ("builtin", "builtin-slow", "builtin-fast", "
                                     "runner40@2", "runner40-crop@1", "traffic48@0.5", "traffic48@1", "traffic48@2")]
          + [(s, 64, "poisson") for s in ("builtin", "runner40@1", "traffic48@1")]
          + [("builtin", 128, "none"), ("runner40@1", 128, "none"), ("builtin", 128, "poisson")])
-
-
-class Cache:
-    """A JSON file of finished runs, rewritten atomically after each one."""
-
-    def __init__(self, path):
-        self.path = Path(path)
-        self.data = json.loads(self.path.read_text()) if self.path.exists() else {}
-
-    def get(self, key, compute):
-        if key not in self.data:
-            self.data[key] = compute()
-            tmp = self.path.with_suffix(".tmp")
-            tmp.write_text(json.dumps(self.data))
-            os.replace(tmp, self.path)
-        return self.data[key]
 
 
 def run_case(scene, size, noise, args, cache):

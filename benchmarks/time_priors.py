@@ -21,7 +21,6 @@ PSNR in dB (peak 1), 64x64 paper array, 200 ADMM iterations, ``lam = 0.1``, ``et
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 from concurrent.futures import ProcessPoolExecutor
@@ -31,6 +30,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 from quality_scenes import available, make_scene  # noqa: E402
 
@@ -146,19 +146,13 @@ def main(argv=None):
     parser.add_argument("--out", type=Path, default=DOCS / "time_priors.md")
     args = parser.parse_args(argv)
     scenes = [s for s in args.scenes if available(s)]
-    done = json.loads(args.cache.read_text()) if args.cache.exists() else {}
-
-    def save():
-        tmp = args.cache.with_suffix(".tmp")
-        tmp.write_text(json.dumps(done))
-        tmp.replace(args.cache)
+    done = Cache(args.cache)
 
     def batch(jobs):
         with ProcessPoolExecutor(args.workers) as pool:
             futures = {key: pool.submit(run, *job) for key, job in jobs.items() if key not in done}
             for key, future in futures.items():
-                done[key] = future.result()
-                save()
+                done.put(key, future.result())
                 print(key, f"{done[key]:.2f} dB", flush=True)
 
     batch({f"{s}|{m}": (s, m) for s in scenes for m in ("interp3d", "tv 1", "tv 3", "tv 10")})

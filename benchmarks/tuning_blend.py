@@ -19,8 +19,6 @@ held out. Results are cached per case (``--cache``). Writes docs/tuning_blend.md
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import tempfile
 import warnings
@@ -35,6 +33,7 @@ from rsocl.model.simulate import simulate
 from rsocl.solver.tuning import Tuning
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 from quality_scenes import available, make_scene, noisy  # noqa: E402
 from tv_step import random_rig  # noqa: E402
@@ -109,7 +108,7 @@ def main(argv=None):
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-tuning-blend-cache.json")
     parser.add_argument("--out", type=Path, default=DOCS / "tuning_blend.md", help="the Markdown page to write")
     args = parser.parse_args(argv)
-    cache = json.loads(args.cache.read_text()) if args.cache.exists() else {}
+    cache = Cache(args.cache)
     op = rsocl.RollingShutterOperator(rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6), device=args.device)
     page = header_lines("The self-tuned blend with the interpolation", op.device,
                         None if argv is None else [__file__, *argv])
@@ -130,12 +129,7 @@ def main(argv=None):
                 skipped.add(scene)
                 continue
             name = f"{key}|{scene}|{photons}|{ITERATIONS}"
-            if name not in cache:
-                cache[name] = run_case(rig, scene, photons, args.device)
-                tmp = args.cache.with_suffix(".tmp")
-                tmp.write_text(json.dumps(cache))
-                os.replace(tmp, args.cache)
-            r = dict(cache[name], photons=photons)
+            r = dict(cache.get(name, lambda: run_case(rig, scene, photons, args.device)), photons=photons)
             results.append(r)
             what = "paper array" if GROUPS[group][0] is None else f"{key}, {rig.n_channels} cameras"
             detail.append(f"| {group} | {what}, {rig.shape[0]}x{rig.shape[1]} | {scene} | "

@@ -23,9 +23,7 @@ without it). Writes ``docs/tuning_design.md``.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
 import sys
 import tempfile
 import time
@@ -35,6 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 from quality_scenes import available, make_scene  # noqa: E402
 
@@ -149,7 +148,7 @@ def main(argv=None):
     import rsocl
 
     device = rsocl.device.get_device(args.device)
-    cache = json.loads(args.cache.read_text()) if args.cache.exists() else {}
+    cache = Cache(args.cache)
     cases, skipped = [], set()
     for rig_name in args.rigs:
         for scene in args.scenes:
@@ -157,12 +156,9 @@ def main(argv=None):
                 skipped.add(scene)
                 continue
             case_key = f"{rig_name}|{scene}|{args.size}|{args.iterations}"
-            if set(cache.get(case_key, {}).get("designs", {})) != set(DESIGNS):
-                cache[case_key] = run_case(rig_name, scene, args.size, args.iterations, args.device,
-                                           cache.get(case_key))
-                tmp = args.cache.with_suffix(".tmp")
-                tmp.write_text(json.dumps(cache))
-                os.replace(tmp, args.cache)
+            earlier = cache[case_key] if case_key in cache else None
+            if set((earlier or {}).get("designs", {})) != set(DESIGNS):
+                cache.put(case_key, run_case(rig_name, scene, args.size, args.iterations, args.device, earlier))
             cases.append({"rig": rig_name, "scene": scene, **cache[case_key]})
             print(rig_name, scene, {n: round(d["psnr"], 2) for n, d in cache[case_key]["designs"].items()},
                   flush=True)
