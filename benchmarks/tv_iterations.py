@@ -1,0 +1,171 @@
+"""TV's inner iterations per ADMM iteration: PSNR and time of the default run at 10, 5 and 3.
+
+Each ADMM iteration calls the TV denoiser (Chambolle's algorithm from a zero dual), and its
+inner iterations are most of an iteration's time. For every case this script runs
+``rsocl.reconstruct`` (200 ADMM iterations, float32) with ``tv_iterations`` = each of
+``--counts``, self-tuned (the default: ``lam``, the temporal weight and the blend with the
+interpolation chosen from the snapshots for that count) and, on the paper array, also with
+fixed settings from zeros (``tune=False``: ``lam`` 0.1, temporal weight 3), and reports PSNR
+(dB, peak 1) against the first count, runs below ``interp3d``, and the time of each run
+against the first count's (wall clock, compile excluded; the same process runs the counts in
+turn, so the machine's drift hits them alike).
+
+Cases: the groups of ``benchmarks/tuning_blend.py`` (random rigs of ``benchmarks/tv_step.py``,
+one-camera rigs included here, in three groups of seeds and scenes, noiseless and with Poisson
+noise plus 1 % read noise; the paper array's scenes of ``benchmarks/quality.py`` at 64x64 and
+128x128). ``design`` is the group a default would be chosen on; the others are held out.
+Results are cached per case (``--cache``). Writes docs/tv_iterations.md.
+
+    python benchmarks/tv_iterations.py [--groups design check-a check-b paper] [--counts 10 5 3]
+        [--out docs/tv_iterations.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import rsocl
+from rsocl.analysis.metrics import psnr
+from rsocl.model.interpolation import interp3d
+from rsocl.model.simulate import simulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from case_cache import Cache  # noqa: E402
+from provenance import DOCS, header_lines, write_page  # noqa: E402
+from quality_scenes import available, make_scene, noisy  # noqa: E402
+from tuning_blend import GROUPS  # noqa: E402
+from tv_step import random_rig  # noqa: E402
+
+ITERATIONS = 200
+COUNTS = (10, 5, 3)
+
+
+def cases(group):
+    """``(key, rig, scene, photons, modes)`` of a group; ``modes``: "tuned", and "fixed" on the paper array."""
+    seeds, scenes, noises = GROUPS[group]
+    if seeds is None:
+        for size, names in ((64, scenes), (128, ("builtin", "runner40@1"))):
+            rig = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6)
+            for scene in names:
+                for photons in noises:
+                    yield f"paper {size}x{size}", rig, scene, photons, ("tuned", "fixed")
+        return
+    for seed in seeds:
+        rig = random_rig(seed)
+        for scene in scenes:
+            for photons in noises:
+                yield f"seed {seed}", rig, scene, photons, ("tuned",)
+
+
+def run_case(rig, scene, photons, modes, counts, device):
+    """PSNR of interp3d; per mode and count: PSNR, seconds and the chosen values."""
+    truth = make_scene(scene, rig.shape, rig.T)
+    g = simulate(truth, rig)
+    if photons is not None:
+        g = noisy(g, rig, photons=photons, read=0.01, seed=1)
+    out = {"interp3d": float(psnr(interp3d(g, rig), truth, data_range=1.0))}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rsocl.reconstruct(g, rig, iterations=2, device=device, tune=False)           # compile outside the timing
+        for mode in modes:
+            for k in counts:
+                t0 = time.perf_counter()
+                result = rsocl.reconstruct(g, rig, iterations=ITERATIONS, tv_iterations=k, device=device,
+                                           tune=mode == "tuned")
+                seconds = time.perf_counter() - t0
+                options = result.params.get("regularizer_options", {})
+                out[f"{mode}{k}"] = {"psnr": float(psnr(result.datacube, truth, data_range=1.0)), "seconds": seconds,
+                                     "lam": float(result.params["lam"]), "blend": float(result.params.get("blend", 1.0)),
+                                     "temporal_weight": float(options.get("temporal_weight", 0.0))}
+    return out
+
+
+def summary_rows(label, results, mode, counts):
+    """Rows per other count: PSNR change against counts[0] (mean, worst, best), below interp3d, time ratio."""
+    base = f"{mode}{counts[0]}"
+    rows = []
+    for k in counts[1:]:
+        key = f"{mode}{k}"
+        level = [r for r in results if key in r and base in r]
+        if not level:
+            continue
+        change = np.array([r[key]["psnr"] - r[base]["psnr"] for r in level])
+        ratio = np.array([r[key]["seconds"] / r[base]["seconds"] for r in level])
+        below = (sum(r[base]["psnr"] < r["interp3d"] for r in level), sum(r[key]["psnr"] < r["interp3d"] for r in level))
+        rows.append(f"| {label} | {mode} | {len(level)} | {k} | {change.mean():+.2f} | {change.min():+.2f} | "
+                    f"{change.max():+.2f} | {int(np.sum(change < -0.1))} | {below[0]} -> {below[1]} | "
+                    f"{np.median(ratio):.2f}x |")
+    return rows
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--groups", nargs="+", choices=list(GROUPS), default=list(GROUPS))
+    parser.add_argument("--counts", type=int, nargs="+", default=list(COUNTS),
+                        help="TV iterations per ADMM iteration (>= 1); the first is the reference")
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-tv-iterations-cache.json")
+    parser.add_argument("--out", type=Path, default=DOCS / "tv_iterations.md", help="the Markdown page to write")
+    args = parser.parse_args(argv)
+    if any(k < 1 for k in args.counts) or len(set(args.counts)) != len(args.counts):
+        parser.error(f"--counts must be distinct integers >= 1, got {args.counts}")
+    counts = tuple(args.counts)
+    cache = Cache(args.cache)
+    op = rsocl.RollingShutterOperator(rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6), device=args.device)
+    page = header_lines("TV iterations per ADMM iteration: quality and time", op.device,
+                        None if argv is None else [__file__, *argv])
+    page += [f"`rsocl.reconstruct` ({ITERATIONS} ADMM iterations, float32) with `tv_iterations` = "
+             f"{', '.join(map(str, counts))}: self-tuned (`tuned`, the default) and, on the paper array, fixed "
+             "settings from zeros (`fixed`, `tune=False`). PSNR in dB with peak 1; change: PSNR at the count minus "
+             f"PSNR at {counts[0]}; time: the run's wall time (search included) over the run's at {counts[0]}, "
+             "median over the cases. Noise: Poisson at the given photo-electrons at full scale plus 1 % read "
+             "noise. Groups (see `benchmarks/tuning_blend.py`): `design` (random rigs of seeds 100-139 x built-in "
+             "scene and Runner at 1 frame per sub-frame), `check-a` (seeds 160-199 x Traffic at 1 and the slow "
+             "built-in scene), `check-b` (seeds 140-159 x Runner at 2 and Traffic at 0.5), `paper` (the paper "
+             "array's scenes of `benchmarks/quality.py`, 64x64 and 128x128).", "",
+             "| group | mode | cases | TV iterations | change mean | worst | best | cases below -0.1 dB | "
+             f"runs below interp3d: {counts[0]} -> this | time vs {counts[0]} |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    detail, skipped = [], set()
+    pooled = {"none": [], "noisy": []}                 # tuned cases of every group
+    for group in args.groups:
+        results = {"tuned": {}, "fixed": {}}
+        for key, rig, scene, photons, modes in cases(group):
+            if not available(scene):
+                skipped.add(scene)
+                continue
+            name = f"{key}|{scene}|{photons}|{ITERATIONS}|{','.join(map(str, counts))}"
+            r = cache.get(name, lambda: run_case(rig, scene, photons, modes, counts, args.device))
+            noise = "none" if photons is None else f"{photons:g}"
+            for mode in modes:
+                results[mode].setdefault(noise, []).append(r)
+                if mode == "tuned":
+                    pooled["none" if photons is None else "noisy"].append(r)
+                what = "paper array" if GROUPS[group][0] is None else f"{key}, {rig.n_channels} cameras"
+                cells = " | ".join(f"{r[f'{mode}{k}']['psnr']:.2f}" for k in counts)
+                detail.append(f"| {group} | {what}, {rig.shape[0]}x{rig.shape[1]} | {scene} | {noise} | {mode} | "
+                              f"{r['interp3d']:.2f} | {cells} |")
+                print(detail[-1], flush=True)
+        for mode in ("tuned", "fixed"):
+            for noise, level in results[mode].items():
+                page += summary_rows(f"{group}, noise {noise}", level, mode, counts)
+    for level, pooled_cases in pooled.items():
+        page += summary_rows(f"every group, {'noiseless' if level == 'none' else 'noisy'}", pooled_cases, "tuned",
+                             counts)
+    if skipped:
+        page += ["", f"Skipped (no ../shared/data): {', '.join(sorted(skipped))}."]
+    page += ["", "## Per case (PSNR, dB)", "",
+             "| group | rig | scene | photo-electrons | mode | interp3d | " + " | ".join(f"TV {k}" for k in counts) + " |",
+             "|---|---|---|---|---|---|" + "---|" * len(counts)] + detail
+    write_page(args.out, page)
+
+
+if __name__ == "__main__":
+    main()
