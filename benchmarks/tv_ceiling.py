@@ -140,8 +140,9 @@ class Case:
 
 
 def measure(case, rounds, threads, chain):
-    """Median seconds per TV iteration of each way (rsocl, then C at each thread count) over ``rounds``
-    calls of ``chain`` iterations, the ways interleaved call by call (a first call of each warms it up)."""
+    """Seconds per TV iteration of each way (rsocl, then C at each thread count), one per round of
+    ``rounds``: calls of ``chain`` iterations, the ways interleaved call by call (a first call of each
+    warms it up)."""
     ways = {"rsocl": case.device_iterations, **{f"C {t}t": case.c_iterations for t in threads}}
     times = {way: [] for way in ways}
     for r in range(rounds + 1):
@@ -152,7 +153,7 @@ def measure(case, rounds, threads, chain):
             ways[way](chain)
             if r:
                 times[way].append((time.perf_counter() - t0) / chain)
-    return {way: float(np.median(v)) for way, v in times.items()}
+    return {way: np.array(v) for way, v in times.items()}
 
 
 def main(argv=None):
@@ -188,24 +189,27 @@ def main(argv=None):
                  "from the same input, rsocl against C.", "",
                  "| datacube | rsocl (ms/iteration) | " + " | ".join(f"C, {t} thread{'s' if t > 1 else ''}"
                                                               for t in threads)
-                 + " | rsocl / best C | rsocl GB/s | best C GB/s | largest difference |",
+                 + " | rsocl / best C, round by round: median (range) | rsocl GB/s | best C GB/s | largest difference |",
                  "|---|---|" + "---|" * len(threads) + "---|---|---|---|"]
         ratios = []
         for size in args.sizes:
             T = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6).T
             case = Case(device, lib, T, size, size)
             diff = case.difference()
-            times = measure(case, args.rounds, threads, args.chain)
+            rounds = measure(case, args.rounds, threads, args.chain)
+            times = {way: float(np.median(v)) for way, v in rounds.items()}
             voxels = T * size * size
             best = min((f"C {t}t" for t in threads), key=times.get)
-            ratio = times["rsocl"] / times[best]
-            ratios.append(f"{size}x{size}x{T}: {ratio:.2f}x")
+            paired = rounds["rsocl"] / np.min([rounds[f"C {t}t"] for t in threads], axis=0)
+            ratio = f"{np.median(paired):.2f}x ({paired.min():.2f}-{paired.max():.2f}x)"
+            ratios.append(f"{size}x{size}x{T}: {ratio}")
             cells = " | ".join(f"{times[f'C {t}t'] * 1e3:.3f}" for t in threads)
-            page.append(f"| {size}x{size}x{T} | {times['rsocl'] * 1e3:.3f} | {cells} | {ratio:.2f}x | "
+            page.append(f"| {size}x{size}x{T} | {times['rsocl'] * 1e3:.3f} | {cells} | {ratio} | "
                         f"{per_voxel * voxels / times['rsocl'] / 1e9:.1f} | {per_voxel * voxels / times[best] / 1e9:.1f} | "
                         f"{diff:.1e} |")
             print(page[-1], flush=True)
-    page += ["", "rsocl's time per TV iteration over the fastest compiled C's: " + ", ".join(ratios) + "."]
+    page += ["", "rsocl's time per TV iteration over the faster compiled C's of the same round (1 or all threads): "
+             + ", ".join(ratios) + "."]
     write_page(args.out, page)
 
 
