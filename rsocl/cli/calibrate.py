@@ -77,9 +77,13 @@ def _read_image(path: Path, what: str) -> np.ndarray:
             array.close()
             raise ValueError(f"{what}: {str(path)!r} is an .npz archive, not one NumPy array (.npy)")
         return array
+    import warnings
+
     import imageio.v3 as iio
 
-    with reading(what, path, "an image"):
+    with reading(what, path, "an image"), warnings.catch_warnings():
+        # a file no plugin reads makes imageio try them all; its legacy ones warn of their own deprecation
+        warnings.simplefilter("ignore", DeprecationWarning)
         image = np.asarray(iio.imread(path))
     if image.ndim == 3 and image.shape[-1] in (3, 4):      # colour image of a grey target
         image = image[..., :3].mean(axis=-1)

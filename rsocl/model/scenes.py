@@ -277,7 +277,7 @@ def load_video(path, *, key="video") -> np.ndarray:
         import imageio.v3 as iio
 
         with check.reading("path", source, "a GIF video"):
-            video = np.asarray(iio.imread(path, index=None, extension=".gif"))
+            video = np.asarray(iio.imread(path, index=None, plugin="pillow", extension=".gif"))
         if video.ndim == 2 or (video.ndim == 3 and video.shape[-1] in (3, 4)):
             video = video[None]                       # a single frame
         return _to_frames(video, source, rgb_last=True)
