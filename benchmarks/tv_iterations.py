@@ -105,6 +105,36 @@ def summary_rows(label, results, mode, counts):
     return rows
 
 
+def plot(path, pooled, counts):
+    """``path`` (PNG): each tuned case's PSNR change against its time ratio, per count other than the
+    first, noiseless and noisy side by side; returns the file's name."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rsocl.files.atomic import atomic_path
+
+    base = f"tuned{counts[0]}"
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    for ax, (level, cases_of_level) in zip(axes, pooled.items()):
+        for k, colour in zip(counts[1:], ("tab:blue", "tab:orange", "tab:green", "tab:red")):
+            ratio = [r[f"tuned{k}"]["seconds"] / r[base]["seconds"] for r in cases_of_level]
+            change = [r[f"tuned{k}"]["psnr"] - r[base]["psnr"] for r in cases_of_level]
+            ax.scatter(ratio, change, s=9, alpha=0.5, color=colour, label=f"{k} TV iterations")
+        ax.axhline(0.0, color="grey", lw=0.8)
+        ax.set_title(f"{'noiseless' if level == 'none' else 'with noise'} ({len(cases_of_level)} cases)")
+        ax.set_xlabel(f"time / time at {counts[0]} TV iterations")
+    axes[0].set_ylabel(f"PSNR - PSNR at {counts[0]} TV iterations (dB)")
+    axes[0].legend(loc="lower right")
+    fig.suptitle("Self-tuned default, every group: fewer inner TV iterations")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=80)
+    plt.close(fig)
+    return Path(path).name
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--groups", nargs="+", choices=list(GROUPS), default=list(GROUPS))
@@ -159,6 +189,9 @@ def main(argv=None):
     for level, pooled_cases in pooled.items():
         page += summary_rows(f"every group, {'noiseless' if level == 'none' else 'noisy'}", pooled_cases, "tuned",
                              counts)
+    if pooled["none"] or pooled["noisy"]:
+        picture = plot(args.out.with_suffix(".png"), pooled, counts)
+        page += ["", f"![PSNR change against time, per case]({picture})"]
     if skipped:
         page += ["", f"Skipped (no ../shared/data): {', '.join(sorted(skipped))}."]
     page += ["", "## Per case (PSNR, dB)", "",
