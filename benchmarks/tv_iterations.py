@@ -159,7 +159,8 @@ def main(argv=None):
              "noise. Groups (see `benchmarks/tuning_blend.py`): `design` (random rigs of seeds 100-139 x built-in "
              "scene and Runner at 1 frame per sub-frame), `check-a` (seeds 160-199 x Traffic at 1 and the slow "
              "built-in scene), `check-b` (seeds 140-159 x Runner at 2 and Traffic at 0.5), `paper` (the paper "
-             "array's scenes of `benchmarks/quality.py`, 64x64 and 128x128).", "",
+             "array's scenes of `benchmarks/quality.py`, 64x64 and 128x128). A case found in the cache (`--cache`) "
+             "is not run again: its numbers are those of the run that measured it.", "",
              "| group | mode | cases | TV iterations | change mean | worst | best | cases below -0.1 dB | "
              f"runs below interp3d: {counts[0]} -> this | time vs {counts[0]} |",
              "|---|---|---|---|---|---|---|---|---|---|"]
