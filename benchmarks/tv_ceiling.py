@@ -34,14 +34,18 @@ from pathlib import Path
 
 import numpy as np
 
+from rsocl_plugins.tv import STEP as TV_STEP
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import DOCS, header_lines, write_page  # noqa: E402
+from provenance import DOCS, header_lines, usable_cores, write_page  # noqa: E402
 
 SOURCE = Path(__file__).resolve().parent / "tv_ceiling.c"
 #: bytes per voxel each kernel must move (float32; see the module doc)
 BYTES = {"tv_primal": 20, "tv_dual": 28}
 WEIGHT = 3.0                 # TV's default temporal weight
-STEP = 0.9 / (2.0 * (2.0 + WEIGHT ** 2))
+#: Chambolle's step tau at TV's default fraction of scikit-image's, and tau over the denoising weight 0.05
+STEP = TV_STEP / (2.0 * (2.0 + WEIGHT ** 2))
+STEP_OVER_WEIGHT = STEP / 0.05
 
 
 def compile_library(cc: str, folder: Path):
@@ -60,13 +64,6 @@ def compile_library(cc: str, folder: Path):
             lib.set_threads.argtypes = [i]
             return lib, " ".join([cc, *flags, *base[:5]])
     raise RuntimeError(f"{cc} could not build {SOURCE.name}: {done.stderr.strip()[:400]}")
-
-
-def usable_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:                  # not on Linux
-        return os.cpu_count() or 1
 
 
 class Case:
@@ -91,7 +88,7 @@ class Case:
         self.d_out = cla.empty(self.queue, self.img.shape, np.float32)
         self.xnext = edge_weights(n, np.float32)
         self.d_xnext = cla.to_device(self.queue, self.xnext)
-        self.d_steps = cla.to_device(self.queue, np.array([STEP, STEP / 0.05], np.float32))
+        self.d_steps = cla.to_device(self.queue, np.array([STEP, STEP_OVER_WEIGHT], np.float32))
         self.sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(1))
 
     def device_primal(self):
@@ -124,7 +121,7 @@ class Case:
     def c_dual(self):
         T, m, n = self.shape
         self.lib.tv_dual(self.host_out.ctypes.data, self.host_p.ctypes.data, self.xnext.ctypes.data, STEP,
-                         STEP / 0.05, WEIGHT, T, m, n)
+                         STEP_OVER_WEIGHT, WEIGHT, T, m, n)
 
     def difference(self) -> float:
         """Largest difference between the two ways after one primal and one dual step from ``p0``."""
@@ -134,8 +131,7 @@ class Case:
         self.host_p[...] = self.p0
         self.device_iterations(1)
         self.lib.set_threads(1)
-        self.c_primal()
-        self.c_dual()
+        self.c_iterations(1)
         return float(max(np.abs(self.d_out.get() - self.host_out).max(), np.abs(self.d_p.get() - self.host_p).max()))
 
 
@@ -185,7 +181,7 @@ def main(argv=None):
                  f"is {args.chain} TV iterations (primal, dual) back to back, as a denoising call issues them (rsocl: "
                  "enqueued, then one wait); time per iteration: the median over "
                  f"{args.rounds} calls, the ways interleaved call by call. GB/s from the {per_voxel} bytes per voxel an "
-                 "iteration must move (primal 20, dual 28). Largest difference: output and dual after one iteration "
+                 f"iteration must move (primal {BYTES['tv_primal']}, dual {BYTES['tv_dual']}). Largest difference: output and dual after one iteration "
                  "from the same input, rsocl against C.", "",
                  "| datacube | rsocl (ms/iteration) | " + " | ".join(f"C, {t} thread{'s' if t > 1 else ''}"
                                                               for t in threads)
