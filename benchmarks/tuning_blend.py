@@ -49,8 +49,9 @@ GROUPS = {
 ITERATIONS = 200
 
 
-def cases(group):
-    """``(key, rig, scene, photons)`` of a group (the paper array: every scene at 64x64, two at 128x128)."""
+def cases(group, one_camera=False):
+    """``(key, rig, scene, photons)`` of a group (the paper array: every scene at 64x64, two at 128x128);
+    random rigs of one camera only with ``one_camera``."""
     seeds, scenes, noises = GROUPS[group]
     if seeds is None:
         sizes = [(64, scenes), (128, ("builtin", "runner40@1"))]
@@ -62,7 +63,7 @@ def cases(group):
         return
     for seed in seeds:
         rig = random_rig(seed)
-        if rig.n_channels == 1:
+        if rig.n_channels == 1 and not one_camera:
             continue
         for scene in scenes:
             for photons in noises:

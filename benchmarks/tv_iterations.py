@@ -40,28 +40,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 from quality_scenes import available, make_scene, noisy  # noqa: E402
-from tuning_blend import GROUPS  # noqa: E402
-from tv_step import random_rig  # noqa: E402
+from tuning_blend import GROUPS, cases as blend_cases  # noqa: E402
 
 ITERATIONS = 200
 COUNTS = (10, 5, 3)
 
 
 def cases(group):
-    """``(key, rig, scene, photons, modes)`` of a group; ``modes``: "tuned", and "fixed" on the paper array."""
-    seeds, scenes, noises = GROUPS[group]
-    if seeds is None:
-        for size, names in ((64, scenes), (128, ("builtin", "runner40@1"))):
-            rig = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6)
-            for scene in names:
-                for photons in noises:
-                    yield f"paper {size}x{size}", rig, scene, photons, ("tuned", "fixed")
-        return
-    for seed in seeds:
-        rig = random_rig(seed)
-        for scene in scenes:
-            for photons in noises:
-                yield f"seed {seed}", rig, scene, photons, ("tuned",)
+    """``(key, rig, scene, photons, modes)`` of a group of ``tuning_blend.py`` (one-camera rigs included);
+    ``modes``: "tuned", and "fixed" on the paper array."""
+    for key, rig, scene, photons in blend_cases(group, one_camera=True):
+        yield key, rig, scene, photons, ("tuned", "fixed") if GROUPS[group][0] is None else ("tuned",)
 
 
 def run_case(rig, scene, photons, modes, counts, device):
