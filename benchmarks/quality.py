@@ -32,7 +32,7 @@ from rsocl.model.simulate import simulate
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality_scenes import available, make_scene, noisy  # noqa: E402
+from quality_scenes import available, case_data  # noqa: E402
 
 WEIGHTS = (1.0, 3.0, 10.0, 30.0)
 LAMS = (0.03, 0.1, 0.3)
@@ -52,10 +52,7 @@ CASES = ([(s, 64, "none") for s in ("builtin", "builtin-slow", "builtin-fast", "
 def run_case(scene, size, noise, args, cache):
     """The results of one case (a dict), computed or from the cache."""
     rig = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6)
-    truth = make_scene(scene, rig.shape, rig.T)
-    g = simulate(truth, rig)
-    if noise == "poisson":
-        g = noisy(g, rig, photons=1000.0, read=0.01, seed=1)
+    truth, g = case_data(scene, rig, 1000.0 if noise == "poisson" else None)
     prefix = f"{scene}|{size}|{noise}|{args.iterations}|"
     common = dict(iterations=args.iterations, device=args.device)
 

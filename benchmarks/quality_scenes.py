@@ -121,3 +121,16 @@ def noisy(g, rig, *, photons=1000.0, read=0.01, seed=0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     g = np.clip(np.asarray(g, dtype=np.float64), 0.0, None)
     return rng.poisson(g * (photons / scale)) * (scale / photons) + rng.normal(0.0, read * scale, g.shape)
+
+
+def case_data(scene, rig, photons=None):
+    """``(truth, g)``: the datacube of ``scene`` on ``rig``'s grid and its simulated snapshots, with
+    :func:`noisy` noise at ``photons`` photo-electrons at full scale, 1 % read noise and seed 1 (None:
+    noiseless)."""
+    from rsocl.model.simulate import simulate
+
+    truth = make_scene(scene, rig.shape, rig.T)
+    g = simulate(truth, rig)
+    if photons is not None:
+        g = noisy(g, rig, photons=photons, read=0.01, seed=1)
+    return truth, g

@@ -29,13 +29,12 @@ import numpy as np
 import rsocl
 from rsocl.analysis.metrics import psnr
 from rsocl.model.interpolation import interp3d
-from rsocl.model.simulate import simulate
 from rsocl.solver.tuning import Tuning
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality_scenes import available, make_scene, noisy  # noqa: E402
+from quality_scenes import available, case_data  # noqa: E402
 from tv_step import random_rig  # noqa: E402
 
 #: name -> (rig seeds, scenes, noise levels: None or photo-electrons at full scale), the paper array as seeds None
@@ -72,10 +71,7 @@ def cases(group, one_camera=False):
 
 def run_case(rig, scene, photons, device):
     """PSNR of interp3d, the tuned default and the same choice unblended; the chosen blend."""
-    truth = make_scene(scene, rig.shape, rig.T)
-    g = simulate(truth, rig)
-    if photons is not None:
-        g = noisy(g, rig, photons=photons, read=0.01, seed=1)
+    truth, g = case_data(scene, rig, photons)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tuned = rsocl.reconstruct(g, rig, iterations=ITERATIONS, device=device)

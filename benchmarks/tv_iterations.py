@@ -34,12 +34,11 @@ import numpy as np
 import rsocl
 from rsocl.analysis.metrics import psnr
 from rsocl.model.interpolation import interp3d
-from rsocl.model.simulate import simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality_scenes import available, make_scene, noisy  # noqa: E402
+from quality_scenes import available, case_data  # noqa: E402
 from tuning_blend import GROUPS, cases as blend_cases  # noqa: E402
 
 ITERATIONS = 200
@@ -55,10 +54,7 @@ def cases(group):
 
 def run_case(rig, scene, photons, modes, counts, device):
     """PSNR of interp3d; per mode and count: PSNR, seconds and the chosen values."""
-    truth = make_scene(scene, rig.shape, rig.T)
-    g = simulate(truth, rig)
-    if photons is not None:
-        g = noisy(g, rig, photons=photons, read=0.01, seed=1)
+    truth, g = case_data(scene, rig, photons)
     out = {"interp3d": float(psnr(interp3d(g, rig), truth, data_range=1.0))}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
