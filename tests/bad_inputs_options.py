@@ -1,0 +1,26 @@
+"""Bad command-line options and solver arguments (table of tests/test_bad_inputs.py)."""
+
+import numpy as np
+
+from test_bad_inputs import Bad
+
+import rsocl
+
+
+def _rig():
+    return rsocl.Rig.paper_array(4, (8, 8), 0.18e-3, 35e-6)
+
+
+def _reconstruct(**kw):
+    rig = _rig()
+    g = np.zeros((len(rig.cameras),) + tuple(rig.shape), np.float32)
+    return lambda tmp: rsocl.reconstruct(g, rig, **kw)
+
+
+CASES = [
+    Bad("simulate-shape-zero", ["--shape"], argv=["simulate", "builtin", "--shape", "0", "8", "--out", "{tmp}/s.h5"]),
+    Bad("simulate-cameras-zero", ["--cameras"], argv=["simulate", "builtin", "--cameras", "0", "--out", "{tmp}/s.h5"]),
+    Bad("reconstruct-missing-capture", ["nothing.h5"], argv=["reconstruct", "{tmp}/nothing.h5", "--out", "{tmp}/r.h5"]),
+    Bad("api-iterations-zero", ["iterations"], api=_reconstruct(iterations=0)),
+    Bad("api-lam-negative", ["lam"], api=_reconstruct(lam=-1.0)),
+]
