@@ -73,7 +73,10 @@ def check_partial(partial: Path, name: str = "out") -> None:
 
     try:
         with h5py.File(partial, "r") as h5:
-            sets = int(h5.attrs.get("sets_complete", 0))
+            if "sets_complete" in h5.attrs:                 # written by rsocl capture after each set
+                sets = int(h5.attrs["sets_complete"])
+            else:                                           # another writer's capture file
+                sets = h5["snapshot_sets"].shape[0] if "snapshot_sets" in h5 else int("snapshots" in h5)
     except BlockingIOError:
         raise ValueError(f"{name}: {str(partial)!r} is being written by another capture (it holds the file's "
                          "lock); wait for it or choose another --out") from None
