@@ -207,7 +207,7 @@ def test_a_full_disk_while_reconstructing_is_one_line_and_keeps_the_earlier_resu
     err = capsys.readouterr().err
     assert rc == 1 and "Traceback" not in err
     [line] = _error_lines(err)
-    assert f"cannot write {str(out)!r}: No space left on device; the existing file is unchanged" in line
+    assert f"cannot write {str(out)!r}: No space left on device (errno 28); the existing file is unchanged" in line
     assert out.read_bytes() == b"an earlier result"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.h5", "r.h5"]     # no temporary left
 
@@ -224,7 +224,9 @@ def test_a_full_disk_while_simulating_is_one_line(tmp_path, capsys, monkeypatch)
 def test_output_error_is_an_oserror_naming_the_file():
     exc = OutputError("/x/r.h5", OSError(errno.EACCES, "Permission denied\nmore"), existed=False)
     assert isinstance(exc, OSError) and exc.errno == errno.EACCES and exc.filename == "/x/r.h5"
-    assert str(exc) == "cannot write '/x/r.h5': Permission denied more; no file was made"
+    assert str(exc) == "cannot write '/x/r.h5': Permission denied (errno 13); no file was made"
+    unnumbered = OutputError("r.h5", OSError("HDF5: cannot\nclose"), existed=True)
+    assert str(unnumbered) == "cannot write 'r.h5': HDF5: cannot close; the existing file is unchanged"
 
 
 def test_a_lock_or_permission_fault_is_one_line_naming_the_file():
@@ -260,15 +262,9 @@ def test_capture_on_a_disk_that_refuses_writes_ends_in_one_line_not_a_crash(tmp_
     capture_sets(rig, tmp_path / "warm.h5", sets=1)     # the kernels built (and cached) without the limit
     out = tmp_path / "f.h5"
     out.write_bytes(b"an earlier capture")
-    limit = 3_000_000                                   # bytes any file may reach: the capture needs more
-
-    def refuse_large_files():
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-
     run = subprocess.run([sys.executable, "-m", "rsocl.cli", "capture", "--rig", str(rig), "--out", str(out),
-                          "--sets", "40", "--quiet"], preexec_fn=refuse_large_files, capture_output=True, text=True,
-                         timeout=300)
+                          "--sets", "40", "--quiet"], preexec_fn=_limited(3_000_000), capture_output=True, text=True,
+                         timeout=300)             # no file may grow past 3 MB: the capture needs more
     assert run.returncode == 1, (run.returncode, run.stderr)          # not a crash (-11, 139)
     assert "Traceback" not in run.stderr and "Exception ignored" not in run.stderr
     [line] = _error_lines(run.stderr)
@@ -324,3 +320,40 @@ def test_a_tiled_runs_error_goes_to_stderr(three_sets, tmp_path, capsys, monkeyp
     captured = capsys.readouterr()
     assert rc == 1 and "error" not in captured.out
     assert "rsocl reconstruct: error: 1 task(s) failed, 3 kept" in captured.err
+
+
+def _limited(limit):
+    def refuse_large_files():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return refuse_large_files
+
+
+def test_simulate_on_a_disk_that_refuses_writes_is_one_line_and_keeps_the_earlier_file(tmp_path, capsys):
+    argv = ["simulate", "builtin", "--shape", "96", "96", "--quiet"]
+    assert main([*argv, "--out", str(tmp_path / "warm.h5")]) == 0     # kernels built without the limit
+    out = tmp_path / "s.h5"
+    out.write_bytes(b"an earlier capture")
+    run = subprocess.run([sys.executable, "-m", "rsocl.cli", *argv, "--out", str(out)], capture_output=True,
+                         text=True, preexec_fn=_limited(1_500_000), timeout=300)
+    assert run.returncode == 1 and "Traceback" not in run.stderr, run.stderr
+    [line] = _error_lines(run.stderr)
+    assert line == f"rsocl simulate: error: cannot write {str(out)!r}: File too large (errno 27); the existing " \
+                   "file is unchanged"
+    assert out.read_bytes() == b"an earlier capture"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.h5", "warm.h5"]
+
+
+def test_a_close_that_cannot_write_is_an_oserror_with_its_errno(tmp_path, monkeypatch):
+    import h5py
+
+    def close(self):
+        raise RuntimeError("Can't decrement id ref count (unable to extend file properly, errno = 28, "
+                           "error message = 'No space left on device')")
+
+    monkeypatch.setattr(h5py.File, "close", close)
+    rig = Rig.paper_array(2, (4, 4), t_e=180e-6, t_r=35e-6)
+    with pytest.raises(OutputError, match=r"cannot write .*one\.h5': No space left on device \(errno 28\); no file"):
+        save_capture(tmp_path / "one.h5", np.zeros((rig.n_channels, 4, 4)), rig)
+    monkeypatch.undo()
+    assert list(tmp_path.iterdir()) == []

@@ -39,7 +39,10 @@ class OutputError(OSError):
 
     def __init__(self, path, cause: OSError, existed: bool):
         kept = "the existing file is unchanged" if existed else "no file was made"
-        why = " ".join((cause.strerror or str(cause) or type(cause).__name__).split())
+        if cause.errno:                           # HDF5's own words list buffers and offsets
+            why = f"{os.strerror(cause.errno)} (errno {cause.errno})"
+        else:
+            why = " ".join((cause.strerror or str(cause) or type(cause).__name__).split())
         super().__init__(cause.errno, f"cannot write {str(path)!r}: {why}; {kept}", str(path))
 
     def __str__(self):

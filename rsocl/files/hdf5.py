@@ -28,7 +28,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.files.atomic import atomic_path
 from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, json_attr, open_checked, read_array, read_rig, \
-    real_dataset, write_header
+    new_file, real_dataset, write_header
 from rsocl.model.rig import Rig
 
 __all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_capture_rig", "load_snapshot_sets",
@@ -141,10 +141,8 @@ def save_capture(path, snapshots, rig, *, truth=None, attrs=None) -> Path:
         truth = _cube("truth", truth, (rig.T, m, n), "[T = rig.T, m, n]")
     meta = dumps_json("attrs", attrs)
     path = Path(os.fspath(path))
-    import h5py
-
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as h5:
+        with new_file(tmp) as h5:
             write_header(h5, "capture", rig)
             h5.attrs["meta"] = meta
             h5.create_dataset("snapshots", data=snapshots)
@@ -308,10 +306,8 @@ def save_reconstruction(path, datacube, rig, *, params=None, history=None, truth
                                  f"dtype {trace.dtype}")
             traces[name] = trace
     path = Path(os.fspath(path))
-    import h5py
-
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as h5:
+        with new_file(tmp) as h5:
             write_header(h5, "reconstruction", rig)
             h5.attrs["params"] = params_json
             h5.create_dataset("datacube", data=datacube)
