@@ -357,3 +357,23 @@ def test_a_close_that_cannot_write_is_an_oserror_with_its_errno(tmp_path, monkey
         save_capture(tmp_path / "one.h5", np.zeros((rig.n_channels, 4, 4)), rig)
     monkeypatch.undo()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_part_way_through_the_sets_says_which_are_written(three_sets, tmp_path, capsys, monkeypatch):
+    from rsocl.files import hdf5
+
+    real = hdf5.save_reconstruction
+
+    def save(path, *args, **kwargs):
+        if "set002" in str(path):
+            raise OutputError(path, OSError(errno.ENOSPC, "No space left on device"), existed=False)
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(hdf5, "save_reconstruction", save)
+    shutil.copy(three_sets, tmp_path / "c.h5")
+    rc = main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "r.h5"), *"--fast --iterations 2 "
+               "--quiet".split()])
+    [line] = _error_lines(capsys.readouterr().err)
+    assert rc == 1 and line.startswith(f"rsocl reconstruct: error: cannot write {str(tmp_path / 'r-set002.h5')!r}")
+    assert line.endswith(f"no file was made; sets 0 to 1 are written ({tmp_path / 'r-set000.h5'} ..)")
+    assert sorted(p.name for p in tmp_path.glob("r-set*")) == ["r-set000.h5", "r-set001.h5"]

@@ -89,6 +89,7 @@ def cmd_reconstruct(args) -> int:
     or another capture); tiles (and sets) run on Dask when asked or needed.
     """
     from rsocl.analysis.visual import comparison_gif
+    from rsocl.files.atomic import OutputError
     from rsocl.files.hdf5 import load_capture, load_snapshot_sets, save_reconstruction
 
     if args.batch is not None and args.batch < 1:          # before anything runs, whatever the capture holds
@@ -118,8 +119,13 @@ def cmd_reconstruct(args) -> int:
         one = batch.set(i)
         known = truth if i == 0 else None              # the capture's truth is set 0's datacube
         print(f"set {i}: " + quality_line(one, known))
-        save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history,
-                            truth=known)
+        try:
+            save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params,
+                                history=one.history, truth=known)
+        except OutputError as exc:                     # a full disk: say which sets are on it
+            if i:
+                exc.strerror += f"; sets 0 to {i - 1} are written ({set_path(out, 0)} ..)"
+            raise
     comparison_gif(gif, truth, batch.set(0).datacube)
     plots = tuning_plot_files(args, batch.set(0).params, gif)
     say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, " + ", ".join(map(str, [gif, *plots])))
