@@ -95,7 +95,7 @@ def fault_line(exc: OSError) -> str:
     else:
         why = " ".join(str(exc).split()) or type(exc).__name__
     where = f"{exc.filename!r}: " if exc.filename else ""
-    return f"{where}{why}; every file written is complete or absent (written atomically), the others are unchanged"
+    return f"{where}{why}; outputs replace a file only once complete, so the files already there are unchanged"
 
 
 if __name__ == "__main__":  # pragma: no cover

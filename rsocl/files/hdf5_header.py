@@ -166,6 +166,9 @@ def open_checked(path, kind: str, name: str = "path"):
     try:
         h5 = h5py.File(path, "r")
     except OSError as exc:
+        if "unable to lock file" in str(exc):
+            raise ValueError(f"{name}: {str(path)!r} is being written by another process (it holds the file's "
+                             "lock); read it once that process has finished") from None
         raise ValueError(f"{name}: {str(path)!r} is not a readable HDF5 file ({check.cause(exc)})") from None
     try:
         found = h5.attrs.get("rsocl_file")
