@@ -5,7 +5,6 @@ explicitly, and full disks, locks and kernel-cache races end cleanly."""
 import errno
 import hashlib
 import os
-import resource
 import shutil
 import signal
 import socket
@@ -260,6 +259,20 @@ def test_a_write_error_during_capture_keeps_the_sets_and_is_one_line(tmp_path, c
     assert load_snapshot_sets(tmp_path / "f.h5").shape[0] == 2
 
 
+POSIX = pytest.mark.skipif(os.name != "posix", reason="file-size limits (RLIMIT_FSIZE) are POSIX")
+
+
+def _limited(limit):
+    """A ``preexec_fn`` under which no file of the child may grow past ``limit`` bytes (EFBIG, as a full disk)."""
+    import resource
+
+    def refuse_large_files():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return refuse_large_files
+
+
+@POSIX
 def test_capture_on_a_disk_that_refuses_writes_ends_in_one_line_not_a_crash(tmp_path):
     rig = _rig_file(tmp_path, shape=(64, 64))
     capture_sets(rig, tmp_path / "warm.h5", sets=1)     # the kernels built (and cached) without the limit
@@ -325,13 +338,7 @@ def test_a_tiled_runs_error_goes_to_stderr(three_sets, tmp_path, capsys, monkeyp
     assert "rsocl reconstruct: error: 1 task(s) failed, 3 kept" in captured.err
 
 
-def _limited(limit):
-    def refuse_large_files():
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-    return refuse_large_files
-
-
+@POSIX
 def test_simulate_on_a_disk_that_refuses_writes_is_one_line_and_keeps_the_earlier_file(tmp_path, capsys):
     argv = ["simulate", "builtin", "--shape", "96", "96", "--quiet"]
     assert main([*argv, "--out", str(tmp_path / "warm.h5")]) == 0     # kernels built without the limit
