@@ -330,7 +330,7 @@ def gige_checks(workdir):
             write_rig(rig, formats, interfaces)
             out = capture_sets(rig, workdir / "capture.h5", sets=2, timeout=2.0)
             raw = load_raw(out)
-            cap = load_capture(out)
+            cap = load_capture(out, set_index=0)
             facts.update(path=str(out), status=raw.status, sets_complete=raw.sets_complete,
                          raw_shapes=[list(f.shape) for f in raw.frames], raw_dtypes=[str(f.dtype) for f in raw.frames],
                          sets=[s.tolist() for s in raw.sets], frame_meta=[m[0] for m in raw.frame_meta],

@@ -37,7 +37,7 @@ def test_capture_round_trip(tmp_path):
     assert capture_sets(path, out, sets=3) == out
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.h5", "rig.toml"]   # no .partial left
 
-    capture = load_capture(out)
+    capture = load_capture(out, set_index=0)
     rig = capture.rig
     assert rig == Rig.paper_array(4, SHAPE, t_e=T_E, t_r=T_R)
     assert capture.snapshots.shape == (4,) + SHAPE and capture.truth.shape == (rig.T,) + SHAPE
@@ -207,7 +207,7 @@ def test_the_capture_rig_holds_the_exposure_the_device_applied(tmp_path, capsys)
     with pytest.warns(UserWarning, match=r"camera 0: the device applied an exposure of 0\.00015 s where the rig "
                                          r"file says t_e = 0\.00018 s; the capture's rig uses 0\.00015 s"):
         capture_sets(rf, out, sets=2)
-    capture = load_capture(out)
+    capture = load_capture(out, set_index=0)
     assert [cam.t_e for cam in capture.rig.cameras] == [150e-6, T_E, T_E, T_E]
     assert capture.meta["cameras"][0]["exposure"] == 150e-6 and len(capture.meta["warnings"]) == 1
     # the snapshots are the stored rig's forward model of the scene: the rig reconstructs them

@@ -13,7 +13,9 @@ def add_parser(subparsers):
         "capture", help="rig file (TOML) -> capture file (HDF5): synchronized sets from the cameras",
         description="Capture synchronized sets from the cameras of a rig file. Each raw frame is written "
                     "before the next is requested, to OUT.partial, renamed to OUT at the end; if a camera "
-                    "fails, OUT keeps everything captured and records the failure, and the exit status is 1.")
+                    "fails, OUT keeps everything captured and records the failure, and the exit status is 1. "
+                    "An OUT.partial left by a killed capture is never overwritten: the capture is refused "
+                    "(naming its complete sets) until it is renamed or removed.")
     p.add_argument("--rig", required=True, help="TOML rig file (seconds, degrees)")
     p.add_argument("--out", required=True, help="capture file to write (.h5)")
     p.add_argument("--sets", type=int, default=1, help="number of synchronized sets (default 1)")

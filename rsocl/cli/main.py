@@ -8,6 +8,7 @@ arguments they share are in :mod:`rsocl.cli.options`.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 
@@ -49,8 +50,9 @@ def main(argv=None) -> int:
     """Run ``rsocl`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status.
 
     0: done; 1: the command reports a failure of its own (no OpenCL device, a camera failed, the host
-    memory ran out part way: sizes that cannot fit are refused first, with 2); 2: bad arguments or input
-    (the message names them); 130: interrupted.
+    memory ran out part way: sizes that cannot fit are refused first, with 2), or the system refused a
+    file (disk full, permission, a lock another process holds: one line, :func:`fault_line`); 2: bad
+    arguments or input (the message names them); 130: interrupted.
     """
     from rsocl.device.context import NoOpenCLError
 
@@ -69,9 +71,31 @@ def main(argv=None) -> int:
         print(f"rsocl {args.command}: error: out of host memory ({str(exc).strip() or 'MemoryError'}); "
               "a smaller grid, fewer sets or tiles (rsocl plan) need less", file=sys.stderr)
         return 1
+    except OSError as exc:
+        print(f"rsocl {args.command}: error: {fault_line(exc)}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"rsocl {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def fault_line(exc: OSError) -> str:
+    """One line for a file the system refused: the path, the cause and what was kept.
+
+    An :class:`~rsocl.files.atomic.OutputError` says it all; another ``OSError`` (HDF5's messages span
+    lines and list buffers) is named by its file and the system's words for its error number."""
+    from rsocl.files.atomic import OutputError
+
+    if isinstance(exc, OutputError):
+        return str(exc)
+    if isinstance(exc, BlockingIOError) or "unable to lock file" in str(exc):
+        why = "another process holds its lock (it is being written)"
+    elif exc.errno:
+        why = f"{os.strerror(exc.errno)} (errno {exc.errno})"
+    else:
+        why = " ".join(str(exc).split()) or type(exc).__name__
+    where = f"{exc.filename!r}: " if exc.filename else ""
+    return f"{where}{why}; outputs replace a file only once complete, so the files already there are unchanged"
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -10,7 +10,7 @@ from rsocl.cli.options import add_device_args, add_solver_args, quality_line, re
     tuning_plot_files
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
-__all__ = ["add_parser", "cmd_reconstruct", "set_path"]
+__all__ = ["add_parser", "cmd_reconstruct", "set_path", "check_set_outputs"]
 
 
 def add_parser(subparsers):
@@ -39,6 +39,45 @@ def set_path(out: Path, index: int) -> Path:
     return out.with_name(f"{out.stem}-set{index:03d}{out.suffix}")
 
 
+def check_set_outputs(args) -> None:
+    """Refuse, naming ``--out``, an HDF5 ``--out`` whose files (``--out`` itself and, for a capture of
+    several sets, every :func:`set_path`) would replace the capture the run reads (the same path, a
+    link or a hard link to it) or any other capture file, before anything is computed."""
+    from rsocl.files.atomic import output_path
+    from rsocl.files.hdf5 import snapshot_set_count
+
+    capture = Path(args.capture)
+    if str(args.out).rstrip("/").lower().endswith(".zarr") or not capture.is_file():
+        return                                        # a store is a folder; a missing capture is named on loading
+    out = Path(args.out)
+    paths = [("--out", out)]
+    if not (args.first_set_only or args.window is not None):
+        count = snapshot_set_count(capture)
+        if count > 1:
+            paths += [(f"--out's set {i} file (of {count} sets)", set_path(out, i)) for i in range(count)]
+    for name, path in paths:
+        output_path(path, name, inputs=(("capture", capture),))
+        if _is_capture(path):
+            raise ValueError(f"{name} {str(path)!r} is a capture file; a reconstruction never replaces a capture: "
+                             "choose another --out")
+
+
+def _is_capture(path: Path) -> bool:
+    """Whether ``path`` is an existing rsocl capture file (HDF5, ``rsocl_file = "capture"``)."""
+    if not path.is_file():
+        return False
+    import h5py
+
+    try:
+        if not h5py.is_hdf5(path):
+            return False
+        with h5py.File(path, "r") as h5:
+            kind = h5.attrs.get("rsocl_file")
+    except OSError:
+        return False
+    return (kind.decode() if isinstance(kind, bytes) else kind) == "capture"
+
+
 def cmd_reconstruct(args) -> int:
     """Reconstruct the capture (every set of a multi-set capture, in batches sized to the device), print the
     quality line of each set, write the reconstruction file(s) and the GIF; returns 0.
@@ -46,19 +85,22 @@ def cmd_reconstruct(args) -> int:
     The capture's ground truth (set 0's datacube), unless ``--no-truth``, gives the PSNR/SSIM and
     is copied into the reconstruction file (of set 0); with ``--no-truth`` it is neither.
 
-    The output paths are checked first; tiles (and sets) run on Dask when asked or needed.
+    The output paths are checked first (:func:`check_set_outputs`: no file written replaces the capture,
+    or another capture); tiles (and sets) run on Dask when asked or needed.
     """
     from rsocl.analysis.visual import comparison_gif
+    from rsocl.files.atomic import OutputError
     from rsocl.files.hdf5 import load_capture, load_snapshot_sets, save_reconstruction
 
     if args.batch is not None and args.batch < 1:          # before anything runs, whatever the capture holds
         raise ValueError(f"--batch must be >= 1 (sets per batch), got {args.batch}")
     check_outputs(args)
+    check_set_outputs(args)
     code = reconstruct_tiled_if_needed(args)
     if code is not None:
         return code
 
-    capture = load_capture(args.capture)
+    capture = load_capture(args.capture, set_index=0)            # every set: load_snapshot_sets
     truth = capture.truth if not args.no_truth else None
     sets = None if args.first_set_only else load_snapshot_sets(args.capture)
     out = Path(args.out)
@@ -77,8 +119,13 @@ def cmd_reconstruct(args) -> int:
         one = batch.set(i)
         known = truth if i == 0 else None              # the capture's truth is set 0's datacube
         print(f"set {i}: " + quality_line(one, known))
-        save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history,
-                            truth=known)
+        try:
+            save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params,
+                                history=one.history, truth=known)
+        except OutputError as exc:                     # a full disk: say which sets are on it
+            if i:
+                exc.strerror += f"; sets 0 to {i - 1} are written ({set_path(out, 0)} ..)"
+            raise
     comparison_gif(gif, truth, batch.set(0).datacube)
     plots = tuning_plot_files(args, batch.set(0).params, gif)
     say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, " + ", ".join(map(str, [gif, *plots])))

@@ -192,7 +192,7 @@ def reconstruct_tiled_if_needed(args):
             out=args.out if zarr_out else None, scheduler=args.scheduler, workers=args.workers,
             retries=_retries(args), tune=not args.fast, blend=args.blend, progress=not args.quiet)
     except TilesFailed as exc:
-        print(f"rsocl reconstruct: error: {exc}", flush=True)
+        print(f"rsocl reconstruct: error: {exc}", file=sys.stderr, flush=True)
         return 1
     ran = len(result.pieces)
     kept = f", {result.skipped} already in the store" if result.skipped else ""
@@ -227,7 +227,7 @@ def _stream(args, capture):
     from rsocl.files.hdf5 import load_capture, save_reconstruction
     from rsocl.scale.stream import default_overlap, reconstruct_stream
 
-    loaded = load_capture(args.capture)
+    loaded = load_capture(args.capture, set_index=0)
     stream = reconstruct_stream(
         loaded.snapshots, loaded.rig, window=args.window, overlap=args.overlap, tile=args.tile, halo=args.halo,
         regularizer=args.regularizer, iterations=args.iterations, lam=args.lam, eta=args.eta,

@@ -289,10 +289,16 @@ def _build(context, files, defines):
     lines += [f"#define {k} {v}" for k, v in defines]
     lines.append(f"#define REAL_IS_DOUBLE {int(dict(defines).get('REAL') == 'double')}")
     source = "\n".join(lines) + "\n" + "\n".join(kernel_source(f) for f in ("common.cl",) + tuple(files))
-    program = cl.Program(context, source)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        program.build(options=["-cl-std=CL1.2"])
+    for attempt in (1, 2):      # once more on a failed clBuildProgram: processes filling PoCL's kernel cache
+        program = cl.Program(context, source)     # together can read another's half-written entry
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                program.build(options=["-cl-std=CL1.2"])
+                break
+            except cl.Error as exc:
+                if attempt == 2 or "clBuildProgram" not in str(exc):
+                    raise
     if caught:
         said = any(meaningful_log(program.get_build_info(dev, cl.program_build_info.LOG)) for dev in context.devices)
         for w in caught:

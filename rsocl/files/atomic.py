@@ -5,17 +5,109 @@ its file there; on success the temporary file is flushed to disk (``fsync``)
 and renamed over the target with :func:`os.replace`, which is atomic on POSIX
 and Windows when both paths are on the same file system. On any exception the
 temporary file is removed and the exception propagates, so a failed write
-never leaves a partial file behind nor clobbers an existing good one.
+never leaves a partial file behind nor clobbers an existing good one; an
+``OSError`` (a full disk, a permission refused) becomes an :class:`OutputError`
+that names the target and says what was kept.
+
+Temporary names carry their owner, ``<host>-<pid>``: the temporaries a killed
+process left (it could not remove them) are recognised by the next writer of
+the same target on the same host, whose process is gone, and removed
+(:func:`remove_stale`); a live process's temporary is never touched.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
+import shutil
+import socket
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "output_path", "output_folder", "default_mode", "fsync_file", "fsync_directory"]
+__all__ = ["atomic_path", "output_path", "output_folder", "default_mode", "fsync_file", "fsync_directory",
+           "OutputError", "owned_prefix", "remove_stale", "process_running"]
+
+#: The rest of an :func:`atomic_path` temporary's name after its owner tag: :func:`tempfile.mkstemp`'s
+#: eight random characters and the suffix.
+TMP_TAIL = r"[a-z0-9_]{8}\.tmp"
+
+
+class OutputError(OSError):
+    """Writing an output file failed (disk full, permission, ...); the message names the file and what was
+    kept (the earlier file unchanged, or none made). ``errno`` and ``filename`` are the failure's."""
+
+    def __init__(self, path, cause: OSError, existed: bool):
+        kept = "the existing file is unchanged" if existed else "no file was made"
+        if cause.errno:                           # HDF5's own words list buffers and offsets
+            why = f"{os.strerror(cause.errno)} (errno {cause.errno})"
+        else:
+            why = " ".join((cause.strerror or str(cause) or type(cause).__name__).split())
+        super().__init__(cause.errno, f"cannot write {str(path)!r}: {why}; {kept}", str(path))
+
+    def __str__(self):
+        return self.strerror
+
+
+def owned_prefix(prefix: str) -> str:
+    """``prefix`` followed by this process's owner tag, ``<host>-<pid>-``: the start of a temporary
+    name that :func:`remove_stale` can tell apart from the live ones."""
+    return f"{prefix}{socket.gethostname()}-{os.getpid()}-"
+
+
+def process_running(pid: int) -> bool:
+    """Whether process ``pid`` exists on this host (another user's included)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    except (OverflowError, OSError):
+        return False
+    return True
+
+
+def remove_stale(directory, prefix: str, tail: str) -> list:
+    """Remove the temporaries in ``directory`` named ``owned_prefix(prefix) + tail`` by a process of this
+    host that no longer runs; returns the paths removed.
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        Where the temporaries are.
+    prefix : str
+        The start of their names, before the owner tag (e.g. ``"out.h5."``).
+    tail : str
+        A regular expression for the rest of the name after ``<host>-<pid>-`` (e.g. :data:`TMP_TAIL`).
+
+    A file is unlinked, a folder removed with its content. Temporaries of other hosts (a shared
+    folder) and of running processes are kept; nothing is done where processes cannot be asked
+    (not POSIX). Errors while removing are ignored (another process may remove them first).
+    """
+    if os.name != "posix":
+        return []
+    directory = Path(os.fspath(directory))
+    start = f"{prefix}{socket.gethostname()}-"
+    pattern = re.compile(r"(\d+)-" + tail)
+    removed = []
+    try:
+        entries = list(directory.iterdir())
+    except OSError:
+        return []
+    for entry in entries:
+        if not entry.name.startswith(start):
+            continue
+        found = pattern.fullmatch(entry.name[len(start):])
+        if not found or int(found.group(1)) == os.getpid() or process_running(int(found.group(1))):
+            continue
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                entry.unlink()
+        removed.append(entry)
+    return removed
 
 
 def default_mode() -> int:
@@ -111,7 +203,9 @@ def atomic_path(path):
     """Context manager yielding a temporary path that replaces ``path`` on success.
 
     The temporary file is created (empty) with :func:`tempfile.mkstemp` in the
-    directory of ``path``, named ``<name>.<random>.tmp``. The caller writes
+    directory of ``path``, named ``<name>.<host>-<pid>-<random>.tmp``; the temporaries
+    of ``path`` that killed processes of this host left are removed first
+    (:func:`remove_stale`). The caller writes
     the complete file there and closes it before the ``with`` block ends;
     writers that pick a format from the file name must be told the format
     explicitly (e.g. ``savefig(tmp, format="png")``), since the name ends in
@@ -135,6 +229,9 @@ def atomic_path(path):
         If the directory of ``path`` does not exist.
     ValueError
         If ``path`` names an existing directory.
+    OutputError
+        If the write fails with an ``OSError`` (disk full, permission refused): ``path`` is
+        unchanged (or not made) and the temporary file removed.
 
     Examples
     --------
@@ -144,8 +241,13 @@ def atomic_path(path):
     """
     path = output_path(path)
     directory = path.parent
-    mode = (path.stat().st_mode & 0o7777) if path.exists() else default_mode()
-    fd, tmp_name = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=directory)
+    existed = path.exists()
+    mode = (path.stat().st_mode & 0o7777) if existed else default_mode()
+    remove_stale(directory, path.name + ".", TMP_TAIL)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=owned_prefix(path.name + "."), suffix=".tmp", dir=directory)
+    except OSError as exc:
+        raise OutputError(path, exc, existed) from exc
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -153,8 +255,11 @@ def atomic_path(path):
         os.chmod(tmp, mode)
         fsync_file(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(exc, OSError) and not isinstance(exc, (OutputError, FileNotFoundError)):
+            raise OutputError(path, exc, existed) from exc
         raise
     fsync_directory(directory)
+

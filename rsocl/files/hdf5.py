@@ -28,7 +28,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.files.atomic import atomic_path
 from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, json_attr, open_checked, read_array, read_rig, \
-    write_header
+    new_file, real_dataset, write_header
 from rsocl.model.rig import Rig
 
 __all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_capture_rig", "load_snapshot_sets",
@@ -141,10 +141,8 @@ def save_capture(path, snapshots, rig, *, truth=None, attrs=None) -> Path:
         truth = _cube("truth", truth, (rig.T, m, n), "[T = rig.T, m, n]")
     meta = dumps_json("attrs", attrs)
     path = Path(os.fspath(path))
-    import h5py
-
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as h5:
+        with new_file(tmp) as h5:
             write_header(h5, "capture", rig)
             h5.attrs["meta"] = meta
             h5.create_dataset("snapshots", data=snapshots)
@@ -153,19 +151,24 @@ def save_capture(path, snapshots, rig, *, truth=None, attrs=None) -> Path:
     return path
 
 
-def load_capture(path) -> Capture:
-    """Read a file written by :func:`save_capture`.
+def load_capture(path, set_index=None) -> Capture:
+    """Read a file written by :func:`save_capture` or ``rsocl capture``: one set of snapshots.
 
     Parameters
     ----------
     path : str or os.PathLike
         The capture file.
+    set_index : int, optional
+        Which set of a capture of several sets (``rsocl capture --sets S``: ``0 <= set_index < S``).
+        None, the default, reads the only set of a one-set capture; of a capture of several sets it
+        reads set 0 and warns, naming the set count (give ``set_index=0`` to say so).
+        :func:`load_snapshot_sets` reads every set.
 
     Returns
     -------
     Capture
-        ``snapshots``, ``rig`` (equal to the saved one), ``truth`` (or None)
-        and ``meta``.
+        ``snapshots`` (of the set asked for), ``rig`` (equal to the saved one), ``truth``
+        (set 0's datacube, so None for another set, or None when not stored) and ``meta``.
 
     Raises
     ------
@@ -173,14 +176,49 @@ def load_capture(path) -> Capture:
         If ``path`` does not exist.
     ValueError
         If the file is not an rsocl capture file (another kind, not HDF5, or
-        a newer format version) or its content is damaged.
+        a newer format version) or its content is damaged, or ``set_index`` is not
+        one of its sets.
+
+    Warns
+    -----
+    UserWarning
+        ``set_index`` not given for a capture of several sets.
+
+    Examples
+    --------
+    >>> capture = load_capture("capture.h5", set_index=2)      # doctest: +SKIP
+    >>> capture.snapshots.shape                                 # doctest: +SKIP
+    (4, 64, 64)
     """
     source = str(path)
+    if set_index is not None:
+        set_index = _set_index(set_index)
     with open_checked(path, "capture") as h5:
         rig = read_rig(h5, source)
-        snapshots = read_array(h5, "snapshots", source, (rig.n_channels,) + rig.shape)
-        return Capture(snapshots=snapshots, rig=rig, truth=_optional(h5, "truth", source, rig.shape),
-                       meta=json_attr(h5, "meta", source))
+        count = int(h5["snapshot_sets"].shape[0]) if "snapshot_sets" in h5 else 1
+        if set_index is not None and set_index >= count:
+            raise ValueError(f"set_index must be in [0, {count - 1}] ({source} holds {count} set(s)), "
+                             f"got {set_index}")
+        if set_index is None and count > 1:
+            import warnings
+
+            warnings.warn(f"{source} holds {count} sets; load_capture reads set 0 (set_index=0 says so, "
+                          f"set_index=k reads set k, load_snapshot_sets reads every set)", stacklevel=2)
+        if set_index:
+            snapshots = real_dataset(h5, "snapshot_sets", source, (rig.n_channels,) + rig.shape)[set_index]
+            if not np.all(np.isfinite(snapshots)):
+                raise ValueError(f"{source}: set {set_index} of dataset 'snapshot_sets' holds NaN or inf values")
+            truth = None                                  # the stored truth is set 0's datacube
+        else:
+            snapshots = read_array(h5, "snapshots", source, (rig.n_channels,) + rig.shape)
+            truth = _optional(h5, "truth", source, rig.shape)
+        return Capture(snapshots=snapshots, rig=rig, truth=truth, meta=json_attr(h5, "meta", source))
+
+
+def _set_index(value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ValueError(f"set_index must be an integer >= 0 (a set of the capture), got {value!r}")
+    return int(value)
 
 
 def load_capture_rig(path) -> Rig:
@@ -202,7 +240,7 @@ def snapshot_set_count(path) -> int:
 def load_snapshot_sets(path) -> np.ndarray | None:
     """Every registered set ``(S, K, m, n)`` of a multi-set capture (dataset ``snapshot_sets``), or None.
 
-    Captures of ``rsocl capture`` hold one set per trigger; :func:`load_capture` reads set 0 only.
+    Captures of ``rsocl capture`` hold one set per trigger; :func:`load_capture` reads one of them.
     """
     source = str(path)
     with open_checked(path, "capture") as h5:
@@ -268,10 +306,8 @@ def save_reconstruction(path, datacube, rig, *, params=None, history=None, truth
                                  f"dtype {trace.dtype}")
             traces[name] = trace
     path = Path(os.fspath(path))
-    import h5py
-
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as h5:
+        with new_file(tmp) as h5:
             write_header(h5, "reconstruction", rig)
             h5.attrs["params"] = params_json
             h5.create_dataset("datacube", data=datacube)

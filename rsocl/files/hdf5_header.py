@@ -12,12 +12,17 @@ Root attributes (format version 1):
 
 :func:`write_header` writes them, :func:`open_checked` opens a file and checks its kind and
 version, :func:`read_rig` reads the rig back; JSON attributes go through :func:`dumps_json`.
+:func:`new_file` creates a file whose failed close (a full disk) is an ``OSError``.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
 import numbers
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +31,7 @@ from rsocl.common import validation as check
 from rsocl.model.rig import Rig
 
 __all__ = ["FORMAT_VERSION", "json_default", "dumps_json", "write_rig", "read_rig", "str_attr", "write_header",
-           "open_checked", "json_attr", "read_array", "real_dataset"]
+           "open_checked", "json_attr", "read_array", "real_dataset", "new_file", "close_error"]
 
 #: Version written to the ``format_version`` attribute; files with a larger
 #: version are refused.
@@ -161,6 +166,9 @@ def open_checked(path, kind: str, name: str = "path"):
     try:
         h5 = h5py.File(path, "r")
     except OSError as exc:
+        if "unable to lock file" in str(exc):
+            raise ValueError(f"{name}: {str(path)!r} is being written by another process (it holds the file's "
+                             "lock); read it once that process has finished") from None
         raise ValueError(f"{name}: {str(path)!r} is not a readable HDF5 file ({check.cause(exc)})") from None
     try:
         found = h5.attrs.get("rsocl_file")
@@ -177,3 +185,39 @@ def open_checked(path, kind: str, name: str = "path"):
         h5.close()
         raise
     return h5
+
+
+def close_error(exc: Exception) -> OSError:
+    """An ``OSError`` for HDF5's failure ``exc`` (h5py raises ``RuntimeError`` when a close cannot write
+    what it holds), with the error number HDF5 names (``errno = N``) and the system's words for it."""
+    if isinstance(exc, OSError) and exc.errno:
+        return OSError(exc.errno, os.strerror(exc.errno))
+    found = re.search(r"errno = (\d+)", str(exc))
+    code = int(found.group(1)) if found else errno.EIO
+    return OSError(code, os.strerror(code))
+
+
+@contextlib.contextmanager
+def new_file(path):
+    """``h5py.File(path, "w")``, closed at the end of the block; when the close fails (HDF5 cannot write
+    the data it still holds: a full disk), an ``OSError`` (:func:`close_error`), and when the block
+    fails, its own error after the file is closed as far as HDF5 can.
+
+    Examples
+    --------
+    >>> with new_file(tmp) as h5:                 # doctest: +SKIP
+    ...     h5.create_dataset("x", data=array)
+    """
+    import h5py
+
+    h5 = h5py.File(path, "w")
+    try:
+        yield h5
+    except BaseException:
+        with contextlib.suppress(Exception):
+            h5.close()
+        raise
+    try:
+        h5.close()
+    except Exception as exc:    # h5py's RuntimeError "Can't decrement id ref count (... errno = 28 ...)"
+        raise close_error(exc) from exc

@@ -20,8 +20,12 @@ The capture is written incrementally to ``<out>.partial`` and renamed to
 ``<out>`` when the run ends, successfully **or not**: a failed run still gives
 ``<out>``, holding the frames captured before the failure and the failure
 itself. A ``<out>.partial`` left behind means the process itself died (power
-loss, ``kill -9``); it is a readable HDF5 file up to the last flush. An existing
-``<out>`` is replaced only at the end of the run. The file's layout and its reader,
+loss, ``kill -9``); it is a readable capture file up to the last flush. It is
+never truncated nor appended to: a capture to the same ``<out>`` is refused
+(:func:`~rsocl.hardware.capture_file.check_partial`, naming the file and its complete sets) until the
+user renames it (to keep it as a capture) or removes it; so is a capture
+whose ``<out>.partial`` another process is writing. An existing ``<out>`` is
+replaced only at the end of the run. The file's layout and its reader,
 :func:`~rsocl.hardware.capture_file.load_raw`, are in :mod:`rsocl.hardware.capture_file`.
 
 Registration and units
@@ -47,7 +51,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.files.atomic import output_path
 from rsocl.files.rigfile import RigFile, load_rigfile
-from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, publish
+from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, check_partial, publish, readable
 
 __all__ = ["capture_sets", "CaptureFailed"]
 
@@ -158,6 +162,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
                                            if isinstance(cam.get("row_map_file"), (str, os.PathLike))]
     out = output_path(out_path, "out", inputs=reads)
     partial = output_path(out.with_name(out.name + PARTIAL_SUFFIX), "out", inputs=reads)
+    check_partial(partial)
 
     backends = rigfile.backends()
     labels = [_label(i, b, c) for i, (b, c) in enumerate(backends)]
@@ -171,9 +176,9 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         try:
             _run(cameras, rigfile, writer, sets, timeout, progress, where)
         except Exception as exc:
-            failure = dict(where, type=type(exc).__name__, error=str(exc))
+            failure = dict(where, type=type(exc).__name__, error=_one_line(exc))
         except BaseException as exc:  # KeyboardInterrupt, SystemExit: record, then let it through
-            failure = dict(where, type=type(exc).__name__, error=str(exc) or type(exc).__name__)
+            failure = dict(where, type=type(exc).__name__, error=_one_line(exc))
             interrupted = exc
         for i, cam in enumerate(cameras):
             for step in (cam.stop, cam.close):
@@ -182,9 +187,23 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
                 except Exception as exc:  # closing must reach every camera
                     writer.warn(f"camera {i}: {step.__name__} failed: {type(exc).__name__}: {exc}")
         status = "complete" if failure is None else ("interrupted" if interrupted is not None else "failed")
-        writer.finish(status, failure)
+        try:
+            writer.finish(status, failure)
+        except Exception as exc:      # the file takes no more (disk full): whether it is readable decides below
+            failure = failure or dict(where, phase="write", type=type(exc).__name__, error=_one_line(exc))
     finally:
-        writer.close()
+        closed = writer.close()
+    if not (closed and readable(partial)):
+        kept = "is unchanged" if out.exists() else "was not made"
+        why = "" if failure is None else f"{failure['type']}: {failure['error']}; "
+        error = CaptureFailed(
+            f"the capture file could not be completed ({why}HDF5 could not close it): {str(partial)!r} is kept as "
+            f"written, {writer.sets_complete} set(s) complete before the failure; {str(out)!r} {kept}",
+            path=partial, camera=None if failure is None else failure["camera"],
+            set_index=None if failure is None else failure["set"], phase="write", sets_complete=writer.sets_complete)
+        if interrupted is not None:
+            raise interrupted from error
+        raise error
     publish(partial, out)
     if interrupted is not None:
         raise interrupted
@@ -197,6 +216,14 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
             path=out, camera=failure["camera"], set_index=failure["set"], phase=failure["phase"],
             sets_complete=writer.sets_complete)
     return out
+
+
+def _one_line(exc: BaseException) -> str:
+    """``str(exc)`` on one line (HDF5's messages hold line breaks), or the exception's type name; an
+    ``OSError`` with an error number as the system's words for it (HDF5 adds buffers and offsets)."""
+    if isinstance(exc, OSError) and exc.errno:
+        return f"[Errno {exc.errno}] {os.strerror(exc.errno)}"
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def _run(cameras, rigfile, writer, sets, timeout, progress, where):

@@ -40,7 +40,7 @@ import numpy as np
 
 from rsocl.files.rigfile import RigFile
 
-__all__ = ["CaptureWriter", "publish", "RawCapture", "load_raw", "PARTIAL_SUFFIX"]
+__all__ = ["CaptureWriter", "check_partial", "readable", "publish", "RawCapture", "load_raw", "PARTIAL_SUFFIX"]
 
 #: Suffix of the file being written; renamed to the capture file's name at the end of the run.
 PARTIAL_SUFFIX = ".partial"
@@ -63,6 +63,32 @@ def _now() -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%S%z")
 
 
+def check_partial(partial: Path, name: str = "out") -> None:
+    """Refuse, naming ``name``, to capture while ``partial`` (``<out>.partial``) exists: the capture
+    file another run is writing (it holds a lock on it), or one a killed run left, whose complete sets
+    the message counts. The file is kept as it is (a capture never truncates or appends to it)."""
+    if not (partial.exists() or partial.is_symlink()):
+        return
+    import h5py
+
+    try:
+        with h5py.File(partial, "r") as h5:
+            if "sets_complete" in h5.attrs:                 # written by rsocl capture after each set
+                sets = int(h5.attrs["sets_complete"])
+            else:                                           # another writer's capture file
+                sets = h5["snapshot_sets"].shape[0] if "snapshot_sets" in h5 else int("snapshots" in h5)
+    except BlockingIOError:
+        raise ValueError(f"{name}: {str(partial)!r} is being written by another capture (it holds the file's "
+                         "lock); wait for it or choose another --out") from None
+    except OSError as exc:
+        why = " ".join(str(exc).split())
+        raise ValueError(f"{name}: {str(partial)!r} is left from an earlier capture and is not readable "
+                         f"({why}); it is kept: move or remove it, or choose another --out") from None
+    raise ValueError(f"{name}: {str(partial)!r} holds {sets} complete set(s) of an earlier capture that did not "
+                     "end; it is kept: rename it (it is a readable capture file) or remove it, or choose "
+                     "another --out")
+
+
 class CaptureWriter:
     """The capture file being written (``<out>.partial``), opened once."""
 
@@ -74,7 +100,14 @@ class CaptureWriter:
         self.partial = partial
         self.rig = rig
         self.K = rig.n_channels
-        self.h5 = h5py.File(partial, "w")
+        try:
+            # "x": never truncates a partial capture (another run's). No chunk cache: each frame reaches the
+            # file as it is written, and a write the disk refuses fails there, not later at close (whose
+            # failure would leave HDF5 a file it cannot close, and the process a crash at exit)
+            self.h5 = h5py.File(partial, "x", rdcc_nbytes=0)
+        except FileExistsError:
+            check_partial(partial)
+            raise
         try:
             self._start(rig, rigfile, labels, sets, timeout, write_header)
         except BaseException:
@@ -229,10 +262,28 @@ class CaptureWriter:
             self.h5.attrs["failure"] = _json(failure)
         self._write_meta()
 
-    def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.h5.flush()
-        self.h5.close()
+    def close(self) -> bool:
+        """Flush and close the file; False when HDF5 could not (a write the disk refused). Never raises:
+        the caller decides from the file (:func:`readable`) whether it can be published."""
+        closed = True
+        for step in (self.h5.flush, self.h5.close):
+            try:
+                step()
+            except Exception:      # HDF5's RuntimeError/OSError: the data it holds cannot reach the disk
+                closed = False
+        return closed
+
+
+def readable(path: Path) -> bool:
+    """Whether ``path`` opens as an HDF5 file and its ``sets_complete`` can be read."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            int(h5.attrs.get("sets_complete", 0))
+    except Exception:
+        return False
+    return True
 
 
 def publish(partial: Path, out: Path) -> None:

@@ -33,16 +33,14 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import secrets
 import shutil
-import socket
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from rsocl.files.atomic import fsync_directory, fsync_file
+from rsocl.files.atomic import fsync_directory, fsync_file, owned_prefix, remove_stale
 from rsocl.files.hdf5 import FORMAT_VERSION
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import expand
@@ -162,12 +160,12 @@ def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> np.ndarray:
 
 
 def _partial_prefix(path: Path) -> str:
-    return f".{path.name}.partial-{socket.gethostname()}-"
+    return f".{path.name}.partial-"
 
 
 def _create(zarr, path: Path, spec: StoreSpec) -> bool:
     """Build the store beside ``path`` and rename it there; False when another process made one first."""
-    tmp = path.with_name(f"{_partial_prefix(path)}{os.getpid()}-{secrets.token_hex(4)}")
+    tmp = path.with_name(f"{owned_prefix(_partial_prefix(path))}{secrets.token_hex(4)}")
     os.mkdir(tmp)
     try:
         group = zarr.open_group(str(tmp), mode="w")
@@ -199,24 +197,7 @@ def _create(zarr, path: Path, spec: StoreSpec) -> bool:
 
 def _remove_leftovers(path: Path) -> None:
     """Remove the partial stores of ``path`` left by runs on this host whose process is gone (POSIX)."""
-    if os.name != "posix":
-        return
-    prefix = _partial_prefix(path)
-    for entry in path.parent.iterdir():
-        found = entry.name.startswith(prefix) and re.fullmatch(r"(\d+)-[0-9a-f]{8}", entry.name[len(prefix):])
-        if found and not _running(int(found.group(1))):
-            shutil.rmtree(entry, ignore_errors=True)
-
-
-def _running(pid: int) -> bool:
-    """Whether process ``pid`` exists on this host (another user's included)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        pass
-    return True
+    remove_stale(path.parent if str(path.parent) else Path("."), _partial_prefix(path), r"[0-9a-f]{8}")
 
 
 _OPEN: dict = {}
