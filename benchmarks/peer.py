@@ -119,16 +119,18 @@ RUNNERS = {"eager": Eager, "graph": Graph, "compile": Compiled}
 
 
 def cases(args):
-    """``[(name, rig, sets, iterations, per_iteration)]`` of the chosen cases, in order."""
+    """``[(name, rig, sets, iterations, per_iteration)]`` of the chosen cases, in ``--cases``' order."""
     out = [("paper", paper_rig(), 1, args.iterations, False)]
     out += [(f"batch{b}", paper_rig(), b, args.iterations, False) for b in args.batches]
     out += [(f"size{m}", rsocl.Rig.paper_array(4, (m, m), 0.18e-3, 35e-6), 1, args.size_iterations, True)
             for m in args.sizes]
-    chosen = set(args.cases or [c[0] for c in out])
-    unknown = chosen - {c[0] for c in out}
+    if not args.cases:
+        return out
+    named = {c[0]: c for c in out}
+    unknown = [name for name in args.cases if name not in named]
     if unknown:
-        raise SystemExit(f"--cases: unknown {sorted(unknown)}; choose from {[c[0] for c in out]}")
-    return [c for c in out if c[0] in chosen]
+        raise SystemExit(f"--cases: unknown {unknown}; choose from {list(named)} (see --batches, --sizes)")
+    return [named[name] for name in dict.fromkeys(args.cases)]
 
 
 def describe(name, rig, sets, iterations):
@@ -222,14 +224,18 @@ def unit(name, sets, seconds):
     return f"{sets / seconds:.1f} sets/s" if sets > 1 else f"{seconds * 1e3:.2f} ms"
 
 
+def row(cells):
+    """One Markdown table row."""
+    return "| " + " | ".join(cells) + " |"
+
+
 def tables(done, modes):
     """Markdown lines: times, ratios (rsocl time / peer time) and the equality check."""
     heads = [LABELS[m] for m in modes]
-    lines = ["## Times (median of the rounds)", "",
-             "| case | rsocl | " + " | ".join(heads) + " |", "|---|---|" + "---|" * len(heads)]
+    lines = ["## Times (median of the rounds)", "", row(["case", "rsocl"] + heads), row(["---"] * (2 + len(heads)))]
     for case, rec in done:
         name, _, sets, _, _ = case
-        cells = []
+        cells = [describe(*case[:4])]
         for impl in ["rsocl"] + list(modes):
             if impl in rec["errors"]:
                 cells.append("failed")
@@ -237,12 +243,14 @@ def tables(done, modes):
                 cells.append(unit(name, sets, statistics.median(rec["seconds"][impl])))
             else:
                 cells.append("–")
-        lines.append(f"| {describe(*case[:4])} | " + " | ".join(cells) + " |")
+        lines.append(row(cells))
+    if not modes:
+        return lines + ["", "No PyTorch peer ran (torch is not installed).", ""]
     lines += ["", "## rsocl's time over the peer's (below 1: rsocl is faster)", "",
               "Median over the rounds of the ratio within each round, and its range.", "",
-              "| case | " + " | ".join(heads) + " |", "|---|" + "---|" * len(heads)]
+              row(["case"] + heads), row(["---"] * (1 + len(heads)))]
     for case, rec in done:
-        cells = []
+        cells = [describe(*case[:4])]
         for m in modes:
             peer = rec["seconds"].get(m)
             if not peer:
@@ -250,22 +258,22 @@ def tables(done, modes):
                 continue
             ratios = [a / b for a, b in zip(rec["seconds"]["rsocl"], peer)]
             cells.append(f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})")
-        lines.append(f"| {describe(*case[:4])} | " + " | ".join(cells) + " |")
+        lines.append(row(cells))
     lines += ["", "## Same results", "",
               "PSNR (dB, peak 1) against the built-in scene's truth; for a batch the mean over the sets, and the "
               "largest PSNR difference over them. Largest |peer − rsocl| over the datacube(s).", "",
-              "| case | rsocl PSNR | " + " | ".join(f"{LABELS[m]}: PSNR − rsocl's, largest difference" for m in modes)
-              + " |", "|---|---|" + "---|" * len(modes)]
+              row(["case", "rsocl PSNR"] + [f"{h}: PSNR − rsocl's, largest difference" for h in heads]),
+              row(["---"] * (2 + len(heads)))]
     for case, rec in done:
         base = rec["psnr"]["rsocl"]
-        cells = []
+        cells = [describe(*case[:4]), f"{np.mean(base):.4f}"]
         for m in modes:
             if m not in rec["psnr"]:
                 cells.append("failed" if m in rec["errors"] else "–")
                 continue
             delta = max((a - b for a, b in zip(rec["psnr"][m], base)), key=abs)
             cells.append(f"{delta:+.1e} dB, {rec['diff'][m]:.1e}")
-        lines.append(f"| {describe(*case[:4])} | {np.mean(base):.4f} | " + " | ".join(cells) + " |")
+        lines.append(row(cells))
     errors = [f"- {case[0]}, {m}: {msg}" for case, rec in done for m, msg in rec["errors"].items()]
     firsts = [f"{case[0]} {m} {sec:.1f} s" for case, rec in done for m, sec in rec["first"].items()]
     if errors:
@@ -303,7 +311,8 @@ def main(argv=None):
     parser.add_argument("--batches", type=int, nargs="*", default=[64, 256], help="sets per call of the batch cases")
     parser.add_argument("--sizes", type=int, nargs="*", default=[64, 128, 256, 512], help="m of the m x m cases")
     parser.add_argument("--size-iterations", type=int, default=20, help="ADMM iterations of the m x m cases")
-    parser.add_argument("--cases", nargs="+", default=None, help="cases to run (default: all)")
+    parser.add_argument("--cases", nargs="+", default=None,
+                        help="cases to run, in this order (default: paper, batchB..., sizeM...)")
     parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
     parser.add_argument("--compile-cases", nargs="+", default=["paper", "batch64"],
                         help="cases where torch.compile runs ('all': every case)")
