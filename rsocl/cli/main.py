@@ -13,7 +13,7 @@ import warnings
 
 from rsocl.cli import bench, calibrate, capture, demo, devices, info, plan, plugins, reconstruct, simulate
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "entry"]
 
 #: In the order ``rsocl --help`` lists them.
 SUBCOMMANDS = (demo, simulate, reconstruct, info, plan, bench, capture, calibrate, devices, plugins)
@@ -74,5 +74,23 @@ def main(argv=None) -> int:
         return 130
 
 
+def entry(argv=None) -> int:
+    """The ``rsocl`` console script (and ``python -m rsocl``): :func:`main`, with output to a reader
+    that stopped reading (``rsocl plugins | head -1``) ending quietly, as a command killed by SIGPIPE
+    does (exit status 141, nothing on stderr)."""
+    import os
+
+    try:
+        status = main(argv)
+        sys.stdout.flush()
+        return status
+    except BrokenPipeError:
+        try:                    # the interpreter's final flush would fail again: send what is left nowhere
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (AttributeError, OSError, ValueError):
+            pass
+        return 141
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(entry())
