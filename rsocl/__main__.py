@@ -2,6 +2,6 @@
 
 import sys
 
-from rsocl.cli.main import entry
+from rsocl.cli import entry
 
 sys.exit(entry())
