@@ -197,6 +197,9 @@ def load_rigfile(path, check_shape=None) -> RigFile:
             data = tomllib.load(handle)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:                    # a binary file (an .h5, a .npy, an image)
+        raise ValueError(f"{path}: not a TOML rig file (byte {exc.object[exc.start]:#04x} at offset {exc.start} "
+                         "is not UTF-8 text)") from None
     try:
         unknown = sorted(set(data) - {"rig", "camera"})
         if unknown:
@@ -220,9 +223,10 @@ def load_rigfile(path, check_shape=None) -> RigFile:
 def save_rigfile(path, rigfile: RigFile) -> Path:
     """Write ``rigfile`` as TOML to ``path``, atomically.
 
-    ``row_map_file`` names are rewritten relative to the new file's folder;
-    cameras holding a ``row_map`` array get it written next to the file as
-    ``<stem>.camera<i>.rows.npy`` (atomically too) and referenced from it.
+    ``row_map_file`` names are rewritten relative to the new file's folder; cameras holding a
+    ``row_map`` array, or a ``row_map_file`` outside that folder (a rig file reads only its own
+    folder and below), get it written next to the file as ``<stem>.camera<i>.rows.npy``
+    (atomically too) and referenced from it.
     Loading the result gives an equal :meth:`RigFile.rig`.
     """
     if not isinstance(rigfile, RigFile):
@@ -234,13 +238,17 @@ def save_rigfile(path, rigfile: RigFile) -> Path:
     arrays = {}
     for i, cam in enumerate(rigfile.cameras):
         table = {key: cam[key] for key in CAMERA_KEYS if key in cam and key not in ("config", "row_map_file")}
+        relative = None
         if cam.get("row_map_file") is not None:
             source = resolve_path(cam["row_map_file"], old_base).resolve()
             try:
-                table["row_map_file"] = Path(os.path.relpath(source, folder.resolve())).as_posix()
+                relative = Path(os.path.relpath(source, folder.resolve()))
             except ValueError:  # another drive (Windows)
-                table["row_map_file"] = str(source)
-        elif cam.get("row_map") is not None:
+                relative = None
+            if relative is not None and ".." not in relative.parts:
+                table["row_map_file"] = relative.as_posix()
+        if "row_map_file" not in table and cam.get("row_map") is not None:
+            # an array, or a file outside the new folder (a rig file reads only its folder and below): a copy beside it
             name = f"{path.stem}.camera{i}.rows.npy"
             arrays[name] = cam["row_map"]
             table["row_map_file"] = name
