@@ -17,7 +17,7 @@ Schema
     name = "left"             # optional label
     address = "10.0.0.2"      # optional shortcut for config.address
     angle = 90.0              # rotation, degrees; or one of:
-    # row_map_file = "cam0_rows.npy"   (a .npy (m, n) row map, relative to the rig file)
+    # row_map_file = "cam0_rows.npy"   (a .npy (m, n) row map, in the rig file's folder or below)
     # homography = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]   (3x3, reference pixel -> sensor pixel)
     t_e = 1.8e-04             # exposure, s (required)
     t_r = 3.5e-05             # row readout time, s (required)
@@ -28,8 +28,9 @@ Schema
     # t_d, frames: multi-frame cameras (see rsocl.Camera)
 
     [camera.config]           # backend settings, passed to the backend as they are
-    scene = "builtin"
+    scene = "builtin"         # (never a model key: angle, t_e, ... in [[camera]], shape, dt, mask in [rig])
 
+Every key, its unit and its table, and an example per backend: ``docs/rig-files.md``.
 Only one of ``angle``, ``row_map_file`` and ``homography`` may be given (none
 means ``angle = 0``). A homography maps a reference pixel centre ``(x, y)``
 (column, row; pixel centres at integer coordinates) to full-sensor coordinates
@@ -188,8 +189,9 @@ def load_rigfile(path, check_shape=None) -> RigFile:
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If it is not valid TOML or its content breaks the schema; the message
-        names the file, the camera index and the key.
+        If it is not a UTF-8 TOML file or its content breaks the schema (a key in the wrong
+        table, a ``row_map_file`` outside the file's folder); the message names the file, the
+        camera index and the key.
     """
     path = check.existing_file("", path, "rig file")
     try:
