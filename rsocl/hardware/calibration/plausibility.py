@@ -4,9 +4,9 @@ Four markers fit a homography *exactly*, whatever their pairing: the reprojectio
 always 0 and checks nothing. What does tell a wrong pairing from a right one is geometry that
 no camera viewing a flat target changes:
 
-* **orientation**: a homography keeps the turning sense of every triangle of markers on one
-  side of its horizon (all of them, for a camera that sees the target); a mirror reverses all
-  of them. Two markers swapped reverse some triangles and not others;
+* **orientation** (:mod:`~rsocl.hardware.calibration.pairing`): a homography keeps the turning
+  sense of every triangle of markers a camera sees; a mirror reverses all of them. Two markers
+  swapped reverse some triangles and not others;
 * **rotation**: markers paired a cyclic shift apart fit a camera turned by their spacing; only
   the rig file's nominal angle tells it apart, so the measured rotation must stay near it;
 * **distortion**: a camera in front of a flat target stretches the reference grid about evenly.
@@ -19,14 +19,13 @@ predicted by the homography of the others) measures it honestly.
 
 from __future__ import annotations
 
-from itertools import combinations
-
 import numpy as np
 
 from rsocl.hardware.calibration._common import _homography, _points, _shape
+from rsocl.hardware.calibration.pairing import check_pairing, flipped_triangles
 
-__all__ = ["MAX_SCALE_RATIO", "MAX_ANISOTROPY", "MAX_TURN", "flipped_triangles", "check_registration",
-           "check_rotation", "leave_one_out_errors", "fit_summary"]
+__all__ = ["MAX_SCALE_RATIO", "MAX_ANISOTROPY", "MAX_TURN", "flipped_triangles", "check_pairing",
+           "check_registration", "check_rotation", "leave_one_out_errors", "fit_summary"]
 
 #: Largest ratio of the local scale (sensor pixels per reference pixel) between two corners of the grid.
 MAX_SCALE_RATIO = 3.0
@@ -34,59 +33,12 @@ MAX_SCALE_RATIO = 3.0
 MAX_ANISOTROPY = 3.0
 #: Largest difference, degrees, between the measured rotation and the rig file's nominal one.
 MAX_TURN = 45.0
-#: Triangles thinner than this fraction of the markers' extent squared have no reliable turning sense.
-_THIN = 1e-2
-
-
-def _turns(points, triples) -> np.ndarray:
-    a, b, c = (points[list(idx)] for idx in zip(*triples))
-    u, v = b - a, c - a
-    cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
-    extent = float(np.ptp(points, axis=0).max()) ** 2
-    return np.where(np.abs(cross) < _THIN * max(extent, 1e-300), 0.0, np.sign(cross))
-
-
-def flipped_triangles(reference_points, sensor_points, *, mirrored=False):
-    """The marker triangles that turn the other way on the sensor than on the reference.
-
-    Parameters
-    ----------
-    reference_points, sensor_points : array_like, shape (N, 2)
-        The same markers, paired by order, ``(x, y)`` pixels.
-    mirrored : bool
-        The camera sees the target in a mirror: every triangle is expected to turn the other way.
-
-    Returns
-    -------
-    (flipped, checked) : (list of (int, int, int), int)
-        The triangles (marker indices) that break the expectation, and how many triangles were
-        thick enough to check.
-    """
-    ref = _points("reference_points", reference_points, minimum=3)
-    sensor = _points("sensor_points", sensor_points, minimum=3)
-    triples = list(combinations(range(len(ref)), 3))
-    a, b = _turns(ref, triples), _turns(sensor, triples)
-    expected = -1.0 if mirrored else 1.0
-    checked = (a != 0) & (b != 0)
-    flipped = [t for t, ok, s in zip(triples, checked, a * b) if ok and s != expected]
-    return flipped, int(checked.sum())
-
-
 def _jacobians(H, points) -> np.ndarray:
     """``(N, 2, 2)`` derivative of the homography's map at ``points``."""
     q = np.column_stack([points, np.ones(len(points))]) @ H.T
     w = q[:, 2]
     image = q[:, :2] / w[:, None]
     return (H[None, :2, :2] - image[:, :, None] * H[None, 2:3, :2]) / w[:, None, None]
-
-
-def _suspects(flipped) -> list:
-    counts = {}
-    for triple in flipped:
-        for k in triple:
-            counts[k] = counts.get(k, 0) + 1
-    top = max(counts.values())
-    return sorted(k for k, n in counts.items() if n == top)
 
 
 def check_registration(reference_points, sensor_points, H, shape, *, mirrored=False) -> None:
@@ -112,29 +64,16 @@ def check_registration(reference_points, sensor_points, H, shape, *, mirrored=Fa
     Examples
     --------
     >>> ref = [[0, 0], [10, 0], [10, 10], [0, 10]]
-    >>> check_registration(ref, [[0, 0], [10, 0], [0, 10], [10, 10]], np.eye(3), (11, 11))
+    >>> check_registration(ref, [[0, 0], [50, 0], [50, 10], [0, 10]], np.diag([5.0, 1, 1]), (11, 11))
     Traceback (most recent call last):
     ...
-    ValueError: markers 2 (10,10) and 3 (0,10) look swapped: ...
+    ValueError: the homography stretches the grid 5.0x more along one direction than the other ...
     """
     ref = _points("reference_points", reference_points, minimum=4)
     sensor = _points("sensor_points", sensor_points, minimum=4)
     H = _homography("H", H)
     m, n = _shape(shape)
-    flipped, checked = flipped_triangles(ref, sensor, mirrored=mirrored)
-    if flipped:
-        if len(flipped) == checked:
-            raise ValueError(f"every triangle of the {len(ref)} markers turns the other way on the sensor: the "
-                             + ("camera sees the target unmirrored, not in a mirror as --mirrored says"
-                                if mirrored else "camera sees the target mirrored (a beam splitter: give "
-                                "--mirrored for it), or the markers are listed in the opposite turning sense"))
-        names = [f"{k} ({ref[k, 0]:g},{ref[k, 1]:g})" for k in _suspects(flipped)]
-        who = (f"markers {', '.join(names[:-1])} and {names[-1]} look swapped"
-               if len(names) > 1 else f"marker {names[0]} looks misplaced")
-        shown = ", ".join(str(t) for t in flipped[:4]) + (", ..." if len(flipped) > 4 else "")
-        raise ValueError(f"{who}: the marker triangles {shown} turn the other way on the sensor than on the "
-                         "reference, which no camera does; check the markers' order (--markers-ref, the "
-                         "'markers' array, --identify)")
+    check_pairing(ref, sensor, mirrored=mirrored)
     corners = np.array([[0, 0], [n - 1, 0], [n - 1, m - 1], [0, m - 1], [(n - 1) / 2, (m - 1) / 2]], float)
     singular = np.linalg.svd(_jacobians(H, corners), compute_uv=False)
     scale = np.sqrt(singular[:, 0] * singular[:, 1])
