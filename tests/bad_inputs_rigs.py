@@ -146,6 +146,11 @@ CASES = [
         argv=["simulate", "builtin", "--shape", "8", "8", "--t-d-us", "300", "--out", "{tmp}/s.h5"]),
     Bad("simulate-t-d-too-short", ["--t-d-us 1", "t_d must be >="],
         argv=["simulate", "builtin", "--shape", "8", "8", "--frames", "2", "--t-d-us", "1", "--out", "{tmp}/s.h5"]),
+    Bad("simulate-frames-beyond-a-rig", ["--frames 100000000", "sub-frames"],
+        argv=["simulate", "builtin", "--shape", "8", "8", "--frames", "100000000", "--out", "{tmp}/s.h5"]),
+    Bad("simulate-frames-beyond-memory", ["--frames 2000000", "host memory"],
+        argv=["simulate", "builtin", "--shape", "512", "512", "--t-r-us", "1", "--t-e-us", "1", "--dt-us", "512",
+              "--frames", "2000000", "--out", "{tmp}/s.h5"]),
     Bad("simulate-t-d-negative", ["--t-d-us", "> 0"],
         argv=["simulate", "builtin", "--shape", "8", "8", "--frames", "2", "--t-d-us", "-5", "--out", "{tmp}/s.h5"]),
 ]

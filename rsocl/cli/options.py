@@ -8,8 +8,8 @@ import os
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
            "check_host_memory", "check_rig_memory", "load_rig_file", "check_datacube_memory", "add_device_args",
-           "add_solver_args", "check_solver_args", "reg_options", "progress_bar", "say", "tuning_plot_path", "tuning_plot_files",
-           "run_reconstruction", "quality_line"]
+           "add_solver_args", "check_solver_args", "reg_options", "progress_bar", "say", "tuning_plot_path",
+           "tuning_plot_files", "run_reconstruction", "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from rsocl.cli.options import US, add_device_args, add_rig_args, check_datacube_memory, rig_from, say
+from rsocl.cli.options import US, add_device_args, add_rig_args, check_datacube_memory, check_rig_memory, rig_from, say
 
 __all__ = ["add_parser", "check_noise_args", "multi_frame_rig", "scene_datacube", "cmd_simulate"]
 
@@ -61,7 +61,7 @@ def multi_frame_rig(args, rig):
     """``rig`` with every camera capturing ``--frames`` frames, ``--t-d-us`` apart (default: the longest
     readout, ``t_r`` times the most rows a camera reads); ``rig`` itself for one frame."""
     from rsocl.common import validation as check
-    from rsocl.model.rig import Camera, Rig
+    from rsocl.model.rig import MAX_T, Camera, Rig
 
     frames = check.positive_int("--frames", args.frames)
     if frames == 1:
@@ -73,6 +73,13 @@ def multi_frame_rig(args, rig):
         t_d = max((float(rig.row_map(i).max()) + 1.0) * cam.t_r for i, cam in enumerate(rig.cameras))
     else:
         t_d = check.positive("--t-d-us", args.t_d_us, "µs") * US
+    # refused before the rig's per-frame exposure windows are allocated
+    span = (frames - 1) * t_d + max(cam.t_e + float(rig.row_map(i).max()) * cam.t_r
+                                     for i, cam in enumerate(rig.cameras))
+    if span / rig.dt > MAX_T:
+        raise ValueError(f"--frames {frames} frames {t_d / US:g} µs apart span {span / rig.dt:,.0f} sub-frames of "
+                         f"{rig.dt / US:g} µs, above the {MAX_T:,} a rig may span; give fewer --frames")
+    check_rig_memory(rig.C * frames, rig.shape, f"--frames {frames}", hint="give fewer --frames or a smaller --shape")
     cameras = [Camera(cam.angle, t_e=cam.t_e, t_r=cam.t_r, t_d=t_d, frames=frames) for cam in rig.cameras]
     try:
         return Rig(cameras, rig.shape, dt=rig.dt, mask=rig.mask)

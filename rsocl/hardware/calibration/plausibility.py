@@ -97,8 +97,8 @@ def check_rotation(H, shape, nominal, *, key="angle", limit=MAX_TURN) -> float:
 
     turn = (homography_angle(H, shape) - nominal + 180.0) % 360.0 - 180.0
     if abs(turn) > limit:
-        raise ValueError(f"the markers give a rotation of {nominal + turn:.1f}°, {abs(turn):.0f}° from the rig file's "
-                         f"{key} = {nominal:g}° (at most {limit:g}°): the markers are paired a turn apart (their "
+        raise ValueError(f"the markers give a rotation of {nominal + turn:.1f}°, {abs(turn):.0f}° from the rig "
+                         f"file's {key} = {nominal:g}° (at most {limit:g}°): the markers are paired a turn apart (their "
                          f"order shifted), or {key} is wrong; check the markers' order or correct {key}")
     return nominal + turn
 
