@@ -79,6 +79,22 @@ def test_angle_in_camera_config_is_never_silently_dropped(tmp_path, capsys):
     assert not (tmp_path / "c.h5").exists()
 
 
+@pytest.mark.parametrize("old, new, message", [
+    ("t_r = 3.5e-05\n", "t_r = 3.5e-05\ndt = 3.5e-05\n",
+     r"camera\[0\]\.dt belongs in the \[rig\] table \(rig\.dt = \.\.\.\), not in \[\[camera\]\]"),
+    ("shape = [8, 8]\n", "shape = [8, 8]\nt_e = 1e-4\n",
+     r"rig\.t_e belongs in each \[\[camera\]\] table \(camera\[i\]\.t_e = \.\.\.\), not in \[rig\]"),
+    ("t_r = 3.5e-05\n", 't_r = 3.5e-05\nscene = "builtin"\n',
+     r"camera\[0\] has unknown key\(s\) \['scene'\].*the backend's own settings go in its \[camera\.config\]"),
+    ("t_r = 3.5e-05\n", "t_r = 3.5e-05\nt_ee = 1e-4\n", r"\('t_ee': did you mean 't_e'\?\)"),
+])
+def test_a_key_in_the_wrong_table_says_where_it_belongs(tmp_path, old, new, message):
+    path = tmp_path / "rig.toml"
+    path.write_text(BASE.replace(old, new, 1))
+    with pytest.raises(ValueError, match=message):
+        load_rigfile(path)
+
+
 def test_keys_the_rig_fills_in_are_refused_in_a_simulated_config(tmp_path):
     path = tmp_path / "rig.toml"
     path.write_text(BASE + '\n[camera.config]\nscene_frames = 5\n')

@@ -6,6 +6,7 @@ seconds, angles degrees, shapes and ROIs pixels.
 
 from __future__ import annotations
 
+import difflib
 import numbers
 import os
 from pathlib import Path
@@ -57,6 +58,9 @@ def check_rig_table(rig) -> dict:
     if not isinstance(rig, dict):
         raise ValueError(f"[rig] must be a table, got {rig!r}")
     unknown = sorted(set(rig) - set(RIG_KEYS))
+    for key in unknown:
+        if key in CAMERA_KEYS:
+            raise ValueError(f"rig.{key} belongs in each [[camera]] table (camera[i].{key} = ...), not in [rig]")
     if unknown:
         raise ValueError(f"[rig] has unknown key(s) {unknown}; known: {list(RIG_KEYS)}")
     if "shape" not in rig:
@@ -72,8 +76,15 @@ def check_camera(i, cam, shape, base_dir):
     if not isinstance(cam, dict):
         raise ValueError(f"camera[{i}] must be a table, got {cam!r}")
     unknown = sorted(set(cam) - set(CAMERA_KEYS) - {"row_map"})
+    for key in unknown:
+        if key in RIG_KEYS:
+            raise ValueError(f"{_where(i, key)} belongs in the [rig] table (rig.{key} = ...), not in [[camera]]; "
+                             "it is the same for every camera")
     if unknown:
-        raise ValueError(f"camera[{i}] has unknown key(s) {unknown}; known: {list(CAMERA_KEYS)}")
+        close = {key: difflib.get_close_matches(str(key), CAMERA_KEYS, n=1) for key in unknown}
+        hints = "".join(f" ({key!r}: did you mean {close[key][0]!r}?)" for key in unknown if close[key])
+        raise ValueError(f"camera[{i}] has unknown key(s) {unknown}{hints}; known: {list(CAMERA_KEYS)}; the "
+                         "backend's own settings go in its [camera.config] table")
     out = {}
     backend = cam.get("backend")
     if not isinstance(backend, str) or not backend:
