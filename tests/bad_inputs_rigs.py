@@ -91,8 +91,10 @@ CASES = [
         setup=_config("[camera.config.sensor]\nread_nois = 0.1"), rc=2),
     Bad("api-rigfile-config-angle", ["camera[0].config.angle", "[[camera]]"],
         api=_rigfile_api(angle=0.0, config={"angle": 90.0})),
-    Bad("rig-dt-in-camera", ["camera[0].dt", "[rig]"], argv=_capture(), setup=_writes(camera0=CAMERA0 + "dt = 3.5e-5\n")),
-    Bad("rig-t_e-in-rig", ["rig.t_e", "[[camera]]"], argv=_capture(), setup=_writes(rig="shape = [8, 8]\nt_e = 1e-4\n")),
+    Bad("rig-dt-in-camera", ["camera[0].dt", "[rig]"], argv=_capture(),
+        setup=_writes(camera0=CAMERA0 + "dt = 3.5e-5\n")),
+    Bad("rig-t_e-in-rig", ["rig.t_e", "[[camera]]"], argv=_capture(),
+        setup=_writes(rig="shape = [8, 8]\nt_e = 1e-4\n")),
     Bad("rig-scene-in-camera", ["scene", "[camera.config]"], argv=_capture(),
         setup=_writes(camera0=CAMERA0 + 'scene = "builtin"\n')),
     # unknown keys and tables
