@@ -6,7 +6,9 @@ needed:
 
 * ``--frames``: one frame per camera of a target with marker dots -> each
   camera's ``homography`` (replacing its ``angle`` or ``row_map_file``), and
-  a PNG of the registered markers (``--png``);
+  a PNG of the registered markers (``--png``). Markers paired as no camera sees
+  them are refused (:mod:`rsocl.hardware.calibration.plausibility`); four markers
+  fit exactly and cannot check the fit, five or more give a leave-one-out error;
 * ``--flicker`` + ``--flicker-hz``: frames of a flickering light -> each
   camera's ``t_r`` (the mean over its frames), checked against the rig
   file first (``--tolerance``);
