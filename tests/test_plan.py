@@ -47,7 +47,7 @@ def test_plan_command(capsys):
 
 @pytest.mark.parametrize("extra, match", [
     (["--tile", "0", "4"], r"--tile must be \(H, W\) pixels with 1 <= H <= m = 32 and 1 <= W <= n = 32"),
-    (["--roi", "0", "0", "16", "8", "--tile", "16", "9"], r"--tile must be .* 1 <= W <= n = 8, got \[16, 9\]"),
+    (["--roi", "0", "0", "8", "16", "--tile", "16", "9"], r"--tile must be .* 1 <= W <= n = 8, got \[16, 9\]"),
     (["--halo", "-1"], r"--halo must be a whole number of pixels in \[0, 32\], got -1"),
     (["--sets", "0"], r"--sets must be an integer >= 1, got 0"),
     (["--memory-mib", "-5"], r"--memory-mib must be > 0 MiB, got -5.0"),

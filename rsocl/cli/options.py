@@ -8,8 +8,8 @@ import os
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
            "check_host_memory", "check_rig_memory", "load_rig_file", "check_datacube_memory", "add_device_args",
-           "add_solver_args", "check_solver_args", "reg_options", "say", "tuning_plot_path", "tuning_plot_files",
-           "run_reconstruction", "quality_line"]
+           "add_solver_args", "check_solver_args", "reg_options", "progress_bar", "say", "tuning_plot_path",
+           "tuning_plot_files", "run_reconstruction", "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
@@ -242,6 +242,19 @@ def reg_options(pairs):
         key, value = pair.split("=", 1)
         options[key.strip()] = value.strip()
     return options
+
+
+def progress_bar(args) -> bool:
+    """Whether to draw a progress bar: not with ``--quiet``, and only on a terminal (stderr, where the
+    bars go, redirected to a file or a pipe would collect every redraw)."""
+    import sys
+
+    if getattr(args, "quiet", False):
+        return False
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):           # a closed or replaced stream
+        return False
 
 
 def say(args, *text):

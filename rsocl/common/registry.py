@@ -118,7 +118,8 @@ def load(group: str, name: str):
 
 
 def status(group: str):
-    """``[(PluginInfo or None, name, "ok" | "broken: cause")]`` for every plugin, importing each.
+    """``[(PluginInfo or None, name, "ok" | "broken: cause" | "missing dependency: cause")]`` for every
+    plugin, importing each (and, for a class with ``check_dependencies()``, what it needs).
 
     Name collisions are reported as broken rows instead of raising.
     """
@@ -132,9 +133,23 @@ def status(group: str):
             continue
         info = next(iter(by_dist.values()))
         try:
-            info.load()
-            rows.append((info, name, "ok"))
+            cls = info.load()
         except PluginError as exc:
             cause = exc.__cause__
             rows.append((info, name, f"broken: {type(cause).__name__}: {cause}"))
+            continue
+        rows.append((info, name, _dependencies(cls)))
     return rows
+
+
+def _dependencies(cls) -> str:
+    """``"ok"``, or ``"missing dependency: cause"`` when the plugin's ``check_dependencies()``
+    (a camera backend's: the library it opens cameras with) raises."""
+    check = getattr(cls, "check_dependencies", None)
+    if not callable(check):
+        return "ok"
+    try:
+        check()
+    except Exception as exc:  # noqa: BLE001 - any failure to import a dependency is reported, not raised
+        return f"missing dependency: {exc}"
+    return "ok"

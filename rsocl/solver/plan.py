@@ -187,7 +187,8 @@ def format_plan(p: Plan) -> str:
     wa = max(len(v) for v in a + ["as given"])
     lines = [f"{'':<{width}}  {'as given':<{wa}}  proposed"]
     lines += [f"{r:<{width}}  {x:<{wa}}  {y}" for r, x, y in zip(rows, a, b)]
-    lines.append(f"proposed ROI (y, x, height, width): {p.roi}")
+    y, x, h, w = p.roi
+    lines.append(f"proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): {x} {y} {w} {h}")
     lines += [f"note: {n}" for n in p.notes]
     lines += [f"note: the {label} problem does not fit one device: it needs {e.limit}"
               for label, e in (("given", p.full), ("proposed", p.proposed)) if not e.fits]

@@ -18,6 +18,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.hardware.calibration._common import _homography, _origin, _points, _reference_grid, _shape, _transform
 from rsocl.hardware.calibration.markers import detect_markers, order_markers
+from rsocl.hardware.calibration.pairing import check_pairing
 from rsocl.model.row_map import row_map_from_homography as model_row_map
 
 
@@ -321,7 +322,15 @@ def register_camera(frame, reference_points, *, sensor_points=None, frame_origin
         to full-sensor coordinates as the rig file expects.
     reference, angle, mirrored, **detect_options
         Passed to :func:`detect_markers` (``angle``: the camera's nominal
-        rotation, degrees, used to start the geometric order).
+        rotation, degrees, used to start the geometric order). ``mirrored``
+        also says which turning sense the markers' triangles must keep.
+
+    Raises
+    ------
+    ValueError
+        If the markers are paired as no camera sees them
+        (:func:`~rsocl.hardware.calibration.pairing.check_pairing`), or
+        :func:`estimate_homography` refuses them.
     """
     reference_points = _points("reference_points", reference_points, minimum=4)
     if sensor_points is not None:
@@ -334,5 +343,6 @@ def register_camera(frame, reference_points, *, sensor_points=None, frame_origin
         ordered_reference = order_markers(reference_points, first=first)
         sensor = detect_markers(frame, len(reference_points), reference=reference, angle=angle,
                                 mirrored=mirrored, **detect_options) + np.asarray(_origin(frame_origin))
+    check_pairing(ordered_reference, sensor, mirrored=mirrored)    # four markers would fit any pairing exactly
     H = estimate_homography(ordered_reference, sensor)
     return CameraRegistration(H, ordered_reference, sensor)
