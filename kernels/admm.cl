@@ -1,4 +1,4 @@
-/* The ADMM data step of MODEL.md. Needs common.cl; the host defines NCH (channels) and
+/* The ADMM data step of docs/model.md. Needs common.cl; the host defines NCH (channels) and
  * PROJECTION_EXACT 0|1.
  *
  *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [sets with eta > 0]

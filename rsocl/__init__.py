@@ -3,7 +3,7 @@
 Describe the array with :class:`Camera` and :class:`Rig`, apply the row-timed
 shutter operator with :class:`RollingShutterOperator`, and recover the
 high-speed datacube with :func:`reconstruct` (ADMM on an OpenCL device).
-Conventions: ``../shared/MODEL.md`` of the project, summarised in the README.
+Conventions: ``docs/model.md`` (conventions, equations, units), summarised in the README.
 """
 
 from rsocl.model.operator import RollingShutterOperator

@@ -66,7 +66,7 @@ def _sampled(rig):
     centre of the sub-frames it averages (in sub-frames, a sub-frame's centre at ``s + 1/2``).
 
     ``exact`` mask: the window's length ``t_e/dt`` and its middle. ``binary`` mask (``w = 1`` for
-    the sub-frames ``s`` with ``start <= s <= end``, MODEL.md): the count of those ``s`` within
+    the sub-frames ``s`` with ``start <= s <= end``, docs/model.md): the count of those ``s`` within
     ``0 .. T-1`` and the middle of the first and the last one's centres.
     """
     win = rig.windows

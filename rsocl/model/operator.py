@@ -1,6 +1,6 @@
 """The matrix-free row-timed shutter operator ``H`` on an OpenCL device.
 
-``H`` maps a datacube ``f[T, m, n]`` to snapshots ``g[K, m, n]`` (MODEL.md,
+``H`` maps a datacube ``f[T, m, n]`` to snapshots ``g[K, m, n]`` (docs/model.md,
 Eqs. 5-10). Nothing of size ``K×T×m×n`` is stored: each pixel's weights are
 computed on the fly from its exposure start (two ``(K, m, n)`` maps) and only
 its exposure window is visited.
@@ -199,7 +199,7 @@ class RollingShutterOperator:
 
     @property
     def psi(self) -> np.ndarray:
-        """Diagonal of ``H Hᵀ``, ``(K, m, n)`` NumPy array (MODEL.md Eq. 16)."""
+        """Diagonal of ``H Hᵀ``, ``(K, m, n)`` NumPy array (docs/model.md Eq. 16)."""
         return self.psi_device().get()
 
     def gram(self) -> np.ndarray:

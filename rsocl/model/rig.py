@@ -1,6 +1,6 @@
 """Rolling-shutter cameras and the array (rig) they form.
 
-Conventions follow ``MODEL.md``: sub-frame ``s`` covers ``[s*dt, (s+1)*dt)``;
+Conventions follow ``docs/model.md``: sub-frame ``s`` covers ``[s*dt, (s+1)*dt)``;
 the exposure of reference pixel ``(y, x)`` in frame ``k`` of a camera starts at
 ``t_a + r(y, x)*t_r + k*t_d`` seconds and lasts ``t_e`` seconds, where
 ``r(y, x)`` is the camera row (in rows, first row read is 0) that sees it.

@@ -2,7 +2,7 @@
 
 - :func:`builtin_scene`: a synthetic high-speed scene that needs no data file.
 - :func:`load_video`: read a video file as it is stored.
-- :func:`benchmark_protocol`: turn any video into a datacube (MODEL.md's protocol).
+- :func:`benchmark_protocol`: turn any video into a datacube (docs/model.md's protocol).
 - :func:`load_scene`: either of the two from one specification string.
 """
 
@@ -305,7 +305,7 @@ def _unit_scaler(video: np.ndarray):
 
 
 def benchmark_protocol(video, shape, T) -> np.ndarray:
-    """Turn a video into a benchmark datacube (the protocol of MODEL.md).
+    """Turn a video into a benchmark datacube (the protocol of docs/model.md).
 
     1. Scale to [0, 1]: integer dtypes are divided by their dtype maximum
        (uint8 by 255, uint16 by 65535, ...); float input is min-max scaled

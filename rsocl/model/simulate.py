@@ -1,6 +1,6 @@
 """Simulated snapshots: the forward model plus an optional sensor model.
 
-Intensities follow MODEL.md: a scene in [0, 1] per sub-frame gives snapshots in
+Intensities follow docs/model.md: a scene in [0, 1] per sub-frame gives snapshots in
 ``[0, gain * t_e/dt]``. The sensor's full scale is that maximum (the largest over
 channels), so ``bit_depth`` quantises ``[0, full_scale]`` into ``2**bit_depth``
 levels and values above it saturate.

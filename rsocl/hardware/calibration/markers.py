@@ -52,7 +52,7 @@ def order_markers(points, *, first=None, angle=0.0, mirrored=False) -> np.ndarra
         ``angle``.
     angle : float
         Expected rotation of the camera relative to the reference, degrees
-        (``Camera.angle`` of ``MODEL.md``). It turns the "top-left" start, so
+        (``Camera.angle`` of ``docs/model.md``). It turns the "top-left" start, so
         that a camera rotated by ``angle`` lists the same physical markers in
         the same order as the reference. Ignored when ``first`` is given.
     mirrored : bool
