@@ -69,7 +69,7 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
  * A tile is TILE_W consecutive pixels p0 .. p0 + TILE_W - 1 (flat index) of one channel;
  * its loop runs over the union of their windows, [min first, max first + L) clipped to
  * [0, T): every load and store is one contiguous vector, where a pixel-per-work-item loop
- * makes per-lane gathers (2-4x the time on PoCL).
+ * makes per-lane gathers (docs/implementation_notes.md).
  * Lanes outside their own window get weight 0, so results equal the scalar loops above.
  * The host defines TILE_W (default: 32 bytes of reals); pixels of blocks cut by the ROI's
  * right or bottom edge take the scalar loops. */
@@ -209,8 +209,8 @@ inline void block_scatter(__global real *f, __global const int *first, __global 
 
 /* sqrt(v) for v >= 0 from the classic bit-level estimate of 1/sqrt refined by
  * Newton steps: plain arithmetic that CPU vectorisers (PoCL) keep in SIMD lanes,
- * where the library sqrt is called one lane at a time (3-5x the time per voxel in
- * the TV kernel on PoCL 3.0). Accurate to a few ulp in float and double. */
+ * where the library sqrt is called one lane at a time (docs/implementation_notes.md).
+ * Accurate to a few ulp in float and double. */
 inline real vector_friendly_sqrt(real v)
 {
     float vf = (float)v;

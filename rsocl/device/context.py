@@ -267,8 +267,7 @@ def kernel_source(name: str) -> str:
 
 
 #: A build-log line that says nothing about the program: NVIDIA's OpenCL (drivers from about 550 on)
-#: writes it for every kernel of every program it compiles (seen on an H100 with driver 580.159.04;
-#: other projects report the same, e.g. silx-kit/pyFAI#2368).
+#: writes it for every kernel of every program it compiles (``docs/implementation_notes.md``).
 _DRIVER_NOISE = re.compile(r"Warning: Function \w+ is a kernel, so overriding noinline attribute\. "
                            r"The function may be inlined when called\.")
 
@@ -305,7 +304,7 @@ class Kernels:
     """A built program whose kernels are created once and reused (``prog.forward(queue, ...)``).
 
     Each is an :class:`rsocl.device.kernel.Kernel`: called like a ``pyopencl.Kernel``, it sets a by-value
-    argument only when its value changes (about 10 µs each on PoCL).
+    argument only when its value changes (:mod:`rsocl.device.kernel`).
     """
 
     def __init__(self, program):
