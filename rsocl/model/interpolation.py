@@ -41,6 +41,21 @@ def interp3d(g, rig, valid=None) -> np.ndarray:
     Returns
     -------
     ndarray of float64, shape (T, m, n)
+
+    Raises
+    ------
+    ValueError
+        If ``rig`` is not a Rig, ``g`` is not ``(K, m, n)`` and finite, or ``valid`` has another
+        shape or keeps no sample.
+
+    Examples
+    --------
+    >>> import rsocl
+    >>> rig = rsocl.Rig.paper_array(4, shape=(16, 16), t_e=180e-6, t_r=35e-6)
+    >>> truth = rsocl.builtin_scene(rig.shape, rig.T)
+    >>> cube = rsocl.interp3d(rsocl.simulate(truth, rig), rig)
+    >>> cube.shape == truth.shape
+    True
     """
     from rsocl.model.rig import Rig
 

@@ -71,6 +71,18 @@ class Camera:
         Optional ``(m, n)`` map of the camera row, in rows, that reads each
         reference pixel (from calibration, or a coded exposure design). Values
         must be finite and >= 0; it replaces ``angle``.
+
+    Raises
+    ------
+    ValueError
+        If a value is out of its range (the message names it), or ``t_d`` is missing with ``frames > 1``.
+
+    Examples
+    --------
+    >>> from rsocl import Camera
+    >>> Camera(90, t_e=180e-6, t_r=35e-6).rows((2, 3))      # 90 degrees: reads left to right
+    array([[0., 1., 2.],
+           [0., 1., 2.]])
     """
 
     def __init__(self, angle=0.0, t_e=None, t_r=None, t_a=0.0, t_d=None, gain=1.0, frames=1, row_map=None):
@@ -179,6 +191,23 @@ class Rig:
         not be smaller than any camera's ``t_r``.
     mask : {"exact", "binary"}
         Shutter weights: exact overlap fraction, or the paper's Eq. 4.
+
+    Raises
+    ------
+    ValueError
+        If ``cameras`` is not a non-empty list of :class:`Camera`, ``shape`` or ``dt`` is out of
+        range, a multi-frame camera's ``t_d`` is too short, or ``T`` would exceed :data:`MAX_T`.
+
+    Examples
+    --------
+    The paper's simulation (``docs/model.md``, section *Paper figures to reproduce*):
+
+    >>> from rsocl import Rig
+    >>> rig = Rig.paper_array(4, shape=(50, 50), t_e=180e-6, t_r=35e-6)
+    >>> rig.T, rig.N_s, rig.T_se, rig.compression_ratio
+    (55, 6, 55, 13.75)
+    >>> round(rig.effective_fps(67))                        # Hz, cameras at 67 fps
+    3685
     """
 
     def __init__(self, cameras, shape, dt=None, mask="exact"):

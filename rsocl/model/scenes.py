@@ -94,6 +94,13 @@ def builtin_scene(shape=(64, 64), T=55, *, dtype=np.float32, seed=0) -> np.ndarr
     ------
     ValueError
         If ``shape``, ``T``, ``dtype`` or ``seed`` are out of range.
+
+    Examples
+    --------
+    >>> import rsocl
+    >>> truth = rsocl.builtin_scene((32, 48), 40)
+    >>> truth.shape, truth.dtype.name, bool(0 <= truth.min() and truth.max() <= 1)
+    ((40, 32, 48), 'float32', True)
     """
     m, n = _shape(shape)
     T = check.positive_int("T (sub-frames)", T)
@@ -338,6 +345,14 @@ def benchmark_protocol(video, shape, T) -> np.ndarray:
     ValueError
         If ``video`` is not a finite real 3-D array with at least one frame,
         or ``shape`` or ``T`` are out of range.
+
+    Examples
+    --------
+    >>> import numpy as np, rsocl
+    >>> video = np.random.default_rng(0).integers(0, 256, (10, 120, 160), dtype=np.uint8)  # 8-bit frames
+    >>> cube = rsocl.benchmark_protocol(video, (32, 32), 55)
+    >>> cube.shape, cube.dtype.name, bool(0 <= cube.min() and cube.max() <= 1)
+    ((55, 32, 32), 'float32', True)
     """
     from skimage.transform import resize
 
