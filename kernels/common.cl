@@ -88,8 +88,8 @@ typedef RSOCL_CAT(int, TILE_W) intw;
 
 /* Tile loads and stores at any alignment, written element by element: LLVM merges them
  * into one unaligned vector load or store. PoCL 3.0 calls vload8/vstore8 as library
- * functions (not inlined, with spills around each call), which costs the forward kernel
- * 25-30 % more time. */
+ * functions (not inlined, with spills around each call), which slows the forward kernel
+ * (docs/implementation_notes.md). */
 #if TILE_W == 2
 #define RSOCL_TILE(p) (p)[0], (p)[1]
 #define RSOCL_STORE(v, p) ((p)[0] = (v).s0, (p)[1] = (v).s1)
@@ -147,10 +147,8 @@ inline realw shutter_weight_v(realw j, realw frac, realw len)
  * The forward, adjoint and ADMM projection kernels give a work item one block: the tiles
  * at flat pixel p0 + r*n, r = 0 .. TILE_R - 1 (n: row length), of the channel at q0 = k*mn + p0.
  * The sub-frame loop is outermost, so each step reads or writes TILE_R tiles of one plane,
- * neighbours in memory. On PoCL 3.0 (paper array, cold caches) TILE_R = 4 is the fastest of
- * 1, 2, 4 and 8 rows for the forward, the adjoint and the ADMM projection at 128x128 (the
- * projection also at 256x256); small problems that stay in cache (50x50) pay 15-35 % more
- * in the projection for the extra loop work per byte. Each row keeps its own window span, so it reads only its own tiles'
+ * neighbours in memory. TILE_R = 4 was the fastest of the row counts tried on PoCL
+ * (docs/implementation_notes.md). Each row keeps its own window span, so it reads only its own tiles'
  * windows and sums in the same order as a tile alone. */
 #ifndef TILE_R
 #define TILE_R 4

@@ -74,7 +74,9 @@ def _cannot_build():
     import setuptools
 
     version = tuple(int(part) for part in setuptools.__version__.split(".")[:2] if part.isdigit())
-    return f"setuptools {setuptools.__version__} is older than {SETUPTOOLS[0]}.{SETUPTOOLS[1]}" if version < SETUPTOOLS else None
+    if version < SETUPTOOLS:
+        return f"setuptools {setuptools.__version__} is older than {SETUPTOOLS[0]}.{SETUPTOOLS[1]}"
+    return None
 
 
 @pytest.fixture(scope="module")

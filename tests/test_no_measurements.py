@@ -23,7 +23,7 @@ MEASUREMENT = re.compile("|".join([
     r"[-+]?\d+(\.\d+)? ?dB\b",                                            # a PSNR or a gain in dB
     r"\b(takes?|took|ran|runs|costs?|about)\s+(about\s+)?\d+(\.\d+)?(-\d+(\.\d+)?)? ?(ms|µs|us|s)\b",  # a timing
     r"\d+(\.\d+)?(-\d+(\.\d+)?)?x (the|slower|faster)\b",                 # a speed-up
-    r"\d+(\.\d+)?(-\d+(\.\d+)?)? ?% (faster|slower|of the \w+ time)",
+    r"\d+(\.\d+)?(-\d+(\.\d+)?)? ?% (faster|slower|more|less|of the \w+ time)",
     r"\bH[12]00\b",                                                       # a GPU's figures
     r"\bseeds? \d+",                                                      # a campaign's seeds
 ]))
@@ -67,7 +67,7 @@ def test_no_measurement_in_docstrings_or_comments(rel):
 
 def test_the_pattern_finds_measurements():
     for text in ("gained +0.15 dB on average", "takes about 45-70 ms per call", "1.5-2x slower",
-                 "ran 7-15 % faster", "on an NVIDIA H100", "seed 100: 7 cam", "costs about 10 µs"):
+                 "ran 7-15 % faster", "pay 15-35 % more", "on an NVIDIA H100", "seed 100: 7 cam", "costs about 10 µs"):
         assert MEASUREMENT.search(text), text
     for text in ("PSNR in dB", "t_e = 180 µs", "exposure time, µs", "seed : int", "units of 100 µs"):
         assert not MEASUREMENT.search(text), text
