@@ -166,9 +166,44 @@ def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 1
     default; ``name`` set; the output is a device array of the input's shape and dtype
     with finite values; the input is not modified; ``out=`` is honoured; weight 0 is the
     identity; the map is non-expansive (``‖D(x) - D(y)‖ <= ‖x - y‖``) on random pairs;
-    no device-to-host transfer happens inside ``denoise``. ``weights`` are the denoising
-    weights tried (at least one, each ``>= 0``; the last one serves the non-expansiveness pairs).
-    Returns the dtypes checked.
+    no device-to-host transfer happens inside ``denoise``.
+
+    Parameters
+    ----------
+    regularizer : Regularizer subclass or instance
+        The plugin's class (built with ``options``) or an instance.
+    options : dict, optional
+        Options for the class, ``{name: value}``.
+    device : str, Device or None
+        OpenCL device (see :func:`rsocl.get_device`).
+    shape : tuple of int
+        ``(T, m, n)`` of the random test arrays, voxels.
+    weights : sequence of float
+        Denoising weights tried, at least one, each ``>= 0``; the last one serves the
+        non-expansiveness pairs.
+    pairs : int
+        Random pairs of the non-expansiveness check.
+    seed : int
+        Seed of the random arrays.
+
+    Returns
+    -------
+    list of str
+        The dtypes checked (``"float64"`` only where the device has ``cl_khr_fp64``).
+
+    Raises
+    ------
+    AssertionError
+        Naming the first property that fails.
+    ValueError
+        If ``weights`` is not a sequence of at least one weight ``>= 0``.
+
+    Examples
+    --------
+    >>> from rsocl.testing import check_regularizer
+    >>> from rsocl_plugins.tv import TV
+    >>> "float32" in check_regularizer(TV, options={"iterations": 3})
+    True
     """
     import pyopencl.array as cla
 
