@@ -12,9 +12,9 @@ import pytest
 import rsocl
 
 MODULES = [
-    "rsocl", "rsocl.testing", "rsocl.model.camera", "rsocl.model.camera", "rsocl.model.rig", "rsocl.model.operator", "rsocl.model.interpolation",
-    "rsocl.model.scenes", "rsocl.model.simulate", "rsocl.analysis.metrics", "rsocl.files.hdf5",
-    "rsocl.common.validation", "rsocl_plugins.tv",
+    "rsocl", "rsocl.testing", "rsocl.model.camera", "rsocl.model.rig", "rsocl.model.operator",
+    "rsocl.model.interpolation", "rsocl.model.scenes", "rsocl.model.simulate", "rsocl.analysis.metrics",
+    "rsocl.files.hdf5", "rsocl.common.validation", "rsocl_plugins.tv",
 ]
 
 #: Public names whose docstring must hold a runnable ``Examples`` section.
