@@ -1,4 +1,4 @@
-"""The ADMM of MODEL.md (Eqs. 11-15) with all state on the OpenCL device.
+"""The ADMM of docs/model.md (Eqs. 11-15) with all state on the OpenCL device.
 
 One iteration is the data step in three launches (``admm_dual``: dual update and
 ``v = theta + b``; ``admm_project``: ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)`` per pixel;

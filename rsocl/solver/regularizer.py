@@ -1,7 +1,7 @@
 """The regularizer contract: a proximal denoiser on device arrays.
 
 A regularizer is the ``theta = denoise(f - b, weight = lam / eta)`` step of the
-ADMM in MODEL.md (Eq. 13): given a ``pyopencl.array.Array`` of shape
+ADMM in docs/model.md (Eq. 13): given a ``pyopencl.array.Array`` of shape
 ``(T, m, n)`` and a weight, it returns the denoised array, on the device, with
 the same shape and dtype. A batch of sets, ``(B, T, m, n)``, takes one weight per set
 (or one for all) and is denoised set by set, each as if alone. Subclasses declare their

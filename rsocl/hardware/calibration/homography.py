@@ -3,7 +3,7 @@
 :func:`estimate_homography` fits the homography from the reference ROI to
 each camera's sensor; :func:`warp_to_reference` resamples a camera's frames
 onto the reference grid, and :func:`row_map_from_homography` gives the
-camera's row-time map ``r(y, x)`` (``MODEL.md``: the sensor row of the mapped
+camera's row-time map ``r(y, x)`` (``docs/model.md``: the sensor row of the mapped
 reference pixel centre). :func:`register_camera` runs the whole chain for one
 frame. Coordinates are as described in :mod:`rsocl.hardware.calibration`.
 """
@@ -117,7 +117,7 @@ def homography_difference(H_a, H_b, shape) -> float:
 
 
 def rotation_homography(angle, shape, *, sensor_shape=None, scale=1.0, shift=(0.0, 0.0)) -> np.ndarray:
-    """Homography of an ideal camera rotated by ``angle`` degrees (``MODEL.md`` convention).
+    """Homography of an ideal camera rotated by ``angle`` degrees (``docs/model.md`` convention).
 
     The sensor row of reference point ``(x, y)`` is
     ``Y = (y - cy) cos(angle) + (x - cx) sin(angle)`` times ``scale`` plus the
@@ -141,7 +141,7 @@ def rotation_homography(angle, shape, *, sensor_shape=None, scale=1.0, shift=(0.
 
 
 def row_map_from_homography(H, shape) -> np.ndarray:
-    """Row-time map ``r(y, x)`` of a camera from its registration (``MODEL.md``).
+    """Row-time map ``r(y, x)`` of a camera from its registration (``docs/model.md``).
 
     Parameters
     ----------
@@ -202,7 +202,7 @@ def homography_angle(H, shape) -> float:
     The direction in which the sensor sees the reference x axis at the
     centre of a reference ROI of ``shape``: ``atan2(dY, dX)`` of the mapped
     unit step. For :func:`rotation_homography` ``(angle)`` it is ``angle``
-    (``MODEL.md``'s ``Camera.angle``), whatever the scale, shift and a small
+    (``docs/model.md``'s ``Camera.angle``), whatever the scale, shift and a small
     perspective.
     """
     H = _homography("H", H)
