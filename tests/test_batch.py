@@ -171,7 +171,7 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
     reg = rsocl.solver.reconstruct.make_regularizer("tv")
 
     def total(b, start=False):
-        return rsocl.solver.batch.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b,
+        return rsocl.solver.memory.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b,
                                                start=start)[1]
 
     memory = (total(4) + total(5)) / 2 / 0.8            # four sets fit in 80 % of it, five do not
@@ -197,7 +197,7 @@ def test_batch_size_on_a_cpu_keeps_the_batch_in_its_cache(sets, monkeypatch):
     cube = (rig.T,) + rig.shape
 
     def total(b):
-        return rsocl.solver.batch.batch_memory(cube, rig.n_channels, np.float32, reg, "exact", b)[1]
+        return rsocl.solver.memory.batch_memory(cube, rig.n_channels, np.float32, reg, "exact", b)[1]
 
     monkeypatch.setattr(type(device), "is_cpu", property(lambda self: True))
     cache = (total(3) + total(4)) / 2 / 0.75            # three sets fit in three quarters of it, four do not
@@ -324,7 +324,7 @@ def test_batch_size_on_a_gpu_goes_past_max_batch_up_to_its_voxels(sets, monkeypa
     reg = rsocl.solver.reconstruct.make_regularizer("tv")
 
     def total(b):
-        return rsocl.solver.batch.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b)[1]
+        return rsocl.solver.memory.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b)[1]
 
     memory = (total(57) + total(58)) / 2 / 0.8
     monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(memory)))

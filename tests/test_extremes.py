@@ -8,7 +8,7 @@ from rsocl.model import reference as ref
 from rsocl.model.interpolation import interp3d
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.scenes import builtin_scene
-from rsocl.solver.tuning import Tuning
+from rsocl.solver.crossval import Tuning
 
 
 def _scene(rig, seed=0):

@@ -4,7 +4,7 @@ Every input is checked before anything is computed: the snapshots against the ri
 settings (``lam``/``eta`` settled once, from the regularizer's recommendation, for every tile),
 the tile and halo, the output path, and the scheduler (connected to first). With ``tune`` (the
 default, as for :func:`rsocl.reconstruct`) what the caller left unset is then chosen once from
-the centre tile of the first set (:mod:`rsocl.scale.tuned`) and every task runs with that choice.
+the centre tile of the first set (:mod:`rsocl.scale.tuning_tile`) and every task runs with that choice.
 """
 
 from __future__ import annotations
@@ -22,13 +22,13 @@ from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
 from rsocl.scale.runner import RETRIES, Engine, non_negative_int
 from rsocl.scale.tiles import check_halo, place, tile_grid, tile_rig
-from rsocl.scale.tuned import tune_tiles, tuned_options
+from rsocl.scale.tuning_tile import tune_tiles, tuned_options
 from rsocl.scale.work import Job, RigPayload, TileSettings
 from rsocl.solver.plan import device_limit, memory_need
-from rsocl.solver.autotune import check_blend, check_tune, starts_from_interpolation
+from rsocl.solver.pipeline import check_blend, check_tune, starts_from_interpolation
 from rsocl.solver.problem import check_settings
 from rsocl.solver.reconstruct import make_regularizer
-from rsocl.solver.tuning import Tuning, applied_blend
+from rsocl.solver.crossval import Tuning, applied_blend
 
 __all__ = ["reconstruct_tiled", "TiledResult", "TilesFailed"]
 
@@ -44,7 +44,7 @@ class TiledResult:
     rig : Rig
     params : dict
         The settings every tile ran with, the tile and halo; ``"tuning"`` the record of the
-        choice (:meth:`rsocl.solver.tuning.Tuning.as_params`, None when not tuned) and
+        choice (:meth:`rsocl.solver.crossval.Tuning.as_params`, None when not tuned) and
         ``"start"`` every tile's first iterate (``"interp3d"`` or ``"zeros"``).
     pieces : list of rsocl.scale.work.Piece
         The tasks run now (blocks dropped), with their sub-frames, seconds and residual.
@@ -54,7 +54,7 @@ class TiledResult:
     seconds : float
         Wall-clock time of the run (the tuning included), seconds.
     store : Path or None
-    tuning : rsocl.solver.tuning.Tuning or None
+    tuning : rsocl.solver.crossval.Tuning or None
         The values chosen for every tile, None when not tuned.
     """
 
@@ -173,14 +173,14 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         See :class:`rsocl.scale.runner.Engine`.
     retries : int
         Extra attempts of a failing task (>= 0).
-    tune : bool or rsocl.solver.tuning.Tuning
+    tune : bool or rsocl.solver.crossval.Tuning
         True (default): ``lam`` and the regularizer's tunable options that are left unset are
         chosen from the snapshots once, in this process, before any task runs, on the tile
         nearest the grid's centre (with its halo, over its own rig) of the first set, as
-        :func:`rsocl.reconstruct` chooses them (:mod:`rsocl.scale.tuned`); every tile of every
+        :func:`rsocl.reconstruct` chooses them (:mod:`rsocl.scale.tuning_tile`); every tile of every
         set then runs with the chosen values and starts from the interpolation of its own
         snapshots. A single tile covering the grid gives ``rsocl.reconstruct(g, rig)``. The
-        search costs about 1.75 runs of one tile. A :class:`~rsocl.solver.tuning.Tuning` (an
+        search costs about 1.75 runs of one tile. A :class:`~rsocl.solver.crossval.Tuning` (an
         earlier run's choice, e.g. the first window of a stream) is applied as it is. False:
         the fixed defaults, zero start. The record is in ``params["tuning"]`` (and a store's
         ``params`` attribute).

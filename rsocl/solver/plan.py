@@ -82,13 +82,13 @@ def memory_need(rig: Rig, *, regularizer="tv", dtype="float32", projection="exac
     """``(largest buffer, total)`` device bytes of reconstructing ``rig``'s sampled sub-frames.
 
     From the shapes alone (nothing is allocated), by the count :func:`rsocl.solver.reconstruct`
-    checks before it runs (:func:`rsocl.solver.batch.batch_memory` of one set): the operator's
+    checks before it runs (:func:`rsocl.solver.memory.batch_memory` of one set): the operator's
     geometry and the snapshots, the datacube over :meth:`Rig.sampled_range`, the solver's arrays,
     the regularizer's workspace and, with ``start`` (the self-tuned default's ``interp3d`` start,
     or a given ``x0``), the start cube.
     """
     from rsocl.common.registry import load
-    from rsocl.solver.batch import batch_memory
+    from rsocl.solver.memory import batch_memory
 
     solved = rig.sampled_range()
     domain = (solved.stop - solved.start,) + rig.shape

@@ -17,7 +17,7 @@ from rsocl.common import validation as check
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
-from rsocl.solver.batch import match_batch, memory_bytes, per_set_value
+from rsocl.solver.memory import match_batch, memory_bytes, per_set_value
 from rsocl.solver.held import HeldError
 
 __all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_settings", "check_representable",
@@ -138,7 +138,7 @@ def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
 def check_settings(*, iterations=None, lam=None, eta=None, tv_iterations=None, projection="exact", tol=None,
                    callback=None) -> Settings:
     """Validate the solver settings (None keeps a default); ``lam``/``eta`` may give one value per set
-    (see :func:`rsocl.solver.batch.per_set_value`; :meth:`Settings.for_batch` checks the count)."""
+    (see :func:`rsocl.solver.memory.per_set_value`; :meth:`Settings.for_batch` checks the count)."""
     if callback is not None and not callable(callback):
         raise ValueError(f"callback must be callable, got {callback!r}")
     return Settings(
@@ -189,7 +189,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     Only the sub-frames some camera samples are modelled; the others hold the nearest modelled one
     in the result (:mod:`rsocl.solver.held`).
     Raises an error naming the sizes when the run would not fit the device; the count
-    (:func:`~rsocl.solver.batch.memory_bytes`) includes a start cube per set when the problem has
+    (:func:`~rsocl.solver.memory.memory_bytes`) includes a start cube per set when the problem has
     an ``x0`` or ``start`` says one will be made after staging (the self-tuned run's ``interp3d`` start).
     """
     import pyopencl.array as cla

@@ -1,6 +1,6 @@
 """``reconstruct``: what a user runs. Five named steps: check the inputs, stage them on the
 device, choose what the caller left unset from the data, run the ADMM iterations, collect the
-result (:mod:`rsocl.solver.problem`, :mod:`rsocl.solver.autotune`, :mod:`rsocl.solver.iterate`).
+result (:mod:`rsocl.solver.problem`, :mod:`rsocl.solver.pipeline`, :mod:`rsocl.solver.iterate`).
 
 **Batches.** ``g`` of shape ``(B, K, m, n)`` holds ``B`` sets of one rig and is reconstructed in
 one run: every kernel launch serves the whole batch, each set is solved as if alone (the same
@@ -11,7 +11,7 @@ or ``(B, T, m, n)``; the callback's residual and ``tol`` act per set.
 
 **Self-tuning** (``tune=True``, the default). ``lam`` and the regularizer's tunable options that
 the caller left unset are chosen from the snapshots alone by block cross-validation on held-out
-snapshot pixels (:mod:`rsocl.solver.tuning`; no ground truth is used), and the run starts from
+snapshot pixels (:mod:`rsocl.solver.crossval`; no ground truth is used), and the run starts from
 :func:`rsocl.model.interpolation.interp3d` unless ``x0`` is given (measured in
 ``benchmarks/quality.py``: -0.12 to +0.01 dB at 64x64, +0.1 to +0.7 dB at 128x128 over a zero
 start). Values the caller gives (``lam``, ``regularizer_options``, a regularizer instance's
@@ -25,12 +25,12 @@ from rsocl.common.registry import load
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import ADMM
-from rsocl.solver.autotune import check_blend, check_tune, interpolation_start, starts_from_interpolation, tune_and_start
+from rsocl.solver.pipeline import check_blend, check_tune, interpolation_start, starts_from_interpolation, tune_and_start
 from rsocl.solver.iterate import collect, run_iterations
 from rsocl.solver.problem import DEFAULTS, check_problem, check_settings, stage_on_device
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.result import Result
-from rsocl.solver.tuning import applied_blend
+from rsocl.solver.crossval import applied_blend
 
 __all__ = ["reconstruct", "make_regularizer", "Result", "DEFAULTS"]
 
@@ -102,14 +102,14 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         Snapshot value (units of ``g``) from which a pixel is left out of the data term.
     tune : bool or Tuning
         Choose ``lam`` and the tunable options (TV: ``temporal_weight``) the caller left unset
-        from the snapshots alone (:mod:`rsocl.solver.autotune`); a ``Tuning``: run with that
+        from the snapshots alone (:mod:`rsocl.solver.pipeline`); a ``Tuning``: run with that
         earlier choice, without a search; False: fixed defaults.
     blend : float or None
         In [0, 1]: return ``x0 + blend (theta - x0)``, the solver's result moved back towards the
         run's start: ``x0`` when given, else the interpolation a self-tuned run starts from (a run
         from zeros refuses a blend below 1); 1 returns the solver's result as it is. None
         (default): the blend the search chose on the same held-out pixels
-        (:mod:`rsocl.solver.tuning`) when the run starts from the interpolation, else 1. Recorded
+        (:mod:`rsocl.solver.crossval`) when the run starts from the interpolation, else 1. Recorded
         in ``Result.params["blend"]``.
 
     A run whose residual ``‖g - H theta‖ / ‖g‖`` turns NaN or grows past 1000 times its smallest

@@ -18,9 +18,9 @@ from rsocl.common import validation as check
 from rsocl.device.context import get_device
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
-from rsocl.solver.batch import batch_memory
+from rsocl.solver.memory import batch_memory
 from rsocl.solver.result import Result
-from rsocl.solver.tuning import Tuning
+from rsocl.solver.crossval import Tuning
 
 __all__ = ["batch_size", "reconstruct_sets", "MAX_BATCH", "GPU_BATCH_VOXELS", "CACHE_FRACTION"]
 

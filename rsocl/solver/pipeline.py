@@ -1,6 +1,6 @@
 """The self-tuning step of :func:`rsocl.solver.reconstruct`: what the caller left unset
 (``lam``, the regularizer's :attr:`~rsocl.solver.regularizer.Regularizer.tunable` options) is
-chosen from the snapshots by :func:`rsocl.solver.tuning.tune_parameters`, and the run then
+chosen from the snapshots by :func:`rsocl.solver.crossval.tune_parameters`, and the run then
 starts from the :func:`~rsocl.model.interpolation.interp3d` interpolation of the snapshots.
 
 A batch of sets of one rig is tuned on its first set, and the chosen values apply to every set
@@ -17,10 +17,10 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import state_bytes
-from rsocl.solver.batch import memory_bytes, problem_bytes, workspace_memory
+from rsocl.solver.memory import memory_bytes, problem_bytes, workspace_memory
 from rsocl.solver.problem import stage_on_device
 from rsocl.solver.regularizer import Regularizer
-from rsocl.solver.tuning import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, can_hold_out, default_patterns, tune_parameters
+from rsocl.solver.crossval import CANDIDATE_FRACTION, LAM_FACTORS, Tuning, can_hold_out, default_patterns, tune_parameters
 
 __all__ = ["check_tune", "check_blend", "tune_and_start", "choose_unset", "chosen_options", "search_memory", "search_peak",
            "starts_from_interpolation", "interpolation_start"]
@@ -38,7 +38,7 @@ def check_tune(tune, reg=None):
         return tune
     if isinstance(tune, (bool, np.bool_)):
         return bool(tune)
-    raise ValueError(f"tune must be True, False or an rsocl.solver.tuning.Tuning, got {tune!r}")
+    raise ValueError(f"tune must be True, False or an rsocl.solver.crossval.Tuning, got {tune!r}")
 
 
 def check_blend(blend, has_start: bool):
@@ -102,10 +102,10 @@ def choose_unset(problem, staged, settings, regularizer, reg, user_options, fixe
     ``problem`` and ``staged`` are one set, checked and staged; ``settings`` are settled
     (:meth:`~rsocl.solver.problem.Settings.settled_for`); ``fixed_lam`` is the caller's ``lam``
     (None: searched). ``lam`` candidates are the settled ``lam`` times
-    :data:`~rsocl.solver.tuning.LAM_FACTORS`; each candidate runs
-    :data:`~rsocl.solver.tuning.CANDIDATE_FRACTION` of ``settings.iterations``, split among the
-    hold-out patterns (:func:`~rsocl.solver.tuning.default_patterns`; at least 10 per pattern). When the
-    folds leave no pixels to fit or to score (:func:`~rsocl.solver.tuning.can_hold_out`: one camera
+    :data:`~rsocl.solver.crossval.LAM_FACTORS`; each candidate runs
+    :data:`~rsocl.solver.crossval.CANDIDATE_FRACTION` of ``settings.iterations``, split among the
+    hold-out patterns (:func:`~rsocl.solver.crossval.default_patterns`; at least 10 per pattern). When the
+    folds leave no pixels to fit or to score (:func:`~rsocl.solver.crossval.can_hold_out`: one camera
     on 2x2 pixels or fewer, or too few valid pixels) a warning says so and None is returned.
     Unless ``checked`` (the caller did it, for a batch), the search's memory beside the staged
     problem (:func:`search_peak`) is checked against the device before anything runs. A rig with
@@ -153,7 +153,7 @@ def interpolation_start(problem, staged):
 
 def search_memory(op, reg, projection: str, batch) -> int:
     """Device bytes the search allocates beside the staged problem, freed before the run's solver is
-    made: per hold-out pattern (:func:`~rsocl.solver.tuning.default_patterns`) one set's ADMM arrays, its
+    made: per hold-out pattern (:func:`~rsocl.solver.crossval.default_patterns`) one set's ADMM arrays, its
     warm start, its warm start's prediction of the snapshots, held-out weights and regularizer
     workspace (a fold's solver keeps the previous candidate's regularizer until its own turn); and for
     a batch (``batch`` sets, None: one set) the first set staged on its own (operator geometry and
@@ -171,7 +171,7 @@ def search_memory(op, reg, projection: str, batch) -> int:
 
 def search_peak(op, reg, projection: str, batch, *, truth=False, start=False) -> int:
     """Device bytes held while the search runs: the staged problem of ``batch`` sets (None: one set;
-    :func:`~rsocl.solver.batch.problem_bytes`, with a ground truth and a given start cube per set
+    :func:`~rsocl.solver.memory.problem_bytes`, with a ground truth and a given start cube per set
     when ``truth``, ``start``) and :func:`search_memory`."""
     held = problem_bytes(op.domain_shape, op.K, op.dtype, batch or 1, truth=truth, start=start)
     return held + search_memory(op, reg, projection, batch)
@@ -218,10 +218,10 @@ def _search_first_set(problem, staged, settings, regularizer, reg, user_options,
 def tune_and_start(problem, staged, settings, regularizer, reg, user_options, fixed_lam, *, make, device, dtype,
                    choice=None, progress=False):
     """Choose the unset parameters from the snapshots (or run with ``choice``, an earlier
-    :class:`~rsocl.solver.tuning.Tuning`, without a search) and set the warm start.
+    :class:`~rsocl.solver.crossval.Tuning`, without a search) and set the warm start.
 
     Returns ``(reg, settings, tuning)``: the regularizer and settings to run with, and the
-    :class:`~rsocl.solver.tuning.Tuning` record (None when nothing was left to choose; then
+    :class:`~rsocl.solver.crossval.Tuning` record (None when nothing was left to choose; then
     ``reg``, ``settings`` and ``staged`` are unchanged). Values the caller fixed (``lam``, options)
     win over an earlier choice's. ``staged.x0`` becomes the interpolation start unless the caller
     gave ``x0``.

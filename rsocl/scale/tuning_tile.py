@@ -1,7 +1,7 @@
 """The self-tuning step of a tiled reconstruction: one choice for every tile and set.
 
 :func:`rsocl.reconstruct` chooses ``lam`` and the regularizer's tunable options from the
-snapshots (:mod:`rsocl.solver.autotune`). A tiled run makes that choice once, in the client,
+snapshots (:mod:`rsocl.solver.pipeline`). A tiled run makes that choice once, in the client,
 before any task is submitted: on the tile whose core is nearest the grid's centre (its block
 with the halo, over its own rig, cut as every tile is by :func:`rsocl.scale.tiles.tile_rig`), of
 the first set; the next nearest when every pixel of that block is saturated. Every tile of
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from rsocl.scale.tiles import Tile, TileGrid, tile_rig
 from rsocl.scale.work import Job, worker_device
-from rsocl.solver.autotune import choose_unset, chosen_options
+from rsocl.solver.pipeline import choose_unset, chosen_options
 from rsocl.solver.problem import check_problem, stage_on_device
 from rsocl.solver.reconstruct import make_regularizer
 
@@ -70,7 +70,7 @@ def tune_tiles(source, rig, grid: TileGrid, regularizer: str, settings, fixed_la
 
     Returns
     -------
-    rsocl.solver.tuning.Tuning or None
+    rsocl.solver.crossval.Tuning or None
         None when nothing was left to choose.
     """
     tile, g = _tuning_block(source, grid, saturation)
