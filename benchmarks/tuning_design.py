@@ -5,7 +5,7 @@ grid, fits the candidates on the rest and scores them on the held-out pixels. Wh
 block holds out decides which scene content tests which camera. The designs compared: blocks of
 half (``1/2``) or a quarter (``1/4``) of the grid's smaller side, in one pattern or two (``x2``:
 the second with the held-out cameras shifted), both sizes pooled (``1/2 + 1/4 x2``), and
-rsocl's ``default`` (:func:`~rsocl.solver.crossval.default_patterns`). More patterns are added
+rsocl's ``default`` (:func:`~rsocl.solver.holdout.default_patterns`). More patterns are added
 where one leaves a camera never held out. All at equal cost: 50 ADMM iterations per candidate,
 shared among the patterns (what the default search runs for a run of 200 iterations).
 
@@ -43,7 +43,7 @@ LAM_FACTORS = (0.3, 1.0, 3.0)
 RIGS = ("paper4", "0/30/60/90", "0/90/45/135", "paper7", "paper3", "paper2", "paper8", "0/45")
 SCENES = ("builtin", "builtin-fast", "builtin-slow", "runner40@1", "runner40@0.5", "traffic48@1", "traffic48@2",
           "runner40-crop@1")
-#: name -> scales of :func:`rsocl.solver.crossval.default_patterns`: (block side as a fraction of the grid's
+#: name -> scales of :func:`rsocl.solver.holdout.default_patterns`: (block side as a fraction of the grid's
 #: smaller side, patterns at least; more when a camera would never be held out); None: rsocl's default
 DESIGNS = {"1/2": ((0.5, 1),), "1/2 x2": ((0.5, 2),), "1/4": ((0.25, 1),), "1/4 x2": ((0.25, 2),),
            "1/2 + 1/4 x2": ((0.5, 1), (0.25, 2)), "default": None}
@@ -76,8 +76,9 @@ def run_case(rig_name, scene, size, iterations, device, done=None):
     from rsocl.model.simulate import simulate
     from rsocl.solver.admm import ADMM
     from rsocl.solver.problem import check_problem, check_settings, stage_on_device
-    from rsocl.solver.reconstruct import make_regularizer
-    from rsocl.solver.crossval import default_patterns, tune_parameters
+    from rsocl.solver.request import make_regularizer
+    from rsocl.solver.crossval import SearchSpace, tune_parameters
+    from rsocl.solver.holdout import default_patterns
 
     rig = make_rig(rig_name, size)
     truth = make_scene(scene, rig.shape, rig.T)
@@ -109,8 +110,8 @@ def run_case(rig_name, scene, size, iterations, device, done=None):
             continue
         patterns = default_patterns(rig.shape, rig.n_channels, scales)
         begin = time.perf_counter()
-        tuning = tune_parameters(op, staged.g, problem.g, rig, make, tunable={"temporal_weight": COARSE},
-                                 lam=[settings.lam * f for f in LAM_FACTORS], eta=settings.eta, patterns=patterns,
+        space = SearchSpace({"temporal_weight": COARSE}, [settings.lam * f for f in LAM_FACTORS])
+        tuning = tune_parameters(op, staged.g, problem.g, make, space, eta=settings.eta, patterns=patterns,
                                  iterations=max(10, round(BUDGET / len(patterns))))
         weight, lam = tuning.chosen["temporal_weight"], tuning.chosen["lam"]
         out["designs"][name] = {"weight": weight, "factor": lam / settings.lam,

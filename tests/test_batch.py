@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 import rsocl
+import rsocl.solver.memory
+import rsocl.solver.request
 from rsocl.model import reference as ref
 from rsocl.model.interpolation import interp3d
 from rsocl.model.scenes import builtin_scene
@@ -168,7 +170,7 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
     device = rsocl.device.get_device()
     assert batch_size(rig, sets=5, device=device) == 5
     assert batch_size(rig, device=device, limit=7) == 7
-    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+    reg = rsocl.solver.request.make_regularizer("tv")
 
     def total(b, start=False):
         return rsocl.solver.memory.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b,
@@ -193,7 +195,7 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
 def test_batch_size_on_a_cpu_keeps_the_batch_in_its_cache(sets, monkeypatch):
     rig, truth, g = sets
     device = rsocl.device.get_device()
-    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+    reg = rsocl.solver.request.make_regularizer("tv")
     cube = (rig.T,) + rig.shape
 
     def total(b):
@@ -321,7 +323,7 @@ def test_batch_size_on_a_gpu_goes_past_max_batch_up_to_its_voxels(sets, monkeypa
     assert batch_size(rig, device=device, sets=40) == 40
     assert batch_size(rig, device=device, limit=7) == 7
     # memory still bounds it: the largest batch within 80 % of the device, found by bisection
-    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+    reg = rsocl.solver.request.make_regularizer("tv")
 
     def total(b):
         return rsocl.solver.memory.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b)[1]

@@ -3,17 +3,17 @@ import pytest
 
 import rsocl
 from rsocl.cli.main import main
-from rsocl.solver.plan import crop_rig, plan
+from rsocl.solver.plan import plan
 
 
 def test_crop_keeps_real_start_times():
     rig = rsocl.Rig.paper_array(4, (20, 30), t_e=1e-4, t_r=3e-5)
-    sub = crop_rig(rig, (5, 7, 6, 8))
+    sub = rig.crop((5, 7, 6, 8))
     np.testing.assert_array_equal(sub.start_times(), rig.start_times()[:, 5:11, 7:15])
     # only the sub-frames the crop's rows are read in are solved
     assert sub.sampled_range().stop - sub.sampled_range().start < rig.T
     with pytest.raises(ValueError, match="roi"):
-        crop_rig(rig, (15, 0, 10, 5))
+        rig.crop((15, 0, 10, 5))
 
 
 def test_plan_picks_the_coarsest_dt_that_resolves_the_motion(device):
@@ -85,3 +85,4 @@ def test_plan_in_python_checks_iterations_and_blur():
         plan(rig, iterations=-3, measure=False)
     with pytest.raises(ValueError, match="blur_pixels"):
         plan(rig, blur_pixels=0, measure=False)
+

@@ -72,7 +72,7 @@ class Regularizer:
         with their coarse candidate values (positive, log spaced); empty: only ``lam`` is tuned.
     one_snapshot : dict of str -> float
         Values of tunable options for a rig with one snapshot per pixel (one camera, one frame):
-        the search then sets them instead of choosing them (:func:`rsocl.solver.pipeline.choose_unset`),
+        the search then sets them instead of choosing them (:func:`rsocl.solver.pipeline.tune`),
         because held-out pixels of the only snapshot are predicted across space alone and the
         criterion cannot rank priors in time. When they leave only ``lam`` unset, ``lam`` keeps its
         default and nothing is searched. Measured per regularizer; empty: searched as always.
