@@ -272,6 +272,7 @@ def test_the_fits_message_suggests_float32_only_for_float64(device):
         device.check_fits("x", device.max_alloc_bytes + 1, dtype="float64")
 
 
+@pytest.mark.slow
 def test_plan_proposes_a_tiling_for_the_whole_sensor(capsys, monkeypatch, device):
     from rsocl.cli.main import main
 
