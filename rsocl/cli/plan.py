@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from rsocl.cli.options import add_device_args, add_rig_args, rig_from
+from rsocl.cli.options import add_device_args, add_rig_args, regularizer_from, rig_from
 from rsocl.cli.tiling import add_plan_tiling_args, check_plan_tiling_args, print_plan_tiling
 
 __all__ = ["add_parser", "roi_from", "cmd_plan"]
@@ -19,7 +19,10 @@ def add_parser(subparsers):
     p.add_argument("--fps", type=float, default=None, help="sub-frame rate wanted, Hz")
     p.add_argument("--blur", type=float, default=1.0, help="motion allowed within a sub-frame, pixels (default 1)")
     p.add_argument("--iterations", type=int, default=200, help="ADMM iterations to cost, >= 1 (default 200)")
-    p.add_argument("--regularizer", default="tv")
+    p.add_argument("--regularizer", default="tv", help="regularizer name (see 'rsocl plugins')")
+    p.add_argument("--reg-opt", action="append", default=[], metavar="KEY=VALUE",
+                   help="regularizer option, repeatable (its workspace is counted: TV's fused=N keeps a second dual "
+                        "buffer)")
     p.add_argument("--no-measure", action="store_true", help="memory only; do not time 3 iterations")
     add_device_args(p)
     add_plan_tiling_args(p)
@@ -47,15 +50,16 @@ def cmd_plan(args) -> int:
     Every option is checked before the table is printed or anything is measured.
     """
     from rsocl.common import validation as check
-    from rsocl.solver.plan import crop_rig, format_plan, plan
+    from rsocl.solver.plan import format_plan, plan
 
     check.positive_int("--iterations", args.iterations)
     check.positive("--blur", args.blur, "pixels")
+    regularizer = regularizer_from(args)
     rig = rig_from(args)
     roi = roi_from(args.roi, rig.shape)
-    check_plan_tiling_args(args, rig.shape if roi is None else crop_rig(rig, roi).shape)
+    check_plan_tiling_args(args, rig.shape if roi is None else rig.crop(roi).shape)
     p = plan(rig, roi=roi, speed=args.speed, fps=args.fps, blur_pixels=args.blur, iterations=args.iterations,
-             regularizer=args.regularizer, dtype=args.dtype, device=args.device, measure=not args.no_measure)
+             regularizer=regularizer, dtype=args.dtype, device=args.device, measure=not args.no_measure)
     print(format_plan(p))
     print_plan_tiling(args, p)
     return 0

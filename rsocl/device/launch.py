@@ -8,7 +8,7 @@ their bounds.
 
 from __future__ import annotations
 
-__all__ = ["voxel_grid", "exact_launches", "element_launches", "batch_launches", "voxel_launches", "tile_grid",
+__all__ = ["voxel_grid", "exact_launches", "element_launches", "batch_launches", "voxel_launches", "flat_tile_grid",
            "block_grid"]
 
 
@@ -72,7 +72,7 @@ def voxel_launches(T: int, m: int, n: int, group: int = 64, max_x: int | None = 
     return [((size, m, T), (local, 1, 1), (offset, 0, 0)) for offset, size, local in exact_launches(n, row)]
 
 
-def tile_grid(pixels: int, width: int, channels: int = 1):
+def flat_tile_grid(pixels: int, width: int, channels: int = 1):
     """Global and local sizes for one work item per tile of ``width`` pixels (and channel).
 
     Flat tiles of ``width`` neighbouring pixels (flat index), 64 tiles per work group; the

@@ -254,7 +254,7 @@ class Rig:
         Sub-frames outside it carry no information; the solver leaves them out and gives them the
         nearest sub-frame it solved (:mod:`rsocl.solver.held`). With ``roi = (y, x, height, width)``
         (pixels, inside the grid): the sampled range of the rig cut to that block
-        (:func:`rsocl.solver.plan.crop_rig`, whose cameras keep every pixel's exposure times), without
+        (:meth:`crop`, whose cameras keep every pixel's exposure times), without
         building it.
         """
         first, last, end = self._pixel_bounds
@@ -332,6 +332,29 @@ class Rig:
     def datacube_bytes(self, itemsize: int = 4) -> int:
         """Bytes of one ``(T, m, n)`` datacube at ``itemsize`` bytes per value."""
         return self.T * self.shape[0] * self.shape[1] * itemsize
+
+    # ------------------------------------------------------------------ rigs made from this one
+    def crop(self, roi, dt=None) -> "Rig":
+        """This rig restricted to ``roi = (y, x, height, width)`` of its reference grid, pixels (and
+        sub-frames of ``dt`` seconds; None keeps this rig's).
+
+        Each camera's row map is cut from the whole one (not re-zeroed), so the exposure start
+        times are those of the whole sensor readout.
+        """
+        y, x, h, w = (int(v) for v in roi)
+        m, n = self.shape
+        if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
+            raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
+        cams = [Camera(**{**cam.to_dict(), "row_map": self.row_map(c, (y, x, h, w))})
+                for c, cam in enumerate(self.cameras)]
+        return Rig(cams, (h, w), dt=self.dt if dt is None else dt, mask=self.mask)
+
+    def frames_window(self, k0: int, k1: int) -> "Rig":
+        """The rig of frames ``k0..k1-1`` of every camera, on this rig's sub-frame grid (same ``dt``):
+        each trigger offset moves to ``t_a + k0*t_d``, so every exposure keeps its absolute start."""
+        cams = [Camera.from_dict({**cam.to_dict(), "t_a": cam.t_a + k0 * (cam.t_d or 0.0), "frames": k1 - k0})
+                for cam in self.cameras]
+        return Rig(cams, self.shape, dt=self.dt, mask=self.mask)
 
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict:
