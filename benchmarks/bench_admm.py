@@ -1,7 +1,7 @@
 """Time rsocl's ADMM-TV against the plain NumPy + scikit-image baseline and a PyTorch peer, in one run.
 
 For each ROI size the paper's 4-camera array (angles 0, 90, 180, 270; t_e = 0.18 ms,
-t_r = 35 us) films a benchmark video (MODEL.md's protocol: resized, resampled to T
+t_r = 35 us) films a benchmark video (docs/model.md's protocol: resized, resampled to T
 sub-frames, [0, 1]); the snapshots are simulated in float64 with rsocl's operator.
 Four reconstructions then run with the same parameters and iteration count:
 

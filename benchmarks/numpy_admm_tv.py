@@ -2,13 +2,13 @@
 
 This is the baseline of ``bench_admm.py``: the reconstruction written the way a
 user would write it from the paper (Guzmán, Meza, Vera, Optics Express 2021) and
-``MODEL.md``, with no rsocl code in the loop. It only reads the rig's timing
+``docs/model.md``, with no rsocl code in the loop. It only reads the rig's timing
 (per-pixel exposure start times, ``dt``, exposure time ``t_e`` and gain of each
 camera); the shutter weights, the forward model, its adjoint, the exact per-pixel
 projection and the loop are all written here with NumPy, and the TV step is
 ``skimage.restoration.denoise_tv_chambolle`` (3-D, spatio-temporal).
 
-The ADMM (MODEL.md, Eqs. 11-15), with ``theta = b = 0`` at the start::
+The ADMM (docs/model.md, Eqs. 11-15), with ``theta = b = 0`` at the start::
 
     v     = theta + b
     f     = v + Hᵀ (eta I + H Hᵀ)⁻¹ (g - H v)       # exact, one C×C block per pixel
@@ -36,7 +36,7 @@ def shutter_mask(rig) -> np.ndarray:
 
     Sub-frame ``s`` covers ``[s*dt, (s+1)*dt)``; pixel ``(y, x)`` of camera ``c`` is
     exposed during ``[start, start + t_e]``. The weight is the overlap of the two
-    intervals as a fraction of ``dt`` (MODEL.md, ``mask="exact"``), in [0, 1].
+    intervals as a fraction of ``dt`` (docs/model.md, ``mask="exact"``), in [0, 1].
     """
     if rig.mask != "exact":
         raise ValueError("this baseline implements the exact overlap mask only")

@@ -4,7 +4,8 @@ For each kernel: the bytes it must move (each value read or written once, neighb
 from cache), the time per launch (median of round-robin repeats, from cold and from warm
 caches), the bandwidth that makes, and its ratio to the copy kernel's bandwidth, over
 ``--runs`` runs; then the TV's bytes per voxel-iteration, plain against fused, counted. Paper
-array, 128x128 by default, float32. Writes docs/roofline.md.
+array, 128x128 by default, float32. Writes docs/roofline.md; docs/implementation_notes.md quotes
+its figures (exact launch grids, work groups of whole rows).
 
     python benchmarks/roofline.py [--size 128] [--repeats 60] [--runs 3] [--caches cold warm]
                                   [--device SPEC] [--out docs/roofline.md]

@@ -70,13 +70,12 @@ def scene_block(rig, rows, subframes, seed=0):
 
 def simulate_blocks(rig, block_rows=64):
     """Snapshots ``(K, m, n)`` of :func:`scene_block`, simulated row block by row block."""
-    from rsocl.solver.plan import crop_rig
 
     m, n = rig.shape
     g = np.empty((rig.n_channels, m, n), dtype=np.float32)
     for y0 in range(0, m, block_rows):
         h = min(block_rows, m - y0)
-        sub = crop_rig(rig, (y0, 0, h, n))
+        sub = rig.crop((y0, 0, h, n))
         frames = sub.sampled_range()
         op = rsocl.RollingShutterOperator(sub, subframes=frames)
         g[:, y0:y0 + h] = op.forward(scene_block(rig, slice(y0, y0 + h), frames))

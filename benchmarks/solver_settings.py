@@ -1,9 +1,9 @@
-"""PSNR of rsocl's ADMM on the shared videos with the paper's 4-camera array (MODEL.md protocol).
+"""PSNR of rsocl's ADMM on the shared videos with the paper's 4-camera array (docs/model.md protocol).
 
 Reports, for Runner and Traffic at 64x64 (t_e = 180 µs, t_r = 35 µs, dt = t_r):
 the default settings (exact projection), the paper's diagonal projection (Eq. 15) at the
 paper's lam = 20, eta = 30 and at the best of a small sweep, and a lam/eta/tv_iterations
-sweep around the defaults, so the defaults in rsocl.solver.reconstruct.DEFAULTS can be checked.
+sweep around the defaults, so the defaults in rsocl.solver.problem.DEFAULTS can be checked.
 PSNR in dB with peak 1 (videos scaled to [0, 1]). Prints a Markdown table and writes it to
 docs/solver_settings.md (``--out``) with the machine, commit and date it was measured on.
 
@@ -20,7 +20,7 @@ from pathlib import Path
 import rsocl
 from rsocl.analysis.metrics import psnr
 from rsocl.model.interpolation import interp3d
-from rsocl.solver.reconstruct import DEFAULTS
+from rsocl.solver.problem import DEFAULTS
 from rsocl.model.scenes import load_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -69,7 +69,7 @@ def main(argv=None):
     page = header_lines("Reconstruction quality on the shared videos", op.device,
                         None if argv is None else [__file__, *argv])
     page += [f"Paper array, {args.size}x{args.size}, T = {rig.T}, t_e = 180 µs, t_r = 35 µs, dt = t_r; "
-             f"videos by the benchmark protocol of MODEL.md; {args.iterations} iterations; rsocl's defaults "
+             f"videos by the benchmark protocol of docs/model.md; {args.iterations} iterations; rsocl's defaults "
              f"{DEFAULTS} unless the row says otherwise; TV with temporal weight 3 (the `tv` plugin's default). "
              "PSNR in dB with peak 1; 'best (iteration)' is the highest PSNR over the iterations and where it "
              "was reached; ms/iteration is the whole call's wall time per iteration (kernel builds excluded, PSNR tracking included).", "",

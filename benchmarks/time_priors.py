@@ -96,7 +96,7 @@ def denoise(image, weight, iterations, a, b, w, p):
 
 
 def admm(rig, g, x0, *, a=0.0, b=1.0, w=1.0, inner=10, warm=False, iterations=200, lam=0.1, eta=0.2):
-    """The reference ADMM of MODEL.md with :func:`denoise` as its prior step; returns theta."""
+    """The reference ADMM of docs/model.md with :func:`denoise` as its prior step; returns theta."""
     from rsocl.model.reference import project
 
     theta, dual = np.asarray(x0, np.float64).copy(), np.zeros((rig.T,) + rig.shape)

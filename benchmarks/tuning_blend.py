@@ -1,6 +1,6 @@
 """The self-tuned blend with the interpolation: PSNR with it, without it and of interp3d alone.
 
-``rsocl.reconstruct``'s search also chooses ``blend`` in [0, 1] (``rsocl.solver.tuning``): the run
+``rsocl.reconstruct``'s search also chooses ``blend`` in [0, 1] (``rsocl.solver.crossval``): the run
 returns ``x0 + blend (theta - x0)``, ``x0`` its interp3d start. For every case this script runs the
 self-tuned default (200 iterations, float32), the same choice with ``blend=1`` (the solver's own
 result, no search: the recorded Tuning again) and ``interp3d``, and reports PSNR (dB, peak 1).
@@ -29,7 +29,7 @@ import numpy as np
 import rsocl
 from rsocl.analysis.metrics import psnr
 from rsocl.model.interpolation import interp3d
-from rsocl.solver.tuning import Tuning
+from rsocl.solver.crossval import Tuning
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from case_cache import Cache  # noqa: E402

@@ -1,18 +1,18 @@
 """The hold-out design of the self-tuning: block size and patterns, measured over rigs and scenes.
 
-:func:`rsocl.solver.tuning.tune_parameters` holds one camera out of each square block of the
+:func:`rsocl.solver.crossval.tune_parameters` holds one camera out of each square block of the
 grid, fits the candidates on the rest and scores them on the held-out pixels. Which camera a
 block holds out decides which scene content tests which camera. The designs compared: blocks of
 half (``1/2``) or a quarter (``1/4``) of the grid's smaller side, in one pattern or two (``x2``:
 the second with the held-out cameras shifted), both sizes pooled (``1/2 + 1/4 x2``), and
-rsocl's ``default`` (:func:`~rsocl.solver.tuning.default_patterns`). More patterns are added
+rsocl's ``default`` (:func:`~rsocl.solver.holdout.default_patterns`). More patterns are added
 where one leaves a camera never held out. All at equal cost: 50 ADMM iterations per candidate,
 shared among the patterns (what the default search runs for a run of 200 iterations).
 
 For each rig and scene: the PSNR of full runs (``--iterations`` ADMM iterations, start from
 interp3d, as the tuned default runs) on the grid of temporal weights 1, 1.73, 3, 5.48, 10, 17.3,
 30 x ``lam`` factors 0.3, 1, 3 (every point the search can choose), then, per design, the search
-itself (:func:`~rsocl.solver.tuning.tune_parameters`, no ground truth) and the PSNR of its choice.
+itself (:func:`~rsocl.solver.crossval.tune_parameters`, no ground truth) and the PSNR of its choice.
 "best" is the best point of the grid of the quality benchmark (weights 1, 3, 10, 30 x the three
 ``lam``), chosen with the ground truth. Rigs: the paper array of 2, 3, 4, 7 and 8 cameras and
 rotations other than the paper's (0/30/60/90, 0/90/45/135, 0/45 degrees). Scenes:
@@ -43,7 +43,7 @@ LAM_FACTORS = (0.3, 1.0, 3.0)
 RIGS = ("paper4", "0/30/60/90", "0/90/45/135", "paper7", "paper3", "paper2", "paper8", "0/45")
 SCENES = ("builtin", "builtin-fast", "builtin-slow", "runner40@1", "runner40@0.5", "traffic48@1", "traffic48@2",
           "runner40-crop@1")
-#: name -> scales of :func:`rsocl.solver.tuning.default_patterns`: (block side as a fraction of the grid's
+#: name -> scales of :func:`rsocl.solver.holdout.default_patterns`: (block side as a fraction of the grid's
 #: smaller side, patterns at least; more when a camera would never be held out); None: rsocl's default
 DESIGNS = {"1/2": ((0.5, 1),), "1/2 x2": ((0.5, 2),), "1/4": ((0.25, 1),), "1/4 x2": ((0.25, 2),),
            "1/2 + 1/4 x2": ((0.5, 1), (0.25, 2)), "default": None}
@@ -76,8 +76,9 @@ def run_case(rig_name, scene, size, iterations, device, done=None):
     from rsocl.model.simulate import simulate
     from rsocl.solver.admm import ADMM
     from rsocl.solver.problem import check_problem, check_settings, stage_on_device
-    from rsocl.solver.reconstruct import make_regularizer
-    from rsocl.solver.tuning import default_patterns, tune_parameters
+    from rsocl.solver.request import make_regularizer
+    from rsocl.solver.crossval import SearchSpace, tune_parameters
+    from rsocl.solver.holdout import default_patterns
 
     rig = make_rig(rig_name, size)
     truth = make_scene(scene, rig.shape, rig.T)
@@ -109,8 +110,8 @@ def run_case(rig_name, scene, size, iterations, device, done=None):
             continue
         patterns = default_patterns(rig.shape, rig.n_channels, scales)
         begin = time.perf_counter()
-        tuning = tune_parameters(op, staged.g, problem.g, rig, make, tunable={"temporal_weight": COARSE},
-                                 lam=[settings.lam * f for f in LAM_FACTORS], eta=settings.eta, patterns=patterns,
+        space = SearchSpace({"temporal_weight": COARSE}, [settings.lam * f for f in LAM_FACTORS])
+        tuning = tune_parameters(op, staged.g, problem.g, make, space, eta=settings.eta, patterns=patterns,
                                  iterations=max(10, round(BUDGET / len(patterns))))
         weight, lam = tuning.chosen["temporal_weight"], tuning.chosen["lam"]
         out["designs"][name] = {"weight": weight, "factor": lam / settings.lam,

@@ -12,7 +12,9 @@ Then the same comparison inside whole reconstructions: the paper configuration (
 T = 55, 200 ADMM iterations of 10 TV iterations, fixed settings, float32) in batches of
 ``--admm-batches`` sets per ``rsocl.reconstruct`` call, plain against each fused value, in
 alternating rounds; seconds per set (set-up included, compilation excluded), the ratio to the
-plain path within each round, and the largest difference between the datacubes.
+plain path within each round, and the largest difference between the datacubes. Writes
+``docs/tv_fused.md``; ``docs/regularizer_defaults.md`` quotes its figures (why TV's ``fused``
+defaults to 0).
 
     python benchmarks/tv_fused.py [--sizes 64 128] [--fused 3 5 9] [--rounds 3] [--calls 5]
         [--admm-batches 1 4] [--device SPEC] [--out docs/tv_fused.md]

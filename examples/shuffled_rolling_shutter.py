@@ -10,6 +10,7 @@ There is no ground truth, so the script writes a montage and a GIF to look at.
 """
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,22 @@ import rsocl
 from rsocl.analysis.visual import comparison_gif, datacube_montage
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "wine_shuffled_rs_real.npz"
+
+
+def load_capture(path, pattern):
+    """``(measurement, time index)`` of ``pattern`` in the capture at ``path``, float64; a missing or
+    unreadable file ends the script with one line saying where the capture is expected."""
+    path = Path(path)
+    if not path.is_file():
+        sys.exit(f"shuffled_rolling_shutter: error: --data: no capture at {path}; it is expected at {DATA} (the "
+                 "shared data folder beside the repository): pass its path with --data PATH")
+    keys = (f"meas_{pattern}", f"{pattern}_time_index")
+    try:
+        with np.load(path) as data:
+            return tuple(data[key].astype(np.float64) for key in keys)
+    except (OSError, ValueError, KeyError) as exc:
+        sys.exit(f"shuffled_rolling_shutter: error: --data: {path} is not the shuffled rolling-shutter capture "
+                 f"(an .npz with arrays {list(keys)}): {type(exc).__name__}: {exc}")
 
 
 def main():
@@ -31,12 +48,11 @@ def main():
     parser.add_argument("--temporal-weight", type=float, default=1.0,
                         help="TV temporal weight (1: fast events such as this pour; rsocl's default is 3)")
     parser.add_argument("--out", default="wine")
-    parser.add_argument("--data", default=str(DATA))
+    parser.add_argument("--data", default=str(DATA),
+                        help=f"the capture (default {DATA}: the shared data folder beside the repository)")
     args = parser.parse_args()
 
-    data = np.load(args.data)
-    meas = data[f"meas_{args.pattern}"].astype(np.float64)
-    index = data[f"{args.pattern}_time_index"].astype(np.float64)
+    meas, index = load_capture(args.data, args.pattern)
     t_r = 1e-4  # arbitrary: only ratios matter for the reconstruction
     camera = rsocl.Camera(t_e=t_r, t_r=t_r, row_map=index)
     rig = rsocl.Rig([camera], meas.shape, dt=args.bin * t_r)

@@ -1,4 +1,4 @@
-/* The ADMM data step of MODEL.md. Needs common.cl; the host defines NCH (channels) and
+/* The ADMM data step of docs/model.md. Needs common.cl; the host defines NCH (channels) and
  * PROJECTION_EXACT 0|1.
  *
  *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [sets with eta > 0]
@@ -14,7 +14,7 @@
  * takes the whole batch in one launch, the set as the last grid dimension. Per set: eta, and
  * whether the dual is updated (eta > 0); the inverse blocks are shared, or one per set.
  * Voxel-parallel passes keep neighbouring work items on neighbouring addresses, which
- * CPU vectorisers need (a per-pixel loop over the whole column takes 5x the time on PoCL).
+ * CPU vectorisers need (a per-pixel loop over the whole column is slower: docs/implementation_notes.md).
  */
 #ifndef PROJECTION_EXACT
 #define PROJECTION_EXACT 1

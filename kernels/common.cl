@@ -69,7 +69,7 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
  * A tile is TILE_W consecutive pixels p0 .. p0 + TILE_W - 1 (flat index) of one channel;
  * its loop runs over the union of their windows, [min first, max first + L) clipped to
  * [0, T): every load and store is one contiguous vector, where a pixel-per-work-item loop
- * makes per-lane gathers (2-4x the time on PoCL).
+ * makes per-lane gathers (docs/implementation_notes.md).
  * Lanes outside their own window get weight 0, so results equal the scalar loops above.
  * The host defines TILE_W (default: 32 bytes of reals); pixels of blocks cut by the ROI's
  * right or bottom edge take the scalar loops. */
@@ -88,8 +88,8 @@ typedef RSOCL_CAT(int, TILE_W) intw;
 
 /* Tile loads and stores at any alignment, written element by element: LLVM merges them
  * into one unaligned vector load or store. PoCL 3.0 calls vload8/vstore8 as library
- * functions (not inlined, with spills around each call), which costs the forward kernel
- * 25-30 % more time. */
+ * functions (not inlined, with spills around each call), which slows the forward kernel
+ * (docs/implementation_notes.md). */
 #if TILE_W == 2
 #define RSOCL_TILE(p) (p)[0], (p)[1]
 #define RSOCL_STORE(v, p) ((p)[0] = (v).s0, (p)[1] = (v).s1)
@@ -147,10 +147,8 @@ inline realw shutter_weight_v(realw j, realw frac, realw len)
  * The forward, adjoint and ADMM projection kernels give a work item one block: the tiles
  * at flat pixel p0 + r*n, r = 0 .. TILE_R - 1 (n: row length), of the channel at q0 = k*mn + p0.
  * The sub-frame loop is outermost, so each step reads or writes TILE_R tiles of one plane,
- * neighbours in memory. On PoCL 3.0 (paper array, cold caches) TILE_R = 4 is the fastest of
- * 1, 2, 4 and 8 rows for the forward, the adjoint and the ADMM projection at 128x128 (the
- * projection also at 256x256); small problems that stay in cache (50x50) pay 15-35 % more
- * in the projection for the extra loop work per byte. Each row keeps its own window span, so it reads only its own tiles'
+ * neighbours in memory. TILE_R = 4 was the fastest of the row counts tried on PoCL
+ * (docs/implementation_notes.md). Each row keeps its own window span, so it reads only its own tiles'
  * windows and sums in the same order as a tile alone. */
 #ifndef TILE_R
 #define TILE_R 4
@@ -209,8 +207,8 @@ inline void block_scatter(__global real *f, __global const int *first, __global 
 
 /* sqrt(v) for v >= 0 from the classic bit-level estimate of 1/sqrt refined by
  * Newton steps: plain arithmetic that CPU vectorisers (PoCL) keep in SIMD lanes,
- * where the library sqrt is called one lane at a time (3-5x the time per voxel in
- * the TV kernel on PoCL 3.0). Accurate to a few ulp in float and double. */
+ * where the library sqrt is called one lane at a time (docs/implementation_notes.md).
+ * Accurate to a few ulp in float and double. */
 inline real vector_friendly_sqrt(real v)
 {
     float vf = (float)v;

@@ -13,9 +13,9 @@
  * and consecutive outputs read consecutive table entries.
  *
  * Why a table and explicit vectors: on PoCL 3 (CPU) cos() is called one lane at a
- * time, so computing the basis in the kernel costs 8-20x the table lookup; and a
+ * time, so computing the basis in the kernel costs more than the table lookup; and a
  * one-output-per-work-item loop is not vectorised across work items (its trip
- * count L varies), 1.5-5x the time of the explicit vectors. Every work item
+ * count L varies; measured: docs/implementation_notes.md). Every work item
  * produces CH = 64 bytes of consecutive outputs (16 floats or 8 doubles) as NV
  * vectors of VW, so the inner loop is vector multiply-adds on whole cache lines. */
 

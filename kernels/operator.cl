@@ -36,8 +36,7 @@ __kernel void forward(__global const real *f_all, __global real *g_all,
 }
 
 /* x = 0, one work item per element on an exact grid (rsocl.device.launch.element_launches): the
- * start of Hᵀ g. On PoCL 3.0 clEnqueueFillBuffer takes about twice as long (8.7 MB: 1.1 ms
- * against 0.6 ms, kernel time from profiling events). */
+ * start of Hᵀ g, faster than clEnqueueFillBuffer on PoCL (docs/implementation_notes.md). */
 __kernel void zero(__global real *x)
 {
     x[get_global_id(0)] = (real)0;
@@ -47,7 +46,7 @@ __kernel void zero(__global real *x)
  * global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R), sets): one work item per block of
  * TILE_R x TILE_W pixels of one set, all channels (blocks are disjoint, so there are no races). The
  * host first sets f to 0 (Hᵀ g, kernel zero) or to a base (base + Hᵀ g) with a copy: a per-pixel
- * loop over the whole column takes 5x the time on CPU devices. Batches as in forward. */
+ * loop over the whole column is slower on CPU devices (docs/implementation_notes.md). Batches as in forward. */
 __kernel void adjoint_scatter(__global const real *g_all, __global real *f_all,
                               __global const int *first, __global const real *frac,
                               __global const real *len, __global const real *gain,

@@ -15,11 +15,11 @@
 /* Launch with an exact grid (rsocl.device.launch.voxel_launches over (B*T, m, n): the set and its
  * sub-frame are get_global_id(2) / T and % T, uniform in a work group): there is no bounds test, and
  * neighbours across an edge are read at a clamped index and discarded with a select,
- * because PoCL turns a per-work-item `if` into masked loads and stores (2x the time).
+ * because PoCL turns a per-work-item `if` into masked loads and stores (docs/implementation_notes.md).
  * Selects on y and s are uniform in a work group (a row); along x, where a per-lane
  * select costs PoCL a vector of 64-bit indices per row of 8 voxels, the kernels use:
  *  - xnext[x] = 1 for x < n - 1, else 0 (n values): the dual multiplies the x difference
- *    by it, a plain vector load and a multiply (10 % of the TV time, measured);
+ *    by it, a plain vector load and a multiply (docs/implementation_notes.md);
  *  - the invariant p[1] = 0 at x = n - 1 (the x difference there is 0 from p = 0 on, so
  *    every step keeps it 0): the primal reads p[1] at i - 1 with no select at x = 0. */
 

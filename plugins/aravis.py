@@ -69,6 +69,11 @@ class AravisCamera(AravisSettings, CameraBackend):
     backend = "aravis"
     pixel_formats = tuple(PIXEL_FORMATS)
 
+    @classmethod
+    def check_dependencies(cls) -> None:
+        """Import PyGObject and Aravis 0.8's introspection data; a CameraError saying what to install."""
+        import_aravis()
+
     def __init__(self, config=None, name=None):
         super().__init__(config, name)
         cfg = self.config

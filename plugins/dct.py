@@ -45,26 +45,19 @@ class DCT(Regularizer):
         transformed with its own, smaller length, so any shape works; ``b`` larger
         than an axis means that axis is taken whole.
 
-    With the paper's 4-camera array at 64x64 (200 ADMM iterations), the whole
-    frame in 3-D with ``lam = 0.3, eta = 0.2`` (threshold 1.5 on data in [0, 1])
-    did best of the settings tried: blocks of 8 / 16 / 32 lost about 7 / 4.5 / 0.6 dB
-    on the Runner scene, and 2-D mode about 6 dB.
-
     Cost: each of the 2 x (2 or 3) one-axis passes does ``L`` multiply-adds per
     voxel, ``L`` the block length along that axis (the axis length for the whole
     frame), plus one thresholding pass; device memory is one work array of the
     input's size and the basis tables (``2 L^2`` values per length that occurs).
-    On PoCL (2 shared CPU cores), a (69, 64, 64) float32 cube takes about 45-70 ms per
-    ``denoise`` for the whole frame and about 15-25 ms for blocks of 8 (a 200-iteration
-    reconstruction: about 50 ms per iteration with the whole frame, TV: about 30).
+    The defaults, :attr:`recommended` and the measured quality and time:
+    ``docs/regularizer_defaults.md``.
 
     ``transform(x)`` and ``inverse(c)`` expose the forward and inverse transforms
     (device arrays in, new device arrays out).
     """
 
     name = "dct"
-    #: measured on the shared videos (paper array, 64x64, 200 iterations): lam 0.3 with eta 0.2
-    #: gives Runner 20.82 dB, Traffic 16.90 dB; lam 0.08 gives 20.66 dB on Runner
+    #: ``lam`` and ``eta`` when the caller gives none (docs/regularizer_defaults.md)
     recommended = {"lam": 0.3, "eta": 0.2}
     options = {
         "mode": Option("3d", "", "'3d': DCT along t, y, x; '2d': DCT of each sub-frame along y, x"),

@@ -1,6 +1,6 @@
 """The ``simulated`` camera backend: frames rendered through the forward model, the test double.
 
-A :class:`SimulatedCamera` is one rolling-shutter camera of MODEL.md looking at a
+A :class:`SimulatedCamera` is one rolling-shutter camera of docs/model.md looking at a
 scene. Each trigger renders one frame: the snapshot of a single-camera
 :class:`~rsocl.model.rig.Rig` (same ``angle`` or ``row_map``, ``t_e``, ``t_r``, ``t_a``,
 ``gain``, ``dt``, ``mask``), computed on the OpenCL device by

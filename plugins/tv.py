@@ -12,7 +12,7 @@ from rsocl_plugins import tv_fused
 __all__ = ["TV"]
 
 #: Work items per work group of the TV kernels (blocks of whole rows, rsocl.device.launch.voxel_launches),
-#: at most: about 512 voxels ran 7-15 % faster than half rows of 64 on PoCL (64x64 to 128x128).
+#: at most (measured: docs/regularizer_defaults.md).
 GROUP = 512
 
 #: Default of the ``step`` option: Chambolle's step as a fraction of scikit-image's ``1 / (2 (2 + w²))``
@@ -20,7 +20,7 @@ GROUP = 512
 STEP = 0.9
 
 #: Default of the ``fused`` option (most Chambolle iterations per launch on tiles in local memory):
-#: the plain path, the faster one on PoCL (see :class:`TV`).
+#: the plain path (measured: docs/regularizer_defaults.md).
 FUSED = 0
 
 
@@ -37,65 +37,48 @@ def launches(prog, device, T: int, m: int, n: int):
 
 
 class TV(Regularizer):
-    """Isotropic TV (Chambolle's projection), the algorithm of ``skimage.restoration.denoise_tv_chambolle``
-    (``eps=0``) with 0.9 of its step by default.
+    """Isotropic total variation: Chambolle's projection, as ``skimage.restoration.denoise_tv_chambolle``.
 
-    ``temporal_weight = 1`` is scikit-image's 3-D TV; ``0`` is 2-D TV on each
-    sub-frame; other values scale the temporal finite difference. The default, 3,
-    was measured on the shared videos (paper array, 64x64, 200 iterations, PSNR in
-    dB): Runner 19.80 / 22.61 / 23.67 and Traffic 16.90 / 18.57 / 18.58 for weights
-    1 / 3 / 5, while on the fast built-in scene (1.4 px per sub-frame) 1 is best
-    (18.2 / 17.7 / 17.1): 3 keeps most of the gain on real videos.
+    The ADMM's prior step ``theta = argmin_x ½‖x - v‖² + weight·TV(x)`` on the device, ``eps=0``.
+    A batch ``(B, T, m, n)`` is denoised in the launches of one set, each set on its own (no
+    temporal difference across a set boundary) with its own weight.
 
-    ``step`` is the dual step ``tau`` as a fraction of scikit-image's ``1 / (2 (2 + w²))`` for
-    temporal weight ``w`` (``1 / (2 ndim)`` at ``w = 1``); ``step = 1`` is scikit-image's step.
-    That step is twice the inverse of the squared norm of the weighted gradient, the edge of
-    stability: where the denoising weight is large against the image's differences, the update is
-    nearly linear and the most oscillating mode (alternating between neighbouring sub-frames or
-    pixels) is not damped, so ten iterations flip it rather than remove it. Inside the ADMM (weight
-    ``lam / eta``) this made reconstructions diverge: a 7-camera rig of 41x11 pixels at ``lam`` 3
-    reached -3 to -28 dB PSNR (values up to 167), and the tuned default lost 5.4 dB to ``interp3d``
-    on Runner with an 8-camera rig of 11x8 pixels. At 0.9 the mode shrinks by 0.8 per iteration;
-    the same runs reach 17.5 to 26.9 dB (values within [-0.3, 1.4]) and +2.5 dB over ``interp3d``.
-    Over 120 random rigs (1-8 cameras at any angle, 6-48 pixels a side, the built-in scene and
-    Runner, self-tuned) 0.9 gained +0.15 dB on average against scikit-image's step (worst -0.36 dB)
-    and removed the runs far below ``interp3d`` (worst -14.2 dB against it with scikit-image's step,
-    -2.9 dB with 0.9: 8 cameras on 40x24 pixels, where the search picks too low a temporal weight). On the paper array,
-    self-tuned (14 scenes at 64x64 and 128x128), it stays within 0.02 dB of scikit-image's step;
-    fixed settings from zeros at 128x128, where 200 iterations are far from converged, lose up to
-    0.16 dB (0.48 dB at a step of 0.75 and 1.31 dB at half the step, Chambolle's proven bound).
-    ``benchmarks/tv_step.py``, ``docs/tv_step.md``.
+    Options
+    -------
+    iterations : int
+        Chambolle iterations per call, 1..100000 (default 10).
+    temporal_weight : float
+        Weight of the temporal difference, 0..1000: ``1`` is scikit-image's 3-D TV, ``0`` 2-D TV on
+        each sub-frame (default 3).
+    step : float
+        Dual step ``tau`` as a fraction of scikit-image's ``1 / (2 (2 + w²))`` for temporal weight
+        ``w``, 0.01..1 (default 0.9; ``1`` is scikit-image's step, at the edge of stability).
+    fused : int
+        Most iterations per launch on tiles held in local memory, with the ADMM's dual update folded
+        into the last launch (:mod:`rsocl_plugins.tv_fused`, same result to float rounding);
+        0..1000, default 0: the plain path, two launches per iteration. A device whose local
+        memory is too small for tiles that save bytes takes the plain path.
 
-    A batch ``(B, T, m, n)`` is denoised in the same launches as one set, each set on its own
-    (no temporal difference across a set boundary) with its own weight.
+    Examples
+    --------
+    >>> import numpy as np, pyopencl.array as cla, rsocl
+    >>> from rsocl_plugins.tv import TV
+    >>> queue = rsocl.get_device().queue
+    >>> x = cla.to_device(queue, np.random.default_rng(0).random((5, 8, 8), dtype=np.float32))
+    >>> y = TV(temporal_weight=1.0).denoise(x, 0.1).get()        # weight: lam / eta in the ADMM
+    >>> y.shape, bool(y.std() < x.get().std())
+    ((5, 8, 8), True)
 
-    ``fused = k > 0`` runs up to ``k`` iterations per launch on tiles held in local memory
-    (:mod:`rsocl_plugins.tv_fused`; same arithmetic, results equal to float rounding) and lets
-    the ADMM fold its dual update into the last launch; ``fused = 0`` is the plain path, two
-    launches per iteration. A device whose local memory is too small for tiles that save bytes
-    takes the plain path whatever ``fused`` says. Tiles and work groups follow the device's
-    ``CL_DEVICE_LOCAL_MEM_SIZE``, ``CL_DEVICE_MAX_WORK_GROUP_SIZE``, ``CL_DEVICE_MAX_WORK_ITEM_SIZES``
-    and the kernel's own limits. The fused path moves a quarter of the plain path's bytes on PoCL's
-    512 KiB of local memory and about 60 % with 48 KiB (counted). On a CPU device a work group is
-    one work item, which runs each row of its tile as one contiguous loop; even so, on PoCL (2 CPU
-    cores, where the plain path's data stays in cache) a TV call takes 1.8-6.9x the plain path's
-    time and a whole reconstruction of the paper configuration 1.6-3.0x (``benchmarks/tv_fused.py``,
-    ``docs/tv_fused.md``): the halos' redundant updates (a region of 39x39x23 voxels for a 32x32x16
-    tile at 3 updates per launch) outweigh the saved bytes. On an NVIDIA H100 a TV call takes
-    0.66-0.69x the plain path's time at 64x64x69, where launches dominate, and 1.55-1.60x at
-    128x128x133 and 256x256x261, and whole reconstructions 1.2-1.6x at every batch size
-    (``docs/gpu/tv_fused.md``). The default is the plain path.
+    In a reconstruction: ``rsocl.reconstruct(g, rig, regularizer="tv", regularizer_options=
+    {"temporal_weight": 0.0})`` (2-D TV).
+
+    The defaults and the measurements behind them: ``docs/regularizer_defaults.md``.
     """
 
     name = "tv"
     batched = True
     tunable = {"temporal_weight": (1.0, 3.0, 10.0, 30.0)}
-    #: One snapshot per pixel (one camera): temporal weight 10, not searched. Over 48 cases of
-    #: one-camera rigs (16 rigs of ``benchmarks/tv_step.py``; built-in, builtin-slow, Runner at 1 and
-    #: 2, Traffic at 0.5 and 1 frames per sub-frame; 7 weights x 3 ``lam`` on the full grid) the
-    #: criterion picked the weakest weights: -1.06 / -2.12 dB on average to the best grid point on
-    #: two sets of rigs and scenes, 32 of 48 cases below ``interp3d``; weight 10 gave -0.30 / -0.27 dB,
-    #: 4 of 48 below ``interp3d`` (weight 5.48: -0.35 / -0.66 dB; 17.3: -0.48 / -0.33 dB), at any ``lam``.
+    #: One snapshot per pixel (one camera): temporal weight 10, not searched (docs/regularizer_defaults.md).
     one_snapshot = {"temporal_weight": 10.0}
     options = {
         "iterations": Option(10, "iterations", "Chambolle iterations per denoising call", 1, 100000),

@@ -77,6 +77,11 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
     backend = "v4l2"
     pixel_formats = tuple(PIXEL_FORMATS)
 
+    @classmethod
+    def check_dependencies(cls) -> None:
+        """Import linuxpy's V4L2 module; a CameraError saying what to install."""
+        import_linuxpy("v4l2")
+
     def __init__(self, config: dict | None = None, name: str | None = None):
         super().__init__(config, name)
         self.path = self._device_node()

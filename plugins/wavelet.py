@@ -44,10 +44,8 @@ class Wavelet(Regularizer):
         leading frames that are in 3-D and the rest in 2-D (True), or let the
         time axis limit the levels / stay untouched (False)
 
-    In the ADMM the threshold is ``weight = lam / eta``. On the paper's 4-camera
-    array at 64 x 64 (Runner, 200 iterations) haar in 3-D was best, flat for
-    ``lam / eta`` between 0.15 and 0.5 (e.g. ``lam=0.06, eta=0.2``); db2 and db4
-    were 0.2 and 1.7 dB lower.
+    In the ADMM the threshold is ``weight = lam / eta``; the defaults (haar, 3-D) and the
+    measurements behind them: ``docs/regularizer_defaults.md``.
 
     Besides :meth:`denoise`, :meth:`transform` and :meth:`inverse` expose the
     forward and inverse transforms on device arrays, with the coefficients of

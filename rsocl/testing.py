@@ -1,4 +1,8 @@
-"""Conformance checks for third-party plugins, to call from their own tests.
+"""Checks for operator and plugin authors, to call from their own tests.
+
+- :func:`dottest`: the dot test ``<A x, y> = <x, Aᵀ y>`` of a linear operator and its adjoint.
+- :func:`check_regularizer`: the regularizer contract of a plugin.
+- :func:`no_host_transfers`: a block inside which reading device data back to the host fails.
 
 Example, in a plugin's test suite::
 
@@ -21,7 +25,95 @@ from rsocl.common import validation as check
 from rsocl.device.context import get_device
 from rsocl.solver.regularizer import Option, Regularizer
 
-__all__ = ["check_regularizer", "no_host_transfers"]
+__all__ = ["check_regularizer", "dottest", "no_host_transfers"]
+
+#: :func:`dottest`'s relative tolerance by the dtype the operator computes in.
+DOTTEST_RTOL = {"float32": 1e-4, "float64": 1e-10}
+
+
+def _shape(name: str, shape) -> tuple:
+    try:
+        shape = tuple(int(s) for s in shape)
+    except TypeError:
+        shape = ()
+    if not shape or min(shape) < 1:
+        raise ValueError(f"{name} must be a tuple of sizes >= 1, got {shape!r}")
+    return shape
+
+
+def dottest(op, domain_shape=None, range_shape=None, *, rtol=None, seed=0, raiseerror=True) -> bool:
+    """Dot test of a linear operator: ``<A x, y> = <x, Aᵀ y>`` for random ``x`` and ``y``.
+
+    The check every operator author runs first: an adjoint that is not the transpose of the
+    forward map makes an iterative solver converge to the wrong answer or diverge.
+
+    Parameters
+    ----------
+    op : object
+        The operator: ``op.forward(x)`` computes ``A x`` and ``op.adjoint(y)`` computes ``Aᵀ y``,
+        on NumPy arrays (a :class:`~rsocl.model.operator.RollingShutterOperator`, or your own).
+    domain_shape, range_shape : tuple of int, optional
+        Shapes of ``x`` and ``y``; default ``op.domain_shape`` and ``op.range_shape``.
+    rtol : float, optional
+        Relative tolerance on ``|<A x, y> - <x, Aᵀ y>|`` (> 0). Default by the dtype that
+        ``op.forward`` returns: ``1e-4`` for float32, ``1e-10`` otherwise (:data:`DOTTEST_RTOL`).
+    seed : int
+        Seed of the random ``x`` and ``y`` (uniform in [0, 1)).
+    raiseerror : bool
+        Raise ``AssertionError`` when the test fails (default); else return False.
+
+    Returns
+    -------
+    bool
+        True when ``|<A x, y> - <x, Aᵀ y>| <= rtol * max(|<A x, y>|, |<x, Aᵀ y>|)``.
+
+    Raises
+    ------
+    ValueError
+        If ``op`` lacks ``forward``/``adjoint``, a shape is missing or not sizes >= 1, or ``rtol``
+        is not > 0.
+    AssertionError
+        If the test fails and ``raiseerror`` is True, or ``A x`` / ``Aᵀ y`` has the wrong shape.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from rsocl.testing import dottest
+    >>> class Scale:                       # A = diag(d): its own transpose
+    ...     domain_shape = range_shape = (3, 4)
+    ...     d = np.arange(12.0).reshape(3, 4)
+    ...     def forward(self, x): return self.d * x
+    ...     def adjoint(self, y): return self.d * y
+    >>> dottest(Scale())
+    True
+    >>> class Wrong(Scale):
+    ...     def adjoint(self, y): return 2 * self.d * y
+    >>> dottest(Wrong(), raiseerror=False)
+    False
+    """
+    if not (callable(getattr(op, "forward", None)) and callable(getattr(op, "adjoint", None))):
+        raise ValueError(f"op must have forward(x) and adjoint(y) methods, got {type(op).__name__}")
+    domain = _shape("domain_shape", domain_shape if domain_shape is not None else getattr(op, "domain_shape", None))
+    image = _shape("range_shape", range_shape if range_shape is not None else getattr(op, "range_shape", None))
+    if rtol is not None:
+        rtol = check.positive("rtol", rtol)
+    rng = np.random.default_rng(seed)
+    x, y = rng.random(domain), rng.random(image)
+    dtype = getattr(op, "dtype", None)
+    if dtype is not None:                  # the operator's own precision on both sides
+        x, y = x.astype(dtype), y.astype(dtype)
+    ax, aty = np.asarray(op.forward(x)), np.asarray(op.adjoint(y))
+    assert ax.shape == image, f"op.forward(x) has shape {ax.shape}, expected range_shape {image}"
+    assert aty.shape == domain, f"op.adjoint(y) has shape {aty.shape}, expected domain_shape {domain}"
+    if rtol is None:
+        rtol = DOTTEST_RTOL.get(np.result_type(ax, aty).name, DOTTEST_RTOL["float64"])
+    lhs = float(np.vdot(ax.astype(np.float64), y.astype(np.float64)))
+    rhs = float(np.vdot(x.astype(np.float64), aty.astype(np.float64)))
+    passed = abs(lhs - rhs) <= rtol * max(abs(lhs), abs(rhs))
+    if not passed and raiseerror:
+        raise AssertionError(f"dot test failed: <A x, y> = {lhs:.10g}, <x, Aᵀ y> = {rhs:.10g}, relative "
+                             f"difference {abs(lhs - rhs) / max(abs(lhs), abs(rhs), 1e-300):.3g} > rtol = {rtol:g}")
+    return passed
 
 
 @contextlib.contextmanager
@@ -74,9 +166,44 @@ def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 1
     default; ``name`` set; the output is a device array of the input's shape and dtype
     with finite values; the input is not modified; ``out=`` is honoured; weight 0 is the
     identity; the map is non-expansive (``‖D(x) - D(y)‖ <= ‖x - y‖``) on random pairs;
-    no device-to-host transfer happens inside ``denoise``. ``weights`` are the denoising
-    weights tried (at least one, each ``>= 0``; the last one serves the non-expansiveness pairs).
-    Returns the dtypes checked.
+    no device-to-host transfer happens inside ``denoise``.
+
+    Parameters
+    ----------
+    regularizer : Regularizer subclass or instance
+        The plugin's class (built with ``options``) or an instance.
+    options : dict, optional
+        Options for the class, ``{name: value}``.
+    device : str, Device or None
+        OpenCL device (see :func:`rsocl.get_device`).
+    shape : tuple of int
+        ``(T, m, n)`` of the random test arrays, voxels.
+    weights : sequence of float
+        Denoising weights tried, at least one, each ``>= 0``; the last one serves the
+        non-expansiveness pairs.
+    pairs : int
+        Random pairs of the non-expansiveness check.
+    seed : int
+        Seed of the random arrays.
+
+    Returns
+    -------
+    list of str
+        The dtypes checked (``"float64"`` only where the device has ``cl_khr_fp64``).
+
+    Raises
+    ------
+    AssertionError
+        Naming the first property that fails.
+    ValueError
+        If ``weights`` is not a sequence of at least one weight ``>= 0``.
+
+    Examples
+    --------
+    >>> from rsocl.testing import check_regularizer
+    >>> from rsocl_plugins.tv import TV
+    >>> "float32" in check_regularizer(TV, options={"iterations": 3})
+    True
     """
     import pyopencl.array as cla
 

@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 
 import rsocl
+import rsocl.solver.memory
+import rsocl.solver.request
 from rsocl.model import reference as ref
 from rsocl.model.interpolation import interp3d
 from rsocl.model.scenes import builtin_scene
@@ -168,10 +170,10 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
     device = rsocl.device.get_device()
     assert batch_size(rig, sets=5, device=device) == 5
     assert batch_size(rig, device=device, limit=7) == 7
-    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+    reg = rsocl.solver.request.make_regularizer("tv")
 
     def total(b, start=False):
-        return rsocl.solver.batch.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b,
+        return rsocl.solver.memory.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b,
                                                start=start)[1]
 
     memory = (total(4) + total(5)) / 2 / 0.8            # four sets fit in 80 % of it, five do not
@@ -193,11 +195,11 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
 def test_batch_size_on_a_cpu_keeps_the_batch_in_its_cache(sets, monkeypatch):
     rig, truth, g = sets
     device = rsocl.device.get_device()
-    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+    reg = rsocl.solver.request.make_regularizer("tv")
     cube = (rig.T,) + rig.shape
 
     def total(b):
-        return rsocl.solver.batch.batch_memory(cube, rig.n_channels, np.float32, reg, "exact", b)[1]
+        return rsocl.solver.memory.batch_memory(cube, rig.n_channels, np.float32, reg, "exact", b)[1]
 
     monkeypatch.setattr(type(device), "is_cpu", property(lambda self: True))
     cache = (total(3) + total(4)) / 2 / 0.75            # three sets fit in three quarters of it, four do not
@@ -321,10 +323,10 @@ def test_batch_size_on_a_gpu_goes_past_max_batch_up_to_its_voxels(sets, monkeypa
     assert batch_size(rig, device=device, sets=40) == 40
     assert batch_size(rig, device=device, limit=7) == 7
     # memory still bounds it: the largest batch within 80 % of the device, found by bisection
-    reg = rsocl.solver.reconstruct.make_regularizer("tv")
+    reg = rsocl.solver.request.make_regularizer("tv")
 
     def total(b):
-        return rsocl.solver.batch.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b)[1]
+        return rsocl.solver.memory.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b)[1]
 
     memory = (total(57) + total(58)) / 2 / 0.8
     monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(memory)))

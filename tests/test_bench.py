@@ -12,7 +12,6 @@ from rsocl.bench.run import (BASELINE, COLUMNS, BenchPoint, build_points, device
                              parse_sweep, run_bench, run_point, write_outputs)
 from rsocl.cli import bench as bench_cli
 from rsocl.model.operator import RollingShutterOperator
-from rsocl.solver.plan import crop_rig
 from rsocl.model.rig import Rig
 
 FILES = ("bench.csv", "iterations.csv", "bench.md", "pareto.png", "cameras.png", "iterations.png")
@@ -65,7 +64,7 @@ def test_interp3d_exact_for_a_scene_constant_in_time(still_scene):
     # directly, with one camera, eight cameras and a cropped (row-map) rig
     image = np.random.default_rng(0).uniform(size=(12, 12))
     for rig in (Rig.paper_array(1, (12, 12), 180e-6, 35e-6), Rig.paper_array(8, (12, 12), 180e-6, 35e-6),
-                crop_rig(Rig.paper_array(4, (12, 12), 180e-6, 35e-6), (2, 2, 8, 8))):
+                Rig.paper_array(4, (12, 12), 180e-6, 35e-6).crop((2, 2, 8, 8))):
         cube = np.repeat(image[None, :rig.shape[0], :rig.shape[1]], rig.T, axis=0)
         g = RollingShutterOperator(rig, dtype="float64").forward(cube)
         np.testing.assert_allclose(interp3d(g, rig), cube, rtol=0, atol=1e-12)

@@ -35,7 +35,7 @@ def render(H, markers=MARKERS, sigmas=SIGMAS, *, sensor=SENSOR, rng=None, noise=
 
 
 def camera_homography(angle, perspective=(1.5e-3, -1.0e-3), scale=1.3, shift=(3.0, -2.0)):
-    """A camera rotated by ``angle`` (MODEL.md convention), scaled, shifted, with a small perspective."""
+    """A camera rotated by ``angle`` (docs/model.md convention), scaled, shifted, with a small perspective."""
     H = cal.rotation_homography(angle, SHAPE, sensor_shape=SENSOR, scale=scale, shift=shift)
     cx, cy = (SENSOR[1] - 1) / 2, (SENSOR[0] - 1) / 2
     centre = np.array([[1, 0, -cx], [0, 1, -cy], [0, 0, 1.0]])

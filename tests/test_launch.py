@@ -68,6 +68,6 @@ def test_block_grid_rejects_empty_shapes():
 
 
 @pytest.mark.parametrize("pixels, width", [(100, 8), (16384, 8), (3, 4)])
-def test_tile_grid_keeps_its_flat_tiles_for_plugins(pixels, width):
-    (gx, gk), (lx, lk) = launch.tile_grid(pixels, width, channels=2)
+def test_flat_tile_grid_keeps_its_flat_tiles_for_plugins(pixels, width):
+    (gx, gk), (lx, lk) = launch.flat_tile_grid(pixels, width, channels=2)
     assert gk == 2 and gx % lx == 0 and lx <= 64 and gx - lx < -(-pixels // width) <= gx

@@ -11,9 +11,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1] / "rsocl"
 
-#: bottom to top; the package's face (rsocl/__init__.py) and rsocl.testing sit above all
+#: bottom to top; the package's faces (rsocl/__init__.py, ``python -m rsocl``) and rsocl.testing sit above all
 LAYERS = ["common", "device", "model", "files", "analysis", "solver", "scale", "hardware", "bench", "cli"]
-FACES = {"rsocl", "rsocl.testing"}
+FACES = {"rsocl", "rsocl.__main__", "rsocl.testing"}
 
 
 def _module_name(path: Path) -> str:

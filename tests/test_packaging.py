@@ -114,7 +114,7 @@ def test_wheel_entry_points(wheel):
         groups = _entry_points(zf)
     regularizers = groups.get("rsocl.regularizers", {})
     assert regularizers.get("tv", "").replace(" ", "") == "rsocl_plugins.tv:TV", groups
-    assert groups.get("console_scripts", {}).get("rsocl", "").replace(" ", "") == "rsocl.cli:main", groups
+    assert groups.get("console_scripts", {}).get("rsocl", "").replace(" ", "") == "rsocl.cli.main:entry", groups
     # Every entry point must name a module the wheel actually contains.
     for group, entries in groups.items():
         for key, target in entries.items():

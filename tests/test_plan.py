@@ -3,17 +3,17 @@ import pytest
 
 import rsocl
 from rsocl.cli.main import main
-from rsocl.solver.plan import crop_rig, plan
+from rsocl.solver.plan import plan
 
 
 def test_crop_keeps_real_start_times():
     rig = rsocl.Rig.paper_array(4, (20, 30), t_e=1e-4, t_r=3e-5)
-    sub = crop_rig(rig, (5, 7, 6, 8))
+    sub = rig.crop((5, 7, 6, 8))
     np.testing.assert_array_equal(sub.start_times(), rig.start_times()[:, 5:11, 7:15])
     # only the sub-frames the crop's rows are read in are solved
     assert sub.sampled_range().stop - sub.sampled_range().start < rig.T
     with pytest.raises(ValueError, match="roi"):
-        crop_rig(rig, (15, 0, 10, 5))
+        rig.crop((15, 0, 10, 5))
 
 
 def test_plan_picks_the_coarsest_dt_that_resolves_the_motion(device):
@@ -47,7 +47,7 @@ def test_plan_command(capsys):
 
 @pytest.mark.parametrize("extra, match", [
     (["--tile", "0", "4"], r"--tile must be \(H, W\) pixels with 1 <= H <= m = 32 and 1 <= W <= n = 32"),
-    (["--roi", "0", "0", "16", "8", "--tile", "16", "9"], r"--tile must be .* 1 <= W <= n = 8, got \[16, 9\]"),
+    (["--roi", "0", "0", "8", "16", "--tile", "16", "9"], r"--tile must be .* 1 <= W <= n = 8, got \[16, 9\]"),
     (["--halo", "-1"], r"--halo must be a whole number of pixels in \[0, 32\], got -1"),
     (["--sets", "0"], r"--sets must be an integer >= 1, got 0"),
     (["--memory-mib", "-5"], r"--memory-mib must be > 0 MiB, got -5.0"),
@@ -85,3 +85,41 @@ def test_plan_in_python_checks_iterations_and_blur():
         plan(rig, iterations=-3, measure=False)
     with pytest.raises(ValueError, match="blur_pixels"):
         plan(rig, blur_pixels=0, measure=False)
+
+
+def _memory_mib(out: str, column: int) -> float:
+    """The ``device memory`` row of ``rsocl plan``'s table: ``column`` 0 (as given) or 1 (proposed), MiB."""
+    row = next(line for line in out.splitlines() if line.startswith("device memory"))
+    return [float(v) for v in row.split() if v.replace(".", "").isdigit()][column]
+
+
+def test_the_configured_regularizer_is_counted_by_plan_and_by_the_tiling_decision(monkeypatch, capsys):
+    """TV with ``fused = N`` keeps a second dual buffer (three planes of the datacube): ``rsocl plan
+    --reg-opt fused=N`` counts it, and so does ``rsocl reconstruct``'s decision to run in tiles: a
+    device with room for the plain run but not for the fused one tiles only the fused run."""
+    from argparse import Namespace
+
+    from rsocl.cli import tiling
+    from rsocl.scale.runner import SCHEDULER_ENV
+    from rsocl.solver.memory import memory_need
+    from rsocl.solver.request import make_regularizer
+
+    rig = rsocl.Rig.paper_array(4, (64, 64), t_e=0.18e-3, t_r=35e-6)
+    solved = rig.sampled_range()
+    dual = 3 * (solved.stop - solved.start) * 64 * 64 * 4                  # one more copy of TV's dual, float32
+    plain = memory_need(rig, make_regularizer("tv"))[1]
+    fused = memory_need(rig, make_regularizer("tv", {"fused": "2"}))[1]
+    assert fused - plain == dual
+    assert main(["plan", "--shape", "64", "64", "--no-measure"]) == 0
+    given = _memory_mib(capsys.readouterr().out, 0)
+    assert main(["plan", "--shape", "64", "64", "--no-measure", "--reg-opt", "fused=2"]) == 0
+    assert _memory_mib(capsys.readouterr().out, 0) == pytest.approx(given + dual / 2**20, abs=0.06)
+
+    device = rsocl.device.get_device()
+    monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: (plain + fused) // 2))
+    monkeypatch.delenv(SCHEDULER_ENV, raising=False)
+    args = Namespace(tile=None, sets=False, workers=None, scheduler=None, out="rec.h5", regularizer="tv", reg_opt=[],
+                     tv_iterations=None, dtype="float32", projection="exact", device=None)
+    capture = Namespace(rig=rig)
+    assert not tiling._wants_tiles(args, capture)
+    assert tiling._wants_tiles(Namespace(**{**vars(args), "reg_opt": ["fused=2"]}), capture)

@@ -9,7 +9,7 @@ from rsocl.model.rig import PAPER_ANGLES
 
 def test_paper_simulation_figures():
     rig = Rig.paper_array(4, (50, 50), t_e=0.18e-3, t_r=35e-6)
-    # MODEL.md: T = ceil(max end / dt) with dt = t_r; the last row starts at 49 t_r.
+    # docs/model.md: T = ceil(max end / dt) with dt = t_r; the last row starts at 49 t_r.
     assert rig.T == math.ceil((49 * 35e-6 + 0.18e-3) / 35e-6) == 55
     assert rig.N_s == 6
     assert rig.exposure_subframes == pytest.approx(0.18e-3 / 35e-6)  # 5.14, the exact rule
@@ -19,7 +19,7 @@ def test_paper_simulation_figures():
 
 
 def test_paper_experiment_exposure_count():
-    # MODEL.md's formula N_s = ceil(t_e / t_r); 200/26 = 7.7 (the paper quotes 7 for its capture)
+    # docs/model.md's formula N_s = ceil(t_e / t_r); 200/26 = 7.7 (the paper quotes 7 for its capture)
     rig = Rig.paper_array(4, (50, 50), t_e=200e-6, t_r=26e-6)
     assert rig.N_s == math.ceil(200 / 26) == 8
 

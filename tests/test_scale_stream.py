@@ -8,7 +8,7 @@ from rsocl.analysis.metrics import psnr
 from rsocl.model.rig import Camera, Rig
 from rsocl.model.scenes import builtin_scene
 from rsocl.scale import reconstruct_tiled
-from rsocl.scale.stream import frame_windows, reconstruct_stream, window_channels, window_rig
+from rsocl.scale.stream import frame_windows, reconstruct_stream, window_channels
 
 
 def _rig(frames=3, shape=(20, 24)):
@@ -23,7 +23,7 @@ def test_windows_cover_every_frame_and_keep_every_exposure():
     assert frame_windows(4, 3, 0) == [(0, 3), (1, 4)]
     rig = _rig()
     for k0, k1 in frame_windows(3, 2, 1):
-        sub = window_rig(rig, k0, k1)
+        sub = rig.frames_window(k0, k1)
         channels = window_channels(rig, k0, k1)
         np.testing.assert_allclose(sub.start_times(), rig.start_times()[channels], rtol=0, atol=1e-15)
         np.testing.assert_array_equal(sub.windows.index, rig.windows.index[channels])

@@ -272,6 +272,7 @@ def test_the_fits_message_suggests_float32_only_for_float64(device):
         device.check_fits("x", device.max_alloc_bytes + 1, dtype="float64")
 
 
+@pytest.mark.slow
 def test_plan_proposes_a_tiling_for_the_whole_sensor(capsys, monkeypatch, device):
     from rsocl.cli.main import main
 
@@ -292,7 +293,8 @@ def test_plan_proposes_a_tiling_for_the_whole_sensor(capsys, monkeypatch, device
 
 def _tiling_cost_of_tile_rigs(rig, tile, halo, **kwargs):
     """:func:`rsocl.scale.proposal.tiling_cost` counted on every tile's own rig (:func:`tile_rig`)."""
-    from rsocl.solver.plan import memory_need
+    from rsocl.solver.memory import memory_need
+    from rsocl.solver.request import make_regularizer
 
     worst, voxels = (0, 0, None, 0), 0
     for t in tile_grid(rig.shape, tile, halo):
@@ -301,7 +303,8 @@ def _tiling_cost_of_tile_rigs(rig, tile, halo, **kwargs):
         v = (solved.stop - solved.start) * sub.shape[0] * sub.shape[1]
         voxels += v
         if v > worst[3]:
-            largest, total = memory_need(sub, **kwargs)
+            largest, total = memory_need(sub, make_regularizer(kwargs.get("regularizer", "tv")),
+                                         **{k: x for k, x in kwargs.items() if k != "regularizer"})
             worst = (total, largest, t, v)
     total, largest, t, v = worst
     return total, largest, voxels, t, v

@@ -9,7 +9,7 @@ from rsocl.model.scenes import builtin_scene
 from rsocl.scale import reconstruct_tiled, tile_grid
 from rsocl.scale.stream import reconstruct_stream
 from rsocl.scale.tiles import tile_rig
-from rsocl.scale.tuned import by_distance_to_centre
+from rsocl.scale.tuning_tile import by_distance_to_centre
 
 ITER = 12
 
@@ -61,7 +61,7 @@ def test_tiles_return_the_blend_the_search_chose():
     assert tiled.params["blend"] == untiled.params["blend"] == tiled.params["tuning"]["blend"]
     np.testing.assert_allclose(tiled.datacube, untiled.datacube, atol=1e-5)
     # the caller's blend replaces the search's, in every tile, as untiled
-    choice = rsocl.solver.tuning.Tuning.from_params(untiled.params["tuning"])
+    choice = rsocl.solver.crossval.Tuning.from_params(untiled.params["tuning"])
     for blend in (1.0, 0.25):
         mine = reconstruct_tiled(g, rig, tile=rig.shape, halo=0, iterations=ITER, tune=choice, blend=blend)
         assert mine.params["blend"] == blend != untiled.params["blend"]

@@ -1,4 +1,5 @@
-"""Parameters chosen from the data (rsocl.solver.tuning): the criterion, the search, the defaults."""
+"""Parameters chosen from the data (rsocl.solver.crossval, rsocl.solver.holdout): the criterion, the search,
+the defaults."""
 
 import inspect
 
@@ -8,7 +9,8 @@ import pytest
 import rsocl
 from rsocl.model import reference as ref
 from rsocl.model.curvature import default_scale
-from rsocl.solver.tuning import holdout, tune_parameters
+from rsocl.solver.crossval import SearchSpace, tune_parameters
+from rsocl.solver.holdout import holdout
 
 SHAPE = (24, 24)
 
@@ -44,7 +46,7 @@ def test_holdout_keeps_all_but_one_channel_per_pixel():
 @pytest.mark.parametrize("channels", range(1, 13))
 @pytest.mark.parametrize("shape", [(16, 16), (24, 40), (48, 32), (8, 200)])
 def test_default_folds_hold_out_every_camera_with_as_few_patterns_as_that_takes(channels, shape):
-    from rsocl.solver.tuning import FOLDS, default_folds
+    from rsocl.solver.holdout import FOLDS, default_folds
 
     period = max(channels, 2)
 
@@ -63,7 +65,7 @@ def test_the_search_pools_the_default_folds_and_records_them():
     """16x16 pixels (blocks of 8x8): one pattern holds out each of 4 cameras, one camera of each
     pixel; 8 cameras take two patterns, 12 cameras on 4x4 pixels (2x2 blocks of 2x2) three."""
     from rsocl.model.scenes import builtin_scene
-    from rsocl.solver.tuning import default_folds
+    from rsocl.solver.holdout import default_folds
 
     for cameras, folds in [(8, 2), (4, 1)]:
         rig = rsocl.Rig.paper_array(cameras, (16, 16), t_e=0.18e-3, t_r=35e-6)
@@ -75,7 +77,7 @@ def test_the_search_pools_the_default_folds_and_records_them():
 
 
 def test_default_blocks_are_a_quarter_of_the_side_within_16_px_and_half_the_side():
-    from rsocl.solver.tuning import MIN_BLOCK, default_block
+    from rsocl.solver.holdout import MIN_BLOCK, default_block
 
     assert MIN_BLOCK == 16
     sides = {(3, 3): 2, (4, 4): 2, (16, 16): 8, (24, 40): 12, (48, 32): 16, (48, 48): 16, (64, 64): 16,
@@ -84,7 +86,7 @@ def test_default_blocks_are_a_quarter_of_the_side_within_16_px_and_half_the_side
 
 
 def test_default_patterns_take_each_scale_once():
-    from rsocl.solver.tuning import default_block, default_patterns
+    from rsocl.solver.holdout import default_block, default_patterns
 
     assert default_patterns((16, 16), 4) == [(default_block((16, 16)), 0)]
     assert default_patterns((16, 16), 4, scales=((0.5, 1), (0.25, 2))) == [(8, 0), (4, 0), (4, 2)]
@@ -93,7 +95,7 @@ def test_default_patterns_take_each_scale_once():
 
 def test_the_search_pools_given_patterns_of_several_block_sizes():
     from rsocl.solver.problem import check_problem, check_settings, stage_on_device
-    from rsocl.solver.reconstruct import make_regularizer
+    from rsocl.solver.request import make_regularizer
 
     rig = _rig()
     g = ref.forward(rig, _static(rig))
@@ -101,13 +103,12 @@ def test_the_search_pools_given_patterns_of_several_block_sizes():
     problem = check_problem(g, rig)
     settings = check_settings(iterations=20).settled_for(tv, "float32", scale=default_scale(rig))
     staged = stage_on_device(problem, tv, settings, start=True)
-    args = (staged.op, staged.g, problem.g, rig, lambda options: make_regularizer("tv", options))
-    kwargs = dict(tunable={"temporal_weight": (1.0, 30.0)}, lam=settings.lam, eta=settings.eta, iterations=10)
+    args = (staged.op, staged.g, problem.g, lambda options: make_regularizer("tv", options),
+            SearchSpace({"temporal_weight": (1.0, 30.0)}, settings.lam))
+    kwargs = dict(eta=settings.eta, iterations=10)
     record = tune_parameters(*args, patterns=[(12, 0), (6, 0), (6, 2)], **kwargs)
     assert record.block == [12, 6] and record.folds == 3 and record.held_out == 3 * SHAPE[0] * SHAPE[1]
     assert record.chosen["temporal_weight"] == 30.0                        # a static scene
-    with pytest.raises(ValueError, match="not both"):
-        tune_parameters(*args, patterns=[(6, 0)], block=6, **kwargs)
     with pytest.raises(ValueError, match="at least one"):
         tune_parameters(*args, patterns=[], **kwargs)
     with pytest.raises(ValueError, match="pattern block"):
@@ -174,7 +175,7 @@ def test_tuning_survives_blank_and_saturated_captures():
 
 @pytest.mark.parametrize("shape", [(2, 2), (1, 1), (1, 2)])
 def test_one_camera_on_a_tiny_grid_runs_the_fixed_defaults_with_a_warning(shape):
-    from rsocl.solver.tuning import can_hold_out
+    from rsocl.solver.holdout import can_hold_out
 
     rig = rsocl.Rig.paper_array(1, shape, t_e=1e-4, t_r=3e-5)
     g = ref.forward(rig, np.random.default_rng(3).random((rig.T,) + rig.shape))
@@ -188,7 +189,7 @@ def test_one_camera_on_a_tiny_grid_runs_the_fixed_defaults_with_a_warning(shape)
 
 def test_an_earlier_choice_runs_again_without_a_search():
     """``tune=<Tuning>`` applies a recorded choice (values and interp3d start) as the tuned run did."""
-    from rsocl.solver.tuning import Tuning
+    from rsocl.solver.crossval import Tuning
 
     rig = _rig()
     g = ref.forward(rig, _static(rig))
@@ -215,7 +216,7 @@ def test_an_earlier_choice_runs_again_without_a_search():
 
 def test_the_blend_minimises_the_held_out_error_of_the_mix():
     """``_blend`` from the three sums of squares is the arg-min over [0, 1] of the mix's held-out error."""
-    from rsocl.solver.tuning import _blend
+    from rsocl.solver.crossval import _blend
 
     rng = np.random.default_rng(4)
     g, start = rng.random(200), rng.random(200)
@@ -237,7 +238,7 @@ def test_a_noisy_still_scene_blends_towards_the_interpolation():
     from rsocl.analysis.metrics import psnr
     from rsocl.model.scenes import builtin_scene
     from rsocl.model.simulate import full_scale
-    from rsocl.solver.tuning import Tuning
+    from rsocl.solver.crossval import Tuning
 
     rig = rsocl.Rig([rsocl.Camera(a, t_e=3e-4, t_r=3e-5) for a in (0, 90, 180)], SHAPE)
     truth = builtin_scene(rig.shape, 1)[0][None] * np.linspace(0.9, 1.1, rig.T)[:, None, None]
@@ -286,9 +287,9 @@ def test_a_search_that_would_not_fit_is_refused_before_it_runs(monkeypatch):
     not for the search refuses the search (naming the way out) before any candidate runs, and
     still runs with fixed values. (For a batch the run needs more than the search on its first
     set: test_the_memory_counts_bound_what_the_search_and_the_run_hold.)"""
-    from rsocl.solver import autotune
-    from rsocl.solver.batch import memory_bytes
-    from rsocl.solver.reconstruct import make_regularizer
+    from rsocl.solver import pipeline
+    from rsocl.solver.memory import memory_bytes, search_peak
+    from rsocl.solver.request import make_regularizer
 
     rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1e-4, t_r=3e-5)
     g = ref.forward(rig, np.random.default_rng(5).random((rig.T,) + rig.shape))
@@ -296,10 +297,10 @@ def test_a_search_that_would_not_fit_is_refused_before_it_runs(monkeypatch):
     op = rsocl.RollingShutterOperator(rig, device=device, subframes=rig.sampled_range())
     reg = make_regularizer("tv")
     run = memory_bytes(op, reg, "exact", 1, start=True)[1]
-    peak = autotune.search_peak(op, reg, "exact", None)
+    peak = search_peak(op, reg, "exact", None)
     assert run < peak
     monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: peak - 1))
-    monkeypatch.setattr(autotune, "tune_parameters", lambda *a, **k: pytest.fail("the search ran"))
+    monkeypatch.setattr(pipeline, "tune_parameters", lambda *a, **k: pytest.fail("the search ran"))
     with pytest.raises(ValueError, match=r"choosing the parameters from the data .* tune=False"):
         rsocl.reconstruct(g, rig, iterations=4, device=device)
     fixed = rsocl.reconstruct(g, rig, iterations=4, device=device, tune=False)
@@ -333,10 +334,11 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
     memory_bytes with the start cube), and the counts exceed them by no more than the valid-pixel
     mask they count always and a few small per-set values: neither an under-count (an allocation
     failure mid-run) nor a refusal of what fits."""
-    from rsocl.solver import autotune, tuning
+    from rsocl.solver import crossval
     from rsocl.solver.admm import own_inverses
-    from rsocl.solver.batch import memory_bytes
-    from rsocl.solver.reconstruct import make_regularizer
+    from rsocl.solver.holdout import default_patterns
+    from rsocl.solver.memory import memory_bytes, search_peak
+    from rsocl.solver.request import make_regularizer
 
     rig = rsocl.Rig.paper_array(cameras, (12, 16), t_e=1e-4, t_r=3e-5)
     cube = np.random.default_rng(5).random((rig.T,) + rig.shape)
@@ -351,11 +353,11 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
     valid = None if saturation is None else g < saturation
     own = own_inverses("exact", 0.2, valid, sets)
     run_count = memory_bytes(op, reg, "exact", sets, truth=truth, own_inverse=own, start=True)[1]
-    search_count = autotune.search_peak(op, reg, "exact", batch, truth=truth, start=x0)
+    search_count = search_peak(op, reg, "exact", batch, truth=truth, start=x0)
     snap = op.K * op.mn * op.dtype.itemsize
     peak = {"search": 0, "run": 0}
 
-    class Probe(tuning.ADMM):                       # every buffer exists once a candidate's first step ran
+    class Probe(crossval.ADMM):                       # every buffer exists once a candidate's first step ran
         def step(self):
             if self.iteration <= 1:
                 peak["search"] = max(peak["search"], _live_device_bytes() - base)
@@ -364,7 +366,7 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
     def callback(iteration, residual, theta):
         peak["run"] = max(peak["run"], _live_device_bytes() - base)
 
-    monkeypatch.setattr(tuning, "ADMM", Probe)
+    monkeypatch.setattr(crossval, "ADMM", Probe)
     base = _live_device_bytes()
     result = rsocl.reconstruct(g, rig, name, regularizer_options=options, iterations=3, callback=callback,
                                truth=cube if truth else None, x0=cube if x0 else None, saturation=saturation)
@@ -373,7 +375,7 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
     assert peak["search"] <= search_count + small
     assert peak["run"] <= run_count + small
     folds = result.params["tuning"]["folds"]
-    assert folds == len(tuning.default_patterns(rig.shape, rig.n_channels))
+    assert folds == len(default_patterns(rig.shape, rig.n_channels))
     assert search_count - peak["search"] <= snap * (folds if batch is None else 0) + small
     assert run_count - peak["run"] <= (0 if saturated else sets * snap) + small
     if batch is not None:                           # the run's own check covers its search
@@ -385,7 +387,7 @@ def test_the_tuned_default_beats_interpolation_on_other_rigs(cameras, shape):
     """Arrays other than the paper's four cameras, non-square grids: the search runs, records a
     choice among its candidates, and the result is closer to the truth than interp3d."""
     from rsocl.analysis.metrics import psnr
-    from rsocl.solver.tuning import default_block
+    from rsocl.solver.holdout import default_block
     from rsocl.model.interpolation import interp3d
     from rsocl.model.scenes import builtin_scene
 
@@ -424,7 +426,7 @@ def test_one_snapshot_per_pixel_sets_the_temporal_weight_and_runs_no_search(tmp_
     temporal weight comes from ``TV.one_snapshot``, not from the criterion; lam, which hardly matters
     then, keeps its default: no search runs."""
     from rsocl.cli.main import main
-    from rsocl.solver.tuning import Tuning
+    from rsocl.solver.crossval import Tuning
     from rsocl_plugins.tv import TV
 
     weight = TV.one_snapshot["temporal_weight"]

@@ -79,8 +79,8 @@ def psnr(estimate, truth, *, data_range=None) -> float:
     truth : array_like
         Ground truth, same shape as ``estimate``.
     data_range : float, optional
-        Peak value range, intensity units (> 0). Defaults to
-        ``truth.max() - truth.min()``, or ``1.0`` when the truth is constant.
+        Peak value range, intensity units (> 0). Default: :func:`default_data_range`, ``1.0``
+        for a truth inside [0, 1], else ``truth.max() - truth.min()`` (``1.0`` when constant).
 
     Returns
     -------
@@ -92,6 +92,13 @@ def psnr(estimate, truth, *, data_range=None) -> float:
     ValueError
         If the shapes differ, an array is empty or not finite, or
         ``data_range`` is not > 0.
+
+    Examples
+    --------
+    >>> import numpy as np, rsocl
+    >>> truth = np.full((2, 8, 8), 0.5)
+    >>> round(rsocl.psnr(truth + 0.1, truth), 6)          # data in [0, 1]: peak 1, MSE 0.01
+    20.0
     """
     estimate, truth = _pair(estimate, truth)
     peak = _data_range(truth, data_range)
@@ -123,9 +130,9 @@ def ssim(estimate, truth, *, data_range=None):
     truth : array_like
         Ground truth, same shape as ``estimate``.
     data_range : float, optional
-        Peak value range, intensity units (> 0). Defaults to
-        ``truth.max() - truth.min()`` over the whole datacube, or ``1.0``
-        when the truth is constant.
+        Peak value range, intensity units (> 0), one for the whole datacube. Default:
+        :func:`default_data_range`, ``1.0`` for a truth inside [0, 1], else
+        ``truth.max() - truth.min()`` (``1.0`` when constant).
 
     Returns
     -------
@@ -145,6 +152,14 @@ def ssim(estimate, truth, *, data_range=None):
     ValueError
         If the shapes differ, the arrays are not 2-D or 3-D, empty or not
         finite, or ``data_range`` is not > 0.
+
+    Examples
+    --------
+    >>> import rsocl
+    >>> truth = rsocl.builtin_scene((16, 16), 3)
+    >>> mean, per_subframe = rsocl.ssim(truth, truth)
+    >>> round(mean, 6), per_subframe.shape
+    (1.0, (3,))
     """
     from skimage.metrics import structural_similarity
 

@@ -1,6 +1,6 @@
 """The plot of a parameter search: the criterion of every candidate against its parameters.
 
-Reads the record :func:`rsocl.solver.tuning.Tuning.as_params` writes (``Result.params["tuning"]``,
+Reads the record :func:`rsocl.solver.crossval.Tuning.as_params` writes (``Result.params["tuning"]``,
 also in the reconstruction file), so it draws a search from a file as well as from a run.
 """
 

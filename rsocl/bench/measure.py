@@ -13,7 +13,7 @@ How a point is measured
   the value of the coarse sub-frame that holds its centre, so the PSNR counts the temporal
   detail a coarse ``dt`` gives up.
 * **A tighter ROI** is a centred ``roi × roi`` crop of the ``shape × shape`` grid
-  (:func:`rsocl.solver.plan.crop_rig`: the crop keeps the full sensor's row times, so sub-frames no
+  (:meth:`rsocl.model.rig.Rig.crop`: the crop keeps the full sensor's row times, so sub-frames no
   cropped pixel samples drop out). Its snapshots and truth are the crop of the full ones; its
   metrics cover the crop's sampled sub-frames, and ``psnr_full_roi`` is the PSNR of the
   full-ROI reconstruction (same other knobs) over the same pixels and sub-frames.

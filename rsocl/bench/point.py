@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from rsocl.solver.problem import DEFAULTS
+
 __all__ = ["BenchPoint", "BenchResult", "BASELINE", "US", "on_iterations_line"]
 
 US = 1e-6
@@ -52,13 +54,13 @@ class BenchPoint:
     shape: int = 64
     roi: int | None = None
     dt_factor: float = 1.0
-    iterations: int = 200
-    tv_iterations: int | None = 10
+    iterations: int = DEFAULTS["iterations"]
+    tv_iterations: int | None = DEFAULTS["tv_iterations"]
     regularizer: str = "tv"
     dtype: str = "float32"
     device: str | None = None
-    lam: float = 0.1
-    eta: float = 0.2
+    lam: float = DEFAULTS["lam"]
+    eta: float = DEFAULTS["eta"]
     t_e: float = 180e-6
     t_r: float = 35e-6
     tune: bool = False
@@ -97,7 +99,6 @@ class BenchPoint:
 
     def rig(self, dt_factor=None):
         """The rig of this point (``dt_factor`` overrides the point's; 1 gives the reference grid)."""
-        from rsocl.solver.plan import crop_rig
         from rsocl.model.rig import Rig
 
         k = self.dt_factor if dt_factor is None else dt_factor
@@ -105,7 +106,7 @@ class BenchPoint:
                                dt=k * self.t_r)
         if self.roi is None:
             return full
-        return crop_rig(full, self.crop_box())
+        return full.crop(self.crop_box())
 
     def crop_box(self):
         """``(y, x, height, width)`` of the centred ROI."""

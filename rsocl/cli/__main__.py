@@ -2,6 +2,6 @@
 
 import sys
 
-from rsocl.cli.main import main
+from rsocl.cli import entry
 
-sys.exit(main())
+sys.exit(entry())

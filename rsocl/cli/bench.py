@@ -55,7 +55,7 @@ def default_point(args):
     from rsocl.bench.run import canonical_device
     from rsocl.cli.options import check_datacube_memory, check_rig_memory
     from rsocl.common import validation as check
-    from rsocl.solver.reconstruct import DEFAULTS
+    from rsocl.solver.problem import DEFAULTS
 
     scene = args.scene
     if scene != "builtin":

@@ -6,7 +6,9 @@ needed:
 
 * ``--frames``: one frame per camera of a target with marker dots -> each
   camera's ``homography`` (replacing its ``angle`` or ``row_map_file``), and
-  a PNG of the registered markers (``--png``);
+  a PNG of the registered markers (``--png``). Markers paired as no camera sees
+  them are refused (:mod:`rsocl.hardware.calibration.plausibility`); four markers
+  fit exactly and cannot check the fit, five or more give a leave-one-out error;
 * ``--flicker`` + ``--flicker-hz``: frames of a flickering light -> each
   camera's ``t_r`` (the mean over its frames), checked against the rig
   file first (``--tolerance``);
@@ -179,6 +181,9 @@ def add_parser(subparsers):
                    help="how markers are matched across rotated cameras: 'position' (clockwise from top-left, "
                         "turned by each camera's nominal angle from the rig file) or 'largest' (the target "
                         "has one larger marker; it comes first)")
+    g.add_argument("--mirrored", type=int, nargs="+", default=[], metavar="C",
+                   help="cameras (indices) that see the target in a mirror, e.g. through a beam splitter: their "
+                        "homography mirrors the image (any other camera's may not)")
     g.add_argument("--polarity", choices=["bright", "dark"], default="bright", help="bright or dark dots")
     g.add_argument("--threshold", type=float, default=None, help="dot/background threshold (default: automatic)")
     g.add_argument("--png", default=None,
@@ -212,6 +217,15 @@ def _nominal_angle(camera: dict, shape) -> float:
     return 0.0
 
 
+def _nominal_key(camera: dict) -> str:
+    return "angle" if camera.get("angle") is not None else "homography"
+
+
+def _has_nominal(camera: dict) -> bool:
+    """Whether the rig file states the camera's rotation (an ``angle`` or a ``homography``)."""
+    return camera.get("angle") is not None or camera.get("homography") is not None
+
+
 def _origin(camera: dict):
     roi = camera.get("roi")
     return (float(roi[0]), float(roi[1])) if roi is not None else (0.0, 0.0)
@@ -220,9 +234,13 @@ def _origin(camera: dict):
 def _register(args, rigfile, updates):
     """Registration of every camera; returns the overlay inputs."""
     from rsocl.hardware.calibration import detect_markers, homography_angle, reference_outline, register_camera
+    from rsocl.hardware.calibration.plausibility import check_registration, check_rotation, fit_summary
 
-    frames, extras = load_frames(args.frames, "--frames")
     C = len(rigfile.cameras)
+    bad = [c for c in args.mirrored if not 0 <= c < C]
+    if bad:
+        raise ValueError(f"--mirrored must list camera indices in [0, {C - 1}], got {bad}")
+    frames, extras = load_frames(args.frames, "--frames")
     frames = [_one_frame(f) for f in _per_camera(frames, C, "--frames")]
     given = extras.get("markers")
     if given is not None and (given.ndim != 3 or given.shape[0] != C or given.shape[2] != 2):
@@ -248,22 +266,24 @@ def _register(args, rigfile, updates):
         try:
             registration = register_camera(
                 frames[c], reference_points, reference=reference, angle=angle, frame_origin=origin,
-                sensor_points=None if given is None else given[c] + origin, **options)
+                sensor_points=None if given is None else given[c] + origin, mirrored=c in args.mirrored, **options)
+            H = registration.homography
+            check_registration(registration.reference_points, registration.sensor_points, H, rigfile.shape,
+                               mirrored=c in args.mirrored)
+            measured = homography_angle(H, rigfile.shape) if not _has_nominal(camera) else \
+                check_rotation(H, rigfile.shape, angle, key=f"camera[{c}].{_nominal_key(camera)}")
         except ValueError as exc:
             raise ValueError(f"camera {c}: {exc}") from None
-        H = registration.homography
         rows = registration.row_map(rigfile.shape)
         updates[c]["homography"] = H
         detected.append(registration.sensor_points - origin)
         reprojected.append(registration.reprojected - origin)
         outlines.append(reference_outline(H, rigfile.shape, frame_origin=origin))
-        measured = angle + (homography_angle(H, rigfile.shape) - angle + 180.0) % 360.0 - 180.0   # nearest turn
         name = camera.get("name")
-        titles.append(f"camera {c}" + (f" ({name})" if name else "") + f": {measured:.1f}°, "
-                      f"rms {registration.rms_error:.2f} px")
-        say(args, f"camera {c}: homography from {len(reference_points)} markers, rms reprojection "
-                  f"{registration.rms_error:.3f} px, rotation {measured:.2f}° (rig file: {angle:g}°), "
-                  f"sensor rows 0..{rows.max():.2f} over the ROI")
+        fit = f"rms {registration.rms_error:.2f} px" if len(reference_points) > 4 else "4 markers: exact fit"
+        titles.append(f"camera {c}" + (f" ({name})" if name else "") + f": {measured:.1f}°, {fit}")
+        say(args, f"camera {c}: homography from {fit_summary(registration)}; rotation {measured:.2f}° (rig file: "
+                  f"{angle:g}°), sensor rows 0..{rows.max():.2f} over the ROI")
     return frames, detected, reprojected, outlines, titles
 
 

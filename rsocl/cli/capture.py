@@ -20,7 +20,7 @@ def add_parser(subparsers):
     p.add_argument("--out", required=True, help="capture file to write (.h5)")
     p.add_argument("--sets", type=int, default=1, help="number of synchronized sets (default 1)")
     p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for each frame (default 2)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar, only errors")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (drawn on a terminal only), only errors")
     p.set_defaults(func=cmd_capture)
     return p
 
@@ -30,13 +30,13 @@ def cmd_capture(args) -> int:
 
     Bad arguments or rig files raise ValueError / FileNotFoundError (the CLI's exit status 2).
     """
-    from rsocl.cli.options import load_rig_file
+    from rsocl.cli.options import load_rig_file, progress_bar
     from rsocl.hardware.capture import CaptureFailed, capture_sets
 
     quiet = bool(getattr(args, "quiet", False))
     rigfile = load_rig_file(args.rig)                 # a shape beyond the host's memory: refused here
     try:
-        path = capture_sets(rigfile, args.out, sets=args.sets, timeout=args.timeout, progress=not quiet)
+        path = capture_sets(rigfile, args.out, sets=args.sets, timeout=args.timeout, progress=progress_bar(args))
     except CaptureFailed as exc:
         print(f"rsocl capture: error: {exc}", file=sys.stderr)
         return 1

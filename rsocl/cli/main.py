@@ -14,7 +14,7 @@ import warnings
 
 from rsocl.cli import bench, calibrate, capture, demo, devices, info, plan, plugins, reconstruct, simulate
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "entry"]
 
 #: In the order ``rsocl --help`` lists them.
 SUBCOMMANDS = (demo, simulate, reconstruct, info, plan, bench, capture, calibrate, devices, plugins)
@@ -71,6 +71,8 @@ def main(argv=None) -> int:
         print(f"rsocl {args.command}: error: out of host memory ({str(exc).strip() or 'MemoryError'}); "
               "a smaller grid, fewer sets or tiles (rsocl plan) need less", file=sys.stderr)
         return 1
+    except BrokenPipeError:     # a reader that stopped reading: entry() ends quietly
+        raise
     except OSError as exc:
         print(f"rsocl {args.command}: error: {fault_line(exc)}", file=sys.stderr)
         return 1
@@ -98,5 +100,21 @@ def fault_line(exc: OSError) -> str:
     return f"{where}{why}; outputs replace a file only once complete, so the files already there are unchanged"
 
 
+def entry(argv=None) -> int:
+    """The ``rsocl`` console script (and ``python -m rsocl``): :func:`main`, with output to a reader
+    that stopped reading (``rsocl plugins | head -1``) ending quietly, as a command killed by SIGPIPE
+    does (exit status 141, nothing on stderr)."""
+    try:
+        status = main(argv)
+        sys.stdout.flush()
+        return status
+    except BrokenPipeError:
+        try:                    # the interpreter's final flush would fail again: send what is left nowhere
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        except (AttributeError, OSError, ValueError):
+            pass
+        return 141
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    sys.exit(entry())

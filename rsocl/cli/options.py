@@ -8,8 +8,8 @@ import os
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
            "check_host_memory", "check_rig_memory", "load_rig_file", "check_datacube_memory", "add_device_args",
-           "add_solver_args", "check_solver_args", "reg_options", "say", "tuning_plot_path", "tuning_plot_files",
-           "run_reconstruction", "quality_line"]
+           "add_solver_args", "check_solver_args", "reg_options", "regularizer_from", "solver_options",
+           "progress_bar", "say", "tuning_plot_path", "tuning_plot_files", "run_reconstruction", "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
@@ -182,7 +182,7 @@ def add_device_args(p):
 
 def add_solver_args(p):
     """Add the solver group (iterations, lam, eta, inner iterations, projection, regularizer) to ``p``."""
-    from rsocl.solver.reconstruct import DEFAULTS
+    from rsocl.solver.problem import DEFAULTS
 
     g = p.add_argument_group("solver (defaults for scenes in [0, 1])")
     g.add_argument("--iterations", type=int, default=DEFAULTS["iterations"])
@@ -213,7 +213,6 @@ def check_solver_args(args) -> None:
     option it refuses (name or range); ``--blend`` outside [0, 1], or below 1 with ``--fast`` (a zero
     start), before anything is simulated, loaded or run."""
     from rsocl.common import validation as check
-    from rsocl.solver.reconstruct import make_regularizer
 
     options = reg_options(args.reg_opt)
     if args.blend is not None:
@@ -230,7 +229,7 @@ def check_solver_args(args) -> None:
         if not same:
             raise ValueError(f"--reg-opt iterations={given} and --tv-iterations {args.tv_iterations} both set the "
                              "regularizer's inner iterations, to different values; give one of them")
-    make_regularizer(args.regularizer, options, args.tv_iterations)
+    regularizer_from(args)
 
 
 def reg_options(pairs):
@@ -242,6 +241,37 @@ def reg_options(pairs):
         key, value = pair.split("=", 1)
         options[key.strip()] = value.strip()
     return options
+
+
+def progress_bar(args) -> bool:
+    """Whether to draw a progress bar: not with ``--quiet``, and only on a terminal (stderr, where the
+    bars go, redirected to a file or a pipe would collect every redraw)."""
+    import sys
+
+    if getattr(args, "quiet", False):
+        return False
+    try:
+        return bool(sys.stderr.isatty())
+    except (AttributeError, ValueError):           # a closed or replaced stream
+        return False
+
+
+def regularizer_from(args):
+    """The configured regularizer of ``--regularizer``, ``--reg-opt`` and ``--tv-iterations`` (where the
+    command has it): the instance whose options the memory counts and the run use."""
+    from rsocl.solver.request import make_regularizer
+
+    return make_regularizer(args.regularizer, reg_options(args.reg_opt), getattr(args, "tv_iterations", None))
+
+
+def solver_options(args) -> dict:
+    """The solver and device arguments as the keyword arguments of :func:`rsocl.reconstruct`,
+    :func:`rsocl.solver.sets.reconstruct_sets` and :func:`rsocl.scale.reconstruct_tiled` (the one map
+    of the command line onto the API)."""
+    return {"regularizer": args.regularizer, "regularizer_options": reg_options(args.reg_opt),
+            "iterations": args.iterations, "lam": args.lam, "eta": args.eta, "tv_iterations": args.tv_iterations,
+            "projection": args.projection, "device": args.device, "dtype": args.dtype, "tune": not args.fast,
+            "blend": args.blend, "progress": not args.quiet}
 
 
 def say(args, *text):
@@ -278,10 +308,7 @@ def run_reconstruction(args, g, rig, truth=None):
     """:func:`rsocl.reconstruct` of snapshots ``g`` with the solver and device arguments."""
     from rsocl.solver.reconstruct import reconstruct
 
-    return reconstruct(g, rig, regularizer=args.regularizer, regularizer_options=reg_options(args.reg_opt),
-                       iterations=args.iterations, lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
-                       projection=args.projection, device=args.device, dtype=args.dtype, truth=truth,
-                       tune=not args.fast, blend=args.blend, progress=not args.quiet)
+    return reconstruct(g, rig, truth=truth, **solver_options(args))
 
 
 def quality_line(result, truth):

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rsocl.cli.options import add_device_args, add_solver_args, quality_line, reg_options, run_reconstruction, say, \
-    tuning_plot_files
+from rsocl.cli.options import add_device_args, add_solver_args, quality_line, run_reconstruction, say, \
+    solver_options, tuning_plot_files
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
 __all__ = ["add_parser", "cmd_reconstruct", "set_path", "check_set_outputs"]
@@ -136,8 +136,4 @@ def _reconstruct_sets(args, sets, rig):
     """:func:`rsocl.solver.sets.reconstruct_sets` of every set with the solver and device arguments."""
     from rsocl.solver.sets import reconstruct_sets
 
-    return reconstruct_sets(sets, rig, batch=args.batch, regularizer=args.regularizer,
-                            regularizer_options=reg_options(args.reg_opt), iterations=args.iterations,
-                            lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations,
-                            projection=args.projection, device=args.device, dtype=args.dtype,
-                            tune=not args.fast, blend=args.blend, progress=not args.quiet)
+    return reconstruct_sets(sets, rig, batch=args.batch, **solver_options(args))

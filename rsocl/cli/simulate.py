@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from rsocl.cli.options import add_device_args, add_rig_args, check_datacube_memory, rig_from, say
+from rsocl.cli.options import US, add_device_args, add_rig_args, check_datacube_memory, check_rig_memory, rig_from, say
 
-__all__ = ["add_parser", "check_noise_args", "cmd_simulate"]
+__all__ = ["add_parser", "check_noise_args", "multi_frame_rig", "scene_datacube", "cmd_simulate"]
 
 
 def add_parser(subparsers):
@@ -13,6 +13,12 @@ def add_parser(subparsers):
     p.add_argument("scene", help="'builtin' or a video: .npz (key 'video'), multi-page .tif, .gif")
     p.add_argument("--out", required=True, help="capture file to write (.h5)")
     add_rig_args(p)
+    p.add_argument("--frames", type=int, default=1,
+                   help="frames every camera captures per trigger, >= 1 (default 1); a multi-frame capture is what "
+                        "'rsocl reconstruct --window F' reconstructs")
+    p.add_argument("--t-d-us", type=float, default=None,
+                   help="with --frames > 1: frame period, µs (default: the readout of the camera reading the most "
+                        "rows, t_r x rows, so consecutive frames follow each other)")
     p.add_argument("--noise", choices=["none", "gaussian", "poisson"], default="none",
                    help="noise model (default none); gaussian needs --sigma, poisson --photons")
     p.add_argument("--sigma", type=float, default=None,
@@ -51,22 +57,71 @@ def check_noise_args(args) -> None:
     check_seed("--seed", args.seed)
 
 
+def multi_frame_rig(args, rig):
+    """``rig`` with every camera capturing ``--frames`` frames, ``--t-d-us`` apart (default: the longest
+    readout, ``t_r`` times the most rows a camera reads); ``rig`` itself for one frame."""
+    from rsocl.common import validation as check
+    from rsocl.model.rig import MAX_T, Camera, Rig
+
+    frames = check.positive_int("--frames", args.frames)
+    if frames == 1:
+        if args.t_d_us is not None:
+            raise ValueError("--t-d-us is the period between the frames of --frames N > 1; with one frame it would "
+                             "be ignored")
+        return rig
+    if args.t_d_us is None:
+        t_d = max((float(rig.row_map(i).max()) + 1.0) * cam.t_r for i, cam in enumerate(rig.cameras))
+    else:
+        t_d = check.positive("--t-d-us", args.t_d_us, "µs") * US
+    # refused before the rig's per-frame exposure windows are allocated
+    span = (frames - 1) * t_d + max(cam.t_e + float(rig.row_map(i).max()) * cam.t_r
+                                     for i, cam in enumerate(rig.cameras))
+    if span / rig.dt > MAX_T:
+        raise ValueError(f"--frames {frames} frames {t_d / US:g} µs apart span {span / rig.dt:,.0f} sub-frames of "
+                         f"{rig.dt / US:g} µs, above the {MAX_T:,} a rig may span; give fewer --frames")
+    check_rig_memory(rig.C * frames, rig.shape, f"--frames {frames}", hint="give fewer --frames or a smaller --shape")
+    cameras = [Camera(cam.angle, t_e=cam.t_e, t_r=cam.t_r, t_d=t_d, frames=frames) for cam in rig.cameras]
+    try:
+        return Rig(cameras, rig.shape, dt=rig.dt, mask=rig.mask)
+    except ValueError as exc:
+        raise ValueError(f"--frames {frames} --t-d-us {t_d / US:g}: {exc}") from None
+
+
+def scene_datacube(args, rig):
+    """The ``(T, m, n)`` datacube of ``args.scene`` for ``rig``; a video of another size is resized
+    (and resampled in time) with a one-line warning saying from what to what and how to keep its size."""
+    import warnings
+
+    from rsocl.model.scenes import benchmark_protocol, load_scene, load_video
+
+    if args.scene == "builtin":
+        return load_scene(args.scene, rig.shape, rig.T)
+    video = load_video(args.scene)
+    F, h, w = video.shape
+    m, n = rig.shape
+    if (h, w) != (m, n) or F != rig.T:
+        keep = f"give --shape {h} {w} to keep its size" if (h, w) != (m, n) else "its size is kept"
+        warnings.warn(f"scene {args.scene}: {F} frames of {h}x{w} resized to T = {rig.T} sub-frames of {m}x{n} "
+                      f"({keep}; T follows from --t-e-us, --t-r-us, --dt-us, --frames and the shape)", stacklevel=2)
+    return benchmark_protocol(video, rig.shape, rig.T)
+
+
 def cmd_simulate(args) -> int:
     """Simulate the snapshots of ``args.scene`` and write them, the rig and the truth to ``--out``; returns 0."""
     from rsocl.files.atomic import output_path
     from rsocl.files.hdf5 import save_capture
-    from rsocl.model.scenes import load_scene
     from rsocl.model.simulate import simulate
 
     check_noise_args(args)
     output_path(args.out, "--out", inputs=(("scene", None if args.scene == "builtin" else args.scene),))
-    rig = rig_from(args)
+    rig = multi_frame_rig(args, rig_from(args))
     check_datacube_memory(rig)
-    truth = load_scene(args.scene, rig.shape, rig.T)
+    truth = scene_datacube(args, rig)
     g = simulate(truth, rig, noise=args.noise, sigma=args.sigma or 0.0, photons=args.photons,
                  bit_depth=args.bit_depth, seed=args.seed, device=args.device)
     meta = {"scene": str(args.scene), "noise": args.noise, "sigma": args.sigma, "photons": args.photons,
             "bit_depth": args.bit_depth, "seed": args.seed}
     path = save_capture(args.out, g, rig, truth=truth, attrs=meta)
-    say(args, f"wrote {path}: {rig.n_channels} snapshots of {rig.shape[0]}x{rig.shape[1]}, T = {rig.T}")
+    frames = f" ({rig.C} cameras x {rig.cameras[0].frames} frames)" if rig.cameras[0].frames > 1 else ""
+    say(args, f"wrote {path}: {rig.n_channels} snapshots{frames} of {rig.shape[0]}x{rig.shape[1]}, T = {rig.T}")
     return 0

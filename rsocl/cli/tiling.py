@@ -107,15 +107,15 @@ def _note_first_set(args, what: str) -> None:
 
 
 def _wants_tiles(args, capture) -> bool:
+    from rsocl.cli.options import regularizer_from
     from rsocl.device.context import get_device
     from rsocl.scale.runner import SCHEDULER_ENV
-    from rsocl.solver.plan import device_limit, memory_need
+    from rsocl.solver.memory import device_limit, memory_need
 
     if (args.tile or args.sets or args.workers is not None or args.scheduler or os.environ.get(SCHEDULER_ENV)
             or _is_zarr(args.out)):
         return True
-    largest, total = memory_need(capture.rig, regularizer=args.regularizer, dtype=args.dtype,
-                                 projection=args.projection)
+    largest, total = memory_need(capture.rig, regularizer_from(args), dtype=args.dtype, projection=args.projection)
     return device_limit(get_device(args.device), largest, total) is not None
 
 
@@ -160,7 +160,7 @@ def reconstruct_tiled_if_needed(args):
 
     ``--overlap``, ``--halo`` and ``--batch`` are refused, naming the option, where the run would
     ignore them (:func:`_check_applies`)."""
-    from rsocl.cli.options import reg_options, say, tuning_plot_files
+    from rsocl.cli.options import regularizer_from, say, solver_options, tuning_plot_files
     from rsocl.scale.inputs import CaptureSets
 
     capture = CaptureSets(args.capture, all_sets=args.sets)
@@ -180,17 +180,14 @@ def reconstruct_tiled_if_needed(args):
 
     tile = args.tile
     if tile is None:
-        tile = propose_tiling(capture.rig, halo=args.halo, regularizer=args.regularizer, dtype=args.dtype,
+        tile = propose_tiling(capture.rig, halo=args.halo, regularizer=regularizer_from(args), dtype=args.dtype,
                               projection=args.projection, device=args.device, measure=False).tile
         say(args, f"tiles of {tile[0]} x {tile[1]} pixels (proposed for this device; --tile H W to choose)")
     zarr_out = _is_zarr(args.out)
     try:
-        result = reconstruct_tiled(
-            capture, capture.rig, args.regularizer, tile=tile, halo=args.halo, iterations=args.iterations,
-            lam=args.lam, eta=args.eta, tv_iterations=args.tv_iterations, projection=args.projection,
-            device=args.device, dtype=args.dtype, regularizer_options=reg_options(args.reg_opt),
-            out=args.out if zarr_out else None, scheduler=args.scheduler, workers=args.workers,
-            retries=_retries(args), tune=not args.fast, blend=args.blend, progress=not args.quiet)
+        result = reconstruct_tiled(capture, capture.rig, tile=tile, halo=args.halo, out=args.out if zarr_out else None,
+                                   scheduler=args.scheduler, workers=args.workers, retries=_retries(args),
+                                   **solver_options(args))
     except TilesFailed as exc:
         print(f"rsocl reconstruct: error: {exc}", file=sys.stderr, flush=True)
         return 1
@@ -223,17 +220,14 @@ def reconstruct_tiled_if_needed(args):
 def _stream(args, capture):
     """``--window``: the capture as a stream of overlapping frame windows, into an HDF5 file."""
     from rsocl.analysis.visual import comparison_gif
-    from rsocl.cli.options import reg_options, say, tuning_plot_files
+    from rsocl.cli.options import say, solver_options, tuning_plot_files
     from rsocl.files.hdf5 import load_capture, save_reconstruction
     from rsocl.scale.stream import default_overlap, reconstruct_stream
 
     loaded = load_capture(args.capture, set_index=0)
-    stream = reconstruct_stream(
-        loaded.snapshots, loaded.rig, window=args.window, overlap=args.overlap, tile=args.tile, halo=args.halo,
-        regularizer=args.regularizer, iterations=args.iterations, lam=args.lam, eta=args.eta,
-        tv_iterations=args.tv_iterations, projection=args.projection, device=args.device, dtype=args.dtype,
-        regularizer_options=reg_options(args.reg_opt), scheduler=args.scheduler, retries=_retries(args),
-        tune=not args.fast, blend=args.blend, progress=not args.quiet)
+    stream = reconstruct_stream(loaded.snapshots, loaded.rig, window=args.window, overlap=args.overlap, tile=args.tile,
+                                halo=args.halo, scheduler=args.scheduler, retries=_retries(args),
+                                **solver_options(args))
     truth = None if args.no_truth else loaded.truth
     text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
     if truth is not None:
@@ -289,12 +283,13 @@ def check_plan_tiling_args(args, shape) -> None:
 def print_plan_tiling(args, p) -> None:
     """After ``rsocl plan``'s table: the tiling, when the proposal does not fit or ``--tile``, ``--sets``
     or ``--memory-mib`` asks (the arguments checked first by :func:`check_plan_tiling_args`)."""
+    from rsocl.cli.options import regularizer_from
     from rsocl.scale.proposal import format_tiling, propose_tiling
 
     if args.tile is None and p.proposed.fits and args.sets == 1 and args.memory_mib is None:
         return
     budget = None if args.memory_mib is None else int(args.memory_mib * 2**20)
     tiling = propose_tiling(p.proposed.rig, tile=args.tile, halo=args.halo, sets=args.sets,
-                            iterations=args.iterations, regularizer=args.regularizer, dtype=args.dtype,
+                            iterations=args.iterations, regularizer=regularizer_from(args), dtype=args.dtype,
                             device=args.device, budget_bytes=budget, measure=not args.no_measure)
     print(format_tiling(tiling))

@@ -73,9 +73,8 @@ def _check_group(group):
 def _entries(group):
     """``{name: {distribution: PluginInfo}}`` of ``group``.
 
-    Only the distributions that declare an entry point of ``group`` have their metadata parsed:
-    ``available`` takes 1.8 ms with 62 distributions installed (15.5 ms parsing every one's
-    ``METADATA``) and 11.5 ms with 215 (94.7 ms), and every ``reconstruct`` call looks one up.
+    Only the distributions that declare an entry point of ``group`` have their metadata parsed,
+    since every ``reconstruct`` call looks one up (measured: ``docs/implementation_notes.md``).
     """
     found = {}
     for dist in metadata.distributions():
@@ -118,7 +117,8 @@ def load(group: str, name: str):
 
 
 def status(group: str):
-    """``[(PluginInfo or None, name, "ok" | "broken: cause")]`` for every plugin, importing each.
+    """``[(PluginInfo or None, name, "ok" | "broken: cause" | "missing dependency: cause")]`` for every
+    plugin, importing each (and, for a class with ``check_dependencies()``, what it needs).
 
     Name collisions are reported as broken rows instead of raising.
     """
@@ -132,9 +132,23 @@ def status(group: str):
             continue
         info = next(iter(by_dist.values()))
         try:
-            info.load()
-            rows.append((info, name, "ok"))
+            cls = info.load()
         except PluginError as exc:
             cause = exc.__cause__
             rows.append((info, name, f"broken: {type(cause).__name__}: {cause}"))
+            continue
+        rows.append((info, name, _dependencies(cls)))
     return rows
+
+
+def _dependencies(cls) -> str:
+    """``"ok"``, or ``"missing dependency: cause"`` when the plugin's ``check_dependencies()``
+    (a camera backend's: the library it opens cameras with) raises."""
+    check = getattr(cls, "check_dependencies", None)
+    if not callable(check):
+        return "ok"
+    try:
+        check()
+    except Exception as exc:  # noqa: BLE001 - any failure to import a dependency is reported, not raised
+        return f"missing dependency: {exc}"
+    return "ok"

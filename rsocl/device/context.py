@@ -1,11 +1,9 @@
 """OpenCL device selection and program building.
 
-Selection order: an explicit ``device`` argument, the ``RSOCL_DEVICE``
-environment variable, ``PYOPENCL_CTX``, else the first GPU, else the first CPU.
-A device spec is ``"P:D"`` (platform and device index, as ``rsocl devices``
-prints them), ``"P"`` (first device of platform P), or a case-insensitive
-substring of the platform or device name (``"pocl"``, ``"nvidia"``, ``"cpu"``,
-``"gpu"``).
+Selection order: an explicit ``device`` argument, the ``RSOCL_DEVICE`` environment variable,
+``PYOPENCL_CTX``, else the first GPU, else the first CPU. A device spec is ``"P:D"`` (platform and
+device index, as ``rsocl devices`` prints them), ``"P"`` (first device of platform P), or a
+case-insensitive substring of the platform or device name (``"pocl"``, ``"nvidia"``, ``"cpu"``, ``"gpu"``).
 """
 
 from __future__ import annotations
@@ -43,7 +41,7 @@ def _cl():
 
 
 def list_devices():
-    """All ``(platform_index, device_index, platform, device)`` tuples; ``[]`` when none."""
+    """Every OpenCL device, ``(P, D, platform, device)`` (``"P:D"`` of :func:`get_device`); ``[]`` when none."""
     cl = _cl()
     try:
         platforms = cl.get_platforms()
@@ -267,8 +265,7 @@ def kernel_source(name: str) -> str:
 
 
 #: A build-log line that says nothing about the program: NVIDIA's OpenCL (drivers from about 550 on)
-#: writes it for every kernel of every program it compiles (seen on an H100 with driver 580.159.04;
-#: other projects report the same, e.g. silx-kit/pyFAI#2368).
+#: writes it for every kernel of every program it compiles (``docs/implementation_notes.md``).
 _DRIVER_NOISE = re.compile(r"Warning: Function \w+ is a kernel, so overriding noinline attribute\. "
                            r"The function may be inlined when called\.")
 
@@ -279,8 +276,7 @@ def meaningful_log(log: str) -> str:
 
 
 def _build(context, files, defines):
-    """Build ``common.cl`` + ``files`` with ``defines``; pyopencl's compiler warning only for a log with more
-    than :data:`_DRIVER_NOISE` in it."""
+    """Build ``common.cl`` + ``files`` with ``defines``; warn only for a build log beyond :data:`_DRIVER_NOISE`."""
     cl = _cl()
     lines = []
     uses_double = any(v == "double" for _, v in defines)
@@ -311,7 +307,7 @@ class Kernels:
     """A built program whose kernels are created once and reused (``prog.forward(queue, ...)``).
 
     Each is an :class:`rsocl.device.kernel.Kernel`: called like a ``pyopencl.Kernel``, it sets a by-value
-    argument only when its value changes (about 10 µs each on PoCL).
+    argument only when its value changes (:mod:`rsocl.device.kernel`).
     """
 
     def __init__(self, program):
@@ -369,9 +365,25 @@ def _device_for(spec: str | None) -> Device:
 
 
 def get_device(device=None) -> Device:
-    """Resolve ``device`` (a :class:`Device`, a spec string, or None) to a :class:`Device`.
+    """The OpenCL device to compute on, with its context, in-order queue and program cache.
 
-    Devices are cached: repeated calls share one context, queue and program cache.
+    Parameters
+    ----------
+    device : Device, str or None
+        A :class:`Device`, a spec (``"P:D"``, ``"P"`` or a name substring, as the module says), or
+        None: the module's selection order.
+
+    Returns
+    -------
+    Device
+        Cached: calls with one spec share one context, queue and program cache.
+
+    Raises
+    ------
+    ValueError
+        If ``device`` is neither a Device, a string nor None, or matches no device (the message lists them).
+    NoOpenCLError
+        If no OpenCL platform has a device (the message says what to install).
     """
     if isinstance(device, Device):
         return device

@@ -1,13 +1,9 @@
 """An OpenCL kernel that sets a by-value argument only when its value changes.
 
-On PoCL 3.0 with pyopencl 2026.1, setting a by-value kernel argument (a size, a step length)
-costs about 10 µs of host time, a buffer argument 0.2 µs and an enqueue 4 µs (``set_arg`` and
-``enqueue_nd_range_kernel`` timed in loops on this project's 2-core VM). pyopencl's
-``kernel(queue, grid, local, *args)`` sets every argument on every launch: an ADMM-TV iteration
-with 10 inner TV iterations makes about 25 launches with about 100 by-value arguments, 1 ms of
-host time per iteration, taken from the same two cores that run the kernels. Most of them are
-the same from one launch to the next (sizes, step lengths), so :class:`Kernel` remembers what
-it set and sets only what changed. :class:`rsocl.device.Kernels` hands out these kernels.
+pyopencl's ``kernel(queue, grid, local, *args)`` sets every argument on every launch, and setting
+a by-value argument (a size, a step length) costs host time on the cores that also run the
+kernels (measured: ``docs/implementation_notes.md``). Most of them are the same from one launch to the next, so
+:class:`Kernel` remembers what it set and sets only what changed. :class:`rsocl.device.Kernels` hands out these kernels.
 """
 
 from __future__ import annotations

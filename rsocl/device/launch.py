@@ -8,7 +8,7 @@ their bounds.
 
 from __future__ import annotations
 
-__all__ = ["voxel_grid", "exact_launches", "element_launches", "batch_launches", "voxel_launches", "tile_grid",
+__all__ = ["voxel_grid", "exact_launches", "element_launches", "batch_launches", "voxel_launches", "flat_tile_grid",
            "block_grid"]
 
 
@@ -26,8 +26,8 @@ def exact_launches(extent: int, group: int = 64):
     """Launches ``(offset, size, local)`` that cover ``range(extent)`` exactly, with no padding.
 
     Kernels launched this way need no bounds test. On CPU devices that matters: PoCL
-    turns a per-work-item ``if (i >= n) return`` into masked loads and stores, and the
-    TV kernels ran 1.5-2x slower with it (``benchmarks/roofline.py``). The local size is
+    turns a per-work-item ``if (i >= n) return`` into masked loads and stores (measured:
+    ``docs/implementation_notes.md``). The local size is
     the largest divisor of ``extent`` up to ``group``; when that is below 8 (a prime
     extent, say), a second launch with a global offset takes the remainder.
     """
@@ -59,9 +59,8 @@ def voxel_launches(T: int, m: int, n: int, group: int = 64, max_x: int | None = 
 
     When a whole row fits in ``group`` work items, a work group is a block of whole rows,
     ``(n, rows)`` with ``rows`` the largest divisor of ``m`` that keeps ``n * rows <= group``:
-    one launch, whatever ``n``. PoCL vectorises along the row; the TV kernels ran 7-15 % faster
-    with blocks of about 512 voxels than with half rows of 64 (64x64 to 128x128, measured with
-    OpenCL profiling). Otherwise rows are split as :func:`exact_launches` says. ``group`` must
+    one launch, whatever ``n``. PoCL vectorises along the row, so larger blocks of whole rows run
+    faster (``docs/implementation_notes.md``). Otherwise rows are split as :func:`exact_launches` says. ``group`` must
     not exceed what the device and kernel allow, nor ``max_x`` the device's work items along
     dimension 0 (``CL_DEVICE_MAX_WORK_ITEM_SIZES[0]``; None: no other limit than ``group``).
     """
@@ -73,7 +72,7 @@ def voxel_launches(T: int, m: int, n: int, group: int = 64, max_x: int | None = 
     return [((size, m, T), (local, 1, 1), (offset, 0, 0)) for offset, size, local in exact_launches(n, row)]
 
 
-def tile_grid(pixels: int, width: int, channels: int = 1):
+def flat_tile_grid(pixels: int, width: int, channels: int = 1):
     """Global and local sizes for one work item per tile of ``width`` pixels (and channel).
 
     Flat tiles of ``width`` neighbouring pixels (flat index), 64 tiles per work group; the

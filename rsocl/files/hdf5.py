@@ -132,6 +132,18 @@ def save_capture(path, snapshots, rig, *, truth=None, attrs=None) -> Path:
     ValueError
         If a shape does not match the rig, an array is not finite, or
         ``attrs`` is not a JSON-serialisable dict with str keys.
+
+    Examples
+    --------
+    >>> import os, tempfile, numpy as np, rsocl
+    >>> folder = tempfile.TemporaryDirectory()
+    >>> rig = rsocl.Rig.paper_array(2, shape=(8, 8), t_e=180e-6, t_r=35e-6)
+    >>> snapshots = np.zeros((rig.n_channels,) + rig.shape, np.float32)
+    >>> path = rsocl.save_capture(os.path.join(folder.name, "cap.h5"), snapshots, rig, attrs={"scene": "dark"})
+    >>> capture = rsocl.load_capture(path)
+    >>> capture.rig == rig, capture.snapshots.shape, capture.meta
+    (True, (2, 8, 8), {'scene': 'dark'})
+    >>> folder.cleanup()
     """
     rig = _check_rig(rig)
     m, n = rig.shape
@@ -284,6 +296,19 @@ def save_reconstruction(path, datacube, rig, *, params=None, history=None, truth
     ValueError
         On shape mismatches, non-finite datacube/truth, bad history names or
         non-1-D traces, or non-JSON ``params``.
+
+    Examples
+    --------
+    >>> import os, tempfile, numpy as np, rsocl
+    >>> folder = tempfile.TemporaryDirectory()
+    >>> rig = rsocl.Rig.paper_array(2, shape=(8, 8), t_e=180e-6, t_r=35e-6)
+    >>> cube = np.zeros((rig.T,) + rig.shape)
+    >>> path = rsocl.save_reconstruction(os.path.join(folder.name, "rec.h5"), cube, rig,
+    ...                                  params={"lam": 0.1}, history={"residual": [1.0, 0.5]})
+    >>> result = rsocl.load_reconstruction(path)
+    >>> result.params, list(result.history), result.datacube.shape == cube.shape
+    ({'lam': 0.1}, ['residual'], True)
+    >>> folder.cleanup()
     """
     rig = _check_rig(rig)
     datacube = _cube("datacube", datacube, None, "[T, m, n]")

@@ -17,7 +17,7 @@ Schema
     name = "left"             # optional label
     address = "10.0.0.2"      # optional shortcut for config.address
     angle = 90.0              # rotation, degrees; or one of:
-    # row_map_file = "cam0_rows.npy"   (a .npy (m, n) row map, relative to the rig file)
+    # row_map_file = "cam0_rows.npy"   (a .npy (m, n) row map, in the rig file's folder or below)
     # homography = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]   (3x3, reference pixel -> sensor pixel)
     t_e = 1.8e-04             # exposure, s (required)
     t_r = 3.5e-05             # row readout time, s (required)
@@ -28,13 +28,14 @@ Schema
     # t_d, frames: multi-frame cameras (see rsocl.Camera)
 
     [camera.config]           # backend settings, passed to the backend as they are
-    scene = "builtin"
+    scene = "builtin"         # (never a model key: angle, t_e, ... in [[camera]], shape, dt, mask in [rig])
 
+Every key, its unit and its table, and an example per backend: ``docs/rig-files.md``.
 Only one of ``angle``, ``row_map_file`` and ``homography`` may be given (none
 means ``angle = 0``). A homography maps a reference pixel centre ``(x, y)``
 (column, row; pixel centres at integer coordinates) to full-sensor coordinates
 ``(x', y')`` (before the ROI); the camera row of the pixel is ``y'``, shifted so
-that the smallest over the reference ROI is 0 (MODEL.md). Content errors raise
+that the smallest over the reference ROI is 0 (docs/model.md). Content errors raise
 :class:`ValueError` naming the file, the camera index and the key, e.g.
 ``rig.toml: camera[2].t_e must be > 0 seconds, got -1.0``.
 
@@ -188,8 +189,9 @@ def load_rigfile(path, check_shape=None) -> RigFile:
     FileNotFoundError
         If ``path`` does not exist.
     ValueError
-        If it is not valid TOML or its content breaks the schema; the message
-        names the file, the camera index and the key.
+        If it is not a UTF-8 TOML file or its content breaks the schema (a key in the wrong
+        table, a ``row_map_file`` outside the file's folder); the message names the file, the
+        camera index and the key.
     """
     path = check.existing_file("", path, "rig file")
     try:
@@ -197,6 +199,9 @@ def load_rigfile(path, check_shape=None) -> RigFile:
             data = tomllib.load(handle)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:                    # a binary file (an .h5, a .npy, an image)
+        raise ValueError(f"{path}: not a TOML rig file (byte {exc.object[exc.start]:#04x} at offset {exc.start} "
+                         "is not UTF-8 text)") from None
     try:
         unknown = sorted(set(data) - {"rig", "camera"})
         if unknown:
@@ -220,9 +225,10 @@ def load_rigfile(path, check_shape=None) -> RigFile:
 def save_rigfile(path, rigfile: RigFile) -> Path:
     """Write ``rigfile`` as TOML to ``path``, atomically.
 
-    ``row_map_file`` names are rewritten relative to the new file's folder;
-    cameras holding a ``row_map`` array get it written next to the file as
-    ``<stem>.camera<i>.rows.npy`` (atomically too) and referenced from it.
+    ``row_map_file`` names are rewritten relative to the new file's folder; cameras holding a
+    ``row_map`` array, or a ``row_map_file`` outside that folder (a rig file reads only its own
+    folder and below), get it written next to the file as ``<stem>.camera<i>.rows.npy``
+    (atomically too) and referenced from it.
     Loading the result gives an equal :meth:`RigFile.rig`.
     """
     if not isinstance(rigfile, RigFile):
@@ -234,13 +240,17 @@ def save_rigfile(path, rigfile: RigFile) -> Path:
     arrays = {}
     for i, cam in enumerate(rigfile.cameras):
         table = {key: cam[key] for key in CAMERA_KEYS if key in cam and key not in ("config", "row_map_file")}
+        relative = None
         if cam.get("row_map_file") is not None:
             source = resolve_path(cam["row_map_file"], old_base).resolve()
             try:
-                table["row_map_file"] = Path(os.path.relpath(source, folder.resolve())).as_posix()
+                relative = Path(os.path.relpath(source, folder.resolve()))
             except ValueError:  # another drive (Windows)
-                table["row_map_file"] = str(source)
-        elif cam.get("row_map") is not None:
+                relative = None
+            if relative is not None and ".." not in relative.parts:
+                table["row_map_file"] = relative.as_posix()
+        if "row_map_file" not in table and cam.get("row_map") is not None:
+            # an array, or a file outside the new folder (a rig file reads only its folder and below): a copy beside it
             name = f"{path.stem}.camera{i}.rows.npy"
             arrays[name] = cam["row_map"]
             table["row_map_file"] = name

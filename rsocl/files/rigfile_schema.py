@@ -6,6 +6,7 @@ seconds, angles degrees, shapes and ROIs pixels.
 
 from __future__ import annotations
 
+import difflib
 import numbers
 import os
 from pathlib import Path
@@ -16,7 +17,8 @@ from rsocl.common import validation as check
 from rsocl.model.rig import Camera
 from rsocl.model.row_map import row_map_from_homography
 
-__all__ = ["RIG_KEYS", "CAMERA_KEYS", "check_rig_table", "check_camera", "resolve_path", "to_camera"]
+__all__ = ["RIG_KEYS", "CAMERA_KEYS", "MISPLACED_CONFIG_KEYS", "check_rig_table", "check_camera", "resolve_path",
+           "to_camera"]
 
 #: Keys of the ``[rig]`` table.
 RIG_KEYS = ("shape", "dt", "mask")
@@ -24,6 +26,16 @@ RIG_KEYS = ("shape", "dt", "mask")
 CAMERA_KEYS = ("backend", "name", "address", "angle", "row_map_file", "homography", "t_e", "t_r", "t_a", "t_d",
                "frames", "gain", "roi", "pixel_format", "config")
 _GEOMETRY = ("angle", "row_map_file", "homography", "row_map")
+#: Keys refused in a ``[camera.config]`` table, with the table they belong in: the model reads them
+#: from ``[rig]`` and ``[[camera]]`` only (a simulated camera would render with a config ``angle``
+#: while the capture records the camera's own).
+MISPLACED_CONFIG_KEYS = {
+    **{key: "[rig]" for key in RIG_KEYS},
+    **{key: "[[camera]]" for key in ("angle", "row_map_file", "row_map", "homography", "t_e", "t_r", "t_a", "t_d",
+                                     "frames", "gain", "roi")},
+}
+#: Keys the rig file fills in for a ``simulated`` camera from the rig itself; refused in its config.
+RIG_FILLED_KEYS = ("scene_frames", "index")
 
 
 def _where(i, key):
@@ -46,6 +58,9 @@ def check_rig_table(rig) -> dict:
     if not isinstance(rig, dict):
         raise ValueError(f"[rig] must be a table, got {rig!r}")
     unknown = sorted(set(rig) - set(RIG_KEYS))
+    for key in unknown:
+        if key in CAMERA_KEYS:
+            raise ValueError(f"rig.{key} belongs in each [[camera]] table (camera[i].{key} = ...), not in [rig]")
     if unknown:
         raise ValueError(f"[rig] has unknown key(s) {unknown}; known: {list(RIG_KEYS)}")
     if "shape" not in rig:
@@ -61,8 +76,15 @@ def check_camera(i, cam, shape, base_dir):
     if not isinstance(cam, dict):
         raise ValueError(f"camera[{i}] must be a table, got {cam!r}")
     unknown = sorted(set(cam) - set(CAMERA_KEYS) - {"row_map"})
+    for key in unknown:
+        if key in RIG_KEYS:
+            raise ValueError(f"{_where(i, key)} belongs in the [rig] table (rig.{key} = ...), not in [[camera]]; "
+                             "it is the same for every camera")
     if unknown:
-        raise ValueError(f"camera[{i}] has unknown key(s) {unknown}; known: {list(CAMERA_KEYS)}")
+        close = {key: difflib.get_close_matches(str(key), CAMERA_KEYS, n=1) for key in unknown}
+        hints = "".join(f" ({key!r}: did you mean {close[key][0]!r}?)" for key in unknown if close[key])
+        raise ValueError(f"camera[{i}] has unknown key(s) {unknown}{hints}; known: {list(CAMERA_KEYS)}; the "
+                         "backend's own settings go in its [camera.config] table")
     out = {}
     backend = cam.get("backend")
     if not isinstance(backend, str) or not backend:
@@ -77,6 +99,7 @@ def check_camera(i, cam, shape, base_dir):
     if not isinstance(config, dict):
         raise ValueError(f"{_where(i, 'config')} must be a table of backend settings, got {config!r}")
     config = dict(config)
+    _check_config_keys(i, config, backend)
     if cam.get("address") is not None:
         if "address" in config:
             raise ValueError(f"camera[{i}]: give 'address' or 'config.address', not both")
@@ -106,7 +129,7 @@ def check_camera(i, cam, shape, base_dir):
         if not isinstance(name, (str, os.PathLike)):
             raise ValueError(f"{_where(i, 'row_map_file')} must be a path string, got {name!r}")
         out["row_map_file"] = os.fspath(name)
-        out["row_map"] = _load_row_map(i, resolve_path(name, base_dir), shape)
+        out["row_map"] = _load_row_map(i, _inside(i, name, base_dir), shape)
     elif "row_map" in geometry:  # built in Python, written as a .npy file by save_rigfile
         out["row_map"] = _check_row_map(i, "row_map", cam["row_map"], shape)
 
@@ -137,10 +160,40 @@ def check_camera(i, cam, shape, base_dir):
     return out
 
 
+def _check_config_keys(i, config, backend):
+    """Refuse model keys put in ``[camera.config]``, naming the table each belongs in."""
+    for key in config:
+        table = MISPLACED_CONFIG_KEYS.get(key)
+        if table is not None:
+            where = f"rig.{key}" if table == "[rig]" else _where(i, key)
+            raise ValueError(f"{_where(i, 'config')}.{key} belongs in the {table} table ({where} = ...), not in "
+                             "[camera.config]; move it there")
+        if backend == "simulated" and key in RIG_FILLED_KEYS:
+            raise ValueError(f"{_where(i, 'config')}.{key} is set from the rig (its sub-frames T and the camera's "
+                             "order) for every simulated camera; leave it out")
+
+
 def resolve_path(name, base_dir) -> Path:
     """``name`` relative to ``base_dir`` (the rig file's folder), unless absolute or ``base_dir`` is None."""
     path = Path(os.fspath(name))
     return path if path.is_absolute() or base_dir is None else Path(base_dir) / path
+
+
+def _inside(i, name, base_dir) -> Path:
+    """``row_map_file`` ``name`` resolved inside ``base_dir`` (the rig file's folder, or below it);
+    an absolute path or one that leaves the folder (``..``, a link out) is refused naming the key."""
+    path = Path(os.fspath(name))
+    if base_dir is None:
+        return path
+    if path.is_absolute():
+        raise ValueError(f"{_where(i, 'row_map_file')} must be a path relative to the rig file's folder, "
+                         f"got the absolute path {str(name)!r}")
+    base = Path(base_dir).resolve()
+    full = (base / path).resolve()
+    if full != base and base not in full.parents:
+        raise ValueError(f"{_where(i, 'row_map_file')} must name a file in the rig file's folder or below it, "
+                         f"got {str(name)!r}")
+    return Path(base_dir) / path
 
 
 def _check_row_map(i, key, array, shape):

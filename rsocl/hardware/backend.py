@@ -74,6 +74,19 @@ class CameraBackend:
         self._trigger_mode = "software"
 
     # -------------------------------------------------------------- lifecycle
+    @classmethod
+    def check_dependencies(cls) -> None:
+        """Import what opening a camera of this backend needs (a library, a driver binding).
+
+        ``rsocl plugins`` calls it to tell a backend that can open cameras from one that cannot.
+        The base class needs nothing.
+
+        Raises
+        ------
+        CameraError
+            Saying what is missing and how to install it.
+        """
+
     def open(self):
         """Connect to the device. Idempotent."""
         if not self._open:

@@ -1,6 +1,6 @@
 """Layer 2, the forward model: the rig and its row timing (:mod:`~rsocl.model.rig`), the row-timed
 shutter operator on the device (:mod:`~rsocl.model.operator`), its dense NumPy reference, test
-scenes and simulated snapshots. Conventions: the project's ``MODEL.md``.
+scenes and simulated snapshots. Conventions: the project's ``docs/model.md``.
 
 Imports :mod:`rsocl.common` and :mod:`rsocl.device`.
 """

@@ -1,6 +1,6 @@
 """The scale of the data term: how strongly the snapshots pin the datacube down.
 
-The diagonal of ``H Hᵀ`` at a snapshot pixel, ``psi = gain² · Σ_s w_s²`` (MODEL.md's shutter
+The diagonal of ``H Hᵀ`` at a snapshot pixel, ``psi = gain² · Σ_s w_s²`` (docs/model.md's shutter
 weights ``w_s`` over the sub-frames ``s`` of its window), is the curvature of the data term
 ``½‖g - H x‖²`` along that pixel's own window. Multiplying every gain by ``c`` multiplies it by
 ``c²``, and so does shortening an exposure below one sub-frame by ``c`` (one weight of ``t_e/dt``);
@@ -17,7 +17,7 @@ __all__ = ["binary_span", "psi_values", "psi_mean", "REFERENCE_PSI", "default_sc
 
 def binary_span(rig):
     """First and last sub-frame a ``binary`` window holds (``w = 1`` for the ``s`` in ``0 .. T-1``
-    with ``start <= s <= end``, MODEL.md), ``(K, m, n)`` float64 each; ``last < first`` where the
+    with ``start <= s <= end``, docs/model.md), ``(K, m, n)`` float64 each; ``last < first`` where the
     window holds no sub-frame start (``t_e < dt``). Unlike :meth:`Rig.sampled_window`, an empty
     window stays empty (no clipping of ``first`` to a valid index)."""
     win = rig.windows

@@ -41,6 +41,21 @@ def interp3d(g, rig, valid=None) -> np.ndarray:
     Returns
     -------
     ndarray of float64, shape (T, m, n)
+
+    Raises
+    ------
+    ValueError
+        If ``rig`` is not a Rig, ``g`` is not ``(K, m, n)`` and finite, or ``valid`` has another
+        shape or keeps no sample.
+
+    Examples
+    --------
+    >>> import rsocl
+    >>> rig = rsocl.Rig.paper_array(4, shape=(16, 16), t_e=180e-6, t_r=35e-6)
+    >>> truth = rsocl.builtin_scene(rig.shape, rig.T)
+    >>> cube = rsocl.interp3d(rsocl.simulate(truth, rig), rig)
+    >>> cube.shape == truth.shape
+    True
     """
     from rsocl.model.rig import Rig
 
@@ -66,7 +81,7 @@ def _sampled(rig):
     centre of the sub-frames it averages (in sub-frames, a sub-frame's centre at ``s + 1/2``).
 
     ``exact`` mask: the window's length ``t_e/dt`` and its middle. ``binary`` mask (``w = 1`` for
-    the sub-frames ``s`` with ``start <= s <= end``, MODEL.md): the count of those ``s`` within
+    the sub-frames ``s`` with ``start <= s <= end``, docs/model.md): the count of those ``s`` within
     ``0 .. T-1`` and the middle of the first and the last one's centres.
     """
     win = rig.windows

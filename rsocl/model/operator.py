@@ -1,6 +1,6 @@
 """The matrix-free row-timed shutter operator ``H`` on an OpenCL device.
 
-``H`` maps a datacube ``f[T, m, n]`` to snapshots ``g[K, m, n]`` (MODEL.md,
+``H`` maps a datacube ``f[T, m, n]`` to snapshots ``g[K, m, n]`` (docs/model.md,
 Eqs. 5-10). Nothing of size ``K×T×m×n`` is stored: each pixel's weights are
 computed on the fly from its exposure start (two ``(K, m, n)`` maps) and only
 its exposure window is visited.
@@ -53,6 +53,26 @@ class RollingShutterOperator:
     ``pyopencl.array.Array`` (and return device arrays, with no host copy). A leading batch
     axis (``(B, T, m, n)`` -> ``(B, K, m, n)`` and back) runs ``B`` sets in one launch.
     Their cost is about ``K*m*n*(t_e/dt + 1)`` weight evaluations.
+
+    Raises
+    ------
+    ValueError
+        If ``rig`` is not a :class:`~rsocl.model.rig.Rig`, ``dtype`` is unknown or not supported by
+        the device, ``subframes`` is not a non-empty slice with step 1, or the datacube does not fit
+        the device.
+
+    Examples
+    --------
+    >>> import numpy as np, rsocl
+    >>> rig = rsocl.Rig.paper_array(4, shape=(16, 16), t_e=180e-6, t_r=35e-6)
+    >>> op = rsocl.RollingShutterOperator(rig)
+    >>> op.domain_shape, op.range_shape
+    ((21, 16, 16), (4, 16, 16))
+    >>> g = op.forward(np.ones(op.domain_shape))           # a constant scene
+    >>> bool(np.allclose(g, 180e-6 / 35e-6))                # every snapshot pixel sees t_e/dt sub-frames
+    True
+    >>> rsocl.testing.dottest(op)                           # Hᵀ is the transpose of H
+    True
     """
 
     def __init__(self, rig: Rig, device=None, dtype="float32", subframes=None):
@@ -199,7 +219,7 @@ class RollingShutterOperator:
 
     @property
     def psi(self) -> np.ndarray:
-        """Diagonal of ``H Hᵀ``, ``(K, m, n)`` NumPy array (MODEL.md Eq. 16)."""
+        """Diagonal of ``H Hᵀ``, ``(K, m, n)`` NumPy array (docs/model.md Eq. 16)."""
         return self.psi_device().get()
 
     def gram(self) -> np.ndarray:

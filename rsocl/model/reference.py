@@ -1,7 +1,7 @@
 """NumPy reference of the forward model, its adjoint, TV and ADMM: the test oracle.
 
 Written for clarity, not speed: the shutter weights are built densely as a
-``(K, T, m, n)`` array straight from the definitions of ``MODEL.md``. The
+``(K, T, m, n)`` array straight from the definitions of ``docs/model.md``. The
 OpenCL code must agree with these functions to rounding.
 """
 
@@ -55,7 +55,7 @@ def gram(rig: Rig) -> np.ndarray:
 
 
 def project(rig: Rig, v, g, eta: float, projection: str = "exact") -> np.ndarray:
-    """The ADMM data step ``f = v + Hᵀ (eta I + H Hᵀ)⁻¹ (g - H v)`` (MODEL.md Eq. 12).
+    """The ADMM data step ``f = v + Hᵀ (eta I + H Hᵀ)⁻¹ (g - H v)`` (docs/model.md Eq. 12).
 
     ``projection="paper"`` uses the diagonal ``psi`` instead (Eq. 15). Singular
     blocks (``eta = 0``) use the pseudo-inverse; nothing is divided by zero.
@@ -105,7 +105,7 @@ def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float =
 
 def admm(rig: Rig, g, *, iterations: int, lam: float, eta: float, tv_iterations: int,
          temporal_weight: float = 1.0, projection: str = "exact", x0=None, step: float = 1.0) -> np.ndarray:
-    """The ADMM-TV of MODEL.md with the reference pieces above; returns ``theta``.
+    """The ADMM-TV of docs/model.md with the reference pieces above; returns ``theta``.
 
     ``eta = 0`` is GAP: the dual ``b`` stays zero and the TV weight is ``lam``. ``step``: the TV
     step of :func:`tv_chambolle`.

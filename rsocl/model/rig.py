@@ -1,6 +1,6 @@
-"""Rolling-shutter cameras and the array (rig) they form.
+"""The array (rig) of rolling-shutter cameras (:mod:`rsocl.model.camera`) sharing one reference ROI.
 
-Conventions follow ``MODEL.md``: sub-frame ``s`` covers ``[s*dt, (s+1)*dt)``;
+Conventions follow ``docs/model.md``: sub-frame ``s`` covers ``[s*dt, (s+1)*dt)``;
 the exposure of reference pixel ``(y, x)`` in frame ``k`` of a camera starts at
 ``t_a + r(y, x)*t_r + k*t_d`` seconds and lasts ``t_e`` seconds, where
 ``r(y, x)`` is the camera row (in rows, first row read is 0) that sees it.
@@ -19,6 +19,7 @@ from functools import cached_property
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.model.camera import SNAP, Camera, _snap
 
 __all__ = ["Camera", "Rig", "ExposureWindows", "PAPER_ANGLES", "MAX_T"]
 
@@ -32,110 +33,6 @@ PAPER_ANGLES = (0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0)
 #: in the wrong unit (an exposure, trigger offset or frame period in µs given as seconds), and is
 #: refused naming it before anything of size ``T`` is allocated.
 MAX_T = 2**24
-
-#: Relative tolerance under which a time, in units of ``dt``, is snapped to the
-#: nearest integer, so that e.g. ``t_e = 3*t_r`` gives window edges exactly on
-#: sub-frame boundaries despite binary floating point.
-SNAP = 1e-9
-
-
-def _snap(values):
-    values = np.asarray(values, dtype=np.float64)
-    nearest = np.rint(values)
-    return np.where(np.abs(values - nearest) <= SNAP * np.maximum(1.0, np.abs(values)), nearest, values)
-
-
-class Camera:
-    """One rolling-shutter camera of the array.
-
-    Parameters
-    ----------
-    angle : float
-        Rotation relative to the reference camera, degrees. ``0`` reads rows
-        top to bottom, ``90`` left to right, ``180`` bottom to top, ``270``
-        right to left. Ignored when ``row_map`` is given.
-    t_e : float
-        Exposure time of every row, seconds (> 0).
-    t_r : float
-        Readout time between consecutive rows, seconds (> 0).
-    t_a : float
-        Trigger offset of this camera, seconds (>= 0).
-    t_d : float or None
-        Frame period for multi-frame captures, seconds. Required when
-        ``frames > 1``.
-    gain : float
-        Photometric gain (> 0), dimensionless.
-    frames : int
-        Number of consecutive frames captured per trigger (>= 1).
-    row_map : array_like or None
-        Optional ``(m, n)`` map of the camera row, in rows, that reads each
-        reference pixel (from calibration, or a coded exposure design). Values
-        must be finite and >= 0; it replaces ``angle``.
-    """
-
-    def __init__(self, angle=0.0, t_e=None, t_r=None, t_a=0.0, t_d=None, gain=1.0, frames=1, row_map=None):
-        if t_e is None:
-            raise ValueError("t_e (exposure time, seconds) is required")
-        if t_r is None:
-            raise ValueError("t_r (row readout time, seconds) is required")
-        self.angle = check.finite("angle", angle)
-        self.t_e = check.positive("t_e", t_e, "seconds")
-        self.t_r = check.positive("t_r", t_r, "seconds")
-        self.t_a = check.non_negative("t_a", t_a, "seconds")
-        self.gain = check.positive("gain", gain)
-        self.frames = check.positive_int("frames", frames)
-        if t_d is not None:
-            t_d = check.positive("t_d", t_d, "seconds")
-        elif self.frames > 1:
-            raise ValueError(f"t_d (frame period, seconds) is required when frames > 1 (frames={self.frames})")
-        self.t_d = t_d
-        if row_map is not None:
-            row_map = check.finite_array("row_map", row_map).astype(np.float64)
-            if row_map.ndim != 2 or row_map.size == 0:
-                raise ValueError(f"row_map must be a non-empty 2-D array, got shape {row_map.shape}")
-            if row_map.min() < 0:
-                raise ValueError(f"row_map values must be >= 0 rows, got minimum {row_map.min()!r}")
-        self.row_map = row_map
-
-    def rows(self, shape) -> np.ndarray:
-        """Camera row ``r(y, x)`` (rows, float64, first row read is 0) for a ROI of ``shape``."""
-        m, n = shape
-        if self.row_map is not None:
-            if self.row_map.shape != (m, n):
-                raise ValueError(f"row_map has shape {self.row_map.shape}, the rig's shape is {(m, n)}")
-            return self.row_map.copy()
-        u = np.arange(m, dtype=np.float64)[:, None] - (m - 1) / 2.0
-        v = np.arange(n, dtype=np.float64)[None, :] - (n - 1) / 2.0
-        a = math.radians(self.angle)
-        r = u * math.cos(a) + v * math.sin(a)
-        r = r - r.min()
-        return _snap(r)
-
-    def to_dict(self) -> dict:
-        """Plain-data description (seconds, degrees); ``row_map`` stays an array."""
-        return {
-            "angle": self.angle, "t_e": self.t_e, "t_r": self.t_r, "t_a": self.t_a,
-            "t_d": self.t_d, "gain": self.gain, "frames": self.frames, "row_map": self.row_map,
-        }
-
-    @classmethod
-    def from_dict(cls, data: dict) -> "Camera":
-        return cls(**data)
-
-    def __eq__(self, other):
-        if not isinstance(other, Camera):
-            return NotImplemented
-        a, b = self.to_dict(), other.to_dict()
-        ra, rb = a.pop("row_map"), b.pop("row_map")
-        if (ra is None) != (rb is None):
-            return False
-        return a == b and (ra is None or np.array_equal(ra, rb))
-
-    def __repr__(self):
-        where = "row_map" if self.row_map is not None else f"angle={self.angle:g}"
-        extra = f", frames={self.frames}, t_d={self.t_d:g}" if self.frames > 1 else ""
-        return (f"Camera({where}, t_e={self.t_e:g}, t_r={self.t_r:g}, t_a={self.t_a:g}, "
-                f"gain={self.gain:g}{extra})")
 
 
 @dataclass(frozen=True)
@@ -179,6 +76,23 @@ class Rig:
         not be smaller than any camera's ``t_r``.
     mask : {"exact", "binary"}
         Shutter weights: exact overlap fraction, or the paper's Eq. 4.
+
+    Raises
+    ------
+    ValueError
+        If ``cameras`` is not a non-empty list of :class:`Camera`, ``shape`` or ``dt`` is out of
+        range, a multi-frame camera's ``t_d`` is too short, or ``T`` would exceed :data:`MAX_T`.
+
+    Examples
+    --------
+    The paper's simulation (``docs/model.md``, section *Paper figures to reproduce*):
+
+    >>> from rsocl import Rig
+    >>> rig = Rig.paper_array(4, shape=(50, 50), t_e=180e-6, t_r=35e-6)
+    >>> rig.T, rig.N_s, rig.T_se, rig.compression_ratio
+    (55, 6, 55, 13.75)
+    >>> round(rig.effective_fps(67))                        # Hz, cameras at 67 fps
+    3685
     """
 
     def __init__(self, cameras, shape, dt=None, mask="exact"):
@@ -238,9 +152,10 @@ class Rig:
     def paper_array(cls, n_cameras=4, shape=(50, 50), t_e=0.18e-3, t_r=35e-6, dt=None, mask="exact") -> "Rig":
         """The paper's array: ``n_cameras`` (1..8) at angles 0, 90, 180, 270, 45, 135, 225, 315.
 
-        ``t_e``, ``t_r`` and ``dt`` in seconds (``dt`` and ``mask`` as in :class:`Rig`). Cameras with
-        other settings (offsets ``t_a``, gains, several frames) are built as :class:`Camera` and
-        given to :class:`Rig`.
+        ``shape`` in pixels, ``t_e``, ``t_r`` and ``dt`` in seconds (``dt`` and ``mask`` as in
+        :class:`Rig`); raises ``ValueError`` naming a value out of range. Cameras with other
+        settings (offsets ``t_a``, gains, several frames) are built as :class:`Camera` and given to
+        :class:`Rig`. Example: the class's.
         """
         n_cameras = check.positive_int("n_cameras", n_cameras, maximum=len(PAPER_ANGLES))
         cams = [Camera(angle, t_e=t_e, t_r=t_r) for angle in PAPER_ANGLES[:n_cameras]]
@@ -339,7 +254,7 @@ class Rig:
         Sub-frames outside it carry no information; the solver leaves them out and gives them the
         nearest sub-frame it solved (:mod:`rsocl.solver.held`). With ``roi = (y, x, height, width)``
         (pixels, inside the grid): the sampled range of the rig cut to that block
-        (:func:`rsocl.solver.plan.crop_rig`, whose cameras keep every pixel's exposure times), without
+        (:meth:`crop`, whose cameras keep every pixel's exposure times), without
         building it.
         """
         first, last, end = self._pixel_bounds
@@ -417,6 +332,29 @@ class Rig:
     def datacube_bytes(self, itemsize: int = 4) -> int:
         """Bytes of one ``(T, m, n)`` datacube at ``itemsize`` bytes per value."""
         return self.T * self.shape[0] * self.shape[1] * itemsize
+
+    # ------------------------------------------------------------------ rigs made from this one
+    def crop(self, roi, dt=None) -> "Rig":
+        """This rig restricted to ``roi = (y, x, height, width)`` of its reference grid, pixels (and
+        sub-frames of ``dt`` seconds; None keeps this rig's).
+
+        Each camera's row map is cut from the whole one (not re-zeroed), so the exposure start
+        times are those of the whole sensor readout.
+        """
+        y, x, h, w = (int(v) for v in roi)
+        m, n = self.shape
+        if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
+            raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
+        cams = [Camera(**{**cam.to_dict(), "row_map": self.row_map(c, (y, x, h, w))})
+                for c, cam in enumerate(self.cameras)]
+        return Rig(cams, (h, w), dt=self.dt if dt is None else dt, mask=self.mask)
+
+    def frames_window(self, k0: int, k1: int) -> "Rig":
+        """The rig of frames ``k0..k1-1`` of every camera, on this rig's sub-frame grid (same ``dt``):
+        each trigger offset moves to ``t_a + k0*t_d``, so every exposure keeps its absolute start."""
+        cams = [Camera.from_dict({**cam.to_dict(), "t_a": cam.t_a + k0 * (cam.t_d or 0.0), "frames": k1 - k0})
+                for cam in self.cameras]
+        return Rig(cams, self.shape, dt=self.dt, mask=self.mask)
 
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict:

@@ -1,6 +1,6 @@
 """The row-time map of a camera registered by a homography (reference pixel -> sensor pixel).
 
-``MODEL.md``: a calibrated camera's row map ``r(y, x)`` is the sensor row of the mapped
+``docs/model.md``: a calibrated camera's row map ``r(y, x)`` is the sensor row of the mapped
 reference pixel centre, shifted so that the first row read is 0. Rig files give cameras by
 ``homography`` and the calibration measures them; both get their row maps here.
 """

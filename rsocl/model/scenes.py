@@ -2,7 +2,7 @@
 
 - :func:`builtin_scene`: a synthetic high-speed scene that needs no data file.
 - :func:`load_video`: read a video file as it is stored.
-- :func:`benchmark_protocol`: turn any video into a datacube (MODEL.md's protocol).
+- :func:`benchmark_protocol`: turn any video into a datacube (docs/model.md's protocol).
 - :func:`load_scene`: either of the two from one specification string.
 """
 
@@ -33,11 +33,8 @@ def _shape(shape) -> tuple:
 
 
 def _coverage(signed_distance: np.ndarray) -> np.ndarray:
-    """Fraction of a pixel inside a shape, from the signed distance (pixels, < 0 inside).
-
-    A linear ramp one pixel wide centred on the edge: an antialiased edge that
-    is exact for a straight edge aligned with the pixel grid.
-    """
+    """Fraction of a pixel inside a shape, from the signed distance (pixels, < 0 inside): a linear
+    ramp one pixel wide centred on the edge, exact for a straight edge aligned with the pixel grid."""
     return np.clip(0.5 - signed_distance, 0.0, 1.0)
 
 
@@ -63,15 +60,13 @@ def _background(shape, rng) -> np.ndarray:
 def builtin_scene(shape=(64, 64), T=55, *, dtype=np.float32, seed=0) -> np.ndarray:
     """A synthetic high-speed scene: a bright disc crossing the frame and a rotating bar.
 
-    The background is scikit-image's ``camera`` photograph (shipped inside the
-    scikit-image wheel, no download), dimmed to [0.05, 0.55]. Over the ``T``
-    sub-frames a bright disc (value 1.0, radius 12% of the smaller side)
-    crosses the frame from left to right on a slightly tilted path, about
-    ``(n + radius) / T`` pixels per sub-frame, and a bar (value 0.8, length
-    44% of the smaller side) turns half a revolution about a fixed centre.
-    Edges are antialiased (coverage from the exact signed distance, one pixel
-    wide ramp). Sub-frame ``s`` is rendered at time ``(s + 0.5) / T`` of the
-    sequence.
+    The background is scikit-image's ``camera`` photograph (shipped inside the scikit-image wheel,
+    no download), dimmed to [0.05, 0.55]. Over the ``T`` sub-frames a bright disc (value 1.0, radius
+    12% of the smaller side) crosses the frame from left to right on a slightly tilted path, about
+    ``(n + radius) / T`` pixels per sub-frame, and a bar (value 0.8, length 44% of the smaller side)
+    turns half a revolution about a fixed centre. Edges are antialiased (coverage from the exact
+    signed distance, one pixel wide ramp). Sub-frame ``s`` is rendered at time ``(s + 0.5) / T`` of
+    the sequence.
 
     Parameters
     ----------
@@ -94,6 +89,13 @@ def builtin_scene(shape=(64, 64), T=55, *, dtype=np.float32, seed=0) -> np.ndarr
     ------
     ValueError
         If ``shape``, ``T``, ``dtype`` or ``seed`` are out of range.
+
+    Examples
+    --------
+    >>> import rsocl
+    >>> truth = rsocl.builtin_scene((32, 48), 40)
+    >>> truth.shape, truth.dtype.name, float(truth.max())
+    ((40, 32, 48), 'float32', 1.0)
     """
     m, n = _shape(shape)
     T = check.positive_int("T (sub-frames)", T)
@@ -151,11 +153,8 @@ def builtin_scene(shape=(64, 64), T=55, *, dtype=np.float32, seed=0) -> np.ndarr
 
 # ---------------------------------------------------------------------- files
 def _to_frames(array: np.ndarray, source: str, *, rgb_last: bool) -> np.ndarray:
-    """Check a ``[frames, h, w]`` stack; ``[frames, h, w, 3|4]`` (RGB/RGBA) becomes gray.
-
-    Gray keeps the input dtype: integer RGB is converted with
-    :func:`skimage.color.rgb2gray` and rounded back to the same integer scale.
-    """
+    """Check a ``[frames, h, w]`` stack; ``[frames, h, w, 3|4]`` (RGB/RGBA) becomes gray, in the input
+    dtype (integer RGB goes through :func:`skimage.color.rgb2gray`, rounded back to its scale)."""
     if array.dtype.kind not in "uif":
         raise ValueError(f"{source}: video must hold real numbers (integer or float), got dtype {array.dtype}")
     if rgb_last and array.ndim == 4 and array.shape[-1] in (3, 4):
@@ -223,10 +222,9 @@ def load_video(path, *, key="video") -> np.ndarray:
     - ``.tif`` / ``.tiff``: every page of a multi-page TIFF, in order;
     - ``.gif``: every frame of an animated GIF.
 
-    RGB or RGBA frames (a trailing axis of 3 or 4; for TIFF, the samples axis)
-    are converted to gray with :func:`skimage.color.rgb2gray`, keeping the
-    dtype (integers are rounded back to their scale; frames whose three
-    channels are equal are taken as they are).
+    RGB or RGBA frames (a trailing axis of 3 or 4; for TIFF, the samples axis) are converted to gray
+    with :func:`skimage.color.rgb2gray`, keeping the dtype (integers are rounded back to their
+    scale; frames whose three channels are equal are taken as they are).
 
     Parameters
     ----------
@@ -287,11 +285,8 @@ def load_video(path, *, key="video") -> np.ndarray:
 
 # ---------------------------------------------------------------------- protocol
 def _unit_scaler(video: np.ndarray):
-    """A function mapping frame index -> that frame scaled to [0, 1], float64.
-
-    Integers (and booleans) are divided by their dtype maximum; floats are
-    min-max scaled with the whole video's minimum and maximum (constant -> 0).
-    """
+    """A function mapping frame index -> that frame scaled to [0, 1], float64: integers (and booleans)
+    divided by their dtype maximum, floats min-max scaled over the whole video (constant -> 0)."""
     kind = video.dtype.kind
     if kind == "b":
         return lambda i: video[i].astype(np.float64)
@@ -305,16 +300,14 @@ def _unit_scaler(video: np.ndarray):
 
 
 def benchmark_protocol(video, shape, T) -> np.ndarray:
-    """Turn a video into a benchmark datacube (the protocol of MODEL.md).
+    """Turn a video into a benchmark datacube (the protocol of docs/model.md).
 
-    1. Scale to [0, 1]: integer dtypes are divided by their dtype maximum
-       (uint8 by 255, uint16 by 65535, ...); float input is min-max scaled
-       over the whole video (a constant video becomes zeros).
-    2. Resize every frame to ``shape`` with :func:`skimage.transform.resize`
-       (bilinear, ``anti_aliasing=True``).
-    3. Resample linearly in time to ``T`` sub-frames: sub-frame ``s`` sits at
-       source frame position ``s*(F-1)/(T-1)`` (``T = 1``: the first frame),
-       so the first and last sub-frames are the resized first and last frames.
+    1. Scale to [0, 1]: integer dtypes are divided by their dtype maximum (uint8 by 255, uint16 by
+       65535, ...); float input is min-max scaled over the whole video (a constant one becomes zeros).
+    2. Resize every frame to ``shape`` with :func:`skimage.transform.resize` (bilinear, anti-aliased).
+    3. Resample linearly in time to ``T`` sub-frames: sub-frame ``s`` sits at source frame position
+       ``s*(F-1)/(T-1)`` (``T = 1``: the first frame), so the first and last sub-frames are the
+       resized first and last frames.
     4. Clip to [0, 1].
 
     Only the source frames that the ``T`` positions touch are resized.
@@ -338,6 +331,14 @@ def benchmark_protocol(video, shape, T) -> np.ndarray:
     ValueError
         If ``video`` is not a finite real 3-D array with at least one frame,
         or ``shape`` or ``T`` are out of range.
+
+    Examples
+    --------
+    >>> import numpy as np, rsocl
+    >>> video = np.random.default_rng(0).integers(0, 256, (10, 120, 160), dtype=np.uint8)  # 8-bit frames
+    >>> cube = rsocl.benchmark_protocol(video, (32, 32), 55)
+    >>> cube.shape, cube.dtype.name, bool(0 <= cube.min() and cube.max() <= 1)
+    ((55, 32, 32), 'float32', True)
     """
     from skimage.transform import resize
 

@@ -1,6 +1,6 @@
 """Simulated snapshots: the forward model plus an optional sensor model.
 
-Intensities follow MODEL.md: a scene in [0, 1] per sub-frame gives snapshots in
+Intensities follow docs/model.md: a scene in [0, 1] per sub-frame gives snapshots in
 ``[0, gain * t_e/dt]``. The sensor's full scale is that maximum (the largest over
 channels), so ``bit_depth`` quantises ``[0, full_scale]`` into ``2**bit_depth``
 levels and values above it saturate.
@@ -52,6 +52,10 @@ def simulate(truth, rig: Rig, *, noise="none", sigma=0.0, photons=None, bit_dept
 
     Parameters
     ----------
+    truth : array_like, shape (T, m, n)
+        The scene, linear intensities (in [0, 1] under the benchmark protocol), ``T = rig.T``.
+    rig : Rig
+        The camera array.
     noise : {"none", "gaussian", "poisson"}
         ``gaussian`` adds ``N(0, sigma**2)`` in snapshot units (``sigma`` as a
         fraction of the full scale); ``poisson`` draws shot noise with ``photons``
@@ -64,6 +68,31 @@ def simulate(truth, rig: Rig, *, noise="none", sigma=0.0, photons=None, bit_dept
         Quantise to ``2**bit_depth`` levels over ``[0, full_scale]`` (1..32), with saturation.
     seed : int or None
         Seed of the noise generator, ``>= 0`` (None: fresh entropy).
+    device : str, Device or None
+        OpenCL device of the forward model (see :func:`rsocl.get_device`).
+    dtype : {"float64", "float32"}
+        Arithmetic of the forward model on the device.
+
+    Returns
+    -------
+    ndarray of float64, shape (K, m, n)
+        Snapshots in the units of ``truth`` times the exposure in sub-frames (``gain * t_e/dt``
+        for a white scene).
+
+    Raises
+    ------
+    ValueError
+        If ``truth`` is not ``(T, m, n)`` and finite, a noise parameter is out of range (the
+        message names it), or ``noise="poisson"`` lacks ``photons`` or sees a negative scene.
+
+    Examples
+    --------
+    >>> import rsocl
+    >>> rig = rsocl.Rig.paper_array(4, shape=(16, 16), t_e=180e-6, t_r=35e-6)
+    >>> truth = rsocl.builtin_scene(rig.shape, rig.T)
+    >>> g = rsocl.simulate(truth, rig, noise="poisson", photons=1e4, bit_depth=12, seed=1)
+    >>> g.shape, bool(0 <= g.min() and g.max() <= rsocl.model.simulate.full_scale(rig))
+    ((4, 16, 16), True)
     """
     truth = check.finite_array("truth", truth)
     expected = (rig.T,) + rig.shape

@@ -16,7 +16,9 @@ from dataclasses import dataclass
 from rsocl.device.context import get_device
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import check_halo, check_tile, tile_grid, tile_rig
-from rsocl.solver.plan import estimate, memory_need
+from rsocl.solver.memory import memory_need
+from rsocl.solver.pipeline import make_regularizer
+from rsocl.solver.plan import estimate
 
 __all__ = ["CANDIDATES", "Tiling", "tiling_cost", "propose_tiling", "format_tiling"]
 
@@ -65,7 +67,8 @@ def tiling_cost(rig: Rig, tile, halo, *, regularizer="tv", dtype="float32", proj
     """``(largest task's total bytes, its largest buffer, modelled voxels, the largest tile, its voxels)``.
 
     Each tile's sampled sub-frames come from the whole rig's windows (:meth:`Rig.sampled_range` of
-    the tile's ROI); only the largest tile's rig is built, for its memory.
+    the tile's ROI); only the largest tile's rig is built, for its memory. ``regularizer``: a
+    registry name (default options) or the configured instance (:mod:`rsocl.solver.memory`).
     """
     worst, most, voxels = None, 0, 0
     for t in tile_grid(rig.shape, tile, halo):
@@ -75,7 +78,8 @@ def tiling_cost(rig: Rig, tile, halo, *, regularizer="tv", dtype="float32", proj
         voxels += v
         if v > most:
             worst, most = t, v
-    largest, total = memory_need(tile_rig(rig, worst), regularizer=regularizer, dtype=dtype, projection=projection)
+    largest, total = memory_need(tile_rig(rig, worst), make_regularizer(regularizer), dtype=dtype,
+                                 projection=projection)
     return total, largest, voxels, worst, most
 
 

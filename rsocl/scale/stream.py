@@ -1,7 +1,7 @@
 """A multi-frame capture (cameras with ``frames`` > 1, period ``t_d``) as a stream of overlapping time windows.
 
 Window ``w`` holds frames ``k0 .. k0 + window - 1`` of every camera (``k0 = w * (window - overlap)``):
-its rig is the capture's rig with each camera's trigger offset moved to ``t_a + k0*t_d`` and
+its rig (:meth:`rsocl.model.rig.Rig.frames_window`) is the capture's rig with each camera's trigger offset moved to ``t_a + k0*t_d`` and
 ``window`` frames, so every exposure keeps its absolute start ``t_a + r*t_r + k*t_d`` and the
 window's sub-frames are those of the whole capture (time 0 is the same). Each window is an
 ordinary (tiled) reconstruction that models only the sub-frames its exposures touch
@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.model.rig import Camera, Rig
+from rsocl.model.rig import Rig
 
-__all__ = ["default_overlap", "frame_windows", "window_rig", "window_channels", "reconstruct_stream", "StreamResult"]
+__all__ = ["default_overlap", "frame_windows", "window_channels", "reconstruct_stream", "StreamResult"]
 
 
 def _frames(rig: Rig) -> int:
@@ -57,16 +57,6 @@ def frame_windows(frames: int, window=None, overlap=None) -> list:
     if starts[-1] + window < frames:
         starts.append(frames - window)
     return [(k0, k0 + window) for k0 in starts]
-
-
-def window_rig(rig: Rig, k0: int, k1: int) -> Rig:
-    """The rig of frames ``k0..k1-1`` of every camera, on the capture's sub-frame grid (same ``dt``)."""
-    cams = []
-    for cam in rig.cameras:
-        data = cam.to_dict()
-        data.update(t_a=cam.t_a + k0 * (cam.t_d or 0.0), frames=k1 - k0)
-        cams.append(Camera.from_dict(data))
-    return Rig(cams, rig.shape, dt=rig.dt, mask=rig.mask)
 
 
 def window_channels(rig: Rig, k0: int, k1: int) -> list:
@@ -125,7 +115,7 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
     if g.shape != (rig.n_channels,) + rig.shape:
         raise ValueError(f"g must have shape (K, m, n) = {(rig.n_channels,) + rig.shape}, got {g.shape}")
     windows = frame_windows(_frames(rig), window, overlap)
-    rigs = [window_rig(rig, k0, k1) for k0, k1 in windows]
+    rigs = [rig.frames_window(k0, k1) for k0, k1 in windows]
     spans = [r.sampled_range() for r in rigs]
     T = rig.T
     s = np.arange(T)

@@ -1,10 +1,11 @@
 """``reconstruct_tiled``: a reconstruction split into tiles (and sets), run as Dask tasks.
 
 Every input is checked before anything is computed: the snapshots against the rig, the solver
-settings (``lam``/``eta`` settled once, from the regularizer's recommendation, for every tile),
+settings (:func:`~rsocl.solver.request.make_request`, as for :func:`rsocl.reconstruct`: ``lam``/``eta``
+settled once, from the regularizer's recommendation, for every tile),
 the tile and halo, the output path, and the scheduler (connected to first). With ``tune`` (the
 default, as for :func:`rsocl.reconstruct`) what the caller left unset is then chosen once from
-the centre tile of the first set (:mod:`rsocl.scale.tuned`) and every task runs with that choice.
+the centre tile of the first set (:mod:`rsocl.scale.tuning_tile`) and every task runs with that choice.
 """
 
 from __future__ import annotations
@@ -17,18 +18,14 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.device.context import Device
-from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
 from rsocl.scale.runner import RETRIES, Engine, non_negative_int
 from rsocl.scale.tiles import check_halo, place, tile_grid, tile_rig
-from rsocl.scale.tuned import tune_tiles, tuned_options
+from rsocl.scale.tuning_tile import tune_tiles
 from rsocl.scale.work import Job, RigPayload, TileSettings
-from rsocl.solver.plan import device_limit, memory_need
-from rsocl.solver.autotune import check_blend, check_tune, starts_from_interpolation
-from rsocl.solver.problem import check_settings
-from rsocl.solver.reconstruct import make_regularizer
-from rsocl.solver.tuning import Tuning, applied_blend
+from rsocl.solver.memory import device_limit, memory_need
+from rsocl.solver.pipeline import Request, Tuning, applied_blend, make_request, run_params
 
 __all__ = ["reconstruct_tiled", "TiledResult", "TilesFailed"]
 
@@ -44,7 +41,7 @@ class TiledResult:
     rig : Rig
     params : dict
         The settings every tile ran with, the tile and halo; ``"tuning"`` the record of the
-        choice (:meth:`rsocl.solver.tuning.Tuning.as_params`, None when not tuned) and
+        choice (:meth:`rsocl.solver.crossval.Tuning.as_params`, None when not tuned) and
         ``"start"`` every tile's first iterate (``"interp3d"`` or ``"zeros"``).
     pieces : list of rsocl.scale.work.Piece
         The tasks run now (blocks dropped), with their sub-frames, seconds and residual.
@@ -54,7 +51,7 @@ class TiledResult:
     seconds : float
         Wall-clock time of the run (the tuning included), seconds.
     store : Path or None
-    tuning : rsocl.solver.tuning.Tuning or None
+    tuning : rsocl.solver.crossval.Tuning or None
         The values chosen for every tile, None when not tuned.
     """
 
@@ -100,7 +97,7 @@ def _check_tile_memory(rig, grid, reg, dtype, projection, device):
     dev = get_device(device)
     dev.real_dtype(dtype)
     worst = max(grid, key=lambda t: t.outer_shape[0] * t.outer_shape[1])
-    largest, total = memory_need(tile_rig(rig, worst), regularizer=reg, dtype=dtype, projection=projection)
+    largest, total = memory_need(tile_rig(rig, worst), reg, dtype=dtype, projection=projection)
     limit = device_limit(dev, largest, total)
     if limit is not None:
         h, w = worst.outer_shape
@@ -117,23 +114,22 @@ def _check_device(device, engine):
                          f"devices lists them), or None to let each worker choose; got a Device ({device.name})")
 
 
-def _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype, saturation, device, fills,
-              blend=None):
-    """Every task's :class:`TileSettings` and the run's ``params``, with ``tuning``'s choice (None: as given);
-    ``fills`` the :func:`~rsocl.scale.inputs.scan` values: one number (one set) or one per set; ``blend``
-    the caller's (None: ``tuning``'s)."""
-    options = tuned_options(tuning, regularizer_options)
-    reg = make_regularizer(regularizer, options, checked.tv_iterations)
-    lam = checked.lam if tuning is None or fixed_lam is not None else tuning.chosen["lam"]
+def _settings(request: Request, tuning, saturation, fills):
+    """Every task's :class:`TileSettings` and the run's ``params``
+    (:func:`~rsocl.solver.request.run_params`), with ``tuning``'s choice (None: as requested); ``fills``
+    the :func:`~rsocl.scale.inputs.scan` values: one number (one set) or one per set."""
+    reg, settled = request.settled(tuning)
+    options = {**request.given.options, **request.tuned_options(tuning)}
     start = "zeros" if tuning is None else "interp3d"
     fill = 0.0 if start == "zeros" else fills
-    blend = applied_blend(tuning) if blend is None else blend
-    settings = TileSettings(regularizer, options, checked.iterations, lam, checked.eta, checked.tv_iterations,
-                            checked.projection, str(np.dtype(dtype)), saturation, device, start, fill, blend)
-    params = {"regularizer": regularizer, "regularizer_options": dict(reg.values), "iterations": checked.iterations,
-              "lam": lam, "eta": checked.eta, "projection": checked.projection, "dtype": settings.dtype,
-              "device": device.name if isinstance(device, Device) else device, "tol": None, "saturation": saturation,
-              "tuning": None if tuning is None else tuning.as_params(), "start": start, "blend": blend}
+    blend = applied_blend(tuning) if request.blend is None else request.blend
+    device = request.device
+    settings = TileSettings(request.name, options, settled.iterations, settled.lam, settled.eta,
+                            settled.tv_iterations, settled.projection, str(np.dtype(request.dtype)), saturation, device,
+                            start, fill, blend)
+    params = run_params(request, reg, settled, lam=settled.lam, eta=settled.eta,
+                        device=device.name if isinstance(device, Device) else device, saturation=saturation,
+                        tuning=tuning, blend=blend, start=start)
     return settings, params
 
 
@@ -173,14 +169,14 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         See :class:`rsocl.scale.runner.Engine`.
     retries : int
         Extra attempts of a failing task (>= 0).
-    tune : bool or rsocl.solver.tuning.Tuning
+    tune : bool or rsocl.solver.crossval.Tuning
         True (default): ``lam`` and the regularizer's tunable options that are left unset are
         chosen from the snapshots once, in this process, before any task runs, on the tile
         nearest the grid's centre (with its halo, over its own rig) of the first set, as
-        :func:`rsocl.reconstruct` chooses them (:mod:`rsocl.scale.tuned`); every tile of every
+        :func:`rsocl.reconstruct` chooses them (:mod:`rsocl.scale.tuning_tile`); every tile of every
         set then runs with the chosen values and starts from the interpolation of its own
         snapshots. A single tile covering the grid gives ``rsocl.reconstruct(g, rig)``. The
-        search costs about 1.75 runs of one tile. A :class:`~rsocl.solver.tuning.Tuning` (an
+        search costs about 1.75 runs of one tile. A :class:`~rsocl.solver.crossval.Tuning` (an
         earlier run's choice, e.g. the first window of a stream) is applied as it is. False:
         the fixed defaults, zero start. The record is in ``params["tuning"]`` (and a store's
         ``params`` attribute).
@@ -202,18 +198,12 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
     if not isinstance(regularizer, str):
         raise ValueError(f"regularizer must be a registry name for a tiled reconstruction (each task builds its "
                          f"own), got {regularizer!r}")
-    tune = check_tune(tune)
     retries = non_negative_int("retries", retries)
     if saturation is not None:
         saturation = check.positive("saturation", saturation, "(snapshot units)")
-    checked = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
-                             projection=projection)
-    reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
-    tune = check_tune(tune, reg)
-    fixed_lam = checked.lam
-    checked = checked.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(source.n_sets)
-    blend = check_blend(blend, starts_from_interpolation(tune, checked, regularizer, reg, regularizer_options,
-                                                         fixed_lam))
+    request = make_request(rig, regularizer, sets=source.n_sets, iterations=iterations, lam=lam, eta=eta,
+                           tv_iterations=tv_iterations, projection=projection, dtype=dtype, device=device,
+                           regularizer_options=regularizer_options, tune=tune, blend=blend, progress=progress)
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
     _check_device(device, engine)
@@ -224,17 +214,13 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         require_zarr("out")
         store = check_store_path(out, "out").absolute()   # workers may run in another folder
     if engine.mode != "distributed":
-        _check_tile_memory(rig, grid, reg, dtype, checked.projection, device)
+        _check_tile_memory(rig, grid, request.regularizer, dtype, request.settings.projection, device)
     span = rig.sampled_range()
     with engine:                        # a cluster is reached (or started) before the input is read
         began = time.perf_counter()
         digest, saturated, fills = scan(source, saturation)
-        tuning = tune if isinstance(tune, Tuning) else None
-        if tune is True:
-            tuning = tune_tiles(source, rig, grid, regularizer, checked, fixed_lam, regularizer_options,
-                                device=device, dtype=dtype, saturation=saturation, progress=progress)
-        settings, params = _settings(regularizer, regularizer_options, checked, fixed_lam, tuning, dtype,
-                                     saturation, device, fills if source.n_sets else fills[0], blend)
+        tuning = tune_tiles(source, grid, request, saturation)
+        settings, params = _settings(request, tuning, saturation, fills if source.n_sets else fills[0])
         params.update({"saturated_pixels": saturated, "solved_subframes": [span.start, span.stop],
                        "tile": list(grid.tile), "halo": grid.halo})
         done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)

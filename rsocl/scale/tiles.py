@@ -5,7 +5,7 @@ A tile owns a ``core`` block of reference pixels; it is reconstructed over the c
 cropped off and the core is placed into the whole datacube. Each core is owned by exactly one
 tile, so a chunked store whose spatial chunks are the tiles gets every chunk from one task.
 
-The tile's rig is the full rig cut to the tile (:func:`rsocl.solver.plan.crop_rig`): every
+The tile's rig is the full rig cut to the tile (:meth:`rsocl.model.rig.Rig.crop`): every
 camera's row map is the full one, cut, so each pixel keeps the exposure start
 ``t_a + r*t_r + k*t_d`` it has in the whole capture and the sub-frame indices of the tile are
 those of the whole datacube. Only the sub-frames that the tile's exposure windows touch
@@ -24,13 +24,11 @@ import numpy as np
 
 from rsocl.model.rig import Rig
 from rsocl.solver.held import held_index
-from rsocl.solver.plan import crop_rig
 
 __all__ = ["DEFAULT_HALO", "Tile", "TileGrid", "tile_grid", "check_tile", "check_halo", "tile_rig", "place", "expand", "core_block"]
 
-#: Halo on every side of a tile, pixels. With 16, 128x128 tiles of a 256x256 reconstruction of the
-#: paper's 4-camera array (50 iterations) differ from the untiled one by at most 3e-4 (data in
-#: [0, 1]) and its PSNR by 2e-5 dB (docs/scale.md).
+#: Halo on every side of a tile, pixels (how far tiles with it differ from the untiled run:
+#: docs/scale.md).
 DEFAULT_HALO = 16
 
 
@@ -75,7 +73,7 @@ class Tile:
 
     @property
     def roi(self) -> tuple:
-        """``(y, x, height, width)`` of the reconstructed block (the ROI of :func:`crop_rig`)."""
+        """``(y, x, height, width)`` of the reconstructed block (the ROI of :meth:`~rsocl.model.rig.Rig.crop`)."""
         y0, y1, x0, x1 = self.outer
         return (y0, x0, y1 - y0, x1 - x0)
 
@@ -168,7 +166,7 @@ def tile_grid(shape, tile, halo=None) -> TileGrid:
 
 def tile_rig(rig: Rig, tile: Tile) -> Rig:
     """The rig of ``tile``'s reconstructed block: the same cameras, row maps cut from the full ones."""
-    return crop_rig(rig, tile.roi)
+    return rig.crop(tile.roi)
 
 
 def expand(block, start: int, lo: int, hi: int, span: tuple) -> np.ndarray:

@@ -31,7 +31,7 @@ class TileSettings:
     """The solver settings of the whole capture, applied as they are to every tile.
 
     ``lam`` and ``eta`` are settled (never None) so that no tile picks its own; a self-tuned
-    run puts the values chosen once for the capture here (:mod:`rsocl.scale.tuned`). Either may
+    run puts the values chosen once for the capture here (:mod:`rsocl.scale.tuning_tile`). Either may
     be one value per set (a tuple), of which each set's tasks take their own (:meth:`for_set`). ``start``
     is each tile's first iterate: ``"zeros"``, or ``"interp3d"`` (the
     :func:`~rsocl.model.interpolation.interp3d` interpolation of the tile's own snapshots over

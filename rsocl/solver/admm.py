@@ -1,4 +1,4 @@
-"""The ADMM of MODEL.md (Eqs. 11-15) with all state on the OpenCL device.
+"""The ADMM of docs/model.md (Eqs. 11-15) with all state on the OpenCL device.
 
 One iteration is the data step in three launches (``admm_dual``: dual update and
 ``v = theta + b``; ``admm_project``: ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)`` per pixel;
@@ -18,7 +18,7 @@ from rsocl.device.launch import batch_launches, element_launches
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.device.reduction import sum_sq_diff, sum_sq_diff_async
 
-__all__ = ["ADMM", "block_inverse", "state_bytes"]
+__all__ = ["ADMM", "block_inverse", "own_inverses"]
 
 
 #: Eigenvalues of ``eta I + M`` below this fraction of the largest one (per pixel) are
@@ -66,17 +66,6 @@ def own_inverses(projection: str, etas, valid, sets: int) -> bool:
         return False
     valid = np.asarray(valid, dtype=bool).reshape(sets, -1)
     return bool((valid != valid[:1]).any())
-
-
-def state_bytes(cube, K: int, dtype, projection: str, sets: int = 1, own_inverse: bool = False) -> int:
-    """Device memory of :class:`ADMM`'s own arrays, bytes: theta, b, f, u (``cube`` each), H·theta, the
-    mask of valid snapshot pixels (counted always; allocated when some pixel is left out) and the
-    per-set values of each of ``sets`` sets, and the inverse blocks (one set of them, or one per set)."""
-    itemsize = np.dtype(dtype).itemsize
-    per_cube = int(np.prod(cube)) * itemsize
-    snap = K * int(np.prod(cube[1:])) * itemsize
-    inverse = snap * K if projection == "exact" else snap
-    return sets * (4 * per_cube + 2 * snap + 16) + inverse * (sets if own_inverse else 1)
 
 
 def _per_set(name, value, sets):

@@ -7,17 +7,14 @@ sub-frame outside it the value of the nearest modelled one, at every pixel: the 
 :func:`rsocl.model.interpolation.interp3d` makes there, and a continuation that adds no temporal
 variation. (The tiles of :mod:`rsocl.scale` continue their own ranges the same way.)
 
-Measured on the random rigs of ``benchmarks/tv_step.py`` whose one camera triggers 1 to 3
-sub-frames late (seeds 107, 108 and 147; built-in scene and Runner at 1 frame per sub-frame;
-self-tuned default): held, the whole datacube's PSNR is 0.33 to 2.26 dB above zero-filled; 3 of
-the 6 cases stay below ``interp3d`` (by 0.00, 0.08 and 0.69 dB), against 4 (by 0.42 to 2.04 dB).
+What holding gives against zero-filling: ``docs/solver-notes.md`` (sub-frames no camera samples).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["held_index", "hold", "HeldError"]
+__all__ = ["held_index", "hold", "HeldSumSquares"]
 
 
 def held_index(T: int, solved: slice) -> np.ndarray:
@@ -34,7 +31,7 @@ def hold(block: np.ndarray, solved: slice, T: int) -> np.ndarray:
     return block[..., held_index(T, solved), :, :]
 
 
-class HeldError:
+class HeldSumSquares:
     """Squared error, against a ground truth, of the sub-frames outside ``solved``, from the two
     solved sub-frames they hold: ``sum_t |truth_t - x|^2 = L |x - mean_t truth_t|^2 + sum_t |truth_t - mean|^2``
     over the ``L`` held sub-frames of each end, so only the end planes are read back per call.

@@ -3,7 +3,7 @@
 :func:`run_iterations` books each iteration's residual (and PSNR with a ground truth) in a
 history, drives the progress bar, the callback and the ``tol`` stop, raises on divergence and warns
 when the run ends unstable though bounded; :func:`collect` reads the
-estimate back and assembles the :class:`~rsocl.solver.result.Result`. For a batch of sets every
+estimate back with what the run's ``params`` record about the data. For a batch of sets every
 record is one value per set, and ``tol`` stops the batch when every set has met it.
 """
 
@@ -17,7 +17,6 @@ import numpy as np
 
 from rsocl.device.reduction import sum_sq_diff
 from rsocl.solver.held import hold
-from rsocl.solver.result import Result
 
 __all__ = ["run_iterations", "collect"]
 
@@ -177,10 +176,12 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> d
     return {k: np.asarray(v) for k, v in history.values.items()}
 
 
-def collect(solver, staged, problem, settings, reg, history) -> Result:
-    """The datacube (sub-frames outside the solved ones hold the nearest solved one:
-    :mod:`rsocl.solver.held`), checked finite, with the run's parameters."""
-    op, solved, rig = staged.op, staged.solved, problem.rig
+def collect(solver, staged, problem) -> tuple:
+    """``(datacube, record)``: the estimate read back (sub-frames outside the solved ones hold the
+    nearest solved one: :mod:`rsocl.solver.held`), checked finite, and what the run's ``params`` add
+    about the data: ``saturated_pixels`` (one count per set for a batch), ``solved_subframes`` and,
+    for a batch, ``sets``."""
+    solved, rig = staged.solved, problem.rig
     batch = () if problem.batch is None else (problem.batch,)
     datacube = hold(solver.theta.get(), solved, rig.T)
     finite = np.isfinite(datacube).reshape(problem.batch or 1, -1).all(axis=1)
@@ -190,17 +191,8 @@ def collect(solver, staged, problem, settings, reg, history) -> Result:
     valid = problem.valid
     sets = problem.batch or 1
     saturated = np.zeros(sets, int) if valid is None else (~valid).reshape(sets, -1).sum(axis=1)
-    params = {"regularizer": reg.name, "regularizer_options": dict(reg.values), "iterations": settings.iterations,
-              "lam": _plain(solver.lam), "eta": _plain(solver.eta), "projection": settings.projection,
-              "dtype": op.dtype.name, "device": op.device.name, "tol": settings.tol,
-              "saturation": problem.saturation,
-              "saturated_pixels": saturated.tolist() if batch else int(saturated.sum()),
+    record = {"saturated_pixels": saturated.tolist() if batch else int(saturated.sum()),
               "solved_subframes": [solved.start, solved.stop]}
     if batch:
-        params["sets"] = problem.batch
-    return Result(datacube, history, rig, params)
-
-
-def _plain(value):
-    """A float, or a list of floats (one per set): what the parameters of a result hold."""
-    return value.tolist() if isinstance(value, np.ndarray) else value
+        record["sets"] = problem.batch
+    return datacube, record

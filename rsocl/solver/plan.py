@@ -23,9 +23,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.model.rig import Camera, Rig
+from rsocl.model.rig import Rig
+from rsocl.solver.memory import device_limit, memory_need
+from rsocl.solver.request import make_regularizer
 
-__all__ = ["Plan", "Estimate", "plan", "crop_rig", "estimate", "memory_need", "device_limit", "format_plan"]
+__all__ = ["Plan", "Estimate", "plan", "estimate", "format_plan"]
 
 
 @dataclass
@@ -60,62 +62,19 @@ class Plan:
     notes: list = field(default_factory=list)
 
 
-def crop_rig(rig: Rig, roi, dt=None) -> Rig:
-    """The rig restricted to ``roi = (y, x, height, width)`` of its reference grid, pixels.
-
-    Each camera's row map is cut from the full one (not re-zeroed), so exposure
-    start times are those of the full sensor readout.
-    """
-    y, x, h, w = (int(v) for v in roi)
-    m, n = rig.shape
-    if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
-        raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
-    cams = []
-    for c, cam in enumerate(rig.cameras):
-        d = cam.to_dict()
-        d["row_map"] = rig.row_map(c, (y, x, h, w))
-        cams.append(Camera(**d))
-    return Rig(cams, (h, w), dt=rig.dt if dt is None else dt, mask=rig.mask)
-
-
-def memory_need(rig: Rig, *, regularizer="tv", dtype="float32", projection="exact", start=True) -> tuple:
-    """``(largest buffer, total)`` device bytes of reconstructing ``rig``'s sampled sub-frames.
-
-    From the shapes alone (nothing is allocated), by the count :func:`rsocl.solver.reconstruct`
-    checks before it runs (:func:`rsocl.solver.batch.batch_memory` of one set): the operator's
-    geometry and the snapshots, the datacube over :meth:`Rig.sampled_range`, the solver's arrays,
-    the regularizer's workspace and, with ``start`` (the self-tuned default's ``interp3d`` start,
-    or a given ``x0``), the start cube.
-    """
-    from rsocl.common.registry import load
-    from rsocl.solver.batch import batch_memory
-
-    solved = rig.sampled_range()
-    domain = (solved.stop - solved.start,) + rig.shape
-    reg = load("rsocl.regularizers", regularizer)() if isinstance(regularizer, str) else regularizer
-    return batch_memory(domain, rig.n_channels, dtype, reg, projection, 1, start=start)
-
-
-def device_limit(device, largest: int, total: int) -> str | None:
-    """Why buffers of ``largest`` and ``total`` bytes do not fit ``device`` (None when they fit)."""
-    if largest > device.max_alloc_bytes:
-        return (f"a buffer of {largest / 2**20:.1f} MiB, above the device's largest allocation of "
-                f"{device.max_alloc_bytes / 2**20:.1f} MiB")
-    if total > device.global_mem_bytes:
-        return f"{total / 2**20:.1f} MiB in all, above the device's {device.global_mem_bytes / 2**20:.1f} MiB"
-    return None
-
-
 def estimate(rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", device=None,
              measure=True, projection="exact") -> Estimate:
-    """Memory (from the buffer sizes) and, when ``measure`` and it fits, time per iteration (3 timed iterations)."""
+    """Memory (from the buffer sizes, :func:`rsocl.solver.memory.memory_need` of the configured
+    regularizer: a name takes its default options, an instance its own) and, when ``measure`` and
+    it fits, time per iteration (3 timed iterations)."""
     from rsocl.device.context import get_device
     from rsocl.solver.reconstruct import reconstruct
 
     dev = get_device(device)
     dev.real_dtype(dtype)
+    regularizer = make_regularizer(regularizer)
     solved = rig.sampled_range()
-    largest, memory = memory_need(rig, regularizer=regularizer, dtype=dtype, projection=projection)
+    largest, memory = memory_need(rig, regularizer, dtype=dtype, projection=projection)
     limit = device_limit(dev, largest, memory)
     per_iteration = None
     if measure and limit is None:
@@ -140,6 +99,9 @@ def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iteration
         Sub-frame rate wanted, Hz.
     blur_pixels : float
         Motion allowed within one sub-frame, pixels.
+    regularizer : str or Regularizer
+        A registry name (default options) or the configured instance, whose options decide its
+        workspace (:mod:`rsocl.solver.memory`).
     """
     iterations = check.positive_int("iterations", iterations)
     blur_pixels = check.positive("blur_pixels", blur_pixels, "(pixels)")
@@ -165,7 +127,7 @@ def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iteration
                          f"dt = t_r, with {t_r / bound:.1f}x the blur asked for")
     dt = k * t_r
     roi = (0, 0) + rig.shape if roi is None else tuple(int(v) for v in roi)
-    proposed = crop_rig(rig, roi, dt=dt)
+    proposed = rig.crop(roi, dt=dt)
     kwargs = dict(iterations=iterations, regularizer=regularizer, dtype=dtype, device=device)
     full = estimate(rig, measure=measure, **kwargs)
     new = estimate(proposed, measure=measure, **kwargs)
@@ -187,7 +149,8 @@ def format_plan(p: Plan) -> str:
     wa = max(len(v) for v in a + ["as given"])
     lines = [f"{'':<{width}}  {'as given':<{wa}}  proposed"]
     lines += [f"{r:<{width}}  {x:<{wa}}  {y}" for r, x, y in zip(rows, a, b)]
-    lines.append(f"proposed ROI (y, x, height, width): {p.roi}")
+    y, x, h, w = p.roi
+    lines.append(f"proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): {x} {y} {w} {h}")
     lines += [f"note: {n}" for n in p.notes]
     lines += [f"note: the {label} problem does not fit one device: it needs {e.limit}"
               for label, e in (("given", p.full), ("proposed", p.proposed)) if not e.fits]

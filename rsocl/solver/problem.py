@@ -7,6 +7,7 @@ for the sampled sub-frames, checks that the run fits the device, and uploads the
 
 from __future__ import annotations
 
+import numbers
 import warnings
 from dataclasses import dataclass, replace
 
@@ -17,11 +18,11 @@ from rsocl.common import validation as check
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
-from rsocl.solver.batch import match_batch, memory_bytes, per_set_value
-from rsocl.solver.held import HeldError
+from rsocl.solver.held import HeldSumSquares
+from rsocl.solver.memory import memory_bytes
 
-__all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "check_problem", "check_settings", "check_representable",
-           "stage_on_device"]
+__all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "per_set_value", "match_batch", "check_problem",
+           "check_settings", "check_representable", "stage_on_device"]
 
 #: Defaults for data scaled to [0, 1] per sub-frame intensity (snapshots then lie in
 #: [0, t_e/dt]): 200 ADMM iterations, ``lam = 0.1``, ``eta = 0.2``, 10 inner TV iterations
@@ -34,9 +35,10 @@ DEFAULTS = {"iterations": 200, "lam": 0.1, "eta": 0.2, "tv_iterations": 10}
 class Problem:
     """Checked host arrays: snapshots ``g`` ``(K, m, n)``, the rig, and the optional extras.
 
-    ``valid`` marks the snapshot pixels that enter the data term (None: all of them);
-    ``x0`` and ``truth`` are ``(T, m, n)`` or None. A batch of ``batch`` sets has a leading
-    axis of that length on ``g``, ``valid``, ``x0`` and ``truth`` (``batch`` is None for one set).
+    ``valid`` marks the snapshot pixels that enter the data term (None: all of them); ``x0`` and
+    ``truth`` are ``(T, m, n)`` or None; ``interpolate``: the run starts from the ``interp3d``
+    interpolation of the snapshots (the caller's ``x0="interp3d"``). A batch of ``batch`` sets has a
+    leading axis of that length on ``g``, ``valid``, ``x0`` and ``truth`` (``batch`` is None for one set).
     """
 
     g: np.ndarray
@@ -46,6 +48,7 @@ class Problem:
     truth: np.ndarray | None = None
     saturation: float | None = None
     batch: int | None = None
+    interpolate: bool = False
 
 
 @dataclass(frozen=True)
@@ -90,6 +93,26 @@ class Settings:
         return self
 
 
+def per_set_value(name: str, value):
+    """A number ``>= 0`` (a float), or a sequence of them, one per set (a tuple of floats)."""
+    if isinstance(value, numbers.Number) or np.ndim(value) == 0:
+        return check.non_negative(name, value)
+    if isinstance(value, (str, bytes)) or np.ndim(value) != 1 or len(value) == 0:
+        raise ValueError(f"{name} must be a number >= 0 or a sequence of them, one per set, got {value!r}")
+    return tuple(check.non_negative(f"{name}[{i}]", v) for i, v in enumerate(value))
+
+
+def match_batch(name: str, value, batch):
+    """Check that a per-set ``value`` (a tuple) has one entry per set of a batch of ``batch`` (None: one set)."""
+    if not isinstance(value, tuple):
+        return
+    if batch is None:
+        raise ValueError(f"{name} has {len(value)} values (one per set), but g holds one set (K, m, n); "
+                         f"give g as (B, K, m, n) for a batch, or one number")
+    if len(value) != batch:
+        raise ValueError(f"{name} must have one value per set: {batch} for this batch, got {len(value)}")
+
+
 def _cube(name, value, shape, batch=None):
     """``value`` checked as a ``(T, m, n)`` cube; for a batch also ``(B, T, m, n)`` (a single cube is every set's)."""
     if value is None:
@@ -106,8 +129,14 @@ def _cube(name, value, shape, batch=None):
 def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
     """Validate the snapshots and the arrays that go with them against ``rig``.
 
-    ``g`` is ``(K, m, n)``, or ``(B, K, m, n)`` for a batch of ``B`` sets of the same rig.
+    ``g`` is ``(K, m, n)``, or ``(B, K, m, n)`` for a batch of ``B`` sets of the same rig; ``x0`` an
+    array, ``"interp3d"`` (the interpolation of the snapshots, made on the device) or None.
     """
+    interpolate = isinstance(x0, str)
+    if interpolate and x0 != "interp3d":
+        raise ValueError(f"x0 must be an array (T, m, n), 'interp3d' or None, got {x0!r}")
+    if interpolate:
+        x0 = None
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     g = check.finite_array("g", g)
@@ -132,13 +161,13 @@ def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
                           UserWarning, stacklevel=3)
     cube = (rig.T,) + rig.shape
     return Problem(g, rig, valid, _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch), saturation,
-                   batch)
+                   batch, interpolate)
 
 
 def check_settings(*, iterations=None, lam=None, eta=None, tv_iterations=None, projection="exact", tol=None,
                    callback=None) -> Settings:
     """Validate the solver settings (None keeps a default); ``lam``/``eta`` may give one value per set
-    (see :func:`rsocl.solver.batch.per_set_value`; :meth:`Settings.for_batch` checks the count)."""
+    (see :func:`per_set_value`; :meth:`Settings.for_batch` checks the count)."""
     if callback is not None and not callable(callback):
         raise ValueError(f"callback must be callable, got {callback!r}")
     return Settings(
@@ -156,7 +185,7 @@ class Staged:
     """A problem on the device: the operator over the ``solved`` sub-frames and its arrays.
 
     ``truth``, ``data_range`` and ``held`` (the error of the sub-frames outside ``solved``, which
-    hold the nearest solved one: :class:`~rsocl.solver.held.HeldError`) are set only when a ground
+    hold the nearest solved one: :class:`~rsocl.solver.held.HeldSumSquares`) are set only when a ground
     truth was given; for a batch ``data_range`` is one per set.
     """
 
@@ -189,7 +218,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     Only the sub-frames some camera samples are modelled; the others hold the nearest modelled one
     in the result (:mod:`rsocl.solver.held`).
     Raises an error naming the sizes when the run would not fit the device; the count
-    (:func:`~rsocl.solver.batch.memory_bytes`) includes a start cube per set when the problem has
+    (:func:`~rsocl.solver.memory.memory_bytes`) includes a start cube per set when the problem has
     an ``x0`` or ``start`` says one will be made after staging (the self-tuned run's ``interp3d`` start).
     """
     import pyopencl.array as cla
@@ -215,7 +244,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     truth = problem.truth
     if truth is not None:
         staged.truth = upload(truth[cut])
-        staged.held = HeldError(truth, solved, rig.T)
+        staged.held = HeldSumSquares(truth, solved, rig.T)
         if problem.batch is None:
             staged.data_range = default_data_range(truth)
         else:

@@ -1,7 +1,7 @@
 """The regularizer contract: a proximal denoiser on device arrays.
 
 A regularizer is the ``theta = denoise(f - b, weight = lam / eta)`` step of the
-ADMM in MODEL.md (Eq. 13): given a ``pyopencl.array.Array`` of shape
+ADMM in docs/model.md (Eq. 13): given a ``pyopencl.array.Array`` of shape
 ``(T, m, n)`` and a weight, it returns the denoised array, on the device, with
 the same shape and dtype. A batch of sets, ``(B, T, m, n)``, takes one weight per set
 (or one for all) and is denoised set by set, each as if alone. Subclasses declare their
@@ -68,11 +68,11 @@ class Regularizer:
         Optional ``lam``/``eta`` that :func:`rsocl.solver.reconstruct` uses when the caller
         gives none (measured for this regularizer; data in [0, 1]).
     tunable : dict of str -> tuple of float
-        Options that :func:`rsocl.solver.tuning.tune_parameters` may choose from the data,
+        Options that :func:`rsocl.solver.crossval.tune_parameters` may choose from the data,
         with their coarse candidate values (positive, log spaced); empty: only ``lam`` is tuned.
     one_snapshot : dict of str -> float
         Values of tunable options for a rig with one snapshot per pixel (one camera, one frame):
-        the search then sets them instead of choosing them (:func:`rsocl.solver.autotune.choose_unset`),
+        the search then sets them instead of choosing them (:func:`rsocl.solver.pipeline.tune`),
         because held-out pixels of the only snapshot are predicted across space alone and the
         criterion cannot rank priors in time. When they leave only ``lam`` unset, ``lam`` keeps its
         default and nothing is searched. Measured per regularizer; empty: searched as always.

@@ -4,10 +4,8 @@
 buffer); :func:`reconstruct_sets` reconstructs ``S`` sets ``(S, K, m, n)`` in batches of that size
 with :func:`rsocl.solver.reconstruct.reconstruct` and returns one batch :class:`Result` of all of
 them. A batch fills a device that one set leaves idle (a GPU) and shares each launch's overhead
-among its sets. On a CPU device the batch is also kept within :data:`CACHE_FRACTION` of the
-device's global memory cache: on PoCL with 2 cores (32 MiB L3), batches of the paper array ran
-faster than one set at a time until their arrays outgrew the cache, then slower again
-(``benchmarks/paper_config.py``, ``docs/paper_config.md``).
+among its sets; on a CPU device it is also kept within :data:`CACHE_FRACTION` of the device's
+global memory cache (the measurements behind these limits: ``docs/solver-notes.md``, batch sizes).
 """
 
 from __future__ import annotations
@@ -18,9 +16,12 @@ from rsocl.common import validation as check
 from rsocl.device.context import get_device
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
-from rsocl.solver.batch import batch_memory
+from rsocl.solver.crossval import Tuning
+from rsocl.solver.memory import batch_memory
+from rsocl.solver.pipeline import prepare, run, tune as choose
+from rsocl.solver.problem import check_problem
+from rsocl.solver.request import make_regularizer, make_request
 from rsocl.solver.result import Result
-from rsocl.solver.tuning import Tuning
 
 __all__ = ["batch_size", "reconstruct_sets", "MAX_BATCH", "GPU_BATCH_VOXELS", "CACHE_FRACTION"]
 
@@ -29,18 +30,10 @@ __all__ = ["batch_size", "reconstruct_sets", "MAX_BATCH", "GPU_BATCH_VOXELS", "C
 MAX_BATCH = 32
 #: On a device other than a CPU (a GPU), a batch may hold more than :data:`MAX_BATCH` sets, up to
 #: this many voxels in all: one set leaves such a device idle between launches, and sets per second
-#: keep rising well past 32 sets. Measured on an NVIDIA H100 (OpenCL 3.0 CUDA 13.0), paper
-#: configuration (137,500 voxels per set), 200 iterations, sets/s against the batch: 1: 2.8,
-#: 16: 40, 32: 61, 64: 85, 128: 95, 256: 110 (``benchmarks/batch_scaling.py``,
-#: ``docs/gpu/batch_scaling.md``). 2**24 voxels is 122 sets there, within 15 % of the 256-set rate
-#: with the first results after about 1.3 s.
+#: keep rising well past 32 sets (``docs/solver-notes.md``, batch sizes).
 GPU_BATCH_VOXELS = 2**24
 #: On a CPU device, a batch's arrays take at most this share of the global memory cache
-#: (``CL_DEVICE_GLOBAL_MEM_CACHE_SIZE``; at least one set). Measured on PoCL, 2 cores, 32 MiB L3,
-#: 4 cameras, 50 iterations, sets per second against one set at a time, batch (MiB of arrays):
-#: 32x32: 2 (2) 1.45x, 4 (4) 2.42x, 8 (8) 3.64x, 16 (17) 4.10x; 50x50: 2 (8) 1.27x, 4 (15) 1.59x,
-#: 6 (23) 1.51x, 8 (30) 1.43x, 16 (60) 1.44x; 64x64: 2 (16) 1.18x, 3 (23) 1.31x, 4 (31) 1.05x,
-#: 8 (62) 1.01x, 16 (123) 0.88x. Three quarters of the cache is within 0.08x of the best batch in all three.
+#: (``CL_DEVICE_GLOBAL_MEM_CACHE_SIZE``; at least one set; ``docs/solver-notes.md``, batch sizes).
 CACHE_FRACTION = 0.75
 
 
@@ -80,8 +73,6 @@ def batch_size(rig: Rig, regularizer="tv", *, sets=None, dtype="float32", device
     ValueError
         When not even one set fits (the message gives the sizes), or on a bad argument.
     """
-    from rsocl.solver.reconstruct import make_regularizer
-
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     if limit is not None:
@@ -126,37 +117,40 @@ def batch_size(rig: Rig, regularizer="tv", *, sets=None, dtype="float32", device
 
 def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, truth=None, progress=False,
                      device=None, dtype="float32", regularizer="tv", regularizer_options=None,
-                     projection="exact", **kwargs) -> Result:
+                     projection="exact", iterations=None, tv_iterations=None, callback=None, tol=None,
+                     saturation=None, tune=True, blend=None) -> Result:
     """Reconstruct ``S`` sets ``g`` ``(S, K, m, n)`` in batches of ``batch`` sets (default: :func:`batch_size`).
 
     ``lam``/``eta`` are one number or one per set; ``x0``/``truth`` one ``(T, m, n)`` cube for every set
-    or ``(S, T, m, n)``; the other keyword arguments go to :func:`rsocl.solver.reconstruct.reconstruct`
-    unchanged. A self-tuned run (the default) chooses its values on the first set, and every later
-    batch runs with them, each set from its own ``interp3d`` start. Returns one batch :class:`Result` of all ``S`` sets: datacube ``(S, T, m, n)``, every
-    history entry ``(iterations, S)`` (``time`` counts from the start of each set's batch; with
+    or ``(S, T, m, n)``; the other arguments are :func:`rsocl.solver.reconstruct.reconstruct`'s, checked
+    once for every batch (:func:`~rsocl.solver.request.make_request`). A self-tuned run (the default)
+    chooses its values on the first set, and every later batch runs with them, each set from its own
+    ``interp3d`` start. Returns one batch :class:`Result` of all ``S`` sets: datacube ``(S, T, m, n)``,
+    every history entry ``(iterations, S)`` (``time`` counts from the start of each set's batch; with
     ``tol`` a batch that stopped early is padded with NaN), ``params["batch"]`` the batch size.
     """
-    from rsocl.solver.reconstruct import reconstruct
-
     g = np.asarray(g)
     if g.ndim != 4 or g.shape[0] < 1:
         raise ValueError(f"g must hold S >= 1 sets, (S, K, m, n), got shape {g.shape}")
     count = g.shape[0]
-    per_set = {"lam": lam, "eta": eta}
-    for name, value in per_set.items():
+    for name, value in {"lam": lam, "eta": eta}.items():
         if value is not None and np.ndim(value) == 1 and len(value) != count:
             raise ValueError(f"{name} must have one value per set: {count} sets, got {len(value)}")
     cubes = {"x0": x0, "truth": truth}
     for name, value in cubes.items():
         if value is not None and np.ndim(value) == 4 and np.shape(value)[0] != count:
             raise ValueError(f"{name} must have one cube per set: {count} sets, got {np.shape(value)[0]}")
+    if not isinstance(rig, Rig):
+        raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
+    request = make_request(rig, regularizer, sets=count, x0_given=x0 is not None, iterations=iterations, lam=lam,
+                           eta=eta, tv_iterations=tv_iterations, projection=projection, tol=tol, callback=callback,
+                           dtype=dtype, device=device, regularizer_options=regularizer_options, tune=tune,
+                           blend=blend)               # the bar counts sets, not each batch's iterations
     if batch is None:
-        saturation = kwargs.get("saturation")
         valid = None if saturation is None else g < check.positive("saturation", saturation, "(snapshot units)")
         own = own_inverses(projection, 0.0 if eta is None else eta, valid, count)
-        batch = batch_size(rig, regularizer, sets=count, dtype=dtype, device=device, projection=projection,
-                           truth=truth is not None, own_inverse=own, start=x0 is not None or kwargs.get("tune", True)
-                           is not False, regularizer_options=regularizer_options)
+        batch = batch_size(rig, request.regularizer, sets=count, dtype=dtype, device=device, projection=projection,
+                           truth=truth is not None, own_inverse=own, start=x0 is not None or tune is not False)
     batch = check.positive_int("batch", batch)
     bar = None
     if progress:
@@ -167,15 +161,13 @@ def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, tr
     try:
         for start in range(0, count, batch):
             part = slice(start, min(start + batch, count))
-            pick = {k: (v[part] if v is not None and np.ndim(v) == 1 else v) for k, v in per_set.items()}
-            pick.update({k: (np.asarray(v)[part] if v is not None and np.ndim(v) == 4 else v)
-                         for k, v in cubes.items()})
-            results.append(reconstruct(g[part], rig, device=device, dtype=dtype, regularizer=regularizer,
-                                       regularizer_options=regularizer_options, projection=projection,
-                                       **pick, **kwargs))
+            pick = {k: (np.asarray(v)[part] if v is not None and np.ndim(v) == 4 else v) for k, v in cubes.items()}
+            problem = check_problem(g[part], rig, x0=pick["x0"], truth=pick["truth"], saturation=saturation)
+            prepared = prepare(request.for_sets(part), problem)
+            results.append(run(prepared, choose(prepared)))
             if start == 0 and results[0].params.get("tuning"):
                 # one capture, one setting: the first batch's choice serves the later batches
-                kwargs["tune"] = Tuning.from_params(results[0].params["tuning"])
+                request = request.with_tuning(Tuning.from_params(results[0].params["tuning"]))
             if bar is not None:
                 bar.update(part.stop - part.start)
     finally:

@@ -3,7 +3,7 @@
 import numpy as np
 import pyopencl as cl
 
-from rsocl.solver.regularizer import Option, Regularizer
+from rsocl import Option, Regularizer
 
 __all__ = ["Shrink"]
 

@@ -8,7 +8,7 @@ Three independent measurements, each from ordinary frames of the cameras:
     homography from the reference ROI to each camera's sensor;
     :func:`warp_to_reference` resamples a camera's frames onto the reference
     grid, and :func:`row_map_from_homography` gives the camera's row-time map
-    ``r(y, x)`` (``MODEL.md``: the sensor row of the mapped reference pixel
+    ``r(y, x)`` (``docs/model.md``: the sensor row of the mapped reference pixel
     centre). :func:`register_camera` runs the whole chain for one frame.
 *Temporal* (a frame of a light flickering at a known frequency)
     a rolling shutter records the flicker as horizontal bands;
@@ -25,7 +25,7 @@ Coordinates
 -----------
 Points are ``(x, y)`` pairs in pixels, ``x`` the column and ``y`` the row,
 with the centre of pixel ``[i, j]`` at ``(x, y) = (j, i)`` (scikit-image's and
-``MODEL.md``'s convention). A homography ``H`` is a 3x3 array mapping
+``docs/model.md``'s convention). A homography ``H`` is a 3x3 array mapping
 reference ``(x, y, 1)`` to sensor ``w * (X, Y, 1)``; it is the ``params`` of a
 :class:`skimage.transform.ProjectiveTransform`, normalised to ``H[2, 2] = 1``.
 """

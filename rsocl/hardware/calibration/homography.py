@@ -3,7 +3,7 @@
 :func:`estimate_homography` fits the homography from the reference ROI to
 each camera's sensor; :func:`warp_to_reference` resamples a camera's frames
 onto the reference grid, and :func:`row_map_from_homography` gives the
-camera's row-time map ``r(y, x)`` (``MODEL.md``: the sensor row of the mapped
+camera's row-time map ``r(y, x)`` (``docs/model.md``: the sensor row of the mapped
 reference pixel centre). :func:`register_camera` runs the whole chain for one
 frame. Coordinates are as described in :mod:`rsocl.hardware.calibration`.
 """
@@ -18,6 +18,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.hardware.calibration._common import _homography, _origin, _points, _reference_grid, _shape, _transform
 from rsocl.hardware.calibration.markers import detect_markers, order_markers
+from rsocl.hardware.calibration.pairing import check_pairing
 from rsocl.model.row_map import row_map_from_homography as model_row_map
 
 
@@ -116,7 +117,7 @@ def homography_difference(H_a, H_b, shape) -> float:
 
 
 def rotation_homography(angle, shape, *, sensor_shape=None, scale=1.0, shift=(0.0, 0.0)) -> np.ndarray:
-    """Homography of an ideal camera rotated by ``angle`` degrees (``MODEL.md`` convention).
+    """Homography of an ideal camera rotated by ``angle`` degrees (``docs/model.md`` convention).
 
     The sensor row of reference point ``(x, y)`` is
     ``Y = (y - cy) cos(angle) + (x - cx) sin(angle)`` times ``scale`` plus the
@@ -140,7 +141,7 @@ def rotation_homography(angle, shape, *, sensor_shape=None, scale=1.0, shift=(0.
 
 
 def row_map_from_homography(H, shape) -> np.ndarray:
-    """Row-time map ``r(y, x)`` of a camera from its registration (``MODEL.md``).
+    """Row-time map ``r(y, x)`` of a camera from its registration (``docs/model.md``).
 
     Parameters
     ----------
@@ -201,7 +202,7 @@ def homography_angle(H, shape) -> float:
     The direction in which the sensor sees the reference x axis at the
     centre of a reference ROI of ``shape``: ``atan2(dY, dX)`` of the mapped
     unit step. For :func:`rotation_homography` ``(angle)`` it is ``angle``
-    (``MODEL.md``'s ``Camera.angle``), whatever the scale, shift and a small
+    (``docs/model.md``'s ``Camera.angle``), whatever the scale, shift and a small
     perspective.
     """
     H = _homography("H", H)
@@ -321,7 +322,15 @@ def register_camera(frame, reference_points, *, sensor_points=None, frame_origin
         to full-sensor coordinates as the rig file expects.
     reference, angle, mirrored, **detect_options
         Passed to :func:`detect_markers` (``angle``: the camera's nominal
-        rotation, degrees, used to start the geometric order).
+        rotation, degrees, used to start the geometric order). ``mirrored``
+        also says which turning sense the markers' triangles must keep.
+
+    Raises
+    ------
+    ValueError
+        If the markers are paired as no camera sees them
+        (:func:`~rsocl.hardware.calibration.pairing.check_pairing`), or
+        :func:`estimate_homography` refuses them.
     """
     reference_points = _points("reference_points", reference_points, minimum=4)
     if sensor_points is not None:
@@ -334,5 +343,6 @@ def register_camera(frame, reference_points, *, sensor_points=None, frame_origin
         ordered_reference = order_markers(reference_points, first=first)
         sensor = detect_markers(frame, len(reference_points), reference=reference, angle=angle,
                                 mirrored=mirrored, **detect_options) + np.asarray(_origin(frame_origin))
+    check_pairing(ordered_reference, sensor, mirrored=mirrored)    # four markers would fit any pairing exactly
     H = estimate_homography(ordered_reference, sensor)
     return CameraRegistration(H, ordered_reference, sensor)

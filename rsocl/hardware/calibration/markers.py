@@ -52,7 +52,7 @@ def order_markers(points, *, first=None, angle=0.0, mirrored=False) -> np.ndarra
         ``angle``.
     angle : float
         Expected rotation of the camera relative to the reference, degrees
-        (``Camera.angle`` of ``MODEL.md``). It turns the "top-left" start, so
+        (``Camera.angle`` of ``docs/model.md``). It turns the "top-left" start, so
         that a camera rotated by ``angle`` lists the same physical markers in
         the same order as the reference. Ignored when ``first`` is given.
     mirrored : bool
@@ -143,10 +143,9 @@ def detect_markers(image, n=4, *, polarity="bright", threshold=None, smooth=1.0,
     ``smoothed > threshold`` (8-connectivity), largest by area. Each
     centroid is ``sum(w * p) / sum(w)`` over its region with
     ``w = image - threshold`` clipped at 0: the weights fall continuously to
-    zero at the region's edge, so the pixel grid adds no bias (measured
-    < 0.01 px for Gaussian dots of sigma 2.6 px without noise). A dot seen
-    in perspective has its centroid slightly off the image of its centre
-    (about 0.05 px for 3 % perspective); keep the dots small.
+    zero at the region's edge, so the pixel grid adds no bias. A dot seen
+    in perspective has its centroid slightly off the image of its centre;
+    keep the dots small (measured: ``docs/implementation_notes.md``).
     """
     from scipy import ndimage
     from skimage.measure import label, regionprops

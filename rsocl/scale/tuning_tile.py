@@ -1,7 +1,7 @@
-"""The self-tuning step of a tiled reconstruction: one choice for every tile and set.
+"""The tile a tiled reconstruction is tuned on: one choice for every tile and set.
 
 :func:`rsocl.reconstruct` chooses ``lam`` and the regularizer's tunable options from the
-snapshots (:mod:`rsocl.solver.autotune`). A tiled run makes that choice once, in the client,
+snapshots (:func:`rsocl.solver.pipeline.tune`). A tiled run makes that choice once, in the client,
 before any task is submitted: on the tile whose core is nearest the grid's centre (its block
 with the halo, over its own rig, cut as every tile is by :func:`rsocl.scale.tiles.tile_rig`), of
 the first set; the next nearest when every pixel of that block is saturated. Every tile of
@@ -14,13 +14,13 @@ tuned run does. A single tile covering the grid therefore runs exactly as
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from rsocl.scale.tiles import Tile, TileGrid, tile_rig
 from rsocl.scale.work import Job, worker_device
-from rsocl.solver.autotune import choose_unset, chosen_options
-from rsocl.solver.problem import check_problem, stage_on_device
-from rsocl.solver.reconstruct import make_regularizer
+from rsocl.solver.pipeline import Request, Tuning, check_problem, prepare, tune
 
-__all__ = ["by_distance_to_centre", "tune_tiles", "tuned_options"]
+__all__ = ["by_distance_to_centre", "tune_tiles"]
 
 
 def by_distance_to_centre(grid: TileGrid) -> list:
@@ -47,40 +47,27 @@ def _tuning_block(source, grid: TileGrid, saturation):
     return nearest
 
 
-def tune_tiles(source, rig, grid: TileGrid, regularizer: str, settings, fixed_lam, regularizer_options, *,
-               device=None, dtype="float32", saturation=None, progress=False):
-    """Choose what the caller left unset on the centre tile of the first set.
+def tune_tiles(source, grid: TileGrid, request: Request, saturation=None):
+    """The choice every tile runs with: the request's earlier :class:`~rsocl.solver.crossval.Tuning`,
+    or what the caller left unset chosen on the centre tile of the first set.
 
     Parameters
     ----------
     source : rsocl.scale.inputs.ArraySets or rsocl.scale.inputs.CaptureSets
-    rig : Rig
-        The whole capture's rig.
     grid : TileGrid
-    regularizer : str
-        Registry name.
-    settings : rsocl.solver.problem.Settings
-        Checked and settled for the regularizer (every tile's ``iterations``, ``eta``, ...).
-    fixed_lam : float or None
-        The caller's ``lam`` (None: searched).
-    regularizer_options : dict or None
-        The caller's options (these are not searched).
-    device, dtype, saturation, progress
-        As :func:`rsocl.reconstruct`; the search runs on this process's device.
+    request : rsocl.solver.request.Request
+        The whole capture's request (its rig, settings settled for that rig, ``tune``); the search
+        runs on this process's device (:func:`~rsocl.scale.work.worker_device` of its device).
+    saturation : float or None
+        Snapshot value from which a pixel is left out, as :func:`rsocl.reconstruct`'s.
 
     Returns
     -------
-    rsocl.solver.tuning.Tuning or None
-        None when nothing was left to choose.
+    rsocl.solver.crossval.Tuning or None
+        None when the request does not tune or nothing was left to choose.
     """
+    if request.tune is not True:
+        return request.tune if isinstance(request.tune, Tuning) else None
     tile, g = _tuning_block(source, grid, saturation)
-    problem = check_problem(g, tile_rig(rig, tile), saturation=saturation)
-    reg = make_regularizer(regularizer, regularizer_options, settings.tv_iterations)
-    staged = stage_on_device(problem, reg, settings, device=worker_device(device), dtype=dtype)
-    return choose_unset(problem, staged, settings, regularizer, reg, regularizer_options, fixed_lam,
-                        make_regularizer, progress=progress)
-
-
-def tuned_options(tuning, regularizer_options) -> dict:
-    """The regularizer options every tile runs with: the caller's, with the chosen ones over them."""
-    return {**dict(regularizer_options or {}), **({} if tuning is None else chosen_options(tuning))}
+    problem = check_problem(g, tile_rig(request.rig, tile), saturation=saturation)
+    return tune(prepare(replace(request, device=worker_device(request.device)), problem, start=False))

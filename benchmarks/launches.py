@@ -1,0 +1,179 @@
+"""Launches per ADMM-TV iteration and host time per launch, beside a trivial kernel's, in one run.
+
+A small reconstruction on a fast device is bound by the host: every kernel launch costs the
+time Python and the OpenCL runtime take to enqueue it. This benchmark counts what one ADMM
+iteration enqueues and how long the host spends per enqueue, against the floor of the same
+device: a kernel with one work item and one buffer argument, enqueued in a loop.
+
+- **Launches per iteration**: every ``enqueue_nd_range_kernel``, ``enqueue_copy`` and
+  ``enqueue_fill_buffer`` that pyopencl is asked for, counted during fixed-setting runs
+  (``tune=False``, start ``x0="interp3d"``) of two lengths; the difference over the difference
+  of iterations is what one iteration costs (set-up and read-back cancel out).
+- **Host µs per launch**: the wall time of an iteration of the tiny case (so small that the
+  kernels' own work is negligible) over its launches, and the same for the trivial kernel's
+  loop. Their ratio says how far the solver's host path is from the floor.
+
+Rounds alternate the trivial loop and the ADMM runs, and the median of the rounds is reported.
+
+    python benchmarks/launches.py [--shapes 8 50 64] [--rounds 5] [--out docs/launches.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import rsocl  # noqa: E402
+from rsocl.device.context import get_device  # noqa: E402
+from rsocl.model import reference as ref  # noqa: E402
+from rsocl.model.scenes import builtin_scene  # noqa: E402
+
+from provenance import DOCS, header_lines, write_page  # noqa: E402
+
+#: The paper's array: exposure and row readout time, seconds.
+T_E, T_R = 0.18e-3, 35e-6
+#: The enqueue calls that are counted (pyopencl module-level names).
+COUNTED = ("enqueue_nd_range_kernel", "enqueue_copy", "enqueue_fill_buffer")
+
+TRIVIAL = "__kernel void trivial(__global float *x) { x[get_global_id(0)] += 1.0f; }"
+
+
+@contextmanager
+def counting():
+    """Count the enqueues of :data:`COUNTED` while the block runs; yields a dict ``{name: count}``."""
+    import pyopencl as cl
+
+    counts = dict.fromkeys(COUNTED, 0)
+    saved = {name: getattr(cl, name) for name in COUNTED}
+
+    def wrap(name, fn):
+        def counted(*args, **kwargs):
+            counts[name] += 1
+            return fn(*args, **kwargs)
+        return counted
+
+    for name, fn in saved.items():
+        setattr(cl, name, wrap(name, fn))
+    try:
+        yield counts
+    finally:
+        for name, fn in saved.items():
+            setattr(cl, name, fn)
+
+
+def trivial_launch_us(device, launches: int = 2000) -> float:
+    """Host µs per enqueue of a one-work-item kernel with one buffer argument, after a finish."""
+    import pyopencl as cl
+
+    buf = cl.Buffer(device.context, cl.mem_flags.READ_WRITE, 4)
+    kernel = cl.Program(device.context, TRIVIAL).build().trivial
+    kernel.set_arg(0, buf)
+    queue = device.queue
+    for _ in range(50):
+        cl.enqueue_nd_range_kernel(queue, kernel, (1,), None)
+    queue.finish()
+    t0 = time.perf_counter()
+    for _ in range(launches):
+        cl.enqueue_nd_range_kernel(queue, kernel, (1,), None)
+    queue.finish()
+    return (time.perf_counter() - t0) / launches * 1e6
+
+
+def case(m: int):
+    """The paper's 4-camera array on an ``m × m`` crop of the built-in scene: ``(rig, snapshots)``."""
+    rig = rsocl.Rig.paper_array(4, (m, m), T_E, T_R)
+    truth = builtin_scene(rig.shape, rig.T)
+    return rig, ref.forward(rig, truth).astype(np.float32)
+
+
+def run(rig, g, iterations: int, device):
+    """One fixed-setting reconstruction; returns ``(seconds, enqueue counts)``."""
+    with counting() as counts:
+        t0 = time.perf_counter()
+        rsocl.reconstruct(g, rig, iterations=iterations, tune=False, x0="interp3d", device=device)
+        seconds = time.perf_counter() - t0
+    return seconds, dict(counts)
+
+
+def per_iteration(rig, g, device, short: int, long: int):
+    """``(launches per iteration by kind, seconds per iteration)`` from runs of ``short`` and ``long``."""
+    t_short, c_short = run(rig, g, short, device)
+    t_long, c_long = run(rig, g, long, device)
+    span = long - short
+    return {k: (c_long[k] - c_short[k]) / span for k in COUNTED}, (t_long - t_short) / span
+
+
+def measure(shapes, rounds: int, short: int, long: int, device):
+    """Alternating rounds of the trivial loop and each shape's runs; per-shape medians."""
+    cases = {m: case(m) for m in shapes}
+    for rig, g in cases.values():               # warm-up: kernel builds, the interpolation's set-up
+        run(rig, g, 2, device)
+    trivial, rows = [], {m: [] for m in shapes}
+    launches = {}
+    for _ in range(rounds):
+        trivial.append(trivial_launch_us(device))
+        for m, (rig, g) in cases.items():
+            kinds, seconds = per_iteration(rig, g, device, short, long)
+            launches[m] = kinds
+            rows[m].append(seconds)
+    floor = statistics.median(trivial)
+    out = []
+    for m in shapes:
+        total = sum(launches[m].values())
+        seconds = statistics.median(rows[m])
+        us = seconds / total * 1e6 if total else float("nan")
+        out.append({"m": m, "T": cases[m][0].T, "launches": launches[m], "total": total,
+                    "ms_per_iteration": seconds * 1e3, "us_per_launch": us, "ratio": us / floor})
+    return floor, trivial, out
+
+
+def page(floor, trivial, rows, device, args) -> list:
+    lines = header_lines("Launches per ADMM-TV iteration and host time per launch", device)
+    lines += ["", "Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), built-in scene,",
+              f"fixed settings from the interpolation, float32; {args.rounds} alternating rounds, medians.",
+              f"Launches per iteration: counts of runs of {args.long} and {args.short} iterations, differenced.",
+              "", f"Trivial kernel (one work item, one buffer argument): **{floor:.1f} µs** per enqueue "
+              f"(rounds: {', '.join(f'{t:.1f}' for t in trivial)}).", "",
+              "| ROI | T | kernels | copies | fills | launches / iteration | ms / iteration "
+              "| µs / launch | × trivial |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        k = r["launches"]
+        lines.append(f"| {r['m']}×{r['m']} | {r['T']} | {k['enqueue_nd_range_kernel']:.1f} | "
+                     f"{k['enqueue_copy']:.1f} | {k['enqueue_fill_buffer']:.1f} | {r['total']:.1f} | "
+                     f"{r['ms_per_iteration']:.2f} | {r['us_per_launch']:.1f} | {r['ratio']:.2f} |")
+    lines += ["", "µs / launch is the iteration's wall time over its launches: on a CPU device the kernels'",
+              "own work shares the cores with the host, so only the smallest ROI isolates the host path."]
+    return lines
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--shapes", type=int, nargs="+", default=[8, 50, 64], help="ROI sizes m (m × m)")
+    p.add_argument("--rounds", type=int, default=5, help="alternating rounds (default 5)")
+    p.add_argument("--short", type=int, default=10, help="iterations of the short run (default 10)")
+    p.add_argument("--long", type=int, default=30, help="iterations of the long run (default 30)")
+    p.add_argument("--device", default=None, help="OpenCL device spec (default: rsocl's choice)")
+    p.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'launches.md'})")
+    args = p.parse_args(argv)
+    if args.long <= args.short or args.short < 1:
+        p.error(f"--long ({args.long}) must exceed --short ({args.short}) >= 1")
+    device = get_device(args.device)
+    floor, trivial, rows = measure(args.shapes, args.rounds, args.short, args.long, device)
+    lines = page(floor, trivial, rows, device, args)
+    print("\n".join(lines))
+    if args.out:
+        write_page(args.out, lines)
+
+
+if __name__ == "__main__":
+    main()

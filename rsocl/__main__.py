@@ -1,0 +1,7 @@
+"""``python -m rsocl``: the same as the ``rsocl`` command."""
+
+import sys
+
+from rsocl.cli import entry
+
+sys.exit(entry())

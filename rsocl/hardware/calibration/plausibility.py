@@ -1,0 +1,138 @@
+"""Whether a registration is one a camera can have: marker pairing, orientation, distortion, fit check.
+
+Four markers fit a homography *exactly*, whatever their pairing: the reprojection error is then
+always 0 and checks nothing. What does tell a wrong pairing from a right one is geometry that
+no camera viewing a flat target changes:
+
+* **orientation** (:mod:`~rsocl.hardware.calibration.pairing`): a homography keeps the turning
+  sense of every triangle of markers a camera sees; a mirror reverses all of them. Two markers
+  swapped reverse some triangles and not others;
+* **rotation**: markers paired a cyclic shift apart fit a camera turned by their spacing; only
+  the rig file's nominal angle tells it apart, so the measured rotation must stay near it;
+* **distortion**: a camera in front of a flat target stretches the reference grid about evenly.
+  A wrong pairing fitted exactly needs a strong perspective: the local scale changes by large
+  factors across the grid, or one direction is stretched far more than the other.
+
+With five or more markers the fit is over-determined, and the leave-one-out error (each marker
+predicted by the homography of the others) measures it honestly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rsocl.hardware.calibration._common import _homography, _points, _shape
+from rsocl.hardware.calibration.pairing import check_pairing, flipped_triangles
+
+__all__ = ["MAX_SCALE_RATIO", "MAX_ANISOTROPY", "MAX_TURN", "flipped_triangles", "check_pairing",
+           "check_registration", "check_rotation", "leave_one_out_errors", "fit_summary"]
+
+#: Largest ratio of the local scale (sensor pixels per reference pixel) between two corners of the grid.
+MAX_SCALE_RATIO = 3.0
+#: Largest ratio of the stretch along two directions at one point of the grid.
+MAX_ANISOTROPY = 3.0
+#: Largest difference, degrees, between the measured rotation and the rig file's nominal one.
+MAX_TURN = 45.0
+def _jacobians(H, points) -> np.ndarray:
+    """``(N, 2, 2)`` derivative of the homography's map at ``points``."""
+    q = np.column_stack([points, np.ones(len(points))]) @ H.T
+    w = q[:, 2]
+    image = q[:, :2] / w[:, None]
+    return (H[None, :2, :2] - image[:, :, None] * H[None, 2:3, :2]) / w[:, None, None]
+
+
+def check_registration(reference_points, sensor_points, H, shape, *, mirrored=False) -> None:
+    """Refuse a registration no camera can have (see the module docstring).
+
+    Parameters
+    ----------
+    reference_points, sensor_points : array_like, shape (N, 2)
+        The markers, paired by order, ``(x, y)`` pixels (N >= 4).
+    H : array_like, shape (3, 3)
+        The homography fitted to them, reference -> sensor.
+    shape : (int, int)
+        ``(m, n)`` of the reference grid, pixels.
+    mirrored : bool
+        The camera sees the target in a mirror (a beam splitter).
+
+    Raises
+    ------
+    ValueError
+        One line naming the markers whose triangles turn the wrong way (a wrong pairing, or a
+        mirror), or the distortion (scale ratio across the grid, anisotropy) and its limit.
+
+    Examples
+    --------
+    >>> ref = [[0, 0], [10, 0], [10, 10], [0, 10]]
+    >>> check_registration(ref, [[0, 0], [50, 0], [50, 10], [0, 10]], np.diag([5.0, 1, 1]), (11, 11))
+    Traceback (most recent call last):
+    ...
+    ValueError: the homography stretches the grid 5.0x more along one direction than the other ...
+    """
+    ref = _points("reference_points", reference_points, minimum=4)
+    sensor = _points("sensor_points", sensor_points, minimum=4)
+    H = _homography("H", H)
+    m, n = _shape(shape)
+    check_pairing(ref, sensor, mirrored=mirrored)
+    corners = np.array([[0, 0], [n - 1, 0], [n - 1, m - 1], [0, m - 1], [(n - 1) / 2, (m - 1) / 2]], float)
+    singular = np.linalg.svd(_jacobians(H, corners), compute_uv=False)
+    scale = np.sqrt(singular[:, 0] * singular[:, 1])
+    ratio = float(scale.max() / max(scale.min(), 1e-300))
+    if ratio > MAX_SCALE_RATIO:
+        raise ValueError(f"the homography magnifies one corner of the grid {ratio:.1f}x as much as another "
+                         f"(at most {MAX_SCALE_RATIO:g} for a camera facing a flat target): the markers are "
+                         "probably paired wrongly; check their order (--markers-ref, the 'markers' array)")
+    stretch = float((singular[:, 0] / np.maximum(singular[:, 1], 1e-300)).max())
+    if stretch > MAX_ANISOTROPY:
+        raise ValueError(f"the homography stretches the grid {stretch:.1f}x more along one direction than "
+                         f"the other (at most {MAX_ANISOTROPY:g} for a camera facing a flat target): the markers "
+                         "are probably paired wrongly; check their order (--markers-ref, the 'markers' array)")
+
+
+def check_rotation(H, shape, nominal, *, key="angle", limit=MAX_TURN) -> float:
+    """The rotation of ``H`` (degrees, the turn nearest ``nominal``); a ValueError naming ``key`` when it is
+    more than ``limit`` degrees from the ``nominal`` one: markers paired a cyclic shift apart fit a camera
+    turned by a multiple of their spacing, which only the rig file's nominal angle tells apart."""
+    from rsocl.hardware.calibration.homography import homography_angle
+
+    turn = (homography_angle(H, shape) - nominal + 180.0) % 360.0 - 180.0
+    if abs(turn) > limit:
+        raise ValueError(f"the markers give a rotation of {nominal + turn:.1f}°, {abs(turn):.0f}° from the rig "
+                         f"file's {key} = {nominal:g}° (at most {limit:g}°): the markers are paired a turn apart (their "
+                         f"order shifted), or {key} is wrong; check the markers' order or correct {key}")
+    return nominal + turn
+
+
+def leave_one_out_errors(reference_points, sensor_points):
+    """Each marker's distance, sensor pixels, from where the homography of the *other* markers puts it.
+
+    ``(N,)`` float64 for ``N >= 5`` markers; None for 4 (the others are too few to fit).
+    """
+    from rsocl.hardware.calibration.homography import estimate_homography, project_points
+
+    ref = _points("reference_points", reference_points, minimum=4)
+    sensor = _points("sensor_points", sensor_points, minimum=4)
+    if len(ref) < 5:
+        return None
+    out = np.empty(len(ref))
+    for k in range(len(ref)):
+        keep = np.arange(len(ref)) != k
+        H = estimate_homography(ref[keep], sensor[keep])
+        out[k] = float(np.hypot(*(project_points(H, ref[k:k + 1])[0] - sensor[k])))
+    return out
+
+
+def fit_summary(registration) -> str:
+    """What the markers say about a :class:`~rsocl.hardware.calibration.CameraRegistration`'s fit.
+
+    Four markers: that they fit exactly and cannot check it. Five or more: the rms reprojection
+    error and the largest leave-one-out error (one misplaced marker raises every marker's, since
+    the homography of the others includes it).
+    """
+    N = len(registration.reference_points)
+    loo = leave_one_out_errors(registration.reference_points, registration.sensor_points)
+    if loo is None:
+        return (f"{N} markers fit a homography exactly, so they cannot check it (no rms); 5 or more markers "
+                "give a leave-one-out check")
+    return (f"{N} markers: rms reprojection {registration.rms_error:.3f} px, leave-one-out largest "
+            f"{float(loo.max()):.3f} px")

@@ -1,0 +1,314 @@
+"""The parameter search: block cross-validation on the snapshots, no ground truth.
+
+Candidate parameters run ADMM on the snapshot pixels that a hold-out pattern
+(:mod:`rsocl.solver.holdout`) keeps, and are scored by how well ``H theta`` predicts the held-out
+ones: the relative prediction error ``‖g - H theta‖ / ‖g‖`` over the held-out pixels. Only the
+snapshots, the rig and the saturation mask enter.
+
+The search is a coordinate search in log space: each tunable option of the regularizer (TV:
+``temporal_weight``, :attr:`rsocl.solver.regularizer.Regularizer.tunable`) over its coarse
+values at the middle ``lam``, then the geometric midpoints next to the best value; then ``lam``
+over its candidates. Every candidate starts from the same warm start (``interp3d`` of the fitted
+pixels) and runs ``iterations`` ADMM steps; values the caller fixed are not searched.
+
+The same held-out pixels choose how far the result moves from its start: the returned estimate
+is ``x0 + blend (theta - x0)``, ``blend`` in [0, 1], whose held-out error is a quadratic in
+``blend`` (``H`` is linear), minimised in closed form per candidate (:func:`_blend`).
+
+Why this criterion and design, and what they were measured to give: ``docs/solver-notes.md``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rsocl.common import validation as check
+from rsocl.device.reduction import sum_sq_diff
+from rsocl.model.interpolation_device import interp3d_device
+from rsocl.solver.admm import ADMM
+from rsocl.solver.holdout import default_patterns, fold_masks
+
+__all__ = ["LAM_FACTORS", "CANDIDATE_FRACTION", "SearchSpace", "Tuning", "tune_parameters", "applied_blend"]
+
+#: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
+LAM_FACTORS = (0.3, 1.0, 3.0)
+#: ADMM iterations per candidate, as a fraction of the final run's iterations, split among the
+#: hold-out patterns (at least 10 each): at the default 200 iterations, 50; the search's 8
+#: candidates cost about 2 final runs (other fractions compared: ``docs/solver-notes.md``).
+CANDIDATE_FRACTION = 0.25
+
+
+@dataclass
+class SearchSpace:
+    """What :func:`tune_parameters` searches.
+
+    Attributes
+    ----------
+    tunable : dict of str -> sequence of float
+        Options to search and their coarse candidate values (log spaced, > 0).
+    lam : float or sequence of float
+        The ``lam`` to use, or its candidates (the middle one is tried first).
+    fixed : dict
+        Parameters the caller fixed (not searched), recorded in the result.
+    preset : dict
+        Regularizer options set without a search: given to every candidate, recorded in the
+        result's ``chosen`` and ``preset``.
+    """
+
+    tunable: dict
+    lam: object
+    fixed: dict = field(default_factory=dict)
+    preset: dict = field(default_factory=dict)
+
+
+@dataclass
+class _Fold:
+    """One hold-out pattern's state during the search: the snapshot pixels that fit the candidates
+    (``fit``), its warm start ``x0`` and that start's prediction ``H x0`` of the snapshots, the
+    held-out pixels as weights on the device, and the pattern's solver (made by its first candidate)."""
+
+    fit: np.ndarray
+    x0: object
+    weights: object
+    start_prediction: object
+    solver: object = None
+
+
+@dataclass
+class Tuning:
+    """What :func:`tune_parameters` chose and why.
+
+    Attributes
+    ----------
+    chosen : dict
+        ``lam`` and the tuned options (e.g. ``temporal_weight``) with the smallest criterion.
+    candidates : list of dict
+        Every candidate run, in order: its ``lam``, options and ``score`` (the relative
+        prediction error of the held-out snapshot pixels).
+    fixed : dict
+        Parameters the caller fixed (not searched).
+    iterations : int
+        ADMM iterations per candidate.
+    block : int or list of int
+        Side of the hold-out blocks, pixels (the sides, largest first, when patterns of several
+        sides were pooled).
+    held_out : int
+        Snapshot pixels held out (over all folds).
+    folds : int
+        Hold-out patterns pooled (:func:`default_patterns`).
+    seconds : float
+        Wall time of the whole search, seconds.
+    preset : dict
+        Options set without a search (in ``chosen`` too): a rig with one snapshot per pixel gets
+        the regularizer's :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values.
+    blend : float or None
+        The chosen candidate's blend with the interpolation, in [0, 1] (module doc): the run that
+        starts from :func:`interp3d` returns ``x0 + blend (theta - x0)``. None: no search ran.
+    """
+
+    chosen: dict
+    candidates: list = field(default_factory=list)
+    fixed: dict = field(default_factory=dict)
+    iterations: int = 0
+    block: int | list = 0
+    held_out: int = 0
+    seconds: float = 0.0
+    folds: int = 1
+    preset: dict = field(default_factory=dict)
+    blend: float | None = None
+
+    @classmethod
+    def from_params(cls, record: dict) -> "Tuning":
+        """The choice recorded by :meth:`as_params` (e.g. ``Result.params["tuning"]``), to run again with."""
+        candidates = [{k: (math.inf if k == "score" and v is None else v) for k, v in c.items()}
+                      for c in record.get("candidates", [])]
+        return cls(dict(record["chosen"]), candidates, dict(record.get("fixed", {})),
+                   record.get("iterations_per_candidate", 0), record.get("block", 0),
+                   record.get("held_out_pixels", 0), record.get("seconds", 0.0), record.get("folds", 1),
+                   dict(record.get("preset", {})), record.get("blend"))
+
+    def as_params(self) -> dict:
+        """A JSON-ready record for :attr:`rsocl.solver.result.Result.params`."""
+        return {"criterion": "block cross-validation: relative error of held-out snapshot pixels",
+                "chosen": dict(self.chosen), "fixed": dict(self.fixed),
+                "candidates": [{k: (v if math.isfinite(v) else None) for k, v in c.items()} for c in self.candidates],
+                "iterations_per_candidate": self.iterations, "block": self.block, "held_out_pixels": self.held_out,
+                "folds": self.folds, "seconds": self.seconds, "preset": dict(self.preset), "blend": self.blend}
+
+
+def _midpoints(values, best):
+    """Geometric midpoints between ``best`` and its neighbours in the sorted coarse ``values``."""
+    values = sorted(values)
+    k = values.index(best)
+    out = []
+    for other in (values[k - 1] if k > 0 else None, values[k + 1] if k + 1 < len(values) else None):
+        if other is not None and other > 0 and best > 0:
+            out.append(float(math.sqrt(best * other)))
+    return out
+
+
+def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, eta, projection="exact", valid=None,
+                    iterations=60, patterns=None, progress=False) -> Tuning:
+    """Search the parameters that predict held-out snapshot pixels best (see the module doc).
+
+    Parameters
+    ----------
+    op : RollingShutterOperator
+        The staged operator (its sub-frames are the ones solved; ``op.rig`` the rig).
+    g_device : pyopencl.array.Array
+        Snapshots on the device, ``(K, m, n)``.
+    g : ndarray
+        The same snapshots on the host (for the warm start).
+    make_regularizer : callable
+        ``make_regularizer(options)`` -> a Regularizer with those option values.
+    space : SearchSpace
+        What to search (options, ``lam``), and what the caller fixed or a preset sets.
+    eta : float
+    projection : {"exact", "paper"}
+    valid : ndarray of bool or None
+        Snapshot pixels usable at all (saturated ones left out).
+    iterations : int
+        ADMM iterations per candidate and hold-out pattern.
+    patterns : list of (int, int) or None
+        The hold-out patterns as ``(block, shift)`` pairs
+        (:func:`~rsocl.solver.holdout.fold_patterns`); None: :func:`~rsocl.solver.holdout.default_patterns`.
+        The criterion pools the held-out errors of all patterns.
+    progress : bool
+        Show a progress bar (tqdm) over the candidates.
+
+    Returns
+    -------
+    Tuning
+
+    Raises
+    ------
+    ValueError
+        When a pattern leaves no pixels to fit or to score, or the patterns are empty or bad.
+    """
+    start = time.perf_counter()
+    iterations = check.positive_int("tuning iterations", iterations)
+    rig = op.rig
+    preset = dict(space.preset)
+    lam = space.lam
+    lams = [float(lam)] if np.isscalar(lam) else [float(v) for v in lam]
+    if patterns is None:
+        patterns = default_patterns(rig.shape, rig.n_channels)
+    patterns = [(check.positive_int("pattern block", b), int(shift)) for b, shift in patterns]
+    if not patterns:
+        raise ValueError("patterns must hold at least one (block, shift) pair, got none")
+    blocks = sorted({b for b, _ in patterns}, reverse=True)
+    usable = np.ones((rig.n_channels,) + rig.shape, bool) if valid is None else np.asarray(valid, bool)
+    folds, held_out = [], 0
+    for (block, _), (fit, scored) in zip(patterns, fold_masks(rig.shape, rig.n_channels, usable, patterns)):
+        folds.append(_fold(op, g_device, g, block, fit, scored))
+        held_out += int(scored.sum())
+    scale = sum(sum_sq_diff(g_device, weights=fold.weights) for fold in folds)
+    start_err = sum(sum_sq_diff(g_device, fold.start_prediction, weights=fold.weights)   # |g - H x0|^2
+                    for fold in folds)
+    tunable = space.tunable
+    current = {"lam": lams[len(lams) // 2], **{name: float(sorted(values)[(len(values) - 1) // 2])
+                                                for name, values in tunable.items()}}
+    scores, blends = {}, {}
+    candidates = []
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        planned = sum(len(v) + 2 for v in tunable.values()) + max(len(lams) - 1, 0) + 1
+        bar = tqdm(total=planned, desc="tuning", unit="candidate", leave=False, disable=None)
+
+    def score(point):
+        key = tuple(sorted(point.items()))
+        if key in scores:
+            return scores[key]
+        reg = make_regularizer({**preset, **{k: v for k, v in point.items() if k != "lam"}})
+        err = moved = 0.0
+        for fold in folds:
+            if fold.solver is None:
+                fold.solver = ADMM(op, g_device, reg, lam=point["lam"], eta=eta, projection=projection, x0=fold.x0,
+                                   valid=fold.fit)
+            else:
+                fold.solver.restart(reg, point["lam"], fold.x0)
+            solver = fold.solver
+            for _ in range(iterations):
+                solver.step()
+            op.forward_into(solver.theta, solver.hx)
+            err += sum_sq_diff(g_device, solver.hx, weights=fold.weights)
+            moved += sum_sq_diff(solver.hx, fold.start_prediction, weights=fold.weights)
+        value = float(math.sqrt(err / scale)) if scale > 0 else float(math.sqrt(err))
+        if not math.isfinite(value):
+            value = math.inf
+        scores[key] = value
+        blends[key] = _blend(start_err, moved, err)
+        candidates.append({**preset, **point, "score": value, "blend": blends[key]})
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(best=f"{min(scores.values()):.4g}")
+        return value
+
+    try:
+        for name, values in tunable.items():
+            coarse = sorted(float(v) for v in values)
+            for v in coarse:
+                score({**current, name: v})
+            best = min(coarse, key=lambda v: score({**current, name: v}))            # run above: cached
+            refined = coarse + _midpoints(coarse, best)
+            for v in refined:
+                score({**current, name: v})
+            current[name] = min(refined, key=lambda v: score({**current, name: v}))
+        for v in lams:
+            score({**current, "lam": v})
+        current["lam"] = min(lams, key=lambda v: score({**current, "lam": v}))
+    finally:
+        if bar is not None:
+            bar.close()
+    return Tuning(chosen={**preset, **current}, candidates=candidates, fixed=dict(space.fixed), iterations=iterations,
+                  block=blocks[0] if len(blocks) == 1 else blocks, held_out=held_out,
+                  seconds=time.perf_counter() - start, folds=len(patterns), preset=preset,
+                  blend=blends[tuple(sorted(current.items()))])
+
+
+def _fold(op, g_device, g, block, fit, scored) -> _Fold:
+    """A hold-out pattern's :class:`_Fold`: its warm start (``interp3d`` of the fitted pixels), that
+    start's prediction and the held-out weights on the device."""
+    import pyopencl.array as cla
+
+    rig = op.rig
+    if not scored.any() or not fit.any():
+        raise ValueError(f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
+                         f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}"
+                         "; fix lam and the regularizer's options or pass tune=False")
+    x0 = interp3d_device(op, g, fit, _solved(rig, op))
+    weights = cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype))
+    start_prediction = cla.empty_like(g_device)
+    op.forward_into(x0, start_prediction)
+    return _Fold(fit, x0, weights, start_prediction)
+
+
+def applied_blend(tuning) -> float:
+    """The blend a run that starts from the interpolation applies with ``tuning`` (a :class:`Tuning` or
+    None): the search's, or 1 (the solver's own result) without a search or a recorded blend."""
+    return 1.0 if tuning is None or tuning.blend is None else float(tuning.blend)
+
+
+def _blend(start_err: float, moved: float, err: float) -> float:
+    """The ``blend`` in [0, 1] that minimises the held-out error of ``x0 + blend (theta - x0)``, from the
+    held-out sums of squares ``‖g - H x0‖²`` (``start_err``), ``‖H theta - H x0‖²`` (``moved``) and
+    ``‖g - H theta‖²`` (``err``): ``<g - H x0, H theta - H x0> / moved``, the inner product by
+    polarisation. 1 (the run's own result) when the run did not move or its error is not finite."""
+    if not (math.isfinite(err) and math.isfinite(moved)) or moved <= 0:
+        return 1.0
+    return float(min(1.0, max(0.0, 0.5 * (start_err + moved - err) / moved)))
+
+
+def _solved(rig, op) -> slice:
+    """The sub-frames ``op`` models, as a slice of the rig's ``T``."""
+    solved = rig.sampled_range()
+    if solved.stop - solved.start != op.T:
+        raise ValueError(f"the operator models {op.T} sub-frames, the rig samples {solved.stop - solved.start}")
+    return solved

@@ -1,0 +1,192 @@
+"""The solver's public steps: :func:`prepare` a checked problem on the device, :func:`tune` what the
+caller left unset, :func:`run` the ADMM iterations.
+
+:func:`rsocl.reconstruct`, :func:`rsocl.solver.sets.reconstruct_sets` and the tiles of
+:mod:`rsocl.scale` all go through them with a :class:`~rsocl.solver.request.Request`::
+
+    request = make_request(rig, lam=None)          # checked once
+    prepared = prepare(request, check_problem(g, rig))
+    result = run(prepared, tune(prepared))
+
+:func:`tune` chooses ``lam`` and the regularizer's tunable options the caller left unset from the
+snapshots (:func:`rsocl.solver.crossval.tune_parameters`); a batch of sets is tuned on its first
+set and the choice serves every set (one capture, one setting). :func:`run` then starts from the
+``interp3d`` interpolation of the snapshots unless the caller gave ``x0``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from rsocl.model.interpolation_device import interp3d_device
+from rsocl.solver.admm import ADMM
+from rsocl.solver.crossval import CANDIDATE_FRACTION, Tuning, applied_blend, tune_parameters
+from rsocl.solver.holdout import can_hold_out, default_patterns
+from rsocl.solver.iterate import collect, run_iterations
+from rsocl.solver.memory import memory_bytes, search_memory, search_peak
+from rsocl.solver.problem import Problem, Staged, check_problem, stage_on_device
+from rsocl.solver.request import Request, first_value, make_regularizer, make_request, run_params
+from rsocl.solver.result import Result
+
+__all__ = ["Prepared", "prepare", "tune", "run", "check_problem", "make_request", "make_regularizer", "Request",
+           "Tuning", "run_params", "applied_blend"]
+
+
+@dataclass
+class Prepared:
+    """A request and its checked problem, staged on the device."""
+
+    request: Request
+    problem: Problem
+    staged: Staged
+
+
+def prepare(request: Request, problem: Problem, *, start=None) -> Prepared:
+    """Stage ``problem`` (:func:`~rsocl.solver.problem.check_problem`) on the request's device.
+
+    Parameters
+    ----------
+    request : Request
+    problem : rsocl.solver.problem.Problem
+        The checked snapshots (and ``x0``, ``truth``, saturation) of one set or a batch.
+    start : bool or None
+        Whether the memory check counts a start cube beside a given ``x0``; None: when the run
+        will have one (the caller's ``x0="interp3d"``, or the search's interpolation start).
+
+    Raises
+    ------
+    ValueError
+        When the run would not fit the device (naming the sizes), or a value is beyond the dtype.
+    """
+    if start is None:
+        start = problem.interpolate or request.starts_from_interpolation
+    staged = stage_on_device(problem, request.regularizer, request.settings, device=request.device,
+                             dtype=request.dtype, start=start)
+    return Prepared(request, problem, staged)
+
+
+def tune(prepared: Prepared):
+    """The values to run with: the request's earlier :class:`~rsocl.solver.crossval.Tuning`, or those
+    chosen from the snapshots by the search (on the first set of a batch); None when the request
+    does not tune or the caller left nothing to choose.
+
+    The search's memory beside the staged problem is checked against the device before it runs;
+    when the snapshots leave no pixels to hold out (one camera on 2x2 pixels or fewer) a warning
+    says so and None is returned.
+    """
+    choice = prepared.request.tune
+    if choice is False:
+        return None
+    if isinstance(choice, Tuning):
+        return choice
+    return _search_first_set(prepared)
+
+
+def run(prepared: Prepared, tuning=None) -> Result:
+    """Run the ADMM iterations with ``tuning``'s values (None: the request's) and collect the result.
+
+    Values the caller fixed (``lam``, options) win over ``tuning``'s. The run starts from the
+    caller's ``x0``, else from the ``interp3d`` interpolation when tuned or asked for, else from
+    zeros; the result is blended towards that start by the request's ``blend`` (None: the
+    search's). ``params`` is :func:`~rsocl.solver.request.run_params`'s record with the saturated
+    pixels and the solved sub-frames.
+    """
+    request, problem, staged = prepared.request, prepared.problem, prepared.staged
+    reg, settings = request.settled(tuning)
+    if (tuning is not None or problem.interpolate) and staged.x0 is None:
+        staged.x0 = interpolation_start(problem, staged)
+    solver = ADMM(staged.op, staged.g, reg, lam=settings.lam, eta=settings.eta, projection=settings.projection,
+                  x0=staged.x0, valid=problem.valid)
+    blend = request.blend
+    if blend is None:
+        blend = applied_blend(tuning) if problem.x0 is None and staged.x0 is not None else 1.0
+    history = run_iterations(solver, staged, settings, progress=request.progress, blend=blend)
+    datacube, extra = collect(solver, staged, problem)
+    start = "x0" if problem.x0 is not None else ("interp3d" if staged.x0 is not None else "zeros")
+    params = run_params(request, reg, settings, lam=_plain(solver.lam), eta=_plain(solver.eta),
+                        device=staged.op.device.name, saturation=problem.saturation, tuning=tuning, blend=blend,
+                        start=start)
+    return Result(datacube, history, problem.rig, {**params, **extra})
+
+
+def _plain(value):
+    """A float, or a list of floats (one per set): what the parameters of a result hold."""
+    return value.tolist() if isinstance(value, np.ndarray) else value
+
+
+def interpolation_start(problem, staged):
+    """``interp3d`` of the snapshots over the solved sub-frames, on the device (one per set of a batch)."""
+    return interp3d_device(staged.op, problem.g, problem.valid, staged.solved)
+
+
+def _choose_unset(prepared: Prepared, checked=False):
+    """Run :func:`tune_parameters` over what the caller left unset on one set; None when nothing is.
+
+    ``prepared`` holds one set. Each candidate runs :data:`~rsocl.solver.crossval.CANDIDATE_FRACTION`
+    of the run's iterations, split among the hold-out patterns (at least 10 per pattern). Unless
+    ``checked`` (the caller did it, for a batch), the search's memory beside the staged problem is
+    checked first. A rig with one snapshot per pixel gets the regularizer's
+    :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values instead of a search for them,
+    and when those leave only ``lam`` unset, the settled ``lam`` without a search
+    (``docs/solver-notes.md``, one snapshot per pixel).
+    """
+    request, problem, staged = prepared.request, prepared.problem, prepared.staged
+    settings, rig = request.settings, problem.rig
+    space = request.search_space()
+    if space is None:
+        return None
+    if not can_hold_out(rig.shape, rig.n_channels, problem.valid):
+        warnings.warn(f"the snapshots of a {rig.n_channels}-camera rig on {rig.shape[0]}x"
+                      f"{rig.shape[1]} pixels leave no pixels to hold out for choosing the parameters: "
+                      "the run uses the fixed defaults (as tune=False); fix lam and the regularizer's options to "
+                      "silence this", UserWarning, stacklevel=5)
+        return None
+    if rig.n_channels == 1:         # one snapshot per pixel: the criterion cannot rank priors in time
+        preset = {k: float(v) for k, v in getattr(request.regularizer, "one_snapshot", {}).items()
+                  if k in space.tunable}
+        space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
+        if not space.tunable and (preset or np.isscalar(space.lam)):
+            # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)
+            lam = space.lam if np.isscalar(space.lam) else first_value(settings.lam)
+            return Tuning(chosen={**preset, "lam": float(lam)}, fixed=space.fixed, preset=preset)
+    if not checked:
+        _check_search_fits(prepared)
+    patterns = default_patterns(rig.shape, rig.n_channels)
+    return tune_parameters(
+        staged.op, staged.g, problem.g, request.with_options, space, eta=first_value(settings.eta),
+        projection=settings.projection, valid=problem.valid,
+        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / len(patterns))), patterns=patterns,
+        progress=request.progress)
+
+
+def _check_search_fits(prepared: Prepared):
+    """Raise before the search when it and the staged problem together would not fit the device."""
+    problem, reg, projection = prepared.problem, prepared.request.regularizer, prepared.request.settings.projection
+    op = prepared.staged.op
+    peak = search_peak(op, reg, projection, problem.batch, truth=problem.truth is not None,
+                       start=problem.x0 is not None)
+    extra = search_memory(op, reg, projection, problem.batch)
+    largest = memory_bytes(op, reg, projection, 1)[0]
+    op.device.check_fits(f"choosing the parameters from the data (ADMM with {reg.name} on "
+                         f"T={op.T} x {problem.rig.shape[0]} x {problem.rig.shape[1]}, "
+                         f"{extra / 2**20:.1f} MiB beside the staged problem's {(peak - extra) / 2**20:.1f} MiB)",
+                         largest, total_bytes=peak, dtype=op.dtype,
+                         also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fast)")
+
+
+def _search_first_set(prepared: Prepared):
+    """:func:`_choose_unset` on the problem, or on the first set of a batch (staged on its own)."""
+    request, problem = prepared.request, prepared.problem
+    if problem.batch is None:
+        return _choose_unset(prepared)
+    if request.search_space() is None:
+        return None
+    _check_search_fits(prepared)
+    one = replace(problem, g=problem.g[0], valid=None if problem.valid is None else problem.valid[0],
+                  x0=None, truth=None, batch=None)
+    first = replace(request, settings=replace(request.settings, lam=first_value(request.settings.lam),
+                                              eta=first_value(request.settings.eta)))
+    return _choose_unset(prepare(first, one, start=False), checked=True)
