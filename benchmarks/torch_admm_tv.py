@@ -36,7 +36,13 @@ import torch
 
 from numpy_admm_tv import psnr, shutter_mask
 
-__all__ = ["tv_chambolle", "Peer", "admm_tv", "synchronize"]
+__all__ = ["tv_chambolle", "Peer", "admm_tv", "synchronize", "compiling"]
+
+
+def compiling() -> bool:
+    """Whether ``torch.compile`` is tracing the caller (False on a torch without ``torch.compiler``)."""
+    check = getattr(getattr(torch, "compiler", None), "is_compiling", None)
+    return bool(check()) if check is not None else False
 
 
 def tv_chambolle(image: torch.Tensor, weight: float, iterations: int, *, temporal_weight: float = 1.0,
@@ -72,7 +78,10 @@ def tv_chambolle(image: torch.Tensor, weight: float, iterations: int, *, tempora
             break
         for k, (ax, w) in enumerate(axes):         # g = w grad(out), 0 at the far edge of each axis
             n = image.shape[ax]
-            torch.sub(out.narrow(ax, 1, n - 1), out.narrow(ax, 0, n - 1), out=g[k].narrow(ax, 0, n - 1))
+            if compiling():                        # torch.compile traces no strided out=: a copy it fuses
+                g[k].narrow(ax, 0, n - 1).copy_(out.narrow(ax, 1, n - 1) - out.narrow(ax, 0, n - 1))
+            else:
+                torch.sub(out.narrow(ax, 1, n - 1), out.narrow(ax, 0, n - 1), out=g[k].narrow(ax, 0, n - 1))
             if w != 1.0:
                 g[k].mul_(w)
         torch.sum(g * g, 0, out=norm)

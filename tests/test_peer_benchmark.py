@@ -98,3 +98,17 @@ def test_benchmark_page(device, tmp_path):
     assert len(row) == 1 and "failed" not in row[0]
     delta = float(row[0].split("|")[3].split(" dB")[0])
     assert abs(delta) < 1e-4
+
+
+def test_compiled_step_is_one_graph():
+    """``torch.compile`` traces a whole ADMM iteration (one set and a batch) without a graph break:
+    a break would leave most of the peer's compile mode eager."""
+    dynamo = pytest.importorskip("torch._dynamo")
+    rig = rsocl.Rig.paper_array(4, (6, 8), 0.18e-3, 35e-6)
+    for shape in [(4, 6, 8), (2, 4, 6, 8)]:
+        g = np.random.default_rng(3).random(shape).astype(np.float32)
+        peer = Peer(g, rig, lam=0.1, eta=0.2, tv_iterations=3, temporal_weight=3.0, step=0.9)
+        with torch.no_grad():
+            explained = dynamo.explain(peer.step)(peer.zeros(), peer.zeros())
+        assert explained.graph_break_count == 0, [b.reason for b in explained.break_reasons]
+        assert explained.graph_count == 1
