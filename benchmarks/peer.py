@@ -104,6 +104,10 @@ class Compiled:
 
     def __init__(self, peer):
         self.peer = peer
+        mark = getattr(importlib.import_module("torch._dynamo"), "mark_static_address", None)
+        if mark is not None:                   # the CUDA graphs read these in place instead of copying them in
+            for tensor in (peer.W, peer.Minv, peer.g):
+                mark(tensor)
         self.step = torch.compile(peer.step, mode="reduce-overhead", dynamic=False)
 
     def run(self, iterations):
@@ -212,7 +216,10 @@ def measure_case(case, args, device, torch_device, tv):
     record["psnr"] = {impl: [psnr(x if sets == 1 else x[s], cubes[s]) for s in range(sets)]
                       for impl, x in record["x"].items()}
     record["diff"] = {impl: float(np.max(np.abs(x - record["x"]["rsocl"]))) for impl, x in record["x"].items()}
+    compiled = "compile" in runners
     del runners, peer
+    if compiled:                               # drop the case's compiled graphs and their memory
+        importlib.import_module("torch._dynamo").reset()
     gc.collect()
     if torch is not None and torch_device.type == "cuda":
         torch.cuda.empty_cache()
