@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# One prepared check on a lent NVIDIA GPU machine (H100 or H200, no network, PyTorch with CUDA
+# preinstalled as python3), in about 8 minutes of one command:
+#   1. install pyopencl and the rest from the carried wheels (.whl/, made by benchmarks/gpu_wheels.sh)
+#      and rsocl from this tree into /tmp/site; point pyopencl's ICD loader at NVIDIA's OpenCL;
+#   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped;
+#   3. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
+#   4. benchmarks/launches.py where the tree has it, capped.
+# Pages and logs go to $OUT (the device tool's folder that comes back; ./out/gpu elsewhere).
+# Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
+#     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
+# Knobs: TEST_WORKERS (12), TEST_CAP (150), PEER_CAP (240), LAUNCH_CAP (45) in seconds; PEER_ARGS replaces the peer's arguments;
+# DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
+set -uo pipefail
+
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$ROOT"
+OUT=${OUT:-$ROOT/out/gpu}
+mkdir -p "$OUT"
+PYTHON=${PYTHON:-python3}
+SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
+DEVICE=${DEVICE:-nvidia}
+TEST_CAP=${TEST_CAP:-150} PEER_CAP=${PEER_CAP:-240} LAUNCH_CAP=${LAUNCH_CAP:-45}
+PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256}
+export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
+T0=$(date +%s)
+stamp() { echo "=== [$(( $(date +%s) - T0 )) s] $*"; }
+if [ -z "${RSOCL_GIT_COMMIT:-}" ] && [ -f .whl/COMMIT ]; then
+    export RSOCL_GIT_COMMIT="$(cat .whl/COMMIT) (from .whl/COMMIT: the wheels' commit, not necessarily this tree's)"
+fi
+
+# ---------------------------------------------------------------- 1. install, OpenCL platform
+{
+stamp "install"
+ls .whl/pyopencl-*.whl >/dev/null 2>&1 || { echo "no .whl/pyopencl-*.whl: run benchmarks/gpu_wheels.sh here and carry .whl"; exit 2; }
+"$PYTHON" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$BUILD" \
+    .whl/setuptools-*.whl .whl/wheel-*.whl || exit 2
+"$PYTHON" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" \
+    $(ls .whl/*.whl | grep -v -e '/rsocl-' -e '/setuptools-' -e '/wheel-') || exit 2
+if PYTHONPATH="$BUILD:$SITE" "$PYTHON" -m pip install -q --no-index --no-deps --no-build-isolation --no-compile \
+        --no-cache-dir --upgrade --target "$SITE" . ; then
+    echo "rsocl installed from this tree"
+else
+    echo "WARNING: building rsocl from this tree failed; installing the carried .whl/rsocl-*.whl (commit $(cat .whl/COMMIT 2>/dev/null))"
+    "$PYTHON" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" .whl/rsocl-*.whl || exit 2
+fi
+# pyopencl's wheel brings an ICD loader; where the driver ships no vendors file, name NVIDIA's library
+if [ "$DEVICE" = nvidia ] && [ ! -e /etc/OpenCL/vendors/nvidia.icd ]; then
+    lib=$(ldconfig -p 2>/dev/null | awk '/libnvidia-opencl\.so\.1/ {print $NF; exit}')
+    [ -n "$lib" ] || lib=$(ls /usr/local/nvidia/lib64/libnvidia-opencl.so.1 /usr/lib/x86_64-linux-gnu/libnvidia-opencl.so.1 2>/dev/null | head -1)
+    [ -n "$lib" ] || { echo "libnvidia-opencl.so.1 not found: no NVIDIA OpenCL here"; exit 3; }
+    rm -rf /tmp/icd && mkdir -p /tmp/icd && echo "$lib" > /tmp/icd/nvidia.icd
+    export OCL_ICD_VENDORS=/tmp/icd
+    echo "OCL_ICD_VENDORS=/tmp/icd -> $lib"
+fi
+} 2>&1 | tee "$OUT/setup.log"
+[ "${PIPESTATUS[0]}" = 0 ] || exit 1
+[ -e /tmp/icd/nvidia.icd ] && export OCL_ICD_VENDORS=/tmp/icd
+export PYTHONPATH="$SITE" RSOCL_DEVICE="$DEVICE"
+# -P: the installed rsocl, never the source folder rsocl/ of the working directory
+"$PYTHON" -P -c "import rsocl; print('rsocl', rsocl.__file__); import torch; print('torch', torch.__version__, 'CUDA', torch.cuda.is_available())" 2>&1 | tee -a "$OUT/setup.log"
+"$PYTHON" -P -m rsocl.cli devices 2>&1 | tee -a "$OUT/setup.log"
+nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1 | tee -a "$OUT/setup.log"
+
+# ---------------------------------------------------------------- 2. the test suite on the GPU
+stamp "tests (cap ${TEST_CAP} s)" | tee "$OUT/tests.log"
+flags=()
+"$PYTHON" -c "import xdist" 2>/dev/null && flags+=(-n "${TEST_WORKERS:-12}")              # pytest-xdist and pytest-timeout: in the image
+"$PYTHON" -c "import pytest_timeout" 2>/dev/null && flags+=(--timeout 120)
+timeout -k 10 "$TEST_CAP" "$PYTHON" -P -m pytest -q -p no:cacheprovider "${flags[@]}" -rfEs 2>&1 \
+    | tee -a "$OUT/tests.log" | tail -n 60
+echo "tests exit status ${PIPESTATUS[0]} (124: stopped at the cap)" | tee -a "$OUT/tests.log"
+
+# ---------------------------------------------------------------- 3. the PyTorch peer
+stamp "benchmarks/peer.py $PEER_ARGS (cap ${PEER_CAP} s)" | tee "$OUT/peer.log"
+# shellcheck disable=SC2086
+timeout -k 10 "$PEER_CAP" "$PYTHON" -P benchmarks/peer.py --device "$DEVICE" --out "$OUT/peer.md" $PEER_ARGS 2>&1 \
+    | tee -a "$OUT/peer.log" | grep -v '^|' | tail -n 40
+echo "peer exit status ${PIPESTATUS[0]} (124: stopped at the cap; the page holds the cases done)" | tee -a "$OUT/peer.log"
+
+# ---------------------------------------------------------------- 4. launches per iteration
+if [ -f benchmarks/launches.py ]; then
+    stamp "benchmarks/launches.py (cap ${LAUNCH_CAP} s)" | tee "$OUT/launches.log"
+    timeout -k 5 "$LAUNCH_CAP" "$PYTHON" -P benchmarks/launches.py --device "$DEVICE" --rounds 3 --out "$OUT/launches.md" \
+        >> "$OUT/launches.log" 2>&1
+    echo "launches exit status $?" | tee -a "$OUT/launches.log"
+else
+    stamp "benchmarks/launches.py is not in this tree: skipped"
+fi
+
+stamp "done; the peer's page:"
+cat "$OUT/peer.md" 2>/dev/null | sed -n '/^## Times/,$p'
