@@ -17,10 +17,6 @@ PYTHON=${PYTHON:-python3}
 PACKAGES=(pyopencl==2026.1.4 pytools==2026.1.1 platformdirs==4.14.8 siphash24==1.9 PyWavelets==1.9.0
           setuptools==84.2.1 wheel==0.48.0)
 
-exclude="$(git -C "$ROOT" rev-parse --git-common-dir)/info/exclude"
-case "$exclude" in /*) ;; *) exclude="$ROOT/$exclude" ;; esac
-grep -qx '/.whl/' "$exclude" 2>/dev/null || echo '/.whl/' >> "$exclude"
-
 rm -rf "$DEST"
 mkdir -p "$DEST"
 platforms=()
