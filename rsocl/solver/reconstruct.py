@@ -81,7 +81,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         ADMM iterations (default 200); ``tv_iterations``: inner denoiser iterations (TV: 10).
     lam, eta : float
         Regularization strength and ADMM penalty, >= 0 (default: the regularizer's
-        ``recommended``, else 0.1 and 0.2, for the paper's configuration; other rigs scale both
+        ``recommended``, else 0.1 and 0.2 (``eta`` 5 with ``projection="paper"``,
+        :data:`rsocl.solver.problem.PAPER_ETA`), for the paper's configuration; other rigs scale both
         by :func:`rsocl.model.curvature.default_scale`, the data term's curvature relative to
         it); ``eta = 0`` runs GAP (denoiser weight ``lam``).
     projection : {"exact", "paper"}
