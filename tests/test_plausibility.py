@@ -205,9 +205,12 @@ def test_one_camera_far_above_its_full_scale_is_warned_in_one_line():
     assert len([w for w in caught if "full scale" in str(w.message)]) == 1
 
 
-def test_snapshots_within_their_full_scale_warn_nothing(recwarn):
+def test_snapshots_within_their_full_scale_or_saturated_warn_nothing(recwarn):
     rig, _, g = _demo()
     rsocl.reconstruct(g, rig, tune=False, iterations=3)
+    g = g.copy()
+    g[2, :4] = 1e6                                  # saturated pixels are left out of the data term
+    rsocl.reconstruct(g, rig, tune=False, iterations=3, saturation=1e5)
     assert not [w for w in recwarn if "full scale" in str(w.message)]
 
 

@@ -114,12 +114,14 @@ def _cube(name, value, shape, batch=None):
 OFF_SCALE = 10.0
 
 
-def warn_off_scale(g, rig) -> None:
+def warn_off_scale(g, rig, valid=None) -> None:
     """Warn (``UserWarning``, one line) when some snapshot channel of ``g`` (``(K, m, n)`` or a batch) peaks
-    above :data:`OFF_SCALE` times its full scale ``gain * t_e / dt``, naming the highest such camera."""
+    above :data:`OFF_SCALE` times its full scale ``gain * t_e / dt`` (over the ``valid`` pixels: those
+    below the saturation), naming the highest such camera."""
     win = rig.windows
     full = win.gain * win.length
-    peak = np.max(np.abs(g.reshape((-1, rig.n_channels, g.shape[-2] * g.shape[-1]))), axis=(0, 2))
+    values = np.abs(g) if valid is None else np.where(valid, np.abs(g), 0.0)
+    peak = np.max(values.reshape((-1, rig.n_channels, g.shape[-2] * g.shape[-1])), axis=(0, 2))
     ratio = peak / full
     k = int(np.argmax(ratio))
     if ratio[k] > OFF_SCALE:
@@ -143,7 +145,6 @@ def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
     if g.shape != expected and (batch is None or batch < 1):
         raise ValueError(f"g must have shape (K, m, n) = {expected} for this rig, or (B, K, m, n) = "
                          f"(B, {', '.join(map(str, expected))}) for a batch of B >= 1 sets, got {g.shape}")
-    warn_off_scale(g, rig)
     m, n = rig.shape
     sets = f"{batch} sets x " if batch else ""
     check_host_memory(4 * (batch or 1) * rig.T * m * n, f"rig shape {m}x{n} and T = {rig.T}",
@@ -163,6 +164,7 @@ def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
             warnings.warn(f"saturation = {saturation!r} keeps only snapshot pixels that are 0{which} (the brightest is "
                           f"{float(np.max(g)):.4g}): the reconstruction will be zero; saturation is in snapshot units",
                           UserWarning, stacklevel=3)
+    warn_off_scale(g, rig, valid)
     cube = (rig.T,) + rig.shape
     return Problem(g, rig, valid, _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch), saturation,
                    batch)
