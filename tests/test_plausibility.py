@@ -241,3 +241,20 @@ def test_the_effective_fps_of_a_multi_frame_rig_counts_its_frames(tmp_path, caps
     assert main(["info", "--capture", str(cap), "--camera-fps", "67"]) == 0
     line = [text for text in capsys.readouterr().out.splitlines() if text.startswith("effective fps")][0]
     assert line.split()[-1] == f"{67.0 * rig.T_se / 4:,.0f}"
+
+
+def test_a_simulated_camera_whose_scene_exceeds_the_host_is_refused_before_capture(tmp_path, capsys, monkeypatch):
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[rig]\nshape = [64, 64]\n\n[[camera]]\nbackend = "simulated"\nt_e = 1.8e-4\nt_r = 3.5e-5\n\n'
+                   '[camera.config]\nscene_frames = 1000000000\n')
+    assert main(["capture", "--rig", str(rig), "--out", str(tmp_path / "c.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "camera 0 (simulated): config['scene_frames'] = 1000000000 (t_e = 0.00018 s, dt = 3.5e-05 s: the camera's own T = 69): its scene of 1,000,000,000 x 64 x 64 float64 sub-frames needs" in err, err
+    assert err.count("\n") == 1
+    rig.write_text('[rig]\nshape = [64, 64]\n\n[[camera]]\nbackend = "simulated"\nt_e = 10\nt_r = 3.5e-5\n')
+    monkeypatch.setattr(memory, "host_memory_bytes", lambda: 2**30)
+    assert main(["capture", "--rig", str(rig), "--out", str(tmp_path / "c.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "rsocl capture: warning: camera t_e = 10 s is longer than 1 s" in err, err
+    assert "scene_frames'] = 285778 (t_e = 10 s, dt = 3.5e-05 s: the camera's own T = 285,778): its scene of 285,778 x 64 x 64 float64" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
