@@ -258,3 +258,19 @@ def test_a_simulated_camera_whose_scene_exceeds_the_host_is_refused_before_captu
     assert "rsocl capture: warning: camera t_e = 10 s is longer than 1 s" in err, err
     assert "scene_frames'] = 285778 (t_e = 10 s, dt = 3.5e-05 s: the camera's own T = 285,778): its scene of 285,778 x 64 x 64 float64" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
+
+
+def test_an_npz_video_claiming_ten_billion_elements_is_refused_naming_the_file_and_key(tmp_path, small_machine):
+    import io
+    import zipfile
+
+    from rsocl.model.scenes import load_video
+
+    member = io.BytesIO()
+    np.lib.format.write_array_header_1_0(member, {"descr": "<f8", "fortran_order": False, "shape": (10, 10**5, 10**4)})
+    member.write(b"\0" * 8)
+    with zipfile.ZipFile(tmp_path / "video.npz", "w") as archive:
+        archive.writestr("video.npy", member.getvalue())
+    with pytest.raises(ValueError, match=r"^path: '.*video.npz'\['video'\]: the 10 x 100000 x 10000 float64 array its "
+                                         r"header claims \(10,000,000,000 elements\)"):
+        load_video(tmp_path / "video.npz")
