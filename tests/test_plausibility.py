@@ -164,7 +164,7 @@ def _demo(shape=(16, 16), cameras=4):
 
 def test_a_run_that_never_moved_is_an_error_naming_eta_lam_and_the_range():
     rig, _, g = _demo()
-    with pytest.raises(FloatingPointError, match=r"^ADMM never moved: the residual stayed at \[1.0\] over 10 "
+    with pytest.raises(FloatingPointError, match=r"^ADMM never moved: the residual stayed at \[1\] over 10 "
                                                  r"iterations with eta = 1e\+30 and lam = 0.1: .* choose eta up to "
                                                  r"about 4 psi = "):
         rsocl.reconstruct(g, rig, eta=1e30, lam=0.1, tune=False)

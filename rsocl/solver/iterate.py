@@ -93,13 +93,16 @@ class _History:
         if not np.any(still):
             return
         where = f" in set(s) {np.flatnonzero(still).tolist()}" if np.ndim(first) else ""
-        eta, lam = self.solver.eta, self.solver.lam
+
+        def shown(values):
+            return ", ".join(f"{float(v):.6g}" for v in np.atleast_1d(values))
+
         psi = float(np.max(self.staged.op.psi))
         low = f"from about psi/2 = {psi / 2:.3g} " if self.settings.projection == "paper" else ""
         raise FloatingPointError(
-            f"ADMM never moved{where}: the residual stayed at {np.round(np.atleast_1d(first)[np.atleast_1d(still)], 6).tolist()} "
-            f"over {count} iterations with eta = {np.round(eta, 6).tolist()} and lam = {np.round(lam, 6).tolist()}: an "
-            f"eta far above the data term's curvature (psi up to {psi:.3g}) leaves the data step at zero; choose eta "
+            f"ADMM never moved{where}: the residual stayed at [{shown(np.atleast_1d(first)[np.atleast_1d(still)])}] "
+            f"over {count} iterations with eta = {shown(self.solver.eta)} and lam = {shown(self.solver.lam)}: an eta "
+            f"far above the data term's curvature (psi up to {psi:.3g}) leaves the data step at zero; choose eta "
             f"{low}up to about 4 psi = {4 * psi:.3g} (leave eta and lam out for the defaults)")
 
     def _diverged(self, it, residual, bad):
