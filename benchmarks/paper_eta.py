@@ -8,7 +8,7 @@ and 1), Runner and Traffic (MODEL.md protocol), runs 200 iterations at ``lam = 0
 its defaults beside them. PSNR in dB with peak 1; "diverged" where the solver raised. Writes
 docs/paper_projection.md (``--out``): the measurement behind ``rsocl.solver.problem.PAPER_ETA``.
 
-    python benchmarks/paper_eta.py [--out docs/paper_projection.md]
+    python benchmarks/paper_eta.py [--out docs/paper_projection.md] [--data ../shared/data]
 """
 
 from __future__ import annotations
@@ -29,12 +29,12 @@ DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 ETAS = (0.2, 0.5, 1.0, 2.0, 5.0, 10.0)
 
 
-def scenes(rig):
+def scenes(rig, data):
     yield "built-in (seed 0)", builtin_scene(rig.shape, rig.T, seed=0)
     yield "built-in (seed 1)", builtin_scene(rig.shape, rig.T, seed=1)
     for name in ("runner40", "traffic48"):
-        if (DATA / f"{name}.npz").is_file():
-            yield name, load_scene(DATA / f"{name}.npz", rig.shape, rig.T)
+        if (data / f"{name}.npz").is_file():
+            yield name, load_scene(data / f"{name}.npz", rig.shape, rig.T)
 
 
 def run(g, rig, truth, **kw) -> str:
@@ -51,6 +51,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(DOCS / "paper_projection.md"))
     parser.add_argument("--size", type=int, default=64)
+    parser.add_argument("--data", type=Path, default=DATA, help="folder of the shared videos (default ../shared/data)")
     args = parser.parse_args(argv)
     lines = header_lines("The paper's diagonal projection: eta that converges", argv=argv)
     lines += [f"Paper array, {args.size}x{args.size}, t_e = 180 µs, t_r = dt = 35 µs; 200 iterations from zeros, "
@@ -61,7 +62,7 @@ def main(argv=None) -> int:
     for cameras in (4, 8, 2):
         rig = rsocl.Rig.paper_array(cameras, (args.size, args.size), 180e-6, 35e-6)
         op = rsocl.RollingShutterOperator(rig)
-        for name, truth in scenes(rig):
+        for name, truth in scenes(rig, args.data):
             g = op.forward(truth)
             cells = [f"{run(g, rig, truth, projection='paper', eta=eta, lam=0.1)} / "
                      f"{run(g, rig, truth, projection='paper', eta=eta, lam=eta / 2)}" for eta in ETAS]
