@@ -235,6 +235,14 @@ class SimulatedCamera(CameraBackend):
             raise ValueError(f"{self.name}: {exc}") from None
         if self.scene_frames is None:
             self.scene_frames = own_T
+        from rsocl.common.memory import check_host_memory
+
+        m, n = self.shape
+        frames = self.scene_frames * (self.scene_sets if self.scene_array is None and self.scene != "builtin" else 1)
+        check_host_memory(8 * frames * m * n, f"{k('scene_frames')} = {self.scene_frames} (t_e = {self.t_e:g} s, "
+                          f"dt = {self.dt:g} s: the camera's own T = {own_T:,})",
+                          f"its scene of {frames:,} x {m} x {n} float64 sub-frames",
+                          "choose fewer scene_frames, a shorter t_e or a longer dt")
 
     # ------------------------------------------------------------------ model
     def _rig(self, t_e, t_a):

@@ -241,10 +241,10 @@ def test_simulated_exposure_range_is_checked(value):
 
 
 def test_a_rig_file_shape_beyond_the_host_memory_is_refused_before_the_rig_is_built(tmp_path, capsys, monkeypatch):
-    from rsocl.cli import options
+    from rsocl.common import memory
     from rsocl.cli.main import main
 
-    monkeypatch.setattr(options, "host_memory_bytes", lambda: 2**30, raising=False)     # a 1 GiB machine
+    monkeypatch.setattr(memory, "host_memory_bytes", lambda: 2**30)     # a 1 GiB machine
     rig_path = tmp_path / "rig.toml"
     rig_path.write_text('[rig]\nshape = [100000, 100000]\n\n'
                         '[[camera]]\nbackend = "simulated"\nt_e = 1.8e-4\nt_r = 3.5e-5\n\n'

@@ -315,10 +315,10 @@ def test_an_unreadable_video_or_frames_file_is_a_one_line_error_naming_it(tmp_pa
 
 
 def test_a_shape_beyond_the_host_memory_is_refused_before_allocating(tmp_path, capsys, monkeypatch):
-    from rsocl.cli import options
+    from rsocl.common import memory
     from rsocl.model import scenes
 
-    monkeypatch.setattr(options, "host_memory_bytes", lambda: 2**30, raising=False)     # a 1 GiB machine
+    monkeypatch.setattr(memory, "host_memory_bytes", lambda: 2**30)     # a 1 GiB machine
     for argv in (["info"], ["plan", "--no-measure"], ["simulate", "builtin", "--out", str(tmp_path / "c.h5")],
                  ["demo", "--out", str(tmp_path / "demo"), "--fast"]):
         assert main(argv + ["--shape", "100000", "100000"]) == 2, argv     # was a MemoryError traceback
@@ -330,7 +330,7 @@ def test_a_shape_beyond_the_host_memory_is_refused_before_allocating(tmp_path, c
     import rsocl
 
     T = rsocl.Rig.paper_array(2, (400, 400), t_e=180e-6, t_r=35e-6).T
-    monkeypatch.setattr(options, "host_memory_bytes", lambda: 128 * 2**20, raising=False)
+    monkeypatch.setattr(memory, "host_memory_bytes", lambda: 128 * 2**20)
     small = ["--shape", "400", "400", "--cameras", "2"]
     assert main(["simulate", "builtin", "--out", str(tmp_path / "c.h5")] + small) == 2
     err = capsys.readouterr().err
@@ -455,8 +455,8 @@ def test_simulate_noise_options_are_complete_and_consistent_before_any_work(tmp_
     (["--dt-us", "-1"], "--dt-us must be > 0 µs, got -1.0"),
     (["--dt-us", "20"], "--dt-us must be >= --t-r-us = 35 µs (a sub-frame lasts at least one row time), got 20"),
     (["--t-r-us", "10", "--dt-us", "9.5"], "--dt-us must be >= --t-r-us = 10 µs"),
-    (["--t-e-us", "1e12"], "--t-e-us 1e+12 µs is 28,571,428,572 sub-frames of 35 µs: T would exceed the 16,777,216 "
-                           "a rig may span; give the exposure in µs"),
+    (["--t-e-us", "1e12"], "--t-e-us 1e+12 µs is 28,571,428,572 sub-frames of 35 µs, more than the 1,048,576 one "
+                           "exposure may span; give the exposure in µs"),
     (["--t-e-us", "1e12", "--dt-us", "5e4"], "--t-e-us 1e+12 µs is 20,000,000 sub-frames of 50000 µs"),
 ])
 def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):

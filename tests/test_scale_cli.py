@@ -160,3 +160,21 @@ def test_a_set_holding_nan_or_inf_is_refused_naming_it_before_any_tile_runs(capt
     assert not calls and not out.exists()
     with pytest.raises(ValueError, match=r"g\[1\] \(set 1\) contains 1 NaN or inf value\(s\)"):
         reconstruct_tiled(sets, rsocl.Rig.paper_array(4, (20, 26), t_e=1.8e-4, t_r=3.5e-5), tile=(10, 13))
+
+
+def test_a_tiled_run_with_a_truth_says_psnr_and_ssim_and_writes_the_gif(capture, tmp_path, capsys):
+    path, rig, _ = capture
+    common = ["--tile", "10", "26", "--halo", "4", "--iterations", "3", "--fast"]
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "rec.zarr"), *common]) == 0
+    out = capsys.readouterr().out
+    assert "PSNR " in out and " dB, SSIM 0." in out and "2 tile task(s)" in out, out
+    assert (tmp_path / "rec.gif").is_file()
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "sets.zarr"), "--sets", *common]) == 0
+    assert "set 0: PSNR " in capsys.readouterr().out and (tmp_path / "sets.gif").is_file()
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "rec.h5"), *common]) == 0
+    assert ", SSIM 0." in capsys.readouterr().out and (tmp_path / "rec.gif").is_file()
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "none.zarr"), "--no-truth", *common]) == 0
+    assert not (tmp_path / "none.gif").exists()
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "bad.zarr"), "--gif", str(tmp_path / "a.png"),
+                 *common]) == 2
+    assert "--gif must name a .gif file" in capsys.readouterr().err and not (tmp_path / "bad.zarr").exists()

@@ -9,7 +9,8 @@ from rsocl.model.scenes import builtin_scene
 from rsocl.scale import reconstruct_tiled, tile_grid
 from rsocl.scale.stream import reconstruct_stream
 from rsocl.scale.tiles import tile_rig
-from rsocl.scale.tuning_tile import by_distance_to_centre
+from rsocl.scale import tuning_tile
+from rsocl.scale.tuning_tile import TUNE_SIDE, by_distance_to_centre, tuning_crop
 
 ITER = 12
 
@@ -83,17 +84,15 @@ def test_a_blend_below_1_needs_the_interpolation_start():
     assert reconstruct_tiled(g, rig, tile=(6, 6), iterations=2, tune=False, blend=1.0).params["blend"] == 1.0
 
 
-def test_every_tile_of_every_set_gets_the_choice_made_on_the_centre_tile_of_the_first_set(monkeypatch, tmp_path):
+def test_every_tile_of_every_set_gets_the_choice_made_on_the_centre_block_of_the_first_set(monkeypatch, tmp_path):
     pytest.importorskip("zarr")
     from rsocl.scale.store import load_store
 
     rig = rsocl.Rig.paper_array(4, (30, 36), t_e=1.8e-4, t_r=3.5e-5)
     sets = np.stack([_problem(rig, seed=s)[0] for s in range(2)])
     grid = tile_grid(rig.shape, (10, 12), 4)
-    centre = by_distance_to_centre(grid)[0]
-    assert centre.index == (1, 1)
-    expected = rsocl.reconstruct(sets[0][:, centre.outer_slices[0], centre.outer_slices[1]],
-                                 tile_rig(rig, centre), iterations=ITER).params["tuning"]["chosen"]
+    assert tuning_crop(grid).outer == (0, 30, 0, 36)          # under TUNE_SIDE a side: the whole grid
+    expected = rsocl.reconstruct(sets[0], rig, iterations=ITER).params["tuning"]["chosen"]
     calls = _record_calls(monkeypatch)
     result = reconstruct_tiled(sets, rig, tile=(10, 12), halo=4, iterations=ITER, out=tmp_path / "rec.zarr")
     assert result.tuning.chosen == expected
@@ -136,3 +135,48 @@ def test_a_stream_runs_every_window_with_the_first_windows_choice():
     assert first.tuning is not None and second.tuning is first.tuning
     assert second.params["lam"] == first.params["lam"] and second.params["start"] == "interp3d"
     assert second.params["regularizer_options"] == first.params["regularizer_options"]
+
+
+def test_the_block_tuned_on_is_centred_and_at_least_tune_side_or_one_tile():
+    crop = tuning_crop(tile_grid((300, 500), (64, 64), 16))
+    assert crop.outer == crop.core == (86, 86 + TUNE_SIDE, 186, 186 + TUNE_SIDE)
+    assert tuning_crop(tile_grid((300, 500), (200, 100), 16)).outer == (34, 266, 184, 316)   # one tile's 232 x 132
+    assert tuning_crop(tile_grid((40, 300), (20, 20), 4)).outer == (0, 40, 86, 214)
+
+
+def test_small_tiles_tune_on_the_centre_block_not_on_one_tile(monkeypatch):
+    """Tiles of 10x12 pixels of a 30x36 grid: the search sees the whole grid (under TUNE_SIDE), so the
+    choice is the untiled run's, where one tile's block (18x20) chose differently."""
+    rig = rsocl.Rig.paper_array(4, (30, 36), t_e=1.8e-4, t_r=3.5e-5)
+    g, _ = _problem(rig, seed=1)
+    seen = []
+    search = tuning_tile._search
+    monkeypatch.setattr(tuning_tile, "_search", lambda block, *a: seen.append(block[0].outer_shape) or search(block, *a))
+    tiled = reconstruct_tiled(g, rig, tile=(10, 12), halo=4, iterations=ITER, tune=True)
+    assert seen == [(30, 36)]
+    assert tiled.tuning.chosen == rsocl.reconstruct(g, rig, iterations=ITER).params["tuning"]["chosen"]
+    centre = by_distance_to_centre(tile_grid(rig.shape, (10, 12), 4))[0]
+    one_tile = rsocl.reconstruct(g[:, centre.outer_slices[0], centre.outer_slices[1]], tile_rig(rig, centre),
+                                 iterations=ITER).params["tuning"]["chosen"]
+    assert one_tile != tiled.tuning.chosen
+
+
+def test_a_centre_block_too_large_for_the_device_falls_back_to_the_centre_tile(monkeypatch):
+    rig = rsocl.Rig.paper_array(4, (30, 36), t_e=1.8e-4, t_r=3.5e-5)
+    g, _ = _problem(rig)
+    seen = []
+    search = tuning_tile._search
+
+    def small_device(block, *args):
+        seen.append(block[0].outer_shape)
+        if block[0].outer_shape == (30, 36):
+            raise ValueError("choosing the parameters needs 9.0 MiB of device memory in all, above the device's 8 MiB")
+        return search(block, *args)
+
+    monkeypatch.setattr(tuning_tile, "_search", small_device)
+    grid = tile_grid(rig.shape, (10, 12), 4)
+    centre = by_distance_to_centre(grid)[0]
+    tiled = reconstruct_tiled(g, rig, tile=(10, 12), halo=4, iterations=ITER)
+    assert seen == [(30, 36), centre.outer_shape]
+    assert tiled.tuning.chosen == rsocl.reconstruct(g[:, centre.outer_slices[0], centre.outer_slices[1]],
+                                                    tile_rig(rig, centre), iterations=ITER).params["tuning"]["chosen"]

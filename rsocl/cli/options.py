@@ -4,18 +4,18 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
+
+from rsocl.common.memory import check_host_memory, host_memory_bytes
+from rsocl.model.plausible import RIG_BYTES_PER_PIXEL, check_rig_memory
 
 __all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
            "check_host_memory", "check_rig_memory", "load_rig_file", "check_datacube_memory", "add_device_args",
            "add_solver_args", "check_solver_args", "reg_options", "regularizer_from", "solver_options",
-           "progress_bar", "say", "tuning_plot_path", "tuning_plot_files", "run_reconstruction", "quality_line"]
+           "progress_bar", "say", "tuning_plot_path", "tuning_plot_files", "run_reconstruction", "truth_quality",
+           "quality_line"]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
-#: Host bytes a :class:`~rsocl.model.rig.Rig` keeps per camera and reference pixel: its row map
-#: (float64) and exposure windows (int32 index, float64 fraction); building it takes about twice that.
-RIG_BYTES_PER_PIXEL = 20
 
 
 class _RigOption(argparse.Action):
@@ -65,12 +65,13 @@ def rig_from(args):
     """The :class:`~rsocl.model.rig.Rig` of the arguments :func:`add_rig_args` added.
 
     The times are checked in the µs the options are given in, naming the option (an exposure of
-    more sub-frames than a rig may span, :data:`~rsocl.model.rig.MAX_T`, names ``--t-e-us`` and
-    T); a ``--shape`` whose rig alone would not fit this machine's memory
+    more sub-frames than one may span, :data:`~rsocl.model.plausible.MAX_WINDOW`, names ``--t-e-us``);
+    a ``--shape`` whose rig alone would not fit this machine's memory
     (:func:`check_host_memory`) is refused before anything is allocated.
     """
     from rsocl.common import validation as check
-    from rsocl.model.rig import MAX_T, SNAP, Rig
+    from rsocl.model.plausible import MAX_WINDOW
+    from rsocl.model.rig import SNAP, Rig
 
     t_e = check.positive("--t-e-us", args.t_e_us, "µs")
     t_r = check.positive("--t-r-us", args.t_r_us, "µs")
@@ -80,74 +81,15 @@ def rig_from(args):
         if dt < t_r * (1 - SNAP):
             raise ValueError(f"--dt-us must be >= --t-r-us = {t_r:g} µs (a sub-frame lasts at least one row time), "
                              f"got {dt:g}")
-    if t_e / dt > MAX_T:
-        raise ValueError(f"--t-e-us {t_e:g} µs is {math.ceil(t_e / dt):,} sub-frames of {dt:g} µs: T would exceed "
-                         f"the {MAX_T:,} a rig may span; give the exposure in µs (or a longer --dt-us)")
+    if t_e / dt > MAX_WINDOW:
+        raise ValueError(f"--t-e-us {t_e:g} µs is {math.ceil(t_e / dt):,} sub-frames of {dt:g} µs, more than the "
+                         f"{MAX_WINDOW:,} one exposure may span; give the exposure in µs (or a longer --dt-us)")
     m, n = check.grid_shape("--shape", args.shape)
     cameras = check.positive_int("--cameras", args.cameras, maximum=8)
     check_rig_memory(cameras, (m, n), f"--shape {m} {n}")
     dt = None if args.dt_us is None else args.dt_us * US
     return Rig.paper_array(cameras, (m, n), t_e=args.t_e_us * US, t_r=args.t_r_us * US,
                            dt=dt, mask=args.mask)
-
-
-def host_memory_bytes():
-    """This machine's memory for one process, bytes: the physical memory, or the control group's
-    limit when lower (a container); None where neither can be read."""
-    from pathlib import Path
-
-    total = None
-    try:
-        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (AttributeError, ValueError, OSError):
-        pass
-    for limit in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
-        try:
-            text = Path(limit).read_text().strip()
-        except OSError:
-            continue
-        if text.isdigit():
-            total = int(text) if total is None else min(total, int(text))
-    return total
-
-
-def _size(nbytes) -> str:
-    for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
-        if nbytes >= scale:
-            return f"{nbytes / scale:.1f} {unit}"
-    return f"{nbytes / 2**10:.1f} KiB"
-
-
-def check_host_memory(need, option: str, what: str, hint: str = "choose a smaller grid") -> None:
-    """Refuse, naming ``option``, an input whose arrays alone (``need`` bytes, a lower bound) exceed
-    :func:`host_memory_bytes`, before they are allocated (numpy would raise a MemoryError, or the
-    system kill the process, part way through).
-
-    Parameters
-    ----------
-    need : int
-        Bytes ``what`` takes at least.
-    option : str
-        The option and value to name, e.g. ``"--shape 100000 100000"``.
-    what : str
-        What takes the memory, for the message.
-    hint : str
-        The way out, for the message.
-    """
-    limit = host_memory_bytes()
-    if limit is not None and need > limit:
-        raise ValueError(f"{option}: {what} needs at least {_size(need)} of host memory, more than this machine's "
-                         f"{_size(limit)}; {hint}")
-
-
-def check_rig_memory(cameras, shape, option, hint="choose a smaller grid") -> None:
-    """Refuse, naming ``option``, a rig of ``cameras`` cameras on ``shape`` (rows, columns) pixels whose
-    row maps and exposure windows alone (:data:`RIG_BYTES_PER_PIXEL`) exceed :func:`host_memory_bytes`,
-    before it is built."""
-    m, n = shape
-    check_host_memory(cameras * m * n * RIG_BYTES_PER_PIXEL, option,
-                      f"a rig of {cameras} camera(s) on {m} x {n} pixels ({RIG_BYTES_PER_PIXEL} bytes per camera "
-                      "and pixel: row maps and exposure windows)", hint)
 
 
 def load_rig_file(path):
@@ -311,14 +253,20 @@ def run_reconstruction(args, g, rig, truth=None):
     return reconstruct(g, rig, truth=truth, **solver_options(args))
 
 
-def quality_line(result, truth):
-    """``PSNR .. dB, SSIM .., N iterations in .. s (.. ms/iteration)`` (PSNR and SSIM only with a truth)."""
+def truth_quality(datacube, truth) -> str:
+    """``PSNR .. dB, SSIM ..`` of ``datacube`` against the ground truth ``truth`` (both ``(T, m, n)``)."""
     from rsocl.analysis.metrics import psnr, ssim
 
+    mean_ssim, _ = ssim(datacube, truth)
+    shown = f"{mean_ssim:.3f}" if math.isfinite(mean_ssim) else "n/a (frames under 3 pixels a side)"
+    return f"PSNR {psnr(datacube, truth):.2f} dB, SSIM {shown}"
+
+
+def quality_line(result, truth):
+    """``PSNR .. dB, SSIM .., N iterations in .. s (.. ms/iteration)`` (PSNR and SSIM only with a truth:
+    :func:`truth_quality`)."""
     seconds = result.history["time"][-1]
     text = f"{result.iterations} iterations in {seconds:.2f} s ({seconds / result.iterations * 1e3:.1f} ms/iteration)"
     if truth is not None:
-        mean_ssim, _ = ssim(result.datacube, truth)
-        shown = f"{mean_ssim:.3f}" if math.isfinite(mean_ssim) else "n/a (frames under 3 pixels a side)"
-        text = f"PSNR {psnr(result.datacube, truth):.2f} dB, SSIM {shown}, " + text
+        text = f"{truth_quality(result.datacube, truth)}, " + text
     return text

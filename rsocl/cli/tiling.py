@@ -77,8 +77,7 @@ def check_outputs(args) -> None:
 
         require_zarr("--out")
         check_store_path(args.out, "--out")
-        if args.gif:
-            raise ValueError("--gif: a GIF is written next to an HDF5 result only, not for a Zarr store")
+        _gif_suffix(output_path(_zarr_gif(args), "--gif", inputs=reads), args)
         if tuned:
             output_path(tuning_plot_path(Path(args.out).with_suffix(".gif")), "--out's NAME-tuning.png",
                         inputs=reads)
@@ -89,10 +88,20 @@ def check_outputs(args) -> None:
     gif = output_path(Path(args.gif) if args.gif else out.with_suffix(".gif"), "--gif", inputs=reads)
     if gif.resolve() == out.resolve():
         raise ValueError(f"--gif {str(gif)!r} is the --out file; give the GIF another name")
-    if gif.suffix.lower() != ".gif":
-        raise ValueError(f"--gif must name a .gif file (the animation is written as a GIF), got {args.gif!r}")
+    _gif_suffix(gif, args)
     if tuned:                                         # next to the GIF
         output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
+
+
+def _gif_suffix(gif, args) -> None:
+    if gif.suffix.lower() != ".gif":
+        raise ValueError(f"--gif must name a .gif file (the animation is written as a GIF), got {args.gif!r}")
+
+
+def _zarr_gif(args) -> Path:
+    """The GIF of a Zarr run: ``--gif``, else ``NAME.gif`` next to ``--out NAME.zarr`` (written when the
+    capture holds a ground truth, or ``--gif`` asks)."""
+    return Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
 
 
 def _note_first_set(args, what: str) -> None:
@@ -160,7 +169,7 @@ def reconstruct_tiled_if_needed(args):
 
     ``--overlap``, ``--halo`` and ``--batch`` are refused, naming the option, where the run would
     ignore them (:func:`_check_applies`)."""
-    from rsocl.cli.options import regularizer_from, say, solver_options, tuning_plot_files
+    from rsocl.cli.options import regularizer_from, say, solver_options, truth_quality, tuning_plot_files
     from rsocl.scale.inputs import CaptureSets
 
     capture = CaptureSets(args.capture, all_sets=args.sets)
@@ -194,17 +203,18 @@ def reconstruct_tiled_if_needed(args):
     ran = len(result.pieces)
     kept = f", {result.skipped} already in the store" if result.skipped else ""
     text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
-    truth = None if args.no_truth or args.sets else capture.truth()
-    if truth is not None and not zarr_out:
-        from rsocl.analysis.metrics import psnr
-
-        text = f"PSNR {psnr(result.datacube, truth):.2f} dB, " + text
+    truth = None if args.no_truth else capture.truth()          # set 0's
+    first = np.asarray(result.datacube[0] if args.sets else result.datacube)
+    if truth is not None:
+        text = ("set 0: " if args.sets else "") + f"{truth_quality(first, truth)}, " + text
     print(text, flush=True)
-    if zarr_out:
-        plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
-        say(args, "wrote " + ", ".join(map(str, [args.out, *plots])))
-        return 0
     from rsocl.analysis.visual import comparison_gif
+
+    if zarr_out:
+        gif = [comparison_gif(_zarr_gif(args), truth, first)] if truth is not None or args.gif else []
+        plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
+        say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
+        return 0
     from rsocl.files.hdf5 import save_reconstruction
 
     history = {"tile_seconds": np.array([p.seconds for p in result.pieces]),
@@ -220,7 +230,7 @@ def reconstruct_tiled_if_needed(args):
 def _stream(args, capture):
     """``--window``: the capture as a stream of overlapping frame windows, into an HDF5 file."""
     from rsocl.analysis.visual import comparison_gif
-    from rsocl.cli.options import say, solver_options, tuning_plot_files
+    from rsocl.cli.options import say, solver_options, truth_quality, tuning_plot_files
     from rsocl.files.hdf5 import load_capture, save_reconstruction
     from rsocl.scale.stream import default_overlap, reconstruct_stream
 
@@ -231,9 +241,7 @@ def _stream(args, capture):
     truth = None if args.no_truth else loaded.truth
     text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
     if truth is not None:
-        from rsocl.analysis.metrics import psnr
-
-        text = f"PSNR {psnr(stream.datacube, truth):.2f} dB, " + text
+        text = f"{truth_quality(stream.datacube, truth)}, " + text
     print(text, flush=True)
     overlap = default_overlap(args.window) if args.overlap is None else args.overlap
     params = dict(stream.results[0].params, window=args.window, overlap=overlap,

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.memory import check_host_memory
 from rsocl.model.rig import Rig
 
 __all__ = ["FORMAT_VERSION", "json_default", "dumps_json", "write_rig", "read_rig", "str_attr", "write_header",
@@ -98,7 +99,10 @@ def read_rig(h5, source: str) -> Rig:
         for camera in data["cameras"]:
             ref = camera.get("row_map")
             if isinstance(ref, dict):
-                camera["row_map"] = np.asarray(h5[ref["dataset"]][()], dtype=np.float64)
+                stored = h5[ref["dataset"]]
+                check_host_memory(8 * stored.size, f"row map {ref['dataset']!r}", f"its {stored.shape} float64 "
+                                  "array", "the stored rig is damaged or too large for this machine")
+                camera["row_map"] = np.asarray(stored[()], dtype=np.float64)
         rig = Rig.from_dict(data)
     except (KeyError, TypeError, AttributeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{source}: the stored rig description is damaged ({exc!r})") from None

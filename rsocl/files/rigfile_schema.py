@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.memory import check_npy_size
 from rsocl.model.rig import Camera
 from rsocl.model.row_map import row_map_from_homography
 
@@ -208,6 +209,7 @@ def _check_row_map(i, key, array, shape):
 def _load_row_map(i, path, shape):
     if not path.is_file():
         raise ValueError(f"{_where(i, 'row_map_file')}: file {str(path)!r} does not exist")
+    check_npy_size(_where(i, "row_map_file"), path)
     try:
         array = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError) as exc:                # EOFError: an empty file

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.model.plausible import warn_unlikely_times
 
 __all__ = ["Camera", "SNAP"]
 
@@ -76,6 +77,7 @@ class Camera:
         self.angle = check.finite("angle", angle)
         self.t_e = check.positive("t_e", t_e, "seconds")
         self.t_r = check.positive("t_r", t_r, "seconds")
+        warn_unlikely_times("camera", self.t_e, self.t_r)
         self.t_a = check.non_negative("t_a", t_a, "seconds")
         self.gain = check.positive("gain", gain)
         self.frames = check.positive_int("frames", frames)

@@ -20,6 +20,7 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.model.camera import SNAP, Camera, _snap
+from rsocl.model.plausible import check_rig_memory, check_window, warn_unlikely_times
 
 __all__ = ["Camera", "Rig", "ExposureWindows", "PAPER_ANGLES", "MAX_T"]
 
@@ -109,6 +110,7 @@ class Rig:
                 raise ValueError(f"cameras[{i}] must be a Camera, got {type(cam).__name__}")
         self.cameras = cameras
         self.shape = check.grid_shape("shape", shape)
+        check_rig_memory(len(cameras), self.shape, f"shape {self.shape}")
         t_r_min = min(cam.t_r for cam in cameras)
         if dt is None:
             dt = t_r_min
@@ -117,6 +119,8 @@ class Rig:
             raise ValueError(f"dt must be >= t_r = {t_r_min!r} s (the smallest row time), got {dt!r}")
         self.dt = dt
         self.mask = check.choice("mask", mask, {"exact", "binary"})
+        for i, cam in enumerate(cameras):
+            check_window(f"cameras[{i}].t_e", cam.t_e, dt)
         self._rows = [cam.rows(self.shape) for cam in cameras]
         for i, (cam, r) in enumerate(zip(cameras, self._rows)):
             rows_read = float(r.max()) + 1.0
@@ -326,8 +330,10 @@ class Rig:
         return 1.0 / self.dt
 
     def effective_fps(self, camera_fps: float) -> float:
-        """Effective frame rate, ``camera_fps * T_se`` (Hz), for cameras running at ``camera_fps``."""
-        return check.positive("camera_fps", camera_fps, "Hz") * self.T_se
+        """Effective frame rate, ``camera_fps * T_se / frames`` (Hz), for cameras running at ``camera_fps``:
+        the ``T_se`` sub-frames span the ``frames`` frames of a trigger (the most of any camera)."""
+        frames = max(cam.frames for cam in self.cameras)
+        return check.positive("camera_fps", camera_fps, "Hz") * self.T_se / frames
 
     def datacube_bytes(self, itemsize: int = 4) -> int:
         """Bytes of one ``(T, m, n)`` datacube at ``itemsize`` bytes per value."""

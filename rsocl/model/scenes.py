@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.memory import check_npy_size
 
 __all__ = ["builtin_scene", "load_video", "benchmark_protocol", "load_scene", "VIDEO_SUFFIXES"]
 
@@ -259,10 +260,12 @@ def load_video(path, *, key="video") -> np.ndarray:
         with archive:
             if key not in archive.files:
                 raise ValueError(f"key {key!r} not found in {source}; the archive holds {sorted(archive.files)}")
+            check_npy_size("path", path, key)
             with check.reading("path", source, f"an .npz video archive (array {key!r})"):
                 video = archive[key]
         return _to_frames(video, f"{source}[{key!r}]", rgb_last=True)
     if suffix == ".npy":
+        check_npy_size("path", path)
         with check.reading("path", source, "a .npy video array"):
             video = np.load(path, allow_pickle=False)
         if not isinstance(video, np.ndarray):

@@ -24,6 +24,11 @@ __all__ = ["run_iterations", "collect"]
 #: A run whose residual exceeds this many times the smallest one it had so far (or than 1, the
 #: residual of a zero estimate, if that is larger) has diverged, though still finite.
 GROWTH = 1e3
+#: A run whose residual, over its first this many iterations (or all of a shorter run of at least 2),
+#: stays within :data:`STALL_TOL` of its first value (which is above 0) never moved: it raises.
+STALL_ITERATIONS = 10
+#: Relative change of the residual under which a run counts as not moving.
+STALL_TOL = 1e-6
 #: A run that ends with a residual above 1 (its estimate explains the snapshots worse than zeros do)
 #: and this many times the smallest residual it had is unstable though bounded: it gets a warning.
 END_GROWTH = 10.0
@@ -75,6 +80,30 @@ class _History:
                       f"{END_GROWTH:g} times the smallest of the run, {np.round(lowest[bad], 4).tolist()}; "
                       f"the result does not reconstruct the data.{self._hint()}", RuntimeWarning, stacklevel=4)
 
+    def check_stall(self, final=False):
+        """Raise ``FloatingPointError`` when the residual (per set) has not moved by :data:`STALL_TOL` from
+        its first value over :data:`STALL_ITERATIONS` records (``final``: over a shorter whole run of >= 2)."""
+        count = len(self.values["residual"])
+        if count != STALL_ITERATIONS and not (final and 2 <= count < STALL_ITERATIONS):
+            return
+        res = np.asarray(self.values["residual"], dtype=np.float64)
+        first = res[0]
+        still = np.all(np.abs(res - first) <= STALL_TOL * first, axis=0) & (first > 0)
+        if not np.any(still):
+            return
+        where = f" in set(s) {np.flatnonzero(still).tolist()}" if np.ndim(first) else ""
+
+        def shown(values):
+            return ", ".join(f"{float(v):.6g}" for v in np.atleast_1d(values))
+
+        psi = float(np.max(self.staged.op.psi))
+        low = f"from about psi/2 = {psi / 2:.3g} " if self.settings.projection == "paper" else ""
+        raise FloatingPointError(
+            f"ADMM never moved{where}: the residual stayed at [{shown(np.atleast_1d(first)[np.atleast_1d(still)])}] "
+            f"over {count} iterations with eta = {shown(self.solver.eta)} and lam = {shown(self.solver.lam)}: an eta "
+            f"far above the data term's curvature (psi up to {psi:.3g}) leaves the data step at zero; choose eta "
+            f"{low}up to about 4 psi = {4 * psi:.3g} (leave eta and lam out for the defaults)")
+
     def _diverged(self, it, residual, bad):
         hint = self._hint()
         lowest = self.lowest
@@ -113,6 +142,7 @@ class _History:
             raise self._diverged(it, residual, bad)
         values, settings = self.values, self.settings
         values["residual"].append(residual)
+        self.check_stall()
         elapsed = time.perf_counter() - self.start
         values["time"].append(np.full(np.shape(residual), elapsed) if np.ndim(residual) else elapsed)
         if self.staged.truth is not None:
@@ -167,6 +197,7 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> d
                 pending = current
         if pending is not None:                     # pipelined: the last iteration's residual
             history.record(settings.iterations - 1, pending.result())
+        history.check_stall(final=True)
         history.check_end()
         if blend is not None and blend < 1 and history.values["residual"]:
             history.blend(blend)

@@ -15,20 +15,25 @@ import numpy as np
 
 from rsocl.analysis.metrics import default_data_range
 from rsocl.common import validation as check
+from rsocl.common.memory import check_host_memory
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
 from rsocl.solver.held import HeldSumSquares
 from rsocl.solver.memory import memory_bytes
 
-__all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "per_set_value", "match_batch", "check_problem",
-           "check_settings", "check_representable", "stage_on_device"]
+__all__ = ["DEFAULTS", "PAPER_ETA", "Problem", "Settings", "Staged", "per_set_value", "match_batch",
+           "check_problem", "check_settings", "check_representable", "stage_on_device"]
 
 #: Defaults for data scaled to [0, 1] per sub-frame intensity (snapshots then lie in
 #: [0, t_e/dt]): 200 ADMM iterations, ``lam = 0.1``, ``eta = 0.2``, 10 inner TV iterations
 #: (measured in ``benchmarks/solver_settings.py``); :func:`rsocl.solver.reconstruct` tunes ``lam``
 #: from the data unless given.
 DEFAULTS = {"iterations": 200, "lam": 0.1, "eta": 0.2, "tv_iterations": 10}
+#: Default ``eta`` of the paper's diagonal projection (``projection="paper"``, docs/model.md Eq. 15), for
+#: the paper's configuration (scaled like the others): about the data term's curvature ``psi`` there
+#: (5.02), below which the diagonal step diverges (measured in ``docs/paper_projection.md``).
+PAPER_ETA = 5.0
 
 
 @dataclass(frozen=True)
@@ -64,8 +69,8 @@ class Settings:
     callback: object
 
     def settled_for(self, reg, dtype, scale: float = 1.0) -> "Settings":
-        """``lam``/``eta`` filled from the regularizer's recommendation, else :data:`DEFAULTS`, times
-        ``scale`` (:func:`rsocl.model.curvature.default_scale` of the rig: the data term's curvature
+        """``lam``/``eta`` filled from the regularizer's recommendation, else :data:`DEFAULTS` (``eta``
+        of the paper's projection: :data:`PAPER_ETA`), times ``scale`` (:func:`rsocl.model.curvature.default_scale` of the rig: the data term's curvature
         against the paper's configuration, for which the defaults hold). A default ``lam`` is not
         scaled for a set the caller runs as GAP (``eta = 0``), whose denoiser weight is ``lam``
         itself: with per-set ``eta`` mixing GAP and ADMM sets, the default ``lam`` is per set too,
@@ -78,7 +83,8 @@ class Settings:
             raise ValueError(f"dtype {dtype.name!r} is not supported by regularizer {reg!r}; "
                              f"supported: {list(reg.dtypes)}")
         recommended = {**DEFAULTS, **getattr(reg, "recommended", {})}
-        eta = recommended["eta"] * scale if self.eta is None else self.eta
+        default_eta = PAPER_ETA if self.projection == "paper" else recommended["eta"]
+        eta = default_eta * scale if self.eta is None else self.eta
         lam = self.lam
         if lam is None:
             lams = recommended["lam"] * np.where(np.asarray(eta, dtype=np.float64) == 0, 1.0, scale)  # GAP: unscaled
@@ -126,6 +132,29 @@ def _cube(name, value, shape, batch=None):
     return value if batch is None else np.broadcast_to(value, (batch,) + shape)
 
 
+#: Snapshots above this many times their channel's full scale (the value of a white scene,
+#: ``gain * t_e / dt``) get a warning: data not in [0, 1] per sub-frame, or a camera in other units.
+OFF_SCALE = 10.0
+
+
+def warn_off_scale(g, rig, valid=None) -> None:
+    """Warn (``UserWarning``, one line) when some snapshot channel of ``g`` (``(K, m, n)`` or a batch) peaks
+    above :data:`OFF_SCALE` times its full scale ``gain * t_e / dt`` (over the ``valid`` pixels: those
+    below the saturation), naming the highest such camera."""
+    win = rig.windows
+    full = win.gain * win.length
+    values = np.abs(g) if valid is None else np.where(valid, np.abs(g), 0.0)
+    peak = np.max(values.reshape((-1, rig.n_channels, g.shape[-2] * g.shape[-1])), axis=(0, 2))
+    ratio = peak / full
+    k = int(np.argmax(ratio))
+    if ratio[k] > OFF_SCALE:
+        camera, frame = rig.channels[k]
+        which = f"camera {camera}" + (f" (frame {frame})" if rig.cameras[camera].frames > 1 else "")
+        warnings.warn(f"g: snapshots of {which} reach {peak[k]:.4g}, {ratio[k]:.3g} times its full scale "
+                      f"{full[k]:.4g} (gain x t_e/dt, a white scene): rsocl works on data in [0, 1] per sub-frame; "
+                      "scale that camera's snapshots (or its gain)", UserWarning, stacklevel=3)
+
+
 def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
     """Validate the snapshots and the arrays that go with them against ``rig``.
 
@@ -145,6 +174,11 @@ def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
     if g.shape != expected and (batch is None or batch < 1):
         raise ValueError(f"g must have shape (K, m, n) = {expected} for this rig, or (B, K, m, n) = "
                          f"(B, {', '.join(map(str, expected))}) for a batch of B >= 1 sets, got {g.shape}")
+    m, n = rig.shape
+    sets = f"{batch} sets x " if batch else ""
+    check_host_memory(4 * (batch or 1) * rig.T * m * n, f"rig shape {m}x{n} and T = {rig.T}",
+                      f"the {sets}{rig.T} x {m} x {n} float32 datacube", "choose a smaller grid, fewer sets "
+                      "or a run in tiles (rsocl.scale)")
     valid = None
     if saturation is not None:
         saturation = check.positive("saturation", saturation, "(snapshot units)")
@@ -159,6 +193,7 @@ def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
             warnings.warn(f"saturation = {saturation!r} keeps only snapshot pixels that are 0{which} (the brightest is "
                           f"{float(np.max(g)):.4g}): the reconstruction will be zero; saturation is in snapshot units",
                           UserWarning, stacklevel=3)
+    warn_off_scale(g, rig, valid)
     cube = (rig.T,) + rig.shape
     return Problem(g, rig, valid, _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch), saturation,
                    batch, interpolate)

@@ -51,7 +51,8 @@ def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta
         :data:`rsocl.solver.problem.DEFAULTS`).
     lam, eta : float
         Regularization strength and ADMM penalty, >= 0 (default: the regularizer's
-        ``recommended``, else :data:`~rsocl.solver.problem.DEFAULTS`, for the paper's
+        ``recommended``, else :data:`~rsocl.solver.problem.DEFAULTS` (``eta``
+        :data:`~rsocl.solver.problem.PAPER_ETA` with ``projection="paper"``), for the paper's
         configuration; other rigs scale both by :func:`rsocl.model.curvature.default_scale`, the
         data term's curvature relative to it); ``eta = 0`` runs GAP (denoiser weight ``lam``).
     projection : {"exact", "paper"}

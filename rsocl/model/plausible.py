@@ -1,0 +1,71 @@
+"""Plausibility of a rig before it is built: times in the right unit, sizes that fit this machine.
+
+Times in rsocl are seconds. An exposure above :data:`T_E_PLAUSIBLE` or a row time above
+:data:`T_R_PLAUSIBLE` is far outside what rolling-shutter sensors do and most often a value in µs
+given as seconds: it gets a one-line warning naming the parameter. An exposure spanning more than
+:data:`MAX_WINDOW` sub-frames is refused (every kernel loops over an exposure's sub-frames for
+each pixel). A rig whose own arrays (row maps, exposure windows: :data:`RIG_BYTES_PER_PIXEL` per
+camera and pixel) exceed the host memory is refused before they are allocated
+(:func:`rsocl.common.memory.check_host_memory`, the one host-memory check).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+from rsocl.common.memory import check_host_memory
+
+__all__ = ["T_E_PLAUSIBLE", "T_R_PLAUSIBLE", "MAX_WINDOW", "RIG_BYTES_PER_PIXEL", "warn_unlikely_times",
+           "check_window", "check_rig_memory"]
+
+#: Longest exposure ``t_e`` (seconds) taken without a warning.
+T_E_PLAUSIBLE = 1.0
+#: Longest row readout time ``t_r`` (seconds) taken without a warning.
+T_R_PLAUSIBLE = 1e-3
+#: Most sub-frames one exposure may span, ``t_e / dt``.
+MAX_WINDOW = 2**20
+#: Host bytes a :class:`~rsocl.model.rig.Rig` keeps per camera and reference pixel: its row map
+#: (float64) and exposure windows (int32 index, float64 fraction).
+RIG_BYTES_PER_PIXEL = 20
+
+
+def _in_us(name: str, seconds: float) -> str:
+    """``"did you mean 180 µs (t_e=0.00018)?"``: the value read as µs."""
+    return f"did you mean {seconds:g} µs ({name}={seconds * 1e-6:g})?"
+
+
+def warn_unlikely_times(name: str, t_e: float, t_r: float) -> None:
+    """Warn (``UserWarning``, one line naming ``name.t_e`` or ``name.t_r``) when ``t_e`` (seconds) is
+    above :data:`T_E_PLAUSIBLE` or ``t_r`` above :data:`T_R_PLAUSIBLE`.
+
+    Examples
+    --------
+    >>> warn_unlikely_times("camera", 180.0, 35e-6)     # doctest: +SKIP
+    UserWarning: camera t_e = 180 s is longer than 1 s; times are in seconds: did you mean 180 µs (t_e=0.00018)?
+    """
+    if t_e > T_E_PLAUSIBLE:
+        warnings.warn(f"{name} t_e = {t_e:g} s is longer than {T_E_PLAUSIBLE:g} s; times are in seconds: "
+                      f"{_in_us('t_e', t_e)}", UserWarning, stacklevel=3)
+    if t_r > T_R_PLAUSIBLE:
+        warnings.warn(f"{name} t_r = {t_r:g} s is longer than {T_R_PLAUSIBLE * 1e3:g} ms per row; times are in "
+                      f"seconds: {_in_us('t_r', t_r)}", UserWarning, stacklevel=3)
+
+
+def check_window(name: str, t_e: float, dt: float) -> None:
+    """Refuse an exposure ``t_e`` (seconds) of more than :data:`MAX_WINDOW` sub-frames of ``dt``, naming ``name``."""
+    span = t_e / dt
+    if span > MAX_WINDOW:
+        hint = _in_us(name.rsplit(".", 1)[-1], t_e) if t_e > T_E_PLAUSIBLE else "choose a longer dt"
+        raise ValueError(f"{name} = {t_e:g} s is {span:,.0f} sub-frames of dt = {dt:g} s, more than the "
+                         f"{MAX_WINDOW:,} one exposure may span (rsocl.model.plausible.MAX_WINDOW); times are in "
+                         f"seconds: {hint}")
+
+
+def check_rig_memory(cameras: int, shape, option: str, hint: str = "choose a smaller grid") -> None:
+    """Refuse, naming ``option``, a rig of ``cameras`` cameras on ``shape`` (rows, columns) pixels whose
+    row maps and exposure windows alone (:data:`RIG_BYTES_PER_PIXEL`) exceed the host memory, before
+    it is built."""
+    m, n = shape
+    check_host_memory(cameras * m * n * RIG_BYTES_PER_PIXEL, option,
+                      f"a rig of {cameras} camera(s) on {m} x {n} pixels ({RIG_BYTES_PER_PIXEL} bytes per camera "
+                      "and pixel: row maps and exposure windows)", hint)
