@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device.context import c_type, device_for_queue
+from rsocl.device.context import device_for_queue
+from rsocl.device.program import c_type
 from rsocl.device.launch import voxel_grid
 from rsocl.solver.regularizer import Option, Regularizer
 

@@ -294,12 +294,12 @@ def test_a_kernel_build_is_retried_once_on_a_cache_race(device, monkeypatch):
 
     import pyopencl as cl
 
-    from rsocl.device import context as devmod
+    from rsocl.device import program as progmod
 
-    real_build, real_source = cl.Program.build, devmod.kernel_source
+    real_build, real_source = cl.Program.build, progmod.kernel_source
     calls = []
     text = f"/* {uuid.uuid4().hex} */\n__kernel void nothing(__global float *x) {{ }}\n"
-    monkeypatch.setattr(devmod, "kernel_source", lambda name: text if name == "fake.cl" else real_source(name))
+    monkeypatch.setattr(progmod, "kernel_source", lambda name: text if name == "fake.cl" else real_source(name))
 
     def flaky(fail_times):
         def build(self, *args, **kwargs):
@@ -310,12 +310,12 @@ def test_a_kernel_build_is_retried_once_on_a_cache_race(device, monkeypatch):
         return build
 
     monkeypatch.setattr(cl.Program, "build", flaky(1))
-    devmod._build(device.context, ("fake.cl",), (("REAL", "float"),))
+    progmod.build_program(device.context, ("fake.cl",), (("REAL", "float"),))
     assert len(calls) == 2
     calls.clear()
     monkeypatch.setattr(cl.Program, "build", flaky(2))
     with pytest.raises(cl.RuntimeError, match="clBuildProgram"):
-        devmod._build(device.context, ("fake.cl",), (("REAL", "float"),))
+        progmod.build_program(device.context, ("fake.cl",), (("REAL", "float"),))
     assert len(calls) == 2                              # once more, not again and again
 
 

@@ -3,6 +3,7 @@
 import pytest
 
 from rsocl.device import context as devmod
+from rsocl.device import program as progmod
 
 
 def test_default_device_and_spec_forms(device):
@@ -66,8 +67,8 @@ NVIDIA_LOG = ("(): Warning: Function admm_dual is a kernel, so overriding noinli
 
 
 def test_the_drivers_noinline_notice_is_not_a_meaningful_log():
-    assert devmod.meaningful_log(NVIDIA_LOG) == ""
-    assert devmod.meaningful_log(NVIDIA_LOG + "<kernel>:3:9: warning: unused variable 'x'\n") == \
+    assert progmod.meaningful_log(NVIDIA_LOG) == ""
+    assert progmod.meaningful_log(NVIDIA_LOG + "<kernel>:3:9: warning: unused variable 'x'\n") == \
         "<kernel>:3:9: warning: unused variable 'x'"
 
 
@@ -78,14 +79,14 @@ def _build_with_log(device, monkeypatch, text, log):
 
     import pyopencl as cl
 
-    real = devmod.kernel_source
+    real = progmod.kernel_source
     text = f"/* {uuid.uuid4().hex} */\n{text}"       # a new source each time: no driver's cache of built programs
-    monkeypatch.setattr(devmod, "kernel_source", lambda name: text if name == "fake.cl" else real(name))
+    monkeypatch.setattr(progmod, "kernel_source", lambda name: text if name == "fake.cl" else real(name))
     if log is not None:
         monkeypatch.setattr(cl.Program, "get_build_info", lambda self, dev, what: log)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        devmod._build(device.context, ("fake.cl",), (("REAL", "float"),))
+        progmod.build_program(device.context, ("fake.cl",), (("REAL", "float"),))
     return [w for w in caught if issubclass(w.category, cl.CompilerWarning)]
 
 

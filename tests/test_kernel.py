@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rsocl.device.context import Kernels
+from rsocl.device.program import Kernels
 from rsocl.device.kernel import Kernel
 
 SOURCE = """

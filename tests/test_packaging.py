@@ -32,7 +32,7 @@ IGNORE = shutil.ignore_patterns(".git", "build", "dist", "*.egg-info", "__pycach
 
 # ------------------------------------------------------------------ installed package
 def test_kernels_are_package_resources():
-    from rsocl.device.context import kernel_source
+    from rsocl.device.program import kernel_source
 
     root = resources.files("rsocl.kernels")
     names = {entry.name for entry in root.iterdir()}

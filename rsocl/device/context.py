@@ -1,4 +1,4 @@
-"""OpenCL device selection and program building.
+"""OpenCL device selection (programs are built by :mod:`rsocl.device.program`).
 
 Selection order: an explicit ``device`` argument, the ``RSOCL_DEVICE`` environment variable,
 ``PYOPENCL_CTX``, else the first GPU, else the first CPU. A device spec is ``"P:D"`` (platform and
@@ -10,16 +10,14 @@ from __future__ import annotations
 
 import functools
 import os
-import re
 import warnings
 from dataclasses import dataclass, field
-from importlib import resources
 
 import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.common.validation import positive_int as check_positive
-from rsocl.device.kernel import Kernel
+from rsocl.device.program import Kernels, build_program, c_type, kernel_source
 
 __all__ = ["Device", "Kernels", "get_device", "device_for_queue", "list_devices", "c_type", "kernel_source",
            "NoOpenCLError", "INSTALL_HINT"]
@@ -238,7 +236,7 @@ class Device:
             raise ValueError(f"dtype='float64' needs cl_khr_fp64, which device {self.name!r} does not support")
         cache = self.__dict__.setdefault("_programs", {})
         if key not in cache:
-            cache[key] = _build(self.context, key[0], key[1])
+            cache[key] = build_program(self.context, key[0], key[1])
         return cache[key]
 
 
@@ -252,102 +250,6 @@ def _yes_or_no(name: str, value) -> bool:
     if isinstance(value, str) and value.strip().lower() in _WORDS:
         return _WORDS[value.strip().lower()]
     raise ValueError(f"{name} must be True or False (or 'yes' or 'no'), got {value!r}")
-
-
-def c_type(dtype) -> str:
-    """OpenCL C name of a float32/float64 NumPy dtype (``"float"`` or ``"double"``)."""
-    return "double" if np.dtype(dtype) == np.float64 else "float"
-
-
-def kernel_source(name: str) -> str:
-    """Text of ``kernels/<name>`` from the installed package (wheel or editable)."""
-    return resources.files("rsocl.kernels").joinpath(name).read_text(encoding="utf-8")
-
-
-#: A build-log line that says nothing about the program: NVIDIA's OpenCL (drivers from about 550 on)
-#: writes it for every kernel of every program it compiles (``docs/implementation_notes.md``).
-_DRIVER_NOISE = re.compile(r"Warning: Function \w+ is a kernel, so overriding noinline attribute\. "
-                           r"The function may be inlined when called\.")
-
-
-def meaningful_log(log: str) -> str:
-    """A program's build log without blank lines and the driver's noise (:data:`_DRIVER_NOISE`)."""
-    return "\n".join(line for line in log.splitlines() if line.strip() and not _DRIVER_NOISE.search(line))
-
-
-def _build(context, files, defines):
-    """Build ``common.cl`` + ``files`` with ``defines``; warn only for a build log beyond :data:`_DRIVER_NOISE`."""
-    cl = _cl()
-    lines = []
-    uses_double = any(v == "double" for _, v in defines)
-    if uses_double:
-        lines.append("#pragma OPENCL EXTENSION cl_khr_fp64 : enable")
-    lines += [f"#define {k} {v}" for k, v in defines]
-    lines.append(f"#define REAL_IS_DOUBLE {int(dict(defines).get('REAL') == 'double')}")
-    source = "\n".join(lines) + "\n" + "\n".join(kernel_source(f) for f in ("common.cl",) + tuple(files))
-    for attempt in (1, 2):      # once more on a failed clBuildProgram: processes filling PoCL's kernel cache
-        program = cl.Program(context, source)     # together can read another's half-written entry
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            try:
-                program.build(options=["-cl-std=CL1.2"])
-                break
-            except cl.Error as exc:
-                if attempt == 2 or "clBuildProgram" not in str(exc):
-                    raise
-    if caught:
-        said = any(meaningful_log(program.get_build_info(dev, cl.program_build_info.LOG)) for dev in context.devices)
-        for w in caught:
-            if said or not issubclass(w.category, cl.CompilerWarning):
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return Kernels(program)
-
-
-class Kernels:
-    """A built program whose kernels are created once and reused (``prog.forward(queue, ...)``).
-
-    Each is an :class:`rsocl.device.kernel.Kernel`: called like a ``pyopencl.Kernel``, it sets a by-value
-    argument only when its value changes (:mod:`rsocl.device.kernel`).
-    """
-
-    def __init__(self, program):
-        self.program = program
-        self._kernels = {}
-
-    #: at most this many instances of :meth:`instance` are kept per program (the oldest go first)
-    MAX_INSTANCES = 256
-
-    def instance(self, name: str, key):
-        """A kernel object ``name`` of its own for ``key`` (any hashable), made once.
-
-        A kernel launched with a few recurring sets of by-value arguments (one per pass of a
-        multi-pass transform, say) sets each set once when every set has its own instance: pass
-        the by-value arguments themselves, or what determines them, as ``key``.
-        """
-        instances = self.__dict__.setdefault("_instances", {})
-        k = (name, key)
-        if k not in instances:
-            kernel = self._create(name)
-            if len(instances) >= self.MAX_INSTANCES:
-                del instances[next(iter(instances))]
-            instances[k] = kernel
-        return instances[k]
-
-    def _create(self, name: str) -> Kernel:
-        import pyopencl as cl
-
-        try:
-            return Kernel(cl.Kernel(self.program, name))
-        except cl.Error as exc:
-            raise AttributeError(f"no kernel {name!r} in this program") from exc
-
-    def __getattr__(self, name):
-        if name.startswith("_"):
-            raise AttributeError(name)
-        kernels = self.__dict__["_kernels"]
-        if name not in kernels:
-            kernels[name] = self._create(name)
-        return kernels[name]
 
 
 @functools.lru_cache(maxsize=None)

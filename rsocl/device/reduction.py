@@ -14,7 +14,8 @@ import math
 
 import numpy as np
 
-from rsocl.device.context import c_type, device_for_queue
+from rsocl.device.context import device_for_queue
+from rsocl.device.program import c_type
 
 __all__ = ["sum_sq_diff", "sum_sq_diff_async", "PendingSum"]
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device.context import c_type
+from rsocl.device.program import c_type
 from rsocl.device.launch import batch_launches
 from rsocl.model.interpolation import samples
 
