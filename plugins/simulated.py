@@ -41,27 +41,7 @@ seed so that cameras draw independent noise), ``address`` (ignored, a label),
 device does, :meth:`~rsocl.hardware.backend.CameraBackend.set_exposure` clamps to it,
 renders with the clamped exposure and returns it.
 
-Sensor model (``sensor`` table, each effect off by default)
------------------------------------------------------------
-Applied in this order to the model value ``g`` (scene in [0, 1] gives
-``g`` in ``[0, gain * t_e/dt]``). The *full scale* is ``saturation`` when given,
-else ``t_e/dt`` (the value of a white scene at unit gain: a camera with
-``gain > 1`` saturates on scenes brighter than ``1/gain``).
-
-1. ``trigger_jitter`` (s): each trigger offsets ``t_a`` by a normal draw with
-   this standard deviation (the offset start is clipped at 0: nothing exists
-   before the scene starts).
-2. ``shot_noise_photons``: photo-electrons at full scale; ``g`` is replaced by
-   ``Poisson(g * photons / full_scale) * full_scale / photons``. None = off.
-3. ``read_noise``: standard deviation of additive Gaussian noise, as a
-   fraction of full scale. 0 = off.
-4. ``saturation`` (model units): values above it are clipped to it.
-5. ``bit_depth`` (1..16): quantisation to ``2**bit_depth`` levels over
-   ``[0, full_scale]`` (values clipped to that range first). Frames are then
-   integers ``0..2**bit_depth - 1`` (``Mono8`` up to 8 bits, else ``Mono16``);
-   ``pixel_format = "Float32"`` keeps the quantised values in model units.
-   None = float output (``Float32``), model units.
-6. ``seed``: seed of the noise and jitter generator (with ``index``).
+Sensor model: the ``sensor`` table, each effect off by default (:mod:`rsocl_plugins.simulated_sensor`).
 
 ``Frame.meta`` carries ``set`` (set index), ``frame_id``, ``t_a`` (the offset
 actually used), ``full_scale`` (model value of the largest integer level, so
@@ -83,13 +63,13 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.hardware.backend import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
+from rsocl_plugins.simulated_sensor import SENSOR_KEYS, apply_sensor, sensor_bits
 
 __all__ = ["SimulatedCamera"]
 
 _CONFIG_KEYS = {"scene", "scene_seed", "scene_frames", "scene_sets", "shape", "angle", "row_map", "t_e", "t_r",
                 "t_a", "gain", "dt", "mask", "pixel_format", "sensor", "fail_after", "device", "dtype", "index",
                 "address", "exposure_range"}
-_SENSOR_KEYS = {"shot_noise_photons", "read_noise", "bit_depth", "saturation", "trigger_jitter", "seed"}
 
 
 @functools.lru_cache(maxsize=16)
@@ -207,8 +187,8 @@ class SimulatedCamera(CameraBackend):
         sensor = cfg.get("sensor") or {}
         if not isinstance(sensor, dict):
             raise ValueError(f"{k('sensor')} must be a table of sensor options, got {sensor!r}")
-        check.unknown_keys(self.name, sensor, _SENSOR_KEYS, what="sensor option")
-        s = {key: sensor.get(key) for key in _SENSOR_KEYS}
+        check.unknown_keys(self.name, sensor, SENSOR_KEYS, what="sensor option")
+        s = {key: sensor.get(key) for key in SENSOR_KEYS}
         sk = lambda key: f"{self.name}: sensor[{key!r}]"  # noqa: E731
         if s["shot_noise_photons"] is not None:
             s["shot_noise_photons"] = check.positive(sk("shot_noise_photons"), s["shot_noise_photons"])
@@ -300,30 +280,10 @@ class SimulatedCamera(CameraBackend):
         return np.asarray(op.forward(np.ascontiguousarray(truth[:T])), dtype=np.float64)[0]
 
     def _sensor(self, g):
-        s, fs, rng = self.sensor, self.full_scale, self._rng
-        if s["shot_noise_photons"] is not None:
-            photons = s["shot_noise_photons"]
-            g = rng.poisson(np.clip(g, 0.0, None) * (photons / fs)) * (fs / photons)
-        if s["read_noise"] > 0:
-            g = g + rng.normal(0.0, s["read_noise"] * fs, g.shape)
-        if s["saturation"] is not None:
-            g = np.minimum(g, s["saturation"])
-        bits = self._bits()
-        if self.pixel_format != "Float32" or s["bit_depth"] is not None:
-            levels = 2 ** bits - 1
-            dn = np.rint(np.clip(g, 0.0, fs) / fs * levels)
-            if self.pixel_format == "Float32":
-                return (dn * (fs / levels)).astype(np.float32)
-            return dn.astype(np.uint8 if self.pixel_format == "Mono8" else np.uint16)
-        return g.astype(np.float32)
+        return apply_sensor(g, self.sensor, self.full_scale, self.pixel_format, self._rng)
 
     def _bits(self):
-        bits = self.sensor["bit_depth"]
-        if self.pixel_format == "Mono8":
-            return min(bits or 8, 8)
-        if self.pixel_format == "Mono16":
-            return bits or 16
-        return bits or 32
+        return sensor_bits(self.sensor["bit_depth"], self.pixel_format)
 
     # ------------------------------------------------------------------ hooks
     def _alive(self):
