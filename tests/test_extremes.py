@@ -146,6 +146,7 @@ def test_denormal_intensities(dtype):
     assert np.abs(res.datacube).max() < 1e-30
 
 
+@pytest.mark.filterwarnings("ignore:g. snapshots of camera:UserWarning")  # raw 16-bit counts, on purpose
 def test_sixteen_bit_data_in_float32():
     rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1e-4, t_r=3e-5)
     scale = 65535.0 * rig.exposure_subframes

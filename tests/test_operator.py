@@ -111,6 +111,7 @@ def test_shape_and_dtype_errors(device):
         RollingShutterOperator("rig", device=device)
 
 
+@pytest.mark.filterwarnings("ignore:camera t_e = .* is longer than 1 s:UserWarning")  # a long exposure, on purpose
 def test_datacube_too_large_for_device_is_refused(device):
     # an exposure of twice as many 10 µs sub-frames of 64x64 (float32) as the device's largest
     # buffer holds: 16 GB on PoCL's 1 GiB limit, 42 GB on an H100's 20 GiB

@@ -135,6 +135,7 @@ def test_tv_iterations_do_not_silently_miss_an_instance(problem):
     assert res.params["regularizer_options"]["iterations"] == 4
 
 
+@pytest.mark.filterwarnings("ignore:g. snapshots of camera:UserWarning")  # far off scale, on purpose
 def test_values_beyond_float32_are_refused_by_name(problem):
     rig, truth, g = problem
     with pytest.raises(ValueError, match=r"g holds values up to 1e\+39, beyond float32's largest.*float64"):

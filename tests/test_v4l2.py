@@ -648,6 +648,7 @@ def test_rig_file_address_reaches_the_camera(fake, tmp_path):
     np.testing.assert_array_equal(raw.frames[0][1], image)
 
 
+@pytest.mark.filterwarnings("ignore:camera t_e = 10 s is longer than 1 s:UserWarning")  # the clamp, on purpose
 @pytest.mark.parametrize("t_e, applied", [(10.0, 2047 * EXPOSURE_UNIT), (0.01234, 123 * EXPOSURE_UNIT)])
 def test_the_capture_rig_holds_the_exposure_the_webcam_applied(fake, tmp_path, t_e, applied):
     from rsocl.files.hdf5 import load_capture
