@@ -1,8 +1,8 @@
 """Building OpenCL programs from the kernels shipped with rsocl, and the built program's kernels.
 
 :func:`build_program` joins ``common.cl`` and the named ``kernels/*.cl`` files (found with
-:mod:`importlib.resources`, so wheel and editable installs alike) under ``#define``\ s of the
-real type and options, builds them for OpenCL C 1.2 and returns :class:`Kernels`, whose kernels
+:mod:`importlib.resources`, so wheel and editable installs alike) under ``#define`` lines of
+the real type and options, builds them for OpenCL C 1.2 and returns :class:`Kernels`, whose kernels
 are created once. :meth:`rsocl.device.Device.program` caches one build per device and definitions.
 """
 
