@@ -1,9 +1,6 @@
 """No docstring or comment of the package, its plugins or its kernels reports a measurement (dB,
 timings, speed-ups, GPU models, seeds of a campaign): those live in ``docs/`` pages, which the
 code points to in one line.
-
-The solver and scale layers (``rsocl/solver``, ``rsocl/scale``) are left out (:data:`NOT_YET`)
-until their docstrings are rewritten with the solver's refactor; remove them from it then.
 """
 
 import io
@@ -14,7 +11,6 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-NOT_YET = ("rsocl/solver/", "rsocl/scale/")
 #: Numbers that look like measurements and are conventions: ``(file, match)``.
 CONVENTIONS = {("rsocl/bench/plots.py", "99 dB")}          # where an exact (infinite) PSNR is drawn
 
@@ -50,9 +46,7 @@ def _c_prose(text):
 def _sources():
     for folder, pattern in (("rsocl", "*.py"), ("plugins", "*.py"), ("kernels", "*.cl")):
         for path in sorted((ROOT / folder).rglob(pattern)):
-            rel = path.relative_to(ROOT).as_posix()
-            if not rel.startswith(NOT_YET):
-                yield rel, path
+            yield path.relative_to(ROOT).as_posix(), path
 
 
 @pytest.mark.parametrize("rel", [rel for rel, _ in _sources()])
