@@ -14,12 +14,16 @@ import re
 import warnings
 from dataclasses import dataclass, field
 from importlib import resources
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.common.validation import positive_int as check_positive
 from rsocl.device.kernel import Kernel
+
+if TYPE_CHECKING:
+    import pyopencl as cl
 
 __all__ = ["Device", "Kernels", "get_device", "device_for_queue", "list_devices", "c_type", "kernel_source",
            "NoOpenCLError", "INSTALL_HINT"]
@@ -104,9 +108,9 @@ class Device:
         Lower limits than the device reports, to run as a smaller device would (see :meth:`limited`).
     """
 
-    context: object
-    queue: object
-    device: object
+    context: cl.Context
+    queue: cl.CommandQueue
+    device: cl.Device
     limits: dict = field(default_factory=dict)
 
     def limited(self, *, fp64=None, max_work_group_size=None, local_mem_bytes=None,

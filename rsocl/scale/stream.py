@@ -122,7 +122,8 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
     depth = np.stack([np.minimum(s - span.start, span.stop - 1 - s) for span in spans])   # < 0 outside a span
     owner = depth.argmax(axis=0)
     tile = rig.shape if tile is None else tile
-    datacube, results = None, []
+    datacube: np.ndarray | None = None
+    results: list = []
     for w, ((k0, k1), sub) in enumerate(zip(windows, rigs)):
         if progress:
             print(f"window {w + 1}/{len(windows)}: frames {k0}..{k1 - 1}, sub-frames {spans[w].start}.."
@@ -138,4 +139,5 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
             datacube = np.zeros((T,) + rig.shape, dtype=cube.dtype)
         mine = np.nonzero(owner == w)[0]
         datacube[mine] = cube[np.minimum(mine, cube.shape[0] - 1)]    # past the window's T: its last, held
+    assert datacube is not None  # frame_windows gives at least one window
     return StreamResult(datacube, rig, windows, [(s.start, s.stop) for s in spans], owner, results)

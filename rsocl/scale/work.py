@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from rsocl.device.context import get_device, list_devices
+from rsocl.device.context import Device, get_device, list_devices
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import Tile, core_block, tile_rig
 
@@ -53,7 +53,7 @@ class TileSettings:
     projection: str
     dtype: str
     saturation: float | None
-    device: str | None
+    device: str | Device | None
     start: str = "zeros"
     fill: float | tuple = 0.0
     blend: float = 1.0

@@ -150,7 +150,7 @@ def _choose_unset(prepared: Prepared, checked=False):
         space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
         if not space.tunable and (preset or np.isscalar(space.lam)):
             # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)
-            lam = space.lam if np.isscalar(space.lam) else first_value(settings.lam)
+            lam = space.lam if isinstance(space.lam, (float, int, np.number)) else first_value(settings.lam)
             return Tuning(chosen={**preset, "lam": float(lam)}, fixed=space.fixed, preset=preset)
     if not checked:
         _check_search_fits(prepared)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numbers
 import warnings
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,6 +22,9 @@ from rsocl.solver.admm import own_inverses
 from rsocl.solver.held import HeldSumSquares
 from rsocl.solver.memory import memory_bytes
 
+if TYPE_CHECKING:
+    import pyopencl.array as cla
+
 __all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "per_set_value", "match_batch", "check_problem",
            "check_settings", "check_representable", "stage_on_device"]
 
@@ -28,7 +32,7 @@ __all__ = ["DEFAULTS", "Problem", "Settings", "Staged", "per_set_value", "match_
 #: [0, t_e/dt]): 200 ADMM iterations, ``lam = 0.1``, ``eta = 0.2``, 10 inner TV iterations
 #: (measured in ``benchmarks/solver_settings.py``); :func:`rsocl.solver.reconstruct` tunes ``lam``
 #: from the data unless given.
-DEFAULTS = {"iterations": 200, "lam": 0.1, "eta": 0.2, "tv_iterations": 10}
+DEFAULTS: dict = {"iterations": 200, "lam": 0.1, "eta": 0.2, "tv_iterations": 10}
 
 
 @dataclass(frozen=True)
@@ -56,8 +60,8 @@ class Settings:
     """Checked solver settings; ``lam``/``eta`` are None until :meth:`settled_for` a regularizer."""
 
     iterations: int
-    lam: float | None
-    eta: float | None
+    lam: float | tuple[float, ...] | None
+    eta: float | tuple[float, ...] | None
     tv_iterations: int | None
     projection: str
     tol: float | None
@@ -191,11 +195,11 @@ class Staged:
 
     op: RollingShutterOperator
     solved: slice
-    g: object
-    x0: object = None
-    truth: object = None
-    data_range: float = 1.0
-    held: object = None
+    g: cla.Array
+    x0: cla.Array | None = None
+    truth: cla.Array | None = None
+    data_range: float | np.ndarray = 1.0
+    held: HeldSumSquares | None = None
 
 
 def check_representable(problem: Problem, dtype):

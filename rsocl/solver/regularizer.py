@@ -29,7 +29,7 @@ class Option:
     maximum: float | None = None
 
     def convert(self, name: str, value):
-        kind = type(self.default)
+        kind: type = type(self.default)
         if kind is bool:
             if isinstance(value, str):
                 if value.lower() not in ("1", "0", "true", "false", "yes", "no"):
@@ -94,9 +94,13 @@ class Regularizer:
     dtypes = ("float32", "float64")
     recommended: dict = {}
     batched = False
-    fuses_dual = False
     tunable: dict = {}
     one_snapshot: dict = {}
+
+    @property
+    def fuses_dual(self) -> bool:
+        """Whether the instance has a fused ``denoise_and_update`` (see the class attributes)."""
+        return False
 
     def __init__(self, **options):
         unknown = sorted(set(options) - set(self.options))

@@ -17,10 +17,11 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.common.registry import load
+from rsocl.device.context import Device
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.solver.crossval import LAM_FACTORS, SearchSpace, Tuning
-from rsocl.solver.problem import check_settings
+from rsocl.solver.problem import Settings, check_settings
 from rsocl.solver.regularizer import Regularizer
 
 __all__ = ["Given", "Request", "make_request", "make_regularizer", "check_tune", "check_blend", "chosen_options",
@@ -118,7 +119,7 @@ class Given:
     """What the caller fixed: the regularizer as given (a registry name or an instance), the options
     of a named one, and ``lam`` (None: left to choose) and ``eta`` as checked (one value or one per set)."""
 
-    regularizer: object
+    regularizer: str | Regularizer
     options: dict = field(default_factory=dict)
     lam: float | tuple | None = None
     eta: float | tuple | None = None
@@ -165,12 +166,12 @@ class Request:
 
     rig: Rig
     regularizer: Regularizer
-    settings: object
+    settings: Settings
     given: Given
-    tune: object = True
+    tune: bool | Tuning = True
     blend: float | None = None
     dtype: str = "float32"
-    device: object = None
+    device: str | Device | None = None
     sets: int | None = None
     progress: bool = False
 

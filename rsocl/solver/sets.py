@@ -189,9 +189,9 @@ def _joined(results, batch) -> Result:
         history[key] = np.concatenate(columns, axis=1)
     params = dict(results[0].params)
     for key in ("lam", "eta", "saturated_pixels"):
-        values = [r.params[key] for r in results]
-        if any(isinstance(v, list) for v in values):
-            params[key] = [x for r, v in zip(results, values) for x in (v if isinstance(v, list) else [v] * r.batch)]
+        per_set = [r.params[key] for r in results]
+        if any(isinstance(v, list) for v in per_set):
+            params[key] = [x for r, v in zip(results, per_set) for x in (v if isinstance(v, list) else [v] * r.batch)]
     params["sets"] = sum(r.batch for r in results)
     params["batch"] = batch
     datacube = np.concatenate([r.datacube for r in results])
