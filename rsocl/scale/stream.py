@@ -1,9 +1,10 @@
 """A multi-frame capture (cameras with ``frames`` > 1, period ``t_d``) as a stream of overlapping time windows.
 
 Window ``w`` holds frames ``k0 .. k0 + window - 1`` of every camera (``k0 = w * (window - overlap)``):
-its rig (:meth:`rsocl.model.rig.Rig.frames_window`) is the capture's rig with each camera's trigger offset moved to ``t_a + k0*t_d`` and
-``window`` frames, so every exposure keeps its absolute start ``t_a + r*t_r + k*t_d`` and the
-window's sub-frames are those of the whole capture (time 0 is the same). Each window is an
+its rig (:meth:`rsocl.model.rig.Rig.frames_window`) is the capture's rig with each camera's trigger
+offset moved to ``t_a + k0*t_d`` and ``window`` frames, so every exposure keeps its absolute start
+``t_a + r*t_r + k*t_d`` and the window's sub-frames are those of the whole capture (time 0 is the
+same). Each window is an
 ordinary (tiled) reconstruction that models only the sub-frames its exposures touch
 (:meth:`rsocl.model.rig.Rig.sampled_range`), so the memory of a window does not grow with the
 length of the capture. Where windows overlap (readout continuous: ``t_d`` close to the
