@@ -44,7 +44,7 @@ def _cl():
     return cl
 
 
-def list_devices():
+def list_devices() -> list[tuple[int, int, cl.Platform, cl.Device]]:
     """Every OpenCL device, ``(P, D, platform, device)`` (``"P:D"`` of :func:`get_device`); ``[]`` when none."""
     cl = _cl()
     try:
@@ -368,7 +368,7 @@ def _device_for(spec: str | None) -> Device:
     return found
 
 
-def get_device(device=None) -> Device:
+def get_device(device: str | Device | None = None) -> Device:
     """The OpenCL device to compute on, with its context, in-order queue and program cache.
 
     Parameters

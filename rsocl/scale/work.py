@@ -47,8 +47,8 @@ class TileSettings:
     regularizer: str
     options: dict
     iterations: int
-    lam: float
-    eta: float
+    lam: float | tuple[float, ...]
+    eta: float | tuple[float, ...]
     tv_iterations: int | None
     projection: str
     dtype: str

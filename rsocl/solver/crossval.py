@@ -291,7 +291,7 @@ def _fold(op, g_device, g, block, fit, scored) -> _Fold:
     return _Fold(fit, x0, weights, start_prediction)
 
 
-def applied_blend(tuning) -> float:
+def applied_blend(tuning: Tuning | None) -> float:
     """The blend a run that starts from the interpolation applies with ``tuning`` (a :class:`Tuning` or
     None): the search's, or 1 (the solver's own result) without a search or a recorded blend."""
     return 1.0 if tuning is None or tuning.blend is None else float(tuning.blend)

@@ -44,7 +44,7 @@ class Prepared:
     staged: Staged
 
 
-def prepare(request: Request, problem: Problem, *, start=None) -> Prepared:
+def prepare(request: Request, problem: Problem, *, start: bool | None = None) -> Prepared:
     """Stage ``problem`` (:func:`~rsocl.solver.problem.check_problem`) on the request's device.
 
     Parameters
@@ -68,7 +68,7 @@ def prepare(request: Request, problem: Problem, *, start=None) -> Prepared:
     return Prepared(request, problem, staged)
 
 
-def tune(prepared: Prepared):
+def tune(prepared: Prepared) -> Tuning | None:
     """The values to run with: the request's earlier :class:`~rsocl.solver.crossval.Tuning`, or those
     chosen from the snapshots by the search (on the first set of a batch); None when the request
     does not tune or the caller left nothing to choose.
@@ -85,7 +85,7 @@ def tune(prepared: Prepared):
     return _search_first_set(prepared)
 
 
-def run(prepared: Prepared, tuning=None) -> Result:
+def run(prepared: Prepared, tuning: Tuning | None = None) -> Result:
     """Run the ADMM iterations with ``tuning``'s values (None: the request's) and collect the result.
 
     Values the caller fixed (``lam``, options) win over ``tuning``'s. The run starts from the

@@ -16,6 +16,7 @@ import numpy as np
 
 from rsocl.analysis.metrics import default_data_range
 from rsocl.common import validation as check
+from rsocl.common.hints import ArrayLike
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
@@ -130,7 +131,8 @@ def _cube(name, value, shape, batch=None):
     return value if batch is None else np.broadcast_to(value, (batch,) + shape)
 
 
-def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
+def check_problem(g: ArrayLike, rig: Rig, *, x0: ArrayLike | str | None = None, truth: ArrayLike | None = None,
+                  saturation: float | None = None) -> Problem:
     """Validate the snapshots and the arrays that go with them against ``rig``.
 
     ``g`` is ``(K, m, n)``, or ``(B, K, m, n)`` for a batch of ``B`` sets of the same rig; ``x0`` an
