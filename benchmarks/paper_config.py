@@ -100,7 +100,8 @@ def batches(device, batch, rounds, iterations):
         loop = results["one at a time"]
         worst = max(worst, *(float(np.abs(results[k] - loop).max() / np.abs(loop).max()) for k in names))
     if device.is_cpu:
-        why = f"on this CPU device a batch stays within {CACHE_FRACTION:.0%} of its {device.cache_bytes / 2**20:.0f} MiB cache"
+        why = (f"on this CPU device a batch stays within {CACHE_FRACTION:.0%} of its "
+               f"{device.cache_bytes / 2**20:.0f} MiB cache")
     else:
         why = f"on this device up to {GPU_BATCH_VOXELS / 2**20:.0f} Mi voxels, within its memory"
     lines = [f"## Batches: {batch} sets per call against one set per call", "",

@@ -229,10 +229,12 @@ def page(results, argv):
     if sensor:
         gib = sensor["peak_rss_bytes"] / 2**30
         lines += ["## The whole sensor into a Zarr store", "", _stamp(sensor),
-                  f"{sensor['shape'][0]}x{sensor['shape'][1]}, 4 cameras, t_e = 180 µs, t_r = 26 µs, dt = t_r: T = {sensor['T']} sub-frames "
-                  f"(T_se = {sensor['T_se']}); one datacube is {sensor['T'] * sensor['shape'][0] * sensor['shape'][1] * 4 / 2**30:.1f} GiB in float32.", "",
+                  f"{sensor['shape'][0]}x{sensor['shape'][1]}, 4 cameras, t_e = 180 µs, t_r = 26 µs, dt = t_r: "
+                  f"T = {sensor['T']} sub-frames (T_se = {sensor['T_se']}); one datacube is "
+                  f"{sensor['T'] * sensor['shape'][0] * sensor['shape'][1] * 4 / 2**30:.1f} GiB in float32.", "",
                   f"- command: `{sensor['command']}` ({sensor['iterations']} iterations, so that the whole run "
-                  f"fits in under an hour on this 2-core CPU; the PSNR below is that of {sensor['iterations']} iterations, not of a "
+                  f"fits in under an hour on this 2-core CPU; the PSNR below is that of {sensor['iterations']} "
+                  "iterations, not of a "
                   "converged reconstruction)",
                   f"- {sensor['tasks']} tasks, store complete: {sensor['complete']}, "
                   f"store on disk {sensor['store_bytes'] / 2**30:.2f} GiB",

@@ -72,7 +72,8 @@ def main(argv=None):
              f"videos by the benchmark protocol of docs/model.md; {args.iterations} iterations; rsocl's defaults "
              f"{DEFAULTS} unless the row says otherwise; TV with temporal weight 3 (the `tv` plugin's default). "
              "PSNR in dB with peak 1; 'best (iteration)' is the highest PSNR over the iterations and where it "
-             "was reached; ms/iteration is the whole call's wall time per iteration (kernel builds excluded, PSNR tracking included).", "",
+             "was reached; ms/iteration is the whole call's wall time per iteration (kernel builds excluded, "
+             "PSNR tracking included).", "",
              "| video | settings | PSNR @200 | PSNR @last | best (iteration) | ms/iteration |",
              "|---|---|---|---|---|---|"]
     print("\n".join(page), flush=True)

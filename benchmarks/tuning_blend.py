@@ -126,7 +126,7 @@ def main(argv=None):
                 skipped.add(scene)
                 continue
             name = f"{key}|{scene}|{photons}|{ITERATIONS}"
-            r = dict(cache.get(name, lambda: run_case(rig, scene, photons, args.device)), photons=photons)
+            r = dict(cache.get(name, lambda rig=rig, scene=scene, photons=photons: run_case(rig, scene, photons, args.device)), photons=photons)
             results.append(r)
             what = "paper array" if GROUPS[group][0] is None else f"{key}, {rig.n_channels} cameras"
             detail.append(f"| {group} | {what}, {rig.shape[0]}x{rig.shape[1]} | {scene} | "

@@ -58,7 +58,8 @@ def main(argv=None):
                         None if argv is None else [__file__, *argv])
     page += [__doc__.split("\n\n", 1)[1].strip(), "",
              f"{args.iterations} ADMM iterations, float32, t_e = 180 µs, t_r = 35 µs.", "",
-             "| cameras | grid | T | noise | interp3d | fixed | tuned | tuned - fixed | tuned - interp3d | chosen weight, lam |",
+             "| cameras | grid | T | noise | interp3d | fixed | tuned | tuned - fixed | tuned - interp3d "
+             "| chosen weight, lam |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     to_fixed, to_interp = [], []
     for cameras in CAMERAS:

@@ -1,4 +1,4 @@
-"""rsocl's TV kernels against the same loops compiled as C with OpenMP: how far the plain path is from this CPU's ceiling.
+"""rsocl's TV kernels against the same loops compiled as C with OpenMP: the plain path against this CPU's ceiling.
 
 Each ADMM-TV iteration of rsocl is mostly its inner Chambolle iterations: one ``tv_primal`` and one
 ``tv_dual`` launch each (``kernels/tv.cl``, one work item per voxel). ``tv_ceiling.c`` holds the
@@ -181,7 +181,8 @@ def main(argv=None):
                  f"is {args.chain} TV iterations (primal, dual) back to back, as a denoising call issues them (rsocl: "
                  "enqueued, then one wait); time per iteration: the median over "
                  f"{args.rounds} calls, the ways interleaved call by call. GB/s from the {per_voxel} bytes per voxel an "
-                 f"iteration must move (primal {BYTES['tv_primal']}, dual {BYTES['tv_dual']}). Largest difference: output and dual after one iteration "
+                 f"iteration must move (primal {BYTES['tv_primal']}, dual {BYTES['tv_dual']}). Largest difference: "
+                 "output and dual after one iteration "
                  "from the same input, rsocl against C.", "",
                  "| datacube | rsocl (ms/iteration) | " + " | ".join(f"C, {t} thread{'s' if t > 1 else ''}"
                                                               for t in threads)

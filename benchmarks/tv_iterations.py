@@ -158,7 +158,8 @@ def main(argv=None):
                 skipped.add(scene)
                 continue
             name = f"{key}|{scene}|{photons}|{ITERATIONS}|{','.join(map(str, counts))}"
-            r = cache.get(name, lambda: run_case(rig, scene, photons, modes, counts, args.device))
+            r = cache.get(name, lambda rig=rig, scene=scene, photons=photons, modes=modes:
+                          run_case(rig, scene, photons, modes, counts, args.device))
             noise = "none" if photons is None else f"{photons:g}"
             for mode in modes:
                 results[mode].setdefault(noise, []).append(r)

@@ -32,8 +32,7 @@ def convert_buffer(data, pixel_format: str, width: int, height: int, x_padding: 
     """
     if pixel_format not in PIXEL_FORMATS:
         raise CameraError(f"pixel format {pixel_format!r} is not supported; use one of {list(PIXEL_FORMATS)}")
-    _, dtype, _ = PIXEL_FORMATS[pixel_format]
-    dtype = np.dtype(dtype)
+    dtype = np.dtype(PIXEL_FORMATS[pixel_format][1])
     width, height, x_padding = int(width), int(height), int(x_padding)
     row = width * dtype.itemsize
     stride = row + max(x_padding, 0)

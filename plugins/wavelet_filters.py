@@ -11,7 +11,7 @@ __all__ = ["WAVELETS", "MODES", "filters", "axis_levels", "Plan"]
 # Decomposition filters of PyWavelets (pywt.Wavelet(name).dec_lo / dec_hi, PyWavelets 1.8),
 # written as the shortest decimals that round-trip to the same doubles. The
 # reconstruction filters are their reverses (rec_lo = dec_lo[::-1], rec_hi = dec_hi[::-1]).
-WAVELETS = {
+WAVELETS: dict[str, dict[str, tuple[float, ...]]] = {
     "haar": {
         "dec_lo": (0.7071067811865476, 0.7071067811865476),
         "dec_hi": (-0.7071067811865476, 0.7071067811865476),

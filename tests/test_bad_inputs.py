@@ -24,7 +24,7 @@ import importlib.util
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import Callable, Sequence
 
 import pytest
 
@@ -37,9 +37,9 @@ class Bad:
 
     id: str
     names: Sequence[str]
-    argv: Optional[Sequence[str]] = None
-    api: Optional[Callable] = None
-    setup: Optional[Callable] = None
+    argv: Sequence[str] | None = None
+    api: Callable | None = None
+    setup: Callable | None = None
     errors: tuple = (ValueError,)
     rc: int = 2
 

@@ -8,7 +8,10 @@ from rsocl.hardware import calibration as cal
 from rsocl.hardware.calibration.plausibility import (check_registration, check_rotation, fit_summary,
                                                      leave_one_out_errors)
 
-from test_calibration import MARKERS, SHAPE, calibration_files, camera_homography  # noqa: F401 (fixture)
+import test_calibration
+from test_calibration import MARKERS, SHAPE, camera_homography
+
+calibration_files = test_calibration.calibration_files      # the fixture, shared with test_calibration.py
 
 ANGLES = (0, 90, 180, 270)
 ORIGINS = [np.zeros(2), np.array([6.0, 4.0]), np.zeros(2), np.zeros(2)]      # camera 1 has a sensor ROI

@@ -62,7 +62,7 @@ def test_capture_round_trip(tmp_path, rig, snapshots, truth):
     np.testing.assert_array_equal(cap.snapshots, snapshots)
     np.testing.assert_array_equal(cap.truth, truth)
     assert cap.meta == {"scene": "builtin", "sigma": 0.01, "n": 3, "list": [1, 2.5], "none": None}
-    with pytest.raises(Exception):
+    with pytest.raises(AttributeError):                      # dataclasses.FrozenInstanceError
         cap.meta = {}                                         # frozen dataclass
 
 

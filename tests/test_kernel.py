@@ -71,7 +71,7 @@ def test_offsets_wait_for_and_attributes(program, device):
     np.testing.assert_array_equal(buf.get(), [3, 3, 3, 3, 2, 2, 2, 2])
     assert program.fill.function_name == "fill" and "fill" in repr(program.fill)
     with pytest.raises(AttributeError):
-        program.fill._private
+        _ = program.fill._private
 
 
 def test_array_arguments_are_set_on_every_call(device):

@@ -16,7 +16,7 @@ def test_exact_launches_cover_the_extent_once(extent):
     assert covered == list(range(extent))
     assert len(launches) == 1 or launches[0][2] == 64        # a remainder launch only after full groups
     # every voxel of a (T, m, n) grid exactly once: split rows, or blocks of whole rows
-    for gsize, lsize, offset in launch.voxel_launches(3, 2, extent):
+    for gsize, lsize, _offset in launch.voxel_launches(3, 2, extent):
         assert gsize[1:] == (2, 3) and lsize[2] == 1 and gsize[0] % lsize[0] == 0
         assert lsize[1] == 1 or lsize[0] == extent
 

@@ -17,7 +17,8 @@ CONVENTIONS = {("rsocl/bench/plots.py", "99 dB")}          # where an exact (inf
 #: What a measurement looks like in prose.
 MEASUREMENT = re.compile("|".join([
     r"[-+]?\d+(\.\d+)? ?dB\b",                                            # a PSNR or a gain in dB
-    r"\b(takes?|took|ran|runs|costs?|about)\s+(about\s+)?\d+(\.\d+)?(-\d+(\.\d+)?)? ?(ms|µs|us|s)\b",  # a timing
+    # a timing
+    r"\b(takes?|took|ran|runs|costs?|about)\s+(about\s+)?\d+(\.\d+)?(-\d+(\.\d+)?)? ?(ms|µs|us|s)\b",
     r"\d+(\.\d+)?(-\d+(\.\d+)?)?x (the|slower|faster)\b",                 # a speed-up
     r"\d+(\.\d+)?(-\d+(\.\d+)?)? ?% (faster|slower|more|less|of the \w+ time)",
     r"\bH[12]00\b",                                                       # a GPU's figures

@@ -234,7 +234,7 @@ def test_levels_option_caps_and_rule():
     for flen in (2, 4, 8):
         for length in range(1, 130):
             L = axis_levels(length, flen)
-            ok = lambda lv: length % 2 ** lv == 0 and length // 2 ** (lv - 1) >= flen  # noqa: E731
+            ok = lambda lv, length=length, flen=flen: length % 2 ** lv == 0 and length // 2 ** (lv - 1) >= flen  # noqa: E731
             assert (L == 0 or ok(L)) and not ok(L + 1), (length, flen, L)
 
 

@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.hints import ArrayLike
 
 __all__ = ["psnr", "ssim", "mse", "default_data_range"]
 
@@ -21,7 +22,7 @@ __all__ = ["psnr", "ssim", "mse", "default_data_range"]
 SSIM_WINDOW = 7
 
 
-def _pair(estimate, truth):
+def _pair(estimate, truth) -> tuple[np.ndarray, np.ndarray]:
     estimate = check.finite_array("estimate", estimate)
     truth = check.finite_array("truth", truth)
     if estimate.shape != truth.shape:
@@ -66,7 +67,7 @@ def mse(estimate, truth) -> float:
     return float(np.mean(np.square(diff)))
 
 
-def psnr(estimate, truth, *, data_range=None) -> float:
+def psnr(estimate: ArrayLike, truth: ArrayLike, *, data_range: float | None = None) -> float:
     """Peak signal-to-noise ratio of ``estimate`` against ``truth``, dB.
 
     ``PSNR = 10 log10(data_range**2 / MSE)`` over all elements (sub-frames,
@@ -116,7 +117,7 @@ def _win_size(m: int, n: int):
     return side if side >= 3 else None
 
 
-def ssim(estimate, truth, *, data_range=None):
+def ssim(estimate: ArrayLike, truth: ArrayLike, *, data_range: float | None = None) -> tuple[float, np.ndarray]:
     """Structural similarity, per sub-frame and averaged.
 
     Each sub-frame is compared as a 2-D image with

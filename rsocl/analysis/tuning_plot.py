@@ -72,7 +72,7 @@ def tuning_plot(path, record, *, dpi=100) -> Path:
     best = min(candidates, key=lambda c: c["score"])
     for i, name in enumerate(names, 1):
         ax = figure.add_subplot(1, len(names), i)
-        groups = {}                       # one line per setting of the other parameters
+        groups: dict = {}                 # one line per setting of the other parameters
         for c in candidates:
             key = tuple((k, c[k]) for k in chosen if k != name and k in c)
             groups.setdefault(key, []).append((c[name], c["score"]))

@@ -275,6 +275,7 @@ def snapshot_montage(path, snapshots, *, titles=None, rig=None, cmap="gray", dpi
         ax.set_title(titles[index], fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
+    assert image is not None  # at least one panel (K >= 1, checked above) draws an image
     figure.colorbar(image, ax=axes.ravel().tolist(), shrink=0.85, label="intensity")
     return _save_figure(path, figure, dpi)
 
@@ -352,5 +353,6 @@ def datacube_montage(path, datacube, *, every=None, truth=None, max_columns=8, c
                     ax.set_title(f"s = {chunk[j]}", fontsize=9)
                 if j == 0 and label is not None:
                     ax.set_ylabel(label, fontsize=9)
+    assert image is not None  # at least one panel (K >= 1, checked above) draws an image
     figure.colorbar(image, ax=axes.ravel().tolist(), shrink=0.85, label="intensity")
     return _save_figure(path, figure, dpi)

@@ -153,7 +153,7 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: 
     # a sub-frame of k*t_r integrates k times the light of one of t_r: scale the snapshots so
     # that the datacube stays in [0, 1] (the scale rsocl's lam and eta assume, README)
     g_scaled = g * (ref.dt / rig.dt)
-    kwargs = dict(regularizer=point.regularizer, lam=None if point.tune else point.lam, eta=point.eta,
+    kwargs: dict = dict(regularizer=point.regularizer, lam=None if point.tune else point.lam, eta=point.eta,
                   tv_iterations=point.tv_iterations, device=point.device, dtype=point.dtype, tune=point.tune)
     warm = ("warm",) + tuple(v for f, v in asdict(point).items() if f not in ("scene", "iterations", "lam", "eta"))
     if warm not in cache:

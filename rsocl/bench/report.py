@@ -101,7 +101,8 @@ def tradeoff_lines(result: BenchResult):
             continue
         lines.append(
             f"- **dt = {p.dt_factor:g}·t_r = {row['dt_us']:.0f} µs** (T {base['T']} → {row['T']}): "
-            f"{row['seconds']:.2f} s instead of {base['seconds']:.2f} s (×{_ratio(row['seconds'], base['seconds']):.2f}), "
+            f"{row['seconds']:.2f} s instead of {base['seconds']:.2f} s "
+            f"(×{_ratio(row['seconds'], base['seconds']):.2f}), "
             f"memory ×{_ratio(row['peak_device_memory_bytes'], base['peak_device_memory_bytes']):.2f}; "
             f"PSNR {_num(row['psnr'], '.2f')} dB vs {_num(base['psnr'], '.2f')} dB "
             f"({row['psnr'] - base['psnr']:+.2f} dB against the same dt = t_r ground truth), "
@@ -115,7 +116,8 @@ def tradeoff_lines(result: BenchResult):
         lines.append(
             f"- **ROI {p.roi_size}×{p.roi_size}** (centred crop of {p.shape}×{p.shape}, "
             f"{row['subframes_evaluated']} sub-frames sampled instead of {base['subframes_evaluated']}): "
-            f"{row['seconds']:.2f} s instead of {base['seconds']:.2f} s (×{_ratio(row['seconds'], base['seconds']):.2f}), "
+            f"{row['seconds']:.2f} s instead of {base['seconds']:.2f} s "
+            f"(×{_ratio(row['seconds'], base['seconds']):.2f}), "
             f"memory ×{_ratio(row['peak_device_memory_bytes'], base['peak_device_memory_bytes']):.2f}; "
             f"PSNR in the crop {_num(row['psnr'], '.2f')} dB vs {_num(full, '.2f')} dB for the full-ROI "
             f"reconstruction over the same pixels and sub-frames{diff}.")

@@ -45,10 +45,10 @@ SWEEPS = {"cameras": "cameras", "iterations": "iterations", "tv_iterations": "tv
           "regularizer": "regularizer", "dtype": "dtype", "dt": "dt_factor", "roi": "roi", "device": "device",
           "tune": "tune"}
 #: Sweep values of the full run; iterations and roi as fractions of the default point's.
-FULL = {"cameras": [1, 2, 3, 4, 5, 6, 7, 8], "iterations": [0.125, 0.25, 0.5, 1.0, 1.5],
+FULL: dict[str, list] = {"cameras": [1, 2, 3, 4, 5, 6, 7, 8], "iterations": [0.125, 0.25, 0.5, 1.0, 1.5],
         "tv_iterations": [2, 5, 10, 20], "dt": [1, 2, 3, 4], "roi": [0.5, 0.75, 1.0]}
 #: The ``--quick`` run: fewer values, the sweeps that show the trade.
-QUICK = {"cameras": [1, 2, 4, 8], "iterations": [0.1, 0.25, 0.5, 1.0], "tv_iterations": [2, 5, 10],
+QUICK: dict[str, list] = {"cameras": [1, 2, 4, 8], "iterations": [0.1, 0.25, 0.5, 1.0], "tv_iterations": [2, 5, 10],
          "dt": [1, 2, 4], "roi": [0.5, 0.75, 1.0], "regularizer": ["tv"], "tune": [False, True]}
 
 
@@ -101,10 +101,10 @@ def parse_sweep(text: str):
         return name, None
     if name == "tune":
         flags = {"0": False, "false": False, "no": False, "1": True, "true": True, "yes": True}
-        values = [v.strip().lower() for v in values.split(",") if v.strip()]
-        if any(v not in flags for v in values):
-            raise ValueError(f"--sweep tune: values must be true/false (or 1/0), got {values!r}")
-        return name, [flags[v] for v in values]
+        words = [v.strip().lower() for v in values.split(",") if v.strip()]
+        if any(v not in flags for v in words):
+            raise ValueError(f"--sweep tune: values must be true/false (or 1/0), got {words!r}")
+        return name, [flags[v] for v in words]
     kind = {"cameras": int, "iterations": int, "tv_iterations": int, "roi": int, "dt": float}.get(name, str)
     try:
         return name, [kind(v.strip()) for v in values.split(",") if v.strip()]
@@ -157,7 +157,7 @@ def build_points(default: BenchPoint, sweeps=None, *, quick=False, baseline=True
     notes : list of str
         Values left out (a broken regularizer, a ROI larger than the grid, no fp64, ...).
     """
-    notes = []
+    notes: list[str] = []
     if sweeps is None:
         sweeps = list(QUICK) if quick else list(SWEEPS)
     requested = []

@@ -372,7 +372,7 @@ def cmd_calibrate(args) -> int:
         png = output_path(Path(args.png) if args.png else out.with_name(out.stem + "-calibration.png"), "--png",
                           inputs=reads + (("--rig", args.rig), ("--out", out)))
     rigfile = load_rig_file(args.rig)
-    updates = [{} for _ in rigfile.cameras]
+    updates: list[dict] = [{} for _ in rigfile.cameras]
     overlay = _register(args, rigfile, updates) if args.frames is not None else None
     if args.flicker is not None:
         _row_times(args, rigfile, updates)

@@ -29,7 +29,7 @@ class PluginInfo:
     value: str
     distribution: str
     version: str
-    entry_point: object
+    entry_point: metadata.EntryPoint
 
     def load(self):
         """Import the plugin and check that it is a class of its group's base (:data:`BASES`)."""
@@ -39,8 +39,8 @@ class PluginInfo:
             raise self._broken(exc) from exc
         base = _base(self.group)
         if not (isinstance(obj, type) and issubclass(obj, base)):
-            exc = TypeError(f"{self.value} is {obj!r}, not a subclass of {base.__module__}.{base.__name__}")
-            raise self._broken(exc) from exc
+            wrong = TypeError(f"{self.value} is {obj!r}, not a subclass of {base.__module__}.{base.__name__}")
+            raise self._broken(wrong) from wrong
         return obj
 
     def _broken(self, exc) -> "PluginError":

@@ -12,12 +12,16 @@ import functools
 import os
 import warnings
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.common.validation import positive_int as check_positive
 from rsocl.device.program import Kernels, build_program, c_type, kernel_source
+
+if TYPE_CHECKING:
+    import pyopencl as cl
 
 __all__ = ["Device", "Kernels", "get_device", "device_for_queue", "list_devices", "c_type", "kernel_source",
            "NoOpenCLError", "INSTALL_HINT"]
@@ -38,7 +42,7 @@ def _cl():
     return cl
 
 
-def list_devices():
+def list_devices() -> list[tuple[int, int, cl.Platform, cl.Device]]:
     """Every OpenCL device, ``(P, D, platform, device)`` (``"P:D"`` of :func:`get_device`); ``[]`` when none."""
     cl = _cl()
     try:
@@ -102,9 +106,9 @@ class Device:
         Lower limits than the device reports, to run as a smaller device would (see :meth:`limited`).
     """
 
-    context: object
-    queue: object
-    device: object
+    context: cl.Context
+    queue: cl.CommandQueue
+    device: cl.Device
     limits: dict = field(default_factory=dict)
 
     def limited(self, *, fp64=None, max_work_group_size=None, local_mem_bytes=None,
@@ -266,7 +270,7 @@ def _device_for(spec: str | None) -> Device:
     return found
 
 
-def get_device(device=None) -> Device:
+def get_device(device: str | Device | None = None) -> Device:
     """The OpenCL device to compute on, with its context, in-order queue and program cache.
 
     Parameters

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.hints import ArrayLike, PathLike
 from rsocl.files.atomic import atomic_path
 from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, json_attr, open_checked, read_array, read_rig, \
     new_file, real_dataset, write_header
@@ -103,7 +104,8 @@ def _optional(h5, name, source, tail=None):
 
 
 # ---------------------------------------------------------------------- capture
-def save_capture(path, snapshots, rig, *, truth=None, attrs=None) -> Path:
+def save_capture(path: PathLike, snapshots: ArrayLike, rig: Rig, *, truth: ArrayLike | None = None,
+                 attrs: dict | None = None) -> Path:
     """Write a capture (snapshots and the rig that took them) to one HDF5 file, atomically.
 
     Parameters
@@ -163,7 +165,7 @@ def save_capture(path, snapshots, rig, *, truth=None, attrs=None) -> Path:
     return path
 
 
-def load_capture(path, set_index=None) -> Capture:
+def load_capture(path: PathLike, set_index: int | None = None) -> Capture:
     """Read a file written by :func:`save_capture` or ``rsocl capture``: one set of snapshots.
 
     Parameters
@@ -265,7 +267,8 @@ def load_snapshot_sets(path) -> np.ndarray | None:
 
 
 # ---------------------------------------------------------------------- reconstruction
-def save_reconstruction(path, datacube, rig, *, params=None, history=None, truth=None) -> Path:
+def save_reconstruction(path: PathLike, datacube: ArrayLike, rig: Rig, *, params: dict | None = None,
+                        history: dict | None = None, truth: ArrayLike | None = None) -> Path:
     """Write a reconstruction (datacube, rig, solver parameters, traces) to one HDF5 file, atomically.
 
     Parameters
@@ -344,7 +347,7 @@ def save_reconstruction(path, datacube, rig, *, params=None, history=None, truth
     return path
 
 
-def load_reconstruction(path) -> Reconstruction:
+def load_reconstruction(path: PathLike) -> Reconstruction:
     """Read a file written by :func:`save_reconstruction`.
 
     Parameters

@@ -260,7 +260,7 @@ def save_rigfile(path, rigfile: RigFile) -> Path:
         if cam["config"]:
             table["config"] = cam["config"]
         tables.append(table)
-    rig = {"shape": list(rigfile.shape)}
+    rig: dict = {"shape": list(rigfile.shape)}
     if rigfile.dt is not None:
         rig["dt"] = rigfile.dt
     rig["mask"] = rigfile.mask

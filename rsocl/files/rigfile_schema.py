@@ -66,7 +66,7 @@ def check_rig_table(rig) -> dict:
         raise ValueError(f"[rig] has unknown key(s) {unknown}; known: {list(RIG_KEYS)}")
     if "shape" not in rig:
         raise ValueError("rig.shape = [m, n] (rows, columns of the reference ROI, pixels) is required")
-    out = {"shape": tuple(_int_list("rig.shape", rig["shape"], 2, (1, 1)))}
+    out: dict = {"shape": tuple(_int_list("rig.shape", rig["shape"], 2, (1, 1)))}
     out["dt"] = None if rig.get("dt") is None else check.positive("rig.dt", rig["dt"], "seconds")
     out["mask"] = check.choice("rig.mask", rig.get("mask", "exact"), {"exact", "binary"})
     return out

@@ -99,6 +99,6 @@ def dumps_toml(data: dict) -> str:
     """
     if not isinstance(data, dict):
         raise ValueError(f"data must be a dict, got {type(data).__name__}")
-    lines = []
+    lines: list[str] = []
     _write_table(lines, None, data)
     return "\n".join(lines) + "\n"

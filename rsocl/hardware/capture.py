@@ -170,7 +170,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
 
     writer = CaptureWriter(partial, rig, rigfile, labels, sets, timeout)
     where = {"camera": None, "set": None, "phase": "open"}
-    failure = None
+    failure: dict | None = None
     interrupted = None
     try:
         try:

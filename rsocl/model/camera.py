@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.hints import ArrayLike
 from rsocl.model.plausible import warn_unlikely_times
 
 __all__ = ["Camera", "SNAP"]
@@ -69,7 +70,8 @@ class Camera:
            [0., 1., 2.]])
     """
 
-    def __init__(self, angle=0.0, t_e=None, t_r=None, t_a=0.0, t_d=None, gain=1.0, frames=1, row_map=None):
+    def __init__(self, angle: float = 0.0, t_e: float | None = None, t_r: float | None = None, t_a: float = 0.0,
+                 t_d: float | None = None, gain: float = 1.0, frames: int = 1, row_map: ArrayLike | None = None) -> None:
         if t_e is None:
             raise ValueError("t_e (exposure time, seconds) is required")
         if t_r is None:
@@ -94,7 +96,7 @@ class Camera:
                 raise ValueError(f"row_map values must be >= 0 rows, got minimum {row_map.min()!r}")
         self.row_map = row_map
 
-    def rows(self, shape) -> np.ndarray:
+    def rows(self, shape: tuple[int, int]) -> np.ndarray:
         """Camera row ``r(y, x)`` (rows, float64, first row read is 0) for a ROI of ``shape``."""
         m, n = shape
         if self.row_map is not None:

@@ -8,16 +8,21 @@ the baseline of ``rsocl bench`` and the warm start of :func:`rsocl.solver.recons
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.hints import ArrayLike
 from rsocl.model.curvature import binary_span
+
+if TYPE_CHECKING:
+    from rsocl.model.rig import Rig
 
 __all__ = ["interp3d", "samples", "evaluate", "Samples"]
 
 
-def interp3d(g, rig, valid=None) -> np.ndarray:
+def interp3d(g: ArrayLike, rig: Rig, valid: ArrayLike | None = None) -> np.ndarray:
     """The 3-D interpolation baseline: a ``(T, m, n)`` datacube from the snapshots alone.
 
     Snapshot pixel ``g[k, y, x]`` divided by its gain and exposure length (``t_e/dt``

@@ -8,12 +8,19 @@ its exposure window is visited.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.device.context import c_type, get_device
+from rsocl.common.hints import ArrayLike, DTypeLike
+from rsocl.device.context import Device, c_type, get_device
+from rsocl.device.kernel import Kernel
 from rsocl.device.launch import block_grid, element_launches
 from rsocl.model.rig import Rig
+
+if TYPE_CHECKING:
+    import pyopencl.array as cla
 
 __all__ = ["RollingShutterOperator", "geometry_bytes"]
 
@@ -75,7 +82,8 @@ class RollingShutterOperator:
     True
     """
 
-    def __init__(self, rig: Rig, device=None, dtype="float32", subframes=None):
+    def __init__(self, rig: Rig, device: str | Device | None = None, dtype: DTypeLike = "float32",
+                 subframes: slice | None = None) -> None:
         import pyopencl.array as cla
 
         if not isinstance(rig, Rig):
@@ -107,15 +115,15 @@ class RollingShutterOperator:
         self.program = self.device.program(
             ["operator.cl"], REAL=c_type(self.dtype), ACC=c_type(self.device.acc_dtype),
             MASK_BINARY=int(rig.mask == "binary"), **self.tile_defines)
-        self._psi = None
+        self._psi: cla.Array | None = None
 
     @property
-    def domain_shape(self):
+    def domain_shape(self) -> tuple[int, int, int]:
         """``(T, m, n)``."""
         return (self.T,) + self.rig.shape
 
     @property
-    def range_shape(self):
+    def range_shape(self) -> tuple[int, int, int]:
         """``(K, m, n)``."""
         return (self.K,) + self.rig.shape
 
@@ -136,18 +144,18 @@ class RollingShutterOperator:
             return x, True
         return cla.to_device(self.queue, np.ascontiguousarray(x, dtype=self.dtype)), False
 
-    def empty(self, shape):
+    def empty(self, shape: tuple[int, ...]) -> cla.Array:
         """An uninitialised device array of this operator's dtype."""
         import pyopencl.array as cla
 
         return cla.empty(self.queue, shape, self.dtype)
 
     @property
-    def tile_defines(self):
+    def tile_defines(self) -> dict[str, int]:
         """Program definitions of the block kernels (``TILE_W`` pixels by ``TILE_R`` rows)."""
         return {"TILE_W": self.vector_width, "TILE_R": self.block_rows}
 
-    def block_grid(self, channels=1, kernels=()):
+    def block_grid(self, channels: int = 1, kernels: tuple = ()) -> tuple[tuple[int, ...], tuple[int, ...]]:
         """Global and local sizes of a kernel with one work item per block of pixels (and channel).
 
         Work groups stay within the device's limits and those of this operator's block kernels and
@@ -158,11 +166,11 @@ class RollingShutterOperator:
         return block_grid(m, n, self.vector_width, self.block_rows, channels, group=group,
                           max_items=self.device.max_work_item_sizes)
 
-    def element_launches(self, count, kernel):
+    def element_launches(self, count: int, kernel: Kernel) -> list:
         """:func:`rsocl.device.launch.element_launches` within the device's and ``kernel``'s limits."""
         return element_launches(count, self.device.group_limit(kernel, cap=64))
 
-    def sets_of(self, array, per_set) -> int:
+    def sets_of(self, array: cla.Array, per_set: tuple[int, ...]) -> int:
         """How many sets a device array holds: its size over ``per_set`` (a domain or range shape)."""
         return array.size // int(np.prod(per_set))
 
@@ -174,14 +182,14 @@ class RollingShutterOperator:
         return (self.first.data, self.frac.data, self.length.data, self.gain.data)
 
     # ------------------------------------------------------------------ H, Hᵀ
-    def forward_into(self, f, out):
+    def forward_into(self, f: cla.Array, out: cla.Array) -> cla.Array:
         """``out = H f`` for device arrays (no checks, no allocation); a batch in one launch."""
         sets = self.sets_of(f, self.domain_shape)
         self.program.forward(self.queue, *self.block_grid(self.K * sets), f.data, out.data, *self._geometry(),
                              np.int32(self.K), np.int32(self.T), np.int32(self.L), *self._shape_args())
         return out
 
-    def adjoint_into(self, g, out, base=None):
+    def adjoint_into(self, g: cla.Array, out: cla.Array, base: cla.Array | None = None) -> cla.Array:
         """``out = base + Hᵀ g`` (``base`` may be None) for device arrays; a batch in one launch."""
         import pyopencl as cl
 
@@ -189,26 +197,27 @@ class RollingShutterOperator:
             for gsize, lsize, offset in self.element_launches(out.size, self.program.zero):
                 self.program.zero(self.queue, gsize, lsize, out.data, global_offset=offset)
         elif base is not out:
-            cl.enqueue_copy(self.queue, out.data, base.data)
+            # the ignore: pyopencl's stub types Array.data as an optional holder; an allocated array's is a Buffer
+            cl.enqueue_copy(self.queue, out.data, base.data)  # type: ignore[arg-type]
         self.program.adjoint_scatter(self.queue, *self.block_grid(self.sets_of(g, self.range_shape)), g.data,
                                      out.data, *self._geometry(), np.int32(self.K), np.int32(self.T),
                                      np.int32(self.L), *self._shape_args())
         return out
 
-    def forward(self, f):
+    def forward(self, f: ArrayLike | cla.Array) -> np.ndarray | cla.Array:
         """Snapshots ``H f``: ``(T, m, n)`` -> ``(K, m, n)`` (or a batch, ``(B, T, m, n)`` -> ``(B, K, m, n)``)."""
         f_dev, on_device = self._to_device(f, self.domain_shape, "f")
         out = self.forward_into(f_dev, self.empty(f_dev.shape[:-3] + self.range_shape))
         return out if on_device else out.get()
 
-    def adjoint(self, g):
+    def adjoint(self, g: ArrayLike | cla.Array) -> np.ndarray | cla.Array:
         """Back-projection ``Hᵀ g``: ``(K, m, n)`` -> ``(T, m, n)`` (or a batch, with a leading axis)."""
         g_dev, on_device = self._to_device(g, self.range_shape, "g")
         out = self.adjoint_into(g_dev, self.empty(g_dev.shape[:-3] + self.domain_shape))
         return out if on_device else out.get()
 
     # ------------------------------------------------------------------ H Hᵀ
-    def psi_device(self):
+    def psi_device(self) -> cla.Array:
         """Diagonal of ``H Hᵀ`` on the device, ``(K, m, n)``."""
         if self._psi is None:
             out = self.empty(self.range_shape)

@@ -13,6 +13,7 @@ camera-major.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -96,7 +97,8 @@ class Rig:
     3685
     """
 
-    def __init__(self, cameras, shape, dt=None, mask="exact"):
+    def __init__(self, cameras: Camera | Sequence[Camera], shape: tuple[int, int], dt: float | None = None,
+                 mask: str = "exact") -> None:
         if isinstance(cameras, Camera):
             raise ValueError("cameras must be a list of Camera, got one Camera; pass [camera]")
         try:
@@ -124,7 +126,7 @@ class Rig:
         self._rows = [cam.rows(self.shape) for cam in cameras]
         for i, (cam, r) in enumerate(zip(cameras, self._rows)):
             rows_read = float(r.max()) + 1.0
-            if cam.frames > 1 and cam.t_d < rows_read * cam.t_r - cam.t_e:
+            if cam.frames > 1 and cam.t_d is not None and cam.t_d < rows_read * cam.t_r - cam.t_e:
                 raise ValueError(
                     f"cameras[{i}].t_d must be >= rows*t_r - t_e = {rows_read:g}*{cam.t_r:g} - {cam.t_e:g} = "
                     f"{rows_read * cam.t_r - cam.t_e:g} s in multi-frame mode, got {cam.t_d!r}")
@@ -153,7 +155,8 @@ class Rig:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def paper_array(cls, n_cameras=4, shape=(50, 50), t_e=0.18e-3, t_r=35e-6, dt=None, mask="exact") -> "Rig":
+    def paper_array(cls, n_cameras: int = 4, shape: tuple[int, int] = (50, 50), t_e: float = 0.18e-3,
+                    t_r: float = 35e-6, dt: float | None = None, mask: str = "exact") -> "Rig":
         """The paper's array: ``n_cameras`` (1..8) at angles 0, 90, 180, 270, 45, 135, 225, 315.
 
         ``shape`` in pixels, ``t_e``, ``t_r`` and ``dt`` in seconds (``dt`` and ``mask`` as in
@@ -190,7 +193,7 @@ class Rig:
             out[i] = cam.t_a + self._rows[c] * cam.t_r + k * (cam.t_d or 0.0)
         return out
 
-    def row_map(self, camera: int, roi=None) -> np.ndarray:
+    def row_map(self, camera: int, roi: tuple[int, int, int, int] | None = None) -> np.ndarray:
         """Row map ``r(y, x)`` of camera ``camera``, rows: a copy of the whole ``(m, n)`` map, or with
         ``roi = (y, x, height, width)`` (pixels, inside the grid) of that block only."""
         rows = self._rows[camera]
@@ -219,7 +222,7 @@ class Rig:
         """Longest per-pixel loop a kernel runs: ``ceil(max t_e/dt) + 1`` sub-frames."""
         return int(math.ceil(float(self._windows.length.max()))) + 1
 
-    def sampled_window(self):
+    def sampled_window(self) -> tuple[np.ndarray, np.ndarray]:
         """First and last sub-frame with a non-zero weight, per channel and pixel.
 
         Returns
@@ -252,7 +255,7 @@ class Rig:
             first, last = np.ceil(start), np.floor(end)
         return first.min(axis=0), last.max(axis=0), end.max(axis=0)
 
-    def sampled_range(self, roi=None) -> slice:
+    def sampled_range(self, roi: tuple[int, int, int, int] | None = None) -> slice:
         """Sub-frames some camera samples at some pixel: ``slice(first, last + 1)``.
 
         Sub-frames outside it carry no information; the solver leaves them out and gives them the

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.hints import ArrayLike, DTypeLike, PathLike
 from rsocl.common.memory import check_npy_size
 
 __all__ = ["builtin_scene", "load_video", "benchmark_protocol", "load_scene", "VIDEO_SUFFIXES"]
@@ -58,7 +59,8 @@ def _background(shape, rng) -> np.ndarray:
     return resize(image, shape, order=1, anti_aliasing=True, mode="reflect")
 
 
-def builtin_scene(shape=(64, 64), T=55, *, dtype=np.float32, seed=0) -> np.ndarray:
+def builtin_scene(shape: tuple[int, int] = (64, 64), T: int = 55, *, dtype: DTypeLike = np.float32,
+                  seed: int = 0) -> np.ndarray:
     """A synthetic high-speed scene: a bright disc crossing the frame and a rotating bar.
 
     The background is scikit-image's ``camera`` photograph (shipped inside the scikit-image wheel,
@@ -213,7 +215,7 @@ def _read_tiff(path: Path) -> np.ndarray:
     return np.concatenate(stacks, axis=0)
 
 
-def load_video(path, *, key="video") -> np.ndarray:
+def load_video(path: PathLike, *, key: str = "video") -> np.ndarray:
     """Read a video file as ``[frames, h, w]`` in its stored dtype.
 
     Supported files (by suffix, case-insensitive):
@@ -302,7 +304,7 @@ def _unit_scaler(video: np.ndarray):
     return lambda i: (video[i].astype(np.float64) - low) / (high - low)
 
 
-def benchmark_protocol(video, shape, T) -> np.ndarray:
+def benchmark_protocol(video: ArrayLike, shape: tuple[int, int], T: int) -> np.ndarray:
     """Turn a video into a benchmark datacube (the protocol of docs/model.md).
 
     1. Scale to [0, 1]: integer dtypes are divided by their dtype maximum (uint8 by 255, uint16 by
@@ -372,7 +374,7 @@ def benchmark_protocol(video, shape, T) -> np.ndarray:
     return out
 
 
-def load_scene(spec, shape, T, *, key="video") -> np.ndarray:
+def load_scene(spec: PathLike, shape: tuple[int, int], T: int, *, key: str = "video") -> np.ndarray:
     """A benchmark datacube from a specification: ``"builtin"`` or a video file.
 
     Parameters

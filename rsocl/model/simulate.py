@@ -13,6 +13,8 @@ import numbers
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.hints import ArrayLike, DTypeLike
+from rsocl.device.context import Device
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 
@@ -46,8 +48,9 @@ def full_scale(rig: Rig) -> float:
     return float(np.max(w.gain * w.length))
 
 
-def simulate(truth, rig: Rig, *, noise="none", sigma=0.0, photons=None, bit_depth=None, seed=0,
-             device=None, dtype="float64") -> np.ndarray:
+def simulate(truth: ArrayLike, rig: Rig, *, noise: str = "none", sigma: float = 0.0, photons: float | None = None,
+             bit_depth: int | None = None, seed: int | None = 0, device: str | Device | None = None,
+             dtype: DTypeLike = "float64") -> np.ndarray:
     """Snapshots ``(K, m, n)`` of the datacube ``truth`` ``(T, m, n)`` seen by ``rig``.
 
     Parameters

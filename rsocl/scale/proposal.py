@@ -78,6 +78,7 @@ def tiling_cost(rig: Rig, tile, halo, *, regularizer="tv", dtype="float32", proj
         voxels += v
         if v > most:
             worst, most = t, v
+    assert worst is not None  # tile_grid yields at least one tile
     largest, total = memory_need(tile_rig(rig, worst), make_regularizer(regularizer), dtype=dtype,
                                  projection=projection)
     return total, largest, voxels, worst, most
@@ -153,7 +154,7 @@ def format_tiling(t: Tiling) -> str:
              f"{t.buffer_bytes / 2**20:.1f} MiB; budget {t.budget_bytes / 2**20:.1f} MiB)",
              f"modelled voxels: {t.voxels / t.untiled_voxels:.2f}x the untiled problem's "
              f"({t.voxels:,} against {t.untiled_voxels:,}, halos included, per set)"]
-    if t.seconds is not None:
+    if t.seconds_per_iteration is not None and t.seconds is not None:
         lines.append(f"time: {t.seconds_per_iteration * 1e3:.1f} ms/iteration measured on the largest tile; "
                      f"all {t.tasks} tasks x {t.iterations} iterations on one device: about {t.seconds:.0f} s "
                      f"({t.seconds / 60:.1f} min); N devices (--workers N): about 1/N of it")

@@ -98,7 +98,7 @@ def _cause(exc) -> str:
 
 def _attempts(job, payload, settings, retries):
     """``solve_tile`` tried up to ``retries + 1`` times: the Piece, or a Failure."""
-    for attempt in range(retries + 1):
+    for _attempt in range(retries + 1):
         try:
             return solve_tile(job, payload, settings)
         except Exception as exc:  # noqa: BLE001 - any cause is reported with the tile

@@ -1,9 +1,10 @@
 """A multi-frame capture (cameras with ``frames`` > 1, period ``t_d``) as a stream of overlapping time windows.
 
 Window ``w`` holds frames ``k0 .. k0 + window - 1`` of every camera (``k0 = w * (window - overlap)``):
-its rig (:meth:`rsocl.model.rig.Rig.frames_window`) is the capture's rig with each camera's trigger offset moved to ``t_a + k0*t_d`` and
-``window`` frames, so every exposure keeps its absolute start ``t_a + r*t_r + k*t_d`` and the
-window's sub-frames are those of the whole capture (time 0 is the same). Each window is an
+its rig (:meth:`rsocl.model.rig.Rig.frames_window`) is the capture's rig with each camera's trigger
+offset moved to ``t_a + k0*t_d`` and ``window`` frames, so every exposure keeps its absolute start
+``t_a + r*t_r + k*t_d`` and the window's sub-frames are those of the whole capture (time 0 is the
+same). Each window is an
 ordinary (tiled) reconstruction that models only the sub-frames its exposures touch
 (:meth:`rsocl.model.rig.Rig.sampled_range`), so the memory of a window does not grow with the
 length of the capture. Where windows overlap (readout continuous: ``t_d`` close to the
@@ -122,7 +123,8 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
     depth = np.stack([np.minimum(s - span.start, span.stop - 1 - s) for span in spans])   # < 0 outside a span
     owner = depth.argmax(axis=0)
     tile = rig.shape if tile is None else tile
-    datacube, results = None, []
+    datacube: np.ndarray | None = None
+    results: list = []
     for w, ((k0, k1), sub) in enumerate(zip(windows, rigs)):
         if progress:
             print(f"window {w + 1}/{len(windows)}: frames {k0}..{k1 - 1}, sub-frames {spans[w].start}.."
@@ -138,4 +140,5 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
             datacube = np.zeros((T,) + rig.shape, dtype=cube.dtype)
         mine = np.nonzero(owner == w)[0]
         datacube[mine] = cube[np.minimum(mine, cube.shape[0] - 1)]    # past the window's T: its last, held
+    assert datacube is not None  # frame_windows gives at least one window
     return StreamResult(datacube, rig, windows, [(s.start, s.stop) for s in spans], owner, results)

@@ -124,6 +124,7 @@ def _settings(request: Request, tuning, saturation, fills):
     fill = 0.0 if start == "zeros" else fills
     blend = applied_blend(tuning) if request.blend is None else request.blend
     device = request.device
+    assert settled.lam is not None and settled.eta is not None  # a Request's settings are settled
     settings = TileSettings(request.name, options, settled.iterations, settled.lam, settled.eta,
                             settled.tv_iterations, settled.projection, str(np.dtype(request.dtype)), saturation, device,
                             start, fill, blend)

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from rsocl.device.context import get_device, list_devices
+from rsocl.device.context import Device, get_device, list_devices
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import Tile, core_block, tile_rig
 
@@ -47,13 +47,13 @@ class TileSettings:
     regularizer: str
     options: dict
     iterations: int
-    lam: float
-    eta: float
+    lam: float | tuple[float, ...]
+    eta: float | tuple[float, ...]
     tv_iterations: int | None
     projection: str
     dtype: str
     saturation: float | None
-    device: str | None
+    device: str | Device | None
     start: str = "zeros"
     fill: float | tuple = 0.0
     blend: float = 1.0

@@ -60,7 +60,7 @@ class SearchSpace:
     """
 
     tunable: dict
-    lam: object
+    lam: float | list[float] | tuple[float, ...]
     fixed: dict = field(default_factory=dict)
     preset: dict = field(default_factory=dict)
 
@@ -194,7 +194,7 @@ def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, et
     rig = op.rig
     preset = dict(space.preset)
     lam = space.lam
-    lams = [float(lam)] if np.isscalar(lam) else [float(v) for v in lam]
+    lams = [float(lam)] if isinstance(lam, (float, int, np.number)) else [float(v) for v in lam]
     if patterns is None:
         patterns = default_patterns(rig.shape, rig.n_channels)
     patterns = [(check.positive_int("pattern block", b), int(shift)) for b, shift in patterns]
@@ -212,7 +212,8 @@ def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, et
     tunable = space.tunable
     current = {"lam": lams[len(lams) // 2], **{name: float(sorted(values)[(len(values) - 1) // 2])
                                                 for name, values in tunable.items()}}
-    scores, blends = {}, {}
+    scores: dict = {}
+    blends: dict = {}
     candidates = []
 
     bar = None
@@ -290,7 +291,7 @@ def _fold(op, g_device, g, block, fit, scored) -> _Fold:
     return _Fold(fit, x0, weights, start_prediction)
 
 
-def applied_blend(tuning) -> float:
+def applied_blend(tuning: Tuning | None) -> float:
     """The blend a run that starts from the interpolation applies with ``tuning`` (a :class:`Tuning` or
     None): the search's, or 1 (the solver's own result) without a search or a recorded blend."""
     return 1.0 if tuning is None or tuning.blend is None else float(tuning.blend)

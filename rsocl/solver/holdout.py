@@ -35,7 +35,7 @@ def default_block(shape) -> int:
     return max(2, min(int(round(min(shape) / 2)), max(MIN_BLOCK, int(round(min(shape) / 4)))))
 
 
-def default_folds(shape, channels: int, block: int | None = None, minimum: int = None) -> int:
+def default_folds(shape, channels: int, block: int | None = None, minimum: int | None = None) -> int:
     """Hold-out patterns :func:`tune_parameters` pools by default: ``minimum`` (None: :data:`FOLDS`),
     or more until every camera is held out of some block (fold ``k`` shifts the held-out channels by
     ``k*P // folds``). A camera never held out would never test the candidates.

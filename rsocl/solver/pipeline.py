@@ -44,7 +44,7 @@ class Prepared:
     staged: Staged
 
 
-def prepare(request: Request, problem: Problem, *, start=None) -> Prepared:
+def prepare(request: Request, problem: Problem, *, start: bool | None = None) -> Prepared:
     """Stage ``problem`` (:func:`~rsocl.solver.problem.check_problem`) on the request's device.
 
     Parameters
@@ -68,7 +68,7 @@ def prepare(request: Request, problem: Problem, *, start=None) -> Prepared:
     return Prepared(request, problem, staged)
 
 
-def tune(prepared: Prepared):
+def tune(prepared: Prepared) -> Tuning | None:
     """The values to run with: the request's earlier :class:`~rsocl.solver.crossval.Tuning`, or those
     chosen from the snapshots by the search (on the first set of a batch); None when the request
     does not tune or the caller left nothing to choose.
@@ -85,7 +85,7 @@ def tune(prepared: Prepared):
     return _search_first_set(prepared)
 
 
-def run(prepared: Prepared, tuning=None) -> Result:
+def run(prepared: Prepared, tuning: Tuning | None = None) -> Result:
     """Run the ADMM iterations with ``tuning``'s values (None: the request's) and collect the result.
 
     Values the caller fixed (``lam``, options) win over ``tuning``'s. The run starts from the
@@ -150,7 +150,7 @@ def _choose_unset(prepared: Prepared, checked=False):
         space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
         if not space.tunable and (preset or np.isscalar(space.lam)):
             # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)
-            lam = space.lam if np.isscalar(space.lam) else first_value(settings.lam)
+            lam = space.lam if isinstance(space.lam, (float, int, np.number)) else first_value(settings.lam)
             return Tuning(chosen={**preset, "lam": float(lam)}, fixed=space.fixed, preset=preset)
     if not checked:
         _check_search_fits(prepared)

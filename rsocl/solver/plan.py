@@ -137,7 +137,7 @@ def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iteration
 def format_plan(p: Plan) -> str:
     """A small table: the unplanned problem beside the proposal."""
     def col(e: Estimate):
-        secs = "-" if e.seconds is None else f"{e.seconds_per_iteration * 1e3:.1f} ms x {e.iterations} = {e.seconds:.1f} s"
+        secs = "-" if e.seconds_per_iteration is None else f"{e.seconds_per_iteration * 1e3:.1f} ms x {e.iterations} = {e.seconds:.1f} s"
         if not e.fits:
             secs = "does not fit the device: tile it"
         return [f"{e.rig.shape[0]} x {e.rig.shape[1]}", f"{e.rig.dt * 1e6:g} µs", f"{e.rig.T}",

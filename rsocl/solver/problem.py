@@ -10,17 +10,22 @@ from __future__ import annotations
 import numbers
 import warnings
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rsocl.analysis.metrics import default_data_range
 from rsocl.common import validation as check
+from rsocl.common.hints import ArrayLike
 from rsocl.common.memory import check_host_memory
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
 from rsocl.solver.held import HeldSumSquares
 from rsocl.solver.memory import memory_bytes
+
+if TYPE_CHECKING:
+    import pyopencl.array as cla
 
 __all__ = ["DEFAULTS", "PAPER_ETA", "Problem", "Settings", "Staged", "per_set_value", "match_batch",
            "check_problem", "check_settings", "check_representable", "stage_on_device"]
@@ -29,7 +34,7 @@ __all__ = ["DEFAULTS", "PAPER_ETA", "Problem", "Settings", "Staged", "per_set_va
 #: [0, t_e/dt]): 200 ADMM iterations, ``lam = 0.1``, ``eta = 0.2``, 10 inner TV iterations
 #: (measured in ``benchmarks/solver_settings.py``); :func:`rsocl.solver.reconstruct` tunes ``lam``
 #: from the data unless given.
-DEFAULTS = {"iterations": 200, "lam": 0.1, "eta": 0.2, "tv_iterations": 10}
+DEFAULTS: dict = {"iterations": 200, "lam": 0.1, "eta": 0.2, "tv_iterations": 10}
 #: Default ``eta`` of the paper's diagonal projection (``projection="paper"``, docs/model.md Eq. 15), for
 #: the paper's configuration (scaled like the others): about the data term's curvature ``psi`` there
 #: (5.02), below which the diagonal step diverges (measured in ``docs/paper_projection.md``).
@@ -61,8 +66,8 @@ class Settings:
     """Checked solver settings; ``lam``/``eta`` are None until :meth:`settled_for` a regularizer."""
 
     iterations: int
-    lam: float | None
-    eta: float | None
+    lam: float | tuple[float, ...] | None
+    eta: float | tuple[float, ...] | None
     tv_iterations: int | None
     projection: str
     tol: float | None
@@ -155,7 +160,8 @@ def warn_off_scale(g, rig, valid=None) -> None:
                       "scale that camera's snapshots (or its gain)", UserWarning, stacklevel=3)
 
 
-def check_problem(g, rig, *, x0=None, truth=None, saturation=None) -> Problem:
+def check_problem(g: ArrayLike, rig: Rig, *, x0: ArrayLike | str | None = None, truth: ArrayLike | None = None,
+                  saturation: float | None = None) -> Problem:
     """Validate the snapshots and the arrays that go with them against ``rig``.
 
     ``g`` is ``(K, m, n)``, or ``(B, K, m, n)`` for a batch of ``B`` sets of the same rig; ``x0`` an
@@ -226,11 +232,11 @@ class Staged:
 
     op: RollingShutterOperator
     solved: slice
-    g: object
-    x0: object = None
-    truth: object = None
-    data_range: float = 1.0
-    held: object = None
+    g: cla.Array
+    x0: cla.Array | None = None
+    truth: cla.Array | None = None
+    data_range: float | np.ndarray = 1.0
+    held: HeldSumSquares | None = None
 
 
 def check_representable(problem: Problem, dtype):

@@ -21,19 +21,26 @@ batch is tuned on its first set and the choice serves every set.
 
 from __future__ import annotations
 
+from rsocl.common.hints import ArrayLike, Callback, DTypeLike, Options, PerSet
+from rsocl.device.context import Device
 from rsocl.model.rig import Rig
 from rsocl.solver.pipeline import prepare, run, tune as choose
 from rsocl.solver.problem import check_problem
+from rsocl.solver.crossval import Tuning
+from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.request import make_request
 from rsocl.solver.result import Result
 
 __all__ = ["reconstruct", "Result"]
 
 
-def reconstruct(g, rig: Rig, regularizer="tv", *, iterations=None, lam=None, eta=None, tv_iterations=None,
-                projection="exact", device=None, dtype="float32", callback=None, x0=None, tol=None,
-                truth=None, regularizer_options=None, saturation=None, tune=True, blend=None,
-                progress=False) -> Result:
+def reconstruct(g: ArrayLike, rig: Rig, regularizer: str | Regularizer = "tv", *, iterations: int | None = None,
+                lam: PerSet | None = None, eta: PerSet | None = None, tv_iterations: int | None = None,
+                projection: str = "exact", device: str | Device | None = None, dtype: DTypeLike = "float32",
+                callback: Callback | None = None, x0: ArrayLike | str | None = None, tol: float | None = None,
+                truth: ArrayLike | None = None, regularizer_options: Options | None = None,
+                saturation: float | None = None, tune: bool | Tuning = True, blend: float | None = None,
+                progress: bool = False) -> Result:
     """Reconstruct the ``(T, m, n)`` datacube from snapshots ``g`` ``(K, m, n)`` with ADMM.
 
     For a batch of sets, ``g`` ``(B, K, m, n)`` -> ``(B, T, m, n)``; ``lam``, ``eta`` may then be one

@@ -12,8 +12,14 @@ takes the whole batch in that hook (in one launch per pass), the others get one 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from rsocl.common.hints import ArrayLike, DTypeLike, PerSet
+
+if TYPE_CHECKING:
+    import pyopencl.array as cla
 
 __all__ = ["Option", "Regularizer"]
 
@@ -28,8 +34,8 @@ class Option:
     minimum: float | None = None
     maximum: float | None = None
 
-    def convert(self, name: str, value):
-        kind = type(self.default)
+    def convert(self, name: str, value: Any) -> Any:
+        kind: type = type(self.default)
         if kind is bool:
             if isinstance(value, str):
                 if value.lower() not in ("1", "0", "true", "false", "yes", "no"):
@@ -94,11 +100,15 @@ class Regularizer:
     dtypes = ("float32", "float64")
     recommended: dict = {}
     batched = False
-    fuses_dual = False
     tunable: dict = {}
     one_snapshot: dict = {}
 
-    def __init__(self, **options):
+    @property
+    def fuses_dual(self) -> bool:
+        """Whether the instance has a fused ``denoise_and_update`` (see the class attributes)."""
+        return False
+
+    def __init__(self, **options: Any) -> None:
         unknown = sorted(set(options) - set(self.options))
         if unknown:
             raise ValueError(f"unknown option(s) {unknown} for regularizer {self.name!r}; "
@@ -113,11 +123,11 @@ class Regularizer:
             return values[key]
         raise AttributeError(key)
 
-    def workspace_bytes(self, shape, dtype) -> int:
+    def workspace_bytes(self, shape: tuple[int, ...], dtype: DTypeLike) -> int:
         """Device memory (bytes) the denoiser allocates for an input of ``shape`` and ``dtype``."""
         return 0
 
-    def denoise(self, x, weight, out=None):
+    def denoise(self, x: cla.Array, weight: PerSet | ArrayLike, out: cla.Array | None = None) -> cla.Array:
         """Denoise the device array ``x`` with strength ``weight`` (>= 0); returns a device array.
 
         ``x`` is ``(T, m, n)``, or a batch ``(B, T, m, n)`` with ``weight`` one number or one per set.
@@ -140,7 +150,8 @@ class Regularizer:
         elif out.shape != x.shape or out.dtype != x.dtype:
             raise ValueError(f"{self.name}: out must match x ({x.shape}, {x.dtype}), got {out.shape}, {out.dtype}")
         if not np.any(weights):
-            cl.enqueue_copy(x.queue, out.data, x.data)
+            # the ignore: pyopencl's stub types an Array's queue and data as optional; an allocated array has both
+            cl.enqueue_copy(x.queue, out.data, x.data)  # type: ignore[arg-type]
             return out
         try:
             if x.ndim == 3:
@@ -151,7 +162,7 @@ class Regularizer:
         except ValueError as exc:
             raise ValueError(f"{self!r}: {exc}") from exc
 
-    def check_weights(self, weight, sets=None) -> np.ndarray:
+    def check_weights(self, weight: PerSet | ArrayLike, sets: int | None = None) -> np.ndarray:
         """``weight`` as a float64 array (one value, or ``sets`` values for a batch), each finite and >= 0."""
         w = np.asarray(weight, dtype=np.float64) if not isinstance(weight, str) else None
         if w is None or w.ndim > 1 or (w.ndim == 1 and (sets is None or w.shape != (sets,))):

@@ -12,22 +12,26 @@ through :func:`rsocl.solver.pipeline.prepare`, :func:`~rsocl.solver.pipeline.tun
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.hints import Callback, DTypeLike, Options, PerSet
 from rsocl.common.registry import load
+from rsocl.device.context import Device
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
 from rsocl.solver.crossval import LAM_FACTORS, SearchSpace, Tuning
-from rsocl.solver.problem import check_settings
+from rsocl.solver.problem import Settings, check_settings
 from rsocl.solver.regularizer import Regularizer
 
 __all__ = ["Given", "Request", "make_request", "make_regularizer", "check_tune", "check_blend", "chosen_options",
            "first_value", "run_params"]
 
 
-def make_regularizer(regularizer, options=None, tv_iterations=None) -> Regularizer:
+def make_regularizer(regularizer: str | Regularizer, options: Options | None = None,
+                     tv_iterations: int | None = None) -> Regularizer:
     """A regularizer instance from a registry name (with options) or an instance (without).
 
     Parameters
@@ -74,17 +78,17 @@ def make_regularizer(regularizer, options=None, tv_iterations=None) -> Regulariz
     return cls(**options)
 
 
-def chosen_options(tuning) -> dict:
+def chosen_options(tuning: Tuning) -> dict:
     """The regularizer options a :class:`~rsocl.solver.crossval.Tuning` chose (its ``chosen`` without ``lam``)."""
     return {k: v for k, v in tuning.chosen.items() if k != "lam"}
 
 
-def check_tune(tune, reg=None):
+def check_tune(tune: bool | Tuning, reg: Regularizer | None = None) -> bool | Tuning:
     """``tune`` checked: ``True``/``False`` (a bool), or an earlier :class:`Tuning` to run with; with
     ``reg`` (the regularizer to run), a Tuning must have chosen options ``reg`` has."""
     if isinstance(tune, Tuning):
         foreign = sorted(set(chosen_options(tune)) - set(reg.values)) if reg is not None else []
-        if foreign:
+        if foreign and reg is not None:
             raise ValueError(f"tune: the earlier Tuning chose {foreign}, options {reg.name!r} does not have "
                              f"(it has {sorted(reg.values)}); pass tune=True to choose for {reg.name!r}, or "
                              "tune=False for its fixed defaults")
@@ -94,7 +98,7 @@ def check_tune(tune, reg=None):
     raise ValueError(f"tune must be True, False or an rsocl.solver.crossval.Tuning, got {tune!r}")
 
 
-def check_blend(blend, has_start: bool):
+def check_blend(blend: float | None, has_start: bool) -> float | None:
     """``blend`` checked in [0, 1] (None: the search's choice, passes). A value below 1 moves the result
     towards the run's start, so it needs one (``has_start``: ``x0`` given, or the interpolation a
     self-tuned run starts from); a run from zeros refuses it."""
@@ -108,7 +112,7 @@ def check_blend(blend, has_start: bool):
     return blend
 
 
-def first_value(value):
+def first_value(value: Any) -> Any:
     """The first set's value of a per-set tuple, else the value."""
     return value[0] if isinstance(value, tuple) else value
 
@@ -118,7 +122,7 @@ class Given:
     """What the caller fixed: the regularizer as given (a registry name or an instance), the options
     of a named one, and ``lam`` (None: left to choose) and ``eta`` as checked (one value or one per set)."""
 
-    regularizer: object
+    regularizer: str | Regularizer
     options: dict = field(default_factory=dict)
     lam: float | tuple | None = None
     eta: float | tuple | None = None
@@ -128,7 +132,7 @@ class Given:
         """The registry name, when the regularizer was given by name."""
         return self.regularizer if isinstance(self.regularizer, str) else None
 
-    def option_names(self, reg) -> set:
+    def option_names(self, reg: Regularizer) -> set:
         """Names of the regularizer options the caller fixed: every option of an instance, else those
         given. They are neither searched nor replaced by an earlier choice."""
         return set(reg.values) if self.name is None else set(self.options)
@@ -153,7 +157,7 @@ class Request:
         Search what is left unset (True), run an earlier choice (a Tuning), or the fixed defaults.
     blend : float or None
         The caller's blend (None: the search's choice).
-    dtype : str
+    dtype : str or numpy dtype
         ``"float32"`` or ``"float64"``.
     device : str, Device or None
         OpenCL device spec.
@@ -165,12 +169,12 @@ class Request:
 
     rig: Rig
     regularizer: Regularizer
-    settings: object
+    settings: Settings
     given: Given
-    tune: object = True
+    tune: bool | Tuning = True
     blend: float | None = None
-    dtype: str = "float32"
-    device: object = None
+    dtype: DTypeLike = "float32"
+    device: str | Device | None = None
     sets: int | None = None
     progress: bool = False
 
@@ -179,7 +183,7 @@ class Request:
         """The regularizer's registry name (as given, else the instance's ``name``)."""
         return self.given.name or self.regularizer.name
 
-    def with_options(self, options) -> Regularizer:
+    def with_options(self, options: Options) -> Regularizer:
         """The regularizer's kind with ``options`` over the caller's ones."""
         if self.given.name is None:
             return type(self.regularizer)(**{**self.regularizer.values, **options})
@@ -213,14 +217,14 @@ class Request:
             return False
         return isinstance(self.tune, Tuning) or self.search_space() is not None
 
-    def tuned_options(self, tuning) -> dict:
+    def tuned_options(self, tuning: Tuning | None) -> dict:
         """The options ``tuning`` chose (None: none) that the caller did not fix."""
         if tuning is None:
             return {}
         given = self.given.option_names(self.regularizer)
         return {k: v for k, v in chosen_options(tuning).items() if k not in given}
 
-    def settled(self, tuning) -> tuple:
+    def settled(self, tuning: Tuning | None) -> tuple[Regularizer, Settings]:
         """``(regularizer, settings)`` to run with ``tuning`` (None: as requested): its chosen options and
         ``lam`` where the caller fixed none."""
         if tuning is None:
@@ -243,14 +247,17 @@ class Request:
         settings = settings.settled_for(self.regularizer, self.dtype, scale=default_scale(self.rig)).for_batch(count)
         return replace(self, given=given, settings=settings, sets=count)
 
-    def with_tuning(self, tuning) -> "Request":
+    def with_tuning(self, tuning: Tuning) -> "Request":
         """This request running ``tuning`` (an earlier choice) instead of a search."""
         return replace(self, tune=tuning)
 
 
-def make_request(rig, regularizer="tv", *, sets=None, x0_given=False, iterations=None, lam=None, eta=None,
-                 tv_iterations=None, projection="exact", tol=None, callback=None, dtype="float32", device=None,
-                 regularizer_options=None, tune=True, blend=None, progress=False) -> Request:
+def make_request(rig: Rig, regularizer: str | Regularizer = "tv", *, sets: int | None = None, x0_given: bool = False,
+                 iterations: int | None = None, lam: PerSet | None = None, eta: PerSet | None = None,
+                 tv_iterations: int | None = None, projection: str = "exact", tol: float | None = None,
+                 callback: Callback | None = None, dtype: DTypeLike = "float32", device: str | Device | None = None,
+                 regularizer_options: Options | None = None, tune: bool | Tuning = True, blend: float | None = None,
+                 progress: bool = False) -> Request:
     """Check what a reconstruction is asked to do, once, before any device work.
 
     Parameters
@@ -295,7 +302,9 @@ def make_request(rig, regularizer="tv", *, sets=None, x0_given=False, iterations
     return replace(request, blend=blend)
 
 
-def run_params(request: Request, reg, settings, *, lam, eta, device, saturation, tuning, blend, start) -> dict:
+def run_params(request: Request, reg: Regularizer, settings: Settings, *, lam: PerSet | None,
+               eta: PerSet | None, device: str | None, saturation: float | None, tuning: Tuning | None,
+               blend: float, start: str) -> dict:
     """The ``params`` record of a run (every path's: one set, a batch, tiles), JSON-ready.
 
     Parameters

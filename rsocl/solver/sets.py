@@ -13,13 +13,15 @@ from __future__ import annotations
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.device.context import get_device
+from rsocl.common.hints import ArrayLike, Callback, DTypeLike, Options, PerSet
+from rsocl.device.context import Device, get_device
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
 from rsocl.solver.crossval import Tuning
 from rsocl.solver.memory import batch_memory
 from rsocl.solver.pipeline import prepare, run, tune as choose
 from rsocl.solver.problem import check_problem
+from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.request import make_regularizer, make_request
 from rsocl.solver.result import Result
 
@@ -37,9 +39,11 @@ GPU_BATCH_VOXELS = 2**24
 CACHE_FRACTION = 0.75
 
 
-def batch_size(rig: Rig, regularizer="tv", *, sets=None, dtype="float32", device=None, projection="exact",
-               truth=False, own_inverse=False, start=False, limit=None, memory_fraction=0.8,
-               regularizer_options=None, cache_fraction=CACHE_FRACTION) -> int:
+def batch_size(rig: Rig, regularizer: str | Regularizer = "tv", *, sets: int | None = None,
+               dtype: DTypeLike = "float32", device: str | Device | None = None, projection: str = "exact",
+               truth: bool = False, own_inverse: bool = False, start: bool = False, limit: int | None = None,
+               memory_fraction: float = 0.8, regularizer_options: Options | None = None,
+               cache_fraction: float = CACHE_FRACTION) -> int:
     """The largest number of sets of ``rig`` that one batch may hold on ``device``.
 
     Parameters
@@ -115,10 +119,13 @@ def batch_size(rig: Rig, regularizer="tv", *, sets=None, dtype="float32", device
     return best
 
 
-def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, truth=None, progress=False,
-                     device=None, dtype="float32", regularizer="tv", regularizer_options=None,
-                     projection="exact", iterations=None, tv_iterations=None, callback=None, tol=None,
-                     saturation=None, tune=True, blend=None) -> Result:
+def reconstruct_sets(g: ArrayLike, rig: Rig, *, batch: int | None = None, lam: PerSet | None = None,
+                     eta: PerSet | None = None, x0: ArrayLike | str | None = None, truth: ArrayLike | None = None,
+                     progress: bool = False, device: str | Device | None = None, dtype: DTypeLike = "float32",
+                     regularizer: str | Regularizer = "tv", regularizer_options: Options | None = None,
+                     projection: str = "exact", iterations: int | None = None, tv_iterations: int | None = None,
+                     callback: Callback | None = None, tol: float | None = None, saturation: float | None = None,
+                     tune: bool | Tuning = True, blend: float | None = None) -> Result:
     """Reconstruct ``S`` sets ``g`` ``(S, K, m, n)`` in batches of ``batch`` sets (default: :func:`batch_size`).
 
     ``lam``/``eta`` are one number or one per set; ``x0``/``truth`` one ``(T, m, n)`` cube for every set
@@ -134,12 +141,12 @@ def reconstruct_sets(g, rig: Rig, *, batch=None, lam=None, eta=None, x0=None, tr
         raise ValueError(f"g must hold S >= 1 sets, (S, K, m, n), got shape {g.shape}")
     count = g.shape[0]
     for name, value in {"lam": lam, "eta": eta}.items():
-        if value is not None and np.ndim(value) == 1 and len(value) != count:
-            raise ValueError(f"{name} must have one value per set: {count} sets, got {len(value)}")
+        if value is not None and np.ndim(value) == 1 and np.size(value) != count:
+            raise ValueError(f"{name} must have one value per set: {count} sets, got {np.size(value)}")
     cubes = {"x0": x0, "truth": truth}
-    for name, value in cubes.items():
-        if value is not None and np.ndim(value) == 4 and np.shape(value)[0] != count:
-            raise ValueError(f"{name} must have one cube per set: {count} sets, got {np.shape(value)[0]}")
+    for name, cube in cubes.items():
+        if cube is not None and np.ndim(cube) == 4 and np.shape(cube)[0] != count:
+            raise ValueError(f"{name} must have one cube per set: {count} sets, got {np.shape(cube)[0]}")
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     request = make_request(rig, regularizer, sets=count, x0_given=x0 is not None, iterations=iterations, lam=lam,
@@ -189,9 +196,9 @@ def _joined(results, batch) -> Result:
         history[key] = np.concatenate(columns, axis=1)
     params = dict(results[0].params)
     for key in ("lam", "eta", "saturated_pixels"):
-        values = [r.params[key] for r in results]
-        if any(isinstance(v, list) for v in values):
-            params[key] = [x for r, v in zip(results, values) for x in (v if isinstance(v, list) else [v] * r.batch)]
+        per_set = [r.params[key] for r in results]
+        if any(isinstance(v, list) for v in per_set):
+            params[key] = [x for r, v in zip(results, per_set) for x in (v if isinstance(v, list) else [v] * r.batch)]
     params["sets"] = sum(r.batch for r in results)
     params["batch"] = batch
     datacube = np.concatenate([r.datacube for r in results])

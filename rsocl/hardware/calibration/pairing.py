@@ -61,7 +61,7 @@ def flipped_triangles(reference_points, sensor_points, *, mirrored=False):
 
 def _suspects(flipped) -> list:
     """The markers in the most flipped triangles."""
-    counts = {}
+    counts: dict = {}
     for triple in flipped:
         for k in triple:
             counts[k] = counts.get(k, 0) + 1
