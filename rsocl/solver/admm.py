@@ -16,9 +16,13 @@ from rsocl.common import validation as check
 from rsocl.device.context import c_type
 from rsocl.device.launch import batch_launches, element_launches
 from rsocl.model.operator import RollingShutterOperator
-from rsocl.device.reduction import sum_sq_diff, sum_sq_diff_async
+from rsocl.solver.residuals import DeviceResiduals
 
-__all__ = ["ADMM", "block_inverse", "own_inverses"]
+__all__ = ["ADMM", "block_inverse", "own_inverses", "RESIDUAL_SLOTS"]
+
+#: Iterations whose residuals the device holds before the host reads them in one copy, in a run that
+#: does not look at each residual (:meth:`ADMM.residual_into`, :meth:`ADMM.read_residuals`).
+RESIDUAL_SLOTS = 8
 
 
 #: Eigenvalues of ``eta I + M`` below this fraction of the largest one (per pixel) are
@@ -143,7 +147,8 @@ class ADMM:
         self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
         self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project,))
         self.fused = bool(getattr(regularizer, "fuses_dual", False))
-        self.g_norm2 = sum_sq_diff(g, weights=self.valid, sets=self.sets if self.batched else None)
+        self.residuals = DeviceResiduals(op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS)
+        self.g_norm2 = self.residuals.g_norm2
         self.iteration = 0
         cl.enqueue_barrier(queue)
 
@@ -245,21 +250,26 @@ class ADMM:
         The next :meth:`step` may be enqueued before the result is read: the device
         works on it while the partial sums travel to the host.
         """
-        self.op.forward_into(self.theta, self.hx)
-        sets = self.sets if self.batched else None
-        return PendingResidual(sum_sq_diff_async(self.g, self.hx, weights=self.valid, sets=sets), self.g_norm2)
+        self.residuals.enqueue(self.theta, 0)
+        return PendingResidual(self.residuals.read(1))
+
+    def residual_into(self, slot: int):
+        """Enqueue the residual of the current ``theta`` into device slot ``slot`` (0 .. :data:`RESIDUAL_SLOTS` - 1);
+        :meth:`read_residuals` reads the slots. One launch; nothing is read back."""
+        self.residuals.enqueue(self.theta, slot)
+
+    def read_residuals(self, count: int):
+        """Enqueue the copy of the residuals in slots ``0 .. count - 1``; ``.result()`` waits and gives
+        one residual (as :meth:`residual`) per slot, in slot order."""
+        return self.residuals.read(count)
 
 
 class PendingResidual:
     """A residual of :meth:`ADMM.residual_async` on its way to the host."""
 
-    def __init__(self, pending, g_norm2):
-        self._pending, self._g_norm2 = pending, g_norm2
+    def __init__(self, pending):
+        self._pending = pending
 
     def result(self):
         """The residual: a float, or one per set (float64 array) for a batch."""
-        r2 = self._pending.result()
-        if np.ndim(r2) == 0:
-            return float(np.sqrt(r2 / self._g_norm2)) if self._g_norm2 != 0 else float(np.sqrt(r2))
-        g2 = np.asarray(self._g_norm2)
-        return np.sqrt(np.where(g2 > 0, r2 / np.where(g2 > 0, g2, 1.0), r2))
+        return self._pending.result()[0]
