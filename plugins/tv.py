@@ -204,19 +204,22 @@ class TV(Regularizer):
         wt = x.dtype.type(self.temporal_weight if self.planes == 3 else 0.0)
         sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(sets))
 
-        def each(kernel, *args):
+        def each(kernel):                           # with the arguments set once per call
             for gsize, lsize, offset in grids[key]:
-                kernel(x.queue, gsize, lsize, *args, *sizes, global_offset=offset)
+                kernel.enqueue(x.queue, gsize, lsize, offset)
 
         if self.iterations == 1:                    # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
         # iteration 0 from p = 0 (out = x): one kernel that only writes p
-        each(prog.tv_dual_first, x.data, p.data, xnext.data, steps.data, wt)
+        prog.tv_dual_first.set_args(x.data, p.data, xnext.data, steps.data, wt, *sizes)
+        each(prog.tv_dual_first)
+        prog.tv_primal.set_args(x.data, p.data, out.data, wt, *sizes)
+        prog.tv_dual.set_args(out.data, p.data, xnext.data, steps.data, wt, *sizes)
         for i in range(1, self.iterations):
-            each(prog.tv_primal, x.data, p.data, out.data, wt)
+            each(prog.tv_primal)
             if i < self.iterations - 1:
-                each(prog.tv_dual, out.data, p.data, xnext.data, steps.data, wt)
+                each(prog.tv_dual)
         return out
 
     def _run_fused(self, x, steps, out, dual, plan):
