@@ -32,7 +32,7 @@ def edge_weights(n: int, dtype) -> np.ndarray:
 def launches(prog, device, T: int, m: int, n: int):
     """Exact launch grids of the TV kernels of ``prog`` (no bounds test in them), in work groups
     of whole rows up to :data:`GROUP`, capped by what ``device`` (an rsocl Device) and the kernels allow."""
-    group = device.group_limit(prog.tv_primal, prog.tv_dual, prog.tv_dual_first, cap=GROUP)
+    group = device.group_limit(prog.tv_primal, prog.tv_dual, prog.tv_dual_first, prog.tv_primal_update, cap=GROUP)
     return voxel_launches(T, m, n, group=group, max_x=device.max_work_item_sizes[0])
 
 
@@ -90,9 +90,8 @@ class TV(Regularizer):
                                              "(0: the plain path, two launches per iteration)", 0, 1000),
     }
 
-    @property
-    def fuses_dual(self) -> bool:
-        return self.fused > 0
+    #: Both paths take the ADMM's dual update into their last launch (:meth:`denoise_and_update`).
+    fuses_dual = True
 
     @property
     def planes(self) -> int:
@@ -163,7 +162,8 @@ class TV(Regularizer):
     def denoise_and_update(self, u, weight, theta, b, f, dual):
         """``theta = denoise(u, weight)``, then the ADMM's next dual update: ``b = theta - u`` and
         ``f = theta + b`` in the sets where ``dual`` (a device int array, one per set) is set, else
-        ``f = theta``. On the fused path that is the last launch's work; otherwise one more pass."""
+        ``f = theta``. That is the last launch's work (the fused path's last launch, the plain path's last
+        primal step); with one Chambolle iteration, one more pass."""
         weights = self.check_weights(weight, u.shape[0] if u.ndim == 4 else None)
         for name, array in (("theta", theta), ("b", b), ("f", f)):
             if array.shape != u.shape or array.dtype != u.dtype:
@@ -178,8 +178,8 @@ class TV(Regularizer):
         plan = self.fused_plan(x) if self.fused > 0 else None
         if plan is not None:
             return self._run_fused(x, steps, out, dual, plan)
-        self._run_plain(x, steps, out)
-        if dual is not None:
+        self._run_plain(x, steps, out, dual)
+        if dual is not None and self.iterations == 1:          # no primal step to take it
             b, f, on = dual
             prog = self._program(x, "tv_fused.cl")
             per_set = x.size // sets
@@ -189,7 +189,7 @@ class TV(Regularizer):
                                  global_offset=offset)
         return out
 
-    def _run_plain(self, x, steps, out):
+    def _run_plain(self, x, steps, out, dual=None):
         import pyopencl as cl
 
         sets = x.shape[0] if x.ndim == 4 else 1
@@ -216,10 +216,15 @@ class TV(Regularizer):
         each(prog.tv_dual_first)
         prog.tv_primal.set_args(x.data, p.data, out.data, wt, *sizes)
         prog.tv_dual.set_args(out.data, p.data, xnext.data, steps.data, wt, *sizes)
-        for i in range(1, self.iterations):
+        for _ in range(1, self.iterations - 1):
             each(prog.tv_primal)
-            if i < self.iterations - 1:
-                each(prog.tv_dual)
+            each(prog.tv_dual)
+        if dual is None:
+            each(prog.tv_primal)
+        else:                                       # the last primal step makes the ADMM's dual update
+            b, f, on = dual
+            prog.tv_primal_update.set_args(x.data, p.data, out.data, wt, *sizes, b.data, f.data, on.data)
+            each(prog.tv_primal_update)
         return out
 
     def _run_fused(self, x, steps, out, dual, plan):

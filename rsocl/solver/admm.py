@@ -3,8 +3,9 @@
 One iteration is the data step in three launches (``admm_dual``: dual update and
 ``v = theta + b``; ``admm_project``: ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)`` per pixel;
 ``admm_difference``: ``u = f - b``) and the regularizer's ``theta = denoise(u, lam/eta)``; a
-regularizer with a fused path takes the first and last of them into its own and the projection's
-launches. A batch of sets runs every launch once for all of them. Nothing crosses to the host but
+regularizer that fuses the dual update (the TV) takes the first and last of them into its own and the
+projection's launches. The residual of the history is one more launch (:mod:`rsocl.solver.residuals`).
+A batch of sets runs every launch once for all of them. Nothing crosses to the host but
 the few partial sums of the history.
 """
 
@@ -107,7 +108,7 @@ class ADMM:
         Snapshot pixels that enter the data term; the others (e.g. saturated ones)
         are left out: their rows of ``H`` are dropped from the projection.
 
-    When the regularizer has a fused path (``regularizer.fuses_dual``: the TV with ``fused > 0``),
+    When the regularizer takes the dual update into its own launches (``regularizer.fuses_dual``: the TV),
     the projection also writes the denoiser's input ``u = f - b`` and the denoiser's last launch
     makes the next iteration's dual update (``b = theta - u``, ``f = theta + b``): no separate
     passes for either after the first iteration.
