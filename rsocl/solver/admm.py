@@ -108,8 +108,9 @@ class ADMM:
         Snapshot pixels that enter the data term; the others (e.g. saturated ones)
         are left out: their rows of ``H`` are dropped from the projection.
 
-    When the regularizer takes the dual update into its own launches (``regularizer.fuses_dual``: the TV),
-    the projection also writes the denoiser's input ``u = f - b`` and the denoiser's last launch
+    When the regularizer takes the dual update into its own launches on this device
+    (``regularizer.fuses_dual_on(device)``: the TV on its fused path or on a GPU), the projection
+    also writes the denoiser's input ``u = f - b`` and the denoiser's last launch
     makes the next iteration's dual update (``b = theta - u``, ``f = theta + b``): no separate
     passes for either after the first iteration.
     """
@@ -147,7 +148,7 @@ class ADMM:
         self.voxels = batch_launches(self.per_set, self.sets, dev.group_limit(prog.admm_dual, cap=64))
         self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
         self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project,))
-        self.fused = bool(getattr(regularizer, "fuses_dual", False))
+        self.fused = bool(regularizer.fuses_dual_on(op.device))
         self.residuals = DeviceResiduals(op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS)
         self.g_norm2 = self.residuals.g_norm2
         self.iteration = 0
@@ -199,7 +200,7 @@ class ADMM:
         import pyopencl as cl
 
         self.regularizer = regularizer
-        self.fused = bool(getattr(regularizer, "fuses_dual", False))
+        self.fused = bool(regularizer.fuses_dual_on(self.op.device))
         self.lams = _per_set("lam", lam, self.sets)
         self.weights = _denoiser_weights(self.lams, self.etas)
         for dest in (self.theta, self.f):
