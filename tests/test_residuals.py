@@ -69,6 +69,8 @@ def test_slots_read_together_equal_slots_read_alone(device, rng):
     assert res.read(4).result() == alone
     with pytest.raises(ValueError, match="slots must be >= 1"):
         DeviceResiduals(op, g, None, None, slots=0)
+    with pytest.raises(ValueError, match=r"slot must be in \[0, 3\]"):
+        res.enqueue(cubes[0], 4)
 
 
 @pytest.mark.parametrize("iterations", [8, 19])

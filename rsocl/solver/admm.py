@@ -152,7 +152,22 @@ class ADMM:
         self.residuals = DeviceResiduals(op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS)
         self.g_norm2 = self.residuals.g_norm2
         self.iteration = 0
+        self._bind_kernels()
         cl.enqueue_barrier(queue)
+
+    def _bind_kernels(self):
+        """This solver's own kernel objects (rsocl.device.Kernels.instance), their arguments set once: a
+        step enqueues them and sets only the by-value arguments that change (the first iteration's flags)."""
+        op, prog, key = self.op, self.program, ("ADMM", id(self))
+        self._dual = prog.instance("admm_dual", key)
+        self._dual.set_args(self.theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0),
+                            np.int32(self.per_set))
+        self._project = prog.instance("admm_project", key)
+        self._project.set_args(self.f.data, self.g.data, *op._geometry(), self.inverse.data, self.eta_device.data,
+                               np.int32(self.own_inverse), self.b.data, self.u.data, np.int32(self.fused),
+                               np.int32(op.T), np.int32(op.L), *op._shape_args())
+        self._difference = prog.instance("admm_difference", key)
+        self._difference.set_args(self.f.data, self.b.data, self.u.data)
 
     @property
     def lam(self):
@@ -210,22 +225,18 @@ class ADMM:
 
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
-        op, queue = self.op, self.op.queue
+        queue = self.op.queue
         if not (self.fused and self.iteration > 0):           # else the denoiser made the dual update
-            update = np.int32(self.iteration > 0)
+            self._dual.set_arg(4, np.int32(self.iteration > 0))
             for gsize, lsize, offset in self.voxels:
-                self.program.admm_dual(queue, gsize, lsize, self.theta.data, self.b.data, self.f.data,
-                                       self.dual_on.data, update, np.int32(self.per_set), global_offset=offset)
-        self.program.admm_project(
-            queue, *self.blocks, self.f.data, self.g.data, *op._geometry(), self.inverse.data,
-            self.eta_device.data, np.int32(self.own_inverse), self.b.data, self.u.data, np.int32(self.fused),
-            np.int32(op.T), np.int32(op.L), *op._shape_args())
+                self._dual.enqueue(queue, gsize, lsize, offset)
+        self._project.set_arg(11, np.int32(self.fused))
+        self._project.enqueue(queue, *self.blocks)
         if self.fused:
             self.regularizer.denoise_and_update(self.u, self.weight, self.theta, self.b, self.f, self.dual_on)
         else:
             for gsize, lsize, offset in self.elements:
-                self.program.admm_difference(queue, gsize, lsize, self.f.data, self.b.data, self.u.data,
-                                             global_offset=offset)
+                self._difference.enqueue(queue, gsize, lsize, offset)
             self.regularizer.denoise(self.u, self.weight, out=self.theta)
         self.iteration += 1
 
