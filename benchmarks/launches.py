@@ -164,6 +164,18 @@ def measure(shapes, rounds: int, short: int, long: int, device, paths=("device",
     return floor, trivial, out
 
 
+def command_buffers(device) -> list:
+    """Lines on record-once-replay (``cl_khr_command_buffer``): whether the device lists the extension
+    and whether pyopencl binds its API (any name with "command_buffer" or "CommandBuffer")."""
+    import pyopencl as cl
+    import pyopencl._cl as _cl
+
+    listed = "cl_khr_command_buffer" in device.device.extensions.split()
+    names = sorted({n for mod in (cl, _cl) for n in dir(mod) if "command_buffer" in n.lower() or "CommandBuffer" in n})
+    return [f"`cl_khr_command_buffer` in this device's extension list: **{'yes' if listed else 'no'}**; "
+            f"command-buffer names in pyopencl {cl.VERSION_TEXT}: **{', '.join(names) if names else 'none'}**."]
+
+
 def page(floor, trivial, rows, device, args) -> list:
     lines = header_lines("Launches per ADMM-TV iteration and host time per launch", device)
     lines += ["", "Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), built-in scene,",
@@ -180,6 +192,7 @@ def page(floor, trivial, rows, device, args) -> list:
         lines.append(f"| {r['m']}×{r['m']} | {r['T']} | {r['path']} | {k['enqueue_nd_range_kernel']:.1f} | "
                      f"{k['enqueue_copy']:.3f} | {k['enqueue_fill_buffer']:.1f} | {r['total']:.2f} | "
                      f"{r['ms_per_iteration']:.2f} ({each}) | {r['us_per_launch']:.1f} | {r['ratio']:.2f} |")
+    lines += [""] + command_buffers(device)
     lines += ["", "Paths: `device` is the device's own choice; `lean` is the path of a device that is not a CPU",
               "(the TV's fused path, the ADMM's dual update and u = f - b folded into the TV's and the projection's",
               "launches), run here by reading the device as a GPU. Both read the residuals of 8 iterations",
