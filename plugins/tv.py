@@ -98,7 +98,8 @@ class TV(Regularizer):
         "step": Option(STEP, "", "Chambolle step as a fraction of scikit-image's 1/(2(2 + w^2)) "
                                  "(1: scikit-image's step)", 0.01, 1.0),
         "fused": Option(FUSED, "iterations", "most Chambolle iterations per launch on tiles in local memory "
-                                             "(0: the plain path, two launches per iteration; -1: the device's choice)", -1, 1000),
+                                             "(0: the plain path, two launches per iteration; "
+                                             "-1: the device's choice)", -1, 1000),
     }
 
     #: Both paths take the ADMM's dual update into their last launch (:meth:`denoise_and_update`).

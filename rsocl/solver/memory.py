@@ -71,8 +71,8 @@ def batch_memory(cube, K: int, dtype, reg, projection: str, sets: int, *, truth=
                  start=False, device=None):
     """``(largest buffer, total)`` device bytes of an ADMM run on ``sets`` sets of ``cube = (T, m, n)``:
     the staged problem (:func:`problem_bytes`, with the ground truth when ``truth`` and a start cube
-    when ``start``), the solver's arrays (:func:`state_bytes`) and the
-    regularizer's workspace (:func:`workspace_memory`, on ``device`` when given). Small per-set values (step lengths) and
+    when ``start``), the solver's arrays (:func:`state_bytes`) and the regularizer's workspace
+    (:func:`workspace_memory`, on ``device`` when given). Small per-set values (step lengths) and
     the partial sums of reductions are not counted.
     """
     cube = tuple(int(v) for v in cube)
@@ -109,7 +109,8 @@ def search_memory(op, reg, projection: str, batch) -> int:
     made: per hold-out pattern (:func:`~rsocl.solver.holdout.default_patterns`) one set's ADMM arrays, its
     warm start, its warm start's prediction of the snapshots, held-out weights and regularizer
     workspace (a fold's solver keeps the previous candidate's regularizer until its own turn), with the
-    stacked copies of the folds run as one batch where batches pay (:func:`~rsocl.solver.search_batch.batch_bytes`); and for
+    stacked copies of the folds run as one batch where batches pay
+    (:func:`~rsocl.solver.search_batch.batch_bytes`); and for
     a batch (``batch`` sets, None: one set) the first set staged on its own (operator geometry and
     snapshots)."""
     cube = op.domain_shape
