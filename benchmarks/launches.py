@@ -19,6 +19,8 @@ that is not a CPU (the TV's fused path, the dual update and ``u = f - b`` folded
 the projection's launches), run on any device by reading it as a GPU for the run.
 
 Rounds alternate the trivial loop and the ADMM runs of each path, and the median of the rounds is reported.
+Then the passes that the lean path folds are timed against the separate ones they replace, in
+alternating rounds (:func:`passes`): what a CPU device's choice of path rests on.
 
     python benchmarks/launches.py [--shapes 8 50 64] [--paths device lean] [--rounds 5] [--out docs/launches.md]
 """
@@ -164,6 +166,84 @@ def measure(shapes, rounds: int, short: int, long: int, device, paths=("device",
     return floor, trivial, out
 
 
+def passes(m: int, device, rounds: int, reps: int = 100):
+    """The folded passes against the separate ones on the ``m × m`` case, in alternating rounds of ``reps``
+    enqueues each (a finish around each round): ``[(name, separate µs, folded µs, folded / separate per round)]``.
+
+    - the residual: ``forward`` + ``sum_sq_diff`` against ``residual_partials`` (one launch);
+    - ``u = f - b``: ``admm_project`` + ``admm_difference`` against ``admm_project`` writing u itself;
+    - the ADMM's dual update: ``tv_primal`` + ``admm_dual`` against ``tv_primal_update``.
+    """
+    import pyopencl.array as cla
+
+    from rsocl.device.reduction import sum_sq_diff_async
+    from rsocl.model.operator import RollingShutterOperator
+    from rsocl.solver.admm import ADMM
+    from rsocl_plugins.tv import TV, launches as tv_launches
+
+    rig, g = case(m)
+    op = RollingShutterOperator(rig, device=device, subframes=rig.sampled_range())
+    tv = TV(fused=0)
+    s = ADMM(op, cla.to_device(op.queue, g), tv, lam=0.1, eta=0.2)
+    s.step()
+    q, prog, T = op.queue, s.program, op.T
+    tv_prog = tv._program(s.u, "tv.cl")
+    grids = tv_launches(tv_prog, device, T, m, m)
+    (p,), _ = tv._buffers(s.u, 1)
+    wt, sizes = np.float32(3.0), (np.int32(T), np.int32(m), np.int32(m), np.int32(1))
+
+    def project(difference):
+        prog.admm_project(q, *s.blocks, s.f.data, s.g.data, *op._geometry(), s.inverse.data, s.eta_device.data,
+                          np.int32(0), s.b.data, s.u.data, np.int32(difference), np.int32(T), np.int32(op.L),
+                          *op._shape_args())
+
+    def project_then_difference():
+        project(0)
+        for gs, ls, off in s.elements:
+            prog.admm_difference(q, gs, ls, s.f.data, s.b.data, s.u.data, global_offset=off)
+
+    def primal_then_dual():
+        for gs, ls, off in grids:
+            tv_prog.tv_primal(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, global_offset=off)
+        for gs, ls, off in s.voxels:
+            prog.admm_dual(q, gs, ls, s.theta.data, s.b.data, s.f.data, s.dual_on.data, np.int32(1),
+                           np.int32(s.per_set), global_offset=off)
+
+    def primal_update():
+        for gs, ls, off in grids:
+            tv_prog.tv_primal_update(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, s.b.data, s.f.data,
+                                     s.dual_on.data, global_offset=off)
+
+    def forward_then_sum():
+        op.forward_into(s.theta, s.hx)
+        sum_sq_diff_async(s.g, s.hx)
+
+    pairs = [("residual: forward + sum_sq_diff | residual_partials", forward_then_sum, lambda: s.residual_into(0)),
+             ("u = f - b: admm_project + admm_difference | admm_project writing u", project_then_difference,
+              lambda: project(1)),
+             ("dual update: tv_primal + admm_dual | tv_primal_update", primal_then_dual, primal_update)]
+
+    def timed(fn):
+        q.finish()
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fn()
+        q.finish()
+        return (time.perf_counter() - t0) / reps * 1e6
+
+    out = []
+    for name, separate, folded in pairs:
+        timed(separate), timed(folded)
+        a, b = [], []
+        for r in range(rounds):
+            if r % 2:
+                b.append(timed(folded)), a.append(timed(separate))
+            else:
+                a.append(timed(separate)), b.append(timed(folded))
+        out.append((name, statistics.median(a), statistics.median(b), [y / x for x, y in zip(a, b)]))
+    return out
+
+
 def command_buffers(device) -> list:
     """Lines on record-once-replay (``cl_khr_command_buffer``): whether the device lists the extension
     and whether pyopencl binds its API (any name with "command_buffer" or "CommandBuffer")."""
@@ -176,7 +256,7 @@ def command_buffers(device) -> list:
             f"command-buffer names in pyopencl {cl.VERSION_TEXT}: **{', '.join(names) if names else 'none'}**."]
 
 
-def page(floor, trivial, rows, device, args) -> list:
+def page(floor, trivial, rows, device, args, passes_rows=None) -> list:
     lines = header_lines("Launches per ADMM-TV iteration and host time per launch", device)
     lines += ["", "Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), built-in scene,",
               f"fixed settings from the interpolation, float32; {args.rounds} alternating rounds, medians.",
@@ -192,11 +272,22 @@ def page(floor, trivial, rows, device, args) -> list:
         lines.append(f"| {r['m']}×{r['m']} | {r['T']} | {r['path']} | {k['enqueue_nd_range_kernel']:.1f} | "
                      f"{k['enqueue_copy']:.3f} | {k['enqueue_fill_buffer']:.1f} | {r['total']:.2f} | "
                      f"{r['ms_per_iteration']:.2f} ({each}) | {r['us_per_launch']:.1f} | {r['ratio']:.2f} |")
+    if passes_rows:
+        lines += ["", "The folded passes against the separate ones (µs per enqueue of the pair or of the one, "
+                  f"{args.rounds} alternating rounds of 100, medians):", "",
+                  "| ROI | separate \\| folded | separate µs | folded µs | folded / separate (rounds) |",
+                  "|---|---|---|---|---|"]
+        for m, rows_m in passes_rows.items():
+            for name, a, b, ratios in rows_m:
+                lines.append(f"| {m}×{m} | {name.replace('|', chr(92) + '|')} | {a:.0f} | {b:.0f} | "
+                             f"{', '.join(f'{r:.2f}' for r in ratios)} |")
     lines += [""] + command_buffers(device)
     lines += ["", "Paths: `device` is the device's own choice; `lean` is the path of a device that is not a CPU",
               "(the TV's fused path, the ADMM's dual update and u = f - b folded into the TV's and the projection's",
               "launches), run here by reading the device as a GPU. Both read the residuals of 8 iterations",
-              "(`rsocl.solver.admm.RESIDUAL_SLOTS`) in one copy.",
+              "(`rsocl.solver.admm.RESIDUAL_SLOTS`) in one copy. On a CPU device the lean path's times are those",
+              "of a GPU's work groups (the fused TV's tiles of hundreds of work items with barriers) run by a CPU:",
+              "there its launch count is the measurement, its time says nothing about a GPU.",
               "", "µs / launch is the iteration's wall time over its launches: on a CPU device the kernels'",
               "own work shares the cores with the host, so only the smallest ROI isolates the host path."]
     return lines
@@ -208,6 +299,8 @@ def main(argv=None):
     p.add_argument("--paths", nargs="+", choices=("device", "lean"), default=["device", "lean"],
                    help="launch paths (default: both)")
     p.add_argument("--rounds", type=int, default=5, help="alternating rounds (default 5)")
+    p.add_argument("--no-passes", dest="passes", action="store_false",
+                   help="leave out the folded passes against the separate ones")
     p.add_argument("--short", type=int, default=20, help="iterations of the short run (default 20)")
     p.add_argument("--long", type=int, default=100, help="iterations of the long run (default 100)")
     p.add_argument("--device", default=None, help="OpenCL device spec (default: rsocl's choice)")
@@ -217,7 +310,8 @@ def main(argv=None):
         p.error(f"--long ({args.long}) must exceed --short ({args.short}) >= 1")
     device = get_device(args.device)
     floor, trivial, rows = measure(args.shapes, args.rounds, args.short, args.long, device, tuple(args.paths))
-    lines = page(floor, trivial, rows, device, args)
+    passes_rows = {m: passes(m, device, args.rounds) for m in args.shapes if m >= 8} if args.passes else None
+    lines = page(floor, trivial, rows, device, args, passes_rows)
     print("\n".join(lines))
     if args.out:
         write_page(args.out, lines)
