@@ -13,9 +13,16 @@ device: a kernel with one work item and one buffer argument, enqueued in a loop.
   kernels' own work is negligible) over its launches, and the same for the trivial kernel's
   loop. Their ratio says how far the solver's host path is from the floor.
 
-Rounds alternate the trivial loop and the ADMM runs, and the median of the rounds is reported.
+Two paths are measured (``--paths``): ``device``, what the device chooses (on a CPU device the
+plain TV and the ADMM's separate dual and difference passes), and ``lean``, the path of a device
+that is not a CPU (the TV's fused path, the dual update and ``u = f - b`` folded into the TV's and
+the projection's launches), run on any device by reading it as a GPU for the run.
 
-    python benchmarks/launches.py [--shapes 8 50 64] [--rounds 5] [--out docs/launches.md]
+Rounds alternate the trivial loop and the ADMM runs of each path, and the median of the rounds is reported.
+Then the passes that the lean path folds are timed against the separate ones they replace, in
+alternating rounds (:func:`passes`): what a CPU device's choice of path rests on.
+
+    python benchmarks/launches.py [--shapes 8 50 64] [--paths device lean] [--rounds 5] [--out docs/launches.md]
 """
 
 from __future__ import annotations
@@ -95,63 +102,193 @@ def case(m: int):
     return rig, ref.forward(rig, truth).astype(np.float32)
 
 
-def run(rig, g, iterations: int, device):
-    """One fixed-setting reconstruction; returns ``(seconds, enqueue counts)``."""
-    with counting() as counts:
+@contextmanager
+def path(name: str):
+    """Run the block on the ``device`` path (the device's own choice) or the ``lean`` one (the device read
+    as one that is not a CPU, so the ADMM and the TV take the path they take on a GPU)."""
+    from rsocl.device.context import Device
+
+    if name == "device":
+        yield
+        return
+    saved = Device.is_cpu
+    Device.is_cpu = property(lambda self: False)
+    try:
+        yield
+    finally:
+        Device.is_cpu = saved
+
+
+def run(rig, g, iterations: int, device, name: str = "device"):
+    """One fixed-setting reconstruction on path ``name``; returns ``(seconds, enqueue counts)``."""
+    with path(name), counting() as counts:
         t0 = time.perf_counter()
         rsocl.reconstruct(g, rig, iterations=iterations, tune=False, x0="interp3d", device=device)
         seconds = time.perf_counter() - t0
     return seconds, dict(counts)
 
 
-def per_iteration(rig, g, device, short: int, long: int):
+def per_iteration(rig, g, device, short: int, long: int, name: str = "device"):
     """``(launches per iteration by kind, seconds per iteration)`` from runs of ``short`` and ``long``."""
-    t_short, c_short = run(rig, g, short, device)
-    t_long, c_long = run(rig, g, long, device)
+    t_short, c_short = run(rig, g, short, device, name)
+    t_long, c_long = run(rig, g, long, device, name)
     span = long - short
     return {k: (c_long[k] - c_short[k]) / span for k in COUNTED}, (t_long - t_short) / span
 
 
-def measure(shapes, rounds: int, short: int, long: int, device):
-    """Alternating rounds of the trivial loop and each shape's runs; per-shape medians."""
+def measure(shapes, rounds: int, short: int, long: int, device, paths=("device", "lean")):
+    """Alternating rounds of the trivial loop and each shape's runs on each path (their order reversed
+    every other round); per-shape and path medians."""
     cases = {m: case(m) for m in shapes}
     for rig, g in cases.values():               # warm-up: kernel builds, the interpolation's set-up
-        run(rig, g, 2, device)
-    trivial, rows = [], {m: [] for m in shapes}
+        for name in paths:
+            run(rig, g, 2, device, name)
+    trivial = []
+    rows = {(m, name): [] for m in shapes for name in paths}
     launches = {}
-    for _ in range(rounds):
+    for r in range(rounds):
         trivial.append(trivial_launch_us(device))
         for m, (rig, g) in cases.items():
-            kinds, seconds = per_iteration(rig, g, device, short, long)
-            launches[m] = kinds
-            rows[m].append(seconds)
+            for name in (paths if r % 2 == 0 else paths[::-1]):
+                kinds, seconds = per_iteration(rig, g, device, short, long, name)
+                launches[m, name] = kinds
+                rows[m, name].append(seconds)
     floor = statistics.median(trivial)
     out = []
     for m in shapes:
-        total = sum(launches[m].values())
-        seconds = statistics.median(rows[m])
-        us = seconds / total * 1e6 if total else float("nan")
-        out.append({"m": m, "T": cases[m][0].T, "launches": launches[m], "total": total,
-                    "ms_per_iteration": seconds * 1e3, "us_per_launch": us, "ratio": us / floor})
+        for name in paths:
+            total = sum(launches[m, name].values())
+            seconds = statistics.median(rows[m, name])
+            us = seconds / total * 1e6 if total else float("nan")
+            out.append({"m": m, "T": cases[m][0].T, "path": name, "launches": launches[m, name], "total": total,
+                        "ms_per_iteration": seconds * 1e3, "rounds_ms": [v * 1e3 for v in rows[m, name]],
+                        "us_per_launch": us, "ratio": us / floor})
     return floor, trivial, out
 
 
-def page(floor, trivial, rows, device, args) -> list:
+def passes(m: int, device, rounds: int, reps: int = 100):
+    """The folded passes against the separate ones on the ``m × m`` case, in alternating rounds of ``reps``
+    enqueues each (a finish around each round): ``[(name, separate µs, folded µs, folded / separate per round)]``.
+
+    - the residual: ``forward`` + ``sum_sq_diff`` against ``residual_partials`` (one launch);
+    - ``u = f - b``: ``admm_project`` + ``admm_difference`` against ``admm_project`` writing u itself;
+    - the ADMM's dual update: ``tv_primal`` + ``admm_dual`` against ``tv_primal_update``.
+    """
+    import pyopencl.array as cla
+
+    from rsocl.device.reduction import sum_sq_diff_async
+    from rsocl.model.operator import RollingShutterOperator
+    from rsocl.solver.admm import ADMM
+    from rsocl_plugins.tv import TV, launches as tv_launches
+
+    rig, g = case(m)
+    op = RollingShutterOperator(rig, device=device, subframes=rig.sampled_range())
+    tv = TV(fused=0)
+    s = ADMM(op, cla.to_device(op.queue, g), tv, lam=0.1, eta=0.2)
+    s.step()
+    q, prog, T = op.queue, s.program, op.T
+    tv_prog = tv._program(s.u, "tv.cl")
+    grids = tv_launches(tv_prog, device, T, m, m)
+    (p,), _ = tv._buffers(s.u, 1)
+    wt, sizes = np.float32(3.0), (np.int32(T), np.int32(m), np.int32(m), np.int32(1))
+
+    def project(difference):
+        prog.admm_project(q, *s.blocks, s.f.data, s.g.data, *op._geometry(), s.inverse.data, s.eta_device.data,
+                          np.int32(0), s.b.data, s.u.data, np.int32(difference), np.int32(T), np.int32(op.L),
+                          *op._shape_args())
+
+    def project_then_difference():
+        project(0)
+        for gs, ls, off in s.elements:
+            prog.admm_difference(q, gs, ls, s.f.data, s.b.data, s.u.data, global_offset=off)
+
+    def primal_then_dual():
+        for gs, ls, off in grids:
+            tv_prog.tv_primal(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, global_offset=off)
+        for gs, ls, off in s.voxels:
+            prog.admm_dual(q, gs, ls, s.theta.data, s.b.data, s.f.data, s.dual_on.data, np.int32(1),
+                           np.int32(s.per_set), global_offset=off)
+
+    def primal_update():
+        for gs, ls, off in grids:
+            tv_prog.tv_primal_update(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, s.b.data, s.f.data,
+                                     s.dual_on.data, global_offset=off)
+
+    def forward_then_sum():
+        op.forward_into(s.theta, s.hx)
+        sum_sq_diff_async(s.g, s.hx)
+
+    pairs = [("residual: forward + sum_sq_diff | residual_partials", forward_then_sum, lambda: s.residual_into(0)),
+             ("u = f - b: admm_project + admm_difference | admm_project writing u", project_then_difference,
+              lambda: project(1)),
+             ("dual update: tv_primal + admm_dual | tv_primal_update", primal_then_dual, primal_update)]
+
+    def timed(fn):
+        q.finish()
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            fn()
+        q.finish()
+        return (time.perf_counter() - t0) / reps * 1e6
+
+    out = []
+    for name, separate, folded in pairs:
+        timed(separate), timed(folded)
+        a, b = [], []
+        for r in range(rounds):
+            if r % 2:
+                b.append(timed(folded)), a.append(timed(separate))
+            else:
+                a.append(timed(separate)), b.append(timed(folded))
+        out.append((name, statistics.median(a), statistics.median(b), [y / x for x, y in zip(a, b)]))
+    return out
+
+
+def command_buffers(device) -> list:
+    """Lines on record-once-replay (``cl_khr_command_buffer``): whether the device lists the extension
+    and whether pyopencl binds its API (any name with "command_buffer" or "CommandBuffer")."""
+    import pyopencl as cl
+    import pyopencl._cl as _cl
+
+    listed = "cl_khr_command_buffer" in device.device.extensions.split()
+    names = sorted({n for mod in (cl, _cl) for n in dir(mod) if "command_buffer" in n.lower() or "CommandBuffer" in n})
+    return [f"`cl_khr_command_buffer` in this device's extension list: **{'yes' if listed else 'no'}**; "
+            f"command-buffer names in pyopencl {cl.VERSION_TEXT}: **{', '.join(names) if names else 'none'}**."]
+
+
+def page(floor, trivial, rows, device, args, passes_rows=None) -> list:
     lines = header_lines("Launches per ADMM-TV iteration and host time per launch", device)
     lines += ["", "Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), built-in scene,",
               f"fixed settings from the interpolation, float32; {args.rounds} alternating rounds, medians.",
               f"Launches per iteration: counts of runs of {args.long} and {args.short} iterations, differenced.",
               "", f"Trivial kernel (one work item, one buffer argument): **{floor:.1f} µs** per enqueue "
               f"(rounds: {', '.join(f'{t:.1f}' for t in trivial)}).", "",
-              "| ROI | T | kernels | copies | fills | launches / iteration | ms / iteration "
+              "| ROI | T | path | kernels | copies | fills | launches / iteration | ms / iteration (rounds) "
               "| µs / launch | × trivial |",
-              "|---|---|---|---|---|---|---|---|---|"]
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         k = r["launches"]
-        lines.append(f"| {r['m']}×{r['m']} | {r['T']} | {k['enqueue_nd_range_kernel']:.1f} | "
-                     f"{k['enqueue_copy']:.1f} | {k['enqueue_fill_buffer']:.1f} | {r['total']:.1f} | "
-                     f"{r['ms_per_iteration']:.2f} | {r['us_per_launch']:.1f} | {r['ratio']:.2f} |")
-    lines += ["", "µs / launch is the iteration's wall time over its launches: on a CPU device the kernels'",
+        each = ", ".join(f"{v:.2f}" for v in r["rounds_ms"])
+        lines.append(f"| {r['m']}×{r['m']} | {r['T']} | {r['path']} | {k['enqueue_nd_range_kernel']:.1f} | "
+                     f"{k['enqueue_copy']:.3f} | {k['enqueue_fill_buffer']:.1f} | {r['total']:.2f} | "
+                     f"{r['ms_per_iteration']:.2f} ({each}) | {r['us_per_launch']:.1f} | {r['ratio']:.2f} |")
+    if passes_rows:
+        lines += ["", "The folded passes against the separate ones (µs per enqueue of the pair or of the one, "
+                  f"{args.rounds} alternating rounds of 100, medians):", "",
+                  "| ROI | separate \\| folded | separate µs | folded µs | folded / separate (rounds) |",
+                  "|---|---|---|---|---|"]
+        for m, rows_m in passes_rows.items():
+            for name, a, b, ratios in rows_m:
+                lines.append(f"| {m}×{m} | {name.replace('|', chr(92) + '|')} | {a:.0f} | {b:.0f} | "
+                             f"{', '.join(f'{r:.2f}' for r in ratios)} |")
+    lines += [""] + command_buffers(device)
+    lines += ["", "Paths: `device` is the device's own choice; `lean` is the path of a device that is not a CPU",
+              "(the TV's fused path, the ADMM's dual update and u = f - b folded into the TV's and the projection's",
+              "launches), run here by reading the device as a GPU. Both read the residuals of 8 iterations",
+              "(`rsocl.solver.admm.RESIDUAL_SLOTS`) in one copy. On a CPU device the lean path's times are those",
+              "of a GPU's work groups (the fused TV's tiles of hundreds of work items with barriers) run by a CPU:",
+              "there its launch count is the measurement, its time says nothing about a GPU.",
+              "", "µs / launch is the iteration's wall time over its launches: on a CPU device the kernels'",
               "own work shares the cores with the host, so only the smallest ROI isolates the host path."]
     return lines
 
@@ -159,17 +296,22 @@ def page(floor, trivial, rows, device, args) -> list:
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--shapes", type=int, nargs="+", default=[8, 50, 64], help="ROI sizes m (m × m)")
+    p.add_argument("--paths", nargs="+", choices=("device", "lean"), default=["device", "lean"],
+                   help="launch paths (default: both)")
     p.add_argument("--rounds", type=int, default=5, help="alternating rounds (default 5)")
-    p.add_argument("--short", type=int, default=10, help="iterations of the short run (default 10)")
-    p.add_argument("--long", type=int, default=30, help="iterations of the long run (default 30)")
+    p.add_argument("--no-passes", dest="passes", action="store_false",
+                   help="leave out the folded passes against the separate ones")
+    p.add_argument("--short", type=int, default=20, help="iterations of the short run (default 20)")
+    p.add_argument("--long", type=int, default=100, help="iterations of the long run (default 100)")
     p.add_argument("--device", default=None, help="OpenCL device spec (default: rsocl's choice)")
     p.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'launches.md'})")
     args = p.parse_args(argv)
     if args.long <= args.short or args.short < 1:
         p.error(f"--long ({args.long}) must exceed --short ({args.short}) >= 1")
     device = get_device(args.device)
-    floor, trivial, rows = measure(args.shapes, args.rounds, args.short, args.long, device)
-    lines = page(floor, trivial, rows, device, args)
+    floor, trivial, rows = measure(args.shapes, args.rounds, args.short, args.long, device, tuple(args.paths))
+    passes_rows = {m: passes(m, device, args.rounds) for m in args.shapes if m >= 8} if args.passes else None
+    lines = page(floor, trivial, rows, device, args, passes_rows)
     print("\n".join(lines))
     if args.out:
         write_page(args.out, lines)

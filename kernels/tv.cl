@@ -46,6 +46,37 @@ __kernel void tv_primal(__global const real *img, __global const real *p, __glob
     out[i] = img[i] + d;
 }
 
+/* tv_primal, and then the ADMM's next dual update from the denoiser's input img = u and output
+ * theta = out: b = theta - u and f = theta + b in the sets where dual[set], else f = theta (the last
+ * primal step of a call made inside the ADMM).  global size (n, m, B*T) */
+__kernel void tv_primal_update(__global const real *img, __global const real *p, __global real *out,
+                               real wt, int T, int m, int n, int sets,
+                               __global real *bvar, __global real *fvar, __global const int *dual)
+{
+    int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
+    int set = st / T, s = st - set * T;
+    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
+    size_t i = ((size_t)st * m + y) * n + x;
+    real d = -(p[i] + p[N + i]);
+    real py = p[y > 0 ? i - n : i];         /* the neighbours as in tv_primal */
+    d += y > 0 ? py : (real)0;
+    d += p[N + i - 1];
+#if TEMPORAL
+    real pt = p[2 * N + (s > 0 ? i - mn : i)];
+    d -= wt * p[2 * N + i];
+    d += s > 0 ? wt * pt : (real)0;
+#endif
+    real u = img[i], th = u + d;
+    out[i] = th;
+    if (dual[set]) {                        /* uniform in a work group (one sub-frame of one set) */
+        real bn = th - u;
+        bvar[i] = bn;
+        fvar[i] = th + bn;
+    } else {
+        fvar[i] = th;
+    }
+}
+
 /* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|) at voxel (x, y, s) of its set; with
  * from_zero, p is taken as 0 and not read (the first iteration, where out = img).
  * At the far edges the clamped neighbour is the voxel itself: the difference is 0. */

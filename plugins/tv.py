@@ -19,9 +19,19 @@ GROUP = 512
 #: (see :class:`TV`).
 STEP = 0.9
 
-#: Default of the ``fused`` option (most Chambolle iterations per launch on tiles in local memory):
-#: the plain path (measured: docs/regularizer_defaults.md).
-FUSED = 0
+#: Default of the ``fused`` option: the device's choice, :func:`device_fused`.
+FUSED = -1
+
+#: ``fused`` of the device's choice on a device that is not a CPU, where launches dominate a small
+#: problem: a denoising call in as few launches as the tiles' plan allows (docs/launches.md). On a
+#: CPU device the plain path is the faster one (docs/tv_fused.md, docs/regularizer_defaults.md).
+GPU_FUSED = 16
+
+
+def device_fused(device) -> int:
+    """``fused`` that the default (:data:`FUSED`) stands for on ``device`` (an rsocl Device): 0 on a CPU
+    device, :data:`GPU_FUSED` on others."""
+    return 0 if device.is_cpu else GPU_FUSED
 
 
 def edge_weights(n: int, dtype) -> np.ndarray:
@@ -32,7 +42,7 @@ def edge_weights(n: int, dtype) -> np.ndarray:
 def launches(prog, device, T: int, m: int, n: int):
     """Exact launch grids of the TV kernels of ``prog`` (no bounds test in them), in work groups
     of whole rows up to :data:`GROUP`, capped by what ``device`` (an rsocl Device) and the kernels allow."""
-    group = device.group_limit(prog.tv_primal, prog.tv_dual, prog.tv_dual_first, cap=GROUP)
+    group = device.group_limit(prog.tv_primal, prog.tv_dual, prog.tv_dual_first, prog.tv_primal_update, cap=GROUP)
     return voxel_launches(T, m, n, group=group, max_x=device.max_work_item_sizes[0])
 
 
@@ -56,8 +66,9 @@ class TV(Regularizer):
     fused : int
         Most iterations per launch on tiles held in local memory, with the ADMM's dual update folded
         into the last launch (:mod:`rsocl_plugins.tv_fused`, same result to float rounding);
-        0..1000, default 0: the plain path, two launches per iteration. A device whose local
-        memory is too small for tiles that save bytes takes the plain path.
+        0: the plain path, two launches per iteration; -1..1000, default -1: the device's choice
+        (:func:`device_fused`: the plain path on a CPU device, the fused path on others). A device
+        whose local memory is too small for tiles that save bytes takes the plain path.
 
     Examples
     --------
@@ -87,21 +98,23 @@ class TV(Regularizer):
         "step": Option(STEP, "", "Chambolle step as a fraction of scikit-image's 1/(2(2 + w^2)) "
                                  "(1: scikit-image's step)", 0.01, 1.0),
         "fused": Option(FUSED, "iterations", "most Chambolle iterations per launch on tiles in local memory "
-                                             "(0: the plain path, two launches per iteration)", 0, 1000),
+                                             "(0: the plain path, two launches per iteration; "
+                                             "-1: the device's choice)", -1, 1000),
     }
 
-    @property
-    def fuses_dual(self) -> bool:
-        return self.fused > 0
+    #: Both paths take the ADMM's dual update into their last launch (:meth:`denoise_and_update`).
+    fuses_dual = True
 
     @property
     def planes(self) -> int:
         return 3 if self.temporal_weight > 0 else 2
 
-    def workspace_bytes(self, shape, dtype) -> int:
+    def workspace_bytes(self, shape, dtype, device=None) -> int:
         # the dual p (planes of the input's size; two copies on the fused path, which reads one and
-        # writes the other) and xnext (n values)
-        copies = 2 if self.fused > 0 else 1
+        # writes the other) and xnext (n values); the device's choice (fused = -1) counted for
+        # ``device``, or as on a CPU without one
+        fused = self.fused if self.fused >= 0 else (0 if device is None else device_fused(device))
+        copies = 2 if fused > 0 else 1
         return (copies * self.planes * int(np.prod(shape)) + int(shape[-1])) * np.dtype(dtype).itemsize
 
     def _steps(self, queue, weights, dtype):
@@ -125,12 +138,22 @@ class TV(Regularizer):
         temporal = int(self.temporal_weight > 0)
         return device_for_queue(x.queue).program([name], REAL=c_type(x.dtype), TEMPORAL=temporal)
 
+    def fuses_dual_on(self, device) -> bool:
+        """Whether an ADMM on ``device`` should leave its dual update to :meth:`denoise_and_update`: on the
+        fused path, and on a device that is not a CPU (one launch less per iteration); on a CPU the
+        plain path's separate passes are faster (docs/launches.md)."""
+        fused = device_fused(device) if self.fused < 0 else self.fused
+        return fused > 0 or not device.is_cpu
+
     def fused_plan(self, x):
         """The :class:`~rsocl_plugins.tv_fused.FusedPlan` for device array ``x`` (None: the plain path)."""
         import pyopencl as cl
 
         cache = self.__dict__.setdefault("_plans", {})
         dev = device_for_queue(x.queue)
+        fused = device_fused(dev) if self.fused < 0 else self.fused
+        if fused == 0:
+            return None
         limits = (dev.local_mem_bytes, dev.max_work_group_size, dev.max_work_item_sizes)
         key = (x.shape, x.dtype.str, x.queue.int_ptr, self.iterations, self.fused, self.planes, limits)
         if key not in cache:
@@ -139,10 +162,11 @@ class TV(Regularizer):
             shape = x.shape if x.ndim == 4 else (1,) + x.shape
             # a CPU runs a work group's items as loops split at barriers: one item per group runs
             # each row of a tile as one contiguous (vectorised) loop
-            cache[key] = tv_fused.plan(shape, x.dtype.itemsize, self.iterations, self.fused, self.planes == 3,
-                                       local_bytes=dev.local_mem_bytes - reserved,
-                                       group=1 if dev.is_cpu else dev.group_limit(kernel),
-                                       max_items=dev.max_work_item_sizes)
+            found = tv_fused.plan(shape, x.dtype.itemsize, self.iterations, fused, self.planes == 3,
+                                  local_bytes=dev.local_mem_bytes - reserved,
+                                  group=1 if dev.is_cpu else dev.group_limit(kernel),
+                                  max_items=dev.max_work_item_sizes)
+            cache[key] = found
         return cache[key]
 
     def _buffers(self, x, copies):
@@ -163,7 +187,8 @@ class TV(Regularizer):
     def denoise_and_update(self, u, weight, theta, b, f, dual):
         """``theta = denoise(u, weight)``, then the ADMM's next dual update: ``b = theta - u`` and
         ``f = theta + b`` in the sets where ``dual`` (a device int array, one per set) is set, else
-        ``f = theta``. On the fused path that is the last launch's work; otherwise one more pass."""
+        ``f = theta``. That is the last launch's work (the fused path's last launch, the plain path's last
+        primal step); with one Chambolle iteration, one more pass."""
         weights = self.check_weights(weight, u.shape[0] if u.ndim == 4 else None)
         for name, array in (("theta", theta), ("b", b), ("f", f)):
             if array.shape != u.shape or array.dtype != u.dtype:
@@ -175,11 +200,11 @@ class TV(Regularizer):
             raise ValueError("out must be another buffer than x (every TV iteration reads x)")
         sets = x.shape[0] if x.ndim == 4 else 1
         steps = self._steps(x.queue, np.broadcast_to(weight, (sets,)), x.dtype)
-        plan = self.fused_plan(x) if self.fused > 0 else None
+        plan = self.fused_plan(x) if self.fused != 0 else None
         if plan is not None:
             return self._run_fused(x, steps, out, dual, plan)
-        self._run_plain(x, steps, out)
-        if dual is not None:
+        self._run_plain(x, steps, out, dual)
+        if dual is not None and self.iterations == 1:          # no primal step to take it
             b, f, on = dual
             prog = self._program(x, "tv_fused.cl")
             per_set = x.size // sets
@@ -189,7 +214,7 @@ class TV(Regularizer):
                                  global_offset=offset)
         return out
 
-    def _run_plain(self, x, steps, out):
+    def _run_plain(self, x, steps, out, dual=None):
         import pyopencl as cl
 
         sets = x.shape[0] if x.ndim == 4 else 1
@@ -204,19 +229,27 @@ class TV(Regularizer):
         wt = x.dtype.type(self.temporal_weight if self.planes == 3 else 0.0)
         sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(sets))
 
-        def each(kernel, *args):
+        def each(kernel):                           # with the arguments set once per call
             for gsize, lsize, offset in grids[key]:
-                kernel(x.queue, gsize, lsize, *args, *sizes, global_offset=offset)
+                kernel.enqueue(x.queue, gsize, lsize, offset)
 
         if self.iterations == 1:                    # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
         # iteration 0 from p = 0 (out = x): one kernel that only writes p
-        each(prog.tv_dual_first, x.data, p.data, xnext.data, steps.data, wt)
-        for i in range(1, self.iterations):
-            each(prog.tv_primal, x.data, p.data, out.data, wt)
-            if i < self.iterations - 1:
-                each(prog.tv_dual, out.data, p.data, xnext.data, steps.data, wt)
+        prog.tv_dual_first.set_args(x.data, p.data, xnext.data, steps.data, wt, *sizes)
+        each(prog.tv_dual_first)
+        prog.tv_primal.set_args(x.data, p.data, out.data, wt, *sizes)
+        prog.tv_dual.set_args(out.data, p.data, xnext.data, steps.data, wt, *sizes)
+        for _ in range(1, self.iterations - 1):
+            each(prog.tv_primal)
+            each(prog.tv_dual)
+        if dual is None:
+            each(prog.tv_primal)
+        else:                                       # the last primal step makes the ADMM's dual update
+            b, f, on = dual
+            prog.tv_primal_update.set_args(x.data, p.data, out.data, wt, *sizes, b.data, f.data, on.data)
+            each(prog.tv_primal_update)
         return out
 
     def _run_fused(self, x, steps, out, dual, plan):

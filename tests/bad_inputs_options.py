@@ -23,4 +23,5 @@ CASES = [
     Bad("reconstruct-missing-capture", ["nothing.h5"], argv=["reconstruct", "{tmp}/nothing.h5", "--out", "{tmp}/r.h5"]),
     Bad("api-iterations-zero", ["iterations"], api=_reconstruct(iterations=0)),
     Bad("api-lam-negative", ["lam"], api=_reconstruct(lam=-1.0)),
+    Bad("api-tv-fused-below-the-device-choice", ["fused", "-1"], api=_reconstruct(regularizer_options={"fused": -2})),
 ]

@@ -113,3 +113,17 @@ def test_instances_are_bounded(program, monkeypatch):
         program.instance("fill", key)
     assert len(program._instances) == 3 and program.instance("fill", 4) is program.instance("fill", 4)
     assert program.instance("fill", 0) is not first          # the oldest went first, and comes back anew
+
+
+def test_enqueue_launches_with_the_arguments_last_set(program, device):
+    import pyopencl.array as cla
+
+    q = device.queue
+    a, b = cla.zeros(q, 8, np.float32), cla.zeros(q, 8, np.float32)
+    fill = program.fill
+    fill.set_args(a.data, np.float32(2), np.int32(1))
+    fill.enqueue(q, (8,), None)
+    np.testing.assert_array_equal(a.get(), np.full(8, 3, np.float32))
+    fill.set_args(b.data, np.float32(2), np.int32(1))     # value arguments unchanged, the buffer changed
+    fill.enqueue(q, (8,), None)
+    np.testing.assert_array_equal(b.get(), np.full(8, 3, np.float32))

@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-KERNELS = ("admm.cl", "common.cl", "interp.cl", "operator.cl", "reduce.cl", "tv.cl", "tv_fused.cl")
+KERNELS = ("admm.cl", "common.cl", "interp.cl", "operator.cl", "reduce.cl", "residual.cl", "tv.cl", "tv_fused.cl")
 # What must never reach the wheel (the copy for the build leaves these out too).
 IGNORE = shutil.ignore_patterns(".git", "build", "dist", "*.egg-info", "__pycache__", "*.pyc", ".pytest_cache",
                                 ".venv", "venv", "out", "*.h5", "rsocl-demo")

@@ -98,3 +98,27 @@ def test_workspace_bytes_counts_the_dual_and_the_edge_weights():
     # p: 3 planes in 3-D, 2 in 2-D; xnext: one value per column
     assert TV().workspace_bytes((5, 7, 9), np.float32) == (3 * 5 * 7 * 9 + 9) * 4
     assert TV(temporal_weight=0).workspace_bytes((5, 7, 9), np.float64) == (2 * 5 * 7 * 9 + 9) * 8
+
+
+@pytest.mark.parametrize("fused", [0, 3])
+@pytest.mark.parametrize("iterations", [1, 2, 7])
+def test_denoise_and_update_is_denoise_then_the_admm_dual_update(device, dtype, rng, fused, iterations):
+    # the plain path's last primal step (tv_primal_update) and the fused path's last launch make
+    # b = theta - u, f = theta + b in the sets with a dual, f = theta in the others
+    import pyopencl.array as cla
+
+    q = device.queue
+    u = rng.random((3, 5, 9, 11))
+    weights = np.array([0.2, 0.0, 0.5])
+    on = np.array([1, 1, 0], np.int32)
+    tv = TV(iterations=iterations, temporal_weight=2.0, fused=fused)
+    want = tv.denoise(cla.to_device(q, u.astype(dtype)), weights).get()
+    dev = {k: cla.to_device(q, v.astype(dtype)) for k, v in (("u", u), ("theta", 0 * u), ("b", u + 3), ("f", u + 5))}
+    tv.denoise_and_update(dev["u"], weights, dev["theta"], dev["b"], dev["f"], cla.to_device(q, on))
+    u_stored = u.astype(dtype)
+    tol = 1e-6 if dtype == "float32" else 1e-13
+    np.testing.assert_allclose(dev["theta"].get(), want, atol=tol)
+    b_want = np.where(on[:, None, None, None] == 1, want - u_stored, (u + 3).astype(dtype))
+    f_want = np.where(on[:, None, None, None] == 1, want + b_want, want)
+    np.testing.assert_allclose(dev["b"].get(), b_want, atol=tol)
+    np.testing.assert_allclose(dev["f"].get(), f_want, atol=tol)

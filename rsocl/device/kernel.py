@@ -56,6 +56,12 @@ class Kernel:
         return self._cl.enqueue_nd_range_kernel(queue, self.kernel, global_size, local_size,
                                                 global_work_offset=global_offset, wait_for=wait_for)
 
+    def enqueue(self, queue, global_size, local_size, global_offset=None):
+        """Enqueue the kernel with the arguments as they were last set (no argument is set): for a
+        kernel launched many times in a row with the same arguments, set once with :meth:`set_args`."""
+        return self._cl.enqueue_nd_range_kernel(queue, self.kernel, global_size, local_size,
+                                                global_work_offset=global_offset)
+
     def __getattr__(self, name):
         if name.startswith("_"):
             raise AttributeError(name)

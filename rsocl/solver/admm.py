@@ -3,8 +3,9 @@
 One iteration is the data step in three launches (``admm_dual``: dual update and
 ``v = theta + b``; ``admm_project``: ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)`` per pixel;
 ``admm_difference``: ``u = f - b``) and the regularizer's ``theta = denoise(u, lam/eta)``; a
-regularizer with a fused path takes the first and last of them into its own and the projection's
-launches. A batch of sets runs every launch once for all of them. Nothing crosses to the host but
+regularizer that fuses the dual update (the TV) takes the first and last of them into its own and the
+projection's launches. The residual of the history is one more launch (:mod:`rsocl.solver.residuals`).
+A batch of sets runs every launch once for all of them. Nothing crosses to the host but
 the few partial sums of the history.
 """
 
@@ -16,9 +17,13 @@ from rsocl.common import validation as check
 from rsocl.device.context import c_type
 from rsocl.device.launch import batch_launches, element_launches
 from rsocl.model.operator import RollingShutterOperator
-from rsocl.device.reduction import sum_sq_diff, sum_sq_diff_async
+from rsocl.solver.residuals import DeviceResiduals
 
-__all__ = ["ADMM", "block_inverse", "own_inverses"]
+__all__ = ["ADMM", "block_inverse", "own_inverses", "RESIDUAL_SLOTS"]
+
+#: Iterations whose residuals the device holds before the host reads them in one copy, in a run that
+#: does not look at each residual (:meth:`ADMM.residual_into`, :meth:`ADMM.read_residuals`).
+RESIDUAL_SLOTS = 8
 
 
 #: Eigenvalues of ``eta I + M`` below this fraction of the largest one (per pixel) are
@@ -103,8 +108,9 @@ class ADMM:
         Snapshot pixels that enter the data term; the others (e.g. saturated ones)
         are left out: their rows of ``H`` are dropped from the projection.
 
-    When the regularizer has a fused path (``regularizer.fuses_dual``: the TV with ``fused > 0``),
-    the projection also writes the denoiser's input ``u = f - b`` and the denoiser's last launch
+    When the regularizer takes the dual update into its own launches on this device
+    (``regularizer.fuses_dual_on(device)``: the TV on its fused path or on a GPU), the projection
+    also writes the denoiser's input ``u = f - b`` and the denoiser's last launch
     makes the next iteration's dual update (``b = theta - u``, ``f = theta + b``): no separate
     passes for either after the first iteration.
     """
@@ -142,10 +148,26 @@ class ADMM:
         self.voxels = batch_launches(self.per_set, self.sets, dev.group_limit(prog.admm_dual, cap=64))
         self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
         self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project,))
-        self.fused = bool(getattr(regularizer, "fuses_dual", False))
-        self.g_norm2 = sum_sq_diff(g, weights=self.valid, sets=self.sets if self.batched else None)
+        self.fused = bool(regularizer.fuses_dual_on(op.device))
+        self.residuals = DeviceResiduals(op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS)
+        self.g_norm2 = self.residuals.g_norm2
         self.iteration = 0
+        self._bind_kernels()
         cl.enqueue_barrier(queue)
+
+    def _bind_kernels(self):
+        """This solver's own kernel objects (rsocl.device.Kernels.instance), their arguments set once: a
+        step enqueues them and sets only the by-value arguments that change (the first iteration's flags)."""
+        op, prog, key = self.op, self.program, ("ADMM", id(self))
+        self._dual = prog.instance("admm_dual", key)
+        self._dual.set_args(self.theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0),
+                            np.int32(self.per_set))
+        self._project = prog.instance("admm_project", key)
+        self._project.set_args(self.f.data, self.g.data, *op._geometry(), self.inverse.data, self.eta_device.data,
+                               np.int32(self.own_inverse), self.b.data, self.u.data, np.int32(self.fused),
+                               np.int32(op.T), np.int32(op.L), *op._shape_args())
+        self._difference = prog.instance("admm_difference", key)
+        self._difference.set_args(self.f.data, self.b.data, self.u.data)
 
     @property
     def lam(self):
@@ -193,7 +215,7 @@ class ADMM:
         import pyopencl as cl
 
         self.regularizer = regularizer
-        self.fused = bool(getattr(regularizer, "fuses_dual", False))
+        self.fused = bool(regularizer.fuses_dual_on(self.op.device))
         self.lams = _per_set("lam", lam, self.sets)
         self.weights = _denoiser_weights(self.lams, self.etas)
         for dest in (self.theta, self.f):
@@ -203,22 +225,18 @@ class ADMM:
 
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
-        op, queue = self.op, self.op.queue
+        queue = self.op.queue
         if not (self.fused and self.iteration > 0):           # else the denoiser made the dual update
-            update = np.int32(self.iteration > 0)
+            self._dual.set_arg(4, np.int32(self.iteration > 0))
             for gsize, lsize, offset in self.voxels:
-                self.program.admm_dual(queue, gsize, lsize, self.theta.data, self.b.data, self.f.data,
-                                       self.dual_on.data, update, np.int32(self.per_set), global_offset=offset)
-        self.program.admm_project(
-            queue, *self.blocks, self.f.data, self.g.data, *op._geometry(), self.inverse.data,
-            self.eta_device.data, np.int32(self.own_inverse), self.b.data, self.u.data, np.int32(self.fused),
-            np.int32(op.T), np.int32(op.L), *op._shape_args())
+                self._dual.enqueue(queue, gsize, lsize, offset)
+        self._project.set_arg(11, np.int32(self.fused))
+        self._project.enqueue(queue, *self.blocks)
         if self.fused:
             self.regularizer.denoise_and_update(self.u, self.weight, self.theta, self.b, self.f, self.dual_on)
         else:
             for gsize, lsize, offset in self.elements:
-                self.program.admm_difference(queue, gsize, lsize, self.f.data, self.b.data, self.u.data,
-                                             global_offset=offset)
+                self._difference.enqueue(queue, gsize, lsize, offset)
             self.regularizer.denoise(self.u, self.weight, out=self.theta)
         self.iteration += 1
 
@@ -245,21 +263,26 @@ class ADMM:
         The next :meth:`step` may be enqueued before the result is read: the device
         works on it while the partial sums travel to the host.
         """
-        self.op.forward_into(self.theta, self.hx)
-        sets = self.sets if self.batched else None
-        return PendingResidual(sum_sq_diff_async(self.g, self.hx, weights=self.valid, sets=sets), self.g_norm2)
+        self.residuals.enqueue(self.theta, 0)
+        return PendingResidual(self.residuals.read(1))
+
+    def residual_into(self, slot: int):
+        """Enqueue the residual of the current ``theta`` into device slot ``slot`` (0 .. :data:`RESIDUAL_SLOTS` - 1);
+        :meth:`read_residuals` reads the slots. One launch; nothing is read back."""
+        self.residuals.enqueue(self.theta, slot)
+
+    def read_residuals(self, count: int):
+        """Enqueue the copy of the residuals in slots ``0 .. count - 1``; ``.result()`` waits and gives
+        one residual (as :meth:`residual`) per slot, in slot order."""
+        return self.residuals.read(count)
 
 
 class PendingResidual:
     """A residual of :meth:`ADMM.residual_async` on its way to the host."""
 
-    def __init__(self, pending, g_norm2):
-        self._pending, self._g_norm2 = pending, g_norm2
+    def __init__(self, pending):
+        self._pending = pending
 
     def result(self):
         """The residual: a float, or one per set (float64 array) for a batch."""
-        r2 = self._pending.result()
-        if np.ndim(r2) == 0:
-            return float(np.sqrt(r2 / self._g_norm2)) if self._g_norm2 != 0 else float(np.sqrt(r2))
-        g2 = np.asarray(self._g_norm2)
-        return np.sqrt(np.where(g2 > 0, r2 / np.where(g2 > 0, g2, 1.0), r2))
+        return self._pending.result()[0]

@@ -32,7 +32,8 @@ from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import ADMM
 from rsocl.solver.holdout import default_patterns, fold_masks
 
-__all__ = ["LAM_FACTORS", "CANDIDATE_FRACTION", "SearchSpace", "Tuning", "tune_parameters", "applied_blend"]
+__all__ = ["LAM_FACTORS", "CANDIDATE_FRACTION", "SearchSpace", "Tuning", "tune_parameters", "run_folds",
+           "applied_blend"]
 
 #: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
 LAM_FACTORS = (0.3, 1.0, 3.0)
@@ -151,8 +152,28 @@ def _midpoints(values, best):
     return out
 
 
+def run_folds(op, g_device, folds, reg, lam, *, eta, projection, iterations):
+    """``(err, moved)``: one candidate (regularizer ``reg``, ``lam``) run ``iterations`` ADMM steps on each
+    fold in turn, its held-out sums of squares ``‖g - H theta‖²`` and ``‖H theta - H x0‖²`` added over the
+    folds in order. Each fold keeps its solver and restarts it for the next candidate."""
+    err = moved = 0.0
+    for fold in folds:
+        if fold.solver is None:
+            fold.solver = ADMM(op, g_device, reg, lam=lam, eta=eta, projection=projection, x0=fold.x0,
+                               valid=fold.fit)
+        else:
+            fold.solver.restart(reg, lam, fold.x0)
+        solver = fold.solver
+        for _ in range(iterations):
+            solver.step()
+        op.forward_into(solver.theta, solver.hx)
+        err += sum_sq_diff(g_device, solver.hx, weights=fold.weights)
+        moved += sum_sq_diff(solver.hx, fold.start_prediction, weights=fold.weights)
+    return err, moved
+
+
 def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, eta, projection="exact", valid=None,
-                    iterations=60, patterns=None, progress=False) -> Tuning:
+                    iterations=60, patterns=None, progress=False, runner=None) -> Tuning:
     """Search the parameters that predict held-out snapshot pixels best (see the module doc).
 
     Parameters
@@ -179,6 +200,9 @@ def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, et
         The criterion pools the held-out errors of all patterns.
     progress : bool
         Show a progress bar (tqdm) over the candidates.
+    runner : callable or None
+        How a candidate runs on the folds, called as :func:`run_folds` is; None: :func:`run_folds`, one
+        fold after the other (:class:`rsocl.solver.search_batch.BatchedFolds` runs them as one batch).
 
     Returns
     -------
@@ -228,19 +252,8 @@ def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, et
         if key in scores:
             return scores[key]
         reg = make_regularizer({**preset, **{k: v for k, v in point.items() if k != "lam"}})
-        err = moved = 0.0
-        for fold in folds:
-            if fold.solver is None:
-                fold.solver = ADMM(op, g_device, reg, lam=point["lam"], eta=eta, projection=projection, x0=fold.x0,
-                                   valid=fold.fit)
-            else:
-                fold.solver.restart(reg, point["lam"], fold.x0)
-            solver = fold.solver
-            for _ in range(iterations):
-                solver.step()
-            op.forward_into(solver.theta, solver.hx)
-            err += sum_sq_diff(g_device, solver.hx, weights=fold.weights)
-            moved += sum_sq_diff(solver.hx, fold.start_prediction, weights=fold.weights)
+        err, moved = (runner or run_folds)(op, g_device, folds, reg, point["lam"], eta=eta, projection=projection,
+                                           iterations=iterations)
         value = float(math.sqrt(err / scale)) if scale > 0 else float(math.sqrt(err))
         if not math.isfinite(value):
             value = math.inf

@@ -165,8 +165,9 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> d
     """Run up to ``settings.iterations`` ADMM steps; the history as a dict of arrays.
 
     With nothing to look at ``theta`` between iterations (no callback, no truth, no tol), the
-    residual of iteration ``it`` is read while the device runs iteration ``it + 1``: the host
-    never waits on an idle device. With ``blend`` below 1 the estimate is then moved back towards
+    residuals stay on the device and are read a group at a time (:func:`_run_pipelined`) while the
+    device runs the next group: the host never waits on an idle device, and a divergence is raised
+    a group or two after the iteration that diverged. With ``blend`` below 1 the estimate is then moved back towards
     the run's start ``staged.x0`` (:meth:`~rsocl.solver.admm.ADMM.blend_towards`), and the last
     record's residual and PSNR are those of the returned estimate.
     """
@@ -184,19 +185,13 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> d
     staged.op.queue.finish()
     history.start = time.perf_counter()
     try:
-        pending = None
-        for it in range(settings.iterations):
-            solver.step()
-            current = solver.residual_async()
-            if not pipelined:
-                if history.record(it, current.result()):
+        if pipelined:
+            _run_pipelined(solver, history, settings.iterations)
+        else:
+            for it in range(settings.iterations):
+                solver.step()
+                if history.record(it, solver.residual_async().result()):
                     break
-            else:
-                if pending is not None:
-                    history.record(it - 1, pending.result())
-                pending = current
-        if pending is not None:                     # pipelined: the last iteration's residual
-            history.record(settings.iterations - 1, pending.result())
         history.check_stall(final=True)
         history.check_end()
         if blend is not None and blend < 1 and history.values["residual"]:
@@ -205,6 +200,29 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> d
         if bar is not None:
             bar.close()
     return {k: np.asarray(v) for k, v in history.values.items()}
+
+
+def _run_pipelined(solver, history, iterations):
+    """The iterations of a run that does not look at each residual: every iteration leaves its
+    residual in a device slot, the slots are read in one copy every ``solver.residuals.slots``
+    iterations, and each copy is waited for only after the next group of iterations is enqueued."""
+    slots = solver.residuals.slots
+    pending = None                                  # (first iteration, residuals on their way)
+    for it in range(iterations):
+        solver.step()
+        solver.residual_into(it % slots)
+        if (it + 1) % slots == 0 or it == iterations - 1:
+            current = (it - it % slots, solver.read_residuals(it % slots + 1))
+            if pending is not None:
+                _book(history, *pending)
+            pending = current
+    if pending is not None:
+        _book(history, *pending)
+
+
+def _book(history, first, pending):
+    for i, residual in enumerate(pending.result()):
+        history.record(first + i, residual)
 
 
 def collect(solver, staged, problem) -> tuple:

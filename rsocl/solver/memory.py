@@ -13,10 +13,13 @@ tiling decision (:mod:`rsocl.scale.proposal`) cost problems and tiles with them.
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 
 from rsocl.model.operator import geometry_bytes
 from rsocl.solver.holdout import default_patterns
+from rsocl.solver.search_batch import batch_bytes, batches_pay
 
 __all__ = ["state_bytes", "problem_bytes", "workspace_memory", "batch_memory", "memory_bytes", "memory_need",
            "search_memory", "search_peak", "device_limit"]
@@ -46,28 +49,36 @@ def problem_bytes(cube, K: int, dtype, sets: int, *, truth=False, start=False) -
     return geometry_bytes(K, pixels, dtype) + sets * (K * pixels * itemsize + (int(truth) + int(start)) * cube_bytes)
 
 
-def workspace_memory(cube, dtype, reg, sets: int) -> int:
-    """Device bytes of ``reg``'s workspace for ``sets`` sets of ``cube``: a regularizer that takes
-    batches (``reg.batched``) allocates it for the whole batch; the others work set by set, through
-    two work arrays of one set."""
+def _workspace(reg, shape, dtype, device):
+    """``reg.workspace_bytes`` on ``device`` where the regularizer's count takes one (TV's device default)."""
+    if device is not None and "device" in inspect.signature(reg.workspace_bytes).parameters:
+        return reg.workspace_bytes(shape, dtype, device=device)
+    return reg.workspace_bytes(shape, dtype)
+
+
+def workspace_memory(cube, dtype, reg, sets: int, device=None) -> int:
+    """Device bytes of ``reg``'s workspace for ``sets`` sets of ``cube`` on ``device`` (None: counted as
+    the regularizer counts without one): a regularizer that takes batches (``reg.batched``) allocates
+    it for the whole batch; the others work set by set, through two work arrays of one set."""
     cube = tuple(int(v) for v in cube)
     if getattr(reg, "batched", False):
-        return reg.workspace_bytes((sets,) + cube, dtype)
-    return reg.workspace_bytes(cube, dtype) + (2 * int(np.prod(cube)) * np.dtype(dtype).itemsize if sets > 1 else 0)
+        return _workspace(reg, (sets,) + cube, dtype, device)
+    return _workspace(reg, cube, dtype, device) + (2 * int(np.prod(cube)) * np.dtype(dtype).itemsize
+                                                   if sets > 1 else 0)
 
 
 def batch_memory(cube, K: int, dtype, reg, projection: str, sets: int, *, truth=False, own_inverse=False,
-                 start=False):
+                 start=False, device=None):
     """``(largest buffer, total)`` device bytes of an ADMM run on ``sets`` sets of ``cube = (T, m, n)``:
     the staged problem (:func:`problem_bytes`, with the ground truth when ``truth`` and a start cube
-    when ``start``), the solver's arrays (:func:`state_bytes`) and the
-    regularizer's workspace (:func:`workspace_memory`). Small per-set values (step lengths) and
+    when ``start``), the solver's arrays (:func:`state_bytes`) and the regularizer's workspace
+    (:func:`workspace_memory`, on ``device`` when given). Small per-set values (step lengths) and
     the partial sums of reductions are not counted.
     """
     cube = tuple(int(v) for v in cube)
     itemsize = np.dtype(dtype).itemsize
     cube_bytes = int(np.prod(cube)) * itemsize
-    work = workspace_memory(cube, dtype, reg, sets)
+    work = workspace_memory(cube, dtype, reg, sets, device)
     total = (problem_bytes(cube, K, dtype, sets, truth=truth, start=start)
              + state_bytes(cube, K, dtype, projection, sets, own_inverse) + work)
     return max(sets * cube_bytes, work if getattr(reg, "batched", False) else 0), total
@@ -76,7 +87,7 @@ def batch_memory(cube, K: int, dtype, reg, projection: str, sets: int, *, truth=
 def memory_bytes(op, reg, projection: str, sets: int, *, truth=False, own_inverse=False, start=False):
     """:func:`batch_memory` for the operator ``op`` (its solved sub-frames, channels and dtype)."""
     return batch_memory(op.domain_shape, op.K, op.dtype, reg, projection, sets, truth=truth, own_inverse=own_inverse,
-                        start=start)
+                        start=start, device=op.device)
 
 
 def memory_need(rig, regularizer, *, dtype="float32", projection="exact", start=True) -> tuple:
@@ -97,15 +108,20 @@ def search_memory(op, reg, projection: str, batch) -> int:
     """Device bytes the search allocates beside the staged problem, freed before the run's solver is
     made: per hold-out pattern (:func:`~rsocl.solver.holdout.default_patterns`) one set's ADMM arrays, its
     warm start, its warm start's prediction of the snapshots, held-out weights and regularizer
-    workspace (a fold's solver keeps the previous candidate's regularizer until its own turn); and for
+    workspace (a fold's solver keeps the previous candidate's regularizer until its own turn), with the
+    stacked copies of the folds run as one batch where batches pay
+    (:func:`~rsocl.solver.search_batch.batch_bytes`); and for
     a batch (``batch`` sets, None: one set) the first set staged on its own (operator geometry and
     snapshots)."""
     cube = op.domain_shape
     itemsize = np.dtype(op.dtype).itemsize
     snap = op.K * int(np.prod(cube[1:])) * itemsize
     per_fold = (state_bytes(cube, op.K, op.dtype, projection, 1) + int(np.prod(cube)) * itemsize + 2 * snap
-                + workspace_memory(cube, op.dtype, reg, 1))
-    extra = len(default_patterns(op.rig.shape, op.K)) * per_fold
+                + workspace_memory(cube, op.dtype, reg, 1, op.device))
+    folds = len(default_patterns(op.rig.shape, op.K))
+    extra = folds * per_fold
+    if batches_pay(op.device):                      # the folds run as one batch (rsocl.solver.search_batch)
+        extra += batch_bytes(op, folds)
     if batch is not None:
         extra += problem_bytes(cube, op.K, op.dtype, 1)
     return extra

@@ -30,6 +30,7 @@ from rsocl.solver.memory import memory_bytes, search_memory, search_peak
 from rsocl.solver.problem import Problem, Staged, check_problem, stage_on_device
 from rsocl.solver.request import Request, first_value, make_regularizer, make_request, run_params
 from rsocl.solver.result import Result
+from rsocl.solver.search_batch import BatchedFolds, batches_pay
 
 __all__ = ["Prepared", "prepare", "tune", "run", "check_problem", "make_request", "make_regularizer", "Request",
            "Tuning", "run_params", "applied_blend"]
@@ -159,7 +160,7 @@ def _choose_unset(prepared: Prepared, checked=False):
         staged.op, staged.g, problem.g, request.with_options, space, eta=first_value(settings.eta),
         projection=settings.projection, valid=problem.valid,
         iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / len(patterns))), patterns=patterns,
-        progress=request.progress)
+        progress=request.progress, runner=BatchedFolds() if batches_pay(staged.op.device) else None)
 
 
 def _check_search_fits(prepared: Prepared):

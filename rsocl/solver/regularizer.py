@@ -123,8 +123,14 @@ class Regularizer:
             return values[key]
         raise AttributeError(key)
 
-    def workspace_bytes(self, shape: tuple[int, ...], dtype: DTypeLike) -> int:
-        """Device memory (bytes) the denoiser allocates for an input of ``shape`` and ``dtype``."""
+    def fuses_dual_on(self, device) -> bool:
+        """Whether an ADMM on ``device`` (an rsocl Device) leaves its dual update to ``denoise_and_update``
+        (default: :attr:`fuses_dual`; a regularizer may keep separate passes where they are faster)."""
+        return bool(self.fuses_dual)
+
+    def workspace_bytes(self, shape: tuple[int, ...], dtype: DTypeLike, device=None) -> int:
+        """Device memory (bytes) the denoiser allocates for an input of ``shape`` and ``dtype`` on
+        ``device`` (an rsocl Device; None: any, for a regularizer whose workspace does not depend on it)."""
         return 0
 
     def denoise(self, x: cla.Array, weight: PerSet | ArrayLike, out: cla.Array | None = None) -> cla.Array:

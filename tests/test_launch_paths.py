@@ -1,0 +1,107 @@
+"""The ADMM's launch paths: the CPU device's (separate dual and difference passes, the plain TV) and
+the one of other devices (the TV's fused path, the dual update and u = f - b folded into the TV's
+and the projection's launches), run here by making the device read as a GPU. Both against the
+NumPy reference ADMM; the launch counts per iteration of each."""
+
+from contextlib import contextmanager
+
+import numpy as np
+import pytest
+
+import rsocl
+from rsocl.device.context import Device
+from rsocl.model import reference as ref
+from rsocl_plugins.tv import GPU_FUSED, STEP, TV, device_fused
+
+
+@pytest.fixture()
+def gpu_like(monkeypatch, device):
+    """The test device, read as a device that is not a CPU (the GPU defaults apply to it)."""
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    assert not device.is_cpu
+    return device
+
+
+@pytest.fixture(scope="module")
+def problem():
+    rig = rsocl.Rig.paper_array(4, (10, 9), t_e=1e-4, t_r=3e-5)
+    truth = np.random.default_rng(11).random((rig.T,) + rig.shape)
+    return rig, ref.forward(rig, truth)
+
+
+@contextmanager
+def counting():
+    """Count pyopencl's kernel enqueues while the block runs (yields a one-item list)."""
+    import pyopencl as cl
+
+    count, saved = [0], cl.enqueue_nd_range_kernel
+
+    def counted(*args, **kwargs):
+        count[0] += 1
+        return saved(*args, **kwargs)
+
+    cl.enqueue_nd_range_kernel = counted
+    try:
+        yield count
+    finally:
+        cl.enqueue_nd_range_kernel = saved
+
+
+def _launches_per_iteration(rig, g, device):
+    counts = []
+    for iterations in (9, 17):
+        with counting() as count:
+            rsocl.reconstruct(g, rig, iterations=iterations, lam=0.05, eta=0.3, tune=False, device=device)
+        counts.append(count[0])
+    return (counts[1] - counts[0]) / 8
+
+
+def test_the_device_default_of_fused(device, gpu_like):
+    assert device_fused(gpu_like) == GPU_FUSED > 0
+
+
+@pytest.mark.parametrize("eta", [0.3, 0.0])
+def test_gpu_path_matches_the_reference(problem, gpu_like, dtype, eta):
+    rig, g = problem
+    kw = dict(iterations=6, lam=0.05, eta=eta, tv_iterations=4)
+    got = rsocl.reconstruct(g, rig, dtype=dtype, device=gpu_like, regularizer_options={"temporal_weight": 2.5}, **kw)
+    want = ref.admm(rig, g, temporal_weight=2.5, step=STEP, **kw)
+    tol = 2e-4 if dtype == "float32" else 1e-10
+    np.testing.assert_allclose(got.datacube, want, atol=tol * np.abs(want).max())
+
+
+def test_gpu_path_of_a_batch_equals_its_sets_on_the_cpu_path(problem, device, monkeypatch):
+    rig, g = problem
+    batch = np.stack([g, 0.5 * g, 2 * g])
+    kw = dict(iterations=5, lam=(0.05, 0.1, 0.02), eta=(0.3, 0.0, 0.2), tune=False, dtype="float64")
+    cpu = rsocl.reconstruct(batch, rig, device=device, **kw)
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    gpu = rsocl.reconstruct(batch, rig, device=device, **kw)
+    np.testing.assert_allclose(gpu.datacube, cpu.datacube, atol=1e-10 * np.abs(cpu.datacube).max())
+    np.testing.assert_allclose(gpu.history["residual"], cpu.history["residual"], rtol=1e-9)
+
+
+def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
+    rig, g = problem
+    # CPU: admm_dual, admm_project, admm_difference, the plain TV of 10 iterations (1 + 9 + 8), the residual
+    assert _launches_per_iteration(rig, g, device) == 22
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    # other devices: the projection, the fused TV, the residual
+    plan = TV().fused_plan(_cube(device, rig))
+    assert plan is not None
+    assert _launches_per_iteration(rig, g, device) == 2 + len(plan.launches) <= 12
+
+
+def _cube(device, rig):
+    import pyopencl.array as cla
+
+    return cla.zeros(device.queue, (rig.sampled_range().stop - rig.sampled_range().start,) + rig.shape, np.float32)
+
+
+def test_memory_counts_the_dual_buffers_of_the_devices_choice(device, monkeypatch):
+    shape, plain = (12, 16, 16), TV().workspace_bytes((12, 16, 16), np.float32)
+    assert TV().workspace_bytes(shape, np.float32, device=device) == plain       # the CPU's plain path
+    assert TV(fused=3).workspace_bytes(shape, np.float32, device=device) > plain
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    assert TV().workspace_bytes(shape, np.float32, device=device) == TV(fused=3).workspace_bytes(shape, np.float32)
+    assert TV(fused=0).workspace_bytes(shape, np.float32, device=device) == plain

@@ -1,0 +1,86 @@
+"""The ADMM's residual in one launch (kernels/residual.cl) against the NumPy forward model, and the
+runs that keep residuals on the device against the runs that read each one."""
+
+import numpy as np
+import pytest
+
+import rsocl
+from rsocl.model import reference as ref
+from rsocl.model.operator import RollingShutterOperator
+from rsocl.solver.residuals import DeviceResiduals
+
+
+def _want(rig, theta, g, w):
+    """``‖g - H theta‖ / ‖g‖`` over the weights ``w`` per set (``‖H theta‖`` where ``g`` is 0), in NumPy."""
+    out = []
+    for t, gs, ws in zip(theta, g, w):
+        d = gs - ref.forward(rig, t)
+        g2 = np.sum(ws * gs**2)
+        r2 = np.sum(ws * d**2)
+        out.append(np.sqrt(r2 / g2) if g2 > 0 else np.sqrt(r2))
+    return np.array(out)
+
+
+# (9, 11): blocks cut by both edges of the ROI; (8, 16): whole blocks only
+@pytest.mark.parametrize("shape", [(9, 11), (8, 16)])
+@pytest.mark.parametrize("weighted", [False, True])
+@pytest.mark.parametrize("sets", [None, 3])
+def test_device_residual_matches_the_numpy_forward_model(device, dtype, rng, shape, weighted, sets):
+    import pyopencl.array as cla
+
+    rig = rsocl.Rig.paper_array(3, shape, t_e=1e-4, t_r=3e-5)
+    op = RollingShutterOperator(rig, device=device, dtype=dtype)
+    batch = sets or 1
+    theta = rng.random((batch,) + op.domain_shape)
+    g = np.stack([ref.forward(rig, t) for t in rng.random((batch,) + op.domain_shape)])
+    if sets:
+        g[1] = 0                                     # an all-zero set: the absolute residual
+    w = (rng.random(g.shape) > 0.3).astype(float) if weighted else np.ones_like(g)
+    cut = (lambda a: a) if sets else (lambda a: a[0])
+
+    def dev(a):
+        return cla.to_device(op.queue, np.ascontiguousarray(cut(a), dtype=op.dtype))
+
+    res = DeviceResiduals(op, dev(g), dev(w) if weighted else None, sets, slots=3)
+    theta_dev = dev(theta)
+    res.enqueue(theta_dev, 2)
+    got = np.atleast_1d(res.read(3).result()[2])
+    # the reference works on the stored (rounded) values
+    stored = lambda a: cut(a).astype(op.dtype).astype(np.float64).reshape((batch,) + a.shape[1:])  # noqa: E731
+    want = _want(rig, stored(theta), stored(g), stored(w))
+    tol = 2e-6 if dtype == "float32" else 1e-12
+    np.testing.assert_allclose(got, want, rtol=tol)
+
+
+def test_slots_read_together_equal_slots_read_alone(device, rng):
+    import pyopencl.array as cla
+
+    rig = rsocl.Rig.paper_array(4, (10, 9), t_e=1e-4, t_r=3e-5)
+    op = RollingShutterOperator(rig, device=device, dtype="float64")
+    g = cla.to_device(op.queue, ref.forward(rig, rng.random(op.domain_shape)))
+    cubes = [cla.to_device(op.queue, rng.random(op.domain_shape)) for _ in range(4)]
+    res = DeviceResiduals(op, g, None, None, slots=4)
+    alone = []
+    for theta in cubes:
+        res.enqueue(theta, 0)
+        alone.append(res.read(1).result()[0])
+    for slot, theta in enumerate(cubes):
+        res.enqueue(theta, slot)
+    assert res.read(4).result() == alone
+    with pytest.raises(ValueError, match="slots must be >= 1"):
+        DeviceResiduals(op, g, None, None, slots=0)
+    with pytest.raises(ValueError, match=r"slot must be in \[0, 3\]"):
+        res.enqueue(cubes[0], 4)
+
+
+@pytest.mark.parametrize("iterations", [8, 19])
+def test_residuals_read_in_groups_equal_the_waited_ones(iterations):
+    # 19 iterations: groups of RESIDUAL_SLOTS and a last, shorter one
+    rig = rsocl.Rig.paper_array(4, (10, 9), t_e=1e-4, t_r=3e-5)
+    g = ref.forward(rig, np.random.default_rng(3).random((rig.T,) + rig.shape))
+    kw = dict(iterations=iterations, lam=0.05, eta=0.3, tv_iterations=3, dtype="float64", tune=False)
+    fast = rsocl.reconstruct(np.stack([g, 0.5 * g]), rig, **kw)
+    waited = rsocl.reconstruct(np.stack([g, 0.5 * g]), rig, callback=lambda it, r, theta: False, **kw)
+    assert np.shape(fast.history["residual"]) == (iterations, 2)
+    np.testing.assert_array_equal(fast.history["residual"], waited.history["residual"])
+    np.testing.assert_array_equal(fast.datacube, waited.datacube)
