@@ -22,10 +22,11 @@ STEP = 0.9
 #: Default of the ``fused`` option: the device's choice, :func:`device_fused`.
 FUSED = -1
 
-#: ``fused`` of the device's choice on a device that is not a CPU, where launches dominate a small
-#: problem: a denoising call in as few launches as the tiles' plan allows (docs/launches.md). On a
-#: CPU device the plain path is the faster one (docs/tv_fused.md, docs/regularizer_defaults.md).
-GPU_FUSED = 16
+#: ``fused`` of the device's choice on a device that is not a CPU. The plain path, whose folded passes
+#: (the ADMM's dual update in the TV's last launch, ``u = f - b`` in the projection) are already fewer
+#: launches: whole reconstructions on an NVIDIA GPU ran slower with the fused TV at every batch size
+#: (docs/gpu/tv_fused.md). ``benchmarks/launches.py`` measures both paths on a device.
+GPU_FUSED = 0
 
 
 def device_fused(device) -> int:

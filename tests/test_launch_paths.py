@@ -11,15 +11,26 @@ import pytest
 import rsocl
 from rsocl.device.context import Device
 from rsocl.model import reference as ref
+import rsocl_plugins.tv as tv_module
 from rsocl_plugins.tv import GPU_FUSED, STEP, TV, device_fused
+
+#: ``fused`` of the fewer-launch path that a GPU run measures against the plain one (benchmarks/launches.py)
+LEAN = 16
 
 
 @pytest.fixture()
-def gpu_like(monkeypatch, device):
+def not_cpu(monkeypatch, device):
     """The test device, read as a device that is not a CPU (the GPU defaults apply to it)."""
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
     assert not device.is_cpu
     return device
+
+
+@pytest.fixture()
+def gpu_like(monkeypatch, not_cpu):
+    """:func:`not_cpu` with the TV's fused path as its choice (``GPU_FUSED = LEAN``): the fewer-launch path."""
+    monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
+    return not_cpu
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +67,12 @@ def _launches_per_iteration(rig, g, device):
     return (counts[1] - counts[0]) / 8
 
 
-def test_the_device_default_of_fused(device, gpu_like):
-    assert device_fused(gpu_like) == GPU_FUSED > 0
+def test_the_device_default_of_fused(device, monkeypatch):
+    assert device_fused(device) == 0                                   # a CPU: the plain path
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    assert device_fused(device) == GPU_FUSED == 0                      # other devices: as measured
+    monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
+    assert device_fused(device) == LEAN
 
 
 @pytest.mark.parametrize("eta", [0.3, 0.0])
@@ -86,7 +101,11 @@ def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
     # CPU: admm_dual, admm_project, admm_difference, the plain TV of 10 iterations (1 + 9 + 8), the residual
     assert _launches_per_iteration(rig, g, device) == 22
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
-    # other devices: the projection, the fused TV, the residual
+    # other devices, plain TV (GPU_FUSED): the projection with u = f - b, the plain TV whose last launch
+    # makes the dual update (1 + 9 + 8), the residual
+    assert GPU_FUSED == 0 and _launches_per_iteration(rig, g, device) == 20
+    # the fused TV: the projection, the fused TV, the residual
+    monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     plan = TV().fused_plan(_cube(device, rig))
     assert plan is not None
     assert _launches_per_iteration(rig, g, device) == 2 + len(plan.launches) <= 12
@@ -103,5 +122,7 @@ def test_memory_counts_the_dual_buffers_of_the_devices_choice(device, monkeypatc
     assert TV().workspace_bytes(shape, np.float32, device=device) == plain       # the CPU's plain path
     assert TV(fused=3).workspace_bytes(shape, np.float32, device=device) > plain
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    assert TV().workspace_bytes(shape, np.float32, device=device) == plain       # GPU_FUSED: the plain path
+    monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     assert TV().workspace_bytes(shape, np.float32, device=device) == TV(fused=3).workspace_bytes(shape, np.float32)
     assert TV(fused=0).workspace_bytes(shape, np.float32, device=device) == plain
