@@ -46,32 +46,42 @@ def scaling(device, batches, rounds, iterations):
 
     rig = paper_rig()
     g = snapshots(rig, device, max(batches))
-    for b in batches:                                              # kernel builds: not timed
+    for b in batches:  # kernel builds: not timed
         rsocl.reconstruct(g[:b] if b > 1 else g[0], rig, iterations=2, device=device, tune=False)
     rates = {b: [] for b in batches}
     for r in range(rounds):
-        for b in (batches if r % 2 == 0 else batches[::-1]):
+        for b in batches if r % 2 == 0 else batches[::-1]:
             t0 = time.perf_counter()
             rsocl.reconstruct(g[:b] if b > 1 else g[0], rig, iterations=iterations, device=device, tune=False)
             rates[b].append(b / (time.perf_counter() - t0))
             print(f"  round {r + 1}: batch {b}: {rates[b][-1]:.2f} sets/s", file=sys.stderr, flush=True)
     chosen = batch_size(rig, device=device, sets=max(batches))
     unlimited = batch_size(rig, device=device, sets=max(batches), limit=max(batches), cache_fraction=None)
-    lines = [f"## Sets per second against the batch size ({iterations} iterations, float32)", "",
-             f"The paper's configuration: 4 cameras, 50x50, T = {rig.T}, fixed settings (TV temporal weight 3, "
-             f"lam 0.1, start from zeros); each batch is one `rsocl.reconstruct` call (set-up included, kernel "
-             f"builds excluded), median over {rounds} rounds with the sizes in turn.", "",
-             "| batch (sets) | sets/s (median) | range | ms per ADMM iteration | against one set |",
-             "|---|---|---|---|---|"]
+    lines = [
+        f"## Sets per second against the batch size ({iterations} iterations, float32)",
+        "",
+        f"The paper's configuration: 4 cameras, 50x50, T = {rig.T}, fixed settings (TV temporal weight 3, "
+        f"lam 0.1, start from zeros); each batch is one `rsocl.reconstruct` call (set-up included, kernel "
+        f"builds excluded), median over {rounds} rounds with the sizes in turn.",
+        "",
+        "| batch (sets) | sets/s (median) | range | ms per ADMM iteration | against one set |",
+        "|---|---|---|---|---|",
+    ]
     one = float(np.median(rates[batches[0]]))
     for b in batches:
         med = float(np.median(rates[b]))
-        lines.append(f"| {b} | {med:.2f} | {min(rates[b]):.2f}-{max(rates[b]):.2f} | "
-                     f"{b / med / iterations * 1e3:.2f} | {med / one:.2f}× |")
+        lines.append(
+            f"| {b} | {med:.2f} | {min(rates[b]):.2f}-{max(rates[b]):.2f} | "
+            f"{b / med / iterations * 1e3:.2f} | {med / one:.2f}× |"
+        )
     best = max(batches, key=lambda b: np.median(rates[b]))
-    lines += ["", f"- fastest batch: {best} sets, {np.median(rates[best]):.1f} sets/s",
-              f"- `batch_size` for {max(batches)} sets: {chosen} with its default limit, {unlimited} within the "
-              "device's memory alone", ""]
+    lines += [
+        "",
+        f"- fastest batch: {best} sets, {np.median(rates[best]):.1f} sets/s",
+        f"- `batch_size` for {max(batches)} sets: {chosen} with its default limit, {unlimited} within the "
+        "device's memory alone",
+        "",
+    ]
     return lines
 
 
@@ -94,21 +104,26 @@ def host_profile(device, iterations):
         if filename.endswith(("rsocl/device/reduction.py", "rsocl\\device\\reduction.py")) and name == "result":
             waited = cumulative
     loop = float(result.history["time"][-1])
-    return ["## Where one set's time goes (profiled)", "",
-            f"One set of the paper's configuration, {iterations} iterations, under `cProfile` (which slows the "
-            "host's Python down, so the host's shares are upper bounds):", "",
-            f"- {wall:.3f} s for the call, {loop:.3f} s in the iterations: {loop / iterations * 1e3:.2f} ms per "
-            "ADMM iteration",
-            f"- {launches / iterations:.1f} kernel launches per iteration through `rsocl.device.kernel.Kernel`, "
-            f"{launch_time / max(launches, 1) * 1e6:.1f} µs of host time each (arguments and enqueue)",
-            f"- {waited:.3f} s ({waited / loop:.0%} of the iterations) waiting for a residual, i.e. for the device",
-            ""]
+    return [
+        "## Where one set's time goes (profiled)",
+        "",
+        f"One set of the paper's configuration, {iterations} iterations, under `cProfile` (which slows the "
+        "host's Python down, so the host's shares are upper bounds):",
+        "",
+        f"- {wall:.3f} s for the call, {loop:.3f} s in the iterations: {loop / iterations * 1e3:.2f} ms per "
+        "ADMM iteration",
+        f"- {launches / iterations:.1f} kernel launches per iteration through `rsocl.device.kernel.Kernel`, "
+        f"{launch_time / max(launches, 1) * 1e6:.1f} µs of host time each (arguments and enqueue)",
+        f"- {waited:.3f} s ({waited / loop:.0%} of the iterations) waiting for a residual, i.e. for the device",
+        "",
+    ]
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--batches", type=int, nargs="+", default=[1, 4, 16, 32, 64, 128],
-                        help="batch sizes, sets (ascending)")
+    parser.add_argument(
+        "--batches", type=int, nargs="+", default=[1, 4, 16, 32, 64, 128], help="batch sizes, sets (ascending)"
+    )
     parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--device", default=None)

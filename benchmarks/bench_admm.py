@@ -32,17 +32,17 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import rsocl  # noqa: E402
-from rsocl.device.context import get_device  # noqa: E402
-from rsocl.analysis.metrics import psnr  # noqa: E402
-from rsocl.model.scenes import builtin_scene, load_scene  # noqa: E402
-
 from numpy_admm_tv import admm_tv  # noqa: E402
+
+import rsocl  # noqa: E402
+from rsocl.analysis.metrics import psnr  # noqa: E402
+from rsocl.device.context import get_device  # noqa: E402
+from rsocl.model.scenes import builtin_scene, load_scene  # noqa: E402
 
 try:
     import torch
     from torch_admm_tv import admm_tv as torch_admm_tv
-except ImportError:                          # the PyTorch peer is optional
+except ImportError:  # the PyTorch peer is optional
     torch = None
 from provenance import DOCS, header_lines, usable_cores, write_page  # noqa: E402
 
@@ -57,22 +57,33 @@ TARGET = 10.0
 
 
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.ArgumentDefaultsHelpFormatter
+    )
     p.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="square ROI sides, pixels")
     p.add_argument("--iterations", type=int, default=30, help="ADMM iterations of every run")
-    p.add_argument("--video", default="runner40",
-                   help="video name in ../shared/data (runner40, traffic48) or a video file path")
+    p.add_argument(
+        "--video", default="runner40", help="video name in ../shared/data (runner40, traffic48) or a video file path"
+    )
     p.add_argument("--tv-iterations", type=int, default=10, help="Chambolle iterations per TV call")
     p.add_argument("--lam", type=float, default=0.1, help="regularization strength (data in [0, 1])")
     p.add_argument("--eta", type=float, default=0.2, help="ADMM penalty")
     p.add_argument("--device", default=None, help="OpenCL device spec for rsocl (default: rsocl's choice)")
-    p.add_argument("--repeat", type=int, default=1,
-                   help="rounds: each runs every implementation once, in turn; the table keeps each one's "
-                        "fastest, the summary also gives the ratio round by round")
-    p.add_argument("--torch-threads", type=int, nargs="+", default=None,
-                   help="thread counts of the PyTorch peer, one run each per round (default: 1 and the "
-                        "cores this process may use)")
+    p.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        help="rounds: each runs every implementation once, in turn; the table keeps each one's "
+        "fastest, the summary also gives the ratio round by round",
+    )
+    p.add_argument(
+        "--torch-threads",
+        type=int,
+        nargs="+",
+        default=None,
+        help="thread counts of the PyTorch peer, one run each per round (default: 1 and the "
+        "cores this process may use)",
+    )
     p.add_argument("--out", type=Path, default=DOCS / "bench_admm.md", help="the Markdown page to write")
     return p.parse_args(argv)
 
@@ -84,8 +95,10 @@ def scene_source(video: str):
     for path in candidates:
         if path.is_file():
             return path
-    print(f"note: video {video!r} not found (looked in {DATA}); using rsocl.model.scenes.builtin_scene instead",
-          file=sys.stderr)
+    print(
+        f"note: video {video!r} not found (looked in {DATA}); using rsocl.model.scenes.builtin_scene instead",
+        file=sys.stderr,
+    )
     return None
 
 
@@ -136,7 +149,7 @@ def timed_rounds(g, rig, truth, params, device, repeat, torch_threads=()):
     to 2x over minutes), so the ratio of one round is a fair comparison. Returns
     ``{(impl, dtype): [(seconds per iteration, PSNR), ...]}``, one entry per round.
     """
-    for dtype in ("float32", "float64"):                  # kernel builds: not timed
+    for dtype in ("float32", "float64"):  # kernel builds: not timed
         rsocl.reconstruct(g, rig, device=device, dtype=dtype, **dict(rsocl_params(params), iterations=2))
     runs = {key: [] for key in implementations(torch_threads)}
     peers = torch_peers(torch_threads)
@@ -150,8 +163,12 @@ def timed_rounds(g, rig, truth, params, device, repeat, torch_threads=()):
             else:
                 out = run_rsocl(g, rig, truth, dtype, params, device)
             runs[impl, dtype].append(out)
-            print(f"  round {r + 1}: {impl} {dtype}: {out[0]:.4g} s/iteration, {out[1]:.3f} dB "
-                  f"({time.perf_counter() - t0:.1f} s)", file=sys.stderr, flush=True)
+            print(
+                f"  round {r + 1}: {impl} {dtype}: {out[0]:.4g} s/iteration, {out[1]:.3f} dB "
+                f"({time.perf_counter() - t0:.1f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
     return runs
 
 
@@ -179,30 +196,42 @@ def main(argv=None):
         raise SystemExit(f"--torch-threads must be >= 1, got {args.torch_threads}")
     device = get_device(args.device)
     source = scene_source(args.video)
-    params = {"iterations": args.iterations, "lam": args.lam, "eta": args.eta,
-              "tv_iterations": args.tv_iterations}
+    params = {"iterations": args.iterations, "lam": args.lam, "eta": args.eta, "tv_iterations": args.tv_iterations}
 
     import skimage
 
-    header = header_lines("ADMM-TV: rsocl against plain NumPy + scikit-image", device,
-                          None if argv is None else [__file__, *argv])
+    header = header_lines(
+        "ADMM-TV: rsocl against plain NumPy + scikit-image", device, None if argv is None else [__file__, *argv]
+    )
     if source is None:
         scene = "rsocl.model.scenes.builtin_scene"
     elif source.parent == DATA:
         scene = f"../shared/data/{source.name}"
     else:
         scene = source.name
-    header[-1:] = [f"- scikit-image {skimage.__version__} (the baseline's TV)",
-                   f"- scene: {scene}; paper array, 4 cameras, t_e = {T_E * 1e3:g} ms, t_r = {T_R * 1e6:g} us; "
-                   f"lam = {args.lam:g}, eta = {args.eta:g}, {args.tv_iterations} TV iterations (rsocl's TV with "
-                   f"temporal weight 1, scikit-image's 3-D TV), {args.iterations} ADMM iterations"
-                   + (f", best of {args.repeat} interleaved rounds" if args.repeat > 1 else ""),
-                   "- s/iteration: baseline = its loop; rsocl = history['time'][-1] / iterations (device-synced, "
-                   "includes the per-iteration residual); PSNR with peak 1 on the [0, 1] scale", ""]
+    header[-1:] = [
+        f"- scikit-image {skimage.__version__} (the baseline's TV)",
+        f"- scene: {scene}; paper array, 4 cameras, t_e = {T_E * 1e3:g} ms, t_r = {T_R * 1e6:g} us; "
+        f"lam = {args.lam:g}, eta = {args.eta:g}, {args.tv_iterations} TV iterations (rsocl's TV with "
+        f"temporal weight 1, scikit-image's 3-D TV), {args.iterations} ADMM iterations"
+        + (f", best of {args.repeat} interleaved rounds" if args.repeat > 1 else ""),
+        "- s/iteration: baseline = its loop; rsocl = history['time'][-1] / iterations (device-synced, "
+        "includes the per-iteration residual); PSNR with peak 1 on the [0, 1] scale",
+        "",
+    ]
     print("\n".join(header), flush=True)
 
-    columns = ["size", "T", "implementation", "dtype", "s/iteration", "PSNR (dB)",
-               "speed-up vs baseline f64", "speed-up vs baseline f32", "ΔPSNR vs baseline same dtype (dB)"]
+    columns = [
+        "size",
+        "T",
+        "implementation",
+        "dtype",
+        "s/iteration",
+        "PSNR (dB)",
+        "speed-up vs baseline f64",
+        "speed-up vs baseline f32",
+        "ΔPSNR vs baseline same dtype (dB)",
+    ]
     rows, summary = [], []
     for side in args.sizes:
         rig = rsocl.Rig.paper_array(4, (side, side), T_E, T_R)
@@ -219,28 +248,44 @@ def main(argv=None):
         base64, base32 = runs["baseline", "float64"], runs["baseline", "float32"]
         for (impl, dtype), (sec, db) in runs.items():
             same = runs["baseline", dtype]
-            rows.append([f"{side}×{side}", str(rig.T), impl, dtype, f"{sec:.4g}", f"{db:.3f}",
-                         f"{base64[0] / sec:.1f}×", f"{base32[0] / sec:.1f}×", signed(db - same[1])])
+            rows.append(
+                [
+                    f"{side}×{side}",
+                    str(rig.T),
+                    impl,
+                    dtype,
+                    f"{sec:.4g}",
+                    f"{db:.3f}",
+                    f"{base64[0] / sec:.1f}×",
+                    f"{base32[0] / sec:.1f}×",
+                    signed(db - same[1]),
+                ]
+            )
 
         checks = []
         for dtype in ("float32", "float64"):
             sec, db = runs["rsocl", dtype]
             diff = db - runs["baseline", dtype][1]
             ok = abs(diff) <= PSNR_TOLERANCE
-            checks.append(f"rsocl {dtype} vs baseline {dtype}: {runs['baseline', dtype][0] / sec:.1f}× best to best, "
-                          f"{round_ratios(rounds, ('rsocl', dtype), ('baseline', dtype))} round by round "
-                          f"(ΔPSNR {signed(diff)} dB, {'equal' if ok else 'NOT equal'} within {PSNR_TOLERANCE} dB)")
+            checks.append(
+                f"rsocl {dtype} vs baseline {dtype}: {runs['baseline', dtype][0] / sec:.1f}× best to best, "
+                f"{round_ratios(rounds, ('rsocl', dtype), ('baseline', dtype))} round by round "
+                f"(ΔPSNR {signed(diff)} dB, {'equal' if ok else 'NOT equal'} within {PSNR_TOLERANCE} dB)"
+            )
         sec, db = runs["rsocl", "float32"]
         diff = db - base64[1]
-        checks.append(f"rsocl float32 vs baseline float64 (a user's default): {base64[0] / sec:.1f}× "
-                      f"(ΔPSNR {signed(diff)} dB)")
+        checks.append(
+            f"rsocl float32 vs baseline float64 (a user's default): {base64[0] / sec:.1f}× (ΔPSNR {signed(diff)} dB)"
+        )
         peers = [(label, "float32") for label in torch_peers(torch_threads)]
         if peers:
             fastest = min(peers, key=lambda key: runs[key][0])
-            checks.append(f"rsocl float32 vs PyTorch float32 at its faster thread count each round "
-                          f"({', '.join(f'{n}t' for n in torch_threads)} tried): "
-                          f"{round_ratios(rounds, ('rsocl', 'float32'), peers)} round by round "
-                          f"(ΔPSNR {signed(db - runs[fastest][1])} dB)")
+            checks.append(
+                f"rsocl float32 vs PyTorch float32 at its faster thread count each round "
+                f"({', '.join(f'{n}t' for n in torch_threads)} tried): "
+                f"{round_ratios(rounds, ('rsocl', 'float32'), peers)} round by round "
+                f"(ΔPSNR {signed(db - runs[fastest][1])} dB)"
+            )
         summary.append(f"- {side}×{side}: " + "; ".join(checks))
 
     widths = [max(len(c), *(len(r[i]) for r in rows)) for i, c in enumerate(columns)]

@@ -40,12 +40,12 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
+from provenance import DOCS, header_lines, write_page  # noqa: E402
+
 import rsocl  # noqa: E402
 from rsocl.device.context import get_device  # noqa: E402
 from rsocl.model import reference as ref  # noqa: E402
 from rsocl.model.scenes import builtin_scene  # noqa: E402
-
-from provenance import DOCS, header_lines, write_page  # noqa: E402
 
 #: The paper's array: exposure and row readout time, seconds.
 T_E, T_R = 0.18e-3, 35e-6
@@ -67,6 +67,7 @@ def counting():
         def counted(*args, **kwargs):
             counts[name] += 1
             return fn(*args, **kwargs)
+
         return counted
 
     for name, fn in saved.items():
@@ -148,7 +149,7 @@ def measure(shapes, rounds: int, short: int, long: int, device, paths=("device",
     """Alternating rounds of the trivial loop and each shape's runs on each path (their order reversed
     every other round); per-shape and path medians."""
     cases = {m: case(m) for m in shapes}
-    for rig, g in cases.values():               # warm-up: kernel builds, the interpolation's set-up
+    for rig, g in cases.values():  # warm-up: kernel builds, the interpolation's set-up
         for name in paths:
             run(rig, g, 2, device, name)
     trivial = []
@@ -157,7 +158,7 @@ def measure(shapes, rounds: int, short: int, long: int, device, paths=("device",
     for r in range(rounds):
         trivial.append(trivial_launch_us(device))
         for m, (rig, g) in cases.items():
-            for name in (paths if r % 2 == 0 else paths[::-1]):
+            for name in paths if r % 2 == 0 else paths[::-1]:
                 kinds, seconds = per_iteration(rig, g, device, short, long, name)
                 launches[m, name] = kinds
                 rows[m, name].append(seconds)
@@ -168,9 +169,19 @@ def measure(shapes, rounds: int, short: int, long: int, device, paths=("device",
             total = sum(launches[m, name].values())
             seconds = statistics.median(rows[m, name])
             us = seconds / total * 1e6 if total else float("nan")
-            out.append({"m": m, "T": cases[m][0].T, "path": name, "launches": launches[m, name], "total": total,
-                        "ms_per_iteration": seconds * 1e3, "rounds_ms": [v * 1e3 for v in rows[m, name]],
-                        "us_per_launch": us, "ratio": us / floor})
+            out.append(
+                {
+                    "m": m,
+                    "T": cases[m][0].T,
+                    "path": name,
+                    "launches": launches[m, name],
+                    "total": total,
+                    "ms_per_iteration": seconds * 1e3,
+                    "rounds_ms": [v * 1e3 for v in rows[m, name]],
+                    "us_per_launch": us,
+                    "ratio": us / floor,
+                }
+            )
     return floor, trivial, out
 
 
@@ -187,7 +198,8 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     from rsocl.device.reduction import sum_sq_diff_async
     from rsocl.model.operator import RollingShutterOperator
     from rsocl.solver.admm import ADMM
-    from rsocl_plugins.tv import TV, launches as tv_launches
+    from rsocl_plugins.tv import TV
+    from rsocl_plugins.tv import launches as tv_launches
 
     rig, g = case(m)
     op = RollingShutterOperator(rig, device=device, subframes=rig.sampled_range())
@@ -201,9 +213,22 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     wt, sizes = np.float32(3.0), (np.int32(T), np.int32(m), np.int32(m), np.int32(1))
 
     def project(difference):
-        prog.admm_project(q, *s.blocks, s.f.data, s.g.data, *op._geometry(), s.inverse.data, s.eta_device.data,
-                          np.int32(0), s.b.data, s.u.data, np.int32(difference), np.int32(T), np.int32(op.L),
-                          *op._shape_args())
+        prog.admm_project(
+            q,
+            *s.blocks,
+            s.f.data,
+            s.g.data,
+            *op._geometry(),
+            s.inverse.data,
+            s.eta_device.data,
+            np.int32(0),
+            s.b.data,
+            s.u.data,
+            np.int32(difference),
+            np.int32(T),
+            np.int32(op.L),
+            *op._shape_args(),
+        )
 
     def project_then_difference():
         project(0)
@@ -214,22 +239,49 @@ def passes(m: int, device, rounds: int, reps: int = 100):
         for gs, ls, off in grids:
             tv_prog.tv_primal(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, global_offset=off)
         for gs, ls, off in s.voxels:
-            prog.admm_dual(q, gs, ls, s.theta.data, s.b.data, s.f.data, s.dual_on.data, np.int32(1),
-                           np.int32(s.per_set), global_offset=off)
+            prog.admm_dual(
+                q,
+                gs,
+                ls,
+                s.theta.data,
+                s.b.data,
+                s.f.data,
+                s.dual_on.data,
+                np.int32(1),
+                np.int32(s.per_set),
+                global_offset=off,
+            )
 
     def primal_update():
         for gs, ls, off in grids:
-            tv_prog.tv_primal_update(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, s.b.data, s.f.data,
-                                     s.dual_on.data, global_offset=off)
+            tv_prog.tv_primal_update(
+                q,
+                gs,
+                ls,
+                s.u.data,
+                p.data,
+                s.theta.data,
+                wt,
+                *sizes,
+                s.b.data,
+                s.f.data,
+                s.dual_on.data,
+                global_offset=off,
+            )
 
     def forward_then_sum():
         op.forward_into(s.theta, s.hx)
         sum_sq_diff_async(s.g, s.hx)
 
-    pairs = [("residual: forward + sum_sq_diff | residual_partials", forward_then_sum, lambda: s.residual_into(0)),
-             ("u = f - b: admm_project + admm_difference | admm_project writing u", project_then_difference,
-              lambda: project(1)),
-             ("dual update: tv_primal + admm_dual | tv_primal_update", primal_then_dual, primal_update)]
+    pairs = [
+        ("residual: forward + sum_sq_diff | residual_partials", forward_then_sum, lambda: s.residual_into(0)),
+        (
+            "u = f - b: admm_project + admm_difference | admm_project writing u",
+            project_then_difference,
+            lambda: project(1),
+        ),
+        ("dual update: tv_primal + admm_dual | tv_primal_update", primal_then_dual, primal_update),
+    ]
 
     def timed(fn):
         q.finish()
@@ -260,55 +312,81 @@ def command_buffers(device) -> list:
 
     listed = "cl_khr_command_buffer" in device.device.extensions.split()
     names = sorted({n for mod in (cl, _cl) for n in dir(mod) if "command_buffer" in n.lower() or "CommandBuffer" in n})
-    return [f"`cl_khr_command_buffer` in this device's extension list: **{'yes' if listed else 'no'}**; "
-            f"command-buffer names in pyopencl {cl.VERSION_TEXT}: **{', '.join(names) if names else 'none'}**."]
+    return [
+        f"`cl_khr_command_buffer` in this device's extension list: **{'yes' if listed else 'no'}**; "
+        f"command-buffer names in pyopencl {cl.VERSION_TEXT}: **{', '.join(names) if names else 'none'}**."
+    ]
 
 
 def page(floor, trivial, rows, device, args, passes_rows=None) -> list:
     lines = header_lines("Launches per ADMM-TV iteration and host time per launch", device)
-    lines += ["", "Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), built-in scene,",
-              f"fixed settings from the interpolation, float32; {args.rounds} alternating rounds, medians.",
-              f"Launches per iteration: counts of runs of {args.long} and {args.short} iterations, differenced.",
-              "", f"Trivial kernel (one work item, one buffer argument): **{floor:.1f} µs** per enqueue "
-              f"(rounds: {', '.join(f'{t:.1f}' for t in trivial)}).", "",
-              "| ROI | T | path | kernels | copies | fills | launches / iteration | ms / iteration (rounds) "
-              "| µs / launch | × trivial |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), built-in scene,",
+        f"fixed settings from the interpolation, float32; {args.rounds} alternating rounds, medians.",
+        f"Launches per iteration: counts of runs of {args.long} and {args.short} iterations, differenced.",
+        "",
+        f"Trivial kernel (one work item, one buffer argument): **{floor:.1f} µs** per enqueue "
+        f"(rounds: {', '.join(f'{t:.1f}' for t in trivial)}).",
+        "",
+        "| ROI | T | path | kernels | copies | fills | launches / iteration | ms / iteration (rounds) "
+        "| µs / launch | × trivial |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         k = r["launches"]
         each = ", ".join(f"{v:.2f}" for v in r["rounds_ms"])
-        lines.append(f"| {r['m']}×{r['m']} | {r['T']} | {r['path']} | {k['enqueue_nd_range_kernel']:.1f} | "
-                     f"{k['enqueue_copy']:.3f} | {k['enqueue_fill_buffer']:.1f} | {r['total']:.2f} | "
-                     f"{r['ms_per_iteration']:.2f} ({each}) | {r['us_per_launch']:.1f} | {r['ratio']:.2f} |")
+        lines.append(
+            f"| {r['m']}×{r['m']} | {r['T']} | {r['path']} | {k['enqueue_nd_range_kernel']:.1f} | "
+            f"{k['enqueue_copy']:.3f} | {k['enqueue_fill_buffer']:.1f} | {r['total']:.2f} | "
+            f"{r['ms_per_iteration']:.2f} ({each}) | {r['us_per_launch']:.1f} | {r['ratio']:.2f} |"
+        )
     if passes_rows:
-        lines += ["", "The folded passes against the separate ones (µs per enqueue of the pair or of the one, "
-                  f"{args.rounds} alternating rounds of 100, medians):", "",
-                  "| ROI | separate \\| folded | separate µs | folded µs | folded / separate (rounds) |",
-                  "|---|---|---|---|---|"]
+        lines += [
+            "",
+            "The folded passes against the separate ones (µs per enqueue of the pair or of the one, "
+            f"{args.rounds} alternating rounds of 100, medians):",
+            "",
+            "| ROI | separate \\| folded | separate µs | folded µs | folded / separate (rounds) |",
+            "|---|---|---|---|---|",
+        ]
         for m, rows_m in passes_rows.items():
             for name, a, b, ratios in rows_m:
-                lines.append(f"| {m}×{m} | {name.replace('|', chr(92) + '|')} | {a:.0f} | {b:.0f} | "
-                             f"{', '.join(f'{r:.2f}' for r in ratios)} |")
+                lines.append(
+                    f"| {m}×{m} | {name.replace('|', chr(92) + '|')} | {a:.0f} | {b:.0f} | "
+                    f"{', '.join(f'{r:.2f}' for r in ratios)} |"
+                )
     lines += [""] + command_buffers(device)
-    lines += ["", "Paths: `device` is the device's own choice; `lean` is the fewest-launch path, a device that is not",
-              "a CPU with the fused TV (the TV's fused path, the ADMM's dual update and u = f - b folded into the TV's and the projection's",
-              "launches), run here by reading the device as a GPU. Both read the residuals of 8 iterations",
-              "(`rsocl.solver.admm.RESIDUAL_SLOTS`) in one copy. On a CPU device the lean path's times are those",
-              "of a GPU's work groups (the fused TV's tiles of hundreds of work items with barriers) run by a CPU:",
-              "there its launch count is the measurement, its time says nothing about a GPU.",
-              "", "µs / launch is the iteration's wall time over its launches: on a CPU device the kernels'",
-              "own work shares the cores with the host, so only the smallest ROI isolates the host path."]
+    lines += [
+        "",
+        "Paths: `device` is the device's own choice; `lean` is the fewest-launch path, a device that is not",
+        "a CPU with the fused TV (the TV's fused path, the ADMM's dual update and u = f - b folded into the",
+        "TV's and the projection's launches), run here by reading the device as a GPU. Both read the residuals",
+        "of 8 iterations (`rsocl.solver.admm.RESIDUAL_SLOTS`) in one copy. On a CPU device the lean path's",
+        "times are those",
+        "of a GPU's work groups (the fused TV's tiles of hundreds of work items with barriers) run by a CPU:",
+        "there its launch count is the measurement, its time says nothing about a GPU.",
+        "",
+        "µs / launch is the iteration's wall time over its launches: on a CPU device the kernels'",
+        "own work shares the cores with the host, so only the smallest ROI isolates the host path.",
+    ]
     return lines
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--shapes", type=int, nargs="+", default=[8, 50, 64], help="ROI sizes m (m × m)")
-    p.add_argument("--paths", nargs="+", choices=("device", "lean"), default=["device", "lean"],
-                   help="launch paths (default: both)")
+    p.add_argument(
+        "--paths",
+        nargs="+",
+        choices=("device", "lean"),
+        default=["device", "lean"],
+        help="launch paths (default: both)",
+    )
     p.add_argument("--rounds", type=int, default=5, help="alternating rounds (default 5)")
-    p.add_argument("--no-passes", dest="passes", action="store_false",
-                   help="leave out the folded passes against the separate ones")
+    p.add_argument(
+        "--no-passes", dest="passes", action="store_false", help="leave out the folded passes against the separate ones"
+    )
     p.add_argument("--short", type=int, default=20, help="iterations of the short run (default 20)")
     p.add_argument("--long", type=int, default=100, help="iterations of the long run (default 100)")
     p.add_argument("--device", default=None, help="OpenCL device spec (default: rsocl's choice)")

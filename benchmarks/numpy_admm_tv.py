@@ -40,14 +40,14 @@ def shutter_mask(rig) -> np.ndarray:
     """
     if rig.mask != "exact":
         raise ValueError("this baseline implements the exact overlap mask only")
-    start = rig.start_times() / rig.dt                                     # (C, m, n), in sub-frames
+    start = rig.start_times() / rig.dt  # (C, m, n), in sub-frames
     t_e = np.array([rig.cameras[c].t_e for c, _ in rig.channels]) / rig.dt  # (C,)
-    gain = np.array([rig.cameras[c].gain for c, _ in rig.channels])         # (C,)
+    gain = np.array([rig.cameras[c].gain for c, _ in rig.channels])  # (C,)
     end = start + t_e[:, None, None]
 
-    s = np.arange(rig.T, dtype=np.float64)[None, :, None, None]            # (1, T, 1, 1)
+    s = np.arange(rig.T, dtype=np.float64)[None, :, None, None]  # (1, T, 1, 1)
     overlap = np.minimum(s + 1.0, end[:, None]) - np.maximum(s, start[:, None])
-    W = np.clip(overlap, 0.0, None)                                        # (C, T, m, n)
+    W = np.clip(overlap, 0.0, None)  # (C, T, m, n)
     return W * gain[:, None, None, None]
 
 
@@ -104,8 +104,8 @@ def admm_tv(g, rig, *, iterations, lam, eta, tv_iterations, dtype=np.float64, tr
 
     # Setup: dense mask, and the per-pixel inverse (eta I + M)^-1 with M = H Hᵀ restricted to a pixel.
     W = shutter_mask(rig).astype(dtype)
-    M = np.einsum("csyx,dsyx->yxcd", W, W)                   # (m, n, C, C)
-    Minv = np.linalg.inv(eta * np.eye(C, dtype=dtype) + M)   # (m, n, C, C)
+    M = np.einsum("csyx,dsyx->yxcd", W, W)  # (m, n, C, C)
+    Minv = np.linalg.inv(eta * np.eye(C, dtype=dtype) + M)  # (m, n, C, C)
 
     theta = np.zeros((T, m, n), dtype=dtype)
     b = np.zeros((T, m, n), dtype=dtype)

@@ -54,23 +54,32 @@ def main(argv=None) -> int:
     parser.add_argument("--data", type=Path, default=DATA, help="folder of the shared videos (default ../shared/data)")
     args = parser.parse_args(argv)
     lines = header_lines("The paper's diagonal projection: eta that converges", argv=argv)
-    lines += [f"Paper array, {args.size}x{args.size}, t_e = 180 µs, t_r = dt = 35 µs; 200 iterations from zeros, "
-              "TV at its defaults; PSNR in dB (peak 1). Columns: eta of projection='paper' at lam = 0.1 / "
-              "lam = eta/2; last column: the exact projection at its defaults (lam 0.1, eta 0.2).", "",
-              "| cameras | scene | " + " | ".join(f"eta {e:g}" for e in ETAS) + " | exact, defaults |",
-              "|---" * (len(ETAS) + 3) + "|"]
+    lines += [
+        f"Paper array, {args.size}x{args.size}, t_e = 180 µs, t_r = dt = 35 µs; 200 iterations from zeros, "
+        "TV at its defaults; PSNR in dB (peak 1). Columns: eta of projection='paper' at lam = 0.1 / "
+        "lam = eta/2; last column: the exact projection at its defaults (lam 0.1, eta 0.2).",
+        "",
+        "| cameras | scene | " + " | ".join(f"eta {e:g}" for e in ETAS) + " | exact, defaults |",
+        "|---" * (len(ETAS) + 3) + "|",
+    ]
     for cameras in (4, 8, 2):
         rig = rsocl.Rig.paper_array(cameras, (args.size, args.size), 180e-6, 35e-6)
         op = rsocl.RollingShutterOperator(rig)
         for name, truth in scenes(rig, args.data):
             g = op.forward(truth)
-            cells = [f"{run(g, rig, truth, projection='paper', eta=eta, lam=0.1)} / "
-                     f"{run(g, rig, truth, projection='paper', eta=eta, lam=eta / 2)}" for eta in ETAS]
+            cells = [
+                f"{run(g, rig, truth, projection='paper', eta=eta, lam=0.1)} / "
+                f"{run(g, rig, truth, projection='paper', eta=eta, lam=eta / 2)}"
+                for eta in ETAS
+            ]
             lines.append(f"| {cameras} | {name} | " + " | ".join(cells) + f" | {run(g, rig, truth)} |")
             print(lines[-1], flush=True)
-    lines += ["", "The default eta of the paper's projection, rsocl.solver.problem.PAPER_ETA = 5 (about psi = 5.02, "
-              "the data term's curvature in this configuration; scaled like the other defaults for other rigs), "
-              "is the smallest of these that converges on every row at lam = 0.1."]
+    lines += [
+        "",
+        "The default eta of the paper's projection, rsocl.solver.problem.PAPER_ETA = 5 (about psi = 5.02, "
+        "the data term's curvature in this configuration; scaled like the other defaults for other rigs), "
+        "is the smallest of these that converges on every row at lam = 0.1.",
+    ]
     write_page(args.out, lines)
     return 0
 

@@ -50,14 +50,17 @@ from provenance import DOCS, header_lines, write_page  # noqa: E402
 
 try:
     import torch
-
     from torch_admm_tv import Peer, synchronize
-except ImportError:                       # the peer is optional
+except ImportError:  # the peer is optional
     torch = None
 
 LAM, ETA = 0.1, 0.2
 MODES = ("eager", "graph", "compile")
-LABELS = {"eager": "PyTorch eager", "graph": "PyTorch, CUDA graph", "compile": '`torch.compile(mode="reduce-overhead")`'}
+LABELS = {
+    "eager": "PyTorch eager",
+    "graph": "PyTorch, CUDA graph",
+    "compile": '`torch.compile(mode="reduce-overhead")`',
+}
 
 
 class Eager:
@@ -105,7 +108,7 @@ class Compiled:
     def __init__(self, peer):
         self.peer = peer
         mark = getattr(importlib.import_module("torch._dynamo"), "mark_static_address", None)
-        if mark is not None:                   # the CUDA graphs read these in place instead of copying them in
+        if mark is not None:  # the CUDA graphs read these in place instead of copying them in
             for tensor in (peer.W, peer.Minv, peer.g):
                 mark(tensor)
         self.step = torch.compile(peer.step, mode="reduce-overhead", dynamic=False)
@@ -126,8 +129,10 @@ def cases(args):
     """``[(name, rig, sets, iterations, per_iteration)]`` of the chosen cases, in ``--cases``' order."""
     out = [("paper", paper_rig(), 1, args.iterations, False)]
     out += [(f"batch{b}", paper_rig(), b, args.iterations, False) for b in args.batches]
-    out += [(f"size{m}", rsocl.Rig.paper_array(4, (m, m), 0.18e-3, 35e-6), 1, args.size_iterations, True)
-            for m in args.sizes]
+    out += [
+        (f"size{m}", rsocl.Rig.paper_array(4, (m, m), 0.18e-3, 35e-6), 1, args.size_iterations, True)
+        for m in args.sizes
+    ]
     if not args.cases:
         return out
     named = {c[0]: c for c in out}
@@ -170,36 +175,45 @@ def measure_case(case, args, device, torch_device, tv):
         seconds = time.perf_counter() - t0
         return res.datacube, (float(np.max(res.history["time"][-1])) / iterations if per_iteration else seconds)
 
-    rsocl.reconstruct(g, rig, iterations=2, **opts)                            # kernel builds
+    rsocl.reconstruct(g, rig, iterations=2, **opts)  # kernel builds
     record = {"seconds": {"rsocl": []}, "x": {}, "first": {}, "errors": {}}
     runners, peer = {}, None
     modes = modes_for(name, args, torch_device)
     if modes:
-        peer = Peer(g, rig, lam=LAM, eta=ETA, tv_iterations=tv.iterations, dtype=torch.float32, device=torch_device,
-                    temporal_weight=tv.temporal_weight, step=tv.step)
+        peer = Peer(
+            g,
+            rig,
+            lam=LAM,
+            eta=ETA,
+            tv_iterations=tv.iterations,
+            dtype=torch.float32,
+            device=torch_device,
+            temporal_weight=tv.temporal_weight,
+            step=tv.step,
+        )
 
     def run_peer(mode):
         synchronize(torch_device)
         t0 = time.perf_counter()
         peer.load(g)
-        if per_iteration:                                                      # the loop alone
+        if per_iteration:  # the loop alone
             synchronize(torch_device)
             t0 = time.perf_counter()
             theta = runners[mode].run(iterations)
             synchronize(torch_device)
             return theta.cpu().numpy(), (time.perf_counter() - t0) / iterations
-        x = runners[mode].run(iterations).cpu().numpy()                       # NumPy in, NumPy out
+        x = runners[mode].run(iterations).cpu().numpy()  # NumPy in, NumPy out
         return x, time.perf_counter() - t0
 
     with torch.no_grad() if torch is not None else contextlib.nullcontext():
-        for mode in modes:                                                     # capture, compile: not timed
+        for mode in modes:  # capture, compile: not timed
             t0 = time.perf_counter()
             try:
                 runners[mode] = RUNNERS[mode](peer)
                 run_peer(mode)
                 record["first"][mode] = time.perf_counter() - t0
                 record["seconds"][mode] = []
-            except Exception as exc:                                           # noqa: BLE001 (reported, not hidden)
+            except Exception as exc:  # noqa: BLE001 (reported, not hidden)
                 record["errors"][mode] = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:200]
                 runners.pop(mode, None)
                 print(f"  {name}: {mode} failed: {record['errors'][mode]}", file=sys.stderr, flush=True)
@@ -210,15 +224,20 @@ def measure_case(case, args, device, torch_device, tv):
                 x, sec = run_rsocl() if impl == "rsocl" else run_peer(impl)
                 record["seconds"][impl].append(sec)
                 record["x"][impl] = x
-            print(f"  {name} round {r + 1}: " + ", ".join(f"{i} {record['seconds'][i][-1] * 1e3:.2f} ms" for i in impls),
-                  file=sys.stderr, flush=True)
+            print(
+                f"  {name} round {r + 1}: " + ", ".join(f"{i} {record['seconds'][i][-1] * 1e3:.2f} ms" for i in impls),
+                file=sys.stderr,
+                flush=True,
+            )
     cubes = [t.astype(np.float64) for t in truth]
-    record["psnr"] = {impl: [psnr(x if sets == 1 else x[s], cubes[s]) for s in range(sets)]
-                      for impl, x in record["x"].items()}
+    record["psnr"] = {
+        impl: [psnr(x if sets == 1 else x[s], cubes[s]) for s in range(sets)] for impl, x in record["x"].items()
+    }
     record["diff"] = {impl: float(np.max(np.abs(x - record["x"]["rsocl"]))) for impl, x in record["x"].items()}
     compiled = "compile" in runners
-    del runners, peer
-    if compiled:                               # drop the case's compiled graphs and their memory
+    runners.clear()
+    peer = None
+    if compiled:  # drop the case's compiled graphs and their memory
         importlib.import_module("torch._dynamo").reset()
     gc.collect()
     if torch is not None and torch_device.type == "cuda":
@@ -253,9 +272,15 @@ def tables(done, modes):
         lines.append(row(cells))
     if not modes:
         return lines + ["", "No PyTorch peer ran (torch is not installed).", ""]
-    lines += ["", "## rsocl's time over the peer's (below 1: rsocl is faster)", "",
-              "Median over the rounds of the ratio within each round, and its range.", "",
-              row(["case"] + heads), row(["---"] * (1 + len(heads)))]
+    lines += [
+        "",
+        "## rsocl's time over the peer's (below 1: rsocl is faster)",
+        "",
+        "Median over the rounds of the ratio within each round, and its range.",
+        "",
+        row(["case"] + heads),
+        row(["---"] * (1 + len(heads))),
+    ]
     for case, rec in done:
         cells = [describe(*case[:4])]
         for m in modes:
@@ -266,11 +291,16 @@ def tables(done, modes):
             ratios = [a / b for a, b in zip(rec["seconds"]["rsocl"], peer)]
             cells.append(f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})")
         lines.append(row(cells))
-    lines += ["", "## Same results", "",
-              "PSNR (dB, peak 1) against the built-in scene's truth; for a batch the mean over the sets, and the "
-              "largest PSNR difference over them. Largest |peer − rsocl| over the datacube(s).", "",
-              row(["case", "rsocl PSNR"] + [f"{h}: PSNR − rsocl's, largest difference" for h in heads]),
-              row(["---"] * (2 + len(heads)))]
+    lines += [
+        "",
+        "## Same results",
+        "",
+        "PSNR (dB, peak 1) against the built-in scene's truth; for a batch the mean over the sets, and the "
+        "largest PSNR difference over them. Largest |peer − rsocl| over the datacube(s).",
+        "",
+        row(["case", "rsocl PSNR"] + [f"{h}: PSNR − rsocl's, largest difference" for h in heads]),
+        row(["---"] * (2 + len(heads))),
+    ]
     for case, rec in done:
         base = rec["psnr"]["rsocl"]
         cells = [describe(*case[:4]), f"{np.mean(base):.4f}"]
@@ -298,12 +328,15 @@ def page(done, pending, modes, device, torch_device, tv, args, argv):
         name = torch.cuda.get_device_name(torch_device) if torch_device.type == "cuda" else "CPU"
         cuda = f", CUDA {torch.version.cuda}" if torch_device.type == "cuda" else f", {torch.get_num_threads()} threads"
         lines += [f"- PyTorch {torch.__version__} on `{torch_device}` ({name}{cuda})", ""]
-    lines += [f"float32, `lam` {LAM}, `eta` {ETA}, {tv.iterations} TV iterations at temporal weight "
-              f"{tv.temporal_weight:g} and step {tv.step:g} (rsocl's TV defaults), start from zeros "
-              "(`rsocl.reconstruct(..., tune=False)`); snapshots of the built-in scene (seed = set). "
-              "Whole calls are timed NumPy in, NumPy out; per-iteration cases time the loops only. "
-              f"{args.rounds} rounds, rsocl and the modes in rotating order. `benchmarks/peer.py` says what each "
-              "mode is.", ""]
+    lines += [
+        f"float32, `lam` {LAM}, `eta` {ETA}, {tv.iterations} TV iterations at temporal weight "
+        f"{tv.temporal_weight:g} and step {tv.step:g} (rsocl's TV defaults), start from zeros "
+        "(`rsocl.reconstruct(..., tune=False)`); snapshots of the built-in scene (seed = set). "
+        "Whole calls are timed NumPy in, NumPy out; per-iteration cases time the loops only. "
+        f"{args.rounds} rounds, rsocl and the modes in rotating order. `benchmarks/peer.py` says what each "
+        "mode is.",
+        "",
+    ]
     lines += tables(done, modes)
     if pending:
         lines += ["Not measured (the run stopped first): " + ", ".join(pending) + ".", ""]
@@ -318,11 +351,16 @@ def main(argv=None):
     parser.add_argument("--batches", type=int, nargs="*", default=[64, 256], help="sets per call of the batch cases")
     parser.add_argument("--sizes", type=int, nargs="*", default=[64, 128, 256, 512], help="m of the m x m cases")
     parser.add_argument("--size-iterations", type=int, default=20, help="ADMM iterations of the m x m cases")
-    parser.add_argument("--cases", nargs="+", default=None,
-                        help="cases to run, in this order (default: paper, batchB..., sizeM...)")
+    parser.add_argument(
+        "--cases", nargs="+", default=None, help="cases to run, in this order (default: paper, batchB..., sizeM...)"
+    )
     parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
-    parser.add_argument("--compile-cases", nargs="+", default=["paper", "batch64"],
-                        help="cases where torch.compile runs ('all': every case)")
+    parser.add_argument(
+        "--compile-cases",
+        nargs="+",
+        default=["paper", "batch64"],
+        help="cases where torch.compile runs ('all': every case)",
+    )
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'gpu' / 'peer.md'})")
     args = parser.parse_args(argv)
@@ -334,7 +372,7 @@ def main(argv=None):
     if torch is not None:
         torch_device = torch.device(args.torch_device or ("cuda" if torch.cuda.is_available() else "cpu"))
         dynamo = importlib.import_module("torch._dynamo")
-        for knob in ("cache_size_limit", "recompile_limit"):                 # one compilation per case
+        for knob in ("cache_size_limit", "recompile_limit"):  # one compilation per case
             if hasattr(dynamo.config, knob):
                 setattr(dynamo.config, knob, 64)
     else:
@@ -347,7 +385,7 @@ def main(argv=None):
         print(f"{case[0]}: {describe(*case[:4])}", file=sys.stderr, flush=True)
         done.append((case, measure_case(case, args, device, torch_device, tv)))
         if args.out:
-            write_page(args.out, page(done, [c[0] for c in todo[i + 1:]], modes, device, torch_device, tv, args, argv))
+            write_page(args.out, page(done, [c[0] for c in todo[i + 1 :]], modes, device, torch_device, tv, args, argv))
     print("\n".join(page(done, [], modes, device, torch_device, tv, args, argv)))
 
 

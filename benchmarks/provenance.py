@@ -41,10 +41,16 @@ def git_revision(root: Path = ROOT) -> str:
     if copied:
         return f"{copied} (copied tree)"
     try:
-        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
-                              text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                               capture_output=True, text=True, check=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown (not a git checkout)"
     return head + ("-dirty" if dirty else "")
@@ -98,18 +104,25 @@ def header_lines(title: str, device=None, argv=None) -> list:
         pass
     command = " ".join(["python", str(script)] + [shlex.quote(a) for a in argv[1:]])
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    lines = [f"# {title}", "",
-             f"- measured: {now}, git commit {git_revision()}",
-             f"- command: `{command}`",
-             f"- CPU: {cpu_model()}, {_cores()}"]
+    lines = [
+        f"# {title}",
+        "",
+        f"- measured: {now}, git commit {git_revision()}",
+        f"- command: `{command}`",
+        f"- CPU: {cpu_model()}, {_cores()}",
+    ]
     if hasattr(os, "getloadavg"):
         lines.append("- load average at start: " + ", ".join(f"{x:.2f}" for x in os.getloadavg()))
     if device is not None:
         dev = device.device
-        lines.append(f"- OpenCL device: {device.name} ({dev.version.strip()}; driver {dev.driver_version.strip()}; "
-                     f"{dev.max_compute_units} compute units)")
-    lines.append(f"- Python {platform.python_version()}, NumPy {np.__version__}, pyopencl {cl.VERSION_TEXT}, "
-                 f"rsocl {rsocl.__version__}")
+        lines.append(
+            f"- OpenCL device: {device.name} ({dev.version.strip()}; driver {dev.driver_version.strip()}; "
+            f"{dev.max_compute_units} compute units)"
+        )
+    lines.append(
+        f"- Python {platform.python_version()}, NumPy {np.__version__}, pyopencl {cl.VERSION_TEXT}, "
+        f"rsocl {rsocl.__version__}"
+    )
     return lines + [""]
 
 

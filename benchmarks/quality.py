@@ -43,10 +43,25 @@ LAMS = (0.03, 0.1, 0.3)
 TUNED_ON = ("builtin", "builtin-fast", "runner40@0.5", "runner40@1", "traffic48@1")
 #: (scene, size, noise) cases: noise "none" or "poisson" (1000 photo-electrons at full scale
 #: and read noise 1 % of full scale).
-CASES = ([(s, 64, "none") for s in ("builtin", "builtin-slow", "builtin-fast", "runner40@0.5", "runner40@1",
-                                    "runner40@2", "runner40-crop@1", "traffic48@0.5", "traffic48@1", "traffic48@2")]
-         + [(s, 64, "poisson") for s in ("builtin", "runner40@1", "traffic48@1")]
-         + [("builtin", 128, "none"), ("runner40@1", 128, "none"), ("builtin", 128, "poisson")])
+CASES = (
+    [
+        (s, 64, "none")
+        for s in (
+            "builtin",
+            "builtin-slow",
+            "builtin-fast",
+            "runner40@0.5",
+            "runner40@1",
+            "runner40@2",
+            "runner40-crop@1",
+            "traffic48@0.5",
+            "traffic48@1",
+            "traffic48@2",
+        )
+    ]
+    + [(s, 64, "poisson") for s in ("builtin", "runner40@1", "traffic48@1")]
+    + [("builtin", 128, "none"), ("runner40@1", 128, "none"), ("builtin", 128, "poisson")]
+)
 
 
 def run_case(scene, size, noise, args, cache):
@@ -62,15 +77,28 @@ def run_case(scene, size, noise, args, cache):
             res = rsocl.reconstruct(g, rig, **common, **kwargs)
             seconds = time.perf_counter() - start
             tuning = res.params.get("tuning") or {}
-            return {"psnr": float(psnr(res.datacube, truth, data_range=1.0)), "seconds": seconds,
-                    "chosen": tuning.get("chosen"), "tuning_seconds": tuning.get("seconds")}
+            return {
+                "psnr": float(psnr(res.datacube, truth, data_range=1.0)),
+                "seconds": seconds,
+                "chosen": tuning.get("chosen"),
+                "tuning_seconds": tuning.get("seconds"),
+            }
+
         return compute
 
-    rsocl.reconstruct(g, rig, iterations=2, tune=False, device=args.device)     # kernel builds, not timed
-    out = {"interp3d": cache.get(prefix + "interp3d", lambda: {"psnr": float(psnr(interp3d(g, rig), truth,
-                                                                                   data_range=1.0))})}
-    out["grid"] = {f"{w:g},{lam:g}": cache.get(prefix + f"grid {w:g},{lam:g}", timed(
-        tune=False, lam=lam, regularizer_options={"temporal_weight": w})) for w in WEIGHTS for lam in LAMS}
+    rsocl.reconstruct(g, rig, iterations=2, tune=False, device=args.device)  # kernel builds, not timed
+    out = {
+        "interp3d": cache.get(
+            prefix + "interp3d", lambda: {"psnr": float(psnr(interp3d(g, rig), truth, data_range=1.0))}
+        )
+    }
+    out["grid"] = {
+        f"{w:g},{lam:g}": cache.get(
+            prefix + f"grid {w:g},{lam:g}", timed(tune=False, lam=lam, regularizer_options={"temporal_weight": w})
+        )
+        for w in WEIGHTS
+        for lam in LAMS
+    }
     out["tuned"] = cache.get(prefix + "tuned", timed())
     out["tuned_zero"] = cache.get(prefix + "tuned zero start", timed(x0=np.zeros_like(truth)))
     return out
@@ -83,11 +111,17 @@ def row(scene, size, noise, r):
     default = r["grid"]["3,0.1"]
     chosen = r["tuned"]["chosen"] or {}
     mark = " (tuning set)" if scene in TUNED_ON and size == 64 and noise == "none" else ""
-    text = (f"| {scene}{mark} | {size} | {noise} | {base:.2f} | {default['psnr']:.2f} | {best:.2f} ({best_key}) | "
-            f"{tuned:.2f} | {r['tuned_zero']['psnr']:.2f} | {chosen.get('temporal_weight', float('nan')):.3g}, "
-            f"{chosen.get('lam', float('nan')):.3g} | {tuned - best:+.2f} | {tuned - base:+.2f} |")
-    return text, {"to_best": tuned - best, "to_interp": tuned - base, "noise": noise,
-                  "warm": tuned - r["tuned_zero"]["psnr"]}
+    text = (
+        f"| {scene}{mark} | {size} | {noise} | {base:.2f} | {default['psnr']:.2f} | {best:.2f} ({best_key}) | "
+        f"{tuned:.2f} | {r['tuned_zero']['psnr']:.2f} | {chosen.get('temporal_weight', float('nan')):.3g}, "
+        f"{chosen.get('lam', float('nan')):.3g} | {tuned - best:+.2f} | {tuned - base:+.2f} |"
+    )
+    return text, {
+        "to_best": tuned - best,
+        "to_interp": tuned - base,
+        "noise": noise,
+        "warm": tuned - r["tuned_zero"]["psnr"],
+    }
 
 
 def main(argv=None):
@@ -103,19 +137,22 @@ def main(argv=None):
     cache = Cache(args.cache)
     op = rsocl.RollingShutterOperator(rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6), device=args.device)
     page = header_lines("Self-tuned reconstruction quality", op.device, None if argv is None else [__file__, *argv])
-    page += [f"Paper array (4 cameras, t_e = 180 µs, t_r = 35 µs, dt = t_r), TV, {args.iterations} iterations, "
-             "float32. PSNR in dB with peak 1. Columns: `interp3d` (no solver); `fixed` the fixed setting "
-             "(temporal weight 3, lam 0.1, `tune=False`); `best grid` the best of temporal weight 1, 3, 10, 30 "
-             "× lam 0.03, 0.1, 0.3 (chosen with the ground truth); `tuned` the default `rsocl.reconstruct` "
-             "(block cross-validation on held-out snapshot pixels, no ground truth, start from interp3d); "
-             "`tuned, 0 start` the same choice started from zeros; the chosen temporal weight "
-             "and lam. Noise `poisson`: 1000 photo-electrons at "
-             "full scale and Gaussian read noise of 1 % of full scale. Rows marked (tuning set) are the "
-             f"scenes the tuning's own settings were chosen on ({', '.join(TUNED_ON)} at 64x64, noiseless); "
-             "every other row is held out.", "",
-             "| scene | size | noise | interp3d | fixed | best grid (weight,lam) | tuned | tuned, 0 start | "
-             "chosen weight, lam | tuned - best | tuned - interp3d |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    page += [
+        f"Paper array (4 cameras, t_e = 180 µs, t_r = 35 µs, dt = t_r), TV, {args.iterations} iterations, "
+        "float32. PSNR in dB with peak 1. Columns: `interp3d` (no solver); `fixed` the fixed setting "
+        "(temporal weight 3, lam 0.1, `tune=False`); `best grid` the best of temporal weight 1, 3, 10, 30 "
+        "× lam 0.03, 0.1, 0.3 (chosen with the ground truth); `tuned` the default `rsocl.reconstruct` "
+        "(block cross-validation on held-out snapshot pixels, no ground truth, start from interp3d); "
+        "`tuned, 0 start` the same choice started from zeros; the chosen temporal weight "
+        "and lam. Noise `poisson`: 1000 photo-electrons at "
+        "full scale and Gaussian read noise of 1 % of full scale. Rows marked (tuning set) are the "
+        f"scenes the tuning's own settings were chosen on ({', '.join(TUNED_ON)} at 64x64, noiseless); "
+        "every other row is held out.",
+        "",
+        "| scene | size | noise | interp3d | fixed | best grid (weight,lam) | tuned | tuned, 0 start | "
+        "chosen weight, lam | tuned - best | tuned - interp3d |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     print("\n".join(page), flush=True)
     stats, skipped = [], []
     for scene, size, noise in CASES:
@@ -132,12 +169,15 @@ def main(argv=None):
         page += ["", f"Skipped (no ../shared/data): {', '.join(sorted(set(skipped)))}."]
     if stats:
         clean = [s for s in stats if s["noise"] == "none"]
-        page += ["", f"Summary over {len(stats)} cases: tuned - best grid from {min(s['to_best'] for s in stats):+.2f} "
-                     f"to {max(s['to_best'] for s in stats):+.2f} dB; tuned - interp3d from "
-                     f"{min(s['to_interp'] for s in stats):+.2f} to {max(s['to_interp'] for s in stats):+.2f} dB "
-                     f"(noiseless: from {min(s['to_interp'] for s in clean):+.2f} dB); starting from interp3d "
-                     "rather than zeros changes the tuned PSNR by "
-                     f"{min(s['warm'] for s in stats):+.2f} to {max(s['warm'] for s in stats):+.2f} dB."]
+        page += [
+            "",
+            f"Summary over {len(stats)} cases: tuned - best grid from {min(s['to_best'] for s in stats):+.2f} "
+            f"to {max(s['to_best'] for s in stats):+.2f} dB; tuned - interp3d from "
+            f"{min(s['to_interp'] for s in stats):+.2f} to {max(s['to_interp'] for s in stats):+.2f} dB "
+            f"(noiseless: from {min(s['to_interp'] for s in clean):+.2f} dB); starting from interp3d "
+            "rather than zeros changes the tuned PSNR by "
+            f"{min(s['warm'] for s in stats):+.2f} to {max(s['warm'] for s in stats):+.2f} dB.",
+        ]
     page += timing(args)
     write_page(args.out, page)
 
@@ -147,13 +187,18 @@ def timing(args, rounds=3):
     rounds (the machine's other load hits both alike); the ratio of the medians."""
     from rsocl.model.scenes import builtin_scene
 
-    lines = ["", f"Time of the tuned run against the fixed run, built-in scene, {args.iterations} iterations, "
-                 f"{rounds} alternating rounds, medians:", "",
-             "| size | fixed s | tuned s | ratio | of which the search s |", "|---|---|---|---|---|"]
+    lines = [
+        "",
+        f"Time of the tuned run against the fixed run, built-in scene, {args.iterations} iterations, "
+        f"{rounds} alternating rounds, medians:",
+        "",
+        "| size | fixed s | tuned s | ratio | of which the search s |",
+        "|---|---|---|---|---|",
+    ]
     for size in args.sizes:
         rig = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6)
         g = simulate(builtin_scene(rig.shape, rig.T), rig)
-        rsocl.reconstruct(g, rig, iterations=2, device=args.device)            # kernel builds, not timed
+        rsocl.reconstruct(g, rig, iterations=2, device=args.device)  # kernel builds, not timed
         fixed, tuned, search = [], [], []
         for _ in range(rounds):
             for tune, times in ((False, fixed), (True, tuned)):

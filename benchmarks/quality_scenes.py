@@ -45,12 +45,12 @@ def video_at_speed(video, shape, T, frames_per_subframe, crop=None) -> np.ndarra
         video = video.astype(np.float64) / np.iinfo(video.dtype).max
     if crop is not None:
         y, x, h, w = crop
-        video = video[:, y:y + h, x:x + w]
+        video = video[:, y : y + h, x : x + w]
     F = video.shape[0]
     position = np.arange(T, dtype=np.float64) * float(frames_per_subframe)
     period = 2 * (F - 1)
     folded = np.mod(position, period)
-    folded = np.where(folded > F - 1, period - folded, folded)        # forwards, then backwards
+    folded = np.where(folded > F - 1, period - folded, folded)  # forwards, then backwards
     lower = np.minimum(np.floor(folded).astype(np.int64), F - 2)
     fraction = folded - lower
     cache = {}
@@ -87,12 +87,12 @@ def make_scene(name, shape, T) -> np.ndarray:
     if name == "builtin":
         return builtin_scene(shape, T)
     if name == "builtin-slow":
-        return builtin_scene(shape, 2 * T)[T // 2:T // 2 + T]
+        return builtin_scene(shape, 2 * T)[T // 2 : T // 2 + T]
     if name == "builtin-fast":
         half = builtin_scene(shape, (T + 1) // 2)
         return np.concatenate([half, half[::-1]])[:T]
     video, _, speed = name.partition("@")
-    crop = CROPS[video[:-len("-crop")]] if video.endswith("-crop") else None
+    crop = CROPS[video[: -len("-crop")]] if video.endswith("-crop") else None
     path = video_path(name)
     if not path.exists():
         raise FileNotFoundError(f"scene {name!r} needs {path}")

@@ -24,11 +24,11 @@ import numpy as np
 import rsocl
 from rsocl.device.context import get_device
 from rsocl.device.launch import element_launches
-from rsocl_plugins import tv as tv_plugin, tv_fused
+from rsocl_plugins import tv as tv_plugin
+from rsocl_plugins import tv_fused
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-
 
 FLUSH_SOURCE = """
 __kernel void flush(__global const float *big, __global float *out, int per_item)
@@ -92,8 +92,9 @@ def cache_flusher(context, queue, nbytes=64 << 20, per_item=64):
     kernel = cl.Kernel(cl.Program(context, FLUSH_SOURCE).build(), "flush")
     kernel.set_args(big.data, out.data, np.int32(per_item))
 
-    def flush(buffers=(big, out)):          # the default keeps the buffers alive
+    def flush(buffers=(big, out)):  # the default keeps the buffers alive
         return cl.enqueue_nd_range_kernel(queue, kernel, (items,), None)
+
     return flush
 
 
@@ -145,14 +146,14 @@ def line_reader(context, queue, f, lines):
     import pyopencl.array as cla
 
     index = cla.to_device(queue, lines.astype(np.int32))
-    items = -(-lines.size // (8 * 64)) * 64                 # work items: 8 lines each, whole groups of 64
+    items = -(-lines.size // (8 * 64)) * 64  # work items: 8 lines each, whole groups of 64
     out = cla.empty(queue, items, np.float32)
     program = cl.Program(context, LINES_SOURCE).build()
     kernel = cl.Kernel(program, "read_lines")
     kernel.set_args(f.data, index.data, out.data, np.int32(lines.size))
     nothing = cl.Kernel(program, "nothing")
     nothing.set_args(out.data)
-    whole = f.nbytes // (64 * 8)                            # work items of read_all (the tail is left out)
+    whole = f.nbytes // (64 * 8)  # work items of read_all (the tail is left out)
     total = cla.empty(queue, max(whole, 1), np.float32)
     everything = cl.Kernel(program, "read_all")
     everything.set_args(f.data, total.data)
@@ -165,7 +166,9 @@ def line_reader(context, queue, f, lines):
 
     def launch_only(buffers=(out,)):
         return cl.enqueue_nd_range_kernel(queue, nothing, (1,), (1,))
+
     return read, read_every_line, launch_only
+
 
 def kernel_rows(dev, rig):
     """The timed rows ``(name, bytes it must move, bytes in 64-B lines or None, launch)`` and the operator."""
@@ -184,25 +187,41 @@ def kernel_rows(dev, rig):
     xnext = cla.to_device(q, tv_plugin.edge_weights(n, np.float32))
     copy = dev.program(["reduce.cl"], REAL="float", ACC="double" if dev.has_fp64 else "float").copy
     tv = dev.program(["tv.cl"], REAL="float", TEMPORAL=1)
-    voxels = tv_plugin.launches(tv, dev, T, m, n)               # as the TV plugin launches them
+    voxels = tv_plugin.launches(tv, dev, T, m, n)  # as the TV plugin launches them
     sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(1))
-    steps = cla.to_device(q, np.array([1 / 6, 0.5], np.float32))     # tau and tau / weight of the one set
+    steps = cla.to_device(q, np.array([1 / 6, 0.5], np.float32))  # tau and tau / weight of the one set
     # sampled voxels per channel and pixel: the window loop reads only those
     first, last = rig.sampled_window()
     samples = int(np.sum(last - first + 1))
     touched = touched_lines(rig, f32)
     lines = touched.size * 64
-    maps = K * mn * 3 * f32              # first, frac and the snapshot of every channel and pixel
+    maps = K * mn * 3 * f32  # first, frac and the snapshot of every channel and pixel
     read_lines, read_every_line, launch_only = line_reader(dev.context, q, x, touched)
     rows = [
-        (COPY, 2 * N * f32, None,
-         lambda: [copy(q, gs, ls, x.data, y.data, global_offset=off) for gs, ls, off in element_launches(N)]),
-        ("tv_primal (3-D)", (1 + 3 + 1) * N * f32, None,
-         lambda: [tv.tv_primal(q, gs, ls, x.data, p.data, y.data, np.float32(1), *sizes, global_offset=off)
-                  for gs, ls, off in voxels]),
-        ("tv_dual (3-D)", (1 + 3 + 3) * N * f32 + n * f32, None,
-         lambda: [tv.tv_dual(q, gs, ls, y.data, p.data, xnext.data, steps.data, np.float32(1),
-                             *sizes, global_offset=off) for gs, ls, off in voxels]),
+        (
+            COPY,
+            2 * N * f32,
+            None,
+            lambda: [copy(q, gs, ls, x.data, y.data, global_offset=off) for gs, ls, off in element_launches(N)],
+        ),
+        (
+            "tv_primal (3-D)",
+            (1 + 3 + 1) * N * f32,
+            None,
+            lambda: [
+                tv.tv_primal(q, gs, ls, x.data, p.data, y.data, np.float32(1), *sizes, global_offset=off)
+                for gs, ls, off in voxels
+            ],
+        ),
+        (
+            "tv_dual (3-D)",
+            (1 + 3 + 3) * N * f32 + n * f32,
+            None,
+            lambda: [
+                tv.tv_dual(q, gs, ls, y.data, p.data, xnext.data, steps.data, np.float32(1), *sizes, global_offset=off)
+                for gs, ls, off in voxels
+            ],
+        ),
         (FORWARD, samples * f32 + maps, lines + maps, lambda: op.forward_into(x, g)),
         (ADJOINT, N * f32 + 2 * samples * f32 + maps, N * f32 + 2 * lines + maps, lambda: op.adjoint_into(g, y)),
         (LINE_READ, lines + touched.size * 4, lines, read_lines),
@@ -220,9 +239,11 @@ def _pct(values):
 
 def table(rows, runs, voxels):
     """Markdown rows of one cache mode; ``runs`` is a list of per-run {name: seconds}."""
-    out = ["| kernel | bytes it must move | per voxel of the datacube | time (ms, median) | GB/s | vs copy "
-           "(range over runs) | in 64-B lines | vs copy, in lines |",
-           "|---|---|---|---|---|---|---|---|"]
+    out = [
+        "| kernel | bytes it must move | per voxel of the datacube | time (ms, median) | GB/s | vs copy "
+        "(range over runs) | in 64-B lines | vs copy, in lines |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     copy_bytes = rows[0][1]
     for name, nbytes, line_bytes, _ in rows:
         sec = statistics.median(r[name] for r in runs)
@@ -230,8 +251,16 @@ def table(rows, runs, voxels):
             out.append(f"| {name} | 0 | | {sec * 1e3:.3f} | | | | |")
             continue
         ratio = [nbytes / r[name] / (copy_bytes / r[COPY]) for r in runs]
-        cells = [name, f"{nbytes / 2**20:.1f} MiB", f"{nbytes / voxels:.1f} B", f"{sec * 1e3:.3f}",
-                 f"{nbytes / sec / 1e9:.2f}", _pct(ratio), "", ""]
+        cells = [
+            name,
+            f"{nbytes / 2**20:.1f} MiB",
+            f"{nbytes / voxels:.1f} B",
+            f"{sec * 1e3:.3f}",
+            f"{nbytes / sec / 1e9:.2f}",
+            _pct(ratio),
+            "",
+            "",
+        ]
         if line_bytes is not None:
             cells[6] = f"{line_bytes / 2**20:.1f} MiB"
             cells[7] = _pct([line_bytes / r[name] / (copy_bytes / r[COPY]) for r in runs])
@@ -268,13 +297,17 @@ def _median(runs, name):
 def bound_text(line_read_s, target_s):
     """What bounds the forward, from the bare read of its lines against the time the 50 % target allows."""
     if line_read_s > target_s:
-        return (f"The bare read of its lines alone takes {line_read_s / target_s:.1f}× that: on this device the "
-                "windows' access pattern, not the arithmetic, bounds the forward. No single layout of `f` serves "
-                "every camera (their windows run along rows, columns and, at other angles, diagonals); a device on "
-                "which scattered 32-byte reads cost less, such as a GPU, is where the forward comes closer to the copy.")
-    return (f"The bare read of its lines fits in that ({line_read_s * 1e3:.3f} ms): at this size the forward's own "
-            "work (weights, loop over the windows' union, launch), not the access pattern, is what the target "
-            "would have to cut.")
+        return (
+            f"The bare read of its lines alone takes {line_read_s / target_s:.1f}× that: on this device the "
+            "windows' access pattern, not the arithmetic, bounds the forward. No single layout of `f` serves "
+            "every camera (their windows run along rows, columns and, at other angles, diagonals); a device on "
+            "which scattered 32-byte reads cost less, such as a GPU, is where the forward comes closer to the copy."
+        )
+    return (
+        f"The bare read of its lines fits in that ({line_read_s * 1e3:.3f} ms): at this size the forward's own "
+        "work (weights, loop over the windows' union, launch), not the access pattern, is what the target "
+        "would have to cut."
+    )
 
 
 def explain(rows, measured, rig, op, args):
@@ -282,14 +315,19 @@ def explain(rows, measured, rig, op, args):
     T, (m, n), K = rig.T, rig.shape, rig.n_channels
     N = T * m * n
     by = {row[0]: row for row in rows}
-    out = [f"Paper array {m}×{n}, T = {T} sub-frames, {K} cameras (0°, 90°, 180°, 270°), float32. Each time is the "
-           f"median of {args.repeats} launches made round-robin (copy, TV primal, TV dual, forward, adjoint, the "
-           "readers, copy, ...), so that the machine's noise hits every kernel alike; times are wall times of "
-           "enqueue and wait, launch included. The tables give the median over "
-           f"{args.runs} run{'s' if args.runs > 1 else ''}, and each ratio to the copy's bandwidth as the median "
-           "and the range of the runs' ratios. How bytes are counted: `benchmarks/README.md`.", ""]
-    titles = {"cold": "Cold caches (a 64 MiB read before every timed launch)",
-              "warm": "Warm caches (each kernel ran once just before its timed launch)"}
+    out = [
+        f"Paper array {m}×{n}, T = {T} sub-frames, {K} cameras (0°, 90°, 180°, 270°), float32. Each time is the "
+        f"median of {args.repeats} launches made round-robin (copy, TV primal, TV dual, forward, adjoint, the "
+        "readers, copy, ...), so that the machine's noise hits every kernel alike; times are wall times of "
+        "enqueue and wait, launch included. The tables give the median over "
+        f"{args.runs} run{'s' if args.runs > 1 else ''}, and each ratio to the copy's bandwidth as the median "
+        "and the range of the runs' ratios. How bytes are counted: `benchmarks/README.md`.",
+        "",
+    ]
+    titles = {
+        "cold": "Cold caches (a 64 MiB read before every timed launch)",
+        "warm": "Warm caches (each kernel ran once just before its timed launch)",
+    }
     for mode, runs in measured.items():
         out += [f"## {titles[mode]}", ""] + table(rows, runs, N) + [""]
     out += KERNELS.format(R=op.block_rows, W=op.vector_width).splitlines() + [""]
@@ -306,21 +344,27 @@ def explain(rows, measured, rig, op, args):
     times = sorted(r[FORWARD] / r[LINE_READ] for r in runs)
     spread = f"{times[0]:.2f}-{times[-1]:.2f}×" if len(times) > 1 else f"{times[0]:.2f}×"
     target = fwd_bytes / (0.5 * copy_bw)
-    out += ["## Why the forward stays below the copy", "",
-            f"The forward moves {fwd_bytes / N:.1f} bytes per voxel of the datacube (sampled values and per-pixel "
-            f"maps), {fwd_lines / N:.1f} counting the whole 64-byte lines that its windows touch. Those lines are "
-            "scattered: a camera at 90° or 270° reads along the columns of the reference frame, so it takes a few "
-            f"pixels of every row from each plane of `f[T, m, n]`, planes {m * n * 4 / 1024:.0f} KiB apart. "
-            f"The two readers isolate that pattern ({mode} caches):", "",
-            f"- reading exactly the forward's lines, sorted by address, with no arithmetic, takes "
-            f"{_median(runs, LINE_READ) * 1e3:.3f} ms: {_pct(ratio(LINE_READ))} of the copy's bandwidth;",
-            f"- reading every line of the datacube in order, {N * 4 / by[LINE_READ][2]:.1f}× those bytes, takes "
-            f"{_median(runs, EVERY_LINE) * 1e3:.3f} ms ({_pct(ratio(EVERY_LINE))} of the copy);",
-            f"- the forward takes {spread} the time of that bare read of its lines "
-            f"({_median(runs, FORWARD) * 1e3:.3f} ms), and an empty launch costs {_median(runs, LAUNCH_ONLY) * 1e3:.3f} ms "
-            "of every row.", "",
-            f"At 50 % of the copy's bandwidth the forward's {fwd_bytes / 2**20:.1f} MiB would take "
-            f"{target * 1e3:.3f} ms. " + bound_text(_median(runs, LINE_READ), target), ""]
+    out += [
+        "## Why the forward stays below the copy",
+        "",
+        f"The forward moves {fwd_bytes / N:.1f} bytes per voxel of the datacube (sampled values and per-pixel "
+        f"maps), {fwd_lines / N:.1f} counting the whole 64-byte lines that its windows touch. Those lines are "
+        "scattered: a camera at 90° or 270° reads along the columns of the reference frame, so it takes a few "
+        f"pixels of every row from each plane of `f[T, m, n]`, planes {m * n * 4 / 1024:.0f} KiB apart. "
+        f"The two readers isolate that pattern ({mode} caches):",
+        "",
+        f"- reading exactly the forward's lines, sorted by address, with no arithmetic, takes "
+        f"{_median(runs, LINE_READ) * 1e3:.3f} ms: {_pct(ratio(LINE_READ))} of the copy's bandwidth;",
+        f"- reading every line of the datacube in order, {N * 4 / by[LINE_READ][2]:.1f}× those bytes, takes "
+        f"{_median(runs, EVERY_LINE) * 1e3:.3f} ms ({_pct(ratio(EVERY_LINE))} of the copy);",
+        f"- the forward takes {spread} the time of that bare read of its lines "
+        f"({_median(runs, FORWARD) * 1e3:.3f} ms), and an empty launch costs {_median(runs, LAUNCH_ONLY) * 1e3:.3f} ms "
+        "of every row.",
+        "",
+        f"At 50 % of the copy's bandwidth the forward's {fwd_bytes / 2**20:.1f} MiB would take "
+        f"{target * 1e3:.3f} ms. " + bound_text(_median(runs, LINE_READ), target),
+        "",
+    ]
 
     out += ["## Against the target (at least 50 % of the copy's bandwidth)", ""]
     for name in ("tv_primal (3-D)", "tv_dual (3-D)", ADJOINT, FORWARD):
@@ -333,34 +377,53 @@ def explain(rows, measured, rig, op, args):
                 text += f" ({_pct(lines)} in lines)"
             parts.append(text)
             met.append((mode, statistics.median(vals) >= 0.5))
-        verdict = ("met" if all(ok for _, ok in met) else "not met" if not any(ok for _, ok in met)
-                   else "met with " + " and ".join(mode for mode, ok in met if ok) + " caches only")
+        verdict = (
+            "met"
+            if all(ok for _, ok in met)
+            else "not met"
+            if not any(ok for _, ok in met)
+            else "met with " + " and ".join(mode for mode, ok in met if ok) + " caches only"
+        )
         out.append(f"- **{name}**: {', '.join(parts)}: {verdict}.")
-    out += ["", "TV counts each neighbour once (they come from cache) and the dual updates `p` in place, so its "
-            "writes need no read for ownership, while the copy writes a buffer it does not read: TV can exceed the "
-            "copy's rate. The adjoint's bytes include zeroing the datacube, a plain stream of writes. The forward "
-            "is bounded as the section above measures."]
+    out += [
+        "",
+        "TV counts each neighbour once (they come from cache) and the dual updates `p` in place, so its "
+        "writes need no read for ownership, while the copy writes a buffer it does not read: TV can exceed the "
+        "copy's rate. The adjoint's bytes include zeroing the datacube, a plain stream of writes. The forward "
+        "is bounded as the section above measures.",
+    ]
     return out
 
 
 def tv_bytes(dev, rig, iterations=10, per_launch=(3, 5, 9)):
     """Markdown lines: bytes per voxel and TV iteration, plain path against fused (counted, not timed)."""
     shape, plain = (1, rig.T) + rig.shape, tv_fused.plain_values(iterations, True)
-    out = [f"## Bytes per voxel and TV iteration (counted; {iterations} iterations per call, float32, 3-D)", "",
-           "Values read or written in global memory per iteration (`rsocl_plugins.tv_fused`, halos counted); `+ dual`: "
-           "with the ADMM's dual update (a pass of 4 values when plain, 2 writes in the last fused launch).", "",
-           "| path | device limits | tile (x, y, t) | launches | B/voxel-iteration | + dual | vs plain |",
-           "|---|---|---|---|---|---|---|", f"| plain (`fused = 0`) | any | | {2 * iterations - 1} | "
-           f"{plain * 4 / iterations:.1f} | {(plain + 4) * 4 / iterations:.1f} | 100 % |"]
-    for limits, local, group in ((f"this device ({dev.local_mem_bytes // 1024} KiB)", dev.local_mem_bytes,
-                                  dev.max_work_group_size), ("48 KiB, 1024 work items", 48 << 10, 1024)):
+    out = [
+        f"## Bytes per voxel and TV iteration (counted; {iterations} iterations per call, float32, 3-D)",
+        "",
+        "Values read or written in global memory per iteration (`rsocl_plugins.tv_fused`, halos counted); `+ dual`: "
+        "with the ADMM's dual update (a pass of 4 values when plain, 2 writes in the last fused launch).",
+        "",
+        "| path | device limits | tile (x, y, t) | launches | B/voxel-iteration | + dual | vs plain |",
+        "|---|---|---|---|---|---|---|",
+        f"| plain (`fused = 0`) | any | | {2 * iterations - 1} | "
+        f"{plain * 4 / iterations:.1f} | {(plain + 4) * 4 / iterations:.1f} | 100 % |",
+    ]
+    for limits, local, group in (
+        (f"this device ({dev.local_mem_bytes // 1024} KiB)", dev.local_mem_bytes, dev.max_work_group_size),
+        ("48 KiB, 1024 work items", 48 << 10, 1024),
+    ):
         for k in per_launch:
-            plan = tv_fused.plan(shape, 4, iterations, k, True, local_bytes=local, group=group,
-                                 max_items=(1024, 1024, 64))
-            out.append(f"| `fused = {k}` | {limits} | plain path: no tile saves bytes | | | | |" if plan is None else
-                       f"| `fused = {k}` | {limits} | {plan.tile} | {len(plan.launches)} | "
-                       f"{plan.values() * 4 / iterations:.1f} | {plan.values(dual=True) * 4 / iterations:.1f} | "
-                       f"{100 * plan.values(dual=True) / (plain + 4):.0f} % |")
+            plan = tv_fused.plan(
+                shape, 4, iterations, k, True, local_bytes=local, group=group, max_items=(1024, 1024, 64)
+            )
+            out.append(
+                f"| `fused = {k}` | {limits} | plain path: no tile saves bytes | | | | |"
+                if plan is None
+                else f"| `fused = {k}` | {limits} | {plan.tile} | {len(plan.launches)} | "
+                f"{plan.values() * 4 / iterations:.1f} | {plan.values(dual=True) * 4 / iterations:.1f} | "
+                f"{100 * plan.values(dual=True) / (plain + 4):.0f} % |"
+            )
     return out + [""]
 
 
@@ -369,8 +432,13 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=128, help="ROI side, pixels")
     parser.add_argument("--repeats", type=int, default=60, help="timed launches of each kernel per run")
     parser.add_argument("--runs", type=int, default=3, help="runs of every cache mode (the tables give ranges)")
-    parser.add_argument("--caches", nargs="+", choices=("cold", "warm"), default=["cold", "warm"],
-                        help="cold: flush the caches before each launch; warm: run the kernel once first")
+    parser.add_argument(
+        "--caches",
+        nargs="+",
+        choices=("cold", "warm"),
+        default=["cold", "warm"],
+        help="cold: flush the caches before each launch; warm: run the kernel once first",
+    )
     parser.add_argument("--device", default=None)
     parser.add_argument("--out", type=Path, default=DOCS / "roofline.md", help="the Markdown page to write")
     args = parser.parse_args(argv)
@@ -387,10 +455,14 @@ def main(argv=None):
         for mode in args.caches:
             seconds = timed(dev.queue, launches, args.repeats, prepare[mode])
             measured[mode].append({row[0]: sec for row, sec in zip(rows, seconds)})
-            print(f"run {run + 1}/{args.runs}, {mode}: forward {seconds[3] * 1e3:.3f} ms, copy {seconds[0] * 1e3:.3f} ms",
-                  file=sys.stderr, flush=True)
-    page = header_lines("Roofline: rsocl's kernels against a copy kernel", dev, argv=None if argv is None
-                        else [__file__] + list(argv))
+            print(
+                f"run {run + 1}/{args.runs}, {mode}: forward {seconds[3] * 1e3:.3f} ms, copy {seconds[0] * 1e3:.3f} ms",
+                file=sys.stderr,
+                flush=True,
+            )
+    page = header_lines(
+        "Roofline: rsocl's kernels against a copy kernel", dev, argv=None if argv is None else [__file__] + list(argv)
+    )
     page += explain(rows, measured, rig, op, args)
     page += tv_bytes(dev, rig)
     print("\n".join(page))

@@ -78,7 +78,7 @@ def simulate_blocks(rig, block_rows=64):
         sub = rig.crop((y0, 0, h, n))
         frames = sub.sampled_range()
         op = rsocl.RollingShutterOperator(sub, subframes=frames)
-        g[:, y0:y0 + h] = op.forward(scene_block(rig, slice(y0, y0 + h), frames))
+        g[:, y0 : y0 + h] = op.forward(scene_block(rig, slice(y0, y0 + h), frames))
     return g
 
 
@@ -93,16 +93,28 @@ def part_seams(args):
     began = time.perf_counter()
     untiled = rsocl.reconstruct(g, rig, iterations=args.iterations, tune=False, progress=True).datacube
     untiled_s = time.perf_counter() - began
-    tiled_result = reconstruct_tiled(g, rig, tile=(128, 128), halo=16, iterations=args.iterations, tune=False,
-                                     progress=True)
+    tiled_result = reconstruct_tiled(
+        g, rig, tile=(128, 128), halo=16, iterations=args.iterations, tune=False, progress=True
+    )
     tiled = tiled_result.datacube
     diff = np.abs(tiled - untiled)
     kept = rig.kept_subframes()
-    out = dict(shape=list(rig.shape), T=rig.T, iterations=args.iterations, tile=[128, 128], halo=16,
-               psnr_untiled=psnr(untiled, truth), psnr_tiled=psnr(tiled, truth),
-               psnr_untiled_kept=psnr(untiled[kept], truth[kept]), psnr_tiled_kept=psnr(tiled[kept], truth[kept]),
-               max_diff=float(diff.max()), mean_diff=float(diff.mean()),
-               max_diff_kept=float(diff[kept].max()), untiled_seconds=untiled_s, tiled_seconds=tiled_result.seconds)
+    out = dict(
+        shape=list(rig.shape),
+        T=rig.T,
+        iterations=args.iterations,
+        tile=[128, 128],
+        halo=16,
+        psnr_untiled=psnr(untiled, truth),
+        psnr_tiled=psnr(tiled, truth),
+        psnr_untiled_kept=psnr(untiled[kept], truth[kept]),
+        psnr_tiled_kept=psnr(tiled[kept], truth[kept]),
+        max_diff=float(diff.max()),
+        mean_diff=float(diff.mean()),
+        max_diff_kept=float(diff[kept].max()),
+        untiled_seconds=untiled_s,
+        tiled_seconds=tiled_result.seconds,
+    )
     _seam_picture(truth, untiled, tiled, tile_grid(rig.shape, (128, 128), 16), (kept.start + kept.stop) // 2)
     return out
 
@@ -117,8 +129,9 @@ def _seam_picture(truth, untiled, tiled, grid, s):
 
     diff = np.abs(tiled[s] - untiled[s])
     fig, axes = plt.subplots(1, 4, figsize=(16, 4.4))
-    for ax, image, title in zip(axes[:3], (truth[s], untiled[s], tiled[s]),
-                                ("truth", "untiled", "tiled 128x128, halo 16")):
+    for ax, image, title in zip(
+        axes[:3], (truth[s], untiled[s], tiled[s]), ("truth", "untiled", "tiled 128x128, halo 16")
+    ):
         ax.imshow(image, cmap="gray", vmin=0, vmax=1)
         ax.set_title(f"{title}, sub-frame {s}")
     shown = axes[3].imshow(diff, cmap="magma", vmin=0, vmax=max(float(diff.max()), 1e-6))
@@ -146,8 +159,17 @@ def part_sensor(args):
     began = time.perf_counter()
     save_capture(capture, simulate_blocks(rig), rig)
     simulate_s = time.perf_counter() - began
-    command = ["reconstruct", str(capture), "--out", str(store), "--tile", "128", "128",
-               "--iterations", str(args.sensor_iterations)]
+    command = [
+        "reconstruct",
+        str(capture),
+        "--out",
+        str(store),
+        "--tile",
+        "128",
+        "128",
+        "--iterations",
+        str(args.sensor_iterations),
+    ]
     began = time.perf_counter()
     code = rsocl_main(command)
     seconds = time.perf_counter() - began
@@ -158,15 +180,28 @@ def part_sensor(args):
     tiles = stored.tiles.reshape(-1, stored.tiles.shape[-1])
     kept = rig.kept_subframes()
     m, n = rig.shape
-    rows, cols = slice(m // 2 - min(128, m // 4), m // 2 + min(128, m // 4)), slice(n // 2 - min(128, n // 4), n // 2 + min(128, n // 4))
+    rows, cols = (
+        slice(m // 2 - min(128, m // 4), m // 2 + min(128, m // 4)),
+        slice(n // 2 - min(128, n // 4), n // 2 + min(128, n // 4)),
+    )
     crop = np.asarray(stored.datacube[kept, rows, cols])
     truth = scene_block(rig, rows, kept)[:, :, cols]
-    return dict(shape=list(rig.shape), T=rig.T, T_se=rig.T_se, iterations=args.sensor_iterations,
-                command="rsocl " + " ".join(command[:1] + ["CAPTURE", "--out", "rec.zarr"] + command[4:]),
-                tasks=int(tiles.shape[0]), complete=bool(stored.complete), seconds=seconds, simulate_seconds=simulate_s,
-                tile_seconds=[float(v) for v in tiles[:, 3]], modelled_subframes=[int(v) for v in tiles[:, 2] - tiles[:, 1]],
-                peak_rss_bytes=int(peak), psnr_center_kept=psnr(crop, truth),
-                store_bytes=int(sum(p.stat().st_size for p in store.rglob("*") if p.is_file())))
+    return dict(
+        shape=list(rig.shape),
+        T=rig.T,
+        T_se=rig.T_se,
+        iterations=args.sensor_iterations,
+        command="rsocl " + " ".join(command[:1] + ["CAPTURE", "--out", "rec.zarr"] + command[4:]),
+        tasks=int(tiles.shape[0]),
+        complete=bool(stored.complete),
+        seconds=seconds,
+        simulate_seconds=simulate_s,
+        tile_seconds=[float(v) for v in tiles[:, 3]],
+        modelled_subframes=[int(v) for v in tiles[:, 2] - tiles[:, 1]],
+        peak_rss_bytes=int(peak),
+        psnr_center_kept=psnr(crop, truth),
+        store_bytes=int(sum(p.stat().st_size for p in store.rglob("*") if p.is_file())),
+    )
 
 
 def part_cluster(args):
@@ -180,16 +215,23 @@ def part_cluster(args):
     reference = None
     for _ in range(args.rounds):
         for workers in (1, 2):
-            result = reconstruct_tiled(sets, rig, tile=rig.shape, halo=0, iterations=args.iterations,
-                                       workers=workers, tune=False)
+            result = reconstruct_tiled(
+                sets, rig, tile=rig.shape, halo=0, iterations=args.iterations, workers=workers, tune=False
+            )
             times[workers].append(result.seconds)
             if reference is None:
                 reference = result.datacube
             assert np.array_equal(result.datacube, reference), "1 and 2 workers gave different numbers"
     best = {w: min(v) for w, v in times.items()}
-    return dict(shape=list(rig.shape), sets=args.sets, iterations=args.iterations, rounds=args.rounds,
-                seconds={str(w): v for w, v in times.items()},
-                sets_per_second={str(w): args.sets / best[w] for w in best}, ratio=best[1] / best[2])
+    return dict(
+        shape=list(rig.shape),
+        sets=args.sets,
+        iterations=args.iterations,
+        rounds=args.rounds,
+        seconds={str(w): v for w, v in times.items()},
+        sets_per_second={str(w): args.sets / best[w] for w in best},
+        ratio=best[1] / best[2],
+    )
 
 
 # ---------------------------------------------------------------------- page
@@ -213,55 +255,84 @@ def page(results, argv):
     lines += ["Written by `benchmarks/scale.py`; each part below names when and at which commit it was measured.", ""]
     seams = results.get("seams")
     if seams:
-        lines += ["## Tiled against untiled (256x256, paper array)", "", _stamp(seams),
-                  f"4 cameras at 0/90/180/270°, t_e = 180 µs, t_r = 35 µs, T = {seams['T']}, "
-                  f"{seams['iterations']} iterations, TV defaults; tiles of 128x128 with a halo of 16 (4 tasks).", "",
-                  "| | untiled | tiled | difference |", "|---|---|---|---|",
-                  f"| PSNR against the truth, all sub-frames | {seams['psnr_untiled']:.2f} dB | {seams['psnr_tiled']:.2f} dB "
-                  f"| {seams['psnr_tiled'] - seams['psnr_untiled']:+.3f} dB |",
-                  f"| PSNR, kept sub-frames (T_se) | {seams['psnr_untiled_kept']:.2f} dB | {seams['psnr_tiled_kept']:.2f} dB "
-                  f"| {seams['psnr_tiled_kept'] - seams['psnr_untiled_kept']:+.3f} dB |",
-                  f"| largest abs. difference (all / kept) | | | {seams['max_diff']:.2e} / {seams['max_diff_kept']:.2e} |",
-                  f"| mean abs. difference | | | {seams['mean_diff']:.2e} |",
-                  f"| wall time | {seams['untiled_seconds']:.1f} s | {seams['tiled_seconds']:.1f} s | |", "",
-                  "![seams](scale_seams.png)", ""]
+        lines += [
+            "## Tiled against untiled (256x256, paper array)",
+            "",
+            _stamp(seams),
+            f"4 cameras at 0/90/180/270°, t_e = 180 µs, t_r = 35 µs, T = {seams['T']}, "
+            f"{seams['iterations']} iterations, TV defaults; tiles of 128x128 with a halo of 16 (4 tasks).",
+            "",
+            "| | untiled | tiled | difference |",
+            "|---|---|---|---|",
+            f"| PSNR against the truth, all sub-frames | {seams['psnr_untiled']:.2f} dB | {seams['psnr_tiled']:.2f} dB "
+            f"| {seams['psnr_tiled'] - seams['psnr_untiled']:+.3f} dB |",
+            f"| PSNR, kept sub-frames (T_se) | {seams['psnr_untiled_kept']:.2f} dB | {seams['psnr_tiled_kept']:.2f} dB "
+            f"| {seams['psnr_tiled_kept'] - seams['psnr_untiled_kept']:+.3f} dB |",
+            f"| largest abs. difference (all / kept) | | | {seams['max_diff']:.2e} / {seams['max_diff_kept']:.2e} |",
+            f"| mean abs. difference | | | {seams['mean_diff']:.2e} |",
+            f"| wall time | {seams['untiled_seconds']:.1f} s | {seams['tiled_seconds']:.1f} s | |",
+            "",
+            "![seams](scale_seams.png)",
+            "",
+        ]
     sensor = results.get("sensor")
     if sensor:
         gib = sensor["peak_rss_bytes"] / 2**30
-        lines += ["## The whole sensor into a Zarr store", "", _stamp(sensor),
-                  f"{sensor['shape'][0]}x{sensor['shape'][1]}, 4 cameras, t_e = 180 µs, t_r = 26 µs, dt = t_r: "
-                  f"T = {sensor['T']} sub-frames (T_se = {sensor['T_se']}); one datacube is "
-                  f"{sensor['T'] * sensor['shape'][0] * sensor['shape'][1] * 4 / 2**30:.1f} GiB in float32.", "",
-                  f"- command: `{sensor['command']}` ({sensor['iterations']} iterations, so that the whole run "
-                  f"fits in under an hour on this 2-core CPU; the PSNR below is that of {sensor['iterations']} "
-                  "iterations, not of a "
-                  "converged reconstruction)",
-                  f"- {sensor['tasks']} tasks, store complete: {sensor['complete']}, "
-                  f"store on disk {sensor['store_bytes'] / 2**30:.2f} GiB",
-                  f"- wall time {sensor['seconds']:.0f} s ({sensor['seconds'] / 60:.1f} min); per tile "
-                  f"{np.median(sensor['tile_seconds']):.1f} s median, {max(sensor['tile_seconds']):.1f} s at most; "
-                  f"modelled sub-frames per tile {min(sensor['modelled_subframes'])}..{max(sensor['modelled_subframes'])}",
-                  f"- peak RSS of the process (the OpenCL CPU device's buffers included): {gib:.2f} GiB",
-                  f"- PSNR of the central 256x256 crop over the kept sub-frames: {sensor['psnr_center_kept']:.2f} dB", "",
-                  "### On paper: N devices", "",
-                  "From the per-tile times measured above, the tasks placed longest first onto the least loaded "
-                  "device (a lower bound on what a cluster's scheduler achieves, transfers left out). "
-                  "A device k times faster than this CPU divides every entry by k.", "",
-                  "| devices | wall time | speed-up |", "|---|---|---|"]
+        lines += [
+            "## The whole sensor into a Zarr store",
+            "",
+            _stamp(sensor),
+            f"{sensor['shape'][0]}x{sensor['shape'][1]}, 4 cameras, t_e = 180 µs, t_r = 26 µs, dt = t_r: "
+            f"T = {sensor['T']} sub-frames (T_se = {sensor['T_se']}); one datacube is "
+            f"{sensor['T'] * sensor['shape'][0] * sensor['shape'][1] * 4 / 2**30:.1f} GiB in float32.",
+            "",
+            f"- command: `{sensor['command']}` ({sensor['iterations']} iterations, so that the whole run "
+            f"fits in under an hour on this 2-core CPU; the PSNR below is that of {sensor['iterations']} "
+            "iterations, not of a "
+            "converged reconstruction)",
+            f"- {sensor['tasks']} tasks, store complete: {sensor['complete']}, "
+            f"store on disk {sensor['store_bytes'] / 2**30:.2f} GiB",
+            f"- wall time {sensor['seconds']:.0f} s ({sensor['seconds'] / 60:.1f} min); per tile "
+            f"{np.median(sensor['tile_seconds']):.1f} s median, {max(sensor['tile_seconds']):.1f} s at most; "
+            f"modelled sub-frames per tile {min(sensor['modelled_subframes'])}..{max(sensor['modelled_subframes'])}",
+            f"- peak RSS of the process (the OpenCL CPU device's buffers included): {gib:.2f} GiB",
+            f"- PSNR of the central 256x256 crop over the kept sub-frames: {sensor['psnr_center_kept']:.2f} dB",
+            "",
+            "### On paper: N devices",
+            "",
+            "From the per-tile times measured above, the tasks placed longest first onto the least loaded "
+            "device (a lower bound on what a cluster's scheduler achieves, transfers left out). "
+            "A device k times faster than this CPU divides every entry by k.",
+            "",
+            "| devices | wall time | speed-up |",
+            "|---|---|---|",
+        ]
         table = n_devices_table(sensor)
         lines += [f"| {n} | {t:.0f} s | {table[0][1] / t:.2f}x |" for n, t in table] + [""]
     cluster = results.get("cluster")
     if cluster:
-        lines += ["## LocalCluster: 1 against 2 worker processes", "", _stamp(cluster),
-                  f"{cluster['sets']} sets of 64x64 (4 cameras), one task per set, {cluster['iterations']} iterations, "
-                  f"{cluster['rounds']} alternating rounds (best of each; cluster start-up not counted).", "",
-                  "| workers | seconds per round | sets/s |", "|---|---|---|"]
+        lines += [
+            "## LocalCluster: 1 against 2 worker processes",
+            "",
+            _stamp(cluster),
+            f"{cluster['sets']} sets of 64x64 (4 cameras), one task per set, {cluster['iterations']} iterations, "
+            f"{cluster['rounds']} alternating rounds (best of each; cluster start-up not counted).",
+            "",
+            "| workers | seconds per round | sets/s |",
+            "|---|---|---|",
+        ]
         for w in ("1", "2"):
-            lines.append(f"| {w} | {', '.join(f'{s:.1f}' for s in cluster['seconds'][w])} | "
-                         f"{cluster['sets_per_second'][w]:.2f} |")
-        lines += ["", f"Ratio (1 worker's time / 2 workers'): **{cluster['ratio']:.2f}x**. Both workers' OpenCL "
-                  "devices are the same 2 CPU cores (PoCL; each worker's device spans both), so the ratio measures "
-                  "how much of them one worker running one 64x64 set at a time leaves idle.", ""]
+            lines.append(
+                f"| {w} | {', '.join(f'{s:.1f}' for s in cluster['seconds'][w])} | "
+                f"{cluster['sets_per_second'][w]:.2f} |"
+            )
+        lines += [
+            "",
+            f"Ratio (1 worker's time / 2 workers'): **{cluster['ratio']:.2f}x**. Both workers' OpenCL "
+            "devices are the same 2 CPU cores (PoCL; each worker's device spans both), so the ratio measures "
+            "how much of them one worker running one 64x64 set at a time leaves idle.",
+            "",
+        ]
     return lines
 
 
@@ -272,16 +343,19 @@ def _stamp(part):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--parts", nargs="*", choices=["seams", "sensor", "cluster"],
-                        default=["seams", "sensor", "cluster"])
+    parser.add_argument(
+        "--parts", nargs="*", choices=["seams", "sensor", "cluster"], default=["seams", "sensor", "cluster"]
+    )
     parser.add_argument("--iterations", type=int, default=50, help="seams and cluster parts (default 50)")
     parser.add_argument("--sensor-iterations", type=int, default=20, help="whole-sensor part (default 20)")
     parser.add_argument("--sets", type=int, default=16, help="sets of the cluster part (default 16)")
     parser.add_argument("--rounds", type=int, default=2, help="alternating rounds of the cluster part (default 2)")
     parser.add_argument("--sensor-shape", type=int, nargs=2, default=[1024, 1280], help="(default 1024 1280)")
-    parser.add_argument("--results", default=str(RESULTS),
-                        help="JSON file the parts' numbers are kept in (default docs/scale.json, which also "
-                             "writes docs/scale.md)")
+    parser.add_argument(
+        "--results",
+        default=str(RESULTS),
+        help="JSON file the parts' numbers are kept in (default docs/scale.json, which also writes docs/scale.md)",
+    )
     parser.add_argument("--merge", nargs="*", default=[], help="results files of other runs to add first")
     parser.add_argument("--workdir", default=None, help="where the sensor's capture and store go (default: a temp dir)")
     args = parser.parse_args(argv)
@@ -289,11 +363,17 @@ def main(argv=None):
     results_path = Path(args.results)
     for name in args.parts:
         print(f"--- {name}", flush=True)
-        stamp = dict(_measured=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-                     _load=", ".join(f"{x:.2f}" for x in os.getloadavg()), _commit=git_revision(), _command=" ".join(["python", "benchmarks/scale.py"] + argv[1:]))
+        stamp = dict(
+            _measured=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            _load=", ".join(f"{x:.2f}" for x in os.getloadavg()),
+            _commit=git_revision(),
+            _command=" ".join(["python", "benchmarks/scale.py"] + argv[1:]),
+        )
         part = {**globals()[f"part_{name}"](args), **stamp}
-        print(json.dumps({k: v for k, v in part.items() if k not in ("tile_seconds", "modelled_subframes")},
-                         indent=1), flush=True)
+        print(
+            json.dumps({k: v for k, v in part.items() if k not in ("tile_seconds", "modelled_subframes")}, indent=1),
+            flush=True,
+        )
         results = json.loads(results_path.read_text()) if results_path.exists() else {}
         results[name] = part
         results_path.write_text(json.dumps(results, indent=1) + "\n")

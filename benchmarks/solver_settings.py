@@ -20,8 +20,8 @@ from pathlib import Path
 import rsocl
 from rsocl.analysis.metrics import psnr
 from rsocl.model.interpolation import interp3d
-from rsocl.solver.problem import DEFAULTS
 from rsocl.model.scenes import load_scene
+from rsocl.solver.problem import DEFAULTS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import DOCS, header_lines, write_page  # noqa: E402
@@ -37,8 +37,10 @@ def runs(quick):
     if quick:
         return
     yield "paper Eq. 15 at the defaults (lam=0.1, eta=0.2)", dict(projection="paper")
-    yield "paper Eq. 15, lam=20 eta=30, TV temporal_weight=1", dict(
-        projection="paper", lam=20.0, eta=30.0, regularizer_options={"temporal_weight": 1.0})
+    yield (
+        "paper Eq. 15, lam=20 eta=30, TV temporal_weight=1",
+        dict(projection="paper", lam=20.0, eta=30.0, regularizer_options={"temporal_weight": 1.0}),
+    )
     for lam in (0.05, 0.2):
         yield f"exact, lam={lam}", dict(lam=lam)
     yield "exact, eta=0.05", dict(eta=0.05)
@@ -66,16 +68,20 @@ def main(argv=None):
         raise SystemExit("--size must be >= 8 and --iterations >= 1")
     rig = rsocl.Rig.paper_array(4, (args.size, args.size), t_e=0.18e-3, t_r=35e-6)
     op = rsocl.RollingShutterOperator(rig, device=args.device, dtype="float64")
-    page = header_lines("Reconstruction quality on the shared videos", op.device,
-                        None if argv is None else [__file__, *argv])
-    page += [f"Paper array, {args.size}x{args.size}, T = {rig.T}, t_e = 180 µs, t_r = 35 µs, dt = t_r; "
-             f"videos by the benchmark protocol of docs/model.md; {args.iterations} iterations; rsocl's defaults "
-             f"{DEFAULTS} unless the row says otherwise; TV with temporal weight 3 (the `tv` plugin's default). "
-             "PSNR in dB with peak 1; 'best (iteration)' is the highest PSNR over the iterations and where it "
-             "was reached; ms/iteration is the whole call's wall time per iteration (kernel builds excluded, "
-             "PSNR tracking included).", "",
-             "| video | settings | PSNR @200 | PSNR @last | best (iteration) | ms/iteration |",
-             "|---|---|---|---|---|---|"]
+    page = header_lines(
+        "Reconstruction quality on the shared videos", op.device, None if argv is None else [__file__, *argv]
+    )
+    page += [
+        f"Paper array, {args.size}x{args.size}, T = {rig.T}, t_e = 180 µs, t_r = 35 µs, dt = t_r; "
+        f"videos by the benchmark protocol of docs/model.md; {args.iterations} iterations; rsocl's defaults "
+        f"{DEFAULTS} unless the row says otherwise; TV with temporal weight 3 (the `tv` plugin's default). "
+        "PSNR in dB with peak 1; 'best (iteration)' is the highest PSNR over the iterations and where it "
+        "was reached; ms/iteration is the whole call's wall time per iteration (kernel builds excluded, "
+        "PSNR tracking included).",
+        "",
+        "| video | settings | PSNR @200 | PSNR @last | best (iteration) | ms/iteration |",
+        "|---|---|---|---|---|---|",
+    ]
     print("\n".join(page), flush=True)
     for video in args.videos:
         path = DATA / f"{video}.npz"
@@ -90,8 +96,9 @@ def main(argv=None):
                 # kernel builds are not timed
                 rsocl.reconstruct(g, rig, iterations=2, device=args.device, tune=False, **kwargs)
                 t0 = time.perf_counter()
-                res = rsocl.reconstruct(g, rig, iterations=args.iterations, truth=truth, device=args.device,
-                                        tune=False, **kwargs)
+                res = rsocl.reconstruct(
+                    g, rig, iterations=args.iterations, truth=truth, device=args.device, tune=False, **kwargs
+                )
             except FloatingPointError as exc:
                 page.append(f"| {video} | {label} | diverged: {str(exc).splitlines()[0][:60]} | | | |")
                 print(page[-1], flush=True)
@@ -99,16 +106,19 @@ def main(argv=None):
             p = res.history["psnr"]
             at200 = p[min(199, len(p) - 1)]
             per_it = (time.perf_counter() - t0) / len(p) * 1e3
-            page.append(f"| {video} | {label} | {at200:.2f} | {p[-1]:.2f} | {p.max():.2f} ({p.argmax() + 1}) | "
-                        f"{per_it:.1f} |")
+            page.append(
+                f"| {video} | {label} | {at200:.2f} | {p[-1]:.2f} | {p.max():.2f} ({p.argmax() + 1}) | {per_it:.1f} |"
+            )
             print(page[-1], flush=True)
         if not args.quick:
             t0 = time.perf_counter()
             estimate = interp3d(g, rig)
             seconds = time.perf_counter() - t0
             db = psnr(estimate, truth, data_range=1.0)
-            page.append(f"| {video} | interp3d: per-pixel linear interpolation in time (no solver) | {db:.2f} | "
-                        f"{db:.2f} | | {seconds * 1e3:.1f} (whole) |")
+            page.append(
+                f"| {video} | interp3d: per-pixel linear interpolation in time (no solver) | {db:.2f} | "
+                f"{db:.2f} | | {seconds * 1e3:.1f} (whole) |"
+            )
             print(page[-1], flush=True)
     write_page(args.out, page)
 

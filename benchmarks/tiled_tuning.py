@@ -45,8 +45,11 @@ def main(argv=None) -> int:
                 tuning_tile._crop_block = crop_block if run == "block" else (lambda *args: None)
                 result = reconstruct_tiled(g, rig, tile=(tile, tile))
         chosen = {k: round(v, 3) for k, v in result.params["tuning"]["chosen"].items()}
-        print(f"{run} {side}x{side} tile {tile}: PSNR {psnr(np.asarray(result.datacube), truth):.2f} dB, chosen "
-              f"{chosen}, blend {result.params.get('blend') or 1:.3f}, {time.perf_counter() - start:.1f} s", flush=True)
+        print(
+            f"{run} {side}x{side} tile {tile}: PSNR {psnr(np.asarray(result.datacube), truth):.2f} dB, chosen "
+            f"{chosen}, blend {result.params.get('blend') or 1:.3f}, {time.perf_counter() - start:.1f} s",
+            flush=True,
+        )
     tuning_tile._crop_block = crop_block
     return 0
 

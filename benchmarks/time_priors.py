@@ -38,10 +38,13 @@ SCENES = ("builtin", "builtin-fast", "runner40@0.5", "runner40@1", "traffic48@1"
 #: Method name -> description for the page. ``tv W``: rsocl's TV maths with temporal weight W.
 METHODS = {
     "interp3d": "interp3d (no solver)",
-    "tv 1": "TV, temporal weight 1", "tv 3": "TV, temporal weight 3", "tv 10": "TV, temporal weight 10",
+    "tv 1": "TV, temporal weight 1",
+    "tv 3": "TV, temporal weight 3",
+    "tv 10": "TV, temporal weight 10",
     "map": "TV, temporal weight map from the truth (best uniform weight w0 at the median motion, "
-           "w0 * median / (motion + 0.1 median), clipped to [w0/3, 30])",
-    "tt 30 0": "second order in time: a = 30, b = 0", "tt 3 10": "second order in time: a = 3, b = 10",
+    "w0 * median / (motion + 0.1 median), clipped to [w0/3, 30])",
+    "tt 30 0": "second order in time: a = 30, b = 0",
+    "tt 3 10": "second order in time: a = 3, b = 10",
     "warm 2": "TV (best uniform weight), dual kept across ADMM iterations, 2 Chambolle iterations",
     "warm 3": "TV (best uniform weight), dual kept across ADMM iterations, 3 Chambolle iterations",
 }
@@ -91,7 +94,7 @@ def denoise(image, weight, iterations, a, b, w, p):
         if i == iterations - 1:
             return out
         g = gradient(out, a, b, w)
-        p[:] = (p - tau * g) / (1.0 + np.sqrt((g ** 2).sum(axis=0)) * (tau / weight))
+        p[:] = (p - tau * g) / (1.0 + np.sqrt((g**2).sum(axis=0)) * (tau / weight))
     return image + gradient_adjoint(p, a, b, w)
 
 
@@ -133,7 +136,7 @@ def run(scene, method, best_weight=None):
         x = admm(rig, g, x0, w=w)
     elif kind == "tt":
         x = admm(rig, g, x0, a=float(values[0]), b=float(values[1]))
-    else:                                                       # warm N
+    else:  # warm N
         x = admm(rig, g, x0, b=best_weight, inner=int(values[0]), warm=True)
     return psnr(x, truth)
 
@@ -159,14 +162,21 @@ def main(argv=None):
     best = {s: max((1, 3, 10), key=lambda w: done[f"{s}|tv {w}"]) for s in scenes}
     batch({f"{s}|{m}": (s, m, best[s]) for s in scenes for m in METHODS if not m.startswith(("interp", "tv "))})
 
-    page = header_lines("Priors that use time differently: measured before building", None,
-                        None if argv is None else [__file__, *argv])
-    page += [__doc__.split("\n\n", 1)[1].split("\n\nPSNR")[0], "",
-             "PSNR in dB (peak 1), 64x64 paper array (4 cameras, t_e = 180 µs, t_r = 35 µs), noiseless, "
-             "NumPy reference maths (float64), 200 ADMM iterations, lam = 0.1, eta = 0.2, start from interp3d. "
-             "Each row's last column: the row's PSNR minus the best of the three uniform TV weights.", ""]
-    page += ["| method | " + " | ".join(scenes) + " | change vs best uniform TV (dB) |",
-             "|---|" + "---|" * (len(scenes) + 1)]
+    page = header_lines(
+        "Priors that use time differently: measured before building", None, None if argv is None else [__file__, *argv]
+    )
+    page += [
+        __doc__.split("\n\n", 1)[1].split("\n\nPSNR")[0],
+        "",
+        "PSNR in dB (peak 1), 64x64 paper array (4 cameras, t_e = 180 µs, t_r = 35 µs), noiseless, "
+        "NumPy reference maths (float64), 200 ADMM iterations, lam = 0.1, eta = 0.2, start from interp3d. "
+        "Each row's last column: the row's PSNR minus the best of the three uniform TV weights.",
+        "",
+    ]
+    page += [
+        "| method | " + " | ".join(scenes) + " | change vs best uniform TV (dB) |",
+        "|---|" + "---|" * (len(scenes) + 1),
+    ]
     for method, text in METHODS.items():
         values = [done[f"{s}|{method}"] for s in scenes]
         delta = [v - done[f"{s}|tv {best[s]}"] for v, s in zip(values, scenes)]

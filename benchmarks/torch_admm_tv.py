@@ -33,7 +33,6 @@ import time
 
 import numpy as np
 import torch
-
 from numpy_admm_tv import psnr, shutter_mask
 
 __all__ = ["tv_chambolle", "Peer", "admm_tv", "synchronize", "compiling"]
@@ -45,8 +44,9 @@ def compiling() -> bool:
     return bool(check()) if check is not None else False
 
 
-def tv_chambolle(image: torch.Tensor, weight: float, iterations: int, *, temporal_weight: float = 1.0,
-                 step: float = 1.0) -> torch.Tensor:
+def tv_chambolle(
+    image: torch.Tensor, weight: float, iterations: int, *, temporal_weight: float = 1.0, step: float = 1.0
+) -> torch.Tensor:
     """Chambolle's isotropic TV of ``image`` ``(..., T, m, n)`` over its last three axes (t, y, x).
 
     Every leading index (a set of a batch) is denoised on its own. With ``temporal_weight = 1``
@@ -59,13 +59,13 @@ def tv_chambolle(image: torch.Tensor, weight: float, iterations: int, *, tempora
     axes = ((-3, wt), (-2, 1.0), (-1, 1.0)) if wt > 0 else ((-2, 1.0), (-1, 1.0))
     tau = float(step) / (2.0 * (2.0 + wt * wt))
     out = image.clone()
-    if iterations <= 1:                            # out = image + div(0)
+    if iterations <= 1:  # out = image + div(0)
         return out
     p = torch.zeros((len(axes),) + tuple(image.shape), dtype=image.dtype, device=image.device)
     g = torch.zeros_like(p)
     norm = torch.empty_like(image)
     for i in range(iterations):
-        if i > 0:                                  # out = image - div_w(p), as scikit-image's d
+        if i > 0:  # out = image - div_w(p), as scikit-image's d
             if wt in (0.0, 1.0):
                 torch.sum(p, 0, out=out)
             else:
@@ -74,11 +74,11 @@ def tv_chambolle(image: torch.Tensor, weight: float, iterations: int, *, tempora
             for k, (ax, w) in enumerate(axes):
                 n = image.shape[ax]
                 out.narrow(ax, 1, n - 1).add_(p[k].narrow(ax, 0, n - 1), alpha=w)
-        if i == iterations - 1:                    # the last dual update is never read: not made
+        if i == iterations - 1:  # the last dual update is never read: not made
             break
-        for k, (ax, w) in enumerate(axes):         # g = w grad(out), 0 at the far edge of each axis
+        for k, (ax, w) in enumerate(axes):  # g = w grad(out), 0 at the far edge of each axis
             n = image.shape[ax]
-            if compiling():                        # torch.compile traces no strided out=: a copy it fuses
+            if compiling():  # torch.compile traces no strided out=: a copy it fuses
                 g[k].narrow(ax, 0, n - 1).copy_(out.narrow(ax, 1, n - 1) - out.narrow(ax, 0, n - 1))
             else:
                 torch.sub(out.narrow(ax, 1, n - 1), out.narrow(ax, 0, n - 1), out=g[k].narrow(ax, 0, n - 1))
@@ -116,14 +116,15 @@ class Peer:
     ``torch.compile``. ``g`` is a tensor that :meth:`load` overwrites in place.
     """
 
-    def __init__(self, g, rig, *, lam, eta, tv_iterations, dtype=torch.float32, device="cpu",
-                 temporal_weight=1.0, step=1.0):
+    def __init__(
+        self, g, rig, *, lam, eta, tv_iterations, dtype=torch.float32, device="cpu", temporal_weight=1.0, step=1.0
+    ):
         g = np.asarray(g)
         C, T = len(rig.channels), rig.T
         if g.shape[-3:] != (C,) + tuple(rig.shape) or g.ndim not in (3, 4):
             raise ValueError(f"g must be (C, m, n) = {(C,) + tuple(rig.shape)} or (B, C, m, n), got {g.shape}")
         self.device, self.dtype = torch.device(device), dtype
-        W = shutter_mask(rig)                                             # float64
+        W = shutter_mask(rig)  # float64
         M = np.einsum("csyx,dsyx->yxcd", W, W)
         Minv = np.linalg.inv(eta * np.eye(C) + M)
         self.W = torch.as_tensor(W, dtype=dtype, device=self.device)
@@ -144,11 +145,12 @@ class Peer:
     def step(self, theta: torch.Tensor, b: torch.Tensor):
         """One ADMM iteration from ``(theta, b)``; returns the new ``(theta, b)``."""
         v = theta + b
-        r = self.g - (self.W * v.unsqueeze(-4)).sum(-3)                   # g - H v
-        z = torch.einsum("yxcd,...dyx->...cyx", self.Minv, r)            # (eta I + H Hᵀ)⁻¹ r per pixel
-        f = v + (self.W * z.unsqueeze(-3)).sum(-4)                        # v + Hᵀ z
-        theta = tv_chambolle(f - b, self.weight, self.tv_iterations,
-                             temporal_weight=self.temporal_weight, step=self.tv_step)
+        r = self.g - (self.W * v.unsqueeze(-4)).sum(-3)  # g - H v
+        z = torch.einsum("yxcd,...dyx->...cyx", self.Minv, r)  # (eta I + H Hᵀ)⁻¹ r per pixel
+        f = v + (self.W * z.unsqueeze(-3)).sum(-4)  # v + Hᵀ z
+        theta = tv_chambolle(
+            f - b, self.weight, self.tv_iterations, temporal_weight=self.temporal_weight, step=self.tv_step
+        )
         return theta, b - (f - theta)
 
 
@@ -159,8 +161,21 @@ def synchronize(device) -> None:
         torch.cuda.synchronize(device)
 
 
-def admm_tv(g, rig, *, iterations, lam, eta, tv_iterations, dtype=torch.float32, truth=None, threads=None,
-            device="cpu", temporal_weight=1.0, step=1.0):
+def admm_tv(
+    g,
+    rig,
+    *,
+    iterations,
+    lam,
+    eta,
+    tv_iterations,
+    dtype=torch.float32,
+    truth=None,
+    threads=None,
+    device="cpu",
+    temporal_weight=1.0,
+    step=1.0,
+):
     """Reconstruct ``(T, m, n)`` from snapshots ``g`` ``(C, m, n)``; as ``numpy_admm_tv.admm_tv``.
 
     ``device``, ``temporal_weight`` and ``step``: see :class:`Peer`. Returns ``(theta as a NumPy
@@ -172,8 +187,17 @@ def admm_tv(g, rig, *, iterations, lam, eta, tv_iterations, dtype=torch.float32,
         torch.set_num_threads(int(threads))
     history, elapsed = [], 0.0
     with torch.no_grad():
-        peer = Peer(g, rig, lam=lam, eta=eta, tv_iterations=tv_iterations, dtype=dtype, device=device,
-                    temporal_weight=temporal_weight, step=step)
+        peer = Peer(
+            g,
+            rig,
+            lam=lam,
+            eta=eta,
+            tv_iterations=tv_iterations,
+            dtype=dtype,
+            device=device,
+            temporal_weight=temporal_weight,
+            step=step,
+        )
         theta, b = peer.zeros(), peer.zeros()
         for _ in range(iterations):
             synchronize(peer.device)
@@ -194,5 +218,7 @@ if __name__ == "__main__":
     truth = builtin_scene(rig.shape, rig.T, dtype=np.float64)
     g = np.einsum("csyx,syx->cyx", shutter_mask(rig), truth)
     theta, history, sec = admm_tv(g, rig, iterations=30, lam=0.1, eta=0.2, tv_iterations=10, truth=truth)
-    print(f"{rig}: PSNR {history[-1]:.2f} dB after {len(history)} iterations, {sec * 1e3:.1f} ms/iteration "
-          f"({torch.get_num_threads()} threads)")
+    print(
+        f"{rig}: PSNR {history[-1]:.2f} dB after {len(history)} iterations, {sec * 1e3:.1f} ms/iteration "
+        f"({torch.get_num_threads()} threads)"
+    )

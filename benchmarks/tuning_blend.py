@@ -42,8 +42,22 @@ GROUPS = {
     "design": (range(100, 140), ("builtin", "runner40@1"), (None, 1000.0)),
     "check-a": (range(160, 200), ("traffic48@1", "builtin-slow"), (None, 300.0)),
     "check-b": (range(140, 160), ("runner40@2", "traffic48@0.5"), (None, 1000.0, 30.0)),
-    "paper": (None, ("builtin", "builtin-slow", "builtin-fast", "runner40@0.5", "runner40@1", "runner40@2",
-                     "runner40-crop@1", "traffic48@0.5", "traffic48@1", "traffic48@2"), (None, 1000.0)),
+    "paper": (
+        None,
+        (
+            "builtin",
+            "builtin-slow",
+            "builtin-fast",
+            "runner40@0.5",
+            "runner40@1",
+            "runner40@2",
+            "runner40-crop@1",
+            "traffic48@0.5",
+            "traffic48@1",
+            "traffic48@2",
+        ),
+        (None, 1000.0),
+    ),
 }
 ITERATIONS = 200
 
@@ -75,11 +89,15 @@ def run_case(rig, scene, photons, device):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tuned = rsocl.reconstruct(g, rig, iterations=ITERATIONS, device=device)
-        own = rsocl.reconstruct(g, rig, iterations=ITERATIONS, device=device, blend=1.0,
-                                tune=Tuning.from_params(tuned.params["tuning"]))
-    return {"interp3d": float(psnr(interp3d(g, rig), truth, data_range=1.0)),
-            "tuned": float(psnr(tuned.datacube, truth, data_range=1.0)),
-            "unblended": float(psnr(own.datacube, truth, data_range=1.0)), "blend": float(tuned.params["blend"])}
+        own = rsocl.reconstruct(
+            g, rig, iterations=ITERATIONS, device=device, blend=1.0, tune=Tuning.from_params(tuned.params["tuning"])
+        )
+    return {
+        "interp3d": float(psnr(interp3d(g, rig), truth, data_range=1.0)),
+        "tuned": float(psnr(tuned.datacube, truth, data_range=1.0)),
+        "unblended": float(psnr(own.datacube, truth, data_range=1.0)),
+        "blend": float(tuned.params["blend"]),
+    }
 
 
 def summary_rows(group, results):
@@ -92,9 +110,11 @@ def summary_rows(group, results):
         change = np.array([r["tuned"] - r["unblended"] for r in level])
         below = (sum(r["unblended"] < r["interp3d"] for r in level), sum(r["tuned"] < r["interp3d"] for r in level))
         blends = np.array([r["blend"] for r in level])
-        rows.append(f"| {group} | {'none' if photons is None else f'{photons:g}'} | {len(level)} | "
-                    f"{change.mean():+.2f} | {change.min():+.2f} | {change.max():+.2f} | "
-                    f"{below[0]} -> {below[1]} | {np.median(blends):.2f} ({blends.min():.2f}-{blends.max():.2f}) |")
+        rows.append(
+            f"| {group} | {'none' if photons is None else f'{photons:g}'} | {len(level)} | "
+            f"{change.mean():+.2f} | {change.min():+.2f} | {change.max():+.2f} | "
+            f"{below[0]} -> {below[1]} | {np.median(blends):.2f} ({blends.min():.2f}-{blends.max():.2f}) |"
+        )
     return rows
 
 
@@ -107,17 +127,22 @@ def main(argv=None):
     args = parser.parse_args(argv)
     cache = Cache(args.cache)
     op = rsocl.RollingShutterOperator(rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6), device=args.device)
-    page = header_lines("The self-tuned blend with the interpolation", op.device,
-                        None if argv is None else [__file__, *argv])
-    page += [f"Self-tuned `rsocl.reconstruct` ({ITERATIONS} iterations, float32) against the same choice with "
-             "`blend=1` (the solver's own result) and `interp3d`; PSNR in dB with peak 1. Noise: Poisson at the "
-             "given photo-electrons at full scale plus 1 % read noise. Groups (see the script): `design`, the "
-             "cases the rule was designed on (random rigs of seeds 100-139 x built-in scene and Runner at 1 "
-             "frame per sub-frame); `check-a` (seeds 160-199 x Traffic at 1 and the slow built-in scene) and "
-             "`check-b` (seeds 140-159 x Runner at 2 and Traffic at 0.5), held out; `paper`, the paper array's "
-             "scenes of `benchmarks/quality.py`. Change: tuned minus unblended PSNR.", "",
-             "| group | photo-electrons | cases | change mean | worst | best | runs below interp3d: unblended -> tuned | "
-             "blend: median (range) |", "|---|---|---|---|---|---|---|---|"]
+    page = header_lines(
+        "The self-tuned blend with the interpolation", op.device, None if argv is None else [__file__, *argv]
+    )
+    page += [
+        f"Self-tuned `rsocl.reconstruct` ({ITERATIONS} iterations, float32) against the same choice with "
+        "`blend=1` (the solver's own result) and `interp3d`; PSNR in dB with peak 1. Noise: Poisson at the "
+        "given photo-electrons at full scale plus 1 % read noise. Groups (see the script): `design`, the "
+        "cases the rule was designed on (random rigs of seeds 100-139 x built-in scene and Runner at 1 "
+        "frame per sub-frame); `check-a` (seeds 160-199 x Traffic at 1 and the slow built-in scene) and "
+        "`check-b` (seeds 140-159 x Runner at 2 and Traffic at 0.5), held out; `paper`, the paper array's "
+        "scenes of `benchmarks/quality.py`. Change: tuned minus unblended PSNR.",
+        "",
+        "| group | photo-electrons | cases | change mean | worst | best | runs below interp3d: unblended -> tuned | "
+        "blend: median (range) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     detail, skipped = [], set()
     for group in args.groups:
         results = []
@@ -126,18 +151,30 @@ def main(argv=None):
                 skipped.add(scene)
                 continue
             name = f"{key}|{scene}|{photons}|{ITERATIONS}"
-            r = dict(cache.get(name, lambda rig=rig, scene=scene, photons=photons: run_case(rig, scene, photons, args.device)), photons=photons)
+            r = dict(
+                cache.get(
+                    name, lambda rig=rig, scene=scene, photons=photons: run_case(rig, scene, photons, args.device)
+                ),
+                photons=photons,
+            )
             results.append(r)
             what = "paper array" if GROUPS[group][0] is None else f"{key}, {rig.n_channels} cameras"
-            detail.append(f"| {group} | {what}, {rig.shape[0]}x{rig.shape[1]} | {scene} | "
-                          f"{'none' if photons is None else f'{photons:g}'} | {r['interp3d']:.2f} | "
-                          f"{r['unblended']:.2f} | {r['tuned']:.2f} | {r['blend']:.2f} |")
+            detail.append(
+                f"| {group} | {what}, {rig.shape[0]}x{rig.shape[1]} | {scene} | "
+                f"{'none' if photons is None else f'{photons:g}'} | {r['interp3d']:.2f} | "
+                f"{r['unblended']:.2f} | {r['tuned']:.2f} | {r['blend']:.2f} |"
+            )
             print(detail[-1], flush=True)
         page += summary_rows(group, results)
     if skipped:
         page += ["", f"Skipped (no ../shared/data): {', '.join(sorted(skipped))}."]
-    page += ["", "## Per case", "", "| group | rig | scene | photo-electrons | interp3d | unblended | tuned | blend |",
-             "|---|---|---|---|---|---|---|---|"] + detail
+    page += [
+        "",
+        "## Per case",
+        "",
+        "| group | rig | scene | photo-electrons | interp3d | unblended | tuned | blend |",
+        "|---|---|---|---|---|---|---|---|",
+    ] + detail
     write_page(args.out, page)
 
 

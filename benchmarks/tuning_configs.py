@@ -39,8 +39,13 @@ def case(cameras, shape, noise, iterations, device):
     g = simulate(truth, rig) if noise == "none" else simulate(truth, rig, noise="poisson", photons=1000)
     fixed = rsocl.reconstruct(g, rig, iterations=iterations, tune=False, device=device)
     tuned = rsocl.reconstruct(g, rig, iterations=iterations, device=device)
-    return (rig.T, psnr(interp3d(g, rig), truth), psnr(fixed.datacube, truth), psnr(tuned.datacube, truth),
-            tuned.params["tuning"]["chosen"])
+    return (
+        rig.T,
+        psnr(interp3d(g, rig), truth),
+        psnr(fixed.datacube, truth),
+        psnr(tuned.datacube, truth),
+        tuned.params["tuning"]["chosen"],
+    )
 
 
 def main(argv=None):
@@ -54,13 +59,18 @@ def main(argv=None):
     import rsocl
 
     device = rsocl.device.get_device(args.device)
-    page = header_lines("Self-tuning across camera counts and grid shapes", device,
-                        None if argv is None else [__file__, *argv])
-    page += [__doc__.split("\n\n", 1)[1].strip(), "",
-             f"{args.iterations} ADMM iterations, float32, t_e = 180 µs, t_r = 35 µs.", "",
-             "| cameras | grid | T | noise | interp3d | fixed | tuned | tuned - fixed | tuned - interp3d "
-             "| chosen weight, lam |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    page = header_lines(
+        "Self-tuning across camera counts and grid shapes", device, None if argv is None else [__file__, *argv]
+    )
+    page += [
+        __doc__.split("\n\n", 1)[1].strip(),
+        "",
+        f"{args.iterations} ADMM iterations, float32, t_e = 180 µs, t_r = 35 µs.",
+        "",
+        "| cameras | grid | T | noise | interp3d | fixed | tuned | tuned - fixed | tuned - interp3d "
+        "| chosen weight, lam |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
     to_fixed, to_interp = [], []
     for cameras in CAMERAS:
         for shape in SHAPES:
@@ -68,15 +78,20 @@ def main(argv=None):
                 T, base, fixed, tuned, chosen = case(cameras, shape, noise, args.iterations, device)
                 to_fixed.append(tuned - fixed)
                 to_interp.append(tuned - base)
-                line = (f"| {cameras} | {shape[0]}x{shape[1]} | {T} | {noise} | {base:.2f} | {fixed:.2f} | {tuned:.2f} | "
-                        f"{tuned - fixed:+.2f} | {tuned - base:+.2f} | "
-                        f"{chosen.get('temporal_weight', float('nan')):.3g}, {chosen['lam']:.3g} |")
+                line = (
+                    f"| {cameras} | {shape[0]}x{shape[1]} | {T} | {noise} | {base:.2f} | {fixed:.2f} | {tuned:.2f} | "
+                    f"{tuned - fixed:+.2f} | {tuned - base:+.2f} | "
+                    f"{chosen.get('temporal_weight', float('nan')):.3g}, {chosen['lam']:.3g} |"
+                )
                 page.append(line)
                 print(line, flush=True)
     to_fixed, to_interp = np.array(to_fixed), np.array(to_interp)
-    page += ["", f"Over {len(to_fixed)} cases: tuned - fixed from {to_fixed.min():+.2f} to {to_fixed.max():+.2f} dB "
-                 f"(mean {to_fixed.mean():+.2f} dB; more than 0.3 dB below fixed in {int((to_fixed < -0.3).sum())}); "
-                 f"tuned - interp3d from {to_interp.min():+.2f} to {to_interp.max():+.2f} dB."]
+    page += [
+        "",
+        f"Over {len(to_fixed)} cases: tuned - fixed from {to_fixed.min():+.2f} to {to_fixed.max():+.2f} dB "
+        f"(mean {to_fixed.mean():+.2f} dB; more than 0.3 dB below fixed in {int((to_fixed < -0.3).sum())}); "
+        f"tuned - interp3d from {to_interp.min():+.2f} to {to_interp.max():+.2f} dB.",
+    ]
     write_page(args.out, page)
 
 

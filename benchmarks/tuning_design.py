@@ -41,12 +41,26 @@ WEIGHTS = (1.0, math.sqrt(3.0), 3.0, math.sqrt(30.0), 10.0, math.sqrt(300.0), 30
 COARSE = (1.0, 3.0, 10.0, 30.0)
 LAM_FACTORS = (0.3, 1.0, 3.0)
 RIGS = ("paper4", "0/30/60/90", "0/90/45/135", "paper7", "paper3", "paper2", "paper8", "0/45")
-SCENES = ("builtin", "builtin-fast", "builtin-slow", "runner40@1", "runner40@0.5", "traffic48@1", "traffic48@2",
-          "runner40-crop@1")
+SCENES = (
+    "builtin",
+    "builtin-fast",
+    "builtin-slow",
+    "runner40@1",
+    "runner40@0.5",
+    "traffic48@1",
+    "traffic48@2",
+    "runner40-crop@1",
+)
 #: name -> scales of :func:`rsocl.solver.holdout.default_patterns`: (block side as a fraction of the grid's
 #: smaller side, patterns at least; more when a camera would never be held out); None: rsocl's default
-DESIGNS = {"1/2": ((0.5, 1),), "1/2 x2": ((0.5, 2),), "1/4": ((0.25, 1),), "1/4 x2": ((0.25, 2),),
-           "1/2 + 1/4 x2": ((0.5, 1), (0.25, 2)), "default": None}
+DESIGNS = {
+    "1/2": ((0.5, 1),),
+    "1/2 x2": ((0.5, 2),),
+    "1/4": ((0.25, 1),),
+    "1/4 x2": ((0.25, 2),),
+    "1/2 + 1/4 x2": ((0.5, 1), (0.25, 2)),
+    "default": None,
+}
 #: ADMM iterations per candidate, shared among the patterns (at least 10 each): what the default
 #: search runs for a run of 200 iterations
 BUDGET = 50
@@ -57,7 +71,7 @@ def make_rig(name, size):
     import rsocl
 
     if name.startswith("paper"):
-        return rsocl.Rig.paper_array(int(name[len("paper"):]), (size, size), t_e=0.18e-3, t_r=35e-6)
+        return rsocl.Rig.paper_array(int(name[len("paper") :]), (size, size), t_e=0.18e-3, t_r=35e-6)
     cameras = [rsocl.Camera(float(a), t_e=0.18e-3, t_r=35e-6) for a in name.split("/")]
     return rsocl.Rig(cameras, (size, size))
 
@@ -75,10 +89,10 @@ def run_case(rig_name, scene, size, iterations, device, done=None):
     from rsocl.model.interpolation_device import interp3d_device
     from rsocl.model.simulate import simulate
     from rsocl.solver.admm import ADMM
-    from rsocl.solver.problem import check_problem, check_settings, stage_on_device
-    from rsocl.solver.request import make_regularizer
     from rsocl.solver.crossval import SearchSpace, tune_parameters
     from rsocl.solver.holdout import default_patterns
+    from rsocl.solver.problem import check_problem, check_settings, stage_on_device
+    from rsocl.solver.request import make_regularizer
 
     rig = make_rig(rig_name, size)
     truth = make_scene(scene, rig.shape, rig.T)
@@ -102,8 +116,11 @@ def run_case(rig_name, scene, size, iterations, device, done=None):
         return float(psnr(x, truth, data_range=1.0))
 
     if done is None:
-        done = {"interp3d": float(psnr(interp3d(g, rig), truth, data_range=1.0)),
-                "grid": {key(w, f): full(w, settings.lam * f) for w in WEIGHTS for f in LAM_FACTORS}, "designs": {}}
+        done = {
+            "interp3d": float(psnr(interp3d(g, rig), truth, data_range=1.0)),
+            "grid": {key(w, f): full(w, settings.lam * f) for w in WEIGHTS for f in LAM_FACTORS},
+            "designs": {},
+        }
     out = done
     for name, scales in DESIGNS.items():
         if name in out["designs"]:
@@ -111,12 +128,24 @@ def run_case(rig_name, scene, size, iterations, device, done=None):
         patterns = default_patterns(rig.shape, rig.n_channels, scales)
         begin = time.perf_counter()
         space = SearchSpace({"temporal_weight": COARSE}, [settings.lam * f for f in LAM_FACTORS])
-        tuning = tune_parameters(op, staged.g, problem.g, make, space, eta=settings.eta, patterns=patterns,
-                                 iterations=max(10, round(BUDGET / len(patterns))))
+        tuning = tune_parameters(
+            op,
+            staged.g,
+            problem.g,
+            make,
+            space,
+            eta=settings.eta,
+            patterns=patterns,
+            iterations=max(10, round(BUDGET / len(patterns))),
+        )
         weight, lam = tuning.chosen["temporal_weight"], tuning.chosen["lam"]
-        out["designs"][name] = {"weight": weight, "factor": lam / settings.lam,
-                                "psnr": out["grid"][key(weight, lam / settings.lam)],
-                                "seconds": time.perf_counter() - begin, "patterns": len(patterns)}
+        out["designs"][name] = {
+            "weight": weight,
+            "factor": lam / settings.lam,
+            "psnr": out["grid"][key(weight, lam / settings.lam)],
+            "seconds": time.perf_counter() - begin,
+            "patterns": len(patterns),
+        }
     return out
 
 
@@ -130,8 +159,10 @@ def summary(cases, name):
     loss = np.array([c["designs"][name]["psnr"] - best_of_grid(c["grid"])[0] for c in cases])
     gain = np.array([c["designs"][name]["psnr"] - c["interp3d"] for c in cases])
     seconds = np.median([c["designs"][name]["seconds"] for c in cases])
-    return (f"| {name} | {loss.mean():+.2f} | {np.median(loss):+.2f} | {loss.min():+.2f} | "
-            f"{int((loss < -0.3).sum())} | {int((gain < 1.0).sum())} | {seconds:.2f} |")
+    return (
+        f"| {name} | {loss.mean():+.2f} | {np.median(loss):+.2f} | {loss.min():+.2f} | "
+        f"{int((loss < -0.3).sum())} | {int((gain < 1.0).sum())} | {seconds:.2f} |"
+    )
 
 
 def main(argv=None):
@@ -161,26 +192,41 @@ def main(argv=None):
             if set((earlier or {}).get("designs", {})) != set(DESIGNS):
                 cache.put(case_key, run_case(rig_name, scene, args.size, args.iterations, args.device, earlier))
             cases.append({"rig": rig_name, "scene": scene, **cache[case_key]})
-            print(rig_name, scene, {n: round(d["psnr"], 2) for n, d in cache[case_key]["designs"].items()},
-                  flush=True)
+            print(rig_name, scene, {n: round(d["psnr"], 2) for n, d in cache[case_key]["designs"].items()}, flush=True)
     page = header_lines("The hold-out design of the self-tuning", device, None if argv is None else [__file__, *argv])
-    page += [__doc__.split("\n\n", 1)[1].strip(), "",
-             f"{args.size}x{args.size} pixels, {args.iterations} ADMM iterations per full run, float32, noiseless, "
-             "t_e = 180 µs, t_r = 35 µs; lam factors of the rig's default lam.", "",
-             f"## Over {len(cases)} cases ({len(args.rigs)} rigs x {len(cases) // max(len(args.rigs), 1)} scenes)", "",
-             "Loss: the design's choice minus the grid's best (dB); below interp3d + 1 dB: cases whose choice is "
-             "less than 1 dB above interp3d (for some scenes no grid point is).", "",
-             "| design | mean loss | median loss | worst loss | cases more than 0.3 dB below | "
-             "below interp3d + 1 dB | search s (median) |", "|---|---|---|---|---|---|---|"]
+    page += [
+        __doc__.split("\n\n", 1)[1].strip(),
+        "",
+        f"{args.size}x{args.size} pixels, {args.iterations} ADMM iterations per full run, float32, noiseless, "
+        "t_e = 180 µs, t_r = 35 µs; lam factors of the rig's default lam.",
+        "",
+        f"## Over {len(cases)} cases ({len(args.rigs)} rigs x {len(cases) // max(len(args.rigs), 1)} scenes)",
+        "",
+        "Loss: the design's choice minus the grid's best (dB); below interp3d + 1 dB: cases whose choice is "
+        "less than 1 dB above interp3d (for some scenes no grid point is).",
+        "",
+        "| design | mean loss | median loss | worst loss | cases more than 0.3 dB below | "
+        "below interp3d + 1 dB | search s (median) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     page += [summary(cases, name) for name in DESIGNS]
-    page += ["", "## Per case", "", "PSNR in dB; each design's choice as temporal weight, lam factor.", "",
-             "| rig | scene | interp3d | best (weight, factor) | " + " | ".join(DESIGNS) + " |",
-             "|---|---|---|---|" + "---|" * len(DESIGNS)]
+    page += [
+        "",
+        "## Per case",
+        "",
+        "PSNR in dB; each design's choice as temporal weight, lam factor.",
+        "",
+        "| rig | scene | interp3d | best (weight, factor) | " + " | ".join(DESIGNS) + " |",
+        "|---|---|---|---|" + "---|" * len(DESIGNS),
+    ]
     for c in cases:
         best, w, f = best_of_grid(c["grid"])
         cells = [f"{d['psnr']:.2f} ({d['weight']:.3g}, {d['factor']:g})" for d in c["designs"].values()]
-        page.append(f"| {c['rig']} | {c['scene']} | {c['interp3d']:.2f} | {best:.2f} ({w:g}, {f:g}) | "
-                    + " | ".join(cells) + " |")
+        page.append(
+            f"| {c['rig']} | {c['scene']} | {c['interp3d']:.2f} | {best:.2f} ({w:g}, {f:g}) | "
+            + " | ".join(cells)
+            + " |"
+        )
     if skipped:
         page += ["", f"Skipped (no ../shared/data): {', '.join(sorted(skipped))}."]
     write_page(args.out, page)

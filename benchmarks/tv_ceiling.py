@@ -42,9 +42,9 @@ from provenance import DOCS, header_lines, usable_cores, write_page  # noqa: E40
 SOURCE = Path(__file__).resolve().parent / "tv_ceiling.c"
 #: bytes per voxel each kernel must move (float32; see the module doc)
 BYTES = {"tv_primal": 20, "tv_dual": 28}
-WEIGHT = 3.0                 # TV's default temporal weight
+WEIGHT = 3.0  # TV's default temporal weight
 #: Chambolle's step tau at TV's default fraction of scikit-image's, and tau over the denoising weight 0.05
-STEP = TV_STEP / (2.0 * (2.0 + WEIGHT ** 2))
+STEP = TV_STEP / (2.0 * (2.0 + WEIGHT**2))
 STEP_OVER_WEIGHT = STEP / 0.05
 
 
@@ -93,13 +93,32 @@ class Case:
 
     def device_primal(self):
         for gsize, lsize, offset in self.grids:
-            self.prog.tv_primal(self.queue, gsize, lsize, self.d_img.data, self.d_p.data, self.d_out.data,
-                                np.float32(WEIGHT), *self.sizes, global_offset=offset)
+            self.prog.tv_primal(
+                self.queue,
+                gsize,
+                lsize,
+                self.d_img.data,
+                self.d_p.data,
+                self.d_out.data,
+                np.float32(WEIGHT),
+                *self.sizes,
+                global_offset=offset,
+            )
 
     def device_dual(self):
         for gsize, lsize, offset in self.grids:
-            self.prog.tv_dual(self.queue, gsize, lsize, self.d_out.data, self.d_p.data, self.d_xnext.data,
-                              self.d_steps.data, np.float32(WEIGHT), *self.sizes, global_offset=offset)
+            self.prog.tv_dual(
+                self.queue,
+                gsize,
+                lsize,
+                self.d_out.data,
+                self.d_p.data,
+                self.d_xnext.data,
+                self.d_steps.data,
+                np.float32(WEIGHT),
+                *self.sizes,
+                global_offset=offset,
+            )
 
     def device_iterations(self, count):
         """``count`` TV iterations (primal, dual) enqueued back to back, as a denoising call issues them."""
@@ -115,13 +134,21 @@ class Case:
 
     def c_primal(self):
         T, m, n = self.shape
-        self.lib.tv_primal(self.img.ctypes.data, self.host_p.ctypes.data, self.host_out.ctypes.data,
-                           WEIGHT, T, m, n)
+        self.lib.tv_primal(self.img.ctypes.data, self.host_p.ctypes.data, self.host_out.ctypes.data, WEIGHT, T, m, n)
 
     def c_dual(self):
         T, m, n = self.shape
-        self.lib.tv_dual(self.host_out.ctypes.data, self.host_p.ctypes.data, self.xnext.ctypes.data, STEP,
-                         STEP_OVER_WEIGHT, WEIGHT, T, m, n)
+        self.lib.tv_dual(
+            self.host_out.ctypes.data,
+            self.host_p.ctypes.data,
+            self.xnext.ctypes.data,
+            STEP,
+            STEP_OVER_WEIGHT,
+            WEIGHT,
+            T,
+            m,
+            n,
+        )
 
     def difference(self) -> float:
         """Largest difference between the two ways after one primal and one dual step from ``p0``."""
@@ -142,7 +169,7 @@ def measure(case, rounds, threads, chain):
     ways = {"rsocl": case.device_iterations, **{f"C {t}t": case.c_iterations for t in threads}}
     times = {way: [] for way in ways}
     for r in range(rounds + 1):
-        for way in (ways if r % 2 == 0 else list(reversed(list(ways)))):
+        for way in ways if r % 2 == 0 else list(reversed(list(ways))):
             if way.startswith("C "):
                 case.lib.set_threads(int(way[2:-1]))
             t0 = time.perf_counter()
@@ -163,7 +190,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     if args.rounds < 3 or args.chain < 1 or min(args.sizes) < 8:
         parser.error("--rounds must be >= 3, --chain >= 1 and every --sizes >= 8")
-    os.environ.setdefault("OMP_WAIT_POLICY", "passive")    # idle OpenMP threads must not spin beside the device's
+    os.environ.setdefault("OMP_WAIT_POLICY", "passive")  # idle OpenMP threads must not spin beside the device's
     import rsocl
 
     device = rsocl.device.get_device(args.device)
@@ -173,21 +200,27 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as folder:
         lib, command = compile_library(args.cc, Path(folder))
         version = subprocess.run([args.cc, "--version"], capture_output=True, text=True).stdout.splitlines()[0]
-        page = header_lines("rsocl's TV kernels against the same loops compiled as C", device,
-                            None if argv is None else [__file__, *argv])
-        page += [f"C: `{command}` ({version}), OpenMP over the rows (OMP_WAIT_POLICY="
-                 f"{os.environ['OMP_WAIT_POLICY']}). One set of the paper array's datacube per size (T of "
-                 f"`Rig.paper_array(4, (m, m), t_e=0.18e-3, t_r=35e-6)`), temporal weight {WEIGHT:g}, float32. A call "
-                 f"is {args.chain} TV iterations (primal, dual) back to back, as a denoising call issues them (rsocl: "
-                 "enqueued, then one wait); time per iteration: the median over "
-                 f"{args.rounds} calls, the ways interleaved call by call. GB/s from the {per_voxel} bytes per voxel an "
-                 f"iteration must move (primal {BYTES['tv_primal']}, dual {BYTES['tv_dual']}). Largest difference: "
-                 "output and dual after one iteration "
-                 "from the same input, rsocl against C.", "",
-                 "| datacube | rsocl (ms/iteration) | " + " | ".join(f"C, {t} thread{'s' if t > 1 else ''}"
-                                                              for t in threads)
-                 + " | rsocl / best C, round by round: median (range) | rsocl GB/s | best C GB/s | largest difference |",
-                 "|---|---|" + "---|" * len(threads) + "---|---|---|---|"]
+        page = header_lines(
+            "rsocl's TV kernels against the same loops compiled as C",
+            device,
+            None if argv is None else [__file__, *argv],
+        )
+        page += [
+            f"C: `{command}` ({version}), OpenMP over the rows (OMP_WAIT_POLICY="
+            f"{os.environ['OMP_WAIT_POLICY']}). One set of the paper array's datacube per size (T of "
+            f"`Rig.paper_array(4, (m, m), t_e=0.18e-3, t_r=35e-6)`), temporal weight {WEIGHT:g}, float32. A call "
+            f"is {args.chain} TV iterations (primal, dual) back to back, as a denoising call issues them (rsocl: "
+            "enqueued, then one wait); time per iteration: the median over "
+            f"{args.rounds} calls, the ways interleaved call by call. GB/s from the {per_voxel} bytes per voxel an "
+            f"iteration must move (primal {BYTES['tv_primal']}, dual {BYTES['tv_dual']}). Largest difference: "
+            "output and dual after one iteration "
+            "from the same input, rsocl against C.",
+            "",
+            "| datacube | rsocl (ms/iteration) | "
+            + " | ".join(f"C, {t} thread{'s' if t > 1 else ''}" for t in threads)
+            + " | rsocl / best C, round by round: median (range) | rsocl GB/s | best C GB/s | largest difference |",
+            "|---|---|" + "---|" * len(threads) + "---|---|---|---|",
+        ]
         ratios = []
         for size in args.sizes:
             T = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6).T
@@ -201,12 +234,18 @@ def main(argv=None):
             ratio = f"{np.median(paired):.2f}x ({paired.min():.2f}-{paired.max():.2f}x)"
             ratios.append(f"{size}x{size}x{T}: {ratio}")
             cells = " | ".join(f"{times[f'C {t}t'] * 1e3:.3f}" for t in threads)
-            page.append(f"| {size}x{size}x{T} | {times['rsocl'] * 1e3:.3f} | {cells} | {ratio} | "
-                        f"{per_voxel * voxels / times['rsocl'] / 1e9:.1f} | {per_voxel * voxels / times[best] / 1e9:.1f} | "
-                        f"{diff:.1e} |")
+            page.append(
+                f"| {size}x{size}x{T} | {times['rsocl'] * 1e3:.3f} | {cells} | {ratio} | "
+                f"{per_voxel * voxels / times['rsocl'] / 1e9:.1f} | {per_voxel * voxels / times[best] / 1e9:.1f} | "
+                f"{diff:.1e} |"
+            )
             print(page[-1], flush=True)
-    page += ["", "rsocl's time per TV iteration over the faster compiled C's of the same round (1 or all threads): "
-             + ", ".join(ratios) + "."]
+    page += [
+        "",
+        "rsocl's time per TV iteration over the faster compiled C's of the same round (1 or all threads): "
+        + ", ".join(ratios)
+        + ".",
+    ]
     write_page(args.out, page)
 
 

@@ -66,10 +66,12 @@ def measure(dev, side, fused, rounds, calls):
         plan = reg.fused_plan(x) if k else None
         values = plan.values() if plan is not None else plain_values(ITERATIONS, True)
         ratio = [s / p for s, p in zip(seconds[k], seconds[0])]
-        rows.append(f"| {side}×{side}×{T} | {'plain' if k == 0 else f'fused = {k}'} | "
-                    f"{plan.tile if plan is not None else '-'} | {np.median(seconds[k]) * 1e3:.2f} | "
-                    f"{np.median(ratio):.2f}× ({min(ratio):.2f}-{max(ratio):.2f}×) | "
-                    f"{values * 4 / ITERATIONS:.1f} | {worst[k]:.1e} |")
+        rows.append(
+            f"| {side}×{side}×{T} | {'plain' if k == 0 else f'fused = {k}'} | "
+            f"{plan.tile if plan is not None else '-'} | {np.median(seconds[k]) * 1e3:.2f} | "
+            f"{np.median(ratio):.2f}× ({min(ratio):.2f}-{max(ratio):.2f}×) | "
+            f"{values * 4 / ITERATIONS:.1f} | {worst[k]:.1e} |"
+        )
     return rows
 
 
@@ -83,23 +85,26 @@ def measure_admm(dev, batch, fused, rounds):
     g = g[0] if batch == 1 else g
 
     def run(k):
-        return rsocl.reconstruct(g, rig, iterations=ADMM_ITERATIONS, tune=False, device=dev,
-                                 regularizer_options={"fused": k})
+        return rsocl.reconstruct(
+            g, rig, iterations=ADMM_ITERATIONS, tune=False, device=dev, regularizer_options={"fused": k}
+        )
 
-    results = {k: run(k).datacube for k in (0, *fused)}           # compiles every variant once
+    results = {k: run(k).datacube for k in (0, *fused)}  # compiles every variant once
     worst = {k: float(np.abs(cube - results[0]).max()) for k, cube in results.items()}
     seconds = {k: [] for k in results}
     for r in range(rounds):
-        for k in (list(results) if r % 2 == 0 else list(results)[::-1]):
+        for k in list(results) if r % 2 == 0 else list(results)[::-1]:
             t0 = time.perf_counter()
             run(k)
             seconds[k].append((time.perf_counter() - t0) / batch)
     rows = []
     for k in results:
         ratio = [s / p for s, p in zip(seconds[k], seconds[0])]
-        rows.append(f"| {batch} | {'plain' if k == 0 else f'fused = {k}'} | {np.median(seconds[k]) * 1e3:.1f} | "
-                    f"{1 / np.median(seconds[k]):.1f} | {np.median(ratio):.2f}× ({min(ratio):.2f}-{max(ratio):.2f}×) | "
-                    f"{worst[k]:.1e} |")
+        rows.append(
+            f"| {batch} | {'plain' if k == 0 else f'fused = {k}'} | {np.median(seconds[k]) * 1e3:.1f} | "
+            f"{1 / np.median(seconds[k]):.1f} | {np.median(ratio):.2f}× ({min(ratio):.2f}-{max(ratio):.2f}×) | "
+            f"{worst[k]:.1e} |"
+        )
     return rows
 
 
@@ -109,31 +114,49 @@ def main(argv=None):
     parser.add_argument("--fused", type=int, nargs="+", default=[3, 5, 9], help="values of the fused option")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--calls", type=int, default=5, help="denoising calls timed per variant and round")
-    parser.add_argument("--admm-batches", type=int, nargs="*", default=[1, 4],
-                        help="sets per reconstruct call in the whole-reconstruction comparison (none: skip it)")
+    parser.add_argument(
+        "--admm-batches",
+        type=int,
+        nargs="*",
+        default=[1, 4],
+        help="sets per reconstruct call in the whole-reconstruction comparison (none: skip it)",
+    )
     parser.add_argument("--device", default=None)
     parser.add_argument("--out", type=Path, default=DOCS / "tv_fused.md", help="the Markdown page to write")
     args = parser.parse_args(argv)
-    if min(args.sizes) < 8 or min(args.fused) < 1 or args.rounds < 1 or args.calls < 1 or \
-            min(args.admm_batches, default=1) < 1:
+    if (
+        min(args.sizes) < 8
+        or min(args.fused) < 1
+        or args.rounds < 1
+        or args.calls < 1
+        or min(args.admm_batches, default=1) < 1
+    ):
         raise SystemExit("--sizes must be >= 8, --fused, --rounds, --calls and --admm-batches >= 1")
     dev = get_device(args.device)
     page = header_lines("TV: fused path against plain path", dev, None if argv is None else [__file__, *argv])
-    page += [f"One TV call of {ITERATIONS} Chambolle iterations (3-D, temporal weight 3, float32) on random "
-             f"values; median of {args.rounds} rounds of {args.calls} calls per variant, variants in turn. "
-             "Bytes per voxel-iteration are counted (global memory, halos included), not measured.", "",
-             "| datacube | path | tile (x, y, t) | ms per call | time vs plain (range) | B/voxel-iteration | "
-             "largest difference to plain |", "|---|---|---|---|---|---|---|"]
+    page += [
+        f"One TV call of {ITERATIONS} Chambolle iterations (3-D, temporal weight 3, float32) on random "
+        f"values; median of {args.rounds} rounds of {args.calls} calls per variant, variants in turn. "
+        "Bytes per voxel-iteration are counted (global memory, halos included), not measured.",
+        "",
+        "| datacube | path | tile (x, y, t) | ms per call | time vs plain (range) | B/voxel-iteration | "
+        "largest difference to plain |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for side in args.sizes:
         page += measure(dev, side, args.fused, args.rounds, args.calls)
         print(page[-1], file=sys.stderr, flush=True)
     if args.admm_batches:
-        page += ["", f"Whole reconstructions: the paper configuration (4 cameras, 50x50, T = 55, {ADMM_ITERATIONS} "
-                 f"ADMM iterations of {ITERATIONS} TV iterations, temporal weight 3, lam 0.1, float32, `tune=False`), "
-                 f"the built-in scene; {args.rounds} rounds, variants in turn (order reversed every other round); "
-                 "seconds per set include the call's set-up, not compilation.", "",
-                 "| sets per call | path | ms per set | sets/s | time vs plain (range) | "
-                 "largest difference to plain |", "|---|---|---|---|---|---|"]
+        page += [
+            "",
+            f"Whole reconstructions: the paper configuration (4 cameras, 50x50, T = 55, {ADMM_ITERATIONS} "
+            f"ADMM iterations of {ITERATIONS} TV iterations, temporal weight 3, lam 0.1, float32, `tune=False`), "
+            f"the built-in scene; {args.rounds} rounds, variants in turn (order reversed every other round); "
+            "seconds per set include the call's set-up, not compilation.",
+            "",
+            "| sets per call | path | ms per set | sets/s | time vs plain (range) | largest difference to plain |",
+            "|---|---|---|---|---|---|",
+        ]
         for batch in args.admm_batches:
             page += measure_admm(dev, batch, args.fused, args.rounds)
             print(page[-1], file=sys.stderr, flush=True)

@@ -52,8 +52,16 @@ def random_rig(seed):
     t_r = float(rng.uniform(5e-6, 60e-6))
     t_e = float(rng.uniform(0.5, 12) * t_r)
     angles = [360.0 * k / K for k in range(K)] if rng.random() < 0.5 else list(rng.uniform(0, 360, K))
-    cameras = [rsocl.Camera(angle=a, t_e=t_e, t_r=t_r, t_a=float(rng.uniform(0, 3) * t_r) if rng.random() < 0.3 else 0.0,
-                            gain=float(rng.uniform(0.5, 2)) if rng.random() < 0.2 else 1.0) for a in angles]
+    cameras = [
+        rsocl.Camera(
+            angle=a,
+            t_e=t_e,
+            t_r=t_r,
+            t_a=float(rng.uniform(0, 3) * t_r) if rng.random() < 0.3 else 0.0,
+            gain=float(rng.uniform(0.5, 2)) if rng.random() < 0.2 else 1.0,
+        )
+        for a in angles
+    ]
     return rsocl.Rig(cameras, shape=(m, n), mask="binary" if rng.random() < 0.2 else "exact")
 
 
@@ -93,8 +101,9 @@ def tuned_cases(cases, steps, device, **kw):
             value, result = run(g, rig, truth, step, device, **kw)
             per.append((value, chosen(result)))
         rows.append((name, base, per))
-        print(f"{name}: interp3d {base:.2f} " + " ".join(f"{s:g}: {v:.2f}" for s, (v, _) in zip(steps, per)),
-              flush=True)
+        print(
+            f"{name}: interp3d {base:.2f} " + " ".join(f"{s:g}: {v:.2f}" for s, (v, _) in zip(steps, per)), flush=True
+        )
     return rows
 
 
@@ -102,19 +111,23 @@ def summary(rows, steps):
     """Markdown rows: per step, its PSNR minus the first step's and minus interp3d's."""
     psnrs = np.array([[v for v, _ in per] for _, _, per in rows])
     interp = np.array([base for _, base, _ in rows])
-    out = ["| step | mean vs step " + f"{steps[0]:g}" + " | worst | best | mean vs interp3d | worst vs interp3d | "
-           "cases below interp3d |", "|---|---|---|---|---|---|---|"]
+    out = [
+        "| step | mean vs step " + f"{steps[0]:g}" + " | worst | best | mean vs interp3d | worst vs interp3d | "
+        "cases below interp3d |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for j, step in enumerate(steps):
         d = psnrs[:, j] - psnrs[:, 0]
         e = psnrs[:, j] - interp
-        out.append(f"| {step:g} | {d.mean():+.2f} | {d.min():+.2f} | {d.max():+.2f} | {e.mean():+.2f} | {e.min():+.2f} | "
-                   f"{int((e < 0).sum())} of {len(e)} |")
+        out.append(
+            f"| {step:g} | {d.mean():+.2f} | {d.min():+.2f} | {d.max():+.2f} | {e.mean():+.2f} | {e.min():+.2f} | "
+            f"{int((e < 0).sum())} of {len(e)} |"
+        )
     return out
 
 
 def per_case(rows, steps):
-    out = ["| case | interp3d | " + " | ".join(f"step {s:g}" for s in steps) + " |",
-           "|---|---|" + "---|" * len(steps)]
+    out = ["| case | interp3d | " + " | ".join(f"step {s:g}" for s in steps) + " |", "|---|---|" + "---|" * len(steps)]
     for name, base, per in rows:
         out.append(f"| {name} | {base:.2f} | " + " | ".join(f"{v:.2f} ({c})" for v, c in per) + " |")
     return out
@@ -122,8 +135,13 @@ def per_case(rows, steps):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=float, nargs="+", default=list(STEPS), help="fractions of scikit-image's step, "
-                        "in (0, 1]; the first is the reference of the differences")
+    parser.add_argument(
+        "--steps",
+        type=float,
+        nargs="+",
+        default=list(STEPS),
+        help="fractions of scikit-image's step, in (0, 1]; the first is the reference of the differences",
+    )
     parser.add_argument("--rigs", type=int, default=60, help="random rigs (>= 0)")
     parser.add_argument("--sizes", type=int, nargs="*", default=[64, 128], help="paper-array grid sides (>= 16)")
     parser.add_argument("--device", default=None)
@@ -144,11 +162,13 @@ def main(argv=None):
     for seed in range(100, 100 + args.rigs):
         rig = random_rig(seed)
         for scene in rig_scenes:
-            random_cases.append((f"seed {seed}: {rig.n_channels} cam, {rig.shape[0]}x{rig.shape[1]}, {scene}", rig, scene))
+            random_cases.append(
+                (f"seed {seed}: {rig.n_channels} cam, {rig.shape[0]}x{rig.shape[1]}, {scene}", rig, scene)
+            )
     paper_cases, fixed_cases = [], []
     for size in args.sizes:
         rig = rsocl.Rig.paper_array(4, shape=(size, size), t_e=180e-6, t_r=35e-6)
-        for scene in (scene_names() if size <= 64 else PAPER_128):
+        for scene in scene_names() if size <= 64 else PAPER_128:
             if available(scene):
                 paper_cases.append((f"paper {size}x{size}, {scene}", rig, scene))
         fixed_cases += [(f"paper {size}x{size}, {scene}", rig, scene) for scene in PAPER_128 if available(scene)]
@@ -159,23 +179,31 @@ def main(argv=None):
     rig = rsocl.Rig([rsocl.Camera(angle=a, t_e=21e-6, t_r=21e-6) for a in LARGE_WEIGHT_ANGLES], shape=(41, 11))
     truth = make_scene("builtin", rig.shape, rig.T)
     g = rsocl.RollingShutterOperator(rig).forward(truth)
-    large = [f"interp3d: {psnr(interp3d(g, rig), truth, data_range=1.0):.2f} dB; T = {rig.T}.", "",
-             "| temporal weight | " + " | ".join(f"step {s:g}: PSNR (min, max)" for s in args.steps) + " |",
-             "|---|" + "---|" * len(args.steps)]
+    large = [
+        f"interp3d: {psnr(interp3d(g, rig), truth, data_range=1.0):.2f} dB; T = {rig.T}.",
+        "",
+        "| temporal weight | " + " | ".join(f"step {s:g}: PSNR (min, max)" for s in args.steps) + " |",
+        "|---|" + "---|" * len(args.steps),
+    ]
     for weight in (0.0, 1.0, 3.0, 30.0):
         cells = []
         for step in args.steps:
-            value, result = run(g, rig, truth, step, device, lam=3.0, tune=False,
-                                regularizer_options={"temporal_weight": weight})
+            value, result = run(
+                g, rig, truth, step, device, lam=3.0, tune=False, regularizer_options={"temporal_weight": weight}
+            )
             cube = result.datacube
             cells.append(f"{value:.2f} ({cube.min():.2f}, {cube.max():.2f})")
         large.append(f"| {weight:g} | " + " | ".join(cells) + " |")
     eta = result.params["eta"]
 
     page = header_lines("TV's Chambolle step", device, None if argv is None else [__file__, *argv])
-    page += [__doc__.split("\n\n", 1)[1].strip(), "",
-             f"Total time {time.perf_counter() - start:.0f} s. PSNR in dB (peak 1); in brackets the self-tuned "
-             "choice, temporal weight / lam.", ""]
+    page += [
+        __doc__.split("\n\n", 1)[1].strip(),
+        "",
+        f"Total time {time.perf_counter() - start:.0f} s. PSNR in dB (peak 1); in brackets the self-tuned "
+        "choice, temporal weight / lam.",
+        "",
+    ]
     if random_rows:
         page += [f"## Random rigs ({len(random_rows)} cases)", ""] + summary(random_rows, args.steps) + [""]
     if paper_rows:

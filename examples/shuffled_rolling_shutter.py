@@ -26,15 +26,19 @@ def load_capture(path, pattern):
     unreadable file ends the script with one line saying where the capture is expected."""
     path = Path(path)
     if not path.is_file():
-        sys.exit(f"shuffled_rolling_shutter: error: --data: no capture at {path}; it is expected at {DATA} (the "
-                 "shared data folder beside the repository): pass its path with --data PATH")
+        sys.exit(
+            f"shuffled_rolling_shutter: error: --data: no capture at {path}; it is expected at {DATA} (the "
+            "shared data folder beside the repository): pass its path with --data PATH"
+        )
     keys = (f"meas_{pattern}", f"{pattern}_time_index")
     try:
         with np.load(path) as data:
             return tuple(data[key].astype(np.float64) for key in keys)
     except (OSError, ValueError, KeyError) as exc:
-        sys.exit(f"shuffled_rolling_shutter: error: --data: {path} is not the shuffled rolling-shutter capture "
-                 f"(an .npz with arrays {list(keys)}): {type(exc).__name__}: {exc}")
+        sys.exit(
+            f"shuffled_rolling_shutter: error: --data: {path} is not the shuffled rolling-shutter capture "
+            f"(an .npz with arrays {list(keys)}): {type(exc).__name__}: {exc}"
+        )
 
 
 def main():
@@ -45,11 +49,16 @@ def main():
     # psi = (t_e/dt)^2 = 1/256 here, far below the [0, 1]-scene defaults' scale: eta and lam follow it
     parser.add_argument("--lam", type=float, default=1e-4)
     parser.add_argument("--eta", type=float, default=1e-3)
-    parser.add_argument("--temporal-weight", type=float, default=1.0,
-                        help="TV temporal weight (1: fast events such as this pour; rsocl's default is 3)")
+    parser.add_argument(
+        "--temporal-weight",
+        type=float,
+        default=1.0,
+        help="TV temporal weight (1: fast events such as this pour; rsocl's default is 3)",
+    )
     parser.add_argument("--out", default="wine")
-    parser.add_argument("--data", default=str(DATA),
-                        help=f"the capture (default {DATA}: the shared data folder beside the repository)")
+    parser.add_argument(
+        "--data", default=str(DATA), help=f"the capture (default {DATA}: the shared data folder beside the repository)"
+    )
     args = parser.parse_args()
 
     meas, index = load_capture(args.data, args.pattern)
@@ -59,10 +68,19 @@ def main():
     # a scene in [0, 1] gives snapshots in [0, t_e/dt]: scale the 16-bit measurement to that
     g = (meas / meas.max() * rig.exposure_subframes)[None]
     print(f"{rig!r}: {rig.T} sub-frames of {args.bin} time steps from one measurement")
-    result = rsocl.reconstruct(g, rig, iterations=args.iterations, lam=args.lam, eta=args.eta, progress=True,
-                               regularizer_options={"temporal_weight": args.temporal_weight})
-    print(f"residual {result.history['residual'][-1]:.4f} after {result.iterations} iterations, "
-          f"{result.history['time'][-1]:.1f} s")
+    result = rsocl.reconstruct(
+        g,
+        rig,
+        iterations=args.iterations,
+        lam=args.lam,
+        eta=args.eta,
+        progress=True,
+        regularizer_options={"temporal_weight": args.temporal_weight},
+    )
+    print(
+        f"residual {result.history['residual'][-1]:.4f} after {result.iterations} iterations, "
+        f"{result.history['time'][-1]:.1f} s"
+    )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # left: what a global-shutter camera would see (the measurement spread evenly in time)

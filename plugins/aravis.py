@@ -81,8 +81,7 @@ class AravisCamera(AravisSettings, CameraBackend):
         k = lambda key: f"{self.name}: config[{key!r}]"  # noqa: E731
         address = cfg.get("address")
         if address is not None and (not isinstance(address, str) or not address.strip()):
-            raise ValueError(f"{k('address')} must be a device id, IP address or serial number string, "
-                             f"got {address!r}")
+            raise ValueError(f"{k('address')} must be a device id, IP address or serial number string, got {address!r}")
         self.address = None if address is None else address.strip()
         self.interfaces = check_interfaces(k("interfaces"), cfg.get("interfaces"))
         self.buffers = _int(k("buffers"), cfg.get("buffers", _DEFAULT_BUFFERS), 1, _MAX_BUFFERS)
@@ -97,8 +96,10 @@ class AravisCamera(AravisSettings, CameraBackend):
 
     # ------------------------------------------------------------------ errors
     def _gone(self):
-        return CameraDisconnected(f"{self.name}: the device is gone (Aravis lost control of it: cable, power or "
-                                  "network; close and re-open it)")
+        return CameraDisconnected(
+            f"{self.name}: the device is gone (Aravis lost control of it: cable, power or "
+            "network; close and re-open it)"
+        )
 
     def _call(self, what, fn, *args):
         """``fn(*args)``; Aravis errors become CameraError / CameraDisconnected naming ``what``."""
@@ -113,8 +114,11 @@ class AravisCamera(AravisSettings, CameraBackend):
             if GLib is None or not isinstance(exc, GLib.Error):
                 raise
             Aravis = self._aravis
-            lost_codes = {int(Aravis.DeviceError.NOT_CONNECTED), int(Aravis.DeviceError.TIMEOUT),
-                          int(Aravis.DeviceError.TRANSFER_ERROR)}
+            lost_codes = {
+                int(Aravis.DeviceError.NOT_CONNECTED),
+                int(Aravis.DeviceError.TIMEOUT),
+                int(Aravis.DeviceError.TRANSFER_ERROR),
+            }
             if self._lost or (exc.domain == "arv-device-error-quark" and exc.code in lost_codes):
                 self._lost = True  # Aravis already retried: the device is not answering any more
                 raise CameraDisconnected(f"{self.name}: {what}: {exc.message} (device not answering)") from exc
@@ -136,19 +140,26 @@ class AravisCamera(AravisSettings, CameraBackend):
         self._device = camera.get_device()
         self._lost_handler = self._device.connect("control-lost", self._on_control_lost)
         info = {}
-        for key, getter in (("device_id", camera.get_device_id), ("vendor", camera.get_vendor_name),
-                            ("model", camera.get_model_name), ("serial", camera.get_device_serial_number)):
+        for key, getter in (
+            ("device_id", camera.get_device_id),
+            ("vendor", camera.get_vendor_name),
+            ("model", camera.get_model_name),
+            ("serial", camera.get_device_serial_number),
+        ):
             try:
                 info[key] = getter()
             except GLib.Error:
                 info[key] = None
-        info["protocol"] = "GigEVision" if camera.is_gv_device() else ("USB3Vision" if camera.is_uv_device()
-                                                                       else "other")
+        info["protocol"] = (
+            "GigEVision" if camera.is_gv_device() else ("USB3Vision" if camera.is_uv_device() else "other")
+        )
         self.device_info = info
         if self.packet_size is not None and not camera.is_gv_device():
             self._close_device()
-            raise CameraError(f"{self.name}: config 'packet_size' applies to GigE Vision cameras only, "
-                              f"{info['device_id']} is {info['protocol']}")
+            raise CameraError(
+                f"{self.name}: config 'packet_size' applies to GigE Vision cameras only, "
+                f"{info['device_id']} is {info['protocol']}"
+            )
 
     def _target(self):
         return "the first camera found" if self.address is None else f"camera {self.address!r}"
@@ -157,8 +168,7 @@ class AravisCamera(AravisSettings, CameraBackend):
         try:
             Aravis = self._aravis
             Aravis.update_device_list()
-            ids = [f"{Aravis.get_device_id(i)} ({Aravis.get_device_address(i)})"
-                   for i in range(Aravis.get_n_devices())]
+            ids = [f"{Aravis.get_device_id(i)} ({Aravis.get_device_address(i)})" for i in range(Aravis.get_n_devices())]
         except Exception:  # only a hint
             return ""
         enabled = "" if self.interfaces is None else f" on interfaces {self.interfaces}"
@@ -192,11 +202,14 @@ class AravisCamera(AravisSettings, CameraBackend):
             return
         Aravis, camera = self._aravis, self._camera
         if self._has("AcquisitionMode") and "Continuous" in self._enum_values("AcquisitionMode"):
-            self._call("setting AcquisitionMode = Continuous", self._device.set_string_feature_value,
-                       "AcquisitionMode", "Continuous")
+            self._call(
+                "setting AcquisitionMode = Continuous",
+                self._device.set_string_feature_value,
+                "AcquisitionMode",
+                "Continuous",
+            )
         if self.packet_size is not None:
-            self._call(f"setting the packet size to {self.packet_size}", camera.gv_set_packet_size,
-                       self.packet_size)
+            self._call(f"setting the packet size to {self.packet_size}", camera.gv_set_packet_size, self.packet_size)
         payload = int(self._call("reading the payload size", camera.get_payload))
         if payload <= 0:
             raise CameraError(f"{self.name}: the device reports a payload of {payload} bytes")
@@ -213,8 +226,14 @@ class AravisCamera(AravisSettings, CameraBackend):
             raise
         if self._exposure is None:
             try:
-                self._exposure = float(self._call("reading the exposure", self._device.get_float_feature_value,
-                                                  self._exposure_feature())) * 1e-6
+                self._exposure = (
+                    float(
+                        self._call(
+                            "reading the exposure", self._device.get_float_feature_value, self._exposure_feature()
+                        )
+                    )
+                    * 1e-6
+                )
             except CameraError:
                 pass
 
@@ -251,26 +270,36 @@ class AravisCamera(AravisSettings, CameraBackend):
         status = buffer.get_status()
         frame_id = int(buffer.get_frame_id())
         if status != Aravis.BufferStatus.SUCCESS:
-            raise CameraError(f"{self.name}: frame {frame_id} failed: buffer status {status.value_nick} "
-                              f"({status.value_name})")
+            raise CameraError(
+                f"{self.name}: frame {frame_id} failed: buffer status {status.value_nick} ({status.value_name})"
+            )
         payload_type = buffer.get_payload_type()
         if payload_type not in (Aravis.BufferPayloadType.IMAGE, Aravis.BufferPayloadType.EXTENDED_CHUNK_DATA):
-            raise CameraError(f"{self.name}: frame {frame_id} is not an image (payload type "
-                              f"{payload_type.value_nick})")
+            raise CameraError(f"{self.name}: frame {frame_id} is not an image (payload type {payload_type.value_nick})")
         code = int(buffer.get_image_pixel_format())
         pixel_format = BY_CODE.get(code)
         if pixel_format is None:
-            raise CameraError(f"{self.name}: frame {frame_id} has pixel format 0x{code:08x}, rsocl reads "
-                              f"{list(PIXEL_FORMATS)}")
+            raise CameraError(
+                f"{self.name}: frame {frame_id} has pixel format 0x{code:08x}, rsocl reads {list(PIXEL_FORMATS)}"
+            )
         width, height = int(buffer.get_image_width()), int(buffer.get_image_height())
         x_padding, _ = buffer.get_image_padding()
         image = convert_buffer(buffer.get_image_data(), pixel_format, width, height, x_padding)
         device_ns = int(buffer.get_timestamp())
         system_ns = int(buffer.get_system_timestamp())
         host = system_ns * 1e-9 if system_ns > 0 else time.time()
-        meta = {"frame_id": frame_id, "device_timestamp_ns": device_ns, "system_timestamp": host,
-                "exposure": self._exposure,
-                "roi": [int(buffer.get_image_x()), int(buffer.get_image_y()), width, height],
-                "device_id": self.device_info.get("device_id")}
-        return Frame(image=image, timestamp=device_ns * 1e-9 if device_ns > 0 else host,
-                     pixel_format=pixel_format, bit_depth=PIXEL_FORMATS[pixel_format][2], meta=meta)
+        meta = {
+            "frame_id": frame_id,
+            "device_timestamp_ns": device_ns,
+            "system_timestamp": host,
+            "exposure": self._exposure,
+            "roi": [int(buffer.get_image_x()), int(buffer.get_image_y()), width, height],
+            "device_id": self.device_info.get("device_id"),
+        }
+        return Frame(
+            image=image,
+            timestamp=device_ns * 1e-9 if device_ns > 0 else host,
+            pixel_format=pixel_format,
+            bit_depth=PIXEL_FORMATS[pixel_format][2],
+            meta=meta,
+        )

@@ -24,9 +24,11 @@ from rsocl.hardware.backend import CameraError
 
 __all__ = ["INSTALL_HINT", "import_aravis", "check_interfaces", "select_interfaces", "discover"]
 
-INSTALL_HINT = ("install Aravis' introspection data with 'apt-get install gir1.2-aravis-0.8' and PyGObject with "
-                "'pip install \"rsocl[aravis]\"' (PyGObject<3.51, built from source: it needs "
-                "'apt-get install libgirepository1.0-dev libcairo2-dev pkg-config gcc python3-dev')")
+INSTALL_HINT = (
+    "install Aravis' introspection data with 'apt-get install gir1.2-aravis-0.8' and PyGObject with "
+    "'pip install \"rsocl[aravis]\"' (PyGObject<3.51, built from source: it needs "
+    "'apt-get install libgirepository1.0-dev libcairo2-dev pkg-config gcc python3-dev')"
+)
 
 
 def import_aravis():
@@ -39,8 +41,9 @@ def import_aravis():
         gi.require_version("Aravis", "0.8")
         from gi.repository import Aravis, GLib
     except (ImportError, ValueError) as exc:
-        raise CameraError(f"the aravis camera backend needs Aravis 0.8 for GObject introspection ({exc}): "
-                          f"{INSTALL_HINT}") from exc
+        raise CameraError(
+            f"the aravis camera backend needs Aravis 0.8 for GObject introspection ({exc}): {INSTALL_HINT}"
+        ) from exc
     return Aravis, GLib
 
 
@@ -71,10 +74,17 @@ def discover(interfaces=None) -> list:
     Aravis.update_device_list()
     out = []
     for i in range(Aravis.get_n_devices()):
-        out.append({"id": Aravis.get_device_id(i), "address": Aravis.get_device_address(i),
-                    "protocol": Aravis.get_device_protocol(i), "serial": Aravis.get_device_serial_nbr(i),
-                    "vendor": Aravis.get_device_vendor(i), "model": Aravis.get_device_model(i),
-                    "physical_id": Aravis.get_device_physical_id(i)})
+        out.append(
+            {
+                "id": Aravis.get_device_id(i),
+                "address": Aravis.get_device_address(i),
+                "protocol": Aravis.get_device_protocol(i),
+                "serial": Aravis.get_device_serial_nbr(i),
+                "vendor": Aravis.get_device_vendor(i),
+                "model": Aravis.get_device_model(i),
+                "physical_id": Aravis.get_device_physical_id(i),
+            }
+        )
     return out
 
 
@@ -82,8 +92,13 @@ def check_interfaces(key, value):
     """``value`` as a list of Aravis interface names (None stays None); a ValueError naming ``key``."""
     if value is None:
         return None
-    if isinstance(value, str) or not isinstance(value, (list, tuple)) or not value \
-            or not all(isinstance(v, str) and v for v in value):
-        raise ValueError(f"{key} must be a non-empty list of Aravis interface names such as ['GigEVision'], "
-                         f"got {value!r}")
+    if (
+        isinstance(value, str)
+        or not isinstance(value, (list, tuple))
+        or not value
+        or not all(isinstance(v, str) and v for v in value)
+    ):
+        raise ValueError(
+            f"{key} must be a non-empty list of Aravis interface names such as ['GigEVision'], got {value!r}"
+        )
     return list(value)

@@ -16,11 +16,7 @@ from rsocl.hardware.backend import CameraError
 __all__ = ["PIXEL_FORMATS", "BY_CODE", "convert_buffer"]
 
 #: name -> (GenICam PFNC code, numpy dtype of the buffer, significant bits)
-PIXEL_FORMATS = {
-    "Mono8": (0x01080001, "u1", 8),
-    "Mono12": (0x01100005, "<u2", 12),
-    "Mono16": (0x01100007, "<u2", 16),
-}
+PIXEL_FORMATS = {"Mono8": (0x01080001, "u1", 8), "Mono12": (0x01100005, "<u2", 12), "Mono16": (0x01100007, "<u2", 16)}
 #: GenICam PFNC code -> name
 BY_CODE = {code: name for name, (code, _, _) in PIXEL_FORMATS.items()}
 
@@ -39,7 +35,9 @@ def convert_buffer(data, pixel_format: str, width: int, height: int, x_padding: 
     need = stride * (height - 1) + row if height > 0 else 0
     raw = np.frombuffer(data, dtype=np.uint8)
     if width < 1 or height < 1 or raw.size < need:
-        raise CameraError(f"{pixel_format} buffer of {raw.size} bytes is too small for {width}x{height} pixels "
-                          f"(row padding {x_padding} bytes; needs {need})")
+        raise CameraError(
+            f"{pixel_format} buffer of {raw.size} bytes is too small for {width}x{height} pixels "
+            f"(row padding {x_padding} bytes; needs {need})"
+        )
     rows = np.lib.stride_tricks.as_strided(raw, shape=(height, row), strides=(stride, 1))
     return np.ascontiguousarray(rows).view(dtype).astype(dtype.newbyteorder("="), copy=True).reshape(height, width)

@@ -49,8 +49,14 @@ class AravisSettings:
         return bool(self._call(f"looking up {feature}", self._device.is_feature_available, feature))
 
     def _enum_values(self, feature):
-        return list(self._call(f"reading the values of {feature}",
-                               self._device.dup_available_enumeration_feature_values_as_strings, feature) or [])
+        return list(
+            self._call(
+                f"reading the values of {feature}",
+                self._device.dup_available_enumeration_feature_values_as_strings,
+                feature,
+            )
+            or []
+        )
 
     def _set_enum(self, feature, value):
         values = self._enum_values(feature)
@@ -78,8 +84,10 @@ class AravisSettings:
         lo, hi = self._call(f"reading the bounds of {feature}", self._device.get_float_feature_bounds, feature)
         us = seconds * 1e6
         if not (lo * (1 - 1e-9) <= us <= hi * (1 + 1e-9)):
-            raise CameraError(f"{self.name}: exposure {seconds!r} s is outside the device's range "
-                              f"[{lo * 1e-6:.6g}, {hi * 1e-6:.6g}] s ({feature})")
+            raise CameraError(
+                f"{self.name}: exposure {seconds!r} s is outside the device's range "
+                f"[{lo * 1e-6:.6g}, {hi * 1e-6:.6g}] s ({feature})"
+            )
         us = min(max(us, lo), hi)
         self._call(f"setting {feature} = {us} us", self._device.set_float_feature_value, feature, us)
         actual = float(self._call(f"reading {feature}", self._device.get_float_feature_value, feature)) * 1e-6
@@ -98,34 +106,44 @@ class AravisSettings:
         if offsets:
             self._set_int("OffsetX", 0)
             self._set_int("OffsetY", 0)
-        for feature, value in (("Width", width), ("Height", height)) + ((("OffsetX", x), ("OffsetY", y))
-                                                                        if offsets else ()):
-            lo, hi = self._call(f"reading the bounds of {feature}", self._device.get_integer_feature_bounds,
-                                feature)
-            step = self._call(f"reading the increment of {feature}", self._device.get_integer_feature_increment,
-                              feature) or 1
+        for feature, value in (("Width", width), ("Height", height)) + (
+            (("OffsetX", x), ("OffsetY", y)) if offsets else ()
+        ):
+            lo, hi = self._call(f"reading the bounds of {feature}", self._device.get_integer_feature_bounds, feature)
+            step = (
+                self._call(f"reading the increment of {feature}", self._device.get_integer_feature_increment, feature)
+                or 1
+            )
             if not lo <= value <= hi:
-                raise CameraError(f"{self.name}: ROI {feature} = {value} is outside the device's range [{lo}, {hi}] "
-                                  f"(ROI {x}, {y}, {width}, {height})")
+                raise CameraError(
+                    f"{self.name}: ROI {feature} = {value} is outside the device's range [{lo}, {hi}] "
+                    f"(ROI {x}, {y}, {width}, {height})"
+                )
             if (value - lo) % step:
-                raise CameraError(f"{self.name}: ROI {feature} = {value} is not a multiple of the device's "
-                                  f"increment {step} (from {lo})")
+                raise CameraError(
+                    f"{self.name}: ROI {feature} = {value} is not a multiple of the device's "
+                    f"increment {step} (from {lo})"
+                )
             self._set_int(feature, value)
-        got = tuple(self._get_int(f) if (f in ("Width", "Height") or offsets) else 0
-                    for f in ("OffsetX", "OffsetY", "Width", "Height"))
+        got = tuple(
+            self._get_int(f) if (f in ("Width", "Height") or offsets) else 0
+            for f in ("OffsetX", "OffsetY", "Width", "Height")
+        )
         if got != (x, y, width, height):
-            raise CameraError(f"{self.name}: the device set the ROI to {list(got)} instead of "
-                              f"{[x, y, width, height]}")
+            raise CameraError(f"{self.name}: the device set the ROI to {list(got)} instead of {[x, y, width, height]}")
 
     def _set_pixel_format(self, pixel_format):
         if self._stream is not None:
             raise CameraError(f"{self.name}: stop acquisition before changing the pixel format")
         values = self._enum_values("PixelFormat")
         if pixel_format not in values:
-            raise CameraError(f"{self.name}: the device has no pixel format {pixel_format!r}; it offers {values} "
-                              f"(rsocl reads {list(PIXEL_FORMATS)})")
-        self._call(f"setting PixelFormat = {pixel_format}", self._device.set_string_feature_value, "PixelFormat",
-                   pixel_format)
+            raise CameraError(
+                f"{self.name}: the device has no pixel format {pixel_format!r}; it offers {values} "
+                f"(rsocl reads {list(PIXEL_FORMATS)})"
+            )
+        self._call(
+            f"setting PixelFormat = {pixel_format}", self._device.set_string_feature_value, "PixelFormat", pixel_format
+        )
 
     def _set_trigger(self, mode, source):
         for feature in ("TriggerMode",) + (("TriggerSource",) if mode != "free" else ()):
@@ -135,10 +153,15 @@ class AravisSettings:
         if mode != "free" and selectors and "FrameStart" not in selectors:
             raise CameraError(f"{self.name}: the device has no TriggerSelector FrameStart (it has {selectors})")
         for selector in selectors:  # every trigger off first (AcquisitionStart, FrameBurstStart, ...)
-            self._call(f"setting TriggerSelector = {selector}", self._device.set_string_feature_value,
-                       "TriggerSelector", selector)
-            self._call(f"setting TriggerMode = Off ({selector})", self._device.set_string_feature_value,
-                       "TriggerMode", "Off")
+            self._call(
+                f"setting TriggerSelector = {selector}",
+                self._device.set_string_feature_value,
+                "TriggerSelector",
+                selector,
+            )
+            self._call(
+                f"setting TriggerMode = Off ({selector})", self._device.set_string_feature_value, "TriggerMode", "Off"
+            )
         if mode == "free":
             if "FrameStart" in selectors:
                 self._set_enum("TriggerSelector", "FrameStart")
@@ -153,8 +176,7 @@ class AravisSettings:
     def _readout_time(self):
         if not self._has("SensorReadoutTime"):
             return None
-        us = float(self._call("reading SensorReadoutTime", self._device.get_float_feature_value,
-                              "SensorReadoutTime"))
+        us = float(self._call("reading SensorReadoutTime", self._device.get_float_feature_value, "SensorReadoutTime"))
         rows = self._get_int("Height")
         if not (math.isfinite(us) and us > 0 and rows > 0):
             return None

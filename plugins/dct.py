@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from rsocl.device.context import device_for_queue
-from rsocl.device.program import c_type
 from rsocl.device.launch import voxel_grid
+from rsocl.device.program import c_type
 from rsocl.solver.regularizer import Option, Regularizer
 
 __all__ = ["DCT", "dct_matrix"]
@@ -95,7 +95,7 @@ class DCT(Regularizer):
     def _table_size(self, shape):
         return sum(2 * L * L for L in self._lengths(shape))
 
-    def workspace_bytes(self, shape, dtype) -> int:
+    def workspace_bytes(self, shape, dtype, device=None) -> int:
         itemsize = np.dtype(dtype).itemsize
         return (int(np.prod(shape)) + self._table_size(shape)) * itemsize
 
@@ -204,7 +204,18 @@ class DCT(Regularizer):
         # 2P launches alternate work/out and the last one writes `out`: pass k (1-based) writes
         # `out` when k is even. x is read only by the first pass, so out may alias x.
         coeffs = self._run(x, passes, False, work, out, res)
-        prog.dct_soft_threshold(x.queue, gsize, lsize, coeffs.data, x.dtype.type(weight), np.int32(bt),
-                                np.int32(by), np.int32(bx), np.int32(T), np.int32(m), np.int32(n))
+        prog.dct_soft_threshold(
+            x.queue,
+            gsize,
+            lsize,
+            coeffs.data,
+            x.dtype.type(weight),
+            np.int32(bt),
+            np.int32(by),
+            np.int32(bx),
+            np.int32(T),
+            np.int32(m),
+            np.int32(n),
+        )
         other = out if coeffs is work else work
         return self._run(coeffs, passes, True, other, coeffs, res)

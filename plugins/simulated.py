@@ -67,9 +67,29 @@ from rsocl_plugins.simulated_sensor import SENSOR_KEYS, apply_sensor, sensor_bit
 
 __all__ = ["SimulatedCamera"]
 
-_CONFIG_KEYS = {"scene", "scene_seed", "scene_frames", "scene_sets", "shape", "angle", "row_map", "t_e", "t_r",
-                "t_a", "gain", "dt", "mask", "pixel_format", "sensor", "fail_after", "device", "dtype", "index",
-                "address", "exposure_range"}
+_CONFIG_KEYS = {
+    "scene",
+    "scene_seed",
+    "scene_frames",
+    "scene_sets",
+    "shape",
+    "angle",
+    "row_map",
+    "t_e",
+    "t_r",
+    "t_a",
+    "gain",
+    "dt",
+    "mask",
+    "pixel_format",
+    "sensor",
+    "fail_after",
+    "device",
+    "dtype",
+    "index",
+    "address",
+    "exposure_range",
+}
 
 
 @functools.lru_cache(maxsize=16)
@@ -139,8 +159,7 @@ class SimulatedCamera(CameraBackend):
             if self.scene_array.ndim != 3 or 0 in self.scene_array.shape:
                 raise ValueError(f"{k('scene')} array must be (frames, m, n), got shape {self.scene_array.shape}")
         elif not isinstance(scene, (str, os.PathLike)):
-            raise ValueError(f"{k('scene')} must be 'builtin', a video path or a (frames, m, n) array, "
-                             f"got {scene!r}")
+            raise ValueError(f"{k('scene')} must be 'builtin', a video path or a (frames, m, n) array, got {scene!r}")
         self.scene = scene if self.scene_array is None else "array"
 
         shape = cfg.get("shape")
@@ -159,8 +178,9 @@ class SimulatedCamera(CameraBackend):
         if self.row_map is not None and self.row_map.shape != self.shape:
             raise ValueError(f"{k('row_map')} has shape {self.row_map.shape}, config 'shape' is {self.shape}")
         if self.scene_array is not None and self.scene_array.shape[1:] != self.shape:
-            raise ValueError(f"{k('scene')} frames have shape {self.scene_array.shape[1:]}, "
-                             f"config 'shape' is {self.shape}")
+            raise ValueError(
+                f"{k('scene')} frames have shape {self.scene_array.shape[1:]}, config 'shape' is {self.shape}"
+            )
         self.scene_seed = _int(k("scene_seed"), cfg.get("scene_seed", 0), 0)
         self.scene_sets = _int(k("scene_sets"), cfg.get("scene_sets", 1), 1)
         frames = cfg.get("scene_frames")
@@ -173,13 +193,16 @@ class SimulatedCamera(CameraBackend):
             try:
                 low, high = cfg["exposure_range"]
             except (TypeError, ValueError):
-                raise ValueError(f"{k('exposure_range')} must be [shortest, longest] in seconds, "
-                                 f"got {cfg['exposure_range']!r}") from None
+                raise ValueError(
+                    f"{k('exposure_range')} must be [shortest, longest] in seconds, got {cfg['exposure_range']!r}"
+                ) from None
             low = check.positive(k("exposure_range") + "[0]", low, "seconds")
             high = check.positive(k("exposure_range") + "[1]", high, "seconds")
             if high < low:
-                raise ValueError(f"{k('exposure_range')} must be [shortest, longest] with shortest <= longest, "
-                                 f"got {cfg['exposure_range']!r}")
+                raise ValueError(
+                    f"{k('exposure_range')} must be [shortest, longest] with shortest <= longest, "
+                    f"got {cfg['exposure_range']!r}"
+                )
             self.exposure_range = (low, high)
         self.device_spec = cfg.get("device")
         self.dtype = cfg.get("dtype")
@@ -204,11 +227,13 @@ class SimulatedCamera(CameraBackend):
         default_format = "Float32" if s["bit_depth"] is None else ("Mono8" if s["bit_depth"] <= 8 else "Mono16")
         self.pixel_format = cfg.get("pixel_format", default_format)
         if self.pixel_format not in self.pixel_formats:
-            raise ValueError(f"{k('pixel_format')} must be one of {list(self.pixel_formats)}, "
-                             f"got {self.pixel_format!r}")
+            raise ValueError(
+                f"{k('pixel_format')} must be one of {list(self.pixel_formats)}, got {self.pixel_format!r}"
+            )
         if self.pixel_format == "Mono8" and (s["bit_depth"] or 8) > 8:
-            raise ValueError(f"{self.name}: pixel_format 'Mono8' holds at most 8 bits, sensor bit_depth is "
-                             f"{s['bit_depth']}")
+            raise ValueError(
+                f"{self.name}: pixel_format 'Mono8' holds at most 8 bits, sensor bit_depth is {s['bit_depth']}"
+            )
         try:
             own_T = self._rig(self.t_e, self.t_a).T
         except ValueError as exc:
@@ -219,10 +244,13 @@ class SimulatedCamera(CameraBackend):
 
         m, n = self.shape
         frames = self.scene_frames * (self.scene_sets if self.scene_array is None and self.scene != "builtin" else 1)
-        check_host_memory(8 * frames * m * n, f"{k('scene_frames')} = {self.scene_frames} (t_e = {self.t_e:g} s, "
-                          f"dt = {self.dt:g} s: the camera's own T = {own_T:,})",
-                          f"its scene of {frames:,} x {m} x {n} float64 sub-frames",
-                          "choose fewer scene_frames, a shorter t_e or a longer dt")
+        check_host_memory(
+            8 * frames * m * n,
+            f"{k('scene_frames')} = {self.scene_frames} (t_e = {self.t_e:g} s, "
+            f"dt = {self.dt:g} s: the camera's own T = {own_T:,})",
+            f"its scene of {frames:,} x {m} x {n} float64 sub-frames",
+            "choose fewer scene_frames, a shorter t_e or a longer dt",
+        )
 
     # ------------------------------------------------------------------ model
     def _rig(self, t_e, t_a):
@@ -264,7 +292,7 @@ class SimulatedCamera(CameraBackend):
 
             self._video = load_scene(self.scene, self.shape, T * self.scene_sets).astype(np.float64)
         block = set_index % self.scene_sets
-        return self._video[block * T:(block + 1) * T]
+        return self._video[block * T : (block + 1) * T]
 
     def render(self, set_index: int, t_a: float | None = None) -> np.ndarray:
         """Noise-free model frame ``(m, n)`` float64 of set ``set_index`` with trigger offset ``t_a`` (s)."""
@@ -315,15 +343,17 @@ class SimulatedCamera(CameraBackend):
             raise CameraError(f"{self.name}: stop acquisition before changing the ROI")
         m, n = self.shape
         if x + width > n or y + height > m:
-            raise CameraError(f"{self.name}: ROI x={x}, y={y}, {width}x{height} exceeds the {n}x{m} "
-                              "(width x height) simulated sensor")
+            raise CameraError(
+                f"{self.name}: ROI x={x}, y={y}, {width}x{height} exceeds the {n}x{m} (width x height) simulated sensor"
+            )
         self._roi = (x, y, width, height)
 
     def _set_pixel_format(self, pixel_format):
         self._alive()
         if pixel_format == "Mono8" and (self.sensor["bit_depth"] or 8) > 8:
-            raise CameraError(f"{self.name}: pixel format Mono8 holds at most 8 bits, sensor bit_depth is "
-                              f"{self.sensor['bit_depth']}")
+            raise CameraError(
+                f"{self.name}: pixel format Mono8 holds at most 8 bits, sensor bit_depth is {self.sensor['bit_depth']}"
+            )
         self.pixel_format = pixel_format
 
     def _set_trigger(self, mode, source):
@@ -362,8 +392,9 @@ class SimulatedCamera(CameraBackend):
         self._reads += 1
         if self.fail_after is not None and self._reads >= self.fail_after:
             self._gone = True
-            raise CameraDisconnected(f"{self.name}: simulated disconnection on read {self._reads} "
-                                     f"(fail_after={self.fail_after})")
+            raise CameraDisconnected(
+                f"{self.name}: simulated disconnection on read {self._reads} (fail_after={self.fail_after})"
+            )
         if not self._started:
             raise CameraError(f"{self.name}: acquisition not started (call start() first)")
         if not self._pending:
@@ -375,8 +406,19 @@ class SimulatedCamera(CameraBackend):
         image = self._sensor(self.render(set_index, t_a))
         if self._roi is not None:
             x, y, w, h = self._roi
-            image = image[y:y + h, x:x + w]
-        meta = {"set": set_index, "frame_id": self._reads - 1, "t_a": t_a, "full_scale": self.full_scale,
-                "exposure": self.t_e, "registered": self._roi is None or self._roi == (0, 0) + self.shape[::-1]}
-        return Frame(image=np.ascontiguousarray(image), timestamp=set_index * self.scene_frames * self.dt + t_a,
-                     pixel_format=self.pixel_format, bit_depth=self._bits(), meta=meta)
+            image = image[y : y + h, x : x + w]
+        meta = {
+            "set": set_index,
+            "frame_id": self._reads - 1,
+            "t_a": t_a,
+            "full_scale": self.full_scale,
+            "exposure": self.t_e,
+            "registered": self._roi is None or self._roi == (0, 0) + self.shape[::-1],
+        }
+        return Frame(
+            image=np.ascontiguousarray(image),
+            timestamp=set_index * self.scene_frames * self.dt + t_a,
+            pixel_format=self.pixel_format,
+            bit_depth=self._bits(),
+            meta=meta,
+        )

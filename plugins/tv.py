@@ -94,13 +94,25 @@ class TV(Regularizer):
     one_snapshot = {"temporal_weight": 10.0}
     options = {
         "iterations": Option(10, "iterations", "Chambolle iterations per denoising call", 1, 100000),
-        "temporal_weight": Option(3.0, "", "weight of the temporal difference (0: 2-D per sub-frame, "
-                                           "1: scikit-image's 3-D TV)", 0, 1e3),
-        "step": Option(STEP, "", "Chambolle step as a fraction of scikit-image's 1/(2(2 + w^2)) "
-                                 "(1: scikit-image's step)", 0.01, 1.0),
-        "fused": Option(FUSED, "iterations", "most Chambolle iterations per launch on tiles in local memory "
-                                             "(0: the plain path, two launches per iteration; "
-                                             "-1: the device's choice)", -1, 1000),
+        "temporal_weight": Option(
+            3.0, "", "weight of the temporal difference (0: 2-D per sub-frame, 1: scikit-image's 3-D TV)", 0, 1e3
+        ),
+        "step": Option(
+            STEP,
+            "",
+            "Chambolle step as a fraction of scikit-image's 1/(2(2 + w^2)) (1: scikit-image's step)",
+            0.01,
+            1.0,
+        ),
+        "fused": Option(
+            FUSED,
+            "iterations",
+            "most Chambolle iterations per launch on tiles in local memory "
+            "(0: the plain path, two launches per iteration; "
+            "-1: the device's choice)",
+            -1,
+            1000,
+        ),
     }
 
     #: Both paths take the ADMM's dual update into their last launch (:meth:`denoise_and_update`).
@@ -163,10 +175,16 @@ class TV(Regularizer):
             shape = x.shape if x.ndim == 4 else (1,) + x.shape
             # a CPU runs a work group's items as loops split at barriers: one item per group runs
             # each row of a tile as one contiguous (vectorised) loop
-            found = tv_fused.plan(shape, x.dtype.itemsize, self.iterations, fused, self.planes == 3,
-                                  local_bytes=dev.local_mem_bytes - reserved,
-                                  group=1 if dev.is_cpu else dev.group_limit(kernel),
-                                  max_items=dev.max_work_item_sizes)
+            found = tv_fused.plan(
+                shape,
+                x.dtype.itemsize,
+                self.iterations,
+                fused,
+                self.planes == 3,
+                local_bytes=dev.local_mem_bytes - reserved,
+                group=1 if dev.is_cpu else dev.group_limit(kernel),
+                max_items=dev.max_work_item_sizes,
+            )
             cache[key] = found
         return cache[key]
 
@@ -178,8 +196,10 @@ class TV(Regularizer):
         key = (x.shape, x.dtype.str, self.planes, copies, x.queue.int_ptr)
         if key not in cache:
             cache.clear()
-            cache[key] = ([cla.empty(x.queue, (self.planes,) + x.shape, x.dtype) for _ in range(copies)],
-                          cla.to_device(x.queue, edge_weights(x.shape[-1], x.dtype)))
+            cache[key] = (
+                [cla.empty(x.queue, (self.planes,) + x.shape, x.dtype) for _ in range(copies)],
+                cla.to_device(x.queue, edge_weights(x.shape[-1], x.dtype)),
+            )
         return cache[key]
 
     def _denoise(self, x, weight, out):
@@ -205,14 +225,24 @@ class TV(Regularizer):
         if plan is not None:
             return self._run_fused(x, steps, out, dual, plan)
         self._run_plain(x, steps, out, dual)
-        if dual is not None and self.iterations == 1:          # no primal step to take it
+        if dual is not None and self.iterations == 1:  # no primal step to take it
             b, f, on = dual
             prog = self._program(x, "tv_fused.cl")
             per_set = x.size // sets
             dev = device_for_queue(x.queue)
             for gsize, lsize, offset in batch_launches(per_set, sets, dev.group_limit(prog.dual_from_u, cap=64)):
-                prog.dual_from_u(x.queue, gsize, lsize, out.data, x.data, b.data, f.data, on.data, np.int32(per_set),
-                                 global_offset=offset)
+                prog.dual_from_u(
+                    x.queue,
+                    gsize,
+                    lsize,
+                    out.data,
+                    x.data,
+                    b.data,
+                    f.data,
+                    on.data,
+                    np.int32(per_set),
+                    global_offset=offset,
+                )
         return out
 
     def _run_plain(self, x, steps, out, dual=None):
@@ -230,11 +260,11 @@ class TV(Regularizer):
         wt = x.dtype.type(self.temporal_weight if self.planes == 3 else 0.0)
         sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(sets))
 
-        def each(kernel):                           # with the arguments set once per call
+        def each(kernel):  # with the arguments set once per call
             for gsize, lsize, offset in grids[key]:
                 kernel.enqueue(x.queue, gsize, lsize, offset)
 
-        if self.iterations == 1:                    # out = x + d(0)
+        if self.iterations == 1:  # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
         # iteration 0 from p = 0 (out = x): one kernel that only writes p
@@ -247,7 +277,7 @@ class TV(Regularizer):
             each(prog.tv_dual)
         if dual is None:
             each(prog.tv_primal)
-        else:                                       # the last primal step makes the ADMM's dual update
+        else:  # the last primal step makes the ADMM's dual update
             b, f, on = dual
             prog.tv_primal_update.set_args(x.data, p.data, out.data, wt, *sizes, b.data, f.data, on.data)
             each(prog.tv_primal_update)
@@ -268,10 +298,39 @@ class TV(Regularizer):
             p_in, p_out = buffers[(i - 1) % len(buffers)], buffers[i % len(buffers)]
             mode = launch.mode | (4 if dual is not None and launch.final else 0)
             kernel = prog.instance("tv_fused", i)
-            kernel(x.queue, gsize, lsize, x.data, p_in.data, p_out.data, out.data, b.data, f.data, on.data,
-                   steps.data, wt, *(np.int32(v) for v in (
-                       T, m, n, sets, plan.tiles_t(), *plan.tile, below, above, t_below, t_above,
-                       launch.updates, mode, plan.cap)), local)
+            kernel(
+                x.queue,
+                gsize,
+                lsize,
+                x.data,
+                p_in.data,
+                p_out.data,
+                out.data,
+                b.data,
+                f.data,
+                on.data,
+                steps.data,
+                wt,
+                *(
+                    np.int32(v)
+                    for v in (
+                        T,
+                        m,
+                        n,
+                        sets,
+                        plan.tiles_t(),
+                        *plan.tile,
+                        below,
+                        above,
+                        t_below,
+                        t_above,
+                        launch.updates,
+                        mode,
+                        plan.cap,
+                    )
+                ),
+                local,
+            )
         return out
 
     def _no_dual(self, queue):

@@ -74,12 +74,12 @@ def _covered(extent: int, tile: int, below: int, above: int) -> int:
 class FusedPlan:
     """Tiles, work groups and launches of the fused path for one datacube shape and device."""
 
-    tile: tuple          # interior (AX, AY, AT), voxels
-    local: tuple         # work group (LX, LY)
-    cap: int             # voxels of the largest region (each local array's length)
-    launches: tuple      # Launch, in order
+    tile: tuple  # interior (AX, AY, AT), voxels
+    local: tuple  # work group (LX, LY)
+    cap: int  # voxels of the largest region (each local array's length)
+    launches: tuple  # Launch, in order
     temporal: bool
-    shape: tuple         # (sets, T, m, n)
+    shape: tuple  # (sets, T, m, n)
 
     @property
     def arrays(self) -> int:
@@ -103,8 +103,9 @@ class FusedPlan:
         _, T, m, n = self.shape
         (below, above), (t_below, t_above) = launch.halos(self.temporal)
         ax, ay, at = self.tile
-        return (_covered(n, ax, below, above) * _covered(m, ay, below, above)
-                * _covered(T, at, t_below, t_above)) / (n * m * T)
+        return (_covered(n, ax, below, above) * _covered(m, ay, below, above) * _covered(T, at, t_below, t_above)) / (
+            n * m * T
+        )
 
     def values(self, dual: bool = False) -> float:
         """Values read or written from global memory per voxel by one denoising call.
@@ -124,8 +125,9 @@ class FusedPlan:
         return min(len(self.launches) - 1, 2)
 
 
-def plan(shape, itemsize: int, iterations: int, fused: int, temporal: bool, *, local_bytes: int, group: int,
-         max_items) -> FusedPlan | None:
+def plan(
+    shape, itemsize: int, iterations: int, fused: int, temporal: bool, *, local_bytes: int, group: int, max_items
+) -> FusedPlan | None:
     """The fused plan for a datacube ``shape = (sets, T, m, n)`` within the device's limits, or None.
 
     ``local_bytes``: local memory a work group may use (the device's, less what the kernel

@@ -111,9 +111,11 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         given = {key: self.config[key] for key in ("address", "device") if key in self.config}
         paths = {key: device_path(value, key) for key, value in given.items()}
         if len(set(paths.values())) > 1:
-            raise ValueError(f"{self.name}: address = {given['address']!r} ({paths['address']}) and "
-                             f"device = {given['device']!r} ({paths['device']}) name different devices; "
-                             "give one of them (a path like /dev/video0 or an index)")
+            raise ValueError(
+                f"{self.name}: address = {given['address']!r} ({paths['address']}) and "
+                f"device = {given['device']!r} ({paths['device']}) name different devices; "
+                "give one of them (a path like /dev/video0 or an index)"
+            )
         return next(iter(paths.values()), device_path(0))
 
     def _reset_state(self):
@@ -151,11 +153,14 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         try:
             dev.open()
         except FileNotFoundError as exc:
-            raise CameraError(f"{self.name}: no such device {self.path} (is the camera plugged in? "
-                              "`ls /dev/video*` or `v4l2-ctl --list-devices` lists them)") from exc
+            raise CameraError(
+                f"{self.name}: no such device {self.path} (is the camera plugged in? "
+                "`ls /dev/video*` or `v4l2-ctl --list-devices` lists them)"
+            ) from exc
         except PermissionError as exc:
-            raise CameraError(f"{self.name}: permission denied on {self.path} (add the user to the "
-                              "'video' group)") from exc
+            raise CameraError(
+                f"{self.name}: permission denied on {self.path} (add the user to the 'video' group)"
+            ) from exc
         self._dev = dev
         try:
             self._probe()
@@ -174,8 +179,10 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         if lvd.Capability.VIDEO_CAPTURE not in caps:
             if lvd.Capability.VIDEO_CAPTURE_MPLANE in caps:
                 raise CameraError(f"{self.name}: multi-planar capture devices are not supported")
-            raise CameraError(f"{self.name}: {self.path} is not a video capture node (capabilities: {caps!r}); "
-                              "webcams often also have a metadata node, try another /dev/video*")
+            raise CameraError(
+                f"{self.name}: {self.path} is not a video capture node (capabilities: {caps!r}); "
+                "webcams often also have a metadata node, try another /dev/video*"
+            )
         if lvd.Capability.STREAMING not in caps:
             raise CameraError(f"{self.name}: the device does not support streaming (mmap) I/O")
         offered = []
@@ -188,8 +195,10 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         if wanted is None:
             usable = [name for name in PIXEL_FORMATS if name in offered]
             if not usable:
-                raise CameraError(f"{self.name}: the device offers {offered or 'no formats'}, none of which this "
-                                  f"backend reads ({list(PIXEL_FORMATS)})")
+                raise CameraError(
+                    f"{self.name}: the device offers {offered or 'no formats'}, none of which this "
+                    f"backend reads ({list(PIXEL_FORMATS)})"
+                )
             wanted = usable[0]
         self._apply_format(wanted, *self._requested_size)
 
@@ -221,18 +230,26 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         except ValueError:
             got = f"0x{pix.pixelformat:08x}"
         if name is not None and got != name:
-            raise CameraError(f"{self.name}: asked the driver for {name}, it chose {got} "
-                              f"(the device offers {list(self.device_formats)})")
+            raise CameraError(
+                f"{self.name}: asked the driver for {name}, it chose {got} "
+                f"(the device offers {list(self.device_formats)})"
+            )
         if got not in PIXEL_FORMATS:
             raise CameraError(f"{self.name}: the driver delivers {got}, which this backend does not read")
         width, height = int(pix.width), int(pix.height)
         bpp = PIXEL_FORMATS[got][0]
         bpl = int(pix.bytesperline) or width * bpp
         if bpl < width * bpp or width < 1 or height < 1:
-            raise CameraError(f"{self.name}: the driver reports an inconsistent {got} format "
-                              f"{width}x{height}, {bpl} bytes per line")
-        self._fmt = {"name": got, "width": width, "height": height, "bpl": bpl,
-                     "sizeimage": int(pix.sizeimage) or bpl * height}
+            raise CameraError(
+                f"{self.name}: the driver reports an inconsistent {got} format {width}x{height}, {bpl} bytes per line"
+            )
+        self._fmt = {
+            "name": got,
+            "width": width,
+            "height": height,
+            "bpl": bpl,
+            "sizeimage": int(pix.sizeimage) or bpl * height,
+        }
         if self._soft_roi is not None:
             x, y, w, h = self._soft_roi
             if x + w > width or y + h > height:
@@ -258,9 +275,11 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
     # ---------------------------------------------------------------- trigger
     def _set_trigger(self, mode, source):
         if mode == "line":
-            raise CameraError(f"{self.name}: V4L2 webcams are free-running and have no hardware trigger input "
-                              f"(asked for line trigger on {source!r}); use 'software' (next frame after the call) "
-                              "or 'free'")
+            raise CameraError(
+                f"{self.name}: V4L2 webcams are free-running and have no hardware trigger input "
+                f"(asked for line trigger on {source!r}); use 'software' (next frame after the call) "
+                "or 'free'"
+            )
         self._trigger_time = None
 
     @os_errors

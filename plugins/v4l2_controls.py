@@ -61,8 +61,10 @@ class V4L2Controls:
         auto = self._control(_CID_EXPOSURE_AUTO, ("auto_exposure", "exposure_auto"))
         absolute = self._control(_CID_EXPOSURE_ABSOLUTE, ("exposure_time_absolute", "exposure_absolute"))
         if absolute is None:
-            raise CameraError(f"{self.name}: the device has no exposure_time_absolute control, so its exposure "
-                              "cannot be set in seconds")
+            raise CameraError(
+                f"{self.name}: the device has no exposure_time_absolute control, so its exposure "
+                "cannot be set in seconds"
+            )
         try:
             if auto is not None and auto.value != _EXPOSURE_MANUAL:
                 menu = getattr(auto, "data", None)
@@ -100,8 +102,9 @@ class V4L2Controls:
             self._software_roi(x, y, width, height)
             return
         if x + width > bounds.width or y + height > bounds.height:
-            raise ValueError(f"{self.name}: ROI {width}x{height}+{x}+{y} exceeds the sensor "
-                             f"{bounds.width}x{bounds.height}")
+            raise ValueError(
+                f"{self.name}: ROI {width}x{height}+{x}+{y} exceeds the sensor {bounds.width}x{bounds.height}"
+            )
         want = lvd.Rect(bounds.left + x, bounds.top + y, width, height)
         try:
             lvd.set_selection(self._dev, capture, lvd.SelectionTarget.CROP, want)
@@ -114,8 +117,12 @@ class V4L2Controls:
         self._soft_roi = None
         fmt = self._read_format(self._fmt["name"])
         scaled = (fmt["width"], fmt["height"]) != (got.width, got.height)
-        contains = (got.left <= want.left and got.top <= want.top
-                    and got.left + got.width >= want.left + width and got.top + got.height >= want.top + height)
+        contains = (
+            got.left <= want.left
+            and got.top <= want.top
+            and got.left + got.width >= want.left + width
+            and got.top + got.height >= want.top + height
+        )
         if tuple(got) == tuple(want) and not scaled:
             whole = tuple(got) == tuple(bounds)
             self._soft_roi, self._roi_kind = None, (None if whole else "hardware")
@@ -131,8 +138,9 @@ class V4L2Controls:
     def _software_roi(self, x, y, width, height):
         fmt = self._fmt
         if x < 0 or y < 0 or x + width > fmt["width"] or y + height > fmt["height"]:
-            raise ValueError(f"{self.name}: ROI {width}x{height}+{x}+{y} exceeds the frame "
-                             f"{fmt['width']}x{fmt['height']}")
+            raise ValueError(
+                f"{self.name}: ROI {width}x{height}+{x}+{y} exceeds the frame {fmt['width']}x{fmt['height']}"
+            )
         full = (x, y, width, height) == (0, 0, fmt["width"], fmt["height"])
         self._soft_roi = None if full else (x, y, width, height)
         self._roi_kind = None if full else "software"

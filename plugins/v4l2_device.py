@@ -57,17 +57,21 @@ def import_linuxpy(name: str):
     try:
         from linuxpy.video import device as lvd
     except (ImportError, OSError) as exc:
-        raise CameraError(f"{name}: the v4l2 camera backend needs linuxpy (Linux only), which could not "
-                          f"be imported ({type(exc).__name__}: {exc}); install it with: "
-                          'pip install "rsocl[v4l2]"') from exc
+        raise CameraError(
+            f"{name}: the v4l2 camera backend needs linuxpy (Linux only), which could not "
+            f"be imported ({type(exc).__name__}: {exc}); install it with: "
+            'pip install "rsocl[v4l2]"'
+        ) from exc
     return lvd
 
 
 def os_error(name: str, exc: OSError) -> CameraError:
     """The camera error of ``exc``: CameraDisconnected when the device went away, else CameraError."""
     if exc.errno in GONE:
-        return CameraDisconnected(f"{name}: the device went away ({os.strerror(exc.errno)}); "
-                                  "check the cable, then close and open the camera again")
+        return CameraDisconnected(
+            f"{name}: the device went away ({os.strerror(exc.errno)}); "
+            "check the cable, then close and open the camera again"
+        )
     reason = f"{os.strerror(exc.errno)} (errno {exc.errno})" if exc.errno else str(exc)
     if exc.errno == errno.EBUSY:
         reason += "; another program may be using the camera"

@@ -134,8 +134,10 @@ class V4L2Stream:
                 continue
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise CameraTimeout(f"{self.name}: no frame within {timeout:g} s (is the device streaming? "
-                                    "a long exposure or a low frame rate needs a longer timeout)")
+                raise CameraTimeout(
+                    f"{self.name}: no frame within {timeout:g} s (is the device streaming? "
+                    "a long exposure or a low frame rate needs a longer timeout)"
+                )
             events = poller.poll(max(1, int(math.ceil(remaining * 1000))))
             if events and not any(ev & select.POLLIN for _, ev in events):
                 # POLLERR / POLLHUP: DQBUF tells why (ENODEV when the device vanished)
@@ -156,8 +158,13 @@ class V4L2Stream:
             flags = int(buff.flags)
             stamp = int(buff.timestamp.secs) + int(buff.timestamp.usecs) * 1e-6
             clock = _BUF_TIMESTAMP_CLOCKS.get(flags & _BUF_TIMESTAMP_MASK, "unknown")
-            if (self._trigger_mode == "software" and self._trigger_time is not None and clock == "monotonic"
-                    and stamp > 0 and stamp < self._trigger_time):
+            if (
+                self._trigger_mode == "software"
+                and self._trigger_time is not None
+                and clock == "monotonic"
+                and stamp > 0
+                and stamp < self._trigger_time
+            ):
                 return None  # completed after trigger() but started before it
             fmt = self._fmt
             bpp = PIXEL_FORMATS[fmt["name"]][0]
@@ -190,5 +197,6 @@ class V4L2Stream:
             "device": self.path,
         }
         self._skipped = 0
-        return Frame(image=image, timestamp=stamp, pixel_format=fmt["name"],
-                     bit_depth=PIXEL_FORMATS[fmt["name"]][1], meta=meta)
+        return Frame(
+            image=image, timestamp=stamp, pixel_format=fmt["name"], bit_depth=PIXEL_FORMATS[fmt["name"]][1], meta=meta
+        )

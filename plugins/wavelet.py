@@ -58,8 +58,12 @@ class Wavelet(Regularizer):
         "wavelet": Option("haar", "", "wavelet: haar, db2 or db4 (PyWavelets names)"),
         "mode": Option("3d", "", "2d: transform y and x of each sub-frame; 3d: also t"),
         "levels": Option(0, "levels", "maximum decomposition levels (0: as many as the shape allows)", 0, 30),
-        "split_time": Option(True, "", "3d with T not a multiple of 2**levels: leading frames in 3-D, "
-                                       "the rest in 2-D (else the time axis limits the levels)"),
+        "split_time": Option(
+            True,
+            "",
+            "3d with T not a multiple of 2**levels: leading frames in 3-D, "
+            "the rest in 2-D (else the time axis limits the levels)",
+        ),
     }
 
     def __init__(self, **options):
@@ -106,7 +110,7 @@ class Wavelet(Regularizer):
         L = min(min(most[a] for a in axes), cap or 64)
         return Plan(L, axes, ((0, T, axes),))
 
-    def workspace_bytes(self, shape, dtype) -> int:
+    def workspace_bytes(self, shape, dtype, device=None) -> int:
         return int(np.prod(shape)) * np.dtype(dtype).itemsize if self.plan(shape).levels else 0
 
     # ------------------------------------------------------------------ device work
@@ -116,8 +120,12 @@ class Wavelet(Regularizer):
         coeffs = WAVELETS[self.wavelet]
         literal = lambda cs: "{" + ", ".join(repr(float(c)) + suffix for c in cs) + "}"  # noqa: E731
         return device_for_queue(queue).program(
-            ["wavelet.cl"], REAL="double" if double else "float", FLEN=len(coeffs["dec_lo"]),
-            DEC_LO=literal(coeffs["dec_lo"]), DEC_HI=literal(coeffs["dec_hi"]))
+            ["wavelet.cl"],
+            REAL="double" if double else "float",
+            FLEN=len(coeffs["dec_lo"]),
+            DEC_LO=literal(coeffs["dec_lo"]),
+            DEC_HI=literal(coeffs["dec_hi"]),
+        )
 
     def _workspace(self, x):
         import pyopencl.array as cla
@@ -163,8 +171,11 @@ class Wavelet(Regularizer):
         """Inverse of the coefficients in ``coeffs`` (overwritten) into ``out``, which is
         ``coeffs`` or ``other``; a block whose result lands in the other one is copied."""
         for block in plan.blocks:
-            res = synthesis_levels(prog, queue, [coeffs, other], 0, shape, itemsize, plan.levels, block) \
-                if block[2] else 0
+            res = (
+                synthesis_levels(prog, queue, [coeffs, other], 0, shape, itemsize, plan.levels, block)
+                if block[2]
+                else 0
+            )
             if [coeffs, other][res] is not out:
                 copy_frames(queue, out, [coeffs, other][res], shape, block, itemsize)
 
@@ -186,8 +197,9 @@ class Wavelet(Regularizer):
             return out
         work = self._workspace(c)
         cl.enqueue_copy(c.queue, work.data, c.data)
-        self._synthesise(self._program(c.queue, c.dtype), c.queue, plan, work.data, out.data, out.data,
-                         c.shape, c.dtype.itemsize)
+        self._synthesise(
+            self._program(c.queue, c.dtype), c.queue, plan, work.data, out.data, out.data, c.shape, c.dtype.itemsize
+        )
         return out
 
     def _denoise(self, x, weight, out):

@@ -28,8 +28,16 @@ def copy_box(queue, dst, src, shape, t0, box, itemsize):
     _, m, n = shape
     ct, cy, cx = box
     pitches = (n * itemsize, m * n * itemsize)
-    cl.enqueue_copy(queue, dst, src, src_origin=(0, 0, t0), dst_origin=(0, 0, t0),
-                    region=(cx * itemsize, cy, ct), src_pitches=pitches, dst_pitches=pitches)
+    cl.enqueue_copy(
+        queue,
+        dst,
+        src,
+        src_origin=(0, 0, t0),
+        dst_origin=(0, 0, t0),
+        region=(cx * itemsize, cy, ct),
+        src_pitches=pitches,
+        dst_pitches=pitches,
+    )
 
 
 def copy_frames(queue, dst, src, shape, block, itemsize):

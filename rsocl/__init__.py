@@ -30,8 +30,14 @@ True
 from rsocl import testing
 from rsocl.analysis.metrics import psnr, ssim
 from rsocl.device.context import get_device, list_devices
-from rsocl.files.hdf5 import (Capture, Reconstruction, load_capture, load_reconstruction, save_capture,
-                              save_reconstruction)
+from rsocl.files.hdf5 import (
+    Capture,
+    Reconstruction,
+    load_capture,
+    load_reconstruction,
+    save_capture,
+    save_reconstruction,
+)
 from rsocl.model.interpolation import interp3d
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Camera, Rig
@@ -43,13 +49,31 @@ from rsocl.solver.sets import batch_size, reconstruct_sets
 
 __version__ = "0.1.0"
 __all__ = [
-    "Camera", "Rig", "RollingShutterOperator",                                   # the model
-    "reconstruct", "reconstruct_sets", "batch_size", "Result",                   # the solver
-    "Regularizer", "Option",                                                     # regularizer plugins
-    "builtin_scene", "load_video", "load_scene", "benchmark_protocol", "simulate",  # scenes, snapshots
-    "interp3d", "psnr", "ssim",                                                  # baseline, metrics
-    "load_capture", "save_capture", "load_reconstruction", "save_reconstruction",  # HDF5 files
-    "Capture", "Reconstruction",
-    "get_device", "list_devices",                                                # OpenCL devices
-    "testing", "__version__",
+    "Camera",
+    "Rig",
+    "RollingShutterOperator",  # the model
+    "reconstruct",
+    "reconstruct_sets",
+    "batch_size",
+    "Result",  # the solver
+    "Regularizer",
+    "Option",  # regularizer plugins
+    "builtin_scene",
+    "load_video",
+    "load_scene",
+    "benchmark_protocol",
+    "simulate",  # scenes, snapshots
+    "interp3d",
+    "psnr",
+    "ssim",  # baseline, metrics
+    "load_capture",
+    "save_capture",
+    "load_reconstruction",
+    "save_reconstruction",  # HDF5 files
+    "Capture",
+    "Reconstruction",
+    "get_device",
+    "list_devices",  # OpenCL devices
+    "testing",
+    "__version__",
 ]

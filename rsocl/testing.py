@@ -100,7 +100,7 @@ def dottest(op, domain_shape=None, range_shape=None, *, rtol=None, seed=0, raise
     rng = np.random.default_rng(seed)
     x, y = rng.random(domain), rng.random(image)
     dtype = getattr(op, "dtype", None)
-    if dtype is not None:                  # the operator's own precision on both sides
+    if dtype is not None:  # the operator's own precision on both sides
         x, y = x.astype(dtype), y.astype(dtype)
     ax, aty = np.asarray(op.forward(x)), np.asarray(op.adjoint(y))
     assert ax.shape == image, f"op.forward(x) has shape {ax.shape}, expected range_shape {image}"
@@ -111,8 +111,10 @@ def dottest(op, domain_shape=None, range_shape=None, *, rtol=None, seed=0, raise
     rhs = float(np.vdot(x.astype(np.float64), aty.astype(np.float64)))
     passed = abs(lhs - rhs) <= rtol * max(abs(lhs), abs(rhs))
     if not passed and raiseerror:
-        raise AssertionError(f"dot test failed: <A x, y> = {lhs:.10g}, <x, Aᵀ y> = {rhs:.10g}, relative "
-                             f"difference {abs(lhs - rhs) / max(abs(lhs), abs(rhs), 1e-300):.3g} > rtol = {rtol:g}")
+        raise AssertionError(
+            f"dot test failed: <A x, y> = {lhs:.10g}, <x, Aᵀ y> = {rhs:.10g}, relative "
+            f"difference {abs(lhs - rhs) / max(abs(lhs), abs(rhs), 1e-300):.3g} > rtol = {rtol:g}"
+        )
     return passed
 
 
@@ -158,8 +160,9 @@ def _weights(weights) -> tuple:
     return tuple(check.non_negative(f"weights[{i}]", w) for i, w in enumerate(weights))
 
 
-def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 10), weights=(0.05, 0.5),
-                      pairs=4, seed=0):
+def check_regularizer(
+    regularizer, *, options=None, device=None, shape=(5, 12, 10), weights=(0.05, 0.5), pairs=4, seed=0
+):
     """Check the regularizer contract on ``device`` in every dtype it and the device support.
 
     Properties checked: options declared as :class:`~rsocl.solver.regularizer.Option` with a
@@ -234,10 +237,16 @@ def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 1
             with no_host_transfers():
                 returned = reg.denoise(x, weight, out=target)
             assert returned is target, f"{dtype}: denoise(out=...) must write and return out"
-            np.testing.assert_allclose(target.get(), values, rtol=0, atol=tol * max(1.0, np.abs(values).max()),
-                                       err_msg=f"{dtype}: out= result differs from the allocated one")
-        np.testing.assert_array_equal(reg.denoise(x, 0.0).get(), x_host, err_msg=f"{dtype}: weight 0 must be "
-                                                                                     "the identity")
+            np.testing.assert_allclose(
+                target.get(),
+                values,
+                rtol=0,
+                atol=tol * max(1.0, np.abs(values).max()),
+                err_msg=f"{dtype}: out= result differs from the allocated one",
+            )
+        np.testing.assert_array_equal(
+            reg.denoise(x, 0.0).get(), x_host, err_msg=f"{dtype}: weight 0 must be the identity"
+        )
         for _ in range(pairs):
             a = rng.random(shape).astype(dtype)
             b = (a + rng.normal(0, 0.2, shape)).astype(dtype)
@@ -245,8 +254,9 @@ def check_regularizer(regularizer, *, options=None, device=None, shape=(5, 12, 1
             db = reg.denoise(cla.to_device(dev.queue, b), weights[-1]).get().astype(np.float64)
             before = np.linalg.norm(a.astype(np.float64) - b)
             after = np.linalg.norm(da - db)
-            assert after <= before * (1 + 100 * tol), (f"{dtype}: not non-expansive: ‖D(x)-D(y)‖ = {after:.6g} > "
-                                                       f"‖x-y‖ = {before:.6g}")
+            assert after <= before * (1 + 100 * tol), (
+                f"{dtype}: not non-expansive: ‖D(x)-D(y)‖ = {after:.6g} > ‖x-y‖ = {before:.6g}"
+            )
         checked.append(dtype)
     assert checked, f"no dtype of {reg.dtypes} is supported on {dev.name}"
     return checked

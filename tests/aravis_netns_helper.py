@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import ctypes
 import json
-import os
 import signal
 import socket
 import subprocess
@@ -53,8 +52,10 @@ def network_interfaces():
 def require_private_netns():
     names = network_interfaces()
     if names != ["lo"]:
-        sys.stderr.write(f"refusing to run: network interfaces {names} are visible; Aravis discovery would "
-                         "broadcast on them. Run inside 'unshare --net'.\n")
+        sys.stderr.write(
+            f"refusing to run: network interfaces {names} are visible; Aravis discovery would "
+            "broadcast on them. Run inside 'unshare --net'.\n"
+        )
         sys.exit(3)
 
 
@@ -100,9 +101,17 @@ def expect_raises(kind, fn, *args):
 
 def frame_facts(frame):
     img = frame.image
-    return {"shape": list(img.shape), "dtype": str(img.dtype), "pixel_format": frame.pixel_format,
-            "bit_depth": frame.bit_depth, "min": int(img.min()), "max": int(img.max()),
-            "timestamp": frame.timestamp, "meta": frame.meta, "writeable": bool(img.flags.writeable)}
+    return {
+        "shape": list(img.shape),
+        "dtype": str(img.dtype),
+        "pixel_format": frame.pixel_format,
+        "bit_depth": frame.bit_depth,
+        "min": int(img.min()),
+        "max": int(img.max()),
+        "timestamp": frame.timestamp,
+        "meta": frame.meta,
+        "writeable": bool(img.flags.writeable),
+    }
 
 
 # ---------------------------------------------------------------------- Fake interface
@@ -143,8 +152,9 @@ def fake_checks(workdir):
             facts["line"] = str(expect_raises(CameraError, cam.set_trigger, "line", "Line7"))
             cam.set_trigger("line", "Line0")
             expect_raises(CameraError, cam.read, 0.1)  # not started
-        facts["open"] = str(expect_raises(CameraError, AravisCamera({"address": "NoSuchCamera",
-                                                                     "interfaces": ["Fake"]}).open))
+        facts["open"] = str(
+            expect_raises(CameraError, AravisCamera({"address": "NoSuchCamera", "interfaces": ["Fake"]}).open)
+        )
 
     def c_timeout(facts):
         # Aravis' Fake stream ignores TriggerMode (it runs at 25 Hz when triggered), so the
@@ -200,8 +210,11 @@ def start_fake_cameras(workdir, xml_for):
         if xml is not None:
             args += ["-g", str(xml)]
         log = open(workdir / f"fake-gv-{i + 1}.log", "wb")
-        procs.append(subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                      preexec_fn=_die_with_parent))
+        procs.append(
+            subprocess.Popen(
+                args, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent
+            )
+        )
         log.close()
     deadline = time.monotonic() + 10
     for address, proc in zip(ADDRESSES, procs):
@@ -238,14 +251,20 @@ def modified_genicam(workdir):
     xml = Aravis.Camera.new("Fake_1").get_device().get_genicam_xml()[0]
     Aravis.disable_interface("Fake")
     Aravis.enable_interface("GigEVision")
-    for old, new in (('<Float Name="ExposureTimeAbs"', '<Float Name="ExposureTime"'),
-                     ("<pFeature>ExposureTimeAbs</pFeature>", "<pFeature>ExposureTime</pFeature>"),
-                     ('<EnumEntry Name="Mono16" NameSpace="Standard">',
-                      '<EnumEntry Name="Mono12" NameSpace="Standard">\n\t\t\t<Value>17825797</Value>\n'
-                      '\t\t</EnumEntry>\n\t\t<EnumEntry Name="Mono16" NameSpace="Standard">'),
-                     ("</RegisterDescription>",
-                      '\t<Float Name="SensorReadoutTime" NameSpace="Custom">\n'
-                      f"\t\t<Value>{READOUT_US}</Value>\n\t\t<Unit>us</Unit>\n\t</Float>\n</RegisterDescription>")):
+    for old, new in (
+        ('<Float Name="ExposureTimeAbs"', '<Float Name="ExposureTime"'),
+        ("<pFeature>ExposureTimeAbs</pFeature>", "<pFeature>ExposureTime</pFeature>"),
+        (
+            '<EnumEntry Name="Mono16" NameSpace="Standard">',
+            '<EnumEntry Name="Mono12" NameSpace="Standard">\n\t\t\t<Value>17825797</Value>\n'
+            '\t\t</EnumEntry>\n\t\t<EnumEntry Name="Mono16" NameSpace="Standard">',
+        ),
+        (
+            "</RegisterDescription>",
+            '\t<Float Name="SensorReadoutTime" NameSpace="Custom">\n'
+            f"\t\t<Value>{READOUT_US}</Value>\n\t\t<Unit>us</Unit>\n\t</Float>\n</RegisterDescription>",
+        ),
+    ):
         if xml.count(old) != 1:
             raise RuntimeError(f"fake camera GenICam XML: expected one {old!r}, found {xml.count(old)}")
         xml = xml.replace(old, new)
@@ -257,10 +276,22 @@ def modified_genicam(workdir):
 def write_rig(path, formats, interfaces):
     lines = ["[rig]", f"shape = [{SHAPE[0]}, {SHAPE[1]}]", "dt = 4e-05", ""]
     for i, (address, fmt) in enumerate(zip(ADDRESSES, formats)):
-        lines += ["[[camera]]", 'backend = "aravis"', f'name = "gv{i + 1}"', f"angle = {90.0 * i}",
-                  f"t_e = {EXPOSURE}", "t_r = 4e-05", f"roi = [0, 0, {SHAPE[1]}, {SHAPE[0]}]",
-                  f'pixel_format = "{fmt}"', "", "[camera.config]", f'address = "{address}"',
-                  f"interfaces = {json.dumps(interfaces)}", "buffers = 4", ""]
+        lines += [
+            "[[camera]]",
+            'backend = "aravis"',
+            f'name = "gv{i + 1}"',
+            f"angle = {90.0 * i}",
+            f"t_e = {EXPOSURE}",
+            "t_r = 4e-05",
+            f"roi = [0, 0, {SHAPE[1]}, {SHAPE[0]}]",
+            f'pixel_format = "{fmt}"',
+            "",
+            "[camera.config]",
+            f'address = "{address}"',
+            f"interfaces = {json.dumps(interfaces)}",
+            "buffers = 4",
+            "",
+        ]
     path.write_text("\n".join(lines))
 
 
@@ -279,8 +310,9 @@ def gige_checks(workdir):
         procs = checks.run("start", lambda facts: start_fake_cameras(workdir, lambda i: xml if i == 1 else None))
         if procs is None:
             return checks.results
-        checks.results["start"]["ip_addr"] = subprocess.run(["ip", "-o", "addr", "show"], capture_output=True,
-                                                            text=True, timeout=5).stdout
+        checks.results["start"]["ip_addr"] = subprocess.run(
+            ["ip", "-o", "addr", "show"], capture_output=True, text=True, timeout=5
+        ).stdout
 
         def c_discover(facts):
             devices = discover(interfaces)
@@ -288,8 +320,10 @@ def gige_checks(workdir):
             expect(sorted(d["address"] for d in devices) == ADDRESSES, f"devices found: {devices}")
 
         def c_array(facts):
-            cams = [AravisCamera({"address": a, "interfaces": interfaces, "buffers": 4}, name=f"gv{i + 1}")
-                    for i, a in enumerate(ADDRESSES)]
+            cams = [
+                AravisCamera({"address": a, "interfaces": interfaces, "buffers": 4}, name=f"gv{i + 1}")
+                for i, a in enumerate(ADDRESSES)
+            ]
             try:
                 for cam in cams:
                     cam.open()
@@ -331,17 +365,27 @@ def gige_checks(workdir):
             out = capture_sets(rig, workdir / "capture.h5", sets=2, timeout=2.0)
             raw = load_raw(out)
             cap = load_capture(out, set_index=0)
-            facts.update(path=str(out), status=raw.status, sets_complete=raw.sets_complete,
-                         raw_shapes=[list(f.shape) for f in raw.frames], raw_dtypes=[str(f.dtype) for f in raw.frames],
-                         sets=[s.tolist() for s in raw.sets], frame_meta=[m[0] for m in raw.frame_meta],
-                         cameras=raw.meta.get("cameras"), warnings=raw.meta.get("warnings"),
-                         snapshot_sets=None if raw.snapshot_sets is None else list(raw.snapshot_sets.shape),
-                         snapshots=list(cap.snapshots.shape), rig_cameras=cap.rig.C)
+            facts.update(
+                path=str(out),
+                status=raw.status,
+                sets_complete=raw.sets_complete,
+                raw_shapes=[list(f.shape) for f in raw.frames],
+                raw_dtypes=[str(f.dtype) for f in raw.frames],
+                sets=[s.tolist() for s in raw.sets],
+                frame_meta=[m[0] for m in raw.frame_meta],
+                cameras=raw.meta.get("cameras"),
+                warnings=raw.meta.get("warnings"),
+                snapshot_sets=None if raw.snapshot_sets is None else list(raw.snapshot_sets.shape),
+                snapshots=list(cap.snapshots.shape),
+                rig_cameras=cap.rig.C,
+            )
             import h5py
 
             with h5py.File(out, "r") as h5:
-                facts["raw_attrs"] = [{k: (v.tolist() if hasattr(v, "tolist") else v)
-                                       for k, v in h5[f"raw/{i}"].attrs.items()} for i in range(len(ADDRESSES))]
+                facts["raw_attrs"] = [
+                    {k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in h5[f"raw/{i}"].attrs.items()}
+                    for i in range(len(ADDRESSES))
+                ]
 
         def c_disconnect(facts):
             # Camera 3 in software-trigger mode: its next register access (TriggerSoftware) times
@@ -389,8 +433,11 @@ def gige_checks(workdir):
         checks.run("disconnect", c_disconnect)
     finally:
         stop_fake_cameras(procs or [])
-        checks.results["stopped"] = {"ok": all(p.poll() is not None for p in procs or []),
-                                     "returncodes": [p.returncode for p in procs or []], "error": None}
+        checks.results["stopped"] = {
+            "ok": all(p.poll() is not None for p in procs or []),
+            "returncodes": [p.returncode for p in procs or []],
+            "error": None,
+        }
     return checks.results
 
 
@@ -413,8 +460,12 @@ def main(argv):
     else:
         Aravis.disable_interface("Fake")
         results = gige_checks(workdir)
-    results["netns"] = {"ok": network_interfaces() == ["lo"], "interfaces": network_interfaces(),
-                        "ip_link": ip_link(), "error": None}
+    results["netns"] = {
+        "ok": network_interfaces() == ["lo"],
+        "interfaces": network_interfaces(),
+        "ip_link": ip_link(),
+        "error": None,
+    }
     sys.stdout.write("\n" + json.dumps(results, default=repr) + "\n")
     sys.stdout.flush()
     return 0

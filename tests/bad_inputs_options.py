@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from test_bad_inputs import Bad
-
 import rsocl
+
+from test_bad_inputs import Bad
 
 
 def _rig():

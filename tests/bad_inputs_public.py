@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from test_bad_inputs import Bad
-
 from rsocl.testing import dottest
+
+from test_bad_inputs import Bad
 
 
 class _Identity:

@@ -34,8 +34,10 @@ from rsocl_plugins.aravis_formats import convert_buffer
 
 HELPER = Path(__file__).with_name("aravis_netns_helper.py")
 REQUIRE = os.environ.get("RSOCL_REQUIRE_ARAVIS") == "1"
-INSTALL = ("apt-get install gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config "
-           "gcc python3-dev iproute2 util-linux; pip install 'PyGObject<3.51'")
+INSTALL = (
+    "apt-get install gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config "
+    "gcc python3-dev iproute2 util-linux; pip install 'PyGObject<3.51'"
+)
 
 
 def _unavailable(reason):
@@ -65,8 +67,7 @@ def _netns_prefix():
     tried = []
     for prefix in (["unshare", "--net"], ["unshare", "--map-root-user", "--net"]):
         try:
-            res = subprocess.run(prefix + ["sh", "-c", "ip link set lo up"], capture_output=True, text=True,
-                                 timeout=10)
+            res = subprocess.run(prefix + ["sh", "-c", "ip link set lo up"], capture_output=True, text=True, timeout=10)
         except (OSError, subprocess.SubprocessError) as exc:
             tried.append(f"{' '.join(prefix)}: {exc}")
             continue
@@ -85,19 +86,20 @@ def _run_helper(mode, workdir, timeout):
         _unavailable(prefix)
     if mode == "gige" and shutil.which("arv-fake-gv-camera-0.8") is None:
         _unavailable("arv-fake-gv-camera-0.8 (Debian package aravis-tools) is not installed")
-    cmd = prefix + ["sh", "-c", 'ip link set lo up && exec "$0" "$@"', sys.executable, str(HELPER), mode,
-                    str(workdir)]
+    cmd = prefix + ["sh", "-c", 'ip link set lo up && exec "$0" "$@"', sys.executable, str(HELPER), mode, str(workdir)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         out, err = proc.communicate()
-        pytest.fail(f"aravis helper '{mode}' did not finish within {timeout} s\nstdout:\n{out[-3000:]}\n"
-                    f"stderr:\n{err[-3000:]}")
+        pytest.fail(
+            f"aravis helper '{mode}' did not finish within {timeout} s\nstdout:\n{out[-3000:]}\nstderr:\n{err[-3000:]}"
+        )
     if proc.returncode != 0:
-        pytest.fail(f"aravis helper '{mode}' exited with {proc.returncode}\nstdout:\n{out[-3000:]}\n"
-                    f"stderr:\n{err[-3000:]}")
+        pytest.fail(
+            f"aravis helper '{mode}' exited with {proc.returncode}\nstdout:\n{out[-3000:]}\nstderr:\n{err[-3000:]}"
+        )
     lines = [line for line in out.splitlines() if line.strip()]
     try:
         results = json.loads(lines[-1])
@@ -139,15 +141,20 @@ def test_convert_buffer_last_row_padding_optional_and_short_buffer():
 
 
 def test_config_validation():
-    cam = AravisCamera({"address": " 10.0.0.2 ", "interfaces": ["GigEVision"], "buffers": 3,
-                        "packet_size": 9000}, name="c")
+    cam = AravisCamera(
+        {"address": " 10.0.0.2 ", "interfaces": ["GigEVision"], "buffers": 3, "packet_size": 9000}, name="c"
+    )
     assert (cam.address, cam.interfaces, cam.buffers, cam.packet_size) == ("10.0.0.2", ["GigEVision"], 3, 9000)
     assert AravisCamera().buffers == 8 and AravisCamera().address is None
-    for bad, match in (({"adress": "x"}, r"unknown config key 'adress' \(did you mean 'address'\?\)"),
-                       ({"address": 5}, "address"),
-                       ({"interfaces": "Fake"}, "interfaces"), ({"interfaces": []}, "interfaces"),
-                       ({"buffers": 0}, "buffers"), ({"buffers": True}, "buffers"),
-                       ({"packet_size": 100}, "packet_size")):
+    for bad, match in (
+        ({"adress": "x"}, r"unknown config key 'adress' \(did you mean 'address'\?\)"),
+        ({"address": 5}, "address"),
+        ({"interfaces": "Fake"}, "interfaces"),
+        ({"interfaces": []}, "interfaces"),
+        ({"buffers": 0}, "buffers"),
+        ({"buffers": True}, "buffers"),
+        ({"packet_size": 100}, "packet_size"),
+    ):
         with pytest.raises(ValueError, match=match):
             AravisCamera(bad, name="c")
 
@@ -238,8 +245,7 @@ def test_gige_fake_cameras_stopped(gige):
 
 def test_gige_discover_four_cameras(gige):
     devices = _check(gige, "discover")["devices"]
-    assert sorted((d["address"], d["serial"]) for d in devices) == [
-        (f"127.0.0.{i}", f"GV0{i}") for i in range(1, 5)]
+    assert sorted((d["address"], d["serial"]) for d in devices) == [(f"127.0.0.{i}", f"GV0{i}") for i in range(1, 5)]
 
 
 def test_gige_array_software_trigger(gige):

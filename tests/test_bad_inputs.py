@@ -22,9 +22,10 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable
 
 import pytest
 
@@ -67,8 +68,11 @@ def gather(folder: Path = HERE) -> list:
 
 def file_hashes(folder: Path) -> dict:
     """``{relative path: md5}`` of every file under ``folder``."""
-    return {str(p.relative_to(folder)): hashlib.md5(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(folder)): hashlib.md5(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 def assert_names(message: str, names: Sequence[str], case_id: str) -> None:
@@ -107,7 +111,7 @@ def test_bad_input_fails_in_one_line_and_keeps_every_file(case, tmp_path, monkey
         assert_names(errors[0], case.names, case.id)
     else:
         with pytest.raises(case.errors) as info, warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)   # a unit slip warns and then fails: the error is tested
+            warnings.simplefilter("ignore", UserWarning)  # a unit slip warns and then fails: the error is tested
             case.api(tmp_path)
         message = str(info.value)
         assert "\n" not in message.strip(), f"{case.id}: message of more than one line: {message!r}"

@@ -23,7 +23,7 @@ def sets():
     rig = rsocl.Rig.paper_array(4, SHAPE, t_e=1e-4, t_r=3e-5)
     rng = np.random.default_rng(7)
     truth = rng.random((3, rig.T) + rig.shape)
-    truth[1] *= 0.5                       # the sets differ in scale, so a mix-up shows
+    truth[1] *= 0.5  # the sets differ in scale, so a mix-up shows
     return rig, truth, np.stack([ref.forward(rig, t) for t in truth])
 
 
@@ -37,7 +37,7 @@ def _tol(dtype):
 @pytest.mark.parametrize("projection", ["exact", "paper"])
 def test_each_set_equals_its_single_set_reconstruction(sets, dtype, projection):
     rig, truth, g = sets
-    lam, eta = [0.05, 0.1, 0.02], [0.3, 0.0, 0.5]            # per set; the second set is GAP
+    lam, eta = [0.05, 0.1, 0.02], [0.3, 0.0, 0.5]  # per set; the second set is GAP
     kw = dict(iterations=4 if SMALL else 7, tv_iterations=4, projection=projection, dtype=dtype, tune=False)
     batch = rsocl.reconstruct(g, rig, lam=lam, eta=eta, truth=truth, **kw)
     assert batch.datacube.shape == (3, rig.T) + rig.shape and batch.batch == 3
@@ -56,8 +56,9 @@ def test_each_set_equals_its_single_set_reconstruction(sets, dtype, projection):
 def test_batch_matches_the_numpy_reference(sets, dtype):
     rig, truth, g = sets
     kw = dict(iterations=5, lam=0.05, eta=0.3, tv_iterations=3)
-    got = rsocl.reconstruct(g, rig, dtype=dtype, regularizer_options={"temporal_weight": 2.0}, tune=False,
-                            **kw).datacube
+    got = rsocl.reconstruct(
+        g, rig, dtype=dtype, regularizer_options={"temporal_weight": 2.0}, tune=False, **kw
+    ).datacube
     for i in range(3):
         want = ref.admm(rig, g[i], temporal_weight=2.0, step=STEP, **kw)
         np.testing.assert_allclose(got[i], want, atol=(2e-4 if dtype == "float32" else 1e-10) * np.abs(want).max())
@@ -94,6 +95,7 @@ def test_a_batch_of_one_set_and_a_regularizer_without_batches(sets):
 
 def test_operator_and_tv_take_a_batch_in_one_call(device, dtype, rng):
     import pyopencl.array as cla
+
     from rsocl_plugins.tv import TV
 
     rig = rsocl.Rig.paper_array(4, SHAPE, t_e=1e-4, t_r=3e-5)
@@ -107,20 +109,22 @@ def test_operator_and_tv_take_a_batch_in_one_call(device, dtype, rng):
         np.testing.assert_allclose(op.adjoint(g)[i], op.adjoint(g[i]), rtol=tol, atol=tol)
     # TV: one weight per set; no temporal difference across the set boundary (a constant set stays constant)
     x = np.stack([rng.random(op.domain_shape), np.full(op.domain_shape, 0.25)]).astype(dtype)
-    x[1, 0] = 0.75                                          # an edge in time inside the second set
+    x[1, 0] = 0.75  # an edge in time inside the second set
     tv = TV(iterations=6, temporal_weight=1.5)
     out = tv.denoise(cla.to_device(device.queue, x), [0.2, 0.0]).get()
     want = ref.tv_chambolle(x[0], 0.2, 6, 1.5, STEP)
     np.testing.assert_allclose(out[0], want, atol=1e-4 if dtype == "float32" else 1e-10)
-    np.testing.assert_array_equal(out[1], x[1])             # weight 0: the set is copied
+    np.testing.assert_array_equal(out[1], x[1])  # weight 0: the set is copied
     both = tv.denoise(cla.to_device(device.queue, x), 0.3).get()
     for i in range(2):
-        np.testing.assert_allclose(both[i], ref.tv_chambolle(x[i], 0.3, 6, 1.5, STEP),
-                                   atol=1e-4 if dtype == "float32" else 1e-10)
+        np.testing.assert_allclose(
+            both[i], ref.tv_chambolle(x[i], 0.3, 6, 1.5, STEP), atol=1e-4 if dtype == "float32" else 1e-10
+        )
 
 
 def test_sums_per_set(device, rng):
     import pyopencl.array as cla
+
     from rsocl.device.reduction import sum_sq_diff
 
     a, b = rng.random((5, 3, 7)), rng.random((5, 3, 7))
@@ -130,13 +134,16 @@ def test_sums_per_set(device, rng):
         sum_sq_diff(cla.to_device(device.queue, a), sets=4)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(lam=[0.1, 0.2]), r"lam must have one value per set: 3 for this batch, got 2"),
-    (dict(eta=[0.1, 0.2, 0.3, 0.4]), r"eta must have one value per set: 3 for this batch, got 4"),
-    (dict(lam=[0.1, -1, 0.2]), r"lam\[1\] must be >= 0"),
-    (dict(eta=[[0.1]]), r"eta must be a number >= 0 or a sequence"),
-    (dict(x0=np.zeros((2, 1, 1, 1))), r"x0 must have shape \(T, m, n\)"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(lam=[0.1, 0.2]), r"lam must have one value per set: 3 for this batch, got 2"),
+        (dict(eta=[0.1, 0.2, 0.3, 0.4]), r"eta must have one value per set: 3 for this batch, got 4"),
+        (dict(lam=[0.1, -1, 0.2]), r"lam\[1\] must be >= 0"),
+        (dict(eta=[[0.1]]), r"eta must be a number >= 0 or a sequence"),
+        (dict(x0=np.zeros((2, 1, 1, 1))), r"x0 must have shape \(T, m, n\)"),
+    ],
+)
 def test_bad_batch_arguments_are_named(sets, kwargs, match):
     rig, truth, g = sets
     with pytest.raises(ValueError, match=match):
@@ -160,6 +167,7 @@ def test_bad_batch_shapes_are_named(sets):
         op.forward(np.zeros((2, 3) + op.domain_shape))
     with pytest.raises(ValueError, match=r"weight must be a number or one per set \(3 values\)"):
         import pyopencl.array as cla
+
         from rsocl_plugins.tv import TV
 
         TV().denoise(cla.zeros(op.queue, (3,) + op.domain_shape, np.float32), [0.1, 0.2])
@@ -173,21 +181,26 @@ def test_batch_size_follows_the_device_memory(sets, monkeypatch):
     reg = rsocl.solver.request.make_regularizer("tv")
 
     def total(b, start=False):
-        return rsocl.solver.memory.batch_memory((rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b,
-                                               start=start)[1]
+        return rsocl.solver.memory.batch_memory(
+            (rig.T,) + rig.shape, rig.n_channels, np.float32, reg, "exact", b, start=start
+        )[1]
 
-    memory = (total(4) + total(5)) / 2 / 0.8            # four sets fit in 80 % of it, five do not
+    memory = (total(4) + total(5)) / 2 / 0.8  # four sets fit in 80 % of it, five do not
     monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(memory)))
     assert batch_size(rig, device=device) == 4
     assert batch_size(rig, device=device, memory_fraction=(total(2) + total(3)) / 2 / memory) == 2
-    memory = (total(3, True) + total(4, True)) / 2 / 0.8   # a start cube per set: three sets, not four
+    memory = (total(3, True) + total(4, True)) / 2 / 0.8  # a start cube per set: three sets, not four
     monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: int(memory)))
     assert batch_size(rig, device=device, start=True) == 3
     monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: total(1) // 2))
     with pytest.raises(ValueError, match="device memory"):
         batch_size(rig, device=device)
-    for kwargs, match in [(dict(limit=0), "limit"), (dict(sets=0), "sets"), (dict(memory_fraction=2), "memory_fraction"),
-                          (dict(projection="diag"), "projection")]:
+    for kwargs, match in [
+        (dict(limit=0), "limit"),
+        (dict(sets=0), "sets"),
+        (dict(memory_fraction=2), "memory_fraction"),
+        (dict(projection="diag"), "projection"),
+    ]:
         with pytest.raises(ValueError, match=match):
             batch_size(rig, device=device, **kwargs)
 
@@ -202,16 +215,16 @@ def test_batch_size_on_a_cpu_keeps_the_batch_in_its_cache(sets, monkeypatch):
         return rsocl.solver.memory.batch_memory(cube, rig.n_channels, np.float32, reg, "exact", b)[1]
 
     monkeypatch.setattr(type(device), "is_cpu", property(lambda self: True))
-    cache = (total(3) + total(4)) / 2 / 0.75            # three sets fit in three quarters of it, four do not
+    cache = (total(3) + total(4)) / 2 / 0.75  # three sets fit in three quarters of it, four do not
     monkeypatch.setattr(type(device), "cache_bytes", property(lambda self: int(cache)))
     assert batch_size(rig, sets=8, device=device) == 3
-    assert batch_size(rig, sets=8, device=device, start=True) == 3      # the start cube, read once: not cached
+    assert batch_size(rig, sets=8, device=device, start=True) == 3  # the start cube, read once: not cached
     assert batch_size(rig, sets=8, device=device, cache_fraction=(total(2) + total(3)) / 2 / cache) == 2
     assert batch_size(rig, sets=8, device=device, cache_fraction=None) == 8
     monkeypatch.setattr(type(device), "cache_bytes", property(lambda self: 16))
-    assert batch_size(rig, sets=8, device=device) == 1                     # at least one set
+    assert batch_size(rig, sets=8, device=device) == 1  # at least one set
     monkeypatch.setattr(type(device), "is_cpu", property(lambda self: False))
-    assert batch_size(rig, sets=8, device=device) == 8                     # a GPU fills its memory instead
+    assert batch_size(rig, sets=8, device=device) == 8  # a GPU fills its memory instead
     with pytest.raises(ValueError, match="cache_fraction"):
         batch_size(rig, device=device, cache_fraction=0)
 
@@ -244,8 +257,12 @@ def test_a_tuned_batch_applies_its_first_sets_choice_to_every_set(sets):
     first = rsocl.reconstruct(g[0], rig, **kw)
     assert first.params["tuning"]["chosen"] == chosen
     np.testing.assert_allclose(batch.datacube[0], first.datacube, atol=2e-6 * np.abs(first.datacube).max())
-    fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]},
-                 blend=batch.params["blend"])                  # the search's blend too, towards the set's own start
+    fixed = dict(
+        kw,
+        lam=chosen["lam"],
+        regularizer_options={"temporal_weight": chosen["temporal_weight"]},
+        blend=batch.params["blend"],
+    )  # the search's blend too, towards the set's own start
     second = rsocl.reconstruct(g[1], rig, x0=interp3d(g[1], rig), tune=False, **fixed)
     np.testing.assert_allclose(batch.datacube[1], second.datacube, atol=2e-6 * np.abs(second.datacube).max())
 
@@ -255,8 +272,12 @@ def test_tuned_sets_in_several_batches_share_the_first_batchs_choice(sets):
     kw = dict(iterations=4, tv_iterations=3, eta=0.3)
     joined = reconstruct_sets(g, rig, batch=2, **kw)
     chosen = joined.params["tuning"]["chosen"]
-    fixed = dict(kw, lam=chosen["lam"], regularizer_options={"temporal_weight": chosen["temporal_weight"]},
-                 blend=joined.params["blend"])
+    fixed = dict(
+        kw,
+        lam=chosen["lam"],
+        regularizer_options={"temporal_weight": chosen["temporal_weight"]},
+        blend=joined.params["blend"],
+    )
     last = rsocl.reconstruct(g[2], rig, x0=interp3d(g[2], rig), tune=False, **fixed).datacube
     np.testing.assert_allclose(joined.datacube[2], last, atol=2e-6 * np.abs(last).max())
 
@@ -267,11 +288,11 @@ def test_own_inverses_rule():
     same = np.ones((3, 4, 2, 2), bool)
     differ = same.copy()
     differ[1, 0, 0, 0] = False
-    assert not own_inverses("exact", [0.2, 0.3], None, 1)                 # one set: nothing to share
-    assert own_inverses("exact", [0.2, 0.3, 0.2], None, 3)                # the exact blocks hold eta
-    assert not own_inverses("paper", [0.2, 0.3, 0.2], None, 3)            # the paper's do not
+    assert not own_inverses("exact", [0.2, 0.3], None, 1)  # one set: nothing to share
+    assert own_inverses("exact", [0.2, 0.3, 0.2], None, 3)  # the exact blocks hold eta
+    assert not own_inverses("paper", [0.2, 0.3, 0.2], None, 3)  # the paper's do not
     assert not own_inverses("exact", 0.2, same, 3)
-    assert own_inverses("paper", 0.2, differ, 3)                          # different pixels left out
+    assert own_inverses("paper", 0.2, differ, 3)  # different pixels left out
 
 
 @pytest.mark.parametrize("projection", ["exact", "paper"])
@@ -286,7 +307,7 @@ def test_the_memory_count_and_the_solver_agree_on_per_set_inverses(sets, monkeyp
     if case == "eta per set":
         kwargs["eta"] = [0.1, 0.2, 0.3]
     elif case == "saturation per set":
-        kwargs["saturation"] = float(np.quantile(g[0], 0.9))             # set 1 (half the scale) loses fewer pixels
+        kwargs["saturation"] = float(np.quantile(g[0], 0.9))  # set 1 (half the scale) loses fewer pixels
     counted, allocated = [], []
     memory_bytes, inverses = problem.memory_bytes, admm.ADMM._inverses
 
@@ -341,7 +362,7 @@ def test_a_gap_set_in_a_batch_gets_the_default_lam_it_gets_alone():
     kw = dict(iterations=3, tune=False, dtype="float64")
     batch = rsocl.reconstruct(g, rig, eta=[0.2, 0.0], **kw)
     alone = [rsocl.reconstruct(g[i], rig, eta=eta, **kw) for i, eta in enumerate((0.2, 0.0))]
-    assert alone[0].params["lam"] != pytest.approx(alone[1].params["lam"])       # scaled, unscaled
+    assert alone[0].params["lam"] != pytest.approx(alone[1].params["lam"])  # scaled, unscaled
     assert batch.params["lam"] == pytest.approx([one.params["lam"] for one in alone])
     for i, one in enumerate(alone):
         np.testing.assert_allclose(batch.datacube[i], one.datacube, atol=1e-12)

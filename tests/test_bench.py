@@ -8,8 +8,19 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from rsocl.bench.run import (BASELINE, COLUMNS, BenchPoint, build_points, device_memory_bytes, interp3d, pareto_front,
-                             parse_sweep, run_bench, run_point, write_outputs)
+from rsocl.bench.run import (
+    BASELINE,
+    COLUMNS,
+    BenchPoint,
+    build_points,
+    device_memory_bytes,
+    interp3d,
+    pareto_front,
+    parse_sweep,
+    run_bench,
+    run_point,
+    write_outputs,
+)
 from rsocl.cli import bench as bench_cli
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
@@ -39,16 +50,16 @@ def test_single_point_row():
     assert row["ssim_mean"] == pytest.approx(np.mean(row["ssim_per_subframe"]))
     assert row["seconds"] > 0 and 0 < row["seconds_per_iteration"] <= row["seconds"]
     assert len(row["_history"]["psnr"]) == 5
-    assert row["_history"]["psnr"][-1] == pytest.approx(row["psnr"], abs=1e-3)   # same truth, same window
+    assert row["_history"]["psnr"][-1] == pytest.approx(row["psnr"], abs=1e-3)  # same truth, same window
     # memory: the buffers rsocl allocates, by hand for TV (3 planes of workspace and xnext)
     K, (m, n), T = 4, rig.shape, rig.T
-    by_hand = 4 * K * m * n + 4 * K * m * n + 2 * K * 4 + 4 * K * m * n           # geometry + snapshots
-    by_hand += 4 * (4 * T * m * n) + 2 * 4 * K * m * n + 4 * K * K * m * n       # theta b f u, H theta, inverse
-    by_hand += 16                                                               # per-set eta and dual switch
-    by_hand += 3 * 4 * T * m * n + 4 * n                                        # TV workspace
+    by_hand = 4 * K * m * n + 4 * K * m * n + 2 * K * 4 + 4 * K * m * n  # geometry + snapshots
+    by_hand += 4 * (4 * T * m * n) + 2 * 4 * K * m * n + 4 * K * K * m * n  # theta b f u, H theta, inverse
+    by_hand += 16  # per-set eta and dual switch
+    by_hand += 3 * 4 * T * m * n + 4 * n  # TV workspace
     # the timed run is a user's run, without the ground truth on the device
     assert row["peak_device_memory_bytes"] == by_hand == device_memory_bytes(rig, "tv", "float32", with_truth=False)
-    assert run_point(point, {})["_history"] is None                              # no history asked, no extra run
+    assert run_point(point, {})["_history"] is None  # no history asked, no extra run
     # a self-tuned point also holds its interp3d start (T m n values), or more while it searches
     tuned = run_point(BenchPoint(shape=16, iterations=5, tune=True), {})
     assert tuned["peak_device_memory_bytes"] == device_memory_bytes(rig, "tv", "float32", with_truth=False, tuned=True)
@@ -56,32 +67,41 @@ def test_single_point_row():
 
 
 def test_interp3d_exact_for_a_scene_constant_in_time(still_scene):
-    row = run_point(BenchPoint(scene=still_scene, shape=16, regularizer=BASELINE, iterations=0,
-                               tv_iterations=None), {})
+    row = run_point(BenchPoint(scene=still_scene, shape=16, regularizer=BASELINE, iterations=0, tv_iterations=None), {})
     assert row["psnr"] == math.inf or row["psnr"] > 60
     assert row["ssim_mean"] == pytest.approx(1.0, abs=1e-6)
     assert row["peak_device_memory_bytes"] == 0 and row["seconds"] >= 0
     # directly, with one camera, eight cameras and a cropped (row-map) rig
     image = np.random.default_rng(0).uniform(size=(12, 12))
-    for rig in (Rig.paper_array(1, (12, 12), 180e-6, 35e-6), Rig.paper_array(8, (12, 12), 180e-6, 35e-6),
-                Rig.paper_array(4, (12, 12), 180e-6, 35e-6).crop((2, 2, 8, 8))):
-        cube = np.repeat(image[None, :rig.shape[0], :rig.shape[1]], rig.T, axis=0)
+    for rig in (
+        Rig.paper_array(1, (12, 12), 180e-6, 35e-6),
+        Rig.paper_array(8, (12, 12), 180e-6, 35e-6),
+        Rig.paper_array(4, (12, 12), 180e-6, 35e-6).crop((2, 2, 8, 8)),
+    ):
+        cube = np.repeat(image[None, : rig.shape[0], : rig.shape[1]], rig.T, axis=0)
         g = RollingShutterOperator(rig, dtype="float64").forward(cube)
         np.testing.assert_allclose(interp3d(g, rig), cube, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("t_e, dt, some_empty", [(26e-6, 87.5e-6, True), (28e-6, 35e-6, False),
-                                                  (180e-6, 35e-6, False), (180e-6, 87.5e-6, False),
-                                                  (1.7e-3, 35e-6, False)])
+@pytest.mark.parametrize(
+    "t_e, dt, some_empty",
+    [
+        (26e-6, 87.5e-6, True),
+        (28e-6, 35e-6, False),
+        (180e-6, 35e-6, False),
+        (180e-6, 87.5e-6, False),
+        (1.7e-3, 35e-6, False),
+    ],
+)
 def test_interp3d_exact_for_a_constant_scene_under_the_binary_mask(t_e, dt, some_empty):
     # a binary window averages the sub-frames whose start it holds: their count, not t_e/dt
     image = np.random.default_rng(1).uniform(0.2, 1.0, size=(9, 11))
     rig = Rig.paper_array(4, image.shape, t_e, 35e-6, mask="binary", dt=dt)
     cube = np.repeat(image[None], rig.T, axis=0)
     g = RollingShutterOperator(rig, dtype="float64").forward(cube)
-    empty = g == 0                  # rows start between sub-frames (dt > t_r): a short window may hold none
+    empty = g == 0  # rows start between sub-frames (dt > t_r): a short window may hold none
     assert empty.any() == some_empty and not empty.all()
-    seen = ~empty.all(axis=0)                          # a pixel no camera saw is not observed at all
+    seen = ~empty.all(axis=0)  # a pixel no camera saw is not observed at all
     assert seen.mean() > 0.7
     np.testing.assert_allclose(interp3d(g, rig)[:, seen], cube[:, seen], rtol=0, atol=1e-12)
 
@@ -90,7 +110,7 @@ def test_interp3d_times_a_binary_sample_at_the_middle_of_its_sub_frames():
     rig = Rig.paper_array(2, (6, 6), 180e-6, 35e-6, mask="binary")
     win = rig.windows
     first, last = np.ceil(win.index + win.fraction), np.minimum(np.floor(win.end), rig.T - 1)
-    ramp = np.arange(rig.T, dtype=np.float64) + 0.5                 # the scene is its own time
+    ramp = np.arange(rig.T, dtype=np.float64) + 0.5  # the scene is its own time
     g = RollingShutterOperator(rig, dtype="float64").forward(np.broadcast_to(ramp[:, None, None], (rig.T,) + rig.shape))
     est = interp3d(g, rig)
     y, x = 5, 0
@@ -106,13 +126,13 @@ def test_interp3d_is_linear_in_time_between_samples():
     centre = win.index + win.fraction + win.length[:, None, None] / 2
     g = np.stack([np.full(rig.shape, 1.0), np.full(rig.shape, 3.0)]) * win.length[:, None, None]
     est = interp3d(g, rig)
-    y, x = 5, 0                                        # camera 0 late, camera 1 early at this pixel
+    y, x = 5, 0  # camera 0 late, camera 1 early at this pixel
     t0, t1 = centre[0, y, x], centre[1, y, x]
     assert t1 < t0
-    s = int(np.floor((t0 + t1) / 2))                   # a sub-frame centre between the two samples
+    s = int(np.floor((t0 + t1) / 2))  # a sub-frame centre between the two samples
     expected = 3.0 + (s + 0.5 - t1) / (t0 - t1) * (1.0 - 3.0)
     assert est[s, y, x] == pytest.approx(expected)
-    assert est[0, y, x] == pytest.approx(3.0) and est[-1, y, x] == pytest.approx(1.0)   # held outside
+    assert est[0, y, x] == pytest.approx(3.0) and est[-1, y, x] == pytest.approx(1.0)  # held outside
 
 
 def test_tv_beats_interp3d_on_the_builtin_scene():
@@ -127,8 +147,8 @@ def test_coarser_dt_keeps_the_intensity_scale(still_scene):
     fine = run_point(BenchPoint(scene=still_scene, shape=12, iterations=30), cache)
     coarse = run_point(BenchPoint(scene=still_scene, shape=12, iterations=30, dt_factor=2), cache)
     assert coarse["T"] < fine["T"] and coarse["dt_us"] == pytest.approx(70.0)
-    assert coarse["subframes_evaluated"] == fine["subframes_evaluated"]       # both on the dt = t_r truth
-    assert coarse["psnr"] > fine["psnr"] - 3.0                                 # unscaled: ~6 dB lower
+    assert coarse["subframes_evaluated"] == fine["subframes_evaluated"]  # both on the dt = t_r truth
+    assert coarse["psnr"] > fine["psnr"] - 3.0  # unscaled: ~6 dB lower
 
 
 def test_roi_crop_is_compared_with_the_full_roi_on_the_same_pixels():
@@ -141,11 +161,16 @@ def test_roi_crop_is_compared_with_the_full_roi_on_the_same_pixels():
 
 
 def test_pareto_front_on_synthetic_rows():
-    rows = [{"seconds": 1.0, "psnr": 20.0}, {"seconds": 2.0, "psnr": 19.0},   # 1 dominated by 0
-            {"seconds": 0.5, "psnr": 15.0}, {"seconds": 4.0, "psnr": 25.0},
-            {"seconds": 4.0, "psnr": 24.0},                                   # same time, lower PSNR
-            {"seconds": 3.0, "psnr": float("nan")}, {"seconds": None, "psnr": 30.0},
-            {"seconds": 8.0, "psnr": math.inf}]
+    rows = [
+        {"seconds": 1.0, "psnr": 20.0},
+        {"seconds": 2.0, "psnr": 19.0},  # 1 dominated by 0
+        {"seconds": 0.5, "psnr": 15.0},
+        {"seconds": 4.0, "psnr": 25.0},
+        {"seconds": 4.0, "psnr": 24.0},  # same time, lower PSNR
+        {"seconds": 3.0, "psnr": float("nan")},
+        {"seconds": None, "psnr": 30.0},
+        {"seconds": 8.0, "psnr": math.inf},
+    ]
     assert pareto_front(rows) == [2, 0, 3, 7]
     assert pareto_front([]) == []
 
@@ -163,8 +188,8 @@ def test_points_and_sweep_parsing():
     pts = [p for p, _ in points]
     assert pts[0] == default and len(set(pts)) == len(pts)
     assert BenchPoint(shape=16, iterations=8, cameras=1) in pts
-    assert sum(p.regularizer == BASELINE for p in pts) == 3                    # C=4, C=1, ROI 8
-    assert pts[-1].roi == 8 and pts[-2].roi == 8                                # crops last, after the full ROI
+    assert sum(p.regularizer == BASELINE for p in pts) == 3  # C=4, C=1, ROI 8
+    assert pts[-1].roi == 8 and pts[-2].roi == 8  # crops last, after the full ROI
     assert any("roi=32" in n for n in notes) and any("nope" in n for n in notes)
     assert parse_sweep("tune=false,1") == ("tune", [False, True])
     with pytest.raises(ValueError, match="true/false"):
@@ -192,7 +217,7 @@ def test_writers_produce_csv_markdown_and_pngs(tmp_path, tiny_result):
     assert not tiny_result.notes
     files = write_outputs(tiny_result, tmp_path)
     assert sorted(f.name for f in files) == sorted(FILES)
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(FILES)        # no temporary files left
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(FILES)  # no temporary files left
     with open(tmp_path / "bench.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert len(rows) == len(tiny_result.rows) and tuple(rows[0]) == COLUMNS
@@ -221,8 +246,25 @@ def test_cmd_bench_quick_end_to_end(tmp_path, capsys):
     parser = argparse.ArgumentParser(prog="rsocl")
     bench_cli.add_parser(parser.add_subparsers(dest="command"))
     out = tmp_path / "b"
-    args = parser.parse_args(["bench", "--quick", "--shape", "12", "--iterations", "4", "--out", str(out),
-                              "--quiet", "--sweep", "cameras=1,2", "--sweep", "dt", "--sweep", "roi"])
+    args = parser.parse_args(
+        [
+            "bench",
+            "--quick",
+            "--shape",
+            "12",
+            "--iterations",
+            "4",
+            "--out",
+            str(out),
+            "--quiet",
+            "--sweep",
+            "cameras=1,2",
+            "--sweep",
+            "dt",
+            "--sweep",
+            "roi",
+        ]
+    )
     assert args.func is bench_cli.cmd_bench
     assert bench_cli.cmd_bench(args) == 0
     assert sorted(p.name for p in out.iterdir()) == sorted(FILES)
@@ -239,8 +281,9 @@ def test_ssim_of_an_roi_under_3_pixels_is_reported_as_not_available(tmp_path):
     parser = argparse.ArgumentParser(prog="rsocl")
     bench_cli.add_parser(parser.add_subparsers(dest="command"))
     out = tmp_path / "b"
-    args = parser.parse_args(["bench", "--quick", "--shape", "12", "--iterations", "3", "--out", str(out),
-                              "--quiet", "--sweep", "roi=2"])
+    args = parser.parse_args(
+        ["bench", "--quick", "--shape", "12", "--iterations", "3", "--out", str(out), "--quiet", "--sweep", "roi=2"]
+    )
     assert bench_cli.cmd_bench(args) == 0
     text = (out / "bench.md").read_text()
     assert "nan" not in text and "| n/a |" in text and "SSIM n/a: the ROI's frames are under 3 pixels" in text
@@ -257,19 +300,22 @@ def test_cmd_bench_missing_scene(tmp_path):
 BENCH_SMALL = ["bench", "--quick", "--shape", "12", "--iterations", "2", "--sweep", "cameras=1", "--quiet"]
 
 
-@pytest.mark.parametrize("extra, match", [
-    (["--lam", "-1"], r"--lam must be >= 0, got -1.0"),
-    (["--eta", "-0.5"], r"--eta must be >= 0 \(0 runs GAP\), got -0.5"),
-    (["--t-r-us", "-3"], r"--t-r-us must be > 0 µs, got -3.0"),
-    (["--t-e-us", "0"], r"--t-e-us must be > 0 µs, got 0.0"),
-    (["--cameras", "9"], r"--cameras must be an integer >= 1 and <= 8, got 9"),
-    (["--tv-iterations", "0"], r"--tv-iterations must be an integer >= 1, got 0"),
-    (["--sweep", "roi=13"], r"--sweep roi=13: roi must be <= shape = 12 pixels"),
-    (["--sweep", "cameras=0"], r"--sweep cameras=0: cameras must be an integer >= 1 and <= 8, got 0"),
-    (["--sweep", "dt=0.5"], r"--sweep dt=0.5: dt_factor must be >= 1"),
-    (["--sweep", "dtype=float16"], r"--sweep dtype=float16: dtype must be one of \['float32', 'float64'\]"),
-    (["--sweep", "regularizer=nope"], r"--sweep regularizer=nope: .*nope"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (["--lam", "-1"], r"--lam must be >= 0, got -1.0"),
+        (["--eta", "-0.5"], r"--eta must be >= 0 \(0 runs GAP\), got -0.5"),
+        (["--t-r-us", "-3"], r"--t-r-us must be > 0 µs, got -3.0"),
+        (["--t-e-us", "0"], r"--t-e-us must be > 0 µs, got 0.0"),
+        (["--cameras", "9"], r"--cameras must be an integer >= 1 and <= 8, got 9"),
+        (["--tv-iterations", "0"], r"--tv-iterations must be an integer >= 1, got 0"),
+        (["--sweep", "roi=13"], r"--sweep roi=13: roi must be <= shape = 12 pixels"),
+        (["--sweep", "cameras=0"], r"--sweep cameras=0: cameras must be an integer >= 1 and <= 8, got 0"),
+        (["--sweep", "dt=0.5"], r"--sweep dt=0.5: dt_factor must be >= 1"),
+        (["--sweep", "dtype=float16"], r"--sweep dtype=float16: dtype must be one of \['float32', 'float64'\]"),
+        (["--sweep", "regularizer=nope"], r"--sweep regularizer=nope: .*nope"),
+    ],
+)
 def test_cmd_bench_refuses_bad_values_before_running(tmp_path, capsys, monkeypatch, extra, match):
     import re
 
@@ -290,7 +336,7 @@ def test_cmd_bench_fails_when_every_reconstruction_point_is_skipped(tmp_path, ca
 
     real = bench_run.run_point
 
-    def lost(point, cache, **kwargs):                # the baseline runs, every reconstruction fails
+    def lost(point, cache, **kwargs):  # the baseline runs, every reconstruction fails
         if not point.is_baseline:
             raise RuntimeError(f"device lost (C={point.cameras})")
         return real(point, cache, **kwargs)
@@ -303,8 +349,13 @@ def test_cmd_bench_fails_when_every_reconstruction_point_is_skipped(tmp_path, ca
     assert "C=1: failed (RuntimeError: device lost (C=1))" in captured.err
     assert not (tmp_path / "b").exists()
     # some points measured: exit 0, and with --quiet the skipped ones are said on stderr
-    monkeypatch.setattr(bench_run, "run_point", lambda point, cache, **kwargs: lost(point, cache, **kwargs)
-                        if point.cameras == 1 else real(point, cache, **kwargs))
+    monkeypatch.setattr(
+        bench_run,
+        "run_point",
+        lambda point, cache, **kwargs: (
+            lost(point, cache, **kwargs) if point.cameras == 1 else real(point, cache, **kwargs)
+        ),
+    )
     assert main(BENCH_SMALL + ["--out", str(tmp_path / "b")]) == 0
     captured = capsys.readouterr()
     assert "points in" in captured.out

@@ -5,29 +5,26 @@ is mapped back to the reference grid and the target (Gaussian dots) is
 evaluated there, so the true marker images and the true homography are known.
 """
 
-import math
-
 import numpy as np
 import pytest
 
 from rsocl import Camera
 from rsocl.hardware import calibration as cal
 
-SHAPE = (48, 64)                       # reference ROI (m, n)
-SENSOR = (100, 110)                    # camera frames (rows, columns)
-MARKERS = np.array([[8.0, 7.0], [55.0, 9.0], [54.0, 40.0], [9.0, 41.0]])   # (x, y), clockwise from top-left
-SIGMAS = (3.0, 2.0, 2.0, 2.0)          # marker 0 is the large one
+SHAPE = (48, 64)  # reference ROI (m, n)
+SENSOR = (100, 110)  # camera frames (rows, columns)
+MARKERS = np.array([[8.0, 7.0], [55.0, 9.0], [54.0, 40.0], [9.0, 41.0]])  # (x, y), clockwise from top-left
+SIGMAS = (3.0, 2.0, 2.0, 2.0)  # marker 0 is the large one
 
 
-def render(H, markers=MARKERS, sigmas=SIGMAS, *, sensor=SENSOR, rng=None, noise=0.02, background=0.1,
-           amplitude=0.8):
+def render(H, markers=MARKERS, sigmas=SIGMAS, *, sensor=SENSOR, rng=None, noise=0.02, background=0.1, amplitude=0.8):
     """Frame of a target with Gaussian dots (sigma in reference pixels) seen through H (reference -> sensor)."""
     rows, cols = sensor
     y, x = np.mgrid[0:rows, 0:cols]
     reference = cal.project_points(np.linalg.inv(H), np.column_stack([x.ravel(), y.ravel()]))
     frame = np.full(rows * cols, background)
     for (mx, my), sigma in zip(markers, sigmas):
-        frame += amplitude * np.exp(-((reference[:, 0] - mx) ** 2 + (reference[:, 1] - my) ** 2) / (2 * sigma ** 2))
+        frame += amplitude * np.exp(-((reference[:, 0] - mx) ** 2 + (reference[:, 1] - my) ** 2) / (2 * sigma**2))
     frame = frame.reshape(rows, cols)
     if rng is not None:
         frame = frame + noise * rng.standard_normal(frame.shape)
@@ -56,7 +53,7 @@ def test_detected_markers_recover_known_homography(angle, reference, rng):
     np.testing.assert_allclose(registration.sensor_points, cal.project_points(H_true, MARKERS), atol=0.15)
     # ...and the homography maps every reference pixel within 0.5 px of the truth.
     assert cal.homography_difference(registration.homography, H_true, SHAPE) < 0.5
-    assert registration.rms_error < 1e-6          # four markers: exact fit
+    assert registration.rms_error < 1e-6  # four markers: exact fit
     assert registration.homography[2, 2] == pytest.approx(1.0)
 
 
@@ -92,7 +89,7 @@ def test_dark_markers_and_explicit_threshold(rng):
     np.testing.assert_allclose(cal.detect_markers(frame, polarity="dark"), truth, atol=0.15)
     np.testing.assert_allclose(cal.detect_markers(frame, polarity="dark", threshold=0.6), truth, atol=0.15)
     with pytest.raises(ValueError, match="found 0 marker blob"):
-        cal.detect_markers(frame)                                    # bright dots asked, none there
+        cal.detect_markers(frame)  # bright dots asked, none there
 
 
 def test_given_sensor_points_skip_detection():
@@ -109,7 +106,7 @@ def test_marker_errors_are_explained(rng):
         cal.detect_markers(equal, reference="largest")
     with pytest.raises(ValueError, match="need 5"):
         cal.detect_markers(equal, n=5)
-    edge = render(np.array([[1, 0, -8.0], [0, 1, 0], [0, 0, 1]]), rng=rng)   # marker 0 cut by the left edge
+    edge = render(np.array([[1, 0, -8.0], [0, 1, 0], [0, 0, 1]]), rng=rng)  # marker 0 cut by the left edge
     with pytest.raises(ValueError, match="touches the frame edge"):
         cal.detect_markers(edge)
     with pytest.raises(ValueError, match="collinear"):
@@ -135,27 +132,29 @@ def test_row_map_of_quarter_turn_is_angle_90():
     m, n = SHAPE
     # A camera turned by 90°: sensor X = m-1-y, Y = x (it reads the reference left to right).
     H = np.array([[0.0, -1.0, m - 1], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    np.testing.assert_allclose(cal.row_map_from_homography(H, SHAPE), Camera(90, t_e=1e-4, t_r=1e-5).rows(SHAPE),
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        cal.row_map_from_homography(H, SHAPE), Camera(90, t_e=1e-4, t_r=1e-5).rows(SHAPE), atol=1e-12
+    )
 
 
 @pytest.mark.parametrize("angle", [0, 90, 180, 270, 45, 135, 225, 315, 30])
 def test_row_map_of_rotation_matches_camera_angle(angle):
     H = cal.rotation_homography(angle, SHAPE, sensor_shape=SENSOR, shift=(2.0, 5.0))
-    np.testing.assert_allclose(cal.row_map_from_homography(H, SHAPE), Camera(angle, t_e=1e-4, t_r=1e-5).rows(SHAPE),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        cal.row_map_from_homography(H, SHAPE), Camera(angle, t_e=1e-4, t_r=1e-5).rows(SHAPE), atol=1e-9
+    )
 
 
 def test_row_map_with_perspective_is_the_sensor_row():
     H = camera_homography(90)
     rows = cal.row_map_from_homography(H, SHAPE)
-    y, x = np.mgrid[0:SHAPE[0], 0:SHAPE[1]]
+    y, x = np.mgrid[0 : SHAPE[0], 0 : SHAPE[1]]
     mapped = cal.project_points(H, np.column_stack([x.ravel(), y.ravel()]))[:, 1].reshape(SHAPE)
     np.testing.assert_allclose(rows, mapped - mapped.min(), atol=1e-9)
     assert rows.min() == 0.0
-    camera = Camera(t_e=2e-4, t_r=26e-6, row_map=rows)     # accepted as a calibrated camera
+    camera = Camera(t_e=2e-4, t_r=26e-6, row_map=rows)  # accepted as a calibrated camera
     np.testing.assert_array_equal(camera.rows(SHAPE), rows)
-    horizon = np.array([[1, 0, 0], [0, 1, 0], [-1 / 30, 0, 1.0]])    # w = 0 at x = 30, inside the ROI
+    horizon = np.array([[1, 0, 0], [0, 1, 0], [-1 / 30, 0, 1.0]])  # w = 0 at x = 30, inside the ROI
     with pytest.raises(ValueError, match="infinity"):
         cal.row_map_from_homography(horizon, SHAPE)
 
@@ -163,7 +162,7 @@ def test_row_map_with_perspective_is_the_sensor_row():
 # ---------------------------------------------------------------------- warping
 def test_warp_to_reference_undoes_the_camera():
     H = camera_homography(270)
-    y, x = np.mgrid[0:SHAPE[0], 0:SHAPE[1]]
+    y, x = np.mgrid[0 : SHAPE[0], 0 : SHAPE[1]]
 
     def pattern(x, y):
         return np.sin(x / 7.0) * np.cos(y / 5.0) + 0.01 * x
@@ -178,14 +177,15 @@ def test_warp_to_reference_undoes_the_camera():
     stack = cal.warp_to_reference(np.stack([frame, 2 * frame]), H, SHAPE)
     assert stack.shape == (2,) + SHAPE
     np.testing.assert_allclose(stack[1], 2 * warped)
-    shift = np.array([[1, 0, 5.0], [0, 1, 3.0], [0, 0, 1]])      # integer shift: exact crop
-    np.testing.assert_allclose(cal.warp_to_reference(frame, shift, SHAPE), frame[3:3 + SHAPE[0], 5:5 + SHAPE[1]],
-                               atol=1e-12)
+    shift = np.array([[1, 0, 5.0], [0, 1, 3.0], [0, 0, 1]])  # integer shift: exact crop
+    np.testing.assert_allclose(
+        cal.warp_to_reference(frame, shift, SHAPE), frame[3 : 3 + SHAPE[0], 5 : 5 + SHAPE[1]], atol=1e-12
+    )
 
 
 # ---------------------------------------------------------------------- row time
 T_R = 26e-6
-FLICKER_HZ = 1040.0                     # band period 1 / (1040 * 26 µs) = 36.98 rows
+FLICKER_HZ = 1040.0  # band period 1 / (1040 * 26 µs) = 36.98 rows
 
 
 def flicker_frame(rng, t_r=T_R, hz=FLICKER_HZ, rows=300, cols=64, noise=0.05, phase=0.7):
@@ -212,7 +212,7 @@ def test_row_time_other_band_periods(t_r, rng):
 
 
 def test_check_row_time_reports_a_mismatch(rng):
-    estimated = cal.estimate_row_time(flicker_frame(rng, hz=1.05 * FLICKER_HZ), FLICKER_HZ)   # wrong frequency
+    estimated = cal.estimate_row_time(flicker_frame(rng, hz=1.05 * FLICKER_HZ), FLICKER_HZ)  # wrong frequency
     with pytest.raises(ValueError, match="t_r mismatch"):
         cal.check_row_time(estimated, T_R)
     assert cal.check_row_time(estimated, T_R, raise_error=False).startswith("t_r mismatch")
@@ -230,11 +230,11 @@ def test_flat_field_gains_within_one_percent(rng):
     dark = 0.02
     flats = []
     for c, gain in enumerate(gains):
-        rows, cols = (60, 80) if c != 2 else (70, 90)           # cameras may differ in size
+        rows, cols = (60, 80) if c != 2 else (70, 90)  # cameras may differ in size
         y, x = np.mgrid[0:rows, 0:cols]
         vignetting = 1.0 - 0.3 * (((x - cols / 2) / cols) ** 2 + ((y - rows / 2) / rows) ** 2)
         frames = dark + gain * 0.5 * vignetting + 0.01 * rng.standard_normal((3, rows, cols))
-        frames[:, rows // 2, cols // 2] = 50.0                    # a hot pixel
+        frames[:, rows // 2, cols // 2] = 50.0  # a hot pixel
         flats.append(frames)
     estimated = cal.flat_field_gain(flats, dark=dark, region=0.3)
     np.testing.assert_allclose(estimated, gains, rtol=0.01)
@@ -246,8 +246,9 @@ def test_flat_field_gains_within_one_percent(rng):
     # flat fields near the top of the float range: the same gains, no overflow
     huge = [f * 1e306 for f in flats]
     np.testing.assert_allclose(cal.flat_field_gain(huge, dark=dark * 1e306, region=0.3), gains, rtol=0.01)
-    np.testing.assert_allclose(cal.flat_field_gain(huge, dark=dark * 1e306, region=0.3, relative_to="mean"),
-                               gains / gains.mean(), rtol=0.01)
+    np.testing.assert_allclose(
+        cal.flat_field_gain(huge, dark=dark * 1e306, region=0.3, relative_to="mean"), gains / gains.mean(), rtol=0.01
+    )
 
 
 # ---------------------------------------------------------------------- picture
@@ -264,12 +265,13 @@ def test_marker_overlay_png_is_written_and_readable(tmp_path, rng):
         outlines.append(cal.reference_outline(registration.homography, SHAPE))
     corner = cal.project_points(camera_homography(180), [[-0.5, -0.5]])[0]
     np.testing.assert_allclose(outlines[2][0], corner, atol=0.5)
-    path = cal.marker_overlay_png(tmp_path / "calibration.png", frames, detected, reprojected, outlines=outlines,
-                                  titles=["a", "b", "c"])
+    path = cal.marker_overlay_png(
+        tmp_path / "calibration.png", frames, detected, reprojected, outlines=outlines, titles=["a", "b", "c"]
+    )
     image = iio.imread(path)
     assert image.ndim == 3 and image.shape[0] > 100 and image.shape[1] > 300
-    assert image[..., :3].std() > 10                                  # not blank
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.png"]     # no temporary left
+    assert image[..., :3].std() > 10  # not blank
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.png"]  # no temporary left
     with pytest.raises(ValueError, match="one point set per frame"):
         cal.marker_overlay_png(tmp_path / "bad.png", frames, detected[:2], reprojected)
     assert not (tmp_path / "bad.png").exists()
@@ -280,20 +282,22 @@ def test_frame_origin_of_a_camera_roi(rng):
     H_true = camera_homography(90)
     x0, y0 = 6.0, 4.0
     to_frame = np.array([[1, 0, -x0], [0, 1, -y0], [0, 0, 1.0]])
-    frame = render(to_frame @ H_true, rng=rng)                  # the camera delivers its ROI only
+    frame = render(to_frame @ H_true, rng=rng)  # the camera delivers its ROI only
     registration = cal.register_camera(frame, MARKERS, reference="largest", frame_origin=(x0, y0))
-    assert cal.homography_difference(registration.homography, H_true, SHAPE) < 0.5     # full-sensor coordinates
-    np.testing.assert_allclose(cal.warp_to_reference(frame, H_true, SHAPE, frame_origin=(x0, y0)),
-                               cal.warp_to_reference(frame, to_frame @ H_true, SHAPE))
+    assert cal.homography_difference(registration.homography, H_true, SHAPE) < 0.5  # full-sensor coordinates
+    np.testing.assert_allclose(
+        cal.warp_to_reference(frame, H_true, SHAPE, frame_origin=(x0, y0)),
+        cal.warp_to_reference(frame, to_frame @ H_true, SHAPE),
+    )
 
 
 @pytest.mark.parametrize("angle", [0, 90, 180, 270, -45, 30])
 def test_homography_angle(angle):
-    def turn(a, b):                                              # signed difference, degrees in (-180, 180]
+    def turn(a, b):  # signed difference, degrees in (-180, 180]
         return (a - b + 180.0) % 360.0 - 180.0
 
     assert -180 < cal.homography_angle(camera_homography(angle), SHAPE) <= 180
-    assert abs(turn(cal.homography_angle(camera_homography(angle), SHAPE), angle)) < 2.0      # small perspective
+    assert abs(turn(cal.homography_angle(camera_homography(angle), SHAPE), angle)) < 2.0  # small perspective
     H = cal.rotation_homography(angle, SHAPE, scale=0.7, shift=(5.0, -3.0))
     assert abs(turn(cal.homography_angle(H, SHAPE), angle)) < 1e-9
 
@@ -321,7 +325,7 @@ def calibration_files(tmp_path, rng):
     from rsocl.files.rigfile import RigFile, save_rigfile
 
     rigfile = RigFile.from_rig(Rig.paper_array(4, shape=SHAPE, t_e=200e-6, t_r=T_R))
-    rigfile.cameras[1]["roi"] = [6, 4, SENSOR[1], SENSOR[0]]            # camera 1 delivers a sensor ROI
+    rigfile.cameras[1]["roi"] = [6, 4, SENSOR[1], SENSOR[0]]  # camera 1 delivers a sensor ROI
     save_rigfile(tmp_path / "rig.toml", rigfile)
     truth = [camera_homography(angle) for angle in ANGLES]
     frames = []
@@ -329,11 +333,13 @@ def calibration_files(tmp_path, rng):
         to_frame = np.array([[1, 0, -6.0], [0, 1, -4.0], [0, 0, 1]]) if c == 1 else np.eye(3)
         frames.append(render(to_frame @ H, rng=rng))
     np.savez(tmp_path / "markers.npz", frames=np.stack(frames))
-    t_r = [26.1e-6, 25.9e-6, 26.0e-6, 26.2e-6]                            # within 1 % of the rig file
+    t_r = [26.1e-6, 25.9e-6, 26.0e-6, 26.2e-6]  # within 1 % of the rig file
     np.savez(tmp_path / "flicker.npz", frames=np.stack([flicker_frame(rng, t_r=t) for t in t_r]))
     gains = [1.0, 0.9, 1.1, 1.2]
-    np.savez(tmp_path / "flats.npz", **{f"camera{c}": 0.4 * g + 0.01 * rng.standard_normal((2, 60, 80))
-                                        for c, g in enumerate(gains)})
+    np.savez(
+        tmp_path / "flats.npz",
+        **{f"camera{c}": 0.4 * g + 0.01 * rng.standard_normal((2, 60, 80)) for c, g in enumerate(gains)},
+    )
     return tmp_path, truth, t_r, gains
 
 
@@ -344,9 +350,29 @@ def test_calibrate_writes_homographies_row_times_gains_and_png(calibration_files
 
     folder, truth, t_r, gains = calibration_files
     refs = [f"{x:g},{y:g}" for x, y in MARKERS]
-    assert _calibrate(["--rig", folder / "rig.toml", "--frames", folder / "markers.npz", "--identify", "largest",
-                       "--markers-ref", *refs, "--flicker", folder / "flicker.npz", "--flicker-hz", FLICKER_HZ,
-                       "--flat", folder / "flats.npz", "--png", folder / "calibration.png"]) == 0
+    assert (
+        _calibrate(
+            [
+                "--rig",
+                folder / "rig.toml",
+                "--frames",
+                folder / "markers.npz",
+                "--identify",
+                "largest",
+                "--markers-ref",
+                *refs,
+                "--flicker",
+                folder / "flicker.npz",
+                "--flicker-hz",
+                FLICKER_HZ,
+                "--flat",
+                folder / "flats.npz",
+                "--png",
+                folder / "calibration.png",
+            ]
+        )
+        == 0
+    )
     calibrated = load_rigfile(folder / "rig.toml")
     rig = calibrated.rig()
     for c, H in enumerate(truth):
@@ -356,7 +382,7 @@ def test_calibrate_writes_homographies_row_times_gains_and_png(calibration_files
         assert calibrated.cameras[c]["gain"] == pytest.approx(gains[c], rel=0.01)
         np.testing.assert_allclose(rig.row_map(c), cal.row_map_from_homography(H, SHAPE), atol=0.5)
     assert calibrated.cameras[1]["roi"] == [6, 4, SENSOR[1], SENSOR[0]]
-    assert rig.dt == pytest.approx(min(cam["t_r"] for cam in calibrated.cameras))     # dt followed t_r
+    assert rig.dt == pytest.approx(min(cam["t_r"] for cam in calibrated.cameras))  # dt followed t_r
     assert iio.imread(folder / "calibration.png").ndim == 3
 
 
@@ -365,13 +391,27 @@ def test_calibrate_positions_with_nominal_angles_and_default_png(calibration_fil
 
     folder, truth, _, _ = calibration_files
     out = folder / "calibrated.toml"
-    assert _calibrate(["--rig", folder / "rig.toml", "--frames", folder / "markers.npz", "--out", out,
-                       "--markers-ref", "55,9;9,41", "8,7 54,40"]) == 0           # any order, any separator
+    assert (
+        _calibrate(
+            [
+                "--rig",
+                folder / "rig.toml",
+                "--frames",
+                folder / "markers.npz",
+                "--out",
+                out,
+                "--markers-ref",
+                "55,9;9,41",
+                "8,7 54,40",
+            ]
+        )
+        == 0
+    )  # any order, any separator
     calibrated = load_rigfile(out)
     for c, H in enumerate(truth):
         assert cal.homography_difference(calibrated.homography(c), H, SHAPE) < 0.5
     assert (folder / "calibrated-calibration.png").is_file()
-    assert "angle" in load_rigfile(folder / "rig.toml").cameras[0]                 # --rig left alone
+    assert "angle" in load_rigfile(folder / "rig.toml").cameras[0]  # --rig left alone
 
 
 def test_calibrate_refuses_a_row_time_mismatch_and_writes_nothing(calibration_files):
@@ -405,8 +445,12 @@ def test_calibrate_reads_folders_and_given_marker_coordinates(calibration_files)
     with np.load(folder / "markers.npz") as data:
         np.savez(folder / "given.npz", frames=data["frames"], markers=given)
     refs = ";".join(f"{x:g},{y:g}" for x, y in MARKERS)
-    assert _calibrate(["--rig", folder / "rig.toml", "--frames", folder / "given.npz", "--markers-ref", refs,
-                       "--flat", flats]) == 0
+    assert (
+        _calibrate(
+            ["--rig", folder / "rig.toml", "--frames", folder / "given.npz", "--markers-ref", refs, "--flat", flats]
+        )
+        == 0
+    )
     calibrated = load_rigfile(folder / "rig.toml")
     for c, H in enumerate(truth):
         assert cal.homography_difference(calibrated.homography(c), H, SHAPE) < 1e-6
@@ -424,8 +468,9 @@ def test_calibrate_refuses_an_output_that_is_an_input_before_any_work(calibratio
     with pytest.raises(ValueError, match=r"--out .*flats.npz' is the --flat it reads"):
         _calibrate(["--rig", folder / "rig.toml", "--flat", folder / "flats.npz", "--out", folder / "flats.npz"])
     with pytest.raises(FileNotFoundError, match="--out: directory .*missing"):
-        _calibrate(["--rig", folder / "rig.toml", "--flat", folder / "flats.npz",
-                    "--out", folder / "missing" / "r.toml"])
+        _calibrate(
+            ["--rig", folder / "rig.toml", "--flat", folder / "flats.npz", "--out", folder / "missing" / "r.toml"]
+        )
     with pytest.raises(ValueError, match=r"--png .*markers.npz' is the --frames it reads"):
         _calibrate(["--rig", folder / "rig.toml", "--frames", folder / "markers.npz", "--png", folder / "markers.npz"])
     assert (folder / "flats.npz").read_bytes() == flats

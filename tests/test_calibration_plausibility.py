@@ -5,16 +5,20 @@ import pytest
 
 from rsocl.cli.main import main
 from rsocl.hardware import calibration as cal
-from rsocl.hardware.calibration.plausibility import (check_registration, check_rotation, fit_summary,
-                                                     leave_one_out_errors)
+from rsocl.hardware.calibration.plausibility import (
+    check_registration,
+    check_rotation,
+    fit_summary,
+    leave_one_out_errors,
+)
 
 import test_calibration
 from test_calibration import MARKERS, SHAPE, camera_homography
 
-calibration_files = test_calibration.calibration_files      # the fixture, shared with test_calibration.py
+calibration_files = test_calibration.calibration_files  # the fixture, shared with test_calibration.py
 
 ANGLES = (0, 90, 180, 270)
-ORIGINS = [np.zeros(2), np.array([6.0, 4.0]), np.zeros(2), np.zeros(2)]      # camera 1 has a sensor ROI
+ORIGINS = [np.zeros(2), np.array([6.0, 4.0]), np.zeros(2), np.zeros(2)]  # camera 1 has a sensor ROI
 
 
 def _given(folder, markers, per_camera=None, name="given.npz"):
@@ -30,8 +34,9 @@ def _given(folder, markers, per_camera=None, name="given.npz"):
 
 def _run(folder, frames, markers, *extra):
     refs = ";".join(f"{x:g},{y:g}" for x, y in markers)
-    return main(["calibrate", "--rig", str(folder / "rig.toml"), "--frames", str(frames), "--markers-ref", refs,
-                 *extra])
+    return main(
+        ["calibrate", "--rig", str(folder / "rig.toml"), "--frames", str(frames), "--markers-ref", refs, *extra]
+    )
 
 
 def _unchanged(folder, before):
@@ -70,7 +75,7 @@ def test_swapped_markers_are_refused_naming_the_camera_and_the_markers(calibrati
 def test_markers_shifted_a_turn_are_refused_naming_the_angle(calibration_files, capsys):
     folder, *_ = calibration_files
     before = (folder / "rig.toml").read_bytes()
-    frames = _given(folder, MARKERS, {2: lambda p: p[[1, 2, 3, 0]]})       # a 90° turn: fits exactly
+    frames = _given(folder, MARKERS, {2: lambda p: p[[1, 2, 3, 0]]})  # a 90° turn: fits exactly
     assert _run(folder, frames, MARKERS) == 2
     err = capsys.readouterr().err
     assert "camera 2: the markers give a rotation of" in err and "camera[2].angle = 180" in err, err
@@ -82,15 +87,16 @@ def test_a_mirrored_camera_needs_mirrored(calibration_files, capsys):
     before = (folder / "rig.toml").read_bytes()
     # camera 3 sees the target through a mirror: x -> -x about the reference centre before its homography
     flip = np.array([[-1.0, 0, SHAPE[1] - 1], [0, 1, 0], [0, 0, 1]])
-    H3 = camera_homography(90) @ flip                                        # a mirror image turned 90°
+    H3 = camera_homography(90) @ flip  # a mirror image turned 90°
     frames = _given(folder, MARKERS, {3: lambda p: cal.project_points(H3, MARKERS)})
     assert _run(folder, frames, MARKERS) == 2
     err = capsys.readouterr().err
     assert "camera 3: every triangle of the 4 markers turns the other way" in err and "--mirrored" in err, err
     _unchanged(folder, before)
     # its reference x axis runs along sensor -y: 270°, the rig file's angle
-    assert _run(folder, frames, MARKERS, "--mirrored", "3", "--out", str(folder / "m.toml")) == 0, \
+    assert _run(folder, frames, MARKERS, "--mirrored", "3", "--out", str(folder / "m.toml")) == 0, (
         capsys.readouterr().err
+    )
     from rsocl.files.rigfile import load_rigfile
 
     assert cal.homography_difference(load_rigfile(folder / "m.toml").homography(3), H3, SHAPE) < 1e-6
@@ -100,10 +106,10 @@ def test_a_mirrored_camera_needs_mirrored(calibration_files, capsys):
 
 def test_check_registration_refuses_extreme_distortion_and_accepts_cameras():
     ref = np.array([[0, 0], [10, 0], [10, 10], [0, 10.0]])
-    for angle in ANGLES:                                     # real cameras, perspective included
+    for angle in ANGLES:  # real cameras, perspective included
         H = camera_homography(angle)
         check_registration(MARKERS, cal.project_points(H, MARKERS), H, SHAPE)
-    squeezed = np.array([[0, 0], [10, 0], [5, 5.5], [0, 10.0]])   # convex, same turning sense, folded corner
+    squeezed = np.array([[0, 0], [10, 0], [5, 5.5], [0, 10.0]])  # convex, same turning sense, folded corner
     with pytest.raises(ValueError, match=r"magnifies one corner of the grid .*x as much as another \(at most 3"):
         check_registration(ref, squeezed, cal.estimate_homography(ref, squeezed), (11, 11))
     stretched = ref * [5.0, 1.0]
@@ -121,7 +127,7 @@ def test_leave_one_out_finds_the_misplaced_marker():
     assert leave_one_out_errors(five, sensor).max() < 1e-6
     sensor[4] += [3.0, 0.0]
     loo = leave_one_out_errors(five, sensor)
-    assert loo[4] == pytest.approx(3.0, rel=1e-6) and loo.max() > 3.0        # it, and the fits that include it
+    assert loo[4] == pytest.approx(3.0, rel=1e-6) and loo.max() > 3.0  # it, and the fits that include it
     registration = cal.register_camera(None, five, sensor_points=sensor)
-    assert registration.rms_error < 3.0 / 2                                 # the fit spreads the error: rms hides it
+    assert registration.rms_error < 3.0 / 2  # the fit spreads the error: rms hides it
     assert f"leave-one-out largest {loo.max():.3f} px" in fit_summary(registration)

@@ -7,14 +7,15 @@ import numpy as np
 import pytest
 
 from rsocl import reconstruct
-from rsocl.model import reference
-from rsocl.cli.capture import add_parser as add_capture_parser, cmd_capture
+from rsocl.analysis.metrics import psnr
+from rsocl.cli.capture import add_parser as add_capture_parser
+from rsocl.cli.capture import cmd_capture
+from rsocl.files.hdf5 import load_capture
+from rsocl.files.rigfile import RigFile, save_rigfile
 from rsocl.hardware.capture import CaptureFailed, capture_sets
 from rsocl.hardware.capture_file import load_raw
-from rsocl.files.hdf5 import load_capture
-from rsocl.analysis.metrics import psnr
+from rsocl.model import reference
 from rsocl.model.rig import Rig
-from rsocl.files.rigfile import RigFile, save_rigfile
 from rsocl.model.scenes import builtin_scene
 from rsocl_plugins.simulated import SimulatedCamera
 
@@ -35,7 +36,7 @@ def test_capture_round_trip(tmp_path):
     save_rigfile(path, _rigfile(configs=[{}, {"sensor": {"bit_depth": 12}}, {}, {}]))
     out = tmp_path / "capture.h5"
     assert capture_sets(path, out, sets=3) == out
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.h5", "rig.toml"]   # no .partial left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.h5", "rig.toml"]  # no .partial left
 
     capture = load_capture(out, set_index=0)
     rig = capture.rig
@@ -58,7 +59,7 @@ def test_capture_round_trip(tmp_path):
     assert raw.frame_meta[1][2]["bit_depth"] == 12 and raw.frame_meta[1][2]["pixel_format"] == "Mono16"
     assert raw.snapshot_sets.shape == (3, 4) + SHAPE
     np.testing.assert_array_equal(raw.snapshot_sets[0], capture.snapshots)
-    later = reference.forward(rig, builtin_scene(SHAPE, rig.T, dtype=np.float64, seed=2))   # set 2: seed 2
+    later = reference.forward(rig, builtin_scene(SHAPE, rig.T, dtype=np.float64, seed=2))  # set 2: seed 2
     np.testing.assert_allclose(raw.snapshot_sets[2][[0, 2, 3]], later[[0, 2, 3]], rtol=1e-5, atol=1e-5)
     with h5py.File(out, "r") as h5:
         assert h5.attrs["capture_status"] == "complete" and "failure" not in h5.attrs
@@ -74,12 +75,19 @@ def test_each_frame_is_written_before_the_next_is_requested(tmp_path, monkeypatc
 
     log = []
     real_read, real_add = SimulatedCamera._read, capture_file.CaptureWriter.add_raw
-    monkeypatch.setattr(SimulatedCamera, "_read", lambda self, t: log.append(("read", self.index)) or
-                        real_read(self, t))
-    monkeypatch.setattr(SimulatedCamera, "_trigger", (lambda trig: lambda self: log.append(("trigger", self.index))
-                                                      or trig(self))(SimulatedCamera._trigger))
-    monkeypatch.setattr(capture_file.CaptureWriter, "add_raw", lambda self, i, j, frame, cam: log.append(("write", i))
-                        or real_add(self, i, j, frame, cam))
+    monkeypatch.setattr(
+        SimulatedCamera, "_read", lambda self, t: log.append(("read", self.index)) or real_read(self, t)
+    )
+    monkeypatch.setattr(
+        SimulatedCamera,
+        "_trigger",
+        (lambda trig: lambda self: log.append(("trigger", self.index)) or trig(self))(SimulatedCamera._trigger),
+    )
+    monkeypatch.setattr(
+        capture_file.CaptureWriter,
+        "add_raw",
+        lambda self, i, j, frame, cam: log.append(("write", i)) or real_add(self, i, j, frame, cam),
+    )
     capture_sets(_rigfile(), tmp_path / "c.h5", sets=2)
     one_set = [("trigger", i) for i in range(4)] + [x for i in range(4) for x in (("read", i), ("write", i))]
     assert log == one_set * 2
@@ -88,7 +96,9 @@ def test_each_frame_is_written_before_the_next_is_requested(tmp_path, monkeypatc
 def test_camera_failure_keeps_what_was_captured(tmp_path):
     out = tmp_path / "capture.h5"
     rf = _rigfile(configs=[{}, {}, {"fail_after": 2}, {}])
-    with pytest.raises(CaptureFailed, match=r"camera 2 \(simulated\): read failed in set 1: CameraDisconnected") as info:
+    with pytest.raises(
+        CaptureFailed, match=r"camera 2 \(simulated\): read failed in set 1: CameraDisconnected"
+    ) as info:
         capture_sets(rf, out, sets=3)
     exc = info.value
     assert (exc.path, exc.camera, exc.set_index, exc.phase, exc.sets_complete) == (out, 2, 1, "read", 1)
@@ -96,12 +106,17 @@ def test_camera_failure_keeps_what_was_captured(tmp_path):
 
     raw = load_raw(out)
     assert raw.status == "failed" and raw.sets_complete == 1
-    assert raw.failure == {"camera": 2, "set": 1, "phase": "read", "type": "CameraDisconnected",
-                           "error": raw.failure["error"]}
+    assert raw.failure == {
+        "camera": 2,
+        "set": 1,
+        "phase": "read",
+        "type": "CameraDisconnected",
+        "error": raw.failure["error"],
+    }
     assert "fail_after=2" in raw.failure["error"]
-    assert [f.shape[0] for f in raw.frames] == [2, 2, 1, 1]    # set 1: cameras 0, 1 read before camera 2 failed
+    assert [f.shape[0] for f in raw.frames] == [2, 2, 1, 1]  # set 1: cameras 0, 1 read before camera 2 failed
     assert raw.snapshot_sets.shape == (1, 4) + SHAPE
-    capture = load_capture(out)                              # set 0 is complete: a valid capture file
+    capture = load_capture(out)  # set 0 is complete: a valid capture file
     assert capture.meta["status"] == "failed" and capture.meta["failure"]["camera"] == 2
     np.testing.assert_array_equal(capture.snapshots, raw.snapshot_sets[0])
 
@@ -173,8 +188,10 @@ def test_cmd_capture(tmp_path, capsys):
     # and the capture file feeds 'rsocl reconstruct' as it is
     from rsocl.cli.main import main
 
-    assert main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "r.h5"), "--iterations", "10",
-                 "--quiet"]) == 0
+    assert (
+        main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "r.h5"), "--iterations", "10", "--quiet"])
+        == 0
+    )
     assert "PSNR" in capsys.readouterr().out
 
     save_rigfile(rig_path, _rigfile(configs=[{"fail_after": 2}, {}, {}, {}]))
@@ -195,7 +212,7 @@ def test_an_output_that_is_an_input_is_refused_before_any_camera_opens(tmp_path)
         capture_sets(rig_path, rig_path, sets=1)
     assert main(["capture", "--rig", str(rig_path), "--out", str(rig_path), "--quiet"]) == 2
     assert rig_path.read_bytes() == before
-    (tmp_path / "c.h5.partial").mkdir()                  # the partial file's name taken by a folder
+    (tmp_path / "c.h5.partial").mkdir()  # the partial file's name taken by a folder
     with pytest.raises(ValueError, match=r"out must name a file, .*c.h5.partial' is a directory"):
         capture_sets(rig_path, tmp_path / "c.h5", sets=1)
 
@@ -204,8 +221,11 @@ def test_the_capture_rig_holds_the_exposure_the_device_applied(tmp_path, capsys)
     # camera 0 clamps the rig file's 180 µs to its longest exposure, 150 µs, and renders with it
     rf = _rigfile(configs=[{"exposure_range": [1e-5, 150e-6]}, {}, {}, {}])
     out = tmp_path / "c.h5"
-    with pytest.warns(UserWarning, match=r"camera 0: the device applied an exposure of 0\.00015 s where the rig "
-                                         r"file says t_e = 0\.00018 s; the capture's rig uses 0\.00015 s"):
+    with pytest.warns(
+        UserWarning,
+        match=r"camera 0: the device applied an exposure of 0\.00015 s where the rig "
+        r"file says t_e = 0\.00018 s; the capture's rig uses 0\.00015 s",
+    ):
         capture_sets(rf, out, sets=2)
     capture = load_capture(out, set_index=0)
     assert [cam.t_e for cam in capture.rig.cameras] == [150e-6, T_E, T_E, T_E]
@@ -230,8 +250,10 @@ def test_the_capture_rig_holds_the_exposure_the_device_applied(tmp_path, capsys)
     rig_path = tmp_path / "rig.toml"
     save_rigfile(rig_path, _rigfile(configs=[{}, {"exposure_range": [200e-6, 1e-3]}, {}, {}]))
     assert main(["capture", "--rig", str(rig_path), "--out", str(tmp_path / "cli.h5"), "--quiet"]) == 0
-    assert ("rsocl capture: warning: camera 1: the device applied an exposure of 0.0002 s where the rig file says "
-            "t_e = 0.00018 s") in capsys.readouterr().err
+    assert (
+        "rsocl capture: warning: camera 1: the device applied an exposure of 0.0002 s where the rig file says "
+        "t_e = 0.00018 s"
+    ) in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("value", [[1e-3], [2e-3, 1e-3], [0, 1e-3], "1e-3", [1e-3, float("inf")]])
@@ -241,16 +263,20 @@ def test_simulated_exposure_range_is_checked(value):
 
 
 def test_a_rig_file_shape_beyond_the_host_memory_is_refused_before_the_rig_is_built(tmp_path, capsys, monkeypatch):
-    from rsocl.common import memory
     from rsocl.cli.main import main
+    from rsocl.common import memory
 
-    monkeypatch.setattr(memory, "host_memory_bytes", lambda: 2**30)     # a 1 GiB machine
+    monkeypatch.setattr(memory, "host_memory_bytes", lambda: 2**30)  # a 1 GiB machine
     rig_path = tmp_path / "rig.toml"
-    rig_path.write_text('[rig]\nshape = [100000, 100000]\n\n'
-                        '[[camera]]\nbackend = "simulated"\nt_e = 1.8e-4\nt_r = 3.5e-5\n\n'
-                        '[[camera]]\nbackend = "simulated"\nrow_map_file = "rows.npy"\nt_e = 1.8e-4\nt_r = 3.5e-5\n')
-    for argv in (["capture", "--rig", str(rig_path), "--out", str(tmp_path / "c.h5")],
-                 ["calibrate", "--rig", str(rig_path), "--flat", str(tmp_path / "flat.png")]):
+    rig_path.write_text(
+        "[rig]\nshape = [100000, 100000]\n\n"
+        '[[camera]]\nbackend = "simulated"\nt_e = 1.8e-4\nt_r = 3.5e-5\n\n'
+        '[[camera]]\nbackend = "simulated"\nrow_map_file = "rows.npy"\nt_e = 1.8e-4\nt_r = 3.5e-5\n'
+    )
+    for argv in (
+        ["capture", "--rig", str(rig_path), "--out", str(tmp_path / "c.h5")],
+        ["calibrate", "--rig", str(rig_path), "--flat", str(tmp_path / "flat.png")],
+    ):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert "rig.toml: shape = [100000, 100000]: a rig of 2 camera(s) on 100000 x 100000 pixels" in err, err

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 import rsocl
-
 from rsocl.cli.main import main
 from rsocl.files.hdf5 import load_capture, load_reconstruction
 
@@ -32,14 +31,18 @@ def test_info_capture_reads_the_rig_of_the_capture_and_refuses_rig_options(tmp_p
     assert "ROI                      9 x 7 pixels" in out and "cameras                  2 " in out
     assert "effective fps at 30 fps" in out
     # a rig option would be ignored: refused, named, even at its default value (--shape 50 50)
-    for extra, named in ((["--shape", "50", "50"], "--shape"), (["--cameras=2"], "--cameras"),
-                         (["--t-e-us", "100", "--mask", "binary", "--t-e-us", "90"], "--t-e-us, --mask"),
-                         (["--sha", "9", "7"], "--shape"), (["--dt-us", "30", "--t-r-us", "30"], "--dt-us, --t-r-us")):
+    for extra, named in (
+        (["--shape", "50", "50"], "--shape"),
+        (["--cameras=2"], "--cameras"),
+        (["--t-e-us", "100", "--mask", "binary", "--t-e-us", "90"], "--t-e-us, --mask"),
+        (["--sha", "9", "7"], "--shape"),
+        (["--dt-us", "30", "--t-r-us", "30"], "--dt-us, --t-r-us"),
+    ):
         assert main(["info", "--capture", str(cap), *extra]) == 2
         captured = capsys.readouterr()
         assert captured.err.startswith(f"rsocl info: error: {named} cannot be used with --capture: ")
         assert captured.err.count("\n") == 1 and not captured.out, captured.err
-    assert main(["info", "--shape", "9", "7", "--cameras", "2"]) == 0           # without --capture they apply
+    assert main(["info", "--shape", "9", "7", "--cameras", "2"]) == 0  # without --capture they apply
     assert "9 x 7 pixels" in capsys.readouterr().out
 
 
@@ -58,7 +61,7 @@ def test_an_output_that_would_replace_the_input_or_cannot_be_made_is_refused_fir
     with pytest.raises(ValueError, match="is the scene it reads"):
         output_path(tmp_path / "link.npz", "--out", inputs=(("scene", video),))
 
-    def refuse(*args, **kwargs):                     # a folder that takes no new file (read-only, chattr +i)
+    def refuse(*args, **kwargs):  # a folder that takes no new file (read-only, chattr +i)
         raise PermissionError(13, "Permission denied")
 
     monkeypatch.setattr(tempfile, "mkstemp", refuse)
@@ -73,13 +76,48 @@ def test_an_output_that_would_replace_the_input_or_cannot_be_made_is_refused_fir
 def test_simulate_reconstruct_round_trip(tmp_path, capsys):
     cap = tmp_path / "cap.h5"
     rec = tmp_path / "rec.h5"
-    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "16", "20", "--cameras", "2",
-                 "--noise", "gaussian", "--sigma", "0.001", "--bit-depth", "12", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "builtin",
+                "--out",
+                str(cap),
+                "--shape",
+                "16",
+                "20",
+                "--cameras",
+                "2",
+                "--noise",
+                "gaussian",
+                "--sigma",
+                "0.001",
+                "--bit-depth",
+                "12",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     capture = load_capture(cap)
     assert capture.snapshots.shape == (2, 16, 20) and capture.rig.C == 2
     assert capture.truth.shape == (capture.rig.T, 16, 20)
-    assert main(["reconstruct", str(cap), "--out", str(rec), "--iterations", "15", "--quiet",
-                 "--reg-opt", "temporal_weight=0.5"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(cap),
+                "--out",
+                str(rec),
+                "--iterations",
+                "15",
+                "--quiet",
+                "--reg-opt",
+                "temporal_weight=0.5",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "PSNR" in out and "15 iterations" in out
     result = load_reconstruction(rec)
@@ -98,19 +136,43 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
     # --blend: the caller's blend with the interpolation replaces the search's
     for blend in ("1", "0.3"):
         mixed = tmp_path / f"blend{blend}.h5"
-        assert main(["reconstruct", str(cap), "--out", str(mixed), "--iterations", "15", "--quiet",
-                     "--reg-opt", "temporal_weight=0.5", "--blend", blend]) == 0
+        assert (
+            main(
+                [
+                    "reconstruct",
+                    str(cap),
+                    "--out",
+                    str(mixed),
+                    "--iterations",
+                    "15",
+                    "--quiet",
+                    "--reg-opt",
+                    "temporal_weight=0.5",
+                    "--blend",
+                    blend,
+                ]
+            )
+            == 0
+        )
         assert load_reconstruction(mixed).params["blend"] == float(blend)
 
 
-@pytest.mark.parametrize("extra, match", [
-    (["--blend", "1.5"], "--blend must be in [0.0, 1.0], got 1.5"),
-    (["--blend", "nan"], "--blend must be finite"),
-    (["--fast", "--blend", "0.5"], "--blend 0.5 moves the result towards the interpolation a self-tuned run starts "
-                                   "from; --fast runs from zeros: leave out --fast or --blend"),
-    (["--lam", "0.1", "--reg-opt", "temporal_weight=3", "--blend", "0.5"],
-     "blend = 0.5 moves the result towards the run's start, and this run starts from zeros"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (["--blend", "1.5"], "--blend must be in [0.0, 1.0], got 1.5"),
+        (["--blend", "nan"], "--blend must be finite"),
+        (
+            ["--fast", "--blend", "0.5"],
+            "--blend 0.5 moves the result towards the interpolation a self-tuned run starts "
+            "from; --fast runs from zeros: leave out --fast or --blend",
+        ),
+        (
+            ["--lam", "0.1", "--reg-opt", "temporal_weight=3", "--blend", "0.5"],
+            "blend = 0.5 moves the result towards the run's start, and this run starts from zeros",
+        ),
+    ],
+)
 def test_a_blend_is_checked_before_any_work(tmp_path, capsys, extra, match):
     cap, out = tmp_path / "one.h5", tmp_path / "rec.h5"
     _capture_with_truth(cap, "one")
@@ -126,8 +188,25 @@ def test_a_warning_is_one_line_naming_the_command(tmp_path, capsys):
     cap, rec = tmp_path / "cap.h5", tmp_path / "rec.h5"
     assert main(["simulate", "builtin", "--out", str(cap), "--shape", "16", "16", "--quiet"]) == 0
     capsys.readouterr()
-    assert main(["reconstruct", str(cap), "--out", str(rec), "--iterations", "30", "--fast", "--quiet",
-                 "--projection", "paper", "--eta", "0.001"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(cap),
+                "--out",
+                str(rec),
+                "--iterations",
+                "30",
+                "--fast",
+                "--quiet",
+                "--projection",
+                "paper",
+                "--eta",
+                "0.001",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert err.startswith("rsocl reconstruct: warning: ADMM ended unstable: the last residual") and err.count("\n") == 1
     assert rec.exists()
@@ -158,8 +237,24 @@ def test_demo_of_one_camera_writes_no_search_plot_where_no_search_ran(tmp_path, 
     assert main(["demo", "--cameras", "1", "--shape", "12", "12", "--iterations", "5", "--out", str(tmp_path)]) == 0
     assert "chosen from the snapshots: temporal_weight = 10" in capsys.readouterr().out
     assert (tmp_path / "demo.h5").is_file() and not (tmp_path / "demo-tuning.png").exists()
-    assert main(["demo", "--cameras", "2", "--shape", "12", "12", "--iterations", "5", "--out", str(tmp_path / "two"),
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "demo",
+                "--cameras",
+                "2",
+                "--shape",
+                "12",
+                "12",
+                "--iterations",
+                "5",
+                "--out",
+                str(tmp_path / "two"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "two" / "demo-tuning.png").is_file()
 
 
@@ -173,8 +268,25 @@ def test_devices_and_plugins_list(capsys):
 
 @pytest.mark.slow
 def test_demo_console_script(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "rsocl.cli", "demo", "--out", str(tmp_path), "--shape", "32", "32",
-                           "--iterations", "40", "--quiet"], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rsocl.cli",
+            "demo",
+            "--out",
+            str(tmp_path),
+            "--shape",
+            "32",
+            "32",
+            "--iterations",
+            "40",
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr
     assert "PSNR" in proc.stdout
     for name in ("demo.gif", "snapshots.png", "subframes.png", "demo.h5", "demo-tuning.png"):
@@ -195,10 +307,26 @@ def test_a_capture_of_several_sets_is_reconstructed_in_batches(tmp_path, capsys)
     sets = np.stack([ref.forward(rig, rng.random((rig.T,) + rig.shape)) for _ in range(3)])
     cap, rec = tmp_path / "sets.h5", tmp_path / "rec.h5"
     save_capture(cap, sets[0], rig)
-    with h5py.File(cap, "a") as h5:                     # as rsocl capture writes it: every set, registered
+    with h5py.File(cap, "a") as h5:  # as rsocl capture writes it: every set, registered
         h5.create_dataset("snapshot_sets", data=sets)
-    assert main(["reconstruct", str(cap), "--out", str(rec), "--iterations", "4", "--batch", "2",
-                 "--dtype", "float64", "--fast"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(cap),
+                "--out",
+                str(rec),
+                "--iterations",
+                "4",
+                "--batch",
+                "2",
+                "--dtype",
+                "float64",
+                "--fast",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "3 sets in batches of 2" in out and "set 2: 4 iterations" in out
     for i in range(3):
@@ -208,7 +336,7 @@ def test_a_capture_of_several_sets_is_reconstructed_in_batches(tmp_path, capsys)
     assert (tmp_path / "rec.gif").exists() and not rec.exists()
     assert main(["reconstruct", str(cap), "--out", str(rec), "--batch", "0"]) == 2
     assert "--batch must be >= 1" in capsys.readouterr().err
-    one_set = tmp_path / "one.h5"                      # refused on a capture of one set too, before any work
+    one_set = tmp_path / "one.h5"  # refused on a capture of one set too, before any work
     save_capture(one_set, sets[0], rig)
     assert main(["reconstruct", str(one_set), "--out", str(tmp_path / "one-rec.h5"), "--batch", "-1"]) == 2
     captured = capsys.readouterr()
@@ -233,14 +361,20 @@ def _capture_with_truth(path, mode):
     truths = [builtin_scene(rig.shape, rig.T, seed=s) for s in range(3 if mode == "sets" else 1)]
     save_capture(path, op.forward(truths[0]), rig, truth=truths[0])
     if mode == "sets":
-        with h5py.File(path, "a") as h5:               # as rsocl capture writes it; the truth is set 0's
+        with h5py.File(path, "a") as h5:  # as rsocl capture writes it; the truth is set 0's
             h5.create_dataset("snapshot_sets", data=np.stack([op.forward(t) for t in truths]))
     return truths[0]
 
 
-@pytest.mark.parametrize("mode, extra", [("one", []), ("sets", ["--batch", "2"]),
-                                         ("tiles", ["--tile", "6", "10", "--halo", "2"]),
-                                         ("window", ["--window", "2", "--halo", "2"])])
+@pytest.mark.parametrize(
+    "mode, extra",
+    [
+        ("one", []),
+        ("sets", ["--batch", "2"]),
+        ("tiles", ["--tile", "6", "10", "--halo", "2"]),
+        ("window", ["--window", "2", "--halo", "2"]),
+    ],
+)
 def test_no_truth_keeps_the_truth_out_of_the_reconstruction(tmp_path, capsys, mode, extra):
     import h5py
 
@@ -249,7 +383,7 @@ def test_no_truth_keeps_the_truth_out_of_the_reconstruction(tmp_path, capsys, mo
     first = (lambda out: out.with_name(f"{out.stem}-set000{out.suffix}")) if mode == "sets" else (lambda out: out)
     common = ["--iterations", "3", "--fast", "--quiet", *extra]
 
-    with_truth = tmp_path / "with.h5"                  # without --no-truth the capture's truth is kept and used
+    with_truth = tmp_path / "with.h5"  # without --no-truth the capture's truth is kept and used
     assert main(["reconstruct", str(cap), "--out", str(with_truth), *common]) == 0
     assert "PSNR" in capsys.readouterr().out
     np.testing.assert_array_equal(load_reconstruction(first(with_truth)).truth, truth)
@@ -270,8 +404,15 @@ def _unreadable_files(folder):
     """Files whose suffix promises a video or frames but whose content is empty, truncated or not that format."""
     np.savez(folder / "whole.npz", video=np.zeros((3, 8, 8)))
     whole = (folder / "whole.npz").read_bytes()
-    files = {"empty.npz": b"", "truncated.npz": whole[:len(whole) // 2], "empty.gif": b"",
-             "corrupt.gif": b"GIF89a\x08\x00", "empty.npy": b"", "empty.tif": b"", "noise.gif": bytes(range(256))}
+    files = {
+        "empty.npz": b"",
+        "truncated.npz": whole[: len(whole) // 2],
+        "empty.gif": b"",
+        "corrupt.gif": b"GIF89a\x08\x00",
+        "empty.npy": b"",
+        "empty.tif": b"",
+        "noise.gif": bytes(range(256)),
+    }
     for name, data in files.items():
         (folder / name).write_bytes(data)
     np.savez(folder / "objects.npz", video=np.array([{"a": 1}], dtype=object))
@@ -293,9 +434,24 @@ def test_an_unreadable_video_or_frames_file_is_a_one_line_error_naming_it(tmp_pa
         assert not out.exists()
     calls = []
     monkeypatch.setattr(bench_run, "run_point", lambda *a, **k: calls.append(a))
-    for name in ("empty.npz", "corrupt.gif"):              # bench reads the scene before any point runs
-        assert main(["bench", "--scene", str(tmp_path / name), "--quick", "--shape", "8", "--iterations", "2",
-                     "--out", str(tmp_path / "b")]) == 2
+    for name in ("empty.npz", "corrupt.gif"):  # bench reads the scene before any point runs
+        assert (
+            main(
+                [
+                    "bench",
+                    "--scene",
+                    str(tmp_path / name),
+                    "--quick",
+                    "--shape",
+                    "8",
+                    "--iterations",
+                    "2",
+                    "--out",
+                    str(tmp_path / "b"),
+                ]
+            )
+            == 2
+        )
         err = capsys.readouterr().err
         assert name in err and len(err.strip().splitlines()) == 1, err
         assert not (tmp_path / "b").exists() and not calls
@@ -303,7 +459,7 @@ def test_an_unreadable_video_or_frames_file_is_a_one_line_error_naming_it(tmp_pa
     rig.write_text('[rig]\nshape = [8, 8]\n\n[[camera]]\nbackend = "simulated"\nt_e = 1.8e-4\nt_r = 3.5e-5\n')
     for name in ("empty.npz", "truncated.npz", "objects.npz", "single.npz", "empty.npy", "empty.gif"):
         frames = tmp_path / name
-        if name == "empty.gif":                            # a folder of frames holding one unreadable image
+        if name == "empty.gif":  # a folder of frames holding one unreadable image
             (tmp_path / "frames").mkdir()
             frames = tmp_path / "frames" / "camera0.png"
             frames.write_bytes(b"")
@@ -318,10 +474,14 @@ def test_a_shape_beyond_the_host_memory_is_refused_before_allocating(tmp_path, c
     from rsocl.common import memory
     from rsocl.model import scenes
 
-    monkeypatch.setattr(memory, "host_memory_bytes", lambda: 2**30)     # a 1 GiB machine
-    for argv in (["info"], ["plan", "--no-measure"], ["simulate", "builtin", "--out", str(tmp_path / "c.h5")],
-                 ["demo", "--out", str(tmp_path / "demo"), "--fast"]):
-        assert main(argv + ["--shape", "100000", "100000"]) == 2, argv     # was a MemoryError traceback
+    monkeypatch.setattr(memory, "host_memory_bytes", lambda: 2**30)  # a 1 GiB machine
+    for argv in (
+        ["info"],
+        ["plan", "--no-measure"],
+        ["simulate", "builtin", "--out", str(tmp_path / "c.h5")],
+        ["demo", "--out", str(tmp_path / "demo"), "--fast"],
+    ):
+        assert main(argv + ["--shape", "100000", "100000"]) == 2, argv  # was a MemoryError traceback
         err = capsys.readouterr().err
         assert "--shape 100000 100000: a rig of 4 camera(s) on 100000 x 100000 pixels" in err, err
         assert "at least 745.1 GiB of host memory, more than this machine's 1.0 GiB" in err
@@ -362,11 +522,12 @@ def test_an_out_folder_that_is_a_file_is_refused_before_any_work(tmp_path, capsy
     monkeypatch.setattr(bench_run, "run_point", lambda *a, **k: calls.append(a))
     existing = tmp_path / "results"
     existing.write_text("keep me")
-    for out, match in ((existing, f"--out must name a folder (several files are written into it), "
-                                  f"{str(existing)!r} is a file"),
-                       (existing / "sub", f"--out: {str(existing)!r} is a file, so the folder")):
+    for out, match in (
+        (existing, f"--out must name a folder (several files are written into it), {str(existing)!r} is a file"),
+        (existing / "sub", f"--out: {str(existing)!r} is a file, so the folder"),
+    ):
         for argv in (["demo", "--shape", "8", "8", "--fast"], ["bench", "--quick", "--shape", "8"]):
-            assert main(argv + ["--out", str(out)]) == 2, argv           # was a FileExistsError traceback
+            assert main(argv + ["--out", str(out)]) == 2, argv  # was a FileExistsError traceback
             err = capsys.readouterr().err
             assert err.startswith(f"rsocl {argv[0]}: error: {match}") and len(err.strip().splitlines()) == 1, err
     assert not calls and existing.read_text() == "keep me"
@@ -385,34 +546,45 @@ def test_reg_opt_iterations_and_tv_iterations_that_disagree_are_refused(tmp_path
 
     monkeypatch.setattr("rsocl.cli.demo.run_reconstruction", spy)
     monkeypatch.setattr("rsocl.cli.reconstruct.run_reconstruction", spy)
-    commands = (["demo", "--out", str(tmp_path / "demo"), "--shape", "8", "8", "--cameras", "2"],
-                ["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5")])
-    for argv in commands:                          # TV ran 5 inner iterations, --tv-iterations 3 was ignored
+    commands = (
+        ["demo", "--out", str(tmp_path / "demo"), "--shape", "8", "8", "--cameras", "2"],
+        ["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5")],
+    )
+    for argv in commands:  # TV ran 5 inner iterations, --tv-iterations 3 was ignored
         assert main(argv + ["--iterations", "2", "--fast", "--reg-opt", "iterations=5", "--tv-iterations", "3"]) == 2
         err = capsys.readouterr().err
-        assert (f"rsocl {argv[0]}: error: --reg-opt iterations=5 and --tv-iterations 3 both set the regularizer's "
-                "inner iterations, to different values; give one of them") in err, err
+        assert (
+            f"rsocl {argv[0]}: error: --reg-opt iterations=5 and --tv-iterations 3 both set the regularizer's "
+            "inner iterations, to different values; give one of them"
+        ) in err, err
     assert not runs and not (tmp_path / "rec.h5").exists() and not (tmp_path / "demo").exists()
-    for argv in commands:                          # the same value twice is no conflict
-        assert main(argv + ["--iterations", "2", "--fast", "--reg-opt", "iterations=3", "--tv-iterations", "3",
-                            "--quiet"]) == 0
+    for argv in commands:  # the same value twice is no conflict
+        assert (
+            main(argv + ["--iterations", "2", "--fast", "--reg-opt", "iterations=3", "--tv-iterations", "3", "--quiet"])
+            == 0
+        )
         capsys.readouterr()
     assert [a.tv_iterations for a in runs] == [3, 3]
     assert load_reconstruction(tmp_path / "rec.h5").params["regularizer_options"]["iterations"] == 3
 
 
-@pytest.mark.parametrize("extra, match", [
-    (["--reg-opt", "step=1.5"], "option step must be in [0.01, 1.0], got '1.5'"),
-    (["--reg-opt", "temporal_wieght=3"], "unknown option"),
-    (["--regularizer", "nope"], "unknown regularizer 'nope'"),
-    (["--regularizer", "dct", "--tv-iterations", "3"], "tv_iterations applies to iterative denoisers"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (["--reg-opt", "step=1.5"], "option step must be in [0.01, 1.0], got '1.5'"),
+        (["--reg-opt", "temporal_wieght=3"], "unknown option"),
+        (["--regularizer", "nope"], "unknown regularizer 'nope'"),
+        (["--regularizer", "dct", "--tv-iterations", "3"], "tv_iterations applies to iterative denoisers"),
+    ],
+)
 def test_regularizer_and_its_options_are_checked_before_any_work(tmp_path, capsys, extra, match):
     cap = tmp_path / "cap.h5"
     assert main(["simulate", "builtin", "--out", str(cap), "--shape", "8", "8", "--cameras", "2", "--quiet"]) == 0
-    commands = (["demo", "--out", str(tmp_path / "demo"), "--shape", "8", "8"],
-                ["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5")])
-    for argv in commands:                          # the demo simulated and printed its rig first
+    commands = (
+        ["demo", "--out", str(tmp_path / "demo"), "--shape", "8", "8"],
+        ["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5")],
+    )
+    for argv in commands:  # the demo simulated and printed its rig first
         assert main(argv + extra) == 2
         captured = capsys.readouterr()
         assert captured.out == "", captured.out
@@ -421,22 +593,35 @@ def test_regularizer_and_its_options_are_checked_before_any_work(tmp_path, capsy
     assert not (tmp_path / "demo").exists() and not (tmp_path / "rec.h5").exists()
 
 
-@pytest.mark.parametrize("extra, match", [
-    (["--noise", "gaussian"], "--noise gaussian needs --sigma (the standard deviation as a fraction of full scale, "
-                              ">= 0); it has no default"),
-    (["--noise", "poisson"], "--noise poisson needs --photons (photo-electrons at full scale, > 0); it has no default"),
-    (["--sigma", "0.01"], "--sigma applies to --noise gaussian only; with --noise none it would be ignored"),
-    (["--noise", "poisson", "--photons", "100", "--sigma", "0.01"], "--sigma applies to --noise gaussian only"),
-    (["--noise", "gaussian", "--sigma", "0.01", "--photons", "100"], "--photons applies to --noise poisson only"),
-    (["--noise", "gaussian", "--sigma", "-0.1"], "--sigma must be >= 0 (fraction of full scale), got -0.1"),
-    (["--noise", "poisson", "--photons", "0"], "--photons must be > 0 photo-electrons, got 0.0"),
-    (["--bit-depth", "40"], "--bit-depth must be an integer >= 1 and <= 32, got 40"),
-    (["--noise", "poisson", "--photons", "1e30"], "--photons must be in (0, 1e+18] photo-electrons at full scale "
-                                                  "(the Poisson sampler's largest mean), got 1e+30"),
-    (["--seed", "-1"], "--seed must be an integer >= 0, got -1"),
-])
-def test_simulate_noise_options_are_complete_and_consistent_before_any_work(tmp_path, capsys, monkeypatch, extra,
-                                                                            match):
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (
+            ["--noise", "gaussian"],
+            "--noise gaussian needs --sigma (the standard deviation as a fraction of full scale, "
+            ">= 0); it has no default",
+        ),
+        (
+            ["--noise", "poisson"],
+            "--noise poisson needs --photons (photo-electrons at full scale, > 0); it has no default",
+        ),
+        (["--sigma", "0.01"], "--sigma applies to --noise gaussian only; with --noise none it would be ignored"),
+        (["--noise", "poisson", "--photons", "100", "--sigma", "0.01"], "--sigma applies to --noise gaussian only"),
+        (["--noise", "gaussian", "--sigma", "0.01", "--photons", "100"], "--photons applies to --noise poisson only"),
+        (["--noise", "gaussian", "--sigma", "-0.1"], "--sigma must be >= 0 (fraction of full scale), got -0.1"),
+        (["--noise", "poisson", "--photons", "0"], "--photons must be > 0 photo-electrons, got 0.0"),
+        (["--bit-depth", "40"], "--bit-depth must be an integer >= 1 and <= 32, got 40"),
+        (
+            ["--noise", "poisson", "--photons", "1e30"],
+            "--photons must be in (0, 1e+18] photo-electrons at full scale "
+            "(the Poisson sampler's largest mean), got 1e+30",
+        ),
+        (["--seed", "-1"], "--seed must be an integer >= 0, got -1"),
+    ],
+)
+def test_simulate_noise_options_are_complete_and_consistent_before_any_work(
+    tmp_path, capsys, monkeypatch, extra, match
+):
     from rsocl.model import scenes
 
     calls, real = [], scenes.load_scene
@@ -448,17 +633,23 @@ def test_simulate_noise_options_are_complete_and_consistent_before_any_work(tmp_
     assert len(err.strip().splitlines()) == 1 and not calls and not out.exists()
 
 
-@pytest.mark.parametrize("extra, match", [
-    (["--t-r-us", "-3"], "--t-r-us must be > 0 µs, got -3.0"),         # was 't_r must be > 0 seconds, got -3e-06'
-    (["--t-e-us", "0"], "--t-e-us must be > 0 µs, got 0.0"),
-    (["--t-e-us", "inf"], "--t-e-us must be finite, got inf"),
-    (["--dt-us", "-1"], "--dt-us must be > 0 µs, got -1.0"),
-    (["--dt-us", "20"], "--dt-us must be >= --t-r-us = 35 µs (a sub-frame lasts at least one row time), got 20"),
-    (["--t-r-us", "10", "--dt-us", "9.5"], "--dt-us must be >= --t-r-us = 10 µs"),
-    (["--t-e-us", "1e12"], "--t-e-us 1e+12 µs is 28,571,428,572 sub-frames of 35 µs, more than the 1,048,576 one "
-                           "exposure may span; give the exposure in µs"),
-    (["--t-e-us", "1e12", "--dt-us", "5e4"], "--t-e-us 1e+12 µs is 20,000,000 sub-frames of 50000 µs"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (["--t-r-us", "-3"], "--t-r-us must be > 0 µs, got -3.0"),  # was 't_r must be > 0 seconds, got -3e-06'
+        (["--t-e-us", "0"], "--t-e-us must be > 0 µs, got 0.0"),
+        (["--t-e-us", "inf"], "--t-e-us must be finite, got inf"),
+        (["--dt-us", "-1"], "--dt-us must be > 0 µs, got -1.0"),
+        (["--dt-us", "20"], "--dt-us must be >= --t-r-us = 35 µs (a sub-frame lasts at least one row time), got 20"),
+        (["--t-r-us", "10", "--dt-us", "9.5"], "--dt-us must be >= --t-r-us = 10 µs"),
+        (
+            ["--t-e-us", "1e12"],
+            "--t-e-us 1e+12 µs is 28,571,428,572 sub-frames of 35 µs, more than the 1,048,576 one "
+            "exposure may span; give the exposure in µs",
+        ),
+        (["--t-e-us", "1e12", "--dt-us", "5e4"], "--t-e-us 1e+12 µs is 20,000,000 sub-frames of 50000 µs"),
+    ],
+)
 def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
     for command in (["info"], ["plan", "--no-measure"]):
         assert main(command + ["--shape", "8", "8"] + extra) == 2
@@ -466,24 +657,51 @@ def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
         assert err.startswith(f"rsocl {command[0]}: error: {match}") and "seconds" not in err, err
 
 
-@pytest.mark.parametrize("capture, extra, match", [
-    ("one", ["--overlap", "1"], "--overlap applies to --window (the frames consecutive windows share)"),
-    ("one", ["--tile", "6", "10", "--overlap", "1"], "--overlap applies to --window"),
-    ("one", ["--halo", "2"], "--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a "
-                             "Zarr --out or a capture too large for the device) or windows (--window); this capture "
-                             "runs in one piece, where --halo would be ignored"),
-    ("one", ["--retries", "1"], "--retries applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, "
-                                "a Zarr --out or a capture too large for the device) or windows (--window), whose "
-                                "tiles run as tasks; this capture runs in one piece, where --retries would be ignored"),
-    ("sets", ["--tile", "6", "10", "--batch", "2"], "--batch applies to the sets of a capture reconstructed in one "
-                                                    "piece; a run in tiles runs every tile of every set"),
-    ("one", ["--window", "1", "--batch", "2"], "--batch applies to the sets of a capture reconstructed in one piece; "
-                                               "--window reconstructs set 0, window by window"),
-    ("one", ["--batch", "2"], "--batch applies to a capture of several sets reconstructed together; the capture "
-                              "holds one set, where --batch would be ignored"),
-    ("sets", ["--first-set-only", "--batch", "2"], "--batch applies to a capture of several sets reconstructed "
-                                                   "together; --first-set-only reconstructs set 0 only"),
-])
+@pytest.mark.parametrize(
+    "capture, extra, match",
+    [
+        ("one", ["--overlap", "1"], "--overlap applies to --window (the frames consecutive windows share)"),
+        ("one", ["--tile", "6", "10", "--overlap", "1"], "--overlap applies to --window"),
+        (
+            "one",
+            ["--halo", "2"],
+            "--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a "
+            "Zarr --out or a capture too large for the device) or windows (--window); this capture "
+            "runs in one piece, where --halo would be ignored",
+        ),
+        (
+            "one",
+            ["--retries", "1"],
+            "--retries applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, "
+            "a Zarr --out or a capture too large for the device) or windows (--window), whose "
+            "tiles run as tasks; this capture runs in one piece, where --retries would be ignored",
+        ),
+        (
+            "sets",
+            ["--tile", "6", "10", "--batch", "2"],
+            "--batch applies to the sets of a capture reconstructed in one "
+            "piece; a run in tiles runs every tile of every set",
+        ),
+        (
+            "one",
+            ["--window", "1", "--batch", "2"],
+            "--batch applies to the sets of a capture reconstructed in one piece; "
+            "--window reconstructs set 0, window by window",
+        ),
+        (
+            "one",
+            ["--batch", "2"],
+            "--batch applies to a capture of several sets reconstructed together; the capture "
+            "holds one set, where --batch would be ignored",
+        ),
+        (
+            "sets",
+            ["--first-set-only", "--batch", "2"],
+            "--batch applies to a capture of several sets reconstructed "
+            "together; --first-set-only reconstructs set 0 only",
+        ),
+    ],
+)
 def test_options_the_run_would_ignore_are_refused_before_any_work(tmp_path, capsys, capture, extra, match):
     cap, out = tmp_path / f"{capture}.h5", tmp_path / "rec.h5"
     _capture_with_truth(cap, capture)
@@ -500,8 +718,10 @@ def test_options_that_contradict_each_other_on_a_capture_are_refused_before_any_
     _capture_with_truth(sets, "sets")
     _capture_with_truth(one, "one")
     cases = [
-        ([str(sets), "--out", str(tmp_path / "a.zarr"), "--sets", "--first-set-only"],
-         "--sets and --first-set-only contradict each other"),
+        (
+            [str(sets), "--out", str(tmp_path / "a.zarr"), "--sets", "--first-set-only"],
+            "--sets and --first-set-only contradict each other",
+        ),
         ([str(one), "--out", str(tmp_path / "c.h5"), "--window", "1", "--workers", "2"], "--workers: the windows"),
     ]
     for extra, message in cases:
@@ -509,11 +729,11 @@ def test_options_that_contradict_each_other_on_a_capture_are_refused_before_any_
         assert main(["reconstruct", *extra, "--iterations", "2", "--fast", "--quiet"]) == 2
         err = capsys.readouterr().err
         assert message in err and "Traceback" not in err, err
-    assert not any(p.suffix == ".zarr" for p in tmp_path.iterdir())          # nothing was started
+    assert not any(p.suffix == ".zarr" for p in tmp_path.iterdir())  # nothing was started
     pytest.importorskip("zarr")
     run = ["--halo", "2", "--iterations", "2", "--fast", "--quiet"]
     assert main(["reconstruct", str(sets), "--out", str(tmp_path / "d.zarr"), *run]) == 0
-    assert "the capture holds 3 sets; the store gets set 0" in capsys.readouterr().err     # said, even --quiet
+    assert "the capture holds 3 sets; the store gets set 0" in capsys.readouterr().err  # said, even --quiet
     assert main(["reconstruct", str(sets), "--out", str(tmp_path / "e.zarr"), "--first-set-only", *run]) == 0
     assert "3 sets" not in capsys.readouterr().err
     # tiles into an HDF5 file, and a stream of windows, take set 0 too: said as well
@@ -521,8 +741,10 @@ def test_options_that_contradict_each_other_on_a_capture_are_refused_before_any_
     assert "the capture holds 3 sets; a tiled run into an HDF5 file reconstructs set 0" in capsys.readouterr().err
     assert main(["reconstruct", str(sets), "--out", str(tmp_path / "g.h5"), "--window", "1", *run]) == 0
     assert "the capture holds 3 sets; --window reconstructs set 0" in capsys.readouterr().err
-    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "h.h5"), "--window", "1", "--first-set-only",
-                 *run]) == 0
+    assert (
+        main(["reconstruct", str(sets), "--out", str(tmp_path / "h.h5"), "--window", "1", "--first-set-only", *run])
+        == 0
+    )
     assert "3 sets" not in capsys.readouterr().err
 
 
@@ -530,7 +752,12 @@ def test_inner_iterations_given_twice_must_agree_in_python(device):
     rig = rsocl.Rig.paper_array(4, (8, 8), t_e=0.18e-3, t_r=35e-6)
     g = np.ones((4, 8, 8))
     with pytest.raises(ValueError, match=r"tv_iterations = 3 and regularizer_options\['iterations'\] = 5 disagree"):
-        rsocl.reconstruct(g, rig, iterations=1, tv_iterations=3, regularizer_options={"iterations": 5}, tune=False,
-                          device=device)
-    assert rsocl.reconstruct(g, rig, iterations=1, tv_iterations=5, regularizer_options={"iterations": 5},
-                             tune=False, device=device).params["regularizer_options"]["iterations"] == 5
+        rsocl.reconstruct(
+            g, rig, iterations=1, tv_iterations=3, regularizer_options={"iterations": 5}, tune=False, device=device
+        )
+    assert (
+        rsocl.reconstruct(
+            g, rig, iterations=1, tv_iterations=5, regularizer_options={"iterations": 5}, tune=False, device=device
+        ).params["regularizer_options"]["iterations"]
+        == 5
+    )

@@ -80,15 +80,42 @@ def test_a_reconstruction_never_replaces_another_capture(three_sets, tmp_path, c
     shutil.copy(three_sets, tmp_path / "c.h5")
     shutil.copy(three_sets, tmp_path / "other.h5")
     before = _md5(tmp_path / "other.h5")
-    assert main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "other.h5"), "--first-set-only",
-                 "--fast", "--iterations", "2", "--quiet"]) == 2
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(tmp_path / "c.h5"),
+                "--out",
+                str(tmp_path / "other.h5"),
+                "--first-set-only",
+                "--fast",
+                "--iterations",
+                "2",
+                "--quiet",
+            ]
+        )
+        == 2
+    )
     assert "--out" in capsys.readouterr().err and _md5(tmp_path / "other.h5") == before
 
 
 def test_per_set_outputs_are_written_when_they_collide_with_nothing(three_sets, tmp_path, capsys):
     shutil.copy(three_sets, tmp_path / "m-set000.h5")
-    assert main(["reconstruct", str(tmp_path / "m-set000.h5"), "--out", str(tmp_path / "r.h5"), "--fast",
-                 "--iterations", "2", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(tmp_path / "m-set000.h5"),
+                "--out",
+                str(tmp_path / "r.h5"),
+                "--fast",
+                "--iterations",
+                "2",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert sorted(p.name for p in tmp_path.glob("r-set*.h5")) == ["r-set000.h5", "r-set001.h5", "r-set002.h5"]
 
 
@@ -97,8 +124,22 @@ def test_a_partial_capture_left_by_a_kill_is_kept_and_refused(tmp_path):
     rig = _rig_file(tmp_path)
     out = tmp_path / "k.h5"
     partial = tmp_path / "k.h5.partial"
-    child = subprocess.Popen([sys.executable, "-m", "rsocl.cli", "capture", "--rig", str(rig), "--out", str(out),
-                              "--sets", "100000", "--quiet"], stderr=subprocess.PIPE)
+    child = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "rsocl.cli",
+            "capture",
+            "--rig",
+            str(rig),
+            "--out",
+            str(out),
+            "--sets",
+            "100000",
+            "--quiet",
+        ],
+        stderr=subprocess.PIPE,
+    )
     try:
         deadline = time.monotonic() + 120
         while (not partial.exists() or partial.stat().st_size < 60_000) and time.monotonic() < deadline:
@@ -117,11 +158,14 @@ def test_a_partial_capture_left_by_a_kill_is_kept_and_refused(tmp_path):
         sets = int(h5.attrs["sets_complete"])
     assert sets >= 1
     before = _md5(partial)
-    with pytest.raises(ValueError, match=rf"out: .*k\.h5\.partial' holds {sets} complete set\(s\) of an earlier "
-                                         r"capture that did not end; it is kept"):
+    with pytest.raises(
+        ValueError,
+        match=rf"out: .*k\.h5\.partial' holds {sets} complete set\(s\) of an earlier "
+        r"capture that did not end; it is kept",
+    ):
         capture_sets(rig, out, sets=2)
     assert _md5(partial) == before and not out.exists()
-    assert load_snapshot_sets(partial).shape[0] >= sets        # still a readable capture
+    assert load_snapshot_sets(partial).shape[0] >= sets  # still a readable capture
 
 
 def test_a_partial_capture_is_refused_by_the_command(three_sets, tmp_path, capsys):
@@ -146,8 +190,7 @@ def test_stale_hdf5_temporaries_of_dead_processes_are_removed_live_ones_kept(tmp
     save_capture(tmp_path / "out.h5", np.zeros((rig.n_channels, 4, 4)), rig)
     assert not dead.exists()
     assert live.exists() and other_host.exists() and other_name.exists()
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
-        ["out.h5", live.name, other_host.name, other_name.name])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["out.h5", live.name, other_host.name, other_name.name])
 
 
 def test_a_temporary_is_named_by_its_owner_and_remove_stale_spares_folders_of_live_processes(tmp_path):
@@ -173,9 +216,13 @@ def test_load_capture_of_several_sets_is_explicit(three_sets):
     np.testing.assert_array_equal(implicit.snapshots, sets[0])
     np.testing.assert_array_equal(first.snapshots, sets[0])
     np.testing.assert_array_equal(last.snapshots, sets[2])
-    assert first.truth is not None and last.truth is None      # the stored truth is set 0's
-    for bad, match in ((3, r"set_index must be in \[0, 2\]"), (-1, "set_index must be an integer >= 0"),
-                       (True, "set_index must be an integer"), (1.0, "set_index must be an integer")):
+    assert first.truth is not None and last.truth is None  # the stored truth is set 0's
+    for bad, match in (
+        (3, r"set_index must be in \[0, 2\]"),
+        (-1, "set_index must be an integer >= 0"),
+        (True, "set_index must be an integer"),
+        (1.0, "set_index must be an integer"),
+    ):
         with pytest.raises(ValueError, match=match):
             load_capture(three_sets, set_index=bad)
 
@@ -196,27 +243,30 @@ def _disk_full(*args, **kwargs):
     raise OSError(errno.ENOSPC, "No space left on device")
 
 
-def test_a_full_disk_while_reconstructing_is_one_line_and_keeps_the_earlier_result(three_sets, tmp_path, capsys,
-                                                                                     monkeypatch):
+def test_a_full_disk_while_reconstructing_is_one_line_and_keeps_the_earlier_result(
+    three_sets, tmp_path, capsys, monkeypatch
+):
     capture = tmp_path / "c.h5"
     shutil.copy(three_sets, capture)
     out = tmp_path / "r.h5"
     out.write_bytes(b"an earlier result")
     monkeypatch.setattr("rsocl.files.hdf5.write_header", _disk_full)
-    rc = main(["reconstruct", str(capture), "--out", str(out), "--first-set-only", "--fast", "--iterations", "2",
-               "--quiet"])
+    rc = main(
+        ["reconstruct", str(capture), "--out", str(out), "--first-set-only", "--fast", "--iterations", "2", "--quiet"]
+    )
     err = capsys.readouterr().err
     assert rc == 1 and "Traceback" not in err
     [line] = _error_lines(err)
     assert f"cannot write {str(out)!r}: No space left on device (errno 28); the existing file is unchanged" in line
     assert out.read_bytes() == b"an earlier result"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.h5", "r.h5"]     # no temporary left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.h5", "r.h5"]  # no temporary left
 
 
 def test_a_full_disk_while_simulating_is_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("rsocl.files.hdf5.write_header", _disk_full)
-    rc = main(["simulate", "builtin", "--shape", "8", "8", "--cameras", "2", "--out", str(tmp_path / "s.h5"),
-               "--quiet"])
+    rc = main(
+        ["simulate", "builtin", "--shape", "8", "8", "--cameras", "2", "--out", str(tmp_path / "s.h5"), "--quiet"]
+    )
     [line] = _error_lines(capsys.readouterr().err)
     assert rc == 1 and "s.h5'" in line and "no file was made" in line
     assert list(tmp_path.iterdir()) == []
@@ -236,8 +286,10 @@ def test_a_lock_or_permission_fault_is_one_line_naming_the_file():
     locked = BlockingIOError(errno.EAGAIN, "Unable to synchronously open file (unable to lock file)", "c.h5")
     assert fault_line(locked).startswith("'c.h5': another process holds its lock")
     denied = fault_line(PermissionError(errno.EACCES, "Permission denied", "/ro/r.h5"))
-    assert denied == "'/ro/r.h5': Permission denied (errno 13); outputs replace a file only once complete, so the " \
-                     "files already there are unchanged"
+    assert (
+        denied == "'/ro/r.h5': Permission denied (errno 13); outputs replace a file only once complete, so the "
+        "files already there are unchanged"
+    )
 
 
 def test_a_write_error_during_capture_keeps_the_sets_and_is_one_line(tmp_path, capsys, monkeypatch):
@@ -269,19 +321,24 @@ def _limited(limit):
     def refuse_large_files():
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
     return refuse_large_files
 
 
 @POSIX
 def test_capture_on_a_disk_that_refuses_writes_ends_in_one_line_not_a_crash(tmp_path):
     rig = _rig_file(tmp_path, shape=(64, 64))
-    capture_sets(rig, tmp_path / "warm.h5", sets=1)     # the kernels built (and cached) without the limit
+    capture_sets(rig, tmp_path / "warm.h5", sets=1)  # the kernels built (and cached) without the limit
     out = tmp_path / "f.h5"
     out.write_bytes(b"an earlier capture")
-    run = subprocess.run([sys.executable, "-m", "rsocl.cli", "capture", "--rig", str(rig), "--out", str(out),
-                          "--sets", "40", "--quiet"], preexec_fn=_limited(3_000_000), capture_output=True, text=True,
-                         timeout=300)             # no file may grow past 3 MB: the capture needs more
-    assert run.returncode == 1, (run.returncode, run.stderr)          # not a crash (-11, 139)
+    run = subprocess.run(
+        [sys.executable, "-m", "rsocl.cli", "capture", "--rig", str(rig), "--out", str(out), "--sets", "40", "--quiet"],
+        preexec_fn=_limited(3_000_000),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )  # no file may grow past 3 MB: the capture needs more
+    assert run.returncode == 1, (run.returncode, run.stderr)  # not a crash (-11, 139)
     assert "Traceback" not in run.stderr and "Exception ignored" not in run.stderr
     [line] = _error_lines(run.stderr)
     assert "[Errno 27] File too large" in line and "f.h5.partial' is kept as written" in line
@@ -307,6 +364,7 @@ def test_a_kernel_build_is_retried_once_on_a_cache_race(device, monkeypatch):
             if len(calls) <= fail_times:
                 raise cl.RuntimeError("clBuildProgram failed: BUILD_PROGRAM_FAILURE (PoCL cache race)")
             return real_build(self, *args, **kwargs)
+
         return build
 
     monkeypatch.setattr(cl.Program, "build", flaky(1))
@@ -316,7 +374,7 @@ def test_a_kernel_build_is_retried_once_on_a_cache_race(device, monkeypatch):
     monkeypatch.setattr(cl.Program, "build", flaky(2))
     with pytest.raises(cl.RuntimeError, match="clBuildProgram"):
         progmod.build_program(device.context, ("fake.cl",), (("REAL", "float"),))
-    assert len(calls) == 2                              # once more, not again and again
+    assert len(calls) == 2  # once more, not again and again
 
 
 def test_a_tiled_runs_error_goes_to_stderr(three_sets, tmp_path, capsys, monkeypatch):
@@ -331,8 +389,22 @@ def test_a_tiled_runs_error_goes_to_stderr(three_sets, tmp_path, capsys, monkeyp
 
     monkeypatch.setattr(tiled, "reconstruct_tiled", fail)
     shutil.copy(three_sets, tmp_path / "c.h5")
-    rc = main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "r.h5"), "--tile", "8", "8",
-               "--first-set-only", "--fast", "--iterations", "2", "--quiet"])
+    rc = main(
+        [
+            "reconstruct",
+            str(tmp_path / "c.h5"),
+            "--out",
+            str(tmp_path / "r.h5"),
+            "--tile",
+            "8",
+            "8",
+            "--first-set-only",
+            "--fast",
+            "--iterations",
+            "2",
+            "--quiet",
+        ]
+    )
     captured = capsys.readouterr()
     assert rc == 1 and "error" not in captured.out
     assert "rsocl reconstruct: error: 1 task(s) failed, 3 kept" in captured.err
@@ -341,15 +413,22 @@ def test_a_tiled_runs_error_goes_to_stderr(three_sets, tmp_path, capsys, monkeyp
 @POSIX
 def test_simulate_on_a_disk_that_refuses_writes_is_one_line_and_keeps_the_earlier_file(tmp_path, capsys):
     argv = ["simulate", "builtin", "--shape", "96", "96", "--quiet"]
-    assert main([*argv, "--out", str(tmp_path / "warm.h5")]) == 0     # kernels built without the limit
+    assert main([*argv, "--out", str(tmp_path / "warm.h5")]) == 0  # kernels built without the limit
     out = tmp_path / "s.h5"
     out.write_bytes(b"an earlier capture")
-    run = subprocess.run([sys.executable, "-m", "rsocl.cli", *argv, "--out", str(out)], capture_output=True,
-                         text=True, preexec_fn=_limited(1_500_000), timeout=300)
+    run = subprocess.run(
+        [sys.executable, "-m", "rsocl.cli", *argv, "--out", str(out)],
+        capture_output=True,
+        text=True,
+        preexec_fn=_limited(1_500_000),
+        timeout=300,
+    )
     assert run.returncode == 1 and "Traceback" not in run.stderr, run.stderr
     [line] = _error_lines(run.stderr)
-    assert line == f"rsocl simulate: error: cannot write {str(out)!r}: File too large (errno 27); the existing " \
-                   "file is unchanged"
+    assert (
+        line == f"rsocl simulate: error: cannot write {str(out)!r}: File too large (errno 27); the existing "
+        "file is unchanged"
+    )
     assert out.read_bytes() == b"an earlier capture"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.h5", "warm.h5"]
 
@@ -358,8 +437,10 @@ def test_a_close_that_cannot_write_is_an_oserror_with_its_errno(tmp_path, monkey
     import h5py
 
     def close(self):
-        raise RuntimeError("Can't decrement id ref count (unable to extend file properly, errno = 28, "
-                           "error message = 'No space left on device')")
+        raise RuntimeError(
+            "Can't decrement id ref count (unable to extend file properly, errno = 28, "
+            "error message = 'No space left on device')"
+        )
 
     monkeypatch.setattr(h5py.File, "close", close)
     rig = Rig.paper_array(2, (4, 4), t_e=180e-6, t_r=35e-6)
@@ -381,8 +462,15 @@ def test_a_full_disk_part_way_through_the_sets_says_which_are_written(three_sets
 
     monkeypatch.setattr(hdf5, "save_reconstruction", save)
     shutil.copy(three_sets, tmp_path / "c.h5")
-    rc = main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "r.h5"), *"--fast --iterations 2 "
-               "--quiet".split()])
+    rc = main(
+        [
+            "reconstruct",
+            str(tmp_path / "c.h5"),
+            "--out",
+            str(tmp_path / "r.h5"),
+            *"--fast --iterations 2 --quiet".split(),
+        ]
+    )
     [line] = _error_lines(capsys.readouterr().err)
     assert rc == 1 and line.startswith(f"rsocl reconstruct: error: cannot write {str(tmp_path / 'r-set002.h5')!r}")
     assert line.endswith(f"no file was made; sets 0 to 1 are written ({tmp_path / 'r-set000.h5'} ..)")

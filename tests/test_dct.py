@@ -55,9 +55,19 @@ def test_whole_frame_transform_matches_scipy(device, dtype, rng, shape, mode):
     np.testing.assert_allclose(got.get(), want, rtol=0, atol=_tol(dtype))
 
 
-@pytest.mark.parametrize("shape,block", [((8, 7, 9), 4), ((13, 20, 18), 8), ((5, 11, 6), 3), ((3, 9, 10), 1),
-                                         ((6, 5, 4), 100), ((55, 64, 64), 8), ((9, 30, 29), 24),
-                                         ((5, 33, 70), 32)])
+@pytest.mark.parametrize(
+    "shape,block",
+    [
+        ((8, 7, 9), 4),
+        ((13, 20, 18), 8),
+        ((5, 11, 6), 3),
+        ((3, 9, 10), 1),
+        ((6, 5, 4), 100),
+        ((55, 64, 64), 8),
+        ((9, 30, 29), 24),
+        ((5, 33, 70), 32),
+    ],
+)
 @pytest.mark.parametrize("mode", ["3d", "2d"])
 def test_block_transform_matches_scipy_per_block(device, dtype, rng, shape, block, mode):
     x = rng.standard_normal(shape)
@@ -157,7 +167,7 @@ def test_2d_treats_subframes_independently(device, dtype, rng, block):
     reg = DCT(mode="2d", block=block)
     whole = reg.denoise(_dev(device, x, dtype), 0.3).get()
     for s in range(x.shape[0]):
-        alone = reg.denoise(_dev(device, x[s:s + 1], dtype), 0.3).get()[0]
+        alone = reg.denoise(_dev(device, x[s : s + 1], dtype), 0.3).get()[0]
         np.testing.assert_allclose(whole[s], alone, rtol=0, atol=_tol(dtype))
     y = x.copy()
     y[3] += 5 * rng.standard_normal(y[3].shape)  # changing one sub-frame leaves the others alone
@@ -165,8 +175,12 @@ def test_2d_treats_subframes_independently(device, dtype, rng, block):
     np.testing.assert_array_equal(np.delete(other, 3, axis=0), np.delete(whole, 3, axis=0))
     # ... whereas 3-D mode couples them
     three = DCT(mode="3d", block=block)
-    assert np.abs(three.denoise(_dev(device, y, dtype), 0.3).get()[0]
-                  - three.denoise(_dev(device, x, dtype), 0.3).get()[0]).max() > 1e-3
+    assert (
+        np.abs(
+            three.denoise(_dev(device, y, dtype), 0.3).get()[0] - three.denoise(_dev(device, x, dtype), 0.3).get()[0]
+        ).max()
+        > 1e-3
+    )
 
 
 def test_workspace_bytes(device):

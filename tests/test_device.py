@@ -60,16 +60,19 @@ def test_kernels_ship_as_package_data():
         assert "__kernel" in devmod.kernel_source(name) or name == "common.cl"
 
 
-
-NVIDIA_LOG = ("(): Warning: Function admm_dual is a kernel, so overriding noinline attribute. The function may be "
-              "inlined when called.\n(): Warning: Function admm_project is a kernel, so overriding noinline attribute. "
-              "The function may be inlined when called.\n\n")
+NVIDIA_LOG = (
+    "(): Warning: Function admm_dual is a kernel, so overriding noinline attribute. The function may be "
+    "inlined when called.\n(): Warning: Function admm_project is a kernel, so overriding noinline attribute. "
+    "The function may be inlined when called.\n\n"
+)
 
 
 def test_the_drivers_noinline_notice_is_not_a_meaningful_log():
     assert progmod.meaningful_log(NVIDIA_LOG) == ""
-    assert progmod.meaningful_log(NVIDIA_LOG + "<kernel>:3:9: warning: unused variable 'x'\n") == \
-        "<kernel>:3:9: warning: unused variable 'x'"
+    assert (
+        progmod.meaningful_log(NVIDIA_LOG + "<kernel>:3:9: warning: unused variable 'x'\n")
+        == "<kernel>:3:9: warning: unused variable 'x'"
+    )
 
 
 def _build_with_log(device, monkeypatch, text, log):
@@ -80,7 +83,7 @@ def _build_with_log(device, monkeypatch, text, log):
     import pyopencl as cl
 
     real = progmod.kernel_source
-    text = f"/* {uuid.uuid4().hex} */\n{text}"       # a new source each time: no driver's cache of built programs
+    text = f"/* {uuid.uuid4().hex} */\n{text}"  # a new source each time: no driver's cache of built programs
     monkeypatch.setattr(progmod, "kernel_source", lambda name: text if name == "fake.cl" else real(name))
     if log is not None:
         monkeypatch.setattr(cl.Program, "get_build_info", lambda self, dev, what: log)

@@ -61,8 +61,7 @@ def test_very_fine_and_very_coarse_dt(dt_factor):
     assert res.history["residual"][-1] < 0.05
 
 
-@pytest.mark.parametrize("n_cameras, shape", [(1, (12, 12)), (8, (12, 12)), (4, (1, 16)), (4, (16, 1)),
-                                              (2, (1, 1))])
+@pytest.mark.parametrize("n_cameras, shape", [(1, (12, 12)), (8, (12, 12)), (4, (1, 16)), (4, (16, 1)), (2, (1, 1))])
 def test_camera_count_and_degenerate_rois(n_cameras, shape, dtype):
     rig = rsocl.Rig.paper_array(n_cameras, shape, t_e=1e-4, t_r=3e-5)
     truth = _scene(rig)
@@ -100,8 +99,16 @@ def test_lam_to_zero_fits_the_data(dtype):
 def test_lam_to_infinity_gives_a_constant_datacube(dtype):
     rig = rsocl.Rig.paper_array(4, (6, 6), t_e=1e-4, t_r=3e-5)
     truth = _scene(rig)
-    res, _ = _solve(rig, truth, dtype=dtype, lam=1e12, eta=0.2, iterations=10, tv_iterations=400,
-                    regularizer_options={"temporal_weight": 1.0})
+    res, _ = _solve(
+        rig,
+        truth,
+        dtype=dtype,
+        lam=1e12,
+        eta=0.2,
+        iterations=10,
+        tv_iterations=400,
+        regularizer_options={"temporal_weight": 1.0},
+    )
     cube = res.datacube
     assert cube.std() < 1e-2 * truth.std()
     assert cube.mean() == pytest.approx(truth.mean(), rel=0.1)
@@ -114,12 +121,20 @@ def test_a_large_denoising_weight_stays_bounded(dtype, temporal_weight):
     from rsocl.analysis.metrics import psnr
     from rsocl.model.scenes import builtin_scene
 
-    rig = rsocl.Rig([rsocl.Camera(angle=a, t_e=21e-6, t_r=21e-6) for a in (215, 284, 328, 248, 68, 353, 103)],
-                    shape=(41, 11))
+    rig = rsocl.Rig(
+        [rsocl.Camera(angle=a, t_e=21e-6, t_r=21e-6) for a in (215, 284, 328, 248, 68, 353, 103)], shape=(41, 11)
+    )
     truth = builtin_scene(rig.shape, rig.T)
     g = RollingShutterOperator(rig).forward(truth)
-    res = rsocl.reconstruct(g, rig, lam=3.0, regularizer_options={"temporal_weight": temporal_weight}, tune=False,
-                            iterations=200, dtype=dtype)
+    res = rsocl.reconstruct(
+        g,
+        rig,
+        lam=3.0,
+        regularizer_options={"temporal_weight": temporal_weight},
+        tune=False,
+        iterations=200,
+        dtype=dtype,
+    )
     assert res.params["lam"] / res.params["eta"] > 100
     cube = res.datacube
     assert -0.5 < cube.min() and cube.max() < 1.5
@@ -182,9 +197,9 @@ def test_reduction_is_accurate_for_large_arrays(device):
     from rsocl.device.reduction import sum_sq_diff
 
     n = 3_000_000
-    x = np.full(n, 1.0 + 2.0 ** -12, np.float32)
+    x = np.full(n, 1.0 + 2.0**-12, np.float32)
     got = sum_sq_diff(cla.to_device(device.queue, x))
-    exact = n * float(np.float32(1.0 + 2.0 ** -12)) ** 2
+    exact = n * float(np.float32(1.0 + 2.0**-12)) ** 2
     assert got == pytest.approx(exact, rel=1e-7)
 
 
@@ -207,9 +222,9 @@ def test_saturated_pixels_are_flagged_and_left_out(projection):
     rig = rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6)
     base = np.random.default_rng(0).random(rig.shape) * 0.5
     truth = np.broadcast_to(base, (rig.T,) + rig.shape).copy()
-    truth[7:10, 4:10, 4:10] = 3.0                      # a brief flash far above full scale
+    truth[7:10, 4:10, 4:10] = 3.0  # a brief flash far above full scale
     g = ref.forward(rig, truth)
-    level = rig.exposure_subframes * 1.0               # full scale of a [0, 1] scene
+    level = rig.exposure_subframes * 1.0  # full scale of a [0, 1] scene
     clipped = np.minimum(g, level)
     assert 0.05 < (g >= level).mean() < 0.2
     outside = np.ones(truth.shape, bool)
@@ -230,7 +245,7 @@ def test_saturation_that_leaves_nothing_is_refused():
     with pytest.raises(ValueError, match="saturation"):
         rsocl.reconstruct(np.ones((2, 4, 4)), rig, saturation=0.5)
     g = np.ones((2, 4, 4))
-    g[0, 0, :2] = 0.0                                  # only dark pixels stay below the level
+    g[0, 0, :2] = 0.0  # only dark pixels stay below the level
     with pytest.warns(UserWarning, match=r"keeps only snapshot pixels that are 0 \(the brightest is 1\)"):
         rsocl.reconstruct(g, rig, saturation=0.5, iterations=2, tune=False)
 
@@ -240,7 +255,7 @@ def test_subframes_no_camera_samples_are_not_modelled_and_hold_the_first_solved_
     cams = [rsocl.Camera(a, t_e=1e-4, t_r=3e-5, t_a=40 * 3e-5) for a in (0, 90, 180, 270)]
     rig = rsocl.Rig(cams, (10, 10))
     assert rig.sampled_range().start == 40 and rig.T == rig.sampled_range().stop
-    truth = _scene(rig)                                          # it changes before the cameras start too
+    truth = _scene(rig)  # it changes before the cameras start too
     g = ref.forward(rig, truth)
     op = RollingShutterOperator(rig, device=device, dtype="float64", subframes=rig.sampled_range())
     assert op.domain_shape == (rig.T - 40, 10, 10)
@@ -260,7 +275,8 @@ def test_subframes_no_camera_samples_are_not_modelled_and_hold_the_first_solved_
     for s in range(2):
         np.testing.assert_array_equal(batch.datacube[s, :40], np.broadcast_to(batch.datacube[s, 40], (40, 10, 10)))
         assert batch.history["psnr"][-1, s] == pytest.approx(
-            rsocl.analysis.metrics.psnr(batch.datacube[s], truths[s]), abs=1e-6)
+            rsocl.analysis.metrics.psnr(batch.datacube[s], truths[s]), abs=1e-6
+        )
 
 
 def test_gap_in_float32_on_nearly_singular_blocks_stays_sound():
@@ -271,9 +287,11 @@ def test_gap_in_float32_on_nearly_singular_blocks_stays_sound():
     angles = (210.9, 80.6, 229.7, 279.2, 268.3, 55.7)
     rig = rsocl.Rig([rsocl.Camera(a, t_e=0.848 * 35e-6, t_r=35e-6) for a in angles], (30, 5))
     g = ref.forward(rig, builtin_scene(rig.shape, rig.T, dtype=np.float64))
-    runs = {dtype: rsocl.reconstruct(g, rig, iterations=30, eta=0.0, dtype=dtype, tune=False, tv_iterations=1)
-            for dtype in ("float32", "float64")}
-    for res in runs.values():                  # TV of one iteration is the identity: f = P(f), a projection
+    runs = {
+        dtype: rsocl.reconstruct(g, rig, iterations=30, eta=0.0, dtype=dtype, tune=False, tv_iterations=1)
+        for dtype in ("float32", "float64")
+    }
+    for res in runs.values():  # TV of one iteration is the identity: f = P(f), a projection
         assert res.history["residual"].max() < 1e-3 and np.abs(res.datacube).max() < 1.5
     # float32 leaves out the directions below 1e-6 of their block's largest (float64 those below
     # 1e-10): the two agree except on the few voxels such directions reach

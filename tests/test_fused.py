@@ -34,13 +34,16 @@ def _both(dev, x, weight, **options):
     return plain, fused.denoise(xd, weight).get(), fused.fused_plan(xd)
 
 
-@pytest.mark.parametrize("shape, local_bytes, temporal_weight", [
-    ((5, 7, 9), 4096, 3.0),          # one set, tiles 1 x 7 x 5: halos along x
-    ((2, 3, 5, 11), 2048, 1.0),      # a batch, tiles with halos along x and t, three launches
-    ((5, 7, 9), 2048, 0.0),          # 2-D per sub-frame
-])
+@pytest.mark.parametrize(
+    "shape, local_bytes, temporal_weight",
+    [
+        ((5, 7, 9), 4096, 3.0),  # one set, tiles 1 x 7 x 5: halos along x
+        ((2, 3, 5, 11), 2048, 1.0),  # a batch, tiles with halos along x and t, three launches
+        ((5, 7, 9), 2048, 0.0),  # 2-D per sub-frame
+    ],
+)
 def test_fused_tv_equals_plain_tv(device, dtype, rng, shape, local_bytes, temporal_weight):
-    local_bytes *= np.dtype(dtype).itemsize // 4             # as many values in either dtype
+    local_bytes *= np.dtype(dtype).itemsize // 4  # as many values in either dtype
     dev = device.limited(local_mem_bytes=local_bytes, **SMALL_GROUP)
     x = rng.random(shape).astype(dtype)
     weight = 0.2 if len(shape) == 3 else np.array([0.2, 0.6])
@@ -78,13 +81,21 @@ def test_fused_admm_equals_plain_admm(device, dtype, projection):
     rig = rsocl.Rig.paper_array(4, (7, 9), t_e=1e-4, t_r=3e-5)
     truth = np.random.default_rng(5).random((2, rig.T) + rig.shape)
     g = np.stack([ref.forward(rig, t) for t in truth])
-    local_bytes = 8192 * np.dtype(dtype).itemsize // 4          # tiles of one sub-frame: two launches
-    kw = dict(iterations=4, lam=[0.05, 0.1], eta=[0.3, 0.0], tv_iterations=5, projection=projection, dtype=dtype,
-              device=device.limited(local_mem_bytes=local_bytes, **SMALL_GROUP), tune=False)
+    local_bytes = 8192 * np.dtype(dtype).itemsize // 4  # tiles of one sub-frame: two launches
+    kw = dict(
+        iterations=4,
+        lam=[0.05, 0.1],
+        eta=[0.3, 0.0],
+        tv_iterations=5,
+        projection=projection,
+        dtype=dtype,
+        device=device.limited(local_mem_bytes=local_bytes, **SMALL_GROUP),
+        tune=False,
+    )
     import pyopencl.array as cla
 
     cube = cla.zeros(kw["device"].queue, (2, rig.T) + rig.shape, dtype)
-    assert TV(fused=2, iterations=5).fused_plan(cube) is not None          # the fused path is taken
+    assert TV(fused=2, iterations=5).fused_plan(cube) is not None  # the fused path is taken
     plain = rsocl.reconstruct(g, rig, regularizer_options={"fused": 0}, **kw).datacube
     fused = rsocl.reconstruct(g, rig, regularizer_options={"fused": 2}, **kw).datacube
     np.testing.assert_allclose(fused, plain, rtol=0, atol=10 * _tol(dtype) * np.abs(plain).max())

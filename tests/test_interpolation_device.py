@@ -43,17 +43,21 @@ def test_matches_the_reference_with_left_out_samples_and_batches(dtype, device, 
     rig = Rig.paper_array(4, (7, 13), t_e=0.18e-3, t_r=35e-6)
     g = rng.random((3, 4) + rig.shape)
     valid = rng.random(g.shape) > 0.55
-    valid[1, :, 0, 0] = False                                 # set 1, pixel (0, 0): no sample
-    valid[2, 1:, 3, 4] = False                                # set 2, pixel (3, 4): one sample
+    valid[1, :, 0, 0] = False  # set 1, pixel (0, 0): no sample
+    valid[2, 1:, 3, 4] = False  # set 2, pixel (3, 4): one sample
     _check(rig, g, valid, None, dtype, device)
     _check(rig, g, valid, slice(1, rig.T - 2), dtype, device)
     _check(rig, g[2], valid[2], None, dtype, device)
 
 
 def test_matches_the_reference_on_oblique_cameras_gains_offsets_and_equal_times(dtype, device, rng):
-    cams = [Camera(0, 1.8e-4, 3.5e-5, gain=0.5), Camera(90, 1.8e-4, 3.5e-5, t_a=2e-5, gain=2.0),
-            Camera(0, 1.8e-4, 3.5e-5),                      # the first camera's twin: equal sample times
-            Camera(33, 2.5e-4, 3.0e-5), Camera(180, 1.0e-4, 3.5e-5, t_a=1e-5)]
+    cams = [
+        Camera(0, 1.8e-4, 3.5e-5, gain=0.5),
+        Camera(90, 1.8e-4, 3.5e-5, t_a=2e-5, gain=2.0),
+        Camera(0, 1.8e-4, 3.5e-5),  # the first camera's twin: equal sample times
+        Camera(33, 2.5e-4, 3.0e-5),
+        Camera(180, 1.0e-4, 3.5e-5, t_a=1e-5),
+    ]
     rig = Rig(cams, (12, 10))
     g = rng.random((5,) + rig.shape) * 3
     _check(rig, g, None, None, dtype, device)
@@ -85,8 +89,9 @@ def test_bad_arguments_are_refused(device):
 
 def test_reconstruct_starts_from_the_interpolation_when_asked(device, rng):
     rig = Rig.paper_array(4, (12, 14), t_e=0.18e-3, t_r=35e-6)
-    g = np.stack([rsocl.RollingShutterOperator(rig, device=device).forward(rng.random((rig.T,) + rig.shape))
-                  for _ in range(2)])
+    g = np.stack(
+        [rsocl.RollingShutterOperator(rig, device=device).forward(rng.random((rig.T,) + rig.shape)) for _ in range(2)]
+    )
     kwargs = dict(iterations=3, tune=False, device=device)
     on_device = rsocl.reconstruct(g, rig, x0="interp3d", **kwargs)
     from_host = rsocl.reconstruct(g, rig, x0=np.stack([interp3d(one, rig) for one in g]), **kwargs)

@@ -7,8 +7,15 @@ import numpy as np
 import pytest
 
 from rsocl.files.atomic import atomic_path
-from rsocl.files.hdf5 import (Capture, Reconstruction, load_capture, load_capture_rig, load_reconstruction,
-                              save_capture, save_reconstruction)
+from rsocl.files.hdf5 import (
+    Capture,
+    Reconstruction,
+    load_capture,
+    load_capture_rig,
+    load_reconstruction,
+    save_capture,
+    save_reconstruction,
+)
 from rsocl.model.rig import Camera, Rig
 
 SHAPE = (9, 7)
@@ -62,8 +69,8 @@ def test_capture_round_trip(tmp_path, rig, snapshots, truth):
     np.testing.assert_array_equal(cap.snapshots, snapshots)
     np.testing.assert_array_equal(cap.truth, truth)
     assert cap.meta == {"scene": "builtin", "sigma": 0.01, "n": 3, "list": [1, 2.5], "none": None}
-    with pytest.raises(AttributeError):                      # dataclasses.FrozenInstanceError
-        cap.meta = {}                                         # frozen dataclass
+    with pytest.raises(AttributeError):  # dataclasses.FrozenInstanceError
+        cap.meta = {}  # frozen dataclass
 
 
 def test_capture_layout(tmp_path, rig, snapshots):
@@ -105,7 +112,7 @@ def test_capture_rig_is_read_without_the_snapshots(tmp_path, rig, snapshots, tru
     header = load_capture_rig(path)
     assert header == load_capture(path).rig == rig
     np.testing.assert_array_equal(header.cameras[1].row_map, rig.cameras[1].row_map)
-    with h5py.File(path, "a") as h5:                    # no snapshots at all: the rig is still read
+    with h5py.File(path, "a") as h5:  # no snapshots at all: the rig is still read
         del h5["snapshots"]
     assert load_capture_rig(path) == rig
     with pytest.raises(ValueError, match="snapshots"):
@@ -145,18 +152,20 @@ def test_a_directory_or_a_damaged_file_gets_a_one_line_error_naming_it(tmp_path)
 
     folder = tmp_path / "cap.h5"
     folder.mkdir()
-    for call, message in ((load_capture, "path: '.*cap.h5' is a directory, not a capture file"),
-                          (load_reconstruction, "path: '.*cap.h5' is a directory, not a reconstruction file"),
-                          (CaptureSets, "capture: '.*cap.h5' is a directory, not a capture file"),
-                          (load_rigfile, "'.*cap.h5' is a directory, not a rig file"),
-                          (lambda p: load_scene(p, (8, 8), 4), "path: '.*cap.h5' is a directory, not a video file")):
+    for call, message in (
+        (load_capture, "path: '.*cap.h5' is a directory, not a capture file"),
+        (load_reconstruction, "path: '.*cap.h5' is a directory, not a reconstruction file"),
+        (CaptureSets, "capture: '.*cap.h5' is a directory, not a capture file"),
+        (load_rigfile, "'.*cap.h5' is a directory, not a rig file"),
+        (lambda p: load_scene(p, (8, 8), 4), "path: '.*cap.h5' is a directory, not a video file"),
+    ):
         with pytest.raises(ValueError, match=f"^{message}$"):
             call(folder)
     (tmp_path / "junk.h5").write_bytes(b"not hdf5 at all")
     for call in (load_capture, CaptureSets):
         with pytest.raises(ValueError, match=r"'.*junk.h5' is not a readable HDF5 file \(OSError: ") as info:
             call(tmp_path / "junk.h5")
-        assert "\n" not in str(info.value)        # h5py's message has several lines: the first one is kept
+        assert "\n" not in str(info.value)  # h5py's message has several lines: the first one is kept
 
 
 # ---------------------------------------------------------------------- reconstruction
@@ -172,7 +181,7 @@ def test_reconstruction_round_trip(tmp_path, rig, truth):
     assert rec.datacube.dtype == np.float32
     np.testing.assert_array_equal(rec.truth, truth)
     assert rec.params == params
-    assert list(rec.history) == ["residual", "psnr", "a"]     # saved order, not alphabetical
+    assert list(rec.history) == ["residual", "psnr", "a"]  # saved order, not alphabetical
     for name, trace in history.items():
         np.testing.assert_array_equal(rec.history[name], trace)
         assert rec.history[name].dtype == trace.dtype
@@ -213,6 +222,7 @@ class _DiskFull(RuntimeError):
 def _fail_on_dataset(monkeypatch):
     def boom(self, name, *args, **kwargs):
         raise _DiskFull(f"simulated failure writing {name}")
+
     monkeypatch.setattr(h5py.Group, "create_dataset", boom)
 
 
@@ -260,26 +270,37 @@ def test_atomic_path_success_and_failure(tmp_path):
     with atomic_path(str(target)) as tmp:
         tmp.write_bytes(b"third")
     assert target.read_bytes() == b"third"
-    assert target.stat().st_mode & 0o777 == 0o640              # existing permissions kept
+    assert target.stat().st_mode & 0o777 == 0o640  # existing permissions kept
     with pytest.raises(FileNotFoundError):
         with atomic_path(tmp_path / "no" / "such" / "dir.bin"):
             pass
 
 
-@pytest.mark.parametrize("damage, match", [
-    (lambda h5: h5.attrs.__delitem__("rig"), "attribute 'rig' is missing"),
-    (lambda h5: h5.attrs.__setitem__("rig", "[1]"), "the stored rig description is damaged"),
-    (lambda h5: h5.attrs.__setitem__("rig", 5), "the stored rig description is damaged"),
-    (lambda h5: h5.attrs.__setitem__("rig", "{bad"), "the stored rig description is damaged"),
-    (lambda h5: h5.attrs.__setitem__("rig", re.sub(r'"t_e": [-+.e0-9]+', '"t_e": -1.0', h5.attrs["rig"], count=1)),
-     "the stored rig is not valid: .*t_e must be > 0"),
-    (lambda h5: h5.attrs.__setitem__("meta", "{bad"), "attribute 'meta' is not valid JSON"),
-    (lambda h5: (h5.__delitem__("snapshots"), h5.create_group("snapshots")), "'snapshots' must be a dataset"),
-    (lambda h5: (h5.__delitem__("snapshots"), h5.create_dataset("snapshots", data=np.full((2, 3), b"x"))),
-     "'snapshots' must hold real numbers"),
-    (lambda h5: (h5.__delitem__("snapshots"), h5.create_dataset("snapshots", data=np.zeros((3, 4)))),
-     r"'snapshots' has shape \(3, 4\), the rig needs"),
-])
+@pytest.mark.parametrize(
+    "damage, match",
+    [
+        (lambda h5: h5.attrs.__delitem__("rig"), "attribute 'rig' is missing"),
+        (lambda h5: h5.attrs.__setitem__("rig", "[1]"), "the stored rig description is damaged"),
+        (lambda h5: h5.attrs.__setitem__("rig", 5), "the stored rig description is damaged"),
+        (lambda h5: h5.attrs.__setitem__("rig", "{bad"), "the stored rig description is damaged"),
+        (
+            lambda h5: h5.attrs.__setitem__(
+                "rig", re.sub(r'"t_e": [-+.e0-9]+', '"t_e": -1.0', h5.attrs["rig"], count=1)
+            ),
+            "the stored rig is not valid: .*t_e must be > 0",
+        ),
+        (lambda h5: h5.attrs.__setitem__("meta", "{bad"), "attribute 'meta' is not valid JSON"),
+        (lambda h5: (h5.__delitem__("snapshots"), h5.create_group("snapshots")), "'snapshots' must be a dataset"),
+        (
+            lambda h5: (h5.__delitem__("snapshots"), h5.create_dataset("snapshots", data=np.full((2, 3), b"x"))),
+            "'snapshots' must hold real numbers",
+        ),
+        (
+            lambda h5: (h5.__delitem__("snapshots"), h5.create_dataset("snapshots", data=np.zeros((3, 4)))),
+            r"'snapshots' has shape \(3, 4\), the rig needs",
+        ),
+    ],
+)
 def test_a_damaged_capture_is_a_value_error_naming_the_file(tmp_path, rig, snapshots, damage, match):
     from rsocl.cli.main import main
     from rsocl.scale.inputs import CaptureSets
@@ -290,7 +311,7 @@ def test_a_damaged_capture_is_a_value_error_naming_the_file(tmp_path, rig, snaps
     with pytest.raises(ValueError, match=match) as info:
         load_capture(cap)
     assert "cap.h5" in str(info.value)
-    if "snapshots" not in match and "meta" not in match:             # the rig: the reader of tiled runs too
+    if "snapshots" not in match and "meta" not in match:  # the rig: the reader of tiled runs too
         with pytest.raises(ValueError, match=match):
             CaptureSets(cap)
     assert main(["reconstruct", str(cap), "--out", str(tmp_path / "r.h5"), "--iterations", "2", "--fast"]) == 2

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rsocl.device.program import Kernels
 from rsocl.device.kernel import Kernel
+from rsocl.device.program import Kernels
 
 SOURCE = """
 __kernel void fill(__global float *x, float value, int add)
@@ -55,10 +55,10 @@ def test_set_arg_passes_through_and_keeps_the_record(program, device):
     buf = cla.empty(q, 8, np.float32)
     fill = program.fill
     _fill(fill, q, buf, 1, 0)
-    fill.set_args(buf.data, np.float32(4), np.int32(0))       # as a user of the raw API would
+    fill.set_args(buf.data, np.float32(4), np.int32(0))  # as a user of the raw API would
     cl.enqueue_nd_range_kernel(q, fill.kernel, (8,), None)
     np.testing.assert_array_equal(buf.get(), np.full(8, 4, np.float32))
-    np.testing.assert_array_equal(_fill(fill, q, buf, 1, 0), np.ones(8, np.float32))   # 1 again: set again
+    np.testing.assert_array_equal(_fill(fill, q, buf, 1, 0), np.ones(8, np.float32))  # 1 again: set again
 
 
 def test_offsets_wait_for_and_attributes(program, device):
@@ -79,8 +79,13 @@ def test_array_arguments_are_set_on_every_call(device):
     import pyopencl as cl
     import pyopencl.array as cla
 
-    prog = Kernels(cl.Program(device.context, """
-        __kernel void put(__global float *x, float2 v) { x[0] = v.x; x[1] = v.y; }""").build())
+    prog = Kernels(
+        cl.Program(
+            device.context,
+            """
+        __kernel void put(__global float *x, float2 v) { x[0] = v.x; x[1] = v.y; }""",
+        ).build()
+    )
     q = device.queue
     buf = cla.zeros(q, 2, np.float32)
     v = np.array([1, 2], np.float32)
@@ -98,7 +103,7 @@ def test_instances_have_their_own_arguments(program, device):
     buf = cla.empty(q, 8, np.float32)
     one, two = program.instance("fill", 1), program.instance("fill", 2)
     assert one is program.instance("fill", 1) and one is not two and one is not program.fill
-    for _ in range(2):                       # alternate: neither may keep the other's value
+    for _ in range(2):  # alternate: neither may keep the other's value
         np.testing.assert_array_equal(_fill(one, q, buf, 1, 0), np.ones(8, np.float32))
         np.testing.assert_array_equal(_fill(two, q, buf, 2, 0), np.full(8, 2, np.float32))
         np.testing.assert_array_equal(_fill(program.fill, q, buf, 7, 0), np.full(8, 7, np.float32))
@@ -112,7 +117,7 @@ def test_instances_are_bounded(program, monkeypatch):
     for key in range(1, 5):
         program.instance("fill", key)
     assert len(program._instances) == 3 and program.instance("fill", 4) is program.instance("fill", 4)
-    assert program.instance("fill", 0) is not first          # the oldest went first, and comes back anew
+    assert program.instance("fill", 0) is not first  # the oldest went first, and comes back anew
 
 
 def test_enqueue_launches_with_the_arguments_last_set(program, device):
@@ -124,6 +129,6 @@ def test_enqueue_launches_with_the_arguments_last_set(program, device):
     fill.set_args(a.data, np.float32(2), np.int32(1))
     fill.enqueue(q, (8,), None)
     np.testing.assert_array_equal(a.get(), np.full(8, 3, np.float32))
-    fill.set_args(b.data, np.float32(2), np.int32(1))     # value arguments unchanged, the buffer changed
+    fill.set_args(b.data, np.float32(2), np.int32(1))  # value arguments unchanged, the buffer changed
     fill.enqueue(q, (8,), None)
     np.testing.assert_array_equal(b.get(), np.full(8, 3, np.float32))

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import rsocl
+import rsocl_plugins.tv as tv_module
 from rsocl.device.context import Device
 from rsocl.model import reference as ref
-import rsocl_plugins.tv as tv_module
 from rsocl_plugins.tv import GPU_FUSED, STEP, TV, device_fused
 
 #: ``fused`` of the fewer-launch path that a GPU run measures against the plain one (benchmarks/launches.py)
@@ -68,9 +68,9 @@ def _launches_per_iteration(rig, g, device):
 
 
 def test_the_device_default_of_fused(device, monkeypatch):
-    assert device_fused(device) == 0                                   # a CPU: the plain path
+    assert device_fused(device) == 0  # a CPU: the plain path
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
-    assert device_fused(device) == GPU_FUSED == 0                      # other devices: as measured
+    assert device_fused(device) == GPU_FUSED == 0  # other devices: as measured
     monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     assert device_fused(device) == LEAN
 
@@ -119,10 +119,10 @@ def _cube(device, rig):
 
 def test_memory_counts_the_dual_buffers_of_the_devices_choice(device, monkeypatch):
     shape, plain = (12, 16, 16), TV().workspace_bytes((12, 16, 16), np.float32)
-    assert TV().workspace_bytes(shape, np.float32, device=device) == plain       # the CPU's plain path
+    assert TV().workspace_bytes(shape, np.float32, device=device) == plain  # the CPU's plain path
     assert TV(fused=3).workspace_bytes(shape, np.float32, device=device) > plain
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
-    assert TV().workspace_bytes(shape, np.float32, device=device) == plain       # GPU_FUSED: the plain path
+    assert TV().workspace_bytes(shape, np.float32, device=device) == plain  # GPU_FUSED: the plain path
     monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     assert TV().workspace_bytes(shape, np.float32, device=device) == TV(fused=3).workspace_bytes(shape, np.float32)
     assert TV(fused=0).workspace_bytes(shape, np.float32, device=device) == plain

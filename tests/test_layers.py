@@ -36,7 +36,7 @@ def _imports(path: Path, module: str):
             if name.split(".")[0] != "rsocl":
                 continue
             yield name
-            for alias in node.names:            # "from rsocl.model import rig" imports a module
+            for alias in node.names:  # "from rsocl.model import rig" imports a module
                 if (ROOT.parent / Path(*f"{name}.{alias.name}".split("."))).with_suffix(".py").exists():
                     yield f"{name}.{alias.name}"
 
@@ -60,8 +60,11 @@ def test_every_module_lives_in_a_layer():
 @pytest.mark.parametrize("module", sorted(m for m in MODULES if m not in FACES))
 def test_imports_go_down_or_sideways(module):
     here = _layer(module)
-    up = [f"{dep} (layer {LAYERS[_layer(dep)]})" for dep in GRAPH[module]
-          if _layer(dep) is not None and _layer(dep) > here]
+    up = [
+        f"{dep} (layer {LAYERS[_layer(dep)]})"
+        for dep in GRAPH[module]
+        if _layer(dep) is not None and _layer(dep) > here
+    ]
     assert not up, f"{module} (layer {LAYERS[here]}) imports from a higher layer: {up}"
 
 
@@ -76,7 +79,7 @@ def test_no_import_circle():
             if dep == m or dep not in MODULES:
                 continue
             if state.get(dep) == "open":
-                circle = stack[stack.index(dep):] + [dep]
+                circle = stack[stack.index(dep) :] + [dep]
                 # a package's __init__ re-exporting its own modules is not a circle
                 if not all(x == dep or x.startswith(dep + ".") for x in circle):
                     raise AssertionError("import circle: " + " -> ".join(circle))

@@ -60,7 +60,7 @@ def test_psnr_float32_accumulates_in_float64():
     estimate = np.full(n, 1e-3, dtype=np.float32)
     estimate[0] = 1.0 + np.float32(1e-3)
     exact_mse = float(np.float32(1e-3)) ** 2
-    assert mse(estimate, truth) == pytest.approx(exact_mse, rel=1e-9)   # float32 sums are off by ~1e-7
+    assert mse(estimate, truth) == pytest.approx(exact_mse, rel=1e-9)  # float32 sums are off by ~1e-7
     assert psnr(estimate, truth, data_range=1.0) == pytest.approx(-10 * math.log10(exact_mse), rel=1e-9)
 
 

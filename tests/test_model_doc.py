@@ -17,9 +17,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "model.md"
-OLD_NAME = "MODEL" + ".md"          # spelled in two parts so this file does not cite it
+OLD_NAME = "MODEL" + ".md"  # spelled in two parts so this file does not cite it
 SKIP_DIRS = {".git", "build", "dist", "__pycache__", ".pytest_cache", ".venv", "venv", "out"}
-SETUPTOOLS = (77, 0)                # pyproject.toml's [build-system] requires
+SETUPTOOLS = (77, 0)  # pyproject.toml's [build-system] requires
 TEXT_SUFFIXES = {".py", ".md", ".cl", ".toml", ".txt", ".in", ".cfg", ".json", ""}
 
 #: Lines of the contract that the page must hold verbatim (one per section).
@@ -31,7 +31,7 @@ CONTRACT_LINES = [
     "Adjoint: `f[s, y, x] = sum_c gain[c] * w[c, s, y, x] * g[c, y, x]`.",
     "    f      = v + Hᵀ (eta I + H Hᵀ)⁻¹ (g - H v)          # Eq. 12, solved exactly",
     "    b      = b - (f - theta)                              # Eq. 14",
-    "`projection=\"exact\"` is the default; `projection=\"paper\"` keeps Eq. 15 for comparison.",
+    '`projection="exact"` is the default; `projection="paper"` keeps Eq. 15 for comparison.',
 ]
 
 
@@ -56,8 +56,15 @@ def test_the_page_holds_the_contract():
     text = PAGE.read_text(encoding="utf-8")
     missing = [line for line in CONTRACT_LINES if line not in text.splitlines()]
     assert not missing, f"docs/model.md lacks the contract's lines {missing}"
-    for heading in ("## Grid", "## Row time of a reference pixel", "## Weights", "## Forward model",
-                    "## Reconstruction", "## Effective figures", "## Units"):
+    for heading in (
+        "## Grid",
+        "## Row time of a reference pixel",
+        "## Weights",
+        "## Forward model",
+        "## Reconstruction",
+        "## Effective figures",
+        "## Units",
+    ):
         assert any(line.startswith(heading) for line in text.splitlines()), heading
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rsocl import Camera, RollingShutterOperator, Rig
+from rsocl import Camera, Rig, RollingShutterOperator
 from rsocl.model import reference as ref
 from rsocl.testing import dottest
 
@@ -16,18 +16,36 @@ def _rigs():
     yield "one-camera", Rig.paper_array(1, (7, 5), t_e=1e-4, t_r=3e-5)
     yield "eight-oblique", Rig.paper_array(8, (8, 10), t_e=1e-4, t_r=3e-5)
     yield "eight-oblique-binary", Rig.paper_array(8, (6, 9), t_e=1e-4, t_r=3e-5, mask="binary")
-    yield "fractional-te-offset-gain", Rig(
-        [Camera(0, t_e=1.37e-4, t_r=3e-5, t_a=1.1e-5, gain=1.3), Camera(30, t_e=0.9e-4, t_r=3e-5, gain=0.7),
-         Camera(200, t_e=2.1e-4, t_r=3e-5, t_a=4e-5)], (10, 7))
+    yield (
+        "fractional-te-offset-gain",
+        Rig(
+            [
+                Camera(0, t_e=1.37e-4, t_r=3e-5, t_a=1.1e-5, gain=1.3),
+                Camera(30, t_e=0.9e-4, t_r=3e-5, gain=0.7),
+                Camera(200, t_e=2.1e-4, t_r=3e-5, t_a=4e-5),
+            ],
+            (10, 7),
+        ),
+    )
     yield "dt-binning", Rig.paper_array(4, (11, 6), t_e=1.6e-4, t_r=3e-5, dt=7.3e-5)
     yield "dt-binning-binary", Rig.paper_array(3, (5, 13), t_e=1.6e-4, t_r=3e-5, dt=7.3e-5, mask="binary")
     yield "te-multiple-of-tr", Rig.paper_array(2, (6, 6), t_e=4 * 3e-5, t_r=3e-5)
     yield "te-multiple-binary", Rig.paper_array(2, (6, 6), t_e=4 * 3e-5, t_r=3e-5, mask="binary")
     yield "short-exposure", Rig.paper_array(4, (6, 8), t_e=0.1 * 3e-5, t_r=3e-5)
-    yield "multi-frame", Rig([Camera(0, t_e=5e-5, t_r=1e-5, frames=3, t_d=1.2e-4), Camera(90, t_e=5e-5, t_r=1e-5)],
-                             (8, 8))
-    yield "row-map", Rig([Camera(t_e=6e-5, t_r=2e-5, row_map=np.random.default_rng(0).uniform(0, 9, (5, 6))),
-                          Camera(90, t_e=6e-5, t_r=2e-5)], (5, 6))
+    yield (
+        "multi-frame",
+        Rig([Camera(0, t_e=5e-5, t_r=1e-5, frames=3, t_d=1.2e-4), Camera(90, t_e=5e-5, t_r=1e-5)], (8, 8)),
+    )
+    yield (
+        "row-map",
+        Rig(
+            [
+                Camera(t_e=6e-5, t_r=2e-5, row_map=np.random.default_rng(0).uniform(0, 9, (5, 6))),
+                Camera(90, t_e=6e-5, t_r=2e-5),
+            ],
+            (5, 6),
+        ),
+    )
     yield "one-row", Rig.paper_array(4, (1, 9), t_e=1e-4, t_r=3e-5)
     yield "one-column", Rig.paper_array(4, (9, 1), t_e=1e-4, t_r=3e-5)
     yield "one-pixel", Rig.paper_array(2, (1, 1), t_e=1e-4, t_r=3e-5)
@@ -76,7 +94,7 @@ def test_binary_rule_is_the_papers():
     # row y starts at s = y and ends at y + 2.5: samples y, y+1, y+2
     expected = np.zeros((rig.T, 3))
     for y in range(3):
-        expected[y:y + 3, y] = 1
+        expected[y : y + 3, y] = 1
     np.testing.assert_array_equal(w, expected)
 
 
@@ -128,11 +146,19 @@ def test_tiles_and_cut_windows_match_zero_padded_reference(shape, mask, dtype, d
     # edge (8x21), the bottom edge (10x16), both (13x13) or smaller than a block (3x7) take the
     # scalar loops. A sub-frame range cuts windows at both ends (first < 0, and windows
     # running past T). All must equal H on the zero-padded datacube.
-    rig = Rig([Camera(0, t_e=1.6e-4, t_r=3e-5), Camera(90, t_e=1.6e-4, t_r=3e-5, t_a=2e-5),
-               Camera(45, t_e=1.6e-4, t_r=3e-5), Camera(200, t_e=0.5e-4, t_r=3e-5, gain=0.8)], shape, mask=mask)
+    rig = Rig(
+        [
+            Camera(0, t_e=1.6e-4, t_r=3e-5),
+            Camera(90, t_e=1.6e-4, t_r=3e-5, t_a=2e-5),
+            Camera(45, t_e=1.6e-4, t_r=3e-5),
+            Camera(200, t_e=0.5e-4, t_r=3e-5, gain=0.8),
+        ],
+        shape,
+        mask=mask,
+    )
     cut = slice(3, rig.T - 4)
     op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=cut)
-    assert (rig.windows.index - cut.start).min() < 0          # some windows start before the range
+    assert (rig.windows.index - cut.start).min() < 0  # some windows start before the range
     # the vector kernels rely on every window ending before L (no per-lane range test)
     w = rig.windows
     assert w.fraction.min() >= 0 and (w.fraction + w.length[:, None, None]).max() < rig.window_length

@@ -26,8 +26,20 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 KERNELS = ("admm.cl", "common.cl", "interp.cl", "operator.cl", "reduce.cl", "residual.cl", "tv.cl", "tv_fused.cl")
 # What must never reach the wheel (the copy for the build leaves these out too).
-IGNORE = shutil.ignore_patterns(".git", "build", "dist", "*.egg-info", "__pycache__", "*.pyc", ".pytest_cache",
-                                ".venv", "venv", "out", "*.h5", "rsocl-demo")
+IGNORE = shutil.ignore_patterns(
+    ".git",
+    "build",
+    "dist",
+    "*.egg-info",
+    "__pycache__",
+    "*.pyc",
+    ".pytest_cache",
+    ".venv",
+    "venv",
+    "out",
+    "*.h5",
+    "rsocl-demo",
+)
 
 
 # ------------------------------------------------------------------ installed package
@@ -77,8 +89,20 @@ def wheel(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("wheel")
     src, dist = tmp / "src", tmp / "dist"
     shutil.copytree(ROOT, src, ignore=IGNORE)
-    cmd = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index",
-           "--disable-pip-version-check", "-q", "-w", str(dist), str(src)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pip",
+        "wheel",
+        "--no-deps",
+        "--no-build-isolation",
+        "--no-index",
+        "--disable-pip-version-check",
+        "-q",
+        "-w",
+        str(dist),
+        str(src),
+    ]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, f"{' '.join(cmd)} failed:\n{done.stdout}\n{done.stderr}"
     wheels = sorted(dist.glob("rsocl-*.whl"))
@@ -98,7 +122,11 @@ def test_wheel_ships_kernels_and_plugins(wheel):
     with zipfile.ZipFile(wheel) as zf:
         names = set(zf.namelist())
     expected = {f"rsocl/kernels/{k}" for k in KERNELS} | {
-        "rsocl/__init__.py", "rsocl/kernels/__init__.py", "rsocl_plugins/__init__.py", "rsocl_plugins/tv.py"}
+        "rsocl/__init__.py",
+        "rsocl/kernels/__init__.py",
+        "rsocl_plugins/__init__.py",
+        "rsocl_plugins/tv.py",
+    }
     missing = sorted(expected - names)
     assert not missing, f"{wheel.name} lacks {missing}"
     # Every kernel source in the tree is shipped, under the package, not at the top level.
@@ -121,4 +149,5 @@ def test_wheel_entry_points(wheel):
             module = target.split(":")[0].strip()
             path = module.replace(".", "/")
             assert f"{path}.py" in names or f"{path}/__init__.py" in names, (
-                f"entry point [{group}] {key} = {target}: module {module} is not in {wheel.name}")
+                f"entry point [{group}] {key} = {target}: module {module} is not in {wheel.name}"
+            )

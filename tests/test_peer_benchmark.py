@@ -15,17 +15,25 @@ torch = pytest.importorskip("torch")
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
+from numpy_admm_tv import psnr  # noqa: E402
+from torch_admm_tv import Peer, tv_chambolle  # noqa: E402
+
 import rsocl  # noqa: E402
 from rsocl.model.scenes import builtin_scene  # noqa: E402
 from rsocl_plugins.tv import TV  # noqa: E402
 
-from numpy_admm_tv import psnr  # noqa: E402
-from torch_admm_tv import Peer, tv_chambolle  # noqa: E402
-
 
 def _reconstruct_peer(g, rig, iterations, dtype, tv):
-    peer = Peer(g, rig, lam=0.1, eta=0.2, tv_iterations=tv.iterations, dtype=dtype,
-                temporal_weight=tv.temporal_weight, step=tv.step)
+    peer = Peer(
+        g,
+        rig,
+        lam=0.1,
+        eta=0.2,
+        tv_iterations=tv.iterations,
+        dtype=dtype,
+        temporal_weight=tv.temporal_weight,
+        step=tv.step,
+    )
     theta, b = peer.zeros(), peer.zeros()
     with torch.no_grad():
         for _ in range(iterations):
@@ -41,7 +49,7 @@ def test_tv_matches_rsocl_tv(device, has_fp64, rng, weight, step, iterations):
 
     if not has_fp64:
         pytest.skip("needs float64 on the device")
-    x = rng.random((2, 5, 6, 7))                                   # a batch of 2 sets
+    x = rng.random((2, 5, 6, 7))  # a batch of 2 sets
     tv = TV(temporal_weight=weight, step=step, iterations=iterations)
     ours = tv.denoise(cla.to_device(device.queue, x), 0.3).get()
     peer = tv_chambolle(torch.from_numpy(x), 0.3, iterations, temporal_weight=weight, step=step).numpy()
@@ -90,8 +98,24 @@ def test_benchmark_page(device, tmp_path):
     import peer
 
     out = tmp_path / "peer.md"
-    peer.main(["--cases", "size8", "--sizes", "8", "--size-iterations", "2", "--rounds", "1",
-               "--modes", "eager", "--torch-device", "cpu", "--out", str(out)])
+    peer.main(
+        [
+            "--cases",
+            "size8",
+            "--sizes",
+            "8",
+            "--size-iterations",
+            "2",
+            "--rounds",
+            "1",
+            "--modes",
+            "eager",
+            "--torch-device",
+            "cpu",
+            "--out",
+            str(out),
+        ]
+    )
     text = out.read_text()
     assert "| one set 8×8 (T = 13), per ADMM iteration |" in text
     row = [line for line in text.splitlines() if line.startswith("| one set 8×8") and " dB, " in line]

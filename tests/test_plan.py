@@ -18,12 +18,12 @@ def test_crop_keeps_real_start_times():
 
 def test_plan_picks_the_coarsest_dt_that_resolves_the_motion(device):
     rig = rsocl.Rig.paper_array(4, (32, 32), t_e=0.18e-3, t_r=35e-6)
-    p = plan(rig, speed=1 / (3.5 * 35e-6), measure=False)     # 1 px per 3.5 t_r
+    p = plan(rig, speed=1 / (3.5 * 35e-6), measure=False)  # 1 px per 3.5 t_r
     assert p.dt == pytest.approx(3 * 35e-6)
     assert p.proposed.rig.T < rig.T
     p = plan(rig, fps=1 / 70e-6, measure=False)
     assert p.dt == pytest.approx(70e-6)
-    p = plan(rig, speed=1e9, measure=False)                   # too fast: dt = t_r, and says so
+    p = plan(rig, speed=1e9, measure=False)  # too fast: dt = t_r, and says so
     assert p.dt == pytest.approx(35e-6) and any("below t_r" in n for n in p.notes)
 
 
@@ -33,28 +33,31 @@ def test_plan_reports_memory_and_time_of_both_problems(device):
     assert p.proposed.memory_bytes < p.full.memory_bytes / 4
     assert p.proposed.subframes < p.full.subframes
     assert p.full.seconds_per_iteration > 0 and p.proposed.seconds == pytest.approx(
-        p.proposed.seconds_per_iteration * 10)
+        p.proposed.seconds_per_iteration * 10
+    )
 
 
 def test_plan_command(capsys):
-    assert main(["plan", "--shape", "32", "32", "--roi", "0", "0", "16", "16", "--speed", "5000",
-                 "--no-measure"]) == 0
+    assert main(["plan", "--shape", "32", "32", "--roi", "0", "0", "16", "16", "--speed", "5000", "--no-measure"]) == 0
     out = capsys.readouterr().out
     assert "device memory" in out and "proposed ROI" in out
     assert main(["plan", "--speed", "-1"]) == 2
     assert "speed must be > 0" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("extra, match", [
-    (["--tile", "0", "4"], r"--tile must be \(H, W\) pixels with 1 <= H <= m = 32 and 1 <= W <= n = 32"),
-    (["--roi", "0", "0", "8", "16", "--tile", "16", "9"], r"--tile must be .* 1 <= W <= n = 8, got \[16, 9\]"),
-    (["--halo", "-1"], r"--halo must be a whole number of pixels in \[0, 32\], got -1"),
-    (["--sets", "0"], r"--sets must be an integer >= 1, got 0"),
-    (["--memory-mib", "-5"], r"--memory-mib must be > 0 MiB, got -5.0"),
-    (["--memory-mib", "nan"], r"--memory-mib must be finite"),
-    (["--iterations", "-3"], r"--iterations must be an integer >= 1, got -3"),
-    (["--blur", "0"], r"--blur must be > 0 pixels, got 0.0"),
-])
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (["--tile", "0", "4"], r"--tile must be \(H, W\) pixels with 1 <= H <= m = 32 and 1 <= W <= n = 32"),
+        (["--roi", "0", "0", "8", "16", "--tile", "16", "9"], r"--tile must be .* 1 <= W <= n = 8, got \[16, 9\]"),
+        (["--halo", "-1"], r"--halo must be a whole number of pixels in \[0, 32\], got -1"),
+        (["--sets", "0"], r"--sets must be an integer >= 1, got 0"),
+        (["--memory-mib", "-5"], r"--memory-mib must be > 0 MiB, got -5.0"),
+        (["--memory-mib", "nan"], r"--memory-mib must be finite"),
+        (["--iterations", "-3"], r"--iterations must be an integer >= 1, got -3"),
+        (["--blur", "0"], r"--blur must be > 0 pixels, got 0.0"),
+    ],
+)
 def test_plan_checks_every_option_before_printing_or_measuring(capsys, monkeypatch, extra, match):
     import re
 
@@ -106,7 +109,7 @@ def test_the_configured_regularizer_is_counted_by_plan_and_by_the_tiling_decisio
 
     rig = rsocl.Rig.paper_array(4, (64, 64), t_e=0.18e-3, t_r=35e-6)
     solved = rig.sampled_range()
-    dual = 3 * (solved.stop - solved.start) * 64 * 64 * 4                  # one more copy of TV's dual, float32
+    dual = 3 * (solved.stop - solved.start) * 64 * 64 * 4  # one more copy of TV's dual, float32
     plain = memory_need(rig, make_regularizer("tv"))[1]
     fused = memory_need(rig, make_regularizer("tv", {"fused": "2"}))[1]
     assert fused - plain == dual
@@ -118,8 +121,19 @@ def test_the_configured_regularizer_is_counted_by_plan_and_by_the_tiling_decisio
     device = rsocl.device.get_device()
     monkeypatch.setattr(type(device), "global_mem_bytes", property(lambda self: (plain + fused) // 2))
     monkeypatch.delenv(SCHEDULER_ENV, raising=False)
-    args = Namespace(tile=None, sets=False, workers=None, scheduler=None, out="rec.h5", regularizer="tv", reg_opt=[],
-                     tv_iterations=None, dtype="float32", projection="exact", device=None)
+    args = Namespace(
+        tile=None,
+        sets=False,
+        workers=None,
+        scheduler=None,
+        out="rec.h5",
+        regularizer="tv",
+        reg_opt=[],
+        tv_iterations=None,
+        dtype="float32",
+        projection="exact",
+        device=None,
+    )
     capture = Namespace(rig=rig)
     assert not tiling._wants_tiles(args, capture)
     assert tiling._wants_tiles(Namespace(**{**vars(args), "reg_opt": ["fused=2"]}), capture)

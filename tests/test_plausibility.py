@@ -26,14 +26,20 @@ def small_machine(monkeypatch):
 # ---------------------------------------------------------------------- times in the wrong unit (item 11)
 def test_an_exposure_in_us_given_as_seconds_is_refused_naming_the_unit():
     with pytest.warns(UserWarning, match=r"t_e = 180 s is longer than 1 s"):
-        with pytest.raises(ValueError, match=r"cameras\[0\]\.t_e = 180 s is 5,142,857 sub-frames .* did you mean "
-                                             r"180 µs \(t_e=0.00018\)\?"):
+        with pytest.raises(
+            ValueError,
+            match=r"cameras\[0\]\.t_e = 180 s is 5,142,857 sub-frames .* did you mean "
+            r"180 µs \(t_e=0.00018\)\?",
+        ):
             rsocl.Rig.paper_array(4, shape=(64, 64), t_e=180, t_r=35e-6)
 
 
 def test_a_row_time_in_us_given_as_seconds_is_warned_in_one_line_naming_t_r():
-    with pytest.warns(UserWarning, match=r"^camera t_r = 35 s is longer than 1 ms per row; times are in seconds: "
-                                         r"did you mean 35 µs \(t_r=3.5e-05\)\?$") as caught:
+    with pytest.warns(
+        UserWarning,
+        match=r"^camera t_r = 35 s is longer than 1 ms per row; times are in seconds: "
+        r"did you mean 35 µs \(t_r=3.5e-05\)\?$",
+    ) as caught:
         rsocl.Rig.paper_array(4, shape=(16, 16), t_e=180e-6, t_r=35)
     assert all("\n" not in str(w.message) for w in caught)
 
@@ -52,8 +58,11 @@ def test_plausible_times_warn_nothing(recwarn):
 # ---------------------------------------------------------------------- memory (items 12, 13)
 def test_a_rig_larger_than_the_host_is_refused_before_its_arrays(small_machine):
     cams = [rsocl.Camera(a, t_e=1.8e-4, t_r=3.5e-5) for a in (0, 90)]
-    with pytest.raises(ValueError, match=r"^shape \(30000, 30000\): a rig of 2 camera\(s\) on 30000 x 30000 pixels "
-                                         r".* needs at least 33.5 GiB of host memory, more than this machine's 1.0 GiB"):
+    with pytest.raises(
+        ValueError,
+        match=r"^shape \(30000, 30000\): a rig of 2 camera\(s\) on 30000 x 30000 pixels "
+        r".* needs at least 33.5 GiB of host memory, more than this machine's 1.0 GiB",
+    ):
         rsocl.Rig(cams, (30000, 30000))
 
 
@@ -62,13 +71,15 @@ def test_reconstruct_refuses_a_datacube_larger_than_the_host_naming_shape_T_and_
     g = np.zeros((3, rig.n_channels) + rig.shape, np.float32)
     need = 4 * 3 * rig.T * 64 * 64
     monkeypatch.setattr(memory, "host_memory_bytes", lambda: need - 1)
-    with pytest.raises(ValueError, match=rf"^rig shape 64x64 and T = {rig.T}: the 3 sets x {rig.T} x 64 x 64 float32 "
-                                         r"datacube needs at least"):
+    with pytest.raises(
+        ValueError,
+        match=rf"^rig shape 64x64 and T = {rig.T}: the 3 sets x {rig.T} x 64 x 64 float32 "
+        r"datacube needs at least",
+    ):
         rsocl.reconstruct(g, rig, tune=False)
 
 
-def test_a_capture_whose_stored_rig_is_larger_than_the_host_is_refused_naming_the_file(tmp_path, small_machine,
-                                                                                        capsys):
+def test_a_capture_whose_stored_rig_is_larger_than_the_host_is_refused_naming_the_file(tmp_path, small_machine, capsys):
     import h5py
 
     from rsocl.files.hdf5 import load_capture_rig, save_capture
@@ -78,8 +89,11 @@ def test_a_capture_whose_stored_rig_is_larger_than_the_host_is_refused_naming_th
     save_capture(cap, np.zeros((rig.n_channels,) + rig.shape), rig)
     with h5py.File(cap, "r+") as h5:
         h5.attrs["rig"] = h5.attrs["rig"].replace('"shape": [8, 8]', '"shape": [20000, 20000]')
-    with pytest.raises(ValueError, match=r"cap.h5: the stored rig is not valid: shape \(20000, 20000\): a rig of 2 "
-                                         r"camera\(s\) .* more than this machine's 1.0 GiB"):
+    with pytest.raises(
+        ValueError,
+        match=r"cap.h5: the stored rig is not valid: shape \(20000, 20000\): a rig of 2 "
+        r"camera\(s\) .* more than this machine's 1.0 GiB",
+    ):
         load_capture_rig(cap)
     for argv in (["info", "--capture", str(cap)], ["reconstruct", str(cap), "--out", str(tmp_path / "r.h5")]):
         assert main(argv) == 2
@@ -100,8 +114,11 @@ def test_a_stored_row_map_claiming_more_than_the_host_is_refused_before_it_is_re
     with h5py.File(cap, "r+") as h5:
         del h5["rig_row_maps/0"]
         h5.create_dataset("rig_row_maps/0", shape=(100000, 100000), dtype="f8", chunks=(100, 100))  # 80 GB, unwritten
-    with pytest.raises(ValueError, match=r"cap.h5: the stored rig is not valid: row map 'rig_row_maps/0': its "
-                                         r"\(100000, 100000\) float64 array needs at least 74.5 GiB"):
+    with pytest.raises(
+        ValueError,
+        match=r"cap.h5: the stored rig is not valid: row map 'rig_row_maps/0': its "
+        r"\(100000, 100000\) float64 array needs at least 74.5 GiB",
+    ):
         load_capture_rig(cap)
 
 
@@ -118,8 +135,11 @@ def test_a_npy_claiming_ten_billion_elements_is_refused_naming_the_file(tmp_path
 
     video = tmp_path / "video.npy"
     _npy_claiming(video, (10, 100000, 10000))
-    with pytest.raises(ValueError, match=r"^path: '.*video.npy': the 10 x 100000 x 10000 float64 array its header "
-                                         r"claims \(10,000,000,000 elements\) needs at least 74.5 GiB"):
+    with pytest.raises(
+        ValueError,
+        match=r"^path: '.*video.npy': the 10 x 100000 x 10000 float64 array its header "
+        r"claims \(10,000,000,000 elements\) needs at least 74.5 GiB",
+    ):
         load_video(video)
 
 
@@ -128,8 +148,11 @@ def test_a_npy_whose_header_claims_more_than_the_file_holds_is_refused_as_damage
 
     video = tmp_path / "video.npy"
     _npy_claiming(video, (4, 100, 100))
-    with pytest.raises(ValueError, match=r"claims a 4 x 100 x 100 float64 array \(312.5 KiB\), the file holds "
-                                         r"8.0 KiB|the file holds 0.0 KiB of data: it is truncated or damaged"):
+    with pytest.raises(
+        ValueError,
+        match=r"claims a 4 x 100 x 100 float64 array \(312.5 KiB\), the file holds "
+        r"8.0 KiB|the file holds 0.0 KiB of data: it is truncated or damaged",
+    ):
         load_video(video)
 
 
@@ -138,8 +161,10 @@ def test_a_row_map_file_claiming_ten_billion_elements_is_refused_naming_the_key(
 
     _npy_claiming(tmp_path / "rows.npy", (100000, 100000))
     rig = tmp_path / "rig.toml"
-    rig.write_text('[rig]\nshape = [8, 8]\n\n[[camera]]\nbackend = "simulated"\nrow_map_file = "rows.npy"\n'
-                   't_e = 1.8e-4\nt_r = 3.5e-5\n')
+    rig.write_text(
+        '[rig]\nshape = [8, 8]\n\n[[camera]]\nbackend = "simulated"\nrow_map_file = "rows.npy"\n'
+        "t_e = 1.8e-4\nt_r = 3.5e-5\n"
+    )
     with pytest.raises(ValueError, match=r"camera\[0\]\.row_map_file: '.*rows.npy': the 100000 x 100000 float64 array"):
         load_rigfile(rig)
 
@@ -164,11 +189,14 @@ def _demo(shape=(16, 16), cameras=4):
 
 def test_a_run_that_never_moved_is_an_error_naming_eta_lam_and_the_range():
     rig, _, g = _demo()
-    with pytest.raises(FloatingPointError, match=r"^ADMM never moved: the residual stayed at \[1\] over 10 "
-                                                 r"iterations with eta = 1e\+30 and lam = 0.1: .* choose eta up to "
-                                                 r"about 4 psi = "):
+    with pytest.raises(
+        FloatingPointError,
+        match=r"^ADMM never moved: the residual stayed at \[1\] over 10 "
+        r"iterations with eta = 1e\+30 and lam = 0.1: .* choose eta up to "
+        r"about 4 psi = ",
+    ):
         rsocl.reconstruct(g, rig, eta=1e30, lam=0.1, tune=False)
-    with pytest.raises(FloatingPointError, match=r"never moved in set\(s\) \[1\]"):       # per set of a batch
+    with pytest.raises(FloatingPointError, match=r"never moved in set\(s\) \[1\]"):  # per set of a batch
         rsocl.reconstruct(np.stack([g, g]), rig, eta=[0.2, 1e30], lam=0.1, tune=False, iterations=4)
 
 
@@ -187,7 +215,9 @@ def test_a_moving_run_and_all_zero_snapshots_are_not_stalls():
 
 
 def test_the_cli_reports_a_run_that_never_moved_in_one_line(tmp_path, capsys):
-    assert main(["demo", "--fast", "--eta", "1e30", "--shape", "16", "16", "--quiet", "--out", str(tmp_path / "d")]) == 2
+    assert (
+        main(["demo", "--fast", "--eta", "1e30", "--shape", "16", "16", "--quiet", "--out", str(tmp_path / "d")]) == 2
+    )
     err = capsys.readouterr().err
     assert err.startswith("rsocl demo: error: ADMM never moved") and err.count("\n") == 1, err
     assert "eta = 1e+30" in err
@@ -199,8 +229,11 @@ def test_one_camera_far_above_its_full_scale_is_warned_in_one_line():
     g = g.copy()
     g[2] *= 100
     full = rig.cameras[2].t_e / rig.dt
-    with pytest.warns(UserWarning, match=rf"^g: snapshots of camera 2 reach .*, \d+(\.\d+)? times its full scale "
-                                         rf"{full:.4g} ") as caught:
+    with pytest.warns(
+        UserWarning,
+        match=rf"^g: snapshots of camera 2 reach .*, \d+(\.\d+)? times its full scale "
+        rf"{full:.4g} ",
+    ) as caught:
         rsocl.reconstruct(g, rig, tune=False, iterations=3)
     assert len([w for w in caught if "full scale" in str(w.message)]) == 1
 
@@ -209,7 +242,7 @@ def test_snapshots_within_their_full_scale_or_saturated_warn_nothing(recwarn):
     rig, _, g = _demo()
     rsocl.reconstruct(g, rig, tune=False, iterations=3)
     g = g.copy()
-    g[2, :4] = 1e6                                  # saturated pixels are left out of the data term
+    g[2, :4] = 1e6  # saturated pixels are left out of the data term
     rsocl.reconstruct(g, rig, tune=False, iterations=3, saturation=1e5)
     assert not [w for w in recwarn if "full scale" in str(w.message)]
 
@@ -251,8 +284,10 @@ def test_a_simulated_camera_whose_scene_exceeds_the_host_is_refused_before_captu
     with pytest.raises(ValueError) as info, SimulatedCamera(config, name="camera 0 (simulated)"):
         pass
     message = str(info.value)
-    assert "config['scene_frames'] = 1000000000 (t_e = 0.00018 s, dt = 3.5e-05 s: the camera's own T = 69): " \
-           "its scene of 1,000,000,000 x 64 x 64 float64 sub-frames needs" in message, message
+    assert (
+        "config['scene_frames'] = 1000000000 (t_e = 0.00018 s, dt = 3.5e-05 s: the camera's own T = 69): "
+        "its scene of 1,000,000,000 x 64 x 64 float64 sub-frames needs" in message
+    ), message
     assert "\n" not in message
     rig = tmp_path / "rig.toml"
     rig.write_text('[rig]\nshape = [64, 64]\n\n[[camera]]\nbackend = "simulated"\nt_e = 10\nt_r = 3.5e-5\n')
@@ -260,7 +295,10 @@ def test_a_simulated_camera_whose_scene_exceeds_the_host_is_refused_before_captu
     assert main(["capture", "--rig", str(rig), "--out", str(tmp_path / "c.h5")]) == 2
     err = capsys.readouterr().err
     assert "rsocl capture: warning: camera t_e = 10 s is longer than 1 s" in err, err
-    assert "scene_frames'] = 285778 (t_e = 10 s, dt = 3.5e-05 s: the camera's own T = 285,778): its scene of 285,778 x 64 x 64 float64" in err, err
+    assert (
+        "scene_frames'] = 285778 (t_e = 10 s, dt = 3.5e-05 s: the camera's own T = 285,778): "
+        "its scene of 285,778 x 64 x 64 float64" in err
+    ), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
 
 
@@ -275,6 +313,9 @@ def test_an_npz_video_claiming_ten_billion_elements_is_refused_naming_the_file_a
     member.write(b"\0" * 8)
     with zipfile.ZipFile(tmp_path / "video.npz", "w") as archive:
         archive.writestr("video.npy", member.getvalue())
-    with pytest.raises(ValueError, match=r"^path: '.*video.npz'\['video'\]: the 10 x 100000 x 10000 float64 array its "
-                                         r"header claims \(10,000,000,000 elements\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"^path: '.*video.npz'\['video'\]: the 10 x 100000 x 10000 float64 array its "
+        r"header claims \(10,000,000,000 elements\)",
+    ):
         load_video(tmp_path / "video.npz")

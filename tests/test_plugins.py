@@ -28,8 +28,10 @@ def _fake_distribution(folder: Path, dist: str, entry: str, module: str, body: s
 
 
 def test_builtin_regularizers_are_listed_without_importing_them():
-    code = ("import sys, rsocl.common.registry as p; names = sorted(p.available('rsocl.regularizers'));"
-            "print(names, any(m.startswith('rsocl_plugins.') for m in sys.modules))")
+    code = (
+        "import sys, rsocl.common.registry as p; names = sorted(p.available('rsocl.regularizers'));"
+        "print(names, any(m.startswith('rsocl_plugins.') for m in sys.modules))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     for name in BUILTIN:
         assert repr(name) in out
@@ -46,14 +48,17 @@ def test_builtin_regularizers_conform(name, device):
     assert "float32" in checked
 
 
-@pytest.mark.parametrize("weights, match", [
-    ((), r"weights must be a sequence of at least one denoising weight >= 0, got \(\)"),
-    ([], r"weights must be a sequence of at least one denoising weight >= 0, got \[\]"),
-    (0.5, r"weights must be a sequence of at least one denoising weight >= 0, got 0.5"),
-    ("0.5", r"weights must be a sequence .*got '0.5'"),
-    ((0.1, -0.5), r"weights\[1\] must be >= 0, got -0.5"),
-    ((np.nan,), r"weights\[0\] must be finite"),
-])
+@pytest.mark.parametrize(
+    "weights, match",
+    [
+        ((), r"weights must be a sequence of at least one denoising weight >= 0, got \(\)"),
+        ([], r"weights must be a sequence of at least one denoising weight >= 0, got \[\]"),
+        (0.5, r"weights must be a sequence of at least one denoising weight >= 0, got 0.5"),
+        ("0.5", r"weights must be a sequence .*got '0.5'"),
+        ((0.1, -0.5), r"weights\[1\] must be >= 0, got -0.5"),
+        ((np.nan,), r"weights\[0\] must be finite"),
+    ],
+)
 def test_conformance_check_refuses_bad_weights_before_running(weights, match, monkeypatch):
     import rsocl.testing
 
@@ -84,8 +89,13 @@ def test_unknown_name_lists_the_available_ones():
 
 
 def test_broken_plugin_is_reported_and_others_keep_working(tmp_path, monkeypatch):
-    _fake_distribution(tmp_path, "broken-rsocl-plugin", "broken", "broken_rsocl_module",
-                       "raise ImportError('needs the missing package frobnicate')\n")
+    _fake_distribution(
+        tmp_path,
+        "broken-rsocl-plugin",
+        "broken",
+        "broken_rsocl_module",
+        "raise ImportError('needs the missing package frobnicate')\n",
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     rows = {name: (info, state) for info, name, state in plugins.status("rsocl.regularizers")}
     info, state = rows["broken"]
@@ -105,16 +115,19 @@ def test_two_distributions_claiming_one_name_is_an_error_for_that_name_only(tmp_
     with pytest.raises(plugins.PluginError, match=r"'tv'.*impostor-tv.*rsocl|'tv'.*rsocl.*impostor-tv"):
         plugins.load("rsocl.regularizers", "tv")
     assert "tv" not in plugins.available("rsocl.regularizers")
-    assert plugins.load("rsocl.regularizers", "dct").name == "dct"            # the others stay usable
+    assert plugins.load("rsocl.regularizers", "dct").name == "dct"  # the others stay usable
     rows = [state for info, name, state in plugins.status("rsocl.regularizers") if name == "tv"]
     assert len(rows) == 2 and all("claimed by" in s for s in rows)
 
 
-@pytest.mark.parametrize("body, cause", [
-    ("import sys\nsys.exit(3)\n", "SystemExit: 3"),
-    ("Thing = 42\n", "TypeError: .* is 42, not a subclass of rsocl.solver.regularizer.Regularizer"),
-    ("def Thing(**kw):\n    return 'x'\n", "not a subclass of rsocl.solver.regularizer.Regularizer"),
-])
+@pytest.mark.parametrize(
+    "body, cause",
+    [
+        ("import sys\nsys.exit(3)\n", "SystemExit: 3"),
+        ("Thing = 42\n", "TypeError: .* is 42, not a subclass of rsocl.solver.regularizer.Regularizer"),
+        ("def Thing(**kw):\n    return 'x'\n", "not a subclass of rsocl.solver.regularizer.Regularizer"),
+    ],
+)
 def test_a_plugin_that_exits_or_is_not_a_regularizer_is_broken_and_the_others_work(tmp_path, monkeypatch, body, cause):
     _fake_distribution(tmp_path, "odd-plugin", "odd", "odd_rsocl_module", body)
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -158,8 +171,19 @@ def test_third_party_plugin_end_to_end(example_plugin_installed, tmp_path, devic
     assert "rsocl-example-shrink" in line and line.rstrip().endswith("ok")
     cap, rec = tmp_path / "cap.h5", tmp_path / "rec.h5"
     assert _rsocl("simulate", "builtin", "--out", str(cap), "--shape", "12", "12", "--quiet").returncode == 0
-    run = _rsocl("reconstruct", str(cap), "--out", str(rec), "--regularizer", "shrink", "--reg-opt", "center=0.5",
-                 "--iterations", "5", "--quiet")
+    run = _rsocl(
+        "reconstruct",
+        str(cap),
+        "--out",
+        str(rec),
+        "--regularizer",
+        "shrink",
+        "--reg-opt",
+        "center=0.5",
+        "--iterations",
+        "5",
+        "--quiet",
+    )
     assert run.returncode == 0, run.stderr
     from rsocl.files.hdf5 import load_reconstruction
 

@@ -39,7 +39,7 @@ def _readme_names():
             code |= {f"{module}.{name.strip()}" for name in names.split(",") if name.strip()}
     prose_text = re.sub(r"```.*?```", "", text, flags=re.S)
     prose = {name for span in re.findall(r"`([^`\n]+)`", prose_text) for name in DOTTED.findall(span)}
-    prose -= set(GROUPS)          # entry-point group names, not Python names
+    prose -= set(GROUPS)  # entry-point group names, not Python names
     return sorted(code), sorted(prose - code)
 
 
@@ -69,7 +69,7 @@ print(json.dumps(missing))
 
 def test_readme_code_uses_names_of_import_rsocl():
     code, _ = _readme_names()
-    assert "rsocl.reconstruct" in code and "rsocl.Option" in code, code    # the blocks were read
+    assert "rsocl.reconstruct" in code and "rsocl.Option" in code, code  # the blocks were read
     missing = _resolve_fresh(code, import_modules=False)
     assert not missing, f"names in the README's Python blocks that `import rsocl` does not give: {missing}"
 
@@ -84,16 +84,30 @@ def test_readme_prose_names_exist():
 def test_readme_uses_the_face_for_public_names():
     """A name the face exports is written ``rsocl.NAME`` in the README, not by its module path."""
     code, prose = _readme_names()
-    deep = [n for n in code + prose if n.count(".") >= 2 and n.rsplit(".", 1)[1] in rsocl.__all__
-            and not n.startswith("rsocl.testing.")]
+    deep = [
+        n
+        for n in code + prose
+        if n.count(".") >= 2 and n.rsplit(".", 1)[1] in rsocl.__all__ and not n.startswith("rsocl.testing.")
+    ]
     assert not deep, f"write these as rsocl.NAME: {deep}"
 
 
 def test_every_exported_name_resolves():
     missing = [name for name in rsocl.__all__ if not hasattr(rsocl, name)]
     assert not missing, missing
-    for name in ("load_capture", "save_capture", "load_reconstruction", "save_reconstruction",
-                 "reconstruct_sets", "psnr", "ssim", "Regularizer", "Option", "builtin_scene", "interp3d"):
+    for name in (
+        "load_capture",
+        "save_capture",
+        "load_reconstruction",
+        "save_reconstruction",
+        "reconstruct_sets",
+        "psnr",
+        "ssim",
+        "Regularizer",
+        "Option",
+        "builtin_scene",
+        "interp3d",
+    ):
         assert name in rsocl.__all__, name
     assert callable(rsocl.testing.dottest)
 
@@ -109,8 +123,9 @@ def test_import_rsocl_loads_no_heavy_dependency():
 
 # ------------------------------------------------------------------ dottest
 def test_dottest_passes_on_the_operator(device, dtype):
-    rig = rsocl.Rig([rsocl.Camera(a, t_e=1e-4, t_r=3e-5, gain=g) for a, g in ((0, 1.0), (33, 0.7), (250, 1.3))],
-                    shape=(7, 9))
+    rig = rsocl.Rig(
+        [rsocl.Camera(a, t_e=1e-4, t_r=3e-5, gain=g) for a, g in ((0, 1.0), (33, 0.7), (250, 1.3))], shape=(7, 9)
+    )
     op = rsocl.RollingShutterOperator(rig, device=device, dtype=dtype)
     assert dottest(op) is True
     assert dottest(op, seed=3, rtol=1e-3) is True

@@ -88,20 +88,23 @@ def test_callback_tol_and_x0(problem):
     assert res.history["residual"][0] < 1e-6
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(iterations=0), "iterations"),
-    (dict(lam=-1), "lam"),
-    (dict(eta=float("nan")), "eta"),
-    (dict(projection="diag"), "projection"),
-    (dict(tv_iterations=0), "tv_iterations"),
-    (dict(tol=-1), "tol"),
-    (dict(regularizer="nope"), "available"),
-    (dict(callback=3), "callback"),
-    (dict(dtype="float16"), "dtype"),
-    (dict(dtype="foo"), "dtype must be 'float32' or 'float64', got 'foo'"),
-    (dict(dtype=None), "dtype must be 'float32' or 'float64', got None"),
-    (dict(regularizer_options={"bogus": 1}), "unknown option"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(iterations=0), "iterations"),
+        (dict(lam=-1), "lam"),
+        (dict(eta=float("nan")), "eta"),
+        (dict(projection="diag"), "projection"),
+        (dict(tv_iterations=0), "tv_iterations"),
+        (dict(tol=-1), "tol"),
+        (dict(regularizer="nope"), "available"),
+        (dict(callback=3), "callback"),
+        (dict(dtype="float16"), "dtype"),
+        (dict(dtype="foo"), "dtype must be 'float32' or 'float64', got 'foo'"),
+        (dict(dtype=None), "dtype must be 'float32' or 'float64', got None"),
+        (dict(regularizer_options={"bogus": 1}), "unknown option"),
+    ],
+)
 def test_bad_arguments_are_named(problem, kwargs, match):
     rig, truth, g = problem
     with pytest.raises(ValueError, match=match):
@@ -191,7 +194,7 @@ def test_regularizer_recommendations_fill_unset_lam_and_eta(problem):
     from rsocl.model.curvature import default_scale
 
     rig, truth, g = problem
-    scale = default_scale(rig)                      # t_e/dt = 3.3 here: the defaults scale with psi
+    scale = default_scale(rig)  # t_e/dt = 3.3 here: the defaults scale with psi
     assert 0.5 < scale < 0.7
     res = rsocl.reconstruct(g, rig, regularizer="dct", iterations=2, tune=False)
     assert (res.params["lam"], res.params["eta"]) == (pytest.approx(0.3 * scale), pytest.approx(0.2 * scale))

@@ -34,7 +34,7 @@ def test_device_residual_matches_the_numpy_forward_model(device, dtype, rng, sha
     theta = rng.random((batch,) + op.domain_shape)
     g = np.stack([ref.forward(rig, t) for t in rng.random((batch,) + op.domain_shape)])
     if sets:
-        g[1] = 0                                     # an all-zero set: the absolute residual
+        g[1] = 0  # an all-zero set: the absolute residual
     w = (rng.random(g.shape) > 0.3).astype(float) if weighted else np.ones_like(g)
     cut = (lambda a: a) if sets else (lambda a: a[0])
 

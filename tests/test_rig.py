@@ -24,12 +24,15 @@ def test_paper_experiment_exposure_count():
     assert rig.N_s == math.ceil(200 / 26) == 8
 
 
-@pytest.mark.parametrize("angle, expected", [
-    (0, lambda y, x, m, n: y),
-    (90, lambda y, x, m, n: x),
-    (180, lambda y, x, m, n: m - 1 - y),
-    (270, lambda y, x, m, n: n - 1 - x),
-])
+@pytest.mark.parametrize(
+    "angle, expected",
+    [
+        (0, lambda y, x, m, n: y),
+        (90, lambda y, x, m, n: x),
+        (180, lambda y, x, m, n: m - 1 - y),
+        (270, lambda y, x, m, n: n - 1 - x),
+    ],
+)
 def test_row_maps_of_the_four_orientations(angle, expected):
     m, n = 5, 7
     r = Camera(angle, t_e=1e-4, t_r=1e-5).rows((m, n))
@@ -77,17 +80,20 @@ def test_multi_frame_channels_and_t_d_rule():
     Rig([Camera(0, t_e=2e-5, t_r=1e-5, frames=2, t_d=8e-5)], (10, 10))
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(t_e=1e-4, t_r=0), "t_r"),
-    (dict(t_e=-1, t_r=1e-5), "t_e"),
-    (dict(t_e=float("nan"), t_r=1e-5), "t_e"),
-    (dict(t_e=1e-4, t_r=float("inf")), "t_r"),
-    (dict(t_e=1e-4, t_r=1e-5, t_a=-1e-6), "t_a"),
-    (dict(t_e=1e-4, t_r=1e-5, gain=0), "gain"),
-    (dict(t_e=1e-4, t_r=1e-5, frames=0), "frames"),
-    (dict(t_e=1e-4, t_r=1e-5, frames=2), "t_d"),
-    (dict(t_e=1e-4), "t_r"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(t_e=1e-4, t_r=0), "t_r"),
+        (dict(t_e=-1, t_r=1e-5), "t_e"),
+        (dict(t_e=float("nan"), t_r=1e-5), "t_e"),
+        (dict(t_e=1e-4, t_r=float("inf")), "t_r"),
+        (dict(t_e=1e-4, t_r=1e-5, t_a=-1e-6), "t_a"),
+        (dict(t_e=1e-4, t_r=1e-5, gain=0), "gain"),
+        (dict(t_e=1e-4, t_r=1e-5, frames=0), "frames"),
+        (dict(t_e=1e-4, t_r=1e-5, frames=2), "t_d"),
+        (dict(t_e=1e-4), "t_r"),
+    ],
+)
 def test_camera_validation_names_the_parameter(kwargs, match):
     with pytest.raises(ValueError, match=match):
         Camera(0, **kwargs)
@@ -113,11 +119,14 @@ def test_rig_validation():
         Camera(t_e=1e-4, t_r=1e-5, row_map=np.full((3, 3), np.nan))
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(t_e=1e-4, t_r=35e-6, t_a=1e3), r"cameras\[1\].t_a = 1000 s makes the rig span T = 28,571,\d+ sub-frames"),
-    (dict(t_e=1e-4, t_r=35e-6, frames=3, t_d=400), r"cameras\[1\].t_d x \(frames - 1\) = 800 s makes the rig span"),
-    (dict(t_e=1e-4, t_r=1e3), r"cameras\[1\].t_r x its 7 rows = 7000 s makes the rig span"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(t_e=1e-4, t_r=35e-6, t_a=1e3), r"cameras\[1\].t_a = 1000 s makes the rig span T = 28,571,\d+ sub-frames"),
+        (dict(t_e=1e-4, t_r=35e-6, frames=3, t_d=400), r"cameras\[1\].t_d x \(frames - 1\) = 800 s makes the rig span"),
+        (dict(t_e=1e-4, t_r=1e3), r"cameras\[1\].t_r x its 7 rows = 7000 s makes the rig span"),
+    ],
+)
 @pytest.mark.filterwarnings("ignore:camera t_r = .* is longer than 1 ms:UserWarning")  # on purpose
 def test_a_time_that_makes_T_absurd_is_refused_naming_it_and_T(kwargs, match):
     from rsocl.model.rig import MAX_T
@@ -125,7 +134,7 @@ def test_a_time_that_makes_T_absurd_is_refused_naming_it_and_T(kwargs, match):
     with pytest.raises(ValueError, match=match) as info:
         Rig([Camera(0, t_e=1e-4, t_r=35e-6), Camera(0, **kwargs)], (8, 8), dt=35e-6)
     assert f"above the {MAX_T:,} a rig may span" in str(info.value)
-    assert Rig([Camera(0, t_e=1e-5, t_r=1e-5, t_a=(MAX_T - 1) * 1e-5)], (1, 1)).T == MAX_T   # the bound is allowed
+    assert Rig([Camera(0, t_e=1e-5, t_r=1e-5, t_a=(MAX_T - 1) * 1e-5)], (1, 1)).T == MAX_T  # the bound is allowed
 
 
 def test_dt_binning_reduces_T():
@@ -146,14 +155,16 @@ def test_trimming_drops_subframes_few_cameras_sample():
     assert rig4.min_cameras == 2
     counts = rig4.cameras_per_subframe()
     assert counts[kept.start] >= 2 and counts[kept.stop - 1] >= 2
-    assert np.all(counts[:kept.start] < 2) and np.all(counts[kept.stop:] < 2)
+    assert np.all(counts[: kept.start] < 2) and np.all(counts[kept.stop :] < 2)
     assert (kept.start, kept.stop) == (20, 59)  # camera 0 alone before, camera 2 alone after
     assert rig4.T_se == 39 < rig4.T
 
 
 def test_dict_round_trip_is_exact():
-    cams = [Camera(33.3, t_e=1.1e-4, t_r=2.7e-5, t_a=1e-6, gain=1.2),
-            Camera(t_e=1e-4, t_r=2e-5, row_map=np.arange(12.0).reshape(3, 4))]
+    cams = [
+        Camera(33.3, t_e=1.1e-4, t_r=2.7e-5, t_a=1e-6, gain=1.2),
+        Camera(t_e=1e-4, t_r=2e-5, row_map=np.arange(12.0).reshape(3, 4)),
+    ]
     rig = Rig(cams, (3, 4), dt=3e-5, mask="binary")
     again = Rig.from_dict(rig.to_dict())
     assert again == rig

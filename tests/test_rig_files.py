@@ -44,24 +44,33 @@ def test_every_example_loads_and_the_simulated_ones_capture(path, tmp_path, caps
     rig = rigfile.rig()
     assert rig.T >= 1 and rig.C == len(rigfile.cameras)
     if {cam["backend"] for cam in rigfile.cameras} != {"simulated"}:
-        return                                     # hardware: loading and checking is what CI can do
+        return  # hardware: loading and checking is what CI can do
     out = tmp_path / "cap.h5"
     assert main(["capture", "--rig", str(path), "--out", str(out), "--quiet"]) == 0, capsys.readouterr().err
     capture = load_capture(out)
-    assert capture.rig == rig                          # angles, homographies and times as the file says
+    assert capture.rig == rig  # angles, homographies and times as the file says
     assert capture.snapshots.shape == (rig.n_channels,) + rig.shape
     assert np.all(np.isfinite(capture.snapshots)) and capture.snapshots.max() > 0
 
 
-@pytest.mark.parametrize("key, value, table", [
-    ("angle", "90.0", "[[camera]]"), ("t_e", "1e-4", "[[camera]]"), ("t_r", "3.5e-5", "[[camera]]"),
-    ("t_a", "0.0", "[[camera]]"), ("gain", "2.0", "[[camera]]"), ("roi", "[0, 0, 8, 8]", "[[camera]]"),
-    ("row_map_file", '"rows.npy"', "[[camera]]"), ("dt", "3.5e-5", "[rig]"), ("shape", "[8, 8]", "[rig]"),
-    ("mask", '"binary"', "[rig]"),
-])
+@pytest.mark.parametrize(
+    "key, value, table",
+    [
+        ("angle", "90.0", "[[camera]]"),
+        ("t_e", "1e-4", "[[camera]]"),
+        ("t_r", "3.5e-5", "[[camera]]"),
+        ("t_a", "0.0", "[[camera]]"),
+        ("gain", "2.0", "[[camera]]"),
+        ("roi", "[0, 0, 8, 8]", "[[camera]]"),
+        ("row_map_file", '"rows.npy"', "[[camera]]"),
+        ("dt", "3.5e-5", "[rig]"),
+        ("shape", "[8, 8]", "[rig]"),
+        ("mask", '"binary"', "[rig]"),
+    ],
+)
 def test_a_model_key_in_camera_config_is_refused_saying_where_it_belongs(tmp_path, key, value, table):
     path = tmp_path / "rig.toml"
-    path.write_text(BASE + f'\n[camera.config]\n{key} = {value}\n')
+    path.write_text(BASE + f"\n[camera.config]\n{key} = {value}\n")
     with pytest.raises(ValueError) as info:
         load_rigfile(path)
     message = str(info.value)
@@ -72,22 +81,34 @@ def test_a_model_key_in_camera_config_is_refused_saying_where_it_belongs(tmp_pat
 def test_angle_in_camera_config_is_never_silently_dropped(tmp_path, capsys):
     """The simulated camera rendered a config angle while the capture recorded the camera's own."""
     path = tmp_path / "rig.toml"
-    path.write_text(BASE.replace('angle = 90.0\n', '') + '\n[camera.config]\nangle = 90.0\n')
+    path.write_text(BASE.replace("angle = 90.0\n", "") + "\n[camera.config]\nangle = 90.0\n")
     assert main(["capture", "--rig", str(path), "--out", str(tmp_path / "c.h5")]) == 2
     err = capsys.readouterr().err
     assert "camera[1].config.angle belongs in the [[camera]] table (camera[1].angle = ...)" in err
     assert not (tmp_path / "c.h5").exists()
 
 
-@pytest.mark.parametrize("old, new, message", [
-    ("t_r = 3.5e-05\n", "t_r = 3.5e-05\ndt = 3.5e-05\n",
-     r"camera\[0\]\.dt belongs in the \[rig\] table \(rig\.dt = \.\.\.\), not in \[\[camera\]\]"),
-    ("shape = [8, 8]\n", "shape = [8, 8]\nt_e = 1e-4\n",
-     r"rig\.t_e belongs in each \[\[camera\]\] table \(camera\[i\]\.t_e = \.\.\.\), not in \[rig\]"),
-    ("t_r = 3.5e-05\n", 't_r = 3.5e-05\nscene = "builtin"\n',
-     r"camera\[0\] has unknown key\(s\) \['scene'\].*the backend's own settings go in its \[camera\.config\]"),
-    ("t_r = 3.5e-05\n", "t_r = 3.5e-05\nt_ee = 1e-4\n", r"\('t_ee': did you mean 't_e'\?\)"),
-])
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        (
+            "t_r = 3.5e-05\n",
+            "t_r = 3.5e-05\ndt = 3.5e-05\n",
+            r"camera\[0\]\.dt belongs in the \[rig\] table \(rig\.dt = \.\.\.\), not in \[\[camera\]\]",
+        ),
+        (
+            "shape = [8, 8]\n",
+            "shape = [8, 8]\nt_e = 1e-4\n",
+            r"rig\.t_e belongs in each \[\[camera\]\] table \(camera\[i\]\.t_e = \.\.\.\), not in \[rig\]",
+        ),
+        (
+            "t_r = 3.5e-05\n",
+            't_r = 3.5e-05\nscene = "builtin"\n',
+            r"camera\[0\] has unknown key\(s\) \['scene'\].*the backend's own settings go in its \[camera\.config\]",
+        ),
+        ("t_r = 3.5e-05\n", "t_r = 3.5e-05\nt_ee = 1e-4\n", r"\('t_ee': did you mean 't_e'\?\)"),
+    ],
+)
 def test_a_key_in_the_wrong_table_says_where_it_belongs(tmp_path, old, new, message):
     path = tmp_path / "rig.toml"
     path.write_text(BASE.replace(old, new, 1))
@@ -97,7 +118,7 @@ def test_a_key_in_the_wrong_table_says_where_it_belongs(tmp_path, old, new, mess
 
 def test_keys_the_rig_fills_in_are_refused_in_a_simulated_config(tmp_path):
     path = tmp_path / "rig.toml"
-    path.write_text(BASE + '\n[camera.config]\nscene_frames = 5\n')
+    path.write_text(BASE + "\n[camera.config]\nscene_frames = 5\n")
     with pytest.raises(ValueError, match=r"camera\[1\]\.config\.scene_frames is set from the rig"):
         load_rigfile(path)
     assert set(MISPLACED_CONFIG_KEYS) >= set(RIG_KEYS) | {"angle", "t_e", "t_r"}
@@ -122,14 +143,17 @@ def test_row_map_file_stays_in_the_rig_files_folder(tmp_path):
     np.save(tmp_path / "outside.npy", rows)
     path = rig_dir / "rig.toml"
     path.write_text(BASE.replace("angle = 90.0", 'row_map_file = "maps/rows.npy"'))
-    np.testing.assert_array_equal(load_rigfile(path).rig().row_map(1), rows)          # below the folder: read
+    np.testing.assert_array_equal(load_rigfile(path).rig().row_map(1), rows)  # below the folder: read
     for name in ("../outside.npy", "maps/../../outside.npy", str(tmp_path / "outside.npy")):
         path.write_text(BASE.replace("angle = 90.0", f'row_map_file = "{name}"'))
-        with pytest.raises(ValueError, match=r"camera\[1\]\.row_map_file must (name a file in the rig file's "
-                                             r"folder or below it|be a path relative to the rig file's folder)"):
+        with pytest.raises(
+            ValueError,
+            match=r"camera\[1\]\.row_map_file must (name a file in the rig file's "
+            r"folder or below it|be a path relative to the rig file's folder)",
+        ):
             load_rigfile(path)
     if hasattr(os, "symlink"):
-        os.symlink(tmp_path / "outside.npy", rig_dir / "link.npy")                      # a link that leaves it
+        os.symlink(tmp_path / "outside.npy", rig_dir / "link.npy")  # a link that leaves it
         path.write_text(BASE.replace("angle = 90.0", 'row_map_file = "link.npy"'))
         with pytest.raises(ValueError, match=r"camera\[1\]\.row_map_file must name a file in the rig file's folder"):
             load_rigfile(path)

@@ -6,9 +6,9 @@ import sys
 import numpy as np
 import pytest
 
-from rsocl.model.rig import Camera, Rig
 from rsocl.files.rigfile import RigFile, load_rigfile, save_rigfile
 from rsocl.files.toml_writer import dumps_toml
+from rsocl.model.rig import Camera, Rig
 from rsocl.model.row_map import row_map_from_homography
 
 if sys.version_info >= (3, 11):
@@ -30,11 +30,26 @@ def _rotation(angle, shape=SHAPE, offset=(3.0, 5.0)):
 def rigfile(tmp_path):
     row_map = np.random.default_rng(2).uniform(0, 8, SHAPE) + 1 / 3
     cameras = [
-        {"backend": "simulated", "name": 'left "A" ✓', "angle": 45.0, "t_e": T_E / 7, "t_r": T_R, "t_a": 1e-5 / 3,
-         "gain": 1.1, "roi": [1, 2, 7, 9], "pixel_format": "Mono16",
-         "config": {"scene": "builtin", "sensor": {"bit_depth": 12, "read_noise": 0.01}, "fail_after": None}},
-        {"backend": "aravis", "address": "10.0.0.2", "homography": _rotation(90.0).tolist(), "t_e": T_E, "t_r": T_R,
-         "config": {"packet_size": 9000, "weird key": [1, 2.5, "x"]}},
+        {
+            "backend": "simulated",
+            "name": 'left "A" ✓',
+            "angle": 45.0,
+            "t_e": T_E / 7,
+            "t_r": T_R,
+            "t_a": 1e-5 / 3,
+            "gain": 1.1,
+            "roi": [1, 2, 7, 9],
+            "pixel_format": "Mono16",
+            "config": {"scene": "builtin", "sensor": {"bit_depth": 12, "read_noise": 0.01}, "fail_after": None},
+        },
+        {
+            "backend": "aravis",
+            "address": "10.0.0.2",
+            "homography": _rotation(90.0).tolist(),
+            "t_e": T_E,
+            "t_r": T_R,
+            "config": {"packet_size": 9000, "weird key": [1, 2.5, "x"]},
+        },
         {"backend": "simulated", "row_map": row_map, "t_e": 1e-4, "t_r": T_R * 2},
         {"backend": "v4l2", "angle": 270, "t_e": 2.2e-5, "t_r": T_R, "frames": 2, "t_d": SHAPE[1] * T_R + 1e-7},
     ]
@@ -126,11 +141,21 @@ def test_backends_pass_the_model_to_simulated_cameras(rigfile):
 
 def test_toml_writer_round_trips():
     data = {
-        "top": 1, "f": 1e-5, "big": 5e16, "neg": -0.0, "inf": math.inf, "b": True, "s": 'q"uote\\back\nline\t✓\x01',
-        "odd key": "x", "list": [1, [2, 3], ["a", "b"]], "inline": [{"a": 1}, 2],
+        "top": 1,
+        "f": 1e-5,
+        "big": 5e16,
+        "neg": -0.0,
+        "inf": math.inf,
+        "b": True,
+        "s": 'q"uote\\back\nline\t✓\x01',
+        "odd key": "x",
+        "list": [1, [2, 3], ["a", "b"]],
+        "inline": [{"a": 1}, 2],
         "table": {"x": 1.5, "empty": {}, "sub": {"y": [1.0, 2.0]}, "skip": None},
         "arr": [{"k": 1, "t": {"z": "deep"}}, {"k": 2}],
-        "np": np.float32(0.5), "npa": np.arange(3), "tuple": (1, 2),
+        "np": np.float32(0.5),
+        "npa": np.arange(3),
+        "tuple": (1, 2),
     }
     back = tomllib.loads(dumps_toml(data))
     expected = dict(data, np=0.5, npa=[0, 1, 2], tuple=[1, 2])
@@ -161,24 +186,27 @@ t_r = {T_R!r}
 """
 
 
-@pytest.mark.parametrize("old, new, message", [
-    ("angle = 90\nt_e = 0.00018", "angle = 90\nt_e = -1.0", r"camera\[1\]\.t_e must be > 0 seconds"),
-    ("angle = 90\nt_e = 0.00018", "angle = 90", r"camera\[1\]\.t_e is required"),
-    ('backend = "simulated"\nangle = 0', "angle = 0", r"camera\[0\]\.backend .* is required"),
-    ("angle = 90", "angle = 90\nexposure = 1", r"camera\[1\] has unknown key\(s\) \['exposure'\]"),
-    ("angle = 90", "angle = 90\nhomography = [[1,0,0],[0,1,0],[0,0,1]]", r"camera\[1\]: give only one of"),
-    ("angle = 90", "homography = [[1,0],[0,1]]", r"camera\[1\]\.homography: homography must be a 3x3"),
-    ("angle = 90", 'row_map_file = "missing.npy"', r"camera\[1\]\.row_map_file: file .*missing\.npy.* does not"),
-    ("angle = 90", "angle = 90\nroi = [0, 0, 0, 5]", r"camera\[1\]\.roi .*\[2\] must be an integer >= 1"),
-    ("angle = 90", 'angle = "ninety"', r"camera\[1\]\.angle must be a finite real number"),
-    ("angle = 90", "angle = 90\nt_a = -1e-6", r"camera\[1\]\.t_a must be >= 0 seconds"),
-    ("angle = 90", "angle = 90\nframes = 2", r"camera\[1\]: t_d .* is required when frames > 1"),
-    ("shape = [9, 7]", "shape = [9]", r"rig\.shape must be a list of 2 integers"),
-    ("shape = [9, 7]", "shape = [9, 7]\ndt = 1e-6", r"dt must be >= t_r"),
-    ("shape = [9, 7]", "shape = [9, 7]\nmask = 'fuzzy'", r"rig\.mask must be one of"),
-    ("[rig]", "[rigg]", r"unknown top-level key"),
-    ("[rig]", "[rig", r"not valid TOML"),
-])
+@pytest.mark.parametrize(
+    "old, new, message",
+    [
+        ("angle = 90\nt_e = 0.00018", "angle = 90\nt_e = -1.0", r"camera\[1\]\.t_e must be > 0 seconds"),
+        ("angle = 90\nt_e = 0.00018", "angle = 90", r"camera\[1\]\.t_e is required"),
+        ('backend = "simulated"\nangle = 0', "angle = 0", r"camera\[0\]\.backend .* is required"),
+        ("angle = 90", "angle = 90\nexposure = 1", r"camera\[1\] has unknown key\(s\) \['exposure'\]"),
+        ("angle = 90", "angle = 90\nhomography = [[1,0,0],[0,1,0],[0,0,1]]", r"camera\[1\]: give only one of"),
+        ("angle = 90", "homography = [[1,0],[0,1]]", r"camera\[1\]\.homography: homography must be a 3x3"),
+        ("angle = 90", 'row_map_file = "missing.npy"', r"camera\[1\]\.row_map_file: file .*missing\.npy.* does not"),
+        ("angle = 90", "angle = 90\nroi = [0, 0, 0, 5]", r"camera\[1\]\.roi .*\[2\] must be an integer >= 1"),
+        ("angle = 90", 'angle = "ninety"', r"camera\[1\]\.angle must be a finite real number"),
+        ("angle = 90", "angle = 90\nt_a = -1e-6", r"camera\[1\]\.t_a must be >= 0 seconds"),
+        ("angle = 90", "angle = 90\nframes = 2", r"camera\[1\]: t_d .* is required when frames > 1"),
+        ("shape = [9, 7]", "shape = [9]", r"rig\.shape must be a list of 2 integers"),
+        ("shape = [9, 7]", "shape = [9, 7]\ndt = 1e-6", r"dt must be >= t_r"),
+        ("shape = [9, 7]", "shape = [9, 7]\nmask = 'fuzzy'", r"rig\.mask must be one of"),
+        ("[rig]", "[rigg]", r"unknown top-level key"),
+        ("[rig]", "[rig", r"not valid TOML"),
+    ],
+)
 def test_bad_content_names_camera_and_key(tmp_path, old, new, message):
     text = BASE.replace(old, new, 1)
     assert text != BASE
@@ -195,7 +223,7 @@ def test_row_map_file_is_checked(tmp_path):
     path.write_text(BASE.replace("angle = 90", 'row_map_file = "rows.npy"'))
     with pytest.raises(ValueError, match=r"camera\[1\]\.row_map_file has shape \(3, 3\)"):
         load_rigfile(path)
-    (tmp_path / "rows.npy").write_bytes(b"")                         # an empty file
+    (tmp_path / "rows.npy").write_bytes(b"")  # an empty file
     with pytest.raises(ValueError, match=r"camera\[1\]\.row_map_file: .*rows.npy' is not a readable .npy array"):
         load_rigfile(path)
     np.save(tmp_path / "rows.npy", np.arange(63.0).reshape(9, 7))

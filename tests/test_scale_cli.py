@@ -10,7 +10,8 @@ import rsocl
 from rsocl.cli.main import main
 from rsocl.files.hdf5 import load_reconstruction, save_capture
 from rsocl.model.scenes import builtin_scene
-from rsocl.scale import reconstruct_tiled, tiled as tiled_module
+from rsocl.scale import reconstruct_tiled
+from rsocl.scale import tiled as tiled_module
 
 zarr = pytest.importorskip("zarr")
 
@@ -40,15 +41,33 @@ def test_reconstruct_into_a_zarr_store_by_tiles(capture, tmp_path, capsys):
     assert group.attrs["rsocl_file"] == "reconstruction" and group.attrs["T"] == rig.T
     expected = reconstruct_tiled(sets[0], rig, tile=(10, 13), halo=4, iterations=5).datacube
     np.testing.assert_array_equal(group["datacube"][...], expected)
-    assert main(args) == 0                     # the same command on a complete store redoes nothing
+    assert main(args) == 0  # the same command on a complete store redoes nothing
     assert "0 tile task(s) in" in capsys.readouterr().out.replace(", 4 already in the store", "")
 
 
 def test_no_truth_and_a_zarr_store(capture, tmp_path, capsys):
     path, rig, _ = capture
     out = tmp_path / "rec.zarr"
-    assert main(["reconstruct", str(path), "--out", str(out), "--tile", "10", "26", "--halo", "4",
-                 "--iterations", "3", "--fast", "--no-truth"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(path),
+                "--out",
+                str(out),
+                "--tile",
+                "10",
+                "26",
+                "--halo",
+                "4",
+                "--iterations",
+                "3",
+                "--fast",
+                "--no-truth",
+            ]
+        )
+        == 0
+    )
     assert "PSNR" not in capsys.readouterr().out
     group = zarr.open_group(str(out), mode="r")
     assert "datacube" in group and "truth" not in group and not any("truth" in key for key in group.attrs)
@@ -57,8 +76,27 @@ def test_no_truth_and_a_zarr_store(capture, tmp_path, capsys):
 def test_every_set_into_one_store(capture, tmp_path):
     path, rig, sets = capture
     out = tmp_path / "sets.zarr"
-    assert main(["reconstruct", str(path), "--out", str(out), "--sets", "--tile", "20", "26", "--halo", "0",
-                 "--iterations", "4", "--fast", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(path),
+                "--out",
+                str(out),
+                "--sets",
+                "--tile",
+                "20",
+                "26",
+                "--halo",
+                "0",
+                "--iterations",
+                "4",
+                "--fast",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     cube = zarr.open_group(str(out), mode="r")["datacube"]
     assert cube.shape == (3, rig.T) + rig.shape
     for s in range(3):
@@ -68,31 +106,54 @@ def test_every_set_into_one_store(capture, tmp_path):
 def test_tiles_into_an_hdf5_file(capture, tmp_path):
     path, rig, _ = capture
     out = tmp_path / "rec.h5"
-    assert main(["reconstruct", str(path), "--out", str(out), "--tile", "10", "26", "--iterations", "3",
-                 "--quiet"]) == 0
+    assert (
+        main(["reconstruct", str(path), "--out", str(out), "--tile", "10", "26", "--iterations", "3", "--quiet"]) == 0
+    )
     assert load_reconstruction(out).datacube.shape == (rig.T,) + rig.shape and out.with_suffix(".gif").is_file()
-    assert (tmp_path / "rec-tuning.png").is_file()            # tuned (no --fast): the search's plot, as untiled
-    assert main(["reconstruct", str(path), "--out", str(tmp_path / "t.zarr"), "--tile", "10", "26", "--iterations",
-                 "3", "--quiet"]) == 0
+    assert (tmp_path / "rec-tuning.png").is_file()  # tuned (no --fast): the search's plot, as untiled
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(path),
+                "--out",
+                str(tmp_path / "t.zarr"),
+                "--tile",
+                "10",
+                "26",
+                "--iterations",
+                "3",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert (tmp_path / "t-tuning.png").is_file()
 
 
-@pytest.mark.parametrize("extra, match", [
-    (["--out", "{tmp}/missing/rec.zarr"], "--out: directory .*missing.* does not exist"),
-    (["--out", "{tmp}/missing/rec.h5"], "--out"),
-    (["--out", "{tmp}/rec.h5", "--sets"], r"--out: every set \(--sets\) goes to a Zarr store"),
-    (["--out", "{tmp}/rec.zarr", "--scheduler", "tcp://127.0.0.1:9"], "scheduler: cannot reach"),
-    (["--out", "{tmp}/rec.zarr", "--workers", "0"], "workers must be"),
-    (["--out", "{tmp}/rec.zarr", "--tile", "0", "4"], r"tile must be \(H, W\)"),
-    (["--out", "{capture}"], r"--out .*cap.h5' is the capture it reads"),
-    (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/rec.h5"], r"--gif .*rec.h5' is the --out file"),
-    (["--out", "{tmp}/rec.h5", "--gif", "{capture}"], r"--gif .*is the capture it reads"),
-    (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/anim.png"], r"--gif must name a \.gif file .*anim.png"),
-    (["--out", "{tmp}/taken.h5"], r"--gif's NAME-tuning.png must name a file, .*taken-tuning.png' is a directory"),
-    (["--out", "{tmp}/taken.zarr"], r"--out's NAME-tuning.png must name a file, .*taken-tuning.png' is a directory"),
-])
-def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, tmp_path, monkeypatch, capsys,
-                                                                       extra, match):
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (["--out", "{tmp}/missing/rec.zarr"], "--out: directory .*missing.* does not exist"),
+        (["--out", "{tmp}/missing/rec.h5"], "--out"),
+        (["--out", "{tmp}/rec.h5", "--sets"], r"--out: every set \(--sets\) goes to a Zarr store"),
+        (["--out", "{tmp}/rec.zarr", "--scheduler", "tcp://127.0.0.1:9"], "scheduler: cannot reach"),
+        (["--out", "{tmp}/rec.zarr", "--workers", "0"], "workers must be"),
+        (["--out", "{tmp}/rec.zarr", "--tile", "0", "4"], r"tile must be \(H, W\)"),
+        (["--out", "{capture}"], r"--out .*cap.h5' is the capture it reads"),
+        (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/rec.h5"], r"--gif .*rec.h5' is the --out file"),
+        (["--out", "{tmp}/rec.h5", "--gif", "{capture}"], r"--gif .*is the capture it reads"),
+        (["--out", "{tmp}/rec.h5", "--gif", "{tmp}/anim.png"], r"--gif must name a \.gif file .*anim.png"),
+        (["--out", "{tmp}/taken.h5"], r"--gif's NAME-tuning.png must name a file, .*taken-tuning.png' is a directory"),
+        (
+            ["--out", "{tmp}/taken.zarr"],
+            r"--out's NAME-tuning.png must name a file, .*taken-tuning.png' is a directory",
+        ),
+    ],
+)
+def test_outputs_and_scheduler_are_checked_before_anything_is_computed(
+    capture, tmp_path, monkeypatch, capsys, extra, match
+):
     from rsocl.scale import runner
 
     monkeypatch.setattr(runner, "CONNECT_TIMEOUT", 1)
@@ -103,8 +164,9 @@ def test_outputs_and_scheduler_are_checked_before_anything_is_computed(capture, 
     path = capture[0]
     before = path.read_bytes()
     (tmp_path / "taken-tuning.png").mkdir()
-    argv = ["reconstruct", str(path), "--iterations", "2"] + [e.replace("{tmp}", str(tmp_path))
-                                                              .replace("{capture}", str(path)) for e in extra]
+    argv = ["reconstruct", str(path), "--iterations", "2"] + [
+        e.replace("{tmp}", str(tmp_path)).replace("{capture}", str(path)) for e in extra
+    ]
     assert main(argv) == 2
     assert path.read_bytes() == before
     err = capsys.readouterr().err
@@ -120,7 +182,7 @@ def test_workers_above_four_per_core_are_refused_before_a_cluster_starts(capture
 
     started = []
 
-    class NoCluster:                                 # --workers 100000 on 2 cores ran until killed
+    class NoCluster:  # --workers 100000 on 2 cores ran until killed
         def __init__(self, *args, **kwargs):
             started.append(kwargs)
             raise RuntimeError("a LocalCluster was started")
@@ -128,8 +190,7 @@ def test_workers_above_four_per_core_are_refused_before_a_cluster_starts(capture
     monkeypatch.setattr(distributed, "LocalCluster", NoCluster)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     path = capture[0]
-    argv = ["reconstruct", str(path), "--out", str(tmp_path / "rec.zarr"), "--iterations", "2", "--fast",
-            "--workers"]
+    argv = ["reconstruct", str(path), "--out", str(tmp_path / "rec.zarr"), "--iterations", "2", "--fast", "--workers"]
     assert main(argv + ["100000"]) == 2
     err = capsys.readouterr().err
     assert f"workers must be an integer in [1, {4 * cores}]" in err and "got 100000" in err
@@ -137,12 +198,13 @@ def test_workers_above_four_per_core_are_refused_before_a_cluster_starts(capture
     assert f"got {4 * cores + 1}" in capsys.readouterr().err
     assert not started and not (tmp_path / "rec.zarr").exists()
     assert runner.max_workers() == 4 * cores
-    assert runner.Engine(workers=4 * cores).workers == 4 * cores        # the cap itself is allowed
+    assert runner.Engine(workers=4 * cores).workers == 4 * cores  # the cap itself is allowed
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
-def test_a_set_holding_nan_or_inf_is_refused_naming_it_before_any_tile_runs(capture, tmp_path, monkeypatch, capsys,
-                                                                            bad):
+def test_a_set_holding_nan_or_inf_is_refused_naming_it_before_any_tile_runs(
+    capture, tmp_path, monkeypatch, capsys, bad
+):
     from rsocl.scale import runner
 
     path, _, sets = capture
@@ -153,8 +215,25 @@ def test_a_set_holding_nan_or_inf_is_refused_naming_it_before_any_tile_runs(capt
     calls = []
     monkeypatch.setattr(runner, "solve_tile", lambda *a: calls.append(a))
     out = tmp_path / "rec.zarr"
-    assert main(["reconstruct", str(path), "--sets", "--out", str(out), "--tile", "10", "13", "--iterations", "2",
-                 "--fast", "--quiet"]) == 2
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(path),
+                "--sets",
+                "--out",
+                str(out),
+                "--tile",
+                "10",
+                "13",
+                "--iterations",
+                "2",
+                "--fast",
+                "--quiet",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "set 1 of dataset 'snapshot_sets' contains 1 NaN or inf value(s)" in err and "cap.h5" in err, err
     assert not calls and not out.exists()
@@ -175,6 +254,8 @@ def test_a_tiled_run_with_a_truth_says_psnr_and_ssim_and_writes_the_gif(capture,
     assert ", SSIM 0." in capsys.readouterr().out and (tmp_path / "rec.gif").is_file()
     assert main(["reconstruct", str(path), "--out", str(tmp_path / "none.zarr"), "--no-truth", *common]) == 0
     assert not (tmp_path / "none.gif").exists()
-    assert main(["reconstruct", str(path), "--out", str(tmp_path / "bad.zarr"), "--gif", str(tmp_path / "a.png"),
-                 *common]) == 2
+    assert (
+        main(["reconstruct", str(path), "--out", str(tmp_path / "bad.zarr"), "--gif", str(tmp_path / "a.png"), *common])
+        == 2
+    )
     assert "--gif must name a .gif file" in capsys.readouterr().err and not (tmp_path / "bad.zarr").exists()

@@ -27,8 +27,14 @@ zarr = pytest.importorskip("zarr")
 
 @pytest.fixture(scope="module")
 def cluster():
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                       dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+    cluster = distributed.LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+        silence_logs=logging.ERROR,
+    )
     client = distributed.Client(cluster)
     yield cluster, client
     client.close()
@@ -83,8 +89,8 @@ def test_a_partly_written_store_resumes_and_matches_a_clean_run(tmp_path):
     partial = tmp_path / "partial.zarr"
     reconstruct_tiled(g, rig, out=partial, **kwargs)
     group = zarr.open_group(str(partial), mode="r+")
-    group["tiles"][0, 1, 0, 0] = 0               # tile (1, 0) not marked done: as if killed after writing
-    group["tiles"][0, 0, 1, 0] = 0               # tile (0, 1): killed while writing, its data garbage
+    group["tiles"][0, 1, 0, 0] = 0  # tile (1, 0) not marked done: as if killed after writing
+    group["tiles"][0, 0, 1, 0] = 0  # tile (0, 1): killed while writing, its data garbage
     group["datacube"][:, :14, 14:] = 7.0
     resumed = reconstruct_tiled(g, rig, out=partial, **kwargs)
     assert resumed.skipped == 2 and sorted(p.index for p in resumed.pieces) == [(0, 1), (1, 0)]
@@ -106,11 +112,12 @@ def test_a_store_cut_short_while_created_is_absent_and_a_rerun_makes_it(tmp_path
         reconstruct_tiled(g, rig, out=store, **kwargs)
     monkeypatch.undo()
     assert list(tmp_path.iterdir()) == []
-    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
-                           check=True)
+    ended = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True
+    )
     prefix = f".rec.zarr.partial-{socket.gethostname()}-"
-    dead = tmp_path / f"{prefix}{int(ended.stdout)}-0123abcd"     # left by a killed run
-    alive = tmp_path / f"{prefix}{os.getpid()}-4567abcd"          # a run creating the store now
+    dead = tmp_path / f"{prefix}{int(ended.stdout)}-0123abcd"  # left by a killed run
+    alive = tmp_path / f"{prefix}{os.getpid()}-4567abcd"  # a run creating the store now
     for leftover in (dead, alive):
         leftover.mkdir()
         (leftover / "zarr.json").write_text("{}")
@@ -138,8 +145,9 @@ def test_a_worker_killed_mid_run_and_every_chunk_is_still_correct(cluster, tmp_p
 
     def run():
         try:
-            outcome["result"] = reconstruct_tiled(g, rig, out=store, scheduler=cluster_.scheduler_address,
-                                                  retries=0, **kwargs)
+            outcome["result"] = reconstruct_tiled(
+                g, rig, out=store, scheduler=cluster_.scheduler_address, retries=0, **kwargs
+            )
         except Exception as exc:  # noqa: BLE001 - reported by the assertion below
             outcome["error"] = exc
 
@@ -174,14 +182,23 @@ def test_a_failing_tile_on_the_cluster_is_reported_with_its_index_and_cause(clus
     rig, g = _problem((32, 32))
     save_capture(tmp_path / "cap.h5", g, rig)
 
-    class Moved(CaptureSets):           # the workers look for tile (1, 1)'s snapshots in a missing file
+    class Moved(CaptureSets):  # the workers look for tile (1, 1)'s snapshots in a missing file
         def block(self, set_index, tile):
             block = super().block(set_index, tile)
             return replace(block, path=str(tmp_path / "moved.h5")) if tile.index == (1, 1) else block
 
     with pytest.raises(TilesFailed) as info:
-        reconstruct_tiled(Moved(tmp_path / "cap.h5"), rig, tile=(16, 16), halo=4, iterations=4, retries=1,
-                          tune=False, out=tmp_path / "rec.zarr", scheduler=cluster[0].scheduler_address)
+        reconstruct_tiled(
+            Moved(tmp_path / "cap.h5"),
+            rig,
+            tile=(16, 16),
+            halo=4,
+            iterations=4,
+            retries=1,
+            tune=False,
+            out=tmp_path / "rec.zarr",
+            scheduler=cluster[0].scheduler_address,
+        )
     assert "tile (1, 1) (rows 16..31, columns 16..31) failed after 2 attempt(s)" in str(info.value)
     assert "moved.h5" in str(info.value)
     assert "run again to redo only the failed ones" in str(info.value)
@@ -210,8 +227,9 @@ def test_an_unreachable_scheduler_is_an_error_before_anything_runs(monkeypatch, 
     assert not calls
 
 
-def test_a_device_object_is_refused_for_workers_and_serves_tasks_in_this_process(cluster, device, tmp_path,
-                                                                                  monkeypatch):
+def test_a_device_object_is_refused_for_workers_and_serves_tasks_in_this_process(
+    cluster, device, tmp_path, monkeypatch
+):
     from rsocl.scale import runner
 
     rig, g = _problem((16, 16))
@@ -219,8 +237,11 @@ def test_a_device_object_is_refused_for_workers_and_serves_tasks_in_this_process
     calls = []
     monkeypatch.setattr(runner, "solve_tile", lambda *a: calls.append(a))
     for where in (dict(workers=1), dict(scheduler=cluster[0].scheduler_address)):
-        with pytest.raises(ValueError, match=r"device must be a device spec string for the workers of .*e.g. 'pocl', "
-                                             r"'0:0' or 'nvidia' .*got a Device \("):
+        with pytest.raises(
+            ValueError,
+            match=r"device must be a device spec string for the workers of .*e.g. 'pocl', "
+            r"'0:0' or 'nvidia' .*got a Device \(",
+        ):
             reconstruct_tiled(g, rig, **kwargs, **where)
     assert not calls
     monkeypatch.undo()
@@ -229,15 +250,28 @@ def test_a_device_object_is_refused_for_workers_and_serves_tasks_in_this_process
     np.testing.assert_array_equal(np.asarray(stored.datacube[...]), reconstruct_tiled(g, rig, **kwargs).datacube)
 
 
-def test_rsocl_reconstruct_on_the_cluster_of_rsocl_scheduler_and_on_its_own_workers(cluster, tmp_path, monkeypatch,
-                                                                                      capsys):
+def test_rsocl_reconstruct_on_the_cluster_of_rsocl_scheduler_and_on_its_own_workers(
+    cluster, tmp_path, monkeypatch, capsys
+):
     from rsocl.cli.main import main
     from rsocl.files.hdf5 import save_capture
 
     rig, g = _problem((18, 20))
     save_capture(tmp_path / "cap.h5", g, rig)
     expected = reconstruct_tiled(g, rig, tile=(9, 10), halo=3, iterations=3, tune=False).datacube
-    args = ["reconstruct", str(tmp_path / "cap.h5"), "--tile", "9", "10", "--halo", "3", "--iterations", "3", "--fast", "--quiet"]
+    args = [
+        "reconstruct",
+        str(tmp_path / "cap.h5"),
+        "--tile",
+        "9",
+        "10",
+        "--halo",
+        "3",
+        "--iterations",
+        "3",
+        "--fast",
+        "--quiet",
+    ]
     monkeypatch.setenv("RSOCL_SCHEDULER", cluster[0].scheduler_address)
     assert main(args + ["--out", str(tmp_path / "env.zarr")]) == 0
     monkeypatch.delenv("RSOCL_SCHEDULER")

@@ -13,7 +13,7 @@ from rsocl.scale.stream import frame_windows, reconstruct_stream, window_channel
 
 def _rig(frames=3, shape=(20, 24)):
     t_r, t_e = 3.5e-5, 1.8e-4
-    t_d = shape[0] * t_r                # continuous readout: frame k+1 starts as frame k's readout ends
+    t_d = shape[0] * t_r  # continuous readout: frame k+1 starts as frame k's readout ends
     return Rig([Camera(a, t_e=t_e, t_r=t_r, t_d=t_d, frames=frames) for a in (0, 90, 180, 270)], shape)
 
 
@@ -40,19 +40,20 @@ def test_a_stream_of_windows_matches_the_whole_capture():
     whole = rsocl.reconstruct(g, rig, iterations=20, tune=False).datacube
     stream = reconstruct_stream(g, rig, window=2, overlap=1, iterations=20, tune=False)
     assert stream.datacube.shape == whole.shape and len(stream.windows) == 2
-    assert all(b - a < rig.T for a, b in stream.spans)          # each window models part of the capture
+    assert all(b - a < rig.T for a, b in stream.spans)  # each window models part of the capture
     sampled = rig.sampled_range()
     assert np.all(stream.owner[sampled] >= 0)
     assert psnr(stream.datacube, truth) > psnr(whole, truth) - 0.3
     one = reconstruct_stream(g, rig, window=3, overlap=0, iterations=20, tile=(10, 12), halo=4, tune=False)
-    np.testing.assert_array_equal(one.datacube, reconstruct_tiled(g, rig, tile=(10, 12), halo=4,
-                                                                  iterations=20, tune=False).datacube)
+    np.testing.assert_array_equal(
+        one.datacube, reconstruct_tiled(g, rig, tile=(10, 12), halo=4, iterations=20, tune=False).datacube
+    )
 
 
 def test_default_windows_fit_any_capture():
     assert frame_windows(1) == [(0, 1)] and frame_windows(3) == [(0, 2), (1, 3)]
     assert frame_windows(3, 1) == [(0, 1), (1, 2), (2, 3)]
-    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1.8e-4, t_r=3.5e-5)          # one frame per camera
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1.8e-4, t_r=3.5e-5)  # one frame per camera
     g = rsocl.RollingShutterOperator(rig).forward(builtin_scene(rig.shape, rig.T, seed=4))
     stream = reconstruct_stream(g, rig, iterations=5, tune=False)
     np.testing.assert_array_equal(stream.datacube, rsocl.reconstruct(g, rig, iterations=5, tune=False).datacube)
@@ -61,8 +62,11 @@ def test_default_windows_fit_any_capture():
 def test_a_stream_into_a_zarr_store_is_refused_before_anything_runs(tmp_path):
     rig = _rig(frames=3, shape=(12, 12))
     g = rsocl.RollingShutterOperator(rig).forward(builtin_scene(rig.shape, rig.T, seed=1))
-    with pytest.raises(ValueError, match=r"out: a stream of frame windows is assembled in memory .*writes no Zarr "
-                                         r"store, got out='.*s.zarr'; leave out out"):
+    with pytest.raises(
+        ValueError,
+        match=r"out: a stream of frame windows is assembled in memory .*writes no Zarr "
+        r"store, got out='.*s.zarr'; leave out out",
+    ):
         reconstruct_stream(g, rig, window=2, iterations=3, tune=False, out=str(tmp_path / "s.zarr"))
     assert list(tmp_path.iterdir()) == []
 
@@ -75,14 +79,43 @@ def test_rsocl_reconstruct_window(tmp_path, capsys):
     truth = builtin_scene(rig.shape, rig.T, seed=2)
     save_capture(tmp_path / "cap.h5", rsocl.RollingShutterOperator(rig).forward(truth), rig, truth=truth)
     out = tmp_path / "stream.h5"
-    assert main(["reconstruct", str(tmp_path / "cap.h5"), "--out", str(out), "--window", "2", "--iterations", "5",
-                 "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(tmp_path / "cap.h5"),
+                "--out",
+                str(out),
+                "--window",
+                "2",
+                "--iterations",
+                "5",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert "2 window(s) of 2 frame(s)" in capsys.readouterr().out
     back = load_reconstruction(out)
     assert back.datacube.shape == (rig.T,) + rig.shape and back.params["windows"] == [[0, 2], [1, 3]]
     assert (tmp_path / "stream-tuning.png").is_file()
-    assert main(["reconstruct", str(tmp_path / "cap.h5"), "--out", str(tmp_path / "one.h5"), "--window", "1",
-                 "--iterations", "3", "--fast", "--quiet"]) == 0                # the default overlap follows --window
+    assert (
+        main(
+            [
+                "reconstruct",
+                str(tmp_path / "cap.h5"),
+                "--out",
+                str(tmp_path / "one.h5"),
+                "--window",
+                "1",
+                "--iterations",
+                "3",
+                "--fast",
+                "--quiet",
+            ]
+        )
+        == 0
+    )  # the default overlap follows --window
     assert load_reconstruction(tmp_path / "one.h5").params["overlap"] == 0
     assert main(["reconstruct", str(tmp_path / "cap.h5"), "--out", str(tmp_path / "s.zarr"), "--window", "2"]) == 2
     assert "--window: a stream of frame windows is written to an HDF5 file" in capsys.readouterr().err
@@ -92,8 +125,9 @@ def test_a_stream_with_gaps_between_frames_fills_every_subframe_from_the_nearest
     # frames 3 readouts apart and every camera late by 5 rows: sub-frames before the first exposure
     # and between frames are sampled by no window; each holds its nearest window's modelled sub-frame
     t_r, t_e, shape = 3.5e-5, 1.8e-4, (12, 12)
-    rig = Rig([Camera(a, t_e=t_e, t_r=t_r, t_a=5 * t_r, t_d=3 * shape[0] * t_r, frames=3) for a in (0, 90, 180, 270)],
-              shape)
+    rig = Rig(
+        [Camera(a, t_e=t_e, t_r=t_r, t_a=5 * t_r, t_d=3 * shape[0] * t_r, frames=3) for a in (0, 90, 180, 270)], shape
+    )
     g = rsocl.RollingShutterOperator(rig).forward(builtin_scene(rig.shape, rig.T, seed=3))
     stream = reconstruct_stream(g, rig, window=1, overlap=0, iterations=10, tune=False)
     assert np.all(stream.owner >= 0) and stream.datacube.shape == (rig.T,) + shape
@@ -101,7 +135,7 @@ def test_a_stream_with_gaps_between_frames_fills_every_subframe_from_the_nearest
     assert first == 5
     np.testing.assert_array_equal(stream.datacube[:first], np.broadcast_to(stream.datacube[first], (first,) + shape))
     gaps = [s for s in range(first, rig.T) if not any(a <= s < b for a, b in stream.spans)]
-    assert gaps                                       # the rig leaves sub-frames between frames unsampled
+    assert gaps  # the rig leaves sub-frames between frames unsampled
     for s in gaps:
         a, b = stream.spans[stream.owner[s]]
         np.testing.assert_array_equal(stream.datacube[s], stream.datacube[min(max(s, a), b - 1)])

@@ -58,7 +58,7 @@ def test_expand_holds_the_first_and_last_modelled_subframe():
     block = np.arange(3 * 2 * 2, dtype=np.float32).reshape(3, 2, 2) + 1
     out = expand(block, 4, 0, 10, (2, 9))
     np.testing.assert_array_equal(out[4:7], block)
-    for t in range(4):                                # before the block, inside the capture's span or not
+    for t in range(4):  # before the block, inside the capture's span or not
         np.testing.assert_array_equal(out[t], block[0])
     for t in range(7, 10):
         np.testing.assert_array_equal(out[t], block[-1])
@@ -76,13 +76,14 @@ def test_tiled_holds_the_subframes_before_every_camera_starts_as_untiled_does(tm
     tiled = reconstruct_tiled(g, rig, tile=(12, 14), halo=8, iterations=ITER, tune=False).datacube
     for cube in (untiled, tiled):
         np.testing.assert_array_equal(cube[:first], np.broadcast_to(cube[first], (first,) + rig.shape))
-    if importlib.util.find_spec("zarr") is not None:             # a store holds the same sub-frames
+    if importlib.util.find_spec("zarr") is not None:  # a store holds the same sub-frames
         from rsocl.scale.store import load_store
 
         reconstruct_tiled(g, rig, tile=(12, 14), halo=8, iterations=ITER, tune=False, out=tmp_path / "late.zarr")
         np.testing.assert_array_equal(np.asarray(load_store(tmp_path / "late.zarr").datacube[:]), tiled)
-    np.testing.assert_array_equal(reconstruct_tiled(g, rig, tile=(24, 28), halo=0, iterations=ITER,
-                                                    tune=False).datacube, untiled)
+    np.testing.assert_array_equal(
+        reconstruct_tiled(g, rig, tile=(24, 28), halo=0, iterations=ITER, tune=False).datacube, untiled
+    )
 
 
 def _assert_close_to_untiled(result, untiled, grid):
@@ -102,10 +103,13 @@ def _assert_close_to_untiled(result, untiled, grid):
         assert diff[lo:hi].max() < 3e-2 and diff.max() < 0.1, (piece.index, diff[lo:hi].max(), diff.max())
 
 
-@pytest.mark.parametrize("angles, shape, tile", [
-    ((0, 90, 180, 270), (37, 45), (16, 20)),          # odd sizes, uneven last tiles
-    ((0, 45, 135, 250), (34, 39), (17, 13)),          # oblique angles
-])
+@pytest.mark.parametrize(
+    "angles, shape, tile",
+    [
+        ((0, 90, 180, 270), (37, 45), (16, 20)),  # odd sizes, uneven last tiles
+        ((0, 45, 135, 250), (34, 39), (17, 13)),  # oblique angles
+    ],
+)
 def test_tiled_matches_untiled(angles, shape, tile):
     rig = Rig([Camera(a, t_e=1.8e-4, t_r=3.5e-5) for a in angles], shape)
     g, truth = _problem(rig)
@@ -119,7 +123,7 @@ def test_tiled_matches_untiled(angles, shape, tile):
 
     assert psnr(tiled, truth) > psnr(untiled, truth) - 0.1
     # the settings of the whole capture, once for every tile
-    scale = default_scale(rig)                     # the whole rig's, not a tile's
+    scale = default_scale(rig)  # the whole rig's, not a tile's
     assert result.params["lam"] == 0.1 * scale and result.params["eta"] == 0.2 * scale
     assert result.params["tile"] == list(tile)
 
@@ -133,7 +137,7 @@ def test_each_set_s_tiles_run_with_that_set_s_lam_and_eta(tmp_path):
     result = reconstruct_tiled(sets, rig, **kwargs)
     assert len(result.pieces) == 8 and result.params["lam"] == (0.02, 0.3) and result.params["eta"] == (0.2, 0.4)
     _assert_close_to_untiled(result, untiled, tile_grid(rig.shape, (15, 17), 12))
-    if importlib.util.find_spec("zarr") is not None:             # a store of per-set values resumes
+    if importlib.util.find_spec("zarr") is not None:  # a store of per-set values resumes
         reconstruct_tiled(sets, rig, out=tmp_path / "sets.zarr", **kwargs)
         assert reconstruct_tiled(sets, rig, out=tmp_path / "sets.zarr", **kwargs).skipped == 8
     with pytest.raises(ValueError, match=r"lam must have one value per set: 2 for this batch, got 3"):
@@ -146,8 +150,9 @@ def test_one_tile_covering_the_grid_is_the_untiled_reconstruction():
     rig = rsocl.Rig.paper_array(4, (24, 28), t_e=1.8e-4, t_r=3.5e-5)
     g, _ = _problem(rig)
     untiled = rsocl.reconstruct(g, rig, iterations=ITER, tune=False).datacube
-    np.testing.assert_array_equal(reconstruct_tiled(g, rig, tile=(24, 28), halo=0, iterations=ITER, tune=False).datacube,
-                                  untiled)
+    np.testing.assert_array_equal(
+        reconstruct_tiled(g, rig, tile=(24, 28), halo=0, iterations=ITER, tune=False).datacube, untiled
+    )
 
 
 def test_sets_and_the_in_process_loop_give_the_same_numbers(monkeypatch):
@@ -164,7 +169,7 @@ def test_sets_and_the_in_process_loop_give_the_same_numbers(monkeypatch):
 
 
 def test_trimmed_keeps_the_subframes_of_every_set(tmp_path):
-    delays = (0, 12, 24, 36)                          # rows each camera starts late: the ends are trimmed
+    delays = (0, 12, 24, 36)  # rows each camera starts late: the ends are trimmed
     rig = Rig([Camera(a, t_e=1.8e-4, t_r=3.5e-5, t_a=d * 3.5e-5) for a, d in zip((0, 90, 180, 270), delays)], (16, 18))
     kept = rig.kept_subframes()
     assert 0 < kept.start and kept.stop < rig.T
@@ -211,7 +216,7 @@ def test_a_tile_with_every_pixel_saturated_holds_the_start_the_untiled_run_keeps
     rig = rsocl.Rig.paper_array(4, (48, 48), t_e=1.8e-4, t_r=3.5e-5)
     g, _ = _problem(rig)
     g = g.copy()
-    g[:, :20, :20] = 1e6          # tile (0, 0) with its halo: every pixel saturated, nothing to fit
+    g[:, :20, :20] = 1e6  # tile (0, 0) with its halo: every pixel saturated, nothing to fit
     kwargs = dict(iterations=ITER, saturation=1e5, tune=tune)
     untiled = rsocl.reconstruct(g, rig, **kwargs).datacube
     result = reconstruct_tiled(g, rig, tile=(16, 16), halo=4, **kwargs)
@@ -219,32 +224,35 @@ def test_a_tile_with_every_pixel_saturated_holds_the_start_the_untiled_run_keeps
     held = next(p for p in result.pieces if p.index == (0, 0))
     assert held.iterations == 0 and held.residual == 0.0
     core = result.datacube[:, :16, :16]
-    if tune:      # the interpolation's value at pixels with no valid sample: the untiled start there
+    if tune:  # the interpolation's value at pixels with no valid sample: the untiled start there
         start = interp3d(g, rig, valid=g < 1e5)[:, :16, :16]
         np.testing.assert_allclose(core, start, rtol=1e-6)
         assert np.abs(untiled[:, :8, :8] - start[:, :8, :8]).max() < 0.1
-    else:         # the zero start, which the untiled run barely leaves there
+    else:  # the zero start, which the untiled run barely leaves there
         assert np.all(core == 0) and np.abs(untiled[:, :8, :8]).max() < 0.1
         grid = tile_grid(rig.shape, (16, 16), 4)
         result.pieces = [p for p in result.pieces if max(p.index) == 2]
-        _assert_close_to_untiled(result, untiled, grid)         # the tiles whose halo keeps clear of it
+        _assert_close_to_untiled(result, untiled, grid)  # the tiles whose halo keeps clear of it
     sets = np.stack([np.full_like(g, 1e6), g])
     with pytest.raises(ValueError, match=r"every snapshot pixel of g\[0\] \(set 0\) is >= saturation = 100000.0"):
         reconstruct_tiled(sets, rig, tile=(16, 16), halo=4, **kwargs)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(tile=(0, 8)), r"tile must be \(H, W\) pixels with 1 <= H <= m = 20 and 1 <= W <= n = 24"),
-    (dict(tile=(8, 25)), r"tile must be .* 1 <= W <= n = 24, got \(8, 25\)"),
-    (dict(tile=(8, 8), halo=-1), r"halo must be a whole number of pixels in \[0, 24\]"),
-    (dict(tile=(8, 8), workers=0), "workers must be"),
-    (dict(tile=(8, 8), retries=-1), "retries must be a whole number >= 0"),
-    (dict(tile=(8, 8), regularizer="nope"), "nope"),
-    (dict(tile=(8, 8), lam=-1), "lam must be"),
-    (dict(tile=(8, 8), saturation=-1, tune=False), r"saturation must be > 0 \(snapshot units\), got -1"),
-    (dict(tile=(8, 8), saturation=float("nan"), tune=False), "saturation must be finite"),
-    (dict(tile=(8, 8), saturation="x", tune=False), "saturation must be a finite real number, got 'x'"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(tile=(0, 8)), r"tile must be \(H, W\) pixels with 1 <= H <= m = 20 and 1 <= W <= n = 24"),
+        (dict(tile=(8, 25)), r"tile must be .* 1 <= W <= n = 24, got \(8, 25\)"),
+        (dict(tile=(8, 8), halo=-1), r"halo must be a whole number of pixels in \[0, 24\]"),
+        (dict(tile=(8, 8), workers=0), "workers must be"),
+        (dict(tile=(8, 8), retries=-1), "retries must be a whole number >= 0"),
+        (dict(tile=(8, 8), regularizer="nope"), "nope"),
+        (dict(tile=(8, 8), lam=-1), "lam must be"),
+        (dict(tile=(8, 8), saturation=-1, tune=False), r"saturation must be > 0 \(snapshot units\), got -1"),
+        (dict(tile=(8, 8), saturation=float("nan"), tune=False), "saturation must be finite"),
+        (dict(tile=(8, 8), saturation="x", tune=False), "saturation must be a finite real number, got 'x'"),
+    ],
+)
 def test_bad_input_names_the_parameter(kwargs, match):
     rig = rsocl.Rig.paper_array(4, (20, 24), t_e=1.8e-4, t_r=3.5e-5)
     g = np.zeros((4, 20, 24))
@@ -303,21 +311,35 @@ def _tiling_cost_of_tile_rigs(rig, tile, halo, **kwargs):
         v = (solved.stop - solved.start) * sub.shape[0] * sub.shape[1]
         voxels += v
         if v > worst[3]:
-            largest, total = memory_need(sub, make_regularizer(kwargs.get("regularizer", "tv")),
-                                         **{k: x for k, x in kwargs.items() if k != "regularizer"})
+            largest, total = memory_need(
+                sub,
+                make_regularizer(kwargs.get("regularizer", "tv")),
+                **{k: x for k, x in kwargs.items() if k != "regularizer"},
+            )
             worst = (total, largest, t, v)
     total, largest, t, v = worst
     return total, largest, voxels, t, v
 
 
-@pytest.mark.parametrize("rig", [
-    rsocl.Rig.paper_array(4, (37, 45), t_e=1.8e-4, t_r=3.5e-5),
-    Rig([Camera(a, t_e=2.3e-4, t_r=3.1e-5, t_a=t_a) for a, t_a in ((0, 0), (45, 4e-5), (135, 1.1e-4), (250, 0))],
-        (34, 39), dt=7.3e-5, mask="binary"),
-    Rig([Camera(0, t_e=1e-4, t_r=3e-5, frames=2, t_d=1.2e-3),
-         Camera(row_map=np.random.default_rng(3).uniform(0, 50, (30, 41)), t_e=1.5e-4, t_r=3e-5, t_a=2e-5)],
-        (30, 41)),
-])
+@pytest.mark.parametrize(
+    "rig",
+    [
+        rsocl.Rig.paper_array(4, (37, 45), t_e=1.8e-4, t_r=3.5e-5),
+        Rig(
+            [Camera(a, t_e=2.3e-4, t_r=3.1e-5, t_a=t_a) for a, t_a in ((0, 0), (45, 4e-5), (135, 1.1e-4), (250, 0))],
+            (34, 39),
+            dt=7.3e-5,
+            mask="binary",
+        ),
+        Rig(
+            [
+                Camera(0, t_e=1e-4, t_r=3e-5, frames=2, t_d=1.2e-3),
+                Camera(row_map=np.random.default_rng(3).uniform(0, 50, (30, 41)), t_e=1.5e-4, t_r=3e-5, t_a=2e-5),
+            ],
+            (30, 41),
+        ),
+    ],
+)
 def test_the_proposed_tiling_and_each_tile_s_range_are_those_of_the_tile_s_own_rig(rig, monkeypatch, device):
     from rsocl.scale import proposal
 
@@ -328,11 +350,13 @@ def test_the_proposed_tiling_and_each_tile_s_range_are_those_of_the_tile_s_own_r
             for c in range(rig.C):
                 np.testing.assert_array_equal(rig.row_map(c, t.roi), rig.row_map(c)[t.outer_slices])
         for kwargs in (dict(), dict(regularizer="tv", dtype="float64", projection="paper")):
-            assert proposal.tiling_cost(rig, tile, halo, **kwargs) == _tiling_cost_of_tile_rigs(rig, tile, halo, **kwargs)
+            assert proposal.tiling_cost(rig, tile, halo, **kwargs) == _tiling_cost_of_tile_rigs(
+                rig, tile, halo, **kwargs
+            )
     assert rig.sampled_range((0, 0) + rig.shape) == rig.sampled_range()
     with pytest.raises(ValueError, match=r"roi must be \(y, x, height, width\) inside the"):
         rig.sampled_range((1, 0) + rig.shape)
-    budget = proposal.tiling_cost(rig, (16, 16), 4)[0]          # the smallest candidate just fits
+    budget = proposal.tiling_cost(rig, (16, 16), 4)[0]  # the smallest candidate just fits
     proposed = proposal.propose_tiling(rig, halo=4, device=device, budget_bytes=budget, measure=False)
     monkeypatch.setattr(proposal, "tiling_cost", _tiling_cost_of_tile_rigs)
     assert proposed == proposal.propose_tiling(rig, halo=4, device=device, budget_bytes=budget, measure=False)

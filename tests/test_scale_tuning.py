@@ -6,10 +6,9 @@ import pytest
 import rsocl
 import rsocl.solver.reconstruct as reconstruct_module
 from rsocl.model.scenes import builtin_scene
-from rsocl.scale import reconstruct_tiled, tile_grid
+from rsocl.scale import reconstruct_tiled, tile_grid, tuning_tile
 from rsocl.scale.stream import reconstruct_stream
 from rsocl.scale.tiles import tile_rig
-from rsocl.scale import tuning_tile
 from rsocl.scale.tuning_tile import TUNE_SIDE, by_distance_to_centre, tuning_crop
 
 ITER = 12
@@ -26,8 +25,16 @@ def _record_calls(monkeypatch):
     real = reconstruct_module.reconstruct
 
     def recording(g, rig, *args, **kwargs):
-        calls.append({"lam": kwargs["lam"], "options": dict(kwargs["regularizer_options"]), "tune": kwargs["tune"],
-                      "x0": kwargs.get("x0"), "g": np.array(g), "rig": rig})
+        calls.append(
+            {
+                "lam": kwargs["lam"],
+                "options": dict(kwargs["regularizer_options"]),
+                "tune": kwargs["tune"],
+                "x0": kwargs.get("x0"),
+                "g": np.array(g),
+                "rig": rig,
+            }
+        )
         return real(g, rig, *args, **kwargs)
 
     monkeypatch.setattr(reconstruct_module, "reconstruct", recording)
@@ -46,7 +53,7 @@ def test_a_single_tile_over_the_grid_is_the_untiled_tuned_reconstruction():
     assert tiled.params["start"] == "interp3d"
     np.testing.assert_allclose(tiled.datacube, untiled.datacube, atol=1e-5)
     fixed = rsocl.reconstruct(g, rig, iterations=ITER, tune=False).datacube
-    assert np.abs(fixed - untiled.datacube).max() > 1e-3          # the tolerance above tells tuned from fixed
+    assert np.abs(fixed - untiled.datacube).max() > 1e-3  # the tolerance above tells tuned from fixed
     assert tiled.params["blend"] == untiled.params["blend"]
 
 
@@ -78,8 +85,9 @@ def test_a_blend_below_1_needs_the_interpolation_start():
         with pytest.raises(ValueError, match="blend must be"):
             reconstruct_tiled(g, rig, tile=(6, 6), iterations=2, blend=bad)
     for kwargs in (dict(tune=False), dict(lam=0.1, regularizer_options={"temporal_weight": 3.0})):
-        with pytest.raises(ValueError, match="blend = 0.5 moves the result towards the run's start, and this run "
-                                             "starts from zeros"):
+        with pytest.raises(
+            ValueError, match="blend = 0.5 moves the result towards the run's start, and this run starts from zeros"
+        ):
             reconstruct_tiled(g, rig, tile=(6, 6), iterations=2, blend=0.5, **kwargs)
     assert reconstruct_tiled(g, rig, tile=(6, 6), iterations=2, tune=False, blend=1.0).params["blend"] == 1.0
 
@@ -91,21 +99,21 @@ def test_every_tile_of_every_set_gets_the_choice_made_on_the_centre_block_of_the
     rig = rsocl.Rig.paper_array(4, (30, 36), t_e=1.8e-4, t_r=3.5e-5)
     sets = np.stack([_problem(rig, seed=s)[0] for s in range(2)])
     grid = tile_grid(rig.shape, (10, 12), 4)
-    assert tuning_crop(grid).outer == (0, 30, 0, 36)          # under TUNE_SIDE a side: the whole grid
+    assert tuning_crop(grid).outer == (0, 30, 0, 36)  # under TUNE_SIDE a side: the whole grid
     expected = rsocl.reconstruct(sets[0], rig, iterations=ITER).params["tuning"]["chosen"]
     calls = _record_calls(monkeypatch)
     result = reconstruct_tiled(sets, rig, tile=(10, 12), halo=4, iterations=ITER, out=tmp_path / "rec.zarr")
     assert result.tuning.chosen == expected
     assert len(calls) == 2 * len(grid)
     options = {k: v for k, v in expected.items() if k != "lam"}
-    for call in calls:                 # one setting for every tile and set, each from its own interpolation
+    for call in calls:  # one setting for every tile and set, each from its own interpolation
         assert call["lam"] == expected["lam"] and call["options"] == options and call["tune"] is False
         assert call["x0"] == "interp3d"
     stored = load_store(tmp_path / "rec.zarr").params
     assert stored["tuning"]["chosen"] == expected and stored["lam"] == expected["lam"]
     assert stored["start"] == "interp3d"
     again = reconstruct_tiled(sets, rig, tile=(10, 12), halo=4, iterations=ITER, out=tmp_path / "rec.zarr")
-    assert again.skipped == 2 * len(grid) and not again.pieces          # resumed, nothing redone
+    assert again.skipped == 2 * len(grid) and not again.pieces  # resumed, nothing redone
 
 
 def test_fixed_settings_when_not_tuned_or_when_nothing_is_left_to_choose(monkeypatch):
@@ -117,8 +125,9 @@ def test_fixed_settings_when_not_tuned_or_when_nothing_is_left_to_choose(monkeyp
     assert all(c["x0"] is None and c["options"] == {} for c in calls)
     assert fixed.params["lam"] == rsocl.reconstruct(g, rig, iterations=4, tune=False).params["lam"]
     calls.clear()
-    given = reconstruct_tiled(g, rig, tile=(10, 12), halo=4, iterations=4, lam=0.05,
-                              regularizer_options={"temporal_weight": 2.0})
+    given = reconstruct_tiled(
+        g, rig, tile=(10, 12), halo=4, iterations=4, lam=0.05, regularizer_options={"temporal_weight": 2.0}
+    )
     assert given.tuning is None and given.params["start"] == "zeros" and given.params["lam"] == 0.05
     assert all(c["lam"] == 0.05 and c["options"] == {"temporal_weight": 2.0} for c in calls)
     with pytest.raises(ValueError, match="tune must be True, False or"):
@@ -140,7 +149,7 @@ def test_a_stream_runs_every_window_with_the_first_windows_choice():
 def test_the_block_tuned_on_is_centred_and_at_least_tune_side_or_one_tile():
     crop = tuning_crop(tile_grid((300, 500), (64, 64), 16))
     assert crop.outer == crop.core == (86, 86 + TUNE_SIDE, 186, 186 + TUNE_SIDE)
-    assert tuning_crop(tile_grid((300, 500), (200, 100), 16)).outer == (34, 266, 184, 316)   # one tile's 232 x 132
+    assert tuning_crop(tile_grid((300, 500), (200, 100), 16)).outer == (34, 266, 184, 316)  # one tile's 232 x 132
     assert tuning_crop(tile_grid((40, 300), (20, 20), 4)).outer == (0, 40, 86, 214)
 
 
@@ -151,13 +160,16 @@ def test_small_tiles_tune_on_the_centre_block_not_on_one_tile(monkeypatch):
     g, _ = _problem(rig, seed=1)
     seen = []
     search = tuning_tile._search
-    monkeypatch.setattr(tuning_tile, "_search", lambda block, *a: seen.append(block[0].outer_shape) or search(block, *a))
+    monkeypatch.setattr(
+        tuning_tile, "_search", lambda block, *a: seen.append(block[0].outer_shape) or search(block, *a)
+    )
     tiled = reconstruct_tiled(g, rig, tile=(10, 12), halo=4, iterations=ITER, tune=True)
     assert seen == [(30, 36)]
     assert tiled.tuning.chosen == rsocl.reconstruct(g, rig, iterations=ITER).params["tuning"]["chosen"]
     centre = by_distance_to_centre(tile_grid(rig.shape, (10, 12), 4))[0]
-    one_tile = rsocl.reconstruct(g[:, centre.outer_slices[0], centre.outer_slices[1]], tile_rig(rig, centre),
-                                 iterations=ITER).params["tuning"]["chosen"]
+    one_tile = rsocl.reconstruct(
+        g[:, centre.outer_slices[0], centre.outer_slices[1]], tile_rig(rig, centre), iterations=ITER
+    ).params["tuning"]["chosen"]
     assert one_tile != tiled.tuning.chosen
 
 
@@ -178,5 +190,9 @@ def test_a_centre_block_too_large_for_the_device_falls_back_to_the_centre_tile(m
     centre = by_distance_to_centre(grid)[0]
     tiled = reconstruct_tiled(g, rig, tile=(10, 12), halo=4, iterations=ITER)
     assert seen == [(30, 36), centre.outer_shape]
-    assert tiled.tuning.chosen == rsocl.reconstruct(g[:, centre.outer_slices[0], centre.outer_slices[1]],
-                                                    tile_rig(rig, centre), iterations=ITER).params["tuning"]["chosen"]
+    assert (
+        tiled.tuning.chosen
+        == rsocl.reconstruct(
+            g[:, centre.outer_slices[0], centre.outer_slices[1]], tile_rig(rig, centre), iterations=ITER
+        ).params["tuning"]["chosen"]
+    )

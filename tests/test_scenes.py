@@ -27,7 +27,7 @@ def test_builtin_scene_shape_range_determinism():
     a = builtin_scene((32, 40), 20)
     assert a.shape == (20, 32, 40) and a.dtype == np.float32
     assert a.min() >= 0.0 and a.max() <= 1.0
-    assert a.max() == pytest.approx(1.0)                    # the disc is white
+    assert a.max() == pytest.approx(1.0)  # the disc is white
     np.testing.assert_array_equal(a, builtin_scene((32, 40), 20))
     assert not np.array_equal(a, builtin_scene((32, 40), 20, seed=1))
     b = builtin_scene((32, 40), 20, dtype=np.float64)
@@ -59,10 +59,17 @@ def test_builtin_scene_other_shapes():
     assert builtin_scene((20, 50), 3).shape == (3, 20, 50)
 
 
-@pytest.mark.parametrize("kwargs, name", [
-    (dict(shape=(0, 5)), "shape"), (dict(shape=(5,)), "shape"), (dict(T=0), "T"),
-    (dict(dtype=np.int32), "dtype"), (dict(seed=-1), "seed"), (dict(seed=1.5), "seed"),
-])
+@pytest.mark.parametrize(
+    "kwargs, name",
+    [
+        (dict(shape=(0, 5)), "shape"),
+        (dict(shape=(5,)), "shape"),
+        (dict(T=0), "T"),
+        (dict(dtype=np.int32), "dtype"),
+        (dict(seed=-1), "seed"),
+        (dict(seed=1.5), "seed"),
+    ],
+)
 def test_builtin_scene_rejects_bad_arguments(kwargs, name):
     with pytest.raises(ValueError, match=name):
         builtin_scene(**kwargs)
@@ -123,13 +130,13 @@ def test_load_gif_gray_and_rgb(tmp_path, video):
     rgb = np.zeros((3, 8, 8, 3), dtype=np.uint8)
     for f in range(3):
         rgb[f, :, :, f] = 255
-        rgb[f, :4, :4] = (10 * f, 10 * f, 10 * f)           # a frame-dependent patch: no frame merging
+        rgb[f, :4, :4] = (10 * f, 10 * f, 10 * f)  # a frame-dependent patch: no frame merging
     iio.imwrite(tmp_path / "c.gif", rgb, duration=50, loop=0)
     gray = load_video(tmp_path / "c.gif")
     assert gray.shape == (3, 8, 8) and gray.dtype == np.uint8
     expected = np.rint(rgb2gray(rgb) * 255).astype(np.uint8)
     np.testing.assert_array_equal(gray, expected)
-    assert gray[0, -1, -1] == round(0.2125 * 255)            # red weight
+    assert gray[0, -1, -1] == round(0.2125 * 255)  # red weight
 
 
 # ---------------------------------------------------------------------- protocol
@@ -154,7 +161,7 @@ def test_protocol_linear_time_interpolation():
     # midpoint between two structured frames is their mean
     rng = np.random.default_rng(0)
     video = rng.integers(0, 256, size=(3, 16, 16), dtype=np.uint8)
-    out = benchmark_protocol(video, (8, 8), 5)                # s=1 at position 0.5
+    out = benchmark_protocol(video, (8, 8), 5)  # s=1 at position 0.5
     mid = 0.5 * (_resized(video[0] / 255.0, (8, 8)) + _resized(video[1] / 255.0, (8, 8)))
     np.testing.assert_allclose(out[1], mid, atol=1e-6)
 

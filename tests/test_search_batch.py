@@ -2,7 +2,6 @@
 CPU device here: the same scores to rounding and the same choices as the folds run one after the other."""
 
 import numpy as np
-import pytest
 
 import rsocl
 from rsocl.device.context import Device
@@ -27,8 +26,17 @@ def _search(runner, dtype):
     staged = stage_on_device(problem, tv, settings, dtype=dtype, start=True)
     lam = settings.lam
     space = SearchSpace({"temporal_weight": (1.0, 3.0, 30.0)}, (0.3 * lam, lam, 3 * lam))
-    return tune_parameters(staged.op, staged.g, problem.g, lambda options: make_regularizer("tv", options), space,
-                           eta=settings.eta, iterations=8, patterns=[(8, 0), (4, 0), (4, 2)], runner=runner)
+    return tune_parameters(
+        staged.op,
+        staged.g,
+        problem.g,
+        lambda options: make_regularizer("tv", options),
+        space,
+        eta=settings.eta,
+        iterations=8,
+        patterns=[(8, 0), (4, 0), (4, 2)],
+        runner=runner,
+    )
 
 
 def test_batched_folds_score_and_choose_as_the_folds_one_after_the_other(dtype):
@@ -38,15 +46,16 @@ def test_batched_folds_score_and_choose_as_the_folds_one_after_the_other(dtype):
     keys = [{k: v for k, v in c.items() if k not in ("score", "blend")} for c in one_by_one.candidates]
     assert [{k: v for k, v in c.items() if k not in ("score", "blend")} for c in batched.candidates] == keys
     tol = 1e-4 if dtype == "float32" else 1e-10
-    np.testing.assert_allclose([c["score"] for c in batched.candidates],
-                               [c["score"] for c in one_by_one.candidates], rtol=tol)
+    np.testing.assert_allclose(
+        [c["score"] for c in batched.candidates], [c["score"] for c in one_by_one.candidates], rtol=tol
+    )
     np.testing.assert_allclose(batched.blend, one_by_one.blend, rtol=tol, atol=tol)
 
 
 def test_the_self_tuned_run_batches_its_search_only_where_batches_pay(device, monkeypatch):
     import rsocl.solver.search_batch as search_batch
 
-    assert not batches_pay(device)              # the CPU device: folds one after the other
+    assert not batches_pay(device)  # the CPU device: folds one after the other
     calls = []
     real = search_batch.BatchedFolds.__call__
 

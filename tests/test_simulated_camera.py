@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from rsocl.common import registry as plugins
-from rsocl.model import reference
 from rsocl.hardware.backend import CameraDisconnected, CameraError, CameraTimeout
+from rsocl.model import reference
 from rsocl.model.rig import Camera, Rig
 from rsocl.model.scenes import builtin_scene
 from rsocl_plugins.simulated import SimulatedCamera
@@ -52,7 +52,7 @@ def test_frames_equal_the_forward_model(geometry):
         camera = Camera(angle, t_e=T_E, t_r=T_R, t_a=7e-6, gain=1.3)
     rig = Rig([camera], SHAPE)
     frames = _frames(cfg, 2)
-    for k, frame in enumerate(frames):   # each trigger advances the built-in scene: new seed per set
+    for k, frame in enumerate(frames):  # each trigger advances the built-in scene: new seed per set
         truth = builtin_scene(SHAPE, rig.T, dtype=np.float64, seed=k)
         expected = reference.forward(rig, truth)[0]
         assert frame.image.dtype == np.float32 and frame.pixel_format == "Float32"
@@ -67,11 +67,11 @@ def test_array_scene_wraps_and_scene_frames_pads():
     scene = np.random.default_rng(1).uniform(size=(2 * rig.T,) + SHAPE)
     frames = _frames(_config(scene=scene, scene_frames=rig.T), 3)
     for k, frame in enumerate(frames):
-        block = scene[(k % 2) * rig.T:(k % 2 + 1) * rig.T]
+        block = scene[(k % 2) * rig.T : (k % 2 + 1) * rig.T]
         np.testing.assert_allclose(frame.image, reference.forward(rig, block)[0], rtol=1e-5, atol=1e-5)
     with SimulatedCamera(_config(scene=scene, scene_frames=rig.T)) as cam:
         assert cam.scene_truth(1).shape == (rig.T,) + SHAPE
-        np.testing.assert_array_equal(cam.scene_truth(2), scene[:rig.T])
+        np.testing.assert_array_equal(cam.scene_truth(2), scene[: rig.T])
 
 
 def test_camera_contract():
@@ -89,11 +89,14 @@ def test_camera_contract():
             cam.set_trigger("line", "Line1")
         assert cam.set_exposure(T_E / 2) == T_E / 2
         frame = cam.capture()
-        np.testing.assert_allclose(frame.image, reference.forward(_rig(t_e=T_E / 2),
-                                                                  cam.scene_truth(0)[:_rig(t_e=T_E / 2).T])[0],
-                                   rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(
+            frame.image,
+            reference.forward(_rig(t_e=T_E / 2), cam.scene_truth(0)[: _rig(t_e=T_E / 2).T])[0],
+            rtol=1e-5,
+            atol=1e-5,
+        )
         cam.set_trigger("free")
-        assert cam.read(0.1).meta["set"] == 1                # free running: no trigger needed
+        assert cam.read(0.1).meta["set"] == 1  # free running: no trigger needed
         with pytest.raises(CameraError, match="stop acquisition"):
             cam.set_roi(0, 0, 4, 4)
         cam.stop()
@@ -121,7 +124,7 @@ def test_bit_depth_levels():
     for bits, dtype, fmt in ((4, np.uint8, "Mono8"), (12, np.uint16, "Mono16")):
         frame = _frames(_config(sensor={"bit_depth": bits}))[0]
         assert frame.image.dtype == dtype and frame.pixel_format == fmt and frame.bit_depth == bits
-        levels = 2 ** bits - 1
+        levels = 2**bits - 1
         assert frame.image.max() <= levels
         np.testing.assert_array_equal(frame.image, np.rint(np.clip(clean, 0, fs) / fs * levels))
         assert frame.meta["full_scale"] == pytest.approx(fs)
@@ -151,10 +154,16 @@ def test_saturation_clips():
 def test_noise_statistics():
     rig = _rig(angle=0.0)
     scene = _flat(0.5, rig.T)
-    clean = reference.forward(rig, scene)[0]            # flat: 0.5 * t_e/dt everywhere
+    clean = reference.forward(rig, scene)[0]  # flat: 0.5 * t_e/dt everywhere
     fs = T_E / T_R
-    big = {"shape": [64, 64], "angle": 0.0, "t_e": T_E, "t_r": T_R, "scene": np.full((rig.T, 64, 64), 0.5),
-           "scene_frames": rig.T}
+    big = {
+        "shape": [64, 64],
+        "angle": 0.0,
+        "t_e": T_E,
+        "t_r": T_R,
+        "scene": np.full((rig.T, 64, 64), 0.5),
+        "scene_frames": rig.T,
+    }
     sigma = 0.02
     read = _frames(dict(big, sensor={"read_noise": sigma, "seed": 1}))[0].image - clean[0, 0]
     assert abs(read.mean()) < 3 * sigma * fs / 64
@@ -198,8 +207,8 @@ def test_trigger_jitter_moves_the_exposure():
     for k, frame in enumerate(shaky):
         assert not np.allclose(frame.image, steady[k].image)
         rig = _rig(t_a=frame.meta["t_a"])
-        truth = truths[k]   # a late trigger holds the last sub-frame
-        truth = np.concatenate([truth, np.repeat(truth[-1:], max(0, rig.T - truth.shape[0]), axis=0)])[:rig.T]
+        truth = truths[k]  # a late trigger holds the last sub-frame
+        truth = np.concatenate([truth, np.repeat(truth[-1:], max(0, rig.T - truth.shape[0]), axis=0)])[: rig.T]
         np.testing.assert_allclose(frame.image, reference.forward(rig, truth)[0], rtol=1e-5, atol=1e-5)
     assert [f.meta["t_a"] for f in steady] == [50e-6] * 3
 

@@ -59,8 +59,10 @@ def test_no_function_takes_more_than_twelve_parameters():
 def test_the_count_sees_what_it_should(tmp_path):
     source = tmp_path / "m.py"
     args = ", ".join(f"a{i}" for i in range(13))
-    source.write_text(f'__all__ = ["entry"]\n\ndef entry(x, *, {args}):\n    pass\n\n'
-                      f"def helper(x, *, {args}):\n    pass\n\nclass C:\n    def method(self, {args}):\n        pass\n")
+    source.write_text(
+        f'__all__ = ["entry"]\n\ndef entry(x, *, {args}):\n    pass\n\n'
+        f"def helper(x, *, {args}):\n    pass\n\nclass C:\n    def method(self, {args}):\n        pass\n"
+    )
     assert [name for name, _, _ in _too_many(source, tmp_path)] == ["m.py:helper", "m.py:method"]
 
 
@@ -74,14 +76,19 @@ def test_scale_imports_only_public_solver_names():
                 continue
             module = PACKAGE.parent.joinpath(*node.module.split(".")).with_suffix(".py")
             public = _public(ast.parse(module.read_text()))
-            found += [f"{path.name}: {node.module}.{alias.name}" for alias in node.names
-                      if alias.name.startswith("_") or alias.name not in public]
+            found += [
+                f"{path.name}: {node.module}.{alias.name}"
+                for alias in node.names
+                if alias.name.startswith("_") or alias.name not in public
+            ]
     assert not found, found
 
 
 def test_every_module_stays_small():
     plugins = PACKAGE.parent / "plugins"
-    sizes = {str(p.relative_to(PACKAGE.parent)): len(p.read_text().splitlines())
-             for p in _modules(PACKAGE) + (_modules(plugins) if plugins.is_dir() else [])}
+    sizes = {
+        str(p.relative_to(PACKAGE.parent)): len(p.read_text().splitlines())
+        for p in _modules(PACKAGE) + (_modules(plugins) if plugins.is_dir() else [])
+    }
     assert len(sizes) > 80, sorted(sizes)
     assert all(n <= MOST_LINES for n in sizes.values()), {k: n for k, n in sizes.items() if n > MOST_LINES}

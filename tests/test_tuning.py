@@ -35,10 +35,10 @@ def _independent(rig, seed=0):
 def test_holdout_keeps_all_but_one_channel_per_pixel():
     held = holdout((20, 30), 4, block=5)
     assert held.shape == (4, 20, 30)
-    assert np.all(held.sum(axis=0) == 1)              # one channel held out everywhere
-    assert all(held[k].any() for k in range(4))      # every channel is held out somewhere
+    assert np.all(held.sum(axis=0) == 1)  # one channel held out everywhere
+    assert all(held[k].any() for k in range(4))  # every channel is held out somewhere
     one = holdout((8, 8), 1, block=2)
-    assert one.any() and not one.all()               # one camera: half the blocks fitted
+    assert one.any() and not one.all()  # one camera: half the blocks fitted
     with pytest.raises(ValueError, match="block"):
         holdout((8, 8), 4, block=0)
 
@@ -69,10 +69,11 @@ def test_the_search_pools_the_default_folds_and_records_them():
 
     for cameras, folds in [(8, 2), (4, 1)]:
         rig = rsocl.Rig.paper_array(cameras, (16, 16), t_e=0.18e-3, t_r=35e-6)
-        record = rsocl.reconstruct(ref.forward(rig, builtin_scene(rig.shape, rig.T)), rig,
-                                   iterations=12).params["tuning"]
+        record = rsocl.reconstruct(ref.forward(rig, builtin_scene(rig.shape, rig.T)), rig, iterations=12).params[
+            "tuning"
+        ]
         assert record["folds"] == folds and record["block"] == 8
-        assert record["held_out_pixels"] == folds * 16 * 16          # one camera of each pixel per fold
+        assert record["held_out_pixels"] == folds * 16 * 16  # one camera of each pixel per fold
     assert default_folds((4, 4), 12) == 3
 
 
@@ -80,8 +81,18 @@ def test_default_blocks_are_a_quarter_of_the_side_within_16_px_and_half_the_side
     from rsocl.solver.holdout import MIN_BLOCK, default_block
 
     assert MIN_BLOCK == 16
-    sides = {(3, 3): 2, (4, 4): 2, (16, 16): 8, (24, 40): 12, (48, 32): 16, (48, 48): 16, (64, 64): 16,
-             (100, 64): 16, (128, 128): 32, (1024, 1280): 256}
+    sides = {
+        (3, 3): 2,
+        (4, 4): 2,
+        (16, 16): 8,
+        (24, 40): 12,
+        (48, 32): 16,
+        (48, 48): 16,
+        (64, 64): 16,
+        (100, 64): 16,
+        (128, 128): 32,
+        (1024, 1280): 256,
+    }
     assert {shape: default_block(shape) for shape in sides} == sides
 
 
@@ -90,7 +101,7 @@ def test_default_patterns_take_each_scale_once():
 
     assert default_patterns((16, 16), 4) == [(default_block((16, 16)), 0)]
     assert default_patterns((16, 16), 4, scales=((0.5, 1), (0.25, 2))) == [(8, 0), (4, 0), (4, 2)]
-    assert default_patterns((4, 4), 4, scales=((0.5, 1), (0.25, 1))) == [(2, 0)]      # both scales: 2x2 blocks
+    assert default_patterns((4, 4), 4, scales=((0.5, 1), (0.25, 1))) == [(2, 0)]  # both scales: 2x2 blocks
 
 
 def test_the_search_pools_given_patterns_of_several_block_sizes():
@@ -103,12 +114,17 @@ def test_the_search_pools_given_patterns_of_several_block_sizes():
     problem = check_problem(g, rig)
     settings = check_settings(iterations=20).settled_for(tv, "float32", scale=default_scale(rig))
     staged = stage_on_device(problem, tv, settings, start=True)
-    args = (staged.op, staged.g, problem.g, lambda options: make_regularizer("tv", options),
-            SearchSpace({"temporal_weight": (1.0, 30.0)}, settings.lam))
+    args = (
+        staged.op,
+        staged.g,
+        problem.g,
+        lambda options: make_regularizer("tv", options),
+        SearchSpace({"temporal_weight": (1.0, 30.0)}, settings.lam),
+    )
     kwargs = dict(eta=settings.eta, iterations=10)
     record = tune_parameters(*args, patterns=[(12, 0), (6, 0), (6, 2)], **kwargs)
     assert record.block == [12, 6] and record.folds == 3 and record.held_out == 3 * SHAPE[0] * SHAPE[1]
-    assert record.chosen["temporal_weight"] == 30.0                        # a static scene
+    assert record.chosen["temporal_weight"] == 30.0  # a static scene
     with pytest.raises(ValueError, match="at least one"):
         tune_parameters(*args, patterns=[], **kwargs)
     with pytest.raises(ValueError, match="pattern block"):
@@ -142,8 +158,12 @@ def test_no_ground_truth_reaches_the_tuning():
     assert blind.params["start"] == "interp3d"
     assert len(record["candidates"]) >= 6 and all(c["score"] > 0 for c in record["candidates"])
     assert min(c["score"] for c in record["candidates"]) == pytest.approx(
-        next(c["score"] for c in record["candidates"]
-             if c["lam"] == record["chosen"]["lam"] and c["temporal_weight"] == record["chosen"]["temporal_weight"]))
+        next(
+            c["score"]
+            for c in record["candidates"]
+            if c["lam"] == record["chosen"]["lam"] and c["temporal_weight"] == record["chosen"]["temporal_weight"]
+        )
+    )
 
 
 def test_values_the_caller_fixes_win():
@@ -159,7 +179,7 @@ def test_values_the_caller_fixes_win():
     assert lam.params["lam"] == 0.05 and {c["lam"] for c in lam.params["tuning"]["candidates"]} == {0.05}
     fast = rsocl.reconstruct(g, rig, iterations=12, tune=False)
     assert fast.params["tuning"] is None
-    lam = 0.1 * default_scale(rig)                                       # t_e/dt = 3.3: psi scales the defaults
+    lam = 0.1 * default_scale(rig)  # t_e/dt = 3.3: psi scales the defaults
     assert (fast.params["lam"], fast.params["regularizer_options"]["temporal_weight"]) == (lam, 3.0)
 
 
@@ -225,9 +245,9 @@ def test_the_blend_minimises_the_held_out_error_of_the_mix():
         alphas = np.linspace(0.0, 1.0, 100001)
         errors = [np.sum((g - start - a * (run - start)) ** 2) for a in alphas[::1000]]
         assert _blend(*sums) == pytest.approx(alphas[::1000][int(np.argmin(errors))], abs=0.01)
-    assert _blend(1.0, 2.0, 0.5) == pytest.approx(0.625)           # (1 + 2 - 0.5) / 2 / 2
-    assert _blend(1.0, 1.0, 4.0) == 0.0                             # moving away from the data: the start
-    assert _blend(1.0, 0.25, 0.0) == 1.0                            # clipped at the run's own result
+    assert _blend(1.0, 2.0, 0.5) == pytest.approx(0.625)  # (1 + 2 - 0.5) / 2 / 2
+    assert _blend(1.0, 1.0, 4.0) == 0.0  # moving away from the data: the start
+    assert _blend(1.0, 0.25, 0.0) == 1.0  # clipped at the run's own result
     assert _blend(1.0, 0.0, 1.0) == 1.0 and _blend(1.0, np.inf, np.inf) == 1.0
 
 
@@ -252,12 +272,14 @@ def test_a_noisy_still_scene_blends_towards_the_interpolation():
     assert choice.blend == blend
     own = rsocl.reconstruct(g, rig, truth=truth, iterations=60, tune=choice, blend=1.0)
     assert own.params["blend"] == 1.0 and psnr(tuned.datacube, truth) > psnr(own.datacube, truth) + 2.0
-    again = rsocl.reconstruct(g, rig, iterations=60, tune=choice)                # the recorded choice's blend
+    again = rsocl.reconstruct(g, rig, iterations=60, tune=choice)  # the recorded choice's blend
     np.testing.assert_allclose(again.datacube, tuned.datacube, atol=1e-5)
     # the same mix asked for by hand, from the same start, without a search
     start = rsocl.model.interpolation.interp3d(g, rig)
-    fixed = dict(lam=tuned.params["lam"],
-                 regularizer_options={"temporal_weight": tuned.params["tuning"]["chosen"]["temporal_weight"]})
+    fixed = dict(
+        lam=tuned.params["lam"],
+        regularizer_options={"temporal_weight": tuned.params["tuning"]["chosen"]["temporal_weight"]},
+    )
     unmixed = rsocl.reconstruct(g, rig, iterations=60, tune=False, x0=start, **fixed).datacube
     mixed = rsocl.reconstruct(g, rig, iterations=60, tune=False, x0=start, blend=blend, **fixed).datacube
     np.testing.assert_allclose(mixed, start + blend * (unmixed - start), atol=1e-5)
@@ -273,8 +295,9 @@ def test_blend_is_checked_and_needs_a_start():
     for bad in (-0.1, 1.5, float("nan"), "half"):
         with pytest.raises(ValueError, match=r"blend must be"):
             rsocl.reconstruct(g, rig, iterations=2, blend=bad)
-    with pytest.raises(ValueError, match="blend = 0.5 moves the result towards the run's start, and this run "
-                                         "starts from zeros"):
+    with pytest.raises(
+        ValueError, match="blend = 0.5 moves the result towards the run's start, and this run starts from zeros"
+    ):
         rsocl.reconstruct(g, rig, iterations=2, tune=False, blend=0.5)
     assert rsocl.reconstruct(g, rig, iterations=2, tune=False).params["blend"] == 1.0
     # a start of the caller's: the search's blend (measured against the interpolation) is not applied
@@ -305,8 +328,9 @@ def test_a_search_that_would_not_fit_is_refused_before_it_runs(monkeypatch):
         rsocl.reconstruct(g, rig, iterations=4, device=device)
     fixed = rsocl.reconstruct(g, rig, iterations=4, device=device, tune=False)
     assert np.all(np.isfinite(fixed.datacube))
-    given = rsocl.reconstruct(g, rig, iterations=4, device=device, lam=0.1,
-                              regularizer_options={"temporal_weight": 3.0})
+    given = rsocl.reconstruct(
+        g, rig, iterations=4, device=device, lam=0.1, regularizer_options={"temporal_weight": 3.0}
+    )
     assert given.params["tuning"] is None
 
 
@@ -323,12 +347,22 @@ def _live_device_bytes():
     return sum(buffers.values())
 
 
-@pytest.mark.parametrize("cameras, batch, truth, x0, saturated, regularizer", [
-    (4, None, False, False, False, "tv"), (4, None, True, True, False, "tv"), (8, None, False, False, False, "tv"),
-    (4, 3, False, False, False, "tv"), (4, 3, True, False, True, "tv"), (4, 3, False, False, False, "tv-fused"),
-    (4, None, False, False, False, "dct"), (4, None, False, False, False, "wavelet")])
-def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch, truth, x0, saturated, regularizer,
-                                                                  monkeypatch):
+@pytest.mark.parametrize(
+    "cameras, batch, truth, x0, saturated, regularizer",
+    [
+        (4, None, False, False, False, "tv"),
+        (4, None, True, True, False, "tv"),
+        (8, None, False, False, False, "tv"),
+        (4, 3, False, False, False, "tv"),
+        (4, 3, True, False, True, "tv"),
+        (4, 3, False, False, False, "tv-fused"),
+        (4, None, False, False, False, "dct"),
+        (4, None, False, False, False, "wavelet"),
+    ],
+)
+def test_the_memory_counts_bound_what_the_search_and_the_run_hold(
+    cameras, batch, truth, x0, saturated, regularizer, monkeypatch
+):
     """For TV (plain and fused), DCT and wavelets: the device arrays alive while the search runs and
     while the run iterates stay within the counts the device is checked against (search_peak;
     memory_bytes with the start cube), and the counts exceed them by no more than the valid-pixel
@@ -357,7 +391,7 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
     snap = op.K * op.mn * op.dtype.itemsize
     peak = {"search": 0, "run": 0}
 
-    class Probe(crossval.ADMM):                       # every buffer exists once a candidate's first step ran
+    class Probe(crossval.ADMM):  # every buffer exists once a candidate's first step ran
         def step(self):
             if self.iteration <= 1:
                 peak["search"] = max(peak["search"], _live_device_bytes() - base)
@@ -368,17 +402,26 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(cameras, batch
 
     monkeypatch.setattr(crossval, "ADMM", Probe)
     base = _live_device_bytes()
-    result = rsocl.reconstruct(g, rig, name, regularizer_options=options, iterations=3, callback=callback,
-                               truth=cube if truth else None, x0=cube if x0 else None, saturation=saturation)
+    result = rsocl.reconstruct(
+        g,
+        rig,
+        name,
+        regularizer_options=options,
+        iterations=3,
+        callback=callback,
+        truth=cube if truth else None,
+        x0=cube if x0 else None,
+        saturation=saturation,
+    )
     assert result.params["tuning"] is not None and peak["search"] > 0 and peak["run"] > 0
-    small = 256                                     # per-set step lengths, eta, flags: uncounted
+    small = 256  # per-set step lengths, eta, flags: uncounted
     assert peak["search"] <= search_count + small
     assert peak["run"] <= run_count + small
     folds = result.params["tuning"]["folds"]
     assert folds == len(default_patterns(rig.shape, rig.n_channels))
     assert search_count - peak["search"] <= snap * (folds if batch is None else 0) + small
     assert run_count - peak["run"] <= (0 if saturated else sets * snap) + small
-    if batch is not None:                           # the run's own check covers its search
+    if batch is not None:  # the run's own check covers its search
         assert search_count < run_count
 
 
@@ -387,9 +430,9 @@ def test_the_tuned_default_beats_interpolation_on_other_rigs(cameras, shape):
     """Arrays other than the paper's four cameras, non-square grids: the search runs, records a
     choice among its candidates, and the result is closer to the truth than interp3d."""
     from rsocl.analysis.metrics import psnr
-    from rsocl.solver.holdout import default_block
     from rsocl.model.interpolation import interp3d
     from rsocl.model.scenes import builtin_scene
+    from rsocl.solver.holdout import default_block
 
     rig = rsocl.Rig.paper_array(cameras, shape, t_e=0.18e-3, t_r=35e-6)
     truth = builtin_scene(rig.shape, rig.T)
@@ -397,8 +440,10 @@ def test_the_tuned_default_beats_interpolation_on_other_rigs(cameras, shape):
     res = rsocl.reconstruct(g, rig, iterations=40)
     record = res.params["tuning"]
     assert record["block"] == default_block(shape) and record["held_out_pixels"] > 0
-    assert any(c["lam"] == record["chosen"]["lam"] and c["temporal_weight"] == record["chosen"]["temporal_weight"]
-               for c in record["candidates"])
+    assert any(
+        c["lam"] == record["chosen"]["lam"] and c["temporal_weight"] == record["chosen"]["temporal_weight"]
+        for c in record["candidates"]
+    )
     assert psnr(res.datacube, truth) > psnr(interp3d(g, rig), truth) + 0.5
 
 
@@ -410,13 +455,15 @@ def test_the_search_summary_says_how_pixels_were_held_out(tmp_path):
     rig = rsocl.Rig.paper_array(8, (16, 16), t_e=0.18e-3, t_r=35e-6)
     record = rsocl.reconstruct(ref.forward(rig, builtin_scene(rig.shape, rig.T)), rig, iterations=40).params["tuning"]
     line = search_summary(record)
-    assert line.startswith("blocks of 8 px, 2 hold-out folds, 512 held-out pixels, 10 iterations per candidate and fold")
+    assert line.startswith(
+        "blocks of 8 px, 2 hold-out folds, 512 held-out pixels, 10 iterations per candidate and fold"
+    )
     assert f"{len(record['candidates'])} candidates" in line and line.endswith(" s")
     one = {**record, "folds": 1, "iterations_per_candidate": 20}
     assert "1 hold-out fold, 512 held-out pixels, 20 iterations per candidate, " in search_summary(one)
     sizes = {**record, "block": [8, 4]}
     assert search_summary(sizes).startswith("blocks of 8 and 4 px, 2 hold-out folds")
-    assert "fold" in search_summary({"candidates": []})                 # an older record without these keys
+    assert "fold" in search_summary({"candidates": []})  # an older record without these keys
     assert "blend with the interpolation 0.25" in search_summary({**record, "blend": 0.25})
     assert tuning_plot(tmp_path / "t.png", record).stat().st_size > 0
 
@@ -435,8 +482,10 @@ def test_one_snapshot_per_pixel_sets_the_temporal_weight_and_runs_no_search(tmp_
     tuned = rsocl.reconstruct(g, rig, iterations=20)
     record = tuned.params["tuning"]
     assert record["preset"] == {"temporal_weight": weight} and record["chosen"]["temporal_weight"] == weight
-    assert record["candidates"] == [] and tuned.params["lam"] == rsocl.reconstruct(g, rig, iterations=1,
-                                                                                   tune=False).params["lam"]
+    assert (
+        record["candidates"] == []
+        and tuned.params["lam"] == rsocl.reconstruct(g, rig, iterations=1, tune=False).params["lam"]
+    )
     assert Tuning.from_params(record).preset == {"temporal_weight": weight}
     # a regularizer without a one-snapshot preset still has lam searched
     dct = rsocl.reconstruct(g, rig, "dct", iterations=20).params["tuning"]

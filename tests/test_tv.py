@@ -55,7 +55,7 @@ def test_default_step_damps_the_most_oscillating_mode(device, rng, temporal_weig
     options = dict(iterations=10, temporal_weight=temporal_weight)
     edge = _denoise(device, x, 100.0, "float64", step=1.0, **options)
     default = _denoise(device, x, 100.0, "float64", **options)
-    assert np.abs(default).max() < 0.2 and np.abs(edge).max() > 0.35      # the input's amplitude: 1
+    assert np.abs(default).max() < 0.2 and np.abs(edge).max() > 0.35  # the input's amplitude: 1
 
 
 def test_more_weight_smooths_more(device, rng):

@@ -101,9 +101,20 @@ class FakeV4L2Device:
     the one S_FMT really picks (a driver that lists more than it delivers).
     """
 
-    def __init__(self, path="/dev/video7", formats=("GREY", "Y16", "YUYV"), sensor=(12, 6), pad=4,
-                 selection=False, crop_align=1, capabilities=None, exposure=(3, 2047, 1, 156),
-                 auto_exposure=True, substitute=None, min_buffers=2):
+    def __init__(
+        self,
+        path="/dev/video7",
+        formats=("GREY", "Y16", "YUYV"),
+        sensor=(12, 6),
+        pad=4,
+        selection=False,
+        crop_align=1,
+        capabilities=None,
+        exposure=(3, 2047, 1, 156),
+        auto_exposure=True,
+        substitute=None,
+        min_buffers=2,
+    ):
         from linuxpy.video import raw
 
         self.raw = raw
@@ -113,8 +124,9 @@ class FakeV4L2Device:
         self.pad = pad
         self.selection = selection
         self.crop_align = crop_align
-        self.caps = capabilities if capabilities is not None else int(raw.Capability.VIDEO_CAPTURE
-                                                                          | raw.Capability.STREAMING)
+        self.caps = (
+            capabilities if capabilities is not None else int(raw.Capability.VIDEO_CAPTURE | raw.Capability.STREAMING)
+        )
         self.substitute = {int(raw.PixelFormat[k]): int(raw.PixelFormat[v]) for k, v in (substitute or {}).items()}
         self.min_buffers = min_buffers
         self.crop = [0, 0, self.sensor_w, self.sensor_h]
@@ -122,23 +134,48 @@ class FakeV4L2Device:
         self._update_format()
         CT = raw.CtrlType
         self.controls = {
-            CID_USER_CLASS: dict(name=b"User Controls", type=CT.CTRL_CLASS, minimum=0, maximum=0, step=0,
-                                 default=0, flags=0x44, value=0),
-            CID_BRIGHTNESS: dict(name=b"Brightness", type=CT.INTEGER, minimum=-64, maximum=64, step=1, default=0,
-                                 flags=0x20, value=0),
-            CID_CAMERA_CLASS: dict(name=b"Camera Controls", type=CT.CTRL_CLASS, minimum=0, maximum=0, step=0,
-                                   default=0, flags=0x44, value=0),
+            CID_USER_CLASS: dict(
+                name=b"User Controls", type=CT.CTRL_CLASS, minimum=0, maximum=0, step=0, default=0, flags=0x44, value=0
+            ),
+            CID_BRIGHTNESS: dict(
+                name=b"Brightness", type=CT.INTEGER, minimum=-64, maximum=64, step=1, default=0, flags=0x20, value=0
+            ),
+            CID_CAMERA_CLASS: dict(
+                name=b"Camera Controls",
+                type=CT.CTRL_CLASS,
+                minimum=0,
+                maximum=0,
+                step=0,
+                default=0,
+                flags=0x44,
+                value=0,
+            ),
         }
         self.menus = {}
         if auto_exposure:
-            self.controls[CID_EXPOSURE_AUTO] = dict(name=b"Auto Exposure", type=CT.MENU, minimum=0, maximum=3, step=1,
-                                                    default=3, flags=0x8, value=EXPOSURE_APERTURE_PRIORITY)
+            self.controls[CID_EXPOSURE_AUTO] = dict(
+                name=b"Auto Exposure",
+                type=CT.MENU,
+                minimum=0,
+                maximum=3,
+                step=1,
+                default=3,
+                flags=0x8,
+                value=EXPOSURE_APERTURE_PRIORITY,
+            )
             self.menus[CID_EXPOSURE_AUTO] = {1: b"Manual Mode", 3: b"Aperture Priority Mode"}
         if exposure is not None:
             lo, hi, step, default = exposure
-            self.controls[CID_EXPOSURE_ABSOLUTE] = dict(name=b"Exposure Time, Absolute", type=CT.INTEGER, minimum=lo,
-                                                        maximum=hi, step=step, default=default, flags=0x10,
-                                                        value=default)
+            self.controls[CID_EXPOSURE_ABSOLUTE] = dict(
+                name=b"Exposure Time, Absolute",
+                type=CT.INTEGER,
+                minimum=lo,
+                maximum=hi,
+                step=step,
+                default=default,
+                flags=0x10,
+                value=default,
+            )
         self.buffers = []
         self.queued, self.done = [], []
         self.streaming = False
@@ -343,8 +380,7 @@ class FakeV4L2Device:
         return c["minimum"] + (value - c["minimum"] + step // 2) // step * step
 
     def _write_control(self, cid, value):
-        if cid == CID_EXPOSURE_ABSOLUTE and self.controls.get(CID_EXPOSURE_AUTO, {}).get("value",
-                                                                                          EXPOSURE_MANUAL) != 1:
+        if cid == CID_EXPOSURE_ABSOLUTE and self.controls.get(CID_EXPOSURE_AUTO, {}).get("value", EXPOSURE_MANUAL) != 1:
             raise _err(errno.EACCES)  # inactive in an auto mode; a real UVC camera refuses too
         self.controls[cid]["value"] = value
         self.control_writes.append((cid, value))
@@ -396,9 +432,20 @@ class FakeV4L2Device:
         length = self.fmt["sizeimage"]
         span = -(-length // PAGE) * PAGE
         for index in range(count):
-            self.buffers.append(dict(index=index, length=length, offset=index * span, mm=_real_mmap(-1, span),
-                                     mapped=False, state="dequeued", bytesused=0, timestamp=0.0, sequence=0,
-                                     error=False))
+            self.buffers.append(
+                dict(
+                    index=index,
+                    length=length,
+                    offset=index * span,
+                    mm=_real_mmap(-1, span),
+                    mapped=False,
+                    state="dequeued",
+                    bytesused=0,
+                    timestamp=0.0,
+                    sequence=0,
+                    error=False,
+                )
+            )
         arg.count = count
 
     def _fill_buffer(self, arg, buf):
@@ -492,8 +539,13 @@ class FakeV4L2Device:
             buf = self.buffers[self.queued.pop(0)]
             assert len(data) <= buf["length"]
             buf["mm"][: len(data)] = data
-            buf.update(state="done", bytesused=len(data) if bytesused is None else bytesused, error=error,
-                       timestamp=time.monotonic() if timestamp is None else timestamp, sequence=self.sequence)
+            buf.update(
+                state="done",
+                bytesused=len(data) if bytesused is None else bytesused,
+                error=error,
+                timestamp=time.monotonic() if timestamp is None else timestamp,
+                sequence=self.sequence,
+            )
             self.sequence += 1
             self.done.append(buf["index"])
             os.write(self.file.w, b"\0")
@@ -538,8 +590,15 @@ def test_missing_linuxpy_names_the_extra(monkeypatch):
     assert not cam._open
 
 
-@pytest.mark.parametrize("device, path", [(0, "/dev/video0"), (2, "/dev/video2"), ("5", "/dev/video5"),
-                                          ("/dev/v4l/by-id/usb-cam", "/dev/v4l/by-id/usb-cam")])
+@pytest.mark.parametrize(
+    "device, path",
+    [
+        (0, "/dev/video0"),
+        (2, "/dev/video2"),
+        ("5", "/dev/video5"),
+        ("/dev/v4l/by-id/usb-cam", "/dev/v4l/by-id/usb-cam"),
+    ],
+)
 def test_device_config(device, path):
     cam = V4L2Camera({"device": device})
     assert cam.path == path and cam.name == f"v4l2 {path}"
@@ -548,22 +607,41 @@ def test_device_config(device, path):
     assert V4L2Camera({"device": 1}, name="left").name == "left"
 
 
-@pytest.mark.parametrize("config", [{"device": -1}, {"device": True}, {"device": ""}, {"buffers": 0},
-                                    {"buffers": 33}, {"buffers": 2.5}, {"pixel_format": "MJPEG"},
-                                    {"width": 0}, {"height": "480"}, {"device": None}, {"device": 1.0}])
+@pytest.mark.parametrize(
+    "config",
+    [
+        {"device": -1},
+        {"device": True},
+        {"device": ""},
+        {"buffers": 0},
+        {"buffers": 33},
+        {"buffers": 2.5},
+        {"pixel_format": "MJPEG"},
+        {"width": 0},
+        {"height": "480"},
+        {"device": None},
+        {"device": 1.0},
+    ],
+)
 def test_bad_config(config):
     with pytest.raises(ValueError):
         V4L2Camera(config)
 
 
 def test_unknown_config_key_is_refused_with_the_closest_key_and_the_known_ones():
-    with pytest.raises(ValueError, match=r"^v4l2 /dev/video0: unknown config key 'adress' \(did you mean "
-                                         r"'address'\?\); known: \[") as info:
+    with pytest.raises(
+        ValueError,
+        match=r"^v4l2 /dev/video0: unknown config key 'adress' \(did you mean "
+        r"'address'\?\); known: \[",
+    ) as info:
         V4L2Camera({"adress": "/dev/video2", "buffers": 2})
     for key in ("address", "buffers", "device", "height", "pixel_format", "width"):
         assert repr(key) in str(info.value).split("known:")[1]
-    with pytest.raises(ValueError, match=r"^left: unknown config keys 'bufers' \(did you mean 'buffers'\?\), "
-                                         r"'zzz'; known"):
+    with pytest.raises(
+        ValueError,
+        match=r"^left: unknown config keys 'bufers' \(did you mean 'buffers'\?\), "
+        r"'zzz'; known",
+    ):
         V4L2Camera({"zzz": 1, "bufers": 3}, name="left")
 
 
@@ -572,8 +650,15 @@ def test_known_config_keys_are_accepted(recwarn):
     assert not [w for w in recwarn if issubclass(w.category, UserWarning)]
 
 
-@pytest.mark.parametrize("address, path", [(2, "/dev/video2"), ("3", "/dev/video3"), ("/dev/video2", "/dev/video2"),
-                                           ("/dev/v4l/by-id/usb-cam", "/dev/v4l/by-id/usb-cam")])
+@pytest.mark.parametrize(
+    "address, path",
+    [
+        (2, "/dev/video2"),
+        ("3", "/dev/video3"),
+        ("/dev/video2", "/dev/video2"),
+        ("/dev/v4l/by-id/usb-cam", "/dev/v4l/by-id/usb-cam"),
+    ],
+)
 def test_address_selects_the_device(address, path):
     cam = V4L2Camera({"address": address})
     assert cam.path == path and cam.name == f"v4l2 {path}"
@@ -581,8 +666,14 @@ def test_address_selects_the_device(address, path):
     assert V4L2Camera({"address": address, "device": path}).path == path
 
 
-@pytest.mark.parametrize("config", [{"address": "/dev/video2", "device": "/dev/video3"},
-                                    {"address": 2, "device": 0}, {"address": "/dev/video1", "device": "2"}])
+@pytest.mark.parametrize(
+    "config",
+    [
+        {"address": "/dev/video2", "device": "/dev/video3"},
+        {"address": 2, "device": 0},
+        {"address": "/dev/video1", "device": "2"},
+    ],
+)
 def test_address_and_device_must_agree(config):
     with pytest.raises(ValueError, match="address") as info:
         V4L2Camera(config)
@@ -653,8 +744,11 @@ def test_rig_file_address_reaches_the_camera(fake, tmp_path):
 def test_the_capture_rig_holds_the_exposure_the_webcam_applied(fake, tmp_path, t_e, applied):
     from rsocl.files.hdf5 import load_capture
 
-    with pytest.warns(UserWarning, match=rf"camera 0: the device applied an exposure of {applied!r} s where the rig "
-                                         rf"file says t_e = {t_e!r} s"):
+    with pytest.warns(
+        UserWarning,
+        match=rf"camera 0: the device applied an exposure of {applied!r} s where the rig "
+        rf"file says t_e = {t_e!r} s",
+    ):
         out, image = _capture_from_webcam(fake, tmp_path, t_e, sets=1)
     capture = load_capture(out)
     assert capture.rig.cameras[0].t_e == pytest.approx(applied)
@@ -812,8 +906,9 @@ def test_exposure_needs_the_absolute_control(make_fake):
 
 
 # ====================================================================== capture
-@pytest.mark.parametrize("name, high, dtype, depth", [("GREY", 256, np.uint8, 8), ("Y16", 65536, np.uint16, 16),
-                                                      ("YUYV", 256, np.uint8, 8)])
+@pytest.mark.parametrize(
+    "name, high, dtype, depth", [("GREY", 256, np.uint8, 8), ("Y16", 65536, np.uint16, 16), ("YUYV", 256, np.uint8, 8)]
+)
 def test_capture_converts_exactly(fake, name, high, dtype, depth):
     image = sensor_image(fake, high)
     with V4L2Camera({"device": fake.path, "pixel_format": name, "buffers": 3}) as cam:
@@ -1059,9 +1154,12 @@ def _capture_nodes():
 
 
 @pytest.mark.v4l2_device
-@pytest.mark.skipif(not _capture_nodes(), reason="no /dev/video* device on this machine: the backend is covered by "
-                    "the fake-device tests above; run on a machine with a webcam (or `modprobe vivid`); "
-                    "RSOCL_V4L2_DEVICE picks the node")
+@pytest.mark.skipif(
+    not _capture_nodes(),
+    reason="no /dev/video* device on this machine: the backend is covered by "
+    "the fake-device tests above; run on a machine with a webcam (or `modprobe vivid`); "
+    "RSOCL_V4L2_DEVICE picks the node",
+)
 def test_real_device():
     pytest.importorskip("linuxpy.video.device", reason='linuxpy not installed (pip install "rsocl[v4l2]")')
     wanted = os.environ.get("RSOCL_V4L2_DEVICE")

@@ -3,15 +3,15 @@ import numpy as np
 import pytest
 
 from rsocl.analysis import visual
-from rsocl.model.rig import Camera, Rig
 from rsocl.analysis.visual import channel_titles, comparison_gif, datacube_montage, snapshot_montage
+from rsocl.model.rig import Camera, Rig
 
 
 @pytest.fixture
 def cubes():
     rng = np.random.default_rng(9)
     truth = rng.uniform(0.1, 0.9, size=(6, 10, 16))
-    estimate = truth + rng.normal(0, 0.2, truth.shape)      # goes outside [0, 1]: tests the common range
+    estimate = truth + rng.normal(0, 0.2, truth.shape)  # goes outside [0, 1]: tests the common range
     return truth, estimate
 
 
@@ -30,7 +30,7 @@ def _gray(frames):
 
 def test_comparison_gif_side_by_side(tmp_path, cubes):
     truth, estimate = cubes
-    scale, gap = 8, 4                                         # gap = scale // 2
+    scale, gap = 8, 4  # gap = scale // 2
     path = comparison_gif(tmp_path / "cmp.gif", truth, estimate, fps=10, scale=scale)
     assert path == tmp_path / "cmp.gif"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cmp.gif"]
@@ -43,9 +43,10 @@ def test_comparison_gif_side_by_side(tmp_path, cubes):
     body = slice(strip, strip + m * scale)
     for s in (0, T - 1):
         np.testing.assert_array_equal(frames[s, body, : n * scale], _upscale(_unit8(truth[s], low, high), scale))
-        np.testing.assert_array_equal(frames[s, body, n * scale + gap:],
-                                      _upscale(_unit8(estimate[s], low, high), scale))
-    assert frames[0, :strip].max() > 128                      # a title was drawn
+        np.testing.assert_array_equal(
+            frames[s, body, n * scale + gap :], _upscale(_unit8(estimate[s], low, high), scale)
+        )
+    assert frames[0, :strip].max() > 128  # a title was drawn
     meta = iio.immeta(path)
     assert meta["loop"] == 0 and meta["duration"] == 100
 
@@ -79,10 +80,20 @@ def test_comparison_gif_rejects_bad_input(tmp_path, cubes):
 
 def test_channel_titles():
     t_r = 1e-5
-    rig = Rig([Camera(0, t_e=3e-5, t_r=t_r), Camera(90, t_e=3e-5, t_r=t_r, frames=2, t_d=1e-4),
-               Camera(t_e=3e-5, t_r=t_r, row_map=np.zeros((4, 5)))], (4, 5))
-    assert channel_titles(rig) == ["camera 0 (0°)", "camera 1 (90°) frame 0", "camera 1 (90°) frame 1",
-                                   "camera 2 (row map)"]
+    rig = Rig(
+        [
+            Camera(0, t_e=3e-5, t_r=t_r),
+            Camera(90, t_e=3e-5, t_r=t_r, frames=2, t_d=1e-4),
+            Camera(t_e=3e-5, t_r=t_r, row_map=np.zeros((4, 5))),
+        ],
+        (4, 5),
+    )
+    assert channel_titles(rig) == [
+        "camera 0 (0°)",
+        "camera 1 (90°) frame 0",
+        "camera 1 (90°) frame 1",
+        "camera 2 (row map)",
+    ]
 
 
 def test_snapshot_montage(tmp_path):
@@ -106,9 +117,9 @@ def test_datacube_montage(tmp_path, cubes):
     with_truth = iio.imread(datacube_montage(tmp_path / "both.png", estimate, truth=truth, every=2))
     alone = iio.imread(datacube_montage(tmp_path / "alone.png", estimate, every=2))
     assert with_truth.ndim == 3 and alone.ndim == 3
-    assert with_truth.shape[0] > alone.shape[0]               # the truth row adds height
+    assert with_truth.shape[0] > alone.shape[0]  # the truth row adds height
     wrapped = iio.imread(datacube_montage(tmp_path / "wrap.png", estimate, every=1, max_columns=3))
-    assert wrapped.shape[0] > alone.shape[0]                  # 6 panels on 2 rows
+    assert wrapped.shape[0] > alone.shape[0]  # 6 panels on 2 rows
     with pytest.raises(ValueError, match="truth"):
         datacube_montage(tmp_path / "bad.png", estimate, truth=truth[:, :-1])
     with pytest.raises(ValueError, match="every"):

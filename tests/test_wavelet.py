@@ -30,27 +30,31 @@ def _pywt_coeffs(x, name, levels, axes):
 
 def _blocks(x, plan, fn):
     """Apply ``fn(block_of_x, axes)`` to each block of frames of the plan; identity where nothing is transformed."""
-    parts = [fn(x[t0:t0 + frames], axes) if plan.levels and axes else x[t0:t0 + frames].copy()
-             for t0, frames, axes in plan.blocks]
+    parts = [
+        fn(x[t0 : t0 + frames], axes) if plan.levels and axes else x[t0 : t0 + frames].copy()
+        for t0, frames, axes in plan.blocks
+    ]
     assert sum(p.shape[0] for p in parts) == x.shape[0]
     return np.concatenate(parts)
 
 
 def _pywt_mallat(x, name, plan):
     """pywt's coefficients of each block placed in the in-place (Mallat) layout."""
+
     def one(b, axes):
         arr, _ = pywt.coeffs_to_array(_pywt_coeffs(b, name, plan.levels, axes), axes=axes)
         assert arr.shape == b.shape
         return arr
+
     return _blocks(x, plan, one)
 
 
 def _pywt_denoise(x, name, plan, weight):
     def one(b, axes):
         coeffs = _pywt_coeffs(b, name, plan.levels, axes)
-        coeffs = [coeffs[0]] + [{k: pywt.threshold(v, weight, mode="soft") for k, v in d.items()}
-                                for d in coeffs[1:]]
+        coeffs = [coeffs[0]] + [{k: pywt.threshold(v, weight, mode="soft") for k, v in d.items()} for d in coeffs[1:]]
         return pywt.waverecn(coeffs, name, mode="periodization", axes=axes)
+
     return _blocks(x, plan, one)
 
 
@@ -67,10 +71,20 @@ def test_filters_are_pywt_filters(name):
         assert np.dot(lo[s:], lo[:-s]) == pytest.approx(0, abs=1e-14)
 
 
-CASES = [((8, 16, 32), "3d", 0), ((8, 16, 32), "2d", 0), ((6, 16, 8), "3d", 0), ((5, 16, 16), "3d", 0),
-         ((4, 8, 24), "2d", 0), ((16, 8, 8), "3d", 2), ((8, 16, 16), "2d", 1), ((8, 7, 9), "3d", 0),
-         # T not a multiple of 2**levels: a 3-D block of leading frames and a 2-D block
-         ((11, 8, 8), "3d", 0), ((13, 16, 8), "3d", 0), ((11, 8, 7), "3d", 0)]
+CASES = [
+    ((8, 16, 32), "3d", 0),
+    ((8, 16, 32), "2d", 0),
+    ((6, 16, 8), "3d", 0),
+    ((5, 16, 16), "3d", 0),
+    ((4, 8, 24), "2d", 0),
+    ((16, 8, 8), "3d", 2),
+    ((8, 16, 16), "2d", 1),
+    ((8, 7, 9), "3d", 0),
+    # T not a multiple of 2**levels: a 3-D block of leading frames and a 2-D block
+    ((11, 8, 8), "3d", 0),
+    ((13, 16, 8), "3d", 0),
+    ((11, 8, 7), "3d", 0),
+]
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -91,8 +105,17 @@ def test_transform_matches_pywt(device, dtype, rng, name, shape, mode, levels):
 
 
 @pytest.mark.parametrize("name", NAMES)
-@pytest.mark.parametrize("shape, mode", [((8, 32, 16), "3d"), ((3, 16, 32), "2d"), ((16, 5, 3), "3d"),
-                                         ((12, 24, 8), "3d"), ((13, 16, 16), "3d"), ((11, 8, 7), "3d")])
+@pytest.mark.parametrize(
+    "shape, mode",
+    [
+        ((8, 32, 16), "3d"),
+        ((3, 16, 32), "2d"),
+        ((16, 5, 3), "3d"),
+        ((12, 24, 8), "3d"),
+        ((13, 16, 16), "3d"),
+        ((11, 8, 7), "3d"),
+    ],
+)
 def test_perfect_reconstruction(device, dtype, rng, name, shape, mode):
     w = Wavelet(wavelet=name, mode=mode)
     x = rng.random(shape)
@@ -106,10 +129,19 @@ def test_perfect_reconstruction(device, dtype, rng, name, shape, mode):
 
 
 @pytest.mark.parametrize("name", NAMES)
-@pytest.mark.parametrize("shape, mode, levels, split", [
-    ((8, 16, 32), "3d", 0, True), ((8, 16, 32), "2d", 0, True), ((5, 16, 16), "3d", 0, True),
-    ((16, 8, 8), "3d", 2, True), ((8, 7, 9), "3d", 0, True), ((13, 16, 8), "3d", 0, True),
-    ((11, 8, 7), "3d", 0, True), ((13, 16, 8), "3d", 0, False)])
+@pytest.mark.parametrize(
+    "shape, mode, levels, split",
+    [
+        ((8, 16, 32), "3d", 0, True),
+        ((8, 16, 32), "2d", 0, True),
+        ((5, 16, 16), "3d", 0, True),
+        ((16, 8, 8), "3d", 2, True),
+        ((8, 7, 9), "3d", 0, True),
+        ((13, 16, 8), "3d", 0, True),
+        ((11, 8, 7), "3d", 0, True),
+        ((13, 16, 8), "3d", 0, False),
+    ],
+)
 @pytest.mark.parametrize("weight", [0.05, 0.3])
 def test_denoise_matches_pywt(device, dtype, rng, name, shape, mode, levels, split, weight):
     w = Wavelet(wavelet=name, mode=mode, levels=levels, split_time=split)
@@ -136,8 +168,11 @@ def test_denoise_writes_out(device, rng):
 def test_large_weight_keeps_the_approximation(device, rng):
     # haar on every level of 16x16 sub-frames: the approximation is the frame's mean
     x = rng.random((3, 16, 16))
-    got = Wavelet(wavelet="haar", mode="2d").denoise(_dev(device, x, "float64" if device.has_fp64 else "float32"),
-                                                     1e6).get()
+    got = (
+        Wavelet(wavelet="haar", mode="2d")
+        .denoise(_dev(device, x, "float64" if device.has_fp64 else "float32"), 1e6)
+        .get()
+    )
     np.testing.assert_allclose(got, np.broadcast_to(x.mean(axis=(1, 2), keepdims=True), x.shape), atol=1e-5)
 
 
@@ -182,37 +217,43 @@ def test_2d_mode_keeps_subframes_independent(device, dtype, rng, name):
     assert np.abs(d2 - d3).max() > 1e-3
 
 
-@pytest.mark.parametrize("name, mode, shape, expected", [
-    ("haar", "3d", (55, 64, 64), (6, (1, 2))),   # odd T: the time axis is left untouched
-    ("db2", "3d", (55, 64, 64), (5, (1, 2))),
-    ("db4", "3d", (55, 64, 64), (4, (1, 2))),    # 64 / 2**3 = 8 taps at the coarsest level
-    ("haar", "2d", (55, 64, 64), (6, (1, 2))),
-    ("haar", "3d", (1, 16, 16), (4, (1, 2))),
-    ("db2", "3d", (1, 16, 16), (3, (1, 2))),
-    ("db4", "3d", (1, 16, 16), (2, (1, 2))),
-    ("haar", "3d", (8, 7, 9), (3, (0,))),        # only t can be transformed
-    ("db2", "3d", (8, 7, 9), (2, (0,))),
-    ("db4", "3d", (8, 7, 9), (1, (0,))),
-    ("haar", "2d", (8, 7, 9), (0, ())),          # nothing can: the denoiser is the identity
-    ("haar", "3d", (16, 64, 64), (4, (0, 1, 2))),  # one level count for all axes
-    ("haar", "3d", (2, 64, 64), (1, (0, 1, 2))),
-    ("db4", "3d", (4, 64, 64), (4, (1, 2))),     # T = 4 is shorter than 8 taps
-    ("haar", "2d", (3, 96, 40), (3, (1, 2))),    # 40 = 8 * 5
-])
+@pytest.mark.parametrize(
+    "name, mode, shape, expected",
+    [
+        ("haar", "3d", (55, 64, 64), (6, (1, 2))),  # odd T: the time axis is left untouched
+        ("db2", "3d", (55, 64, 64), (5, (1, 2))),
+        ("db4", "3d", (55, 64, 64), (4, (1, 2))),  # 64 / 2**3 = 8 taps at the coarsest level
+        ("haar", "2d", (55, 64, 64), (6, (1, 2))),
+        ("haar", "3d", (1, 16, 16), (4, (1, 2))),
+        ("db2", "3d", (1, 16, 16), (3, (1, 2))),
+        ("db4", "3d", (1, 16, 16), (2, (1, 2))),
+        ("haar", "3d", (8, 7, 9), (3, (0,))),  # only t can be transformed
+        ("db2", "3d", (8, 7, 9), (2, (0,))),
+        ("db4", "3d", (8, 7, 9), (1, (0,))),
+        ("haar", "2d", (8, 7, 9), (0, ())),  # nothing can: the denoiser is the identity
+        ("haar", "3d", (16, 64, 64), (4, (0, 1, 2))),  # one level count for all axes
+        ("haar", "3d", (2, 64, 64), (1, (0, 1, 2))),
+        ("db4", "3d", (4, 64, 64), (4, (1, 2))),  # T = 4 is shorter than 8 taps
+        ("haar", "2d", (3, 96, 40), (3, (1, 2))),  # 40 = 8 * 5
+    ],
+)
 def test_levels_auto_choice(name, mode, shape, expected):
     plan = Wavelet(wavelet=name, mode=mode).plan(shape)
     assert plan[:2] == expected and plan.blocks == ((0, shape[0], expected[1]),)
     assert Wavelet(wavelet=name, mode=mode, split_time=False).plan(shape) == plan
 
 
-@pytest.mark.parametrize("name, shape, levels, head", [
-    ("haar", (69, 64, 64), 6, 64),   # the paper's 4-camera array at 64 x 64: T = 69
-    ("db2", (69, 64, 64), 5, 64),
-    ("db4", (69, 64, 64), 4, 64),
-    ("haar", (70, 64, 64), 6, 64),   # 70 = 2 * 35 would allow only 1 level without the split
-    ("db4", (69, 16, 16), 2, 68),
-    ("db2", (11, 8, 8), 2, 8),
-])
+@pytest.mark.parametrize(
+    "name, shape, levels, head",
+    [
+        ("haar", (69, 64, 64), 6, 64),  # the paper's 4-camera array at 64 x 64: T = 69
+        ("db2", (69, 64, 64), 5, 64),
+        ("db4", (69, 64, 64), 4, 64),
+        ("haar", (70, 64, 64), 6, 64),  # 70 = 2 * 35 would allow only 1 level without the split
+        ("db4", (69, 16, 16), 2, 68),
+        ("db2", (11, 8, 8), 2, 8),
+    ],
+)
 def test_levels_with_time_split(name, shape, levels, head):
     plan = Wavelet(wavelet=name).plan(shape)
     assert plan.levels == levels and plan.axes == (0, 1, 2)
@@ -234,7 +275,7 @@ def test_levels_option_caps_and_rule():
     for flen in (2, 4, 8):
         for length in range(1, 130):
             L = axis_levels(length, flen)
-            ok = lambda lv, length=length, flen=flen: length % 2 ** lv == 0 and length // 2 ** (lv - 1) >= flen  # noqa: E731
+            ok = lambda lv, length=length, flen=flen: length % 2**lv == 0 and length // 2 ** (lv - 1) >= flen  # noqa: E731
             assert (L == 0 or ok(L)) and not ok(L + 1), (length, flen, L)
 
 
@@ -287,7 +328,15 @@ def test_reconstruct_with_wavelet_improves_psnr():
     rig = rsocl.Rig.paper_array(4, (16, 16), t_e=1e-4, t_r=3e-5)
     truth = np.clip(np.linspace(0, 1, 16)[None, None, :] + np.zeros((rig.T,) + rig.shape), 0, 1)
     g = ref.forward(rig, truth)
-    res = rsocl.reconstruct(g, rig, regularizer="wavelet", regularizer_options={"wavelet": "db2"},
-                            iterations=20, lam=0.02, eta=0.2, truth=truth)
+    res = rsocl.reconstruct(
+        g,
+        rig,
+        regularizer="wavelet",
+        regularizer_options={"wavelet": "db2"},
+        iterations=20,
+        lam=0.02,
+        eta=0.2,
+        truth=truth,
+    )
     assert res.params["regularizer"] == "wavelet"
     assert res.history["psnr"][-1] > res.history["psnr"][0]

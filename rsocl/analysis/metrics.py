@@ -26,8 +26,9 @@ def _pair(estimate, truth) -> tuple[np.ndarray, np.ndarray]:
     estimate = check.finite_array("estimate", estimate)
     truth = check.finite_array("truth", truth)
     if estimate.shape != truth.shape:
-        raise ValueError(f"estimate and truth must have the same shape, got estimate {estimate.shape} "
-                         f"and truth {truth.shape}")
+        raise ValueError(
+            f"estimate and truth must have the same shape, got estimate {estimate.shape} and truth {truth.shape}"
+        )
     if truth.size == 0:
         raise ValueError(f"truth must not be empty, got shape {truth.shape}")
     return estimate, truth
@@ -175,6 +176,7 @@ def ssim(estimate: ArrayLike, truth: ArrayLike, *, data_range: float | None = No
     per = np.full(truth.shape[0], np.nan, dtype=np.float64)
     if win is not None:
         for s in range(truth.shape[0]):
-            per[s] = structural_similarity(estimate[s].astype(np.float64), truth[s].astype(np.float64),
-                                           data_range=peak, win_size=win)
+            per[s] = structural_similarity(
+                estimate[s].astype(np.float64), truth[s].astype(np.float64), data_range=peak, win_size=win
+            )
     return float(np.mean(per)), per

@@ -72,25 +72,29 @@ def tuning_plot(path, record, *, dpi=100) -> Path:
     best = min(candidates, key=lambda c: c["score"])
     for i, name in enumerate(names, 1):
         ax = figure.add_subplot(1, len(names), i)
-        groups: dict = {}                 # one line per setting of the other parameters
+        groups: dict = {}  # one line per setting of the other parameters
         for c in candidates:
             key = tuple((k, c[k]) for k in chosen if k != name and k in c)
             groups.setdefault(key, []).append((c[name], c["score"]))
         for j, (key, points) in enumerate(sorted(groups.items(), key=lambda item: -len(item[1]))):
             label = ", ".join(f"{k} = {v:.3g}" for k, v in key) or "candidates"
             ax.plot(*zip(*sorted(points)), "o-" if len(points) > 1 else "o", color=f"C{j % 10}", label=label)
-        ax.plot([best[name]], [best["score"]], "*", color="C3", markersize=14,
-                label=f"chosen {name} = {best[name]:.3g}")
+        ax.plot(
+            [best[name]], [best["score"]], "*", color="C3", markersize=14, label=f"chosen {name} = {best[name]:.3g}"
+        )
         ax.set_xscale("log")
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(name)
         ax.set_ylabel("held-out relative error")
         ax.legend(fontsize=7)
     fixed = ", ".join(f"{k} = {v:g}" for k, v in record.get("fixed", {}).items() if isinstance(v, (int, float)))
-    width = int(figure.get_figwidth() * 17)          # characters of 8-point text per line
-    figure.suptitle(textwrap.fill("cross-validation on held-out snapshot pixels"
-                                  + (f" (fixed: {fixed})" if fixed else ""), width)
-                    + "\n" + textwrap.fill(search_summary(record), width), fontsize=8)
+    width = int(figure.get_figwidth() * 17)  # characters of 8-point text per line
+    figure.suptitle(
+        textwrap.fill("cross-validation on held-out snapshot pixels" + (f" (fixed: {fixed})" if fixed else ""), width)
+        + "\n"
+        + textwrap.fill(search_summary(record), width),
+        fontsize=8,
+    )
     figure.tight_layout()
     path = Path(os.fspath(path))
     with atomic_path(path) as tmp:

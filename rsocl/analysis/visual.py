@@ -61,15 +61,16 @@ class _TextStrip:
         self.shape = (height, width)
         self.figure = Figure(figsize=(width / 72.0, height / 72.0), dpi=72, facecolor="black")
         self.canvas = FigureCanvasAgg(self.figure)
-        self.text = self.figure.text(0.5, 0.5, "", color="white", ha="center", va="center",
-                                     fontsize=fontsize, family="DejaVu Sans")
+        self.text = self.figure.text(
+            0.5, 0.5, "", color="white", ha="center", va="center", fontsize=fontsize, family="DejaVu Sans"
+        )
 
     def render(self, label: str) -> np.ndarray:
         self.text.set_text(label)
         self.canvas.draw()
         rgba = np.asarray(self.canvas.buffer_rgba())
         strip = rgba[..., :3].mean(axis=-1).round().astype(np.uint8)
-        out = np.zeros(self.shape, dtype=np.uint8)            # guard against off-by-one canvas sizes
+        out = np.zeros(self.shape, dtype=np.uint8)  # guard against off-by-one canvas sizes
         h, w = min(self.shape[0], strip.shape[0]), min(self.shape[1], strip.shape[1])
         out[:h, :w] = strip[:h, :w]
         return out
@@ -153,16 +154,18 @@ def comparison_gif(path, truth, estimate, *, fps=10, scale=4) -> Path:
     if truth is not None:
         truth = _stack("truth", truth)
         if truth.shape != estimate.shape:
-            raise ValueError(f"truth and estimate must have the same shape, got truth {truth.shape} and "
-                             f"estimate {estimate.shape}")
+            raise ValueError(
+                f"truth and estimate must have the same shape, got truth {truth.shape} and estimate {estimate.shape}"
+            )
     fps = check.positive("fps", fps, "frames per second")
     scale = check.positive_int("scale", scale, maximum=64)
     low, high = _display_range(truth, estimate)
 
     T, m, n = estimate.shape
     height, width = m * scale, n * scale
-    panels = [("ground truth", truth), ("reconstruction", estimate)] if truth is not None else \
-             [("reconstruction", estimate)]
+    panels = (
+        [("ground truth", truth), ("reconstruction", estimate)] if truth is not None else [("reconstruction", estimate)]
+    )
     gap = max(1, scale // 2)
     total_width = len(panels) * width + (len(panels) - 1) * gap
 
@@ -332,7 +335,7 @@ def datacube_montage(path, datacube, *, every=None, truth=None, max_columns=8, c
         high = low + 1.0
 
     ncols = min(len(selected), max_columns)
-    chunks = [selected[i:i + ncols] for i in range(0, len(selected), ncols)]
+    chunks = [selected[i : i + ncols] for i in range(0, len(selected), ncols)]
     cubes = [("truth", truth), ("reconstruction", datacube)] if truth is not None else [(None, datacube)]
     nrows = len(chunks) * len(cubes)
     panel = 1.6

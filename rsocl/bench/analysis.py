@@ -7,7 +7,6 @@ from dataclasses import replace
 
 from rsocl.bench.point import BASELINE, BenchPoint, BenchResult
 
-
 __all__ = ["SPEED_PICK_DB", "pareto_front", "picks"]
 
 #: Drop from the best PSNR accepted by the "pick for speed" line, dB.
@@ -52,8 +51,9 @@ def _varied(result: BenchResult, knob: str, *, baseline=False):
     """Rows that differ from the default (or its baseline) in ``knob`` only, sorted by that knob."""
     default = result.default
     if baseline:
-        default = replace(default, regularizer=BASELINE, iterations=0, tv_iterations=None, dtype="float64",
-                          dt_factor=1.0)
+        default = replace(
+            default, regularizer=BASELINE, iterations=0, tv_iterations=None, dtype="float64", dt_factor=1.0
+        )
     out = []
     for row in result.rows:
         point = row["_point"]

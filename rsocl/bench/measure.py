@@ -36,9 +36,9 @@ from dataclasses import asdict, replace
 
 import numpy as np
 
-from rsocl.model.interpolation import interp3d
 from rsocl.bench.memory import device_memory_bytes
 from rsocl.bench.point import US, BenchPoint, _scene_name
+from rsocl.model.interpolation import interp3d
 
 __all__ = ["run_point"]
 
@@ -64,7 +64,7 @@ def _data(point: BenchPoint, cache: dict):
         ref = point.rig(dt_factor=1.0)
         if point.roi is not None:
             y, x, h, w = point.crop_box()
-            truth = truth[:ref.T, y:y + h, x:x + w]
+            truth = truth[: ref.T, y : y + h, x : x + w]
         truth = np.ascontiguousarray(truth, dtype=np.float64)
         device = _device_of(point.device)
         op = RollingShutterOperator(ref, device=device, dtype="float64" if device.has_fp64 else "float32")
@@ -99,11 +99,25 @@ def _metrics(estimate_ref, truth_ref, window):
 
 def _row(point: BenchPoint, rig, window, **values) -> dict:
     row = {
-        "scene": _scene_name(point.scene), "sweep": "", "label": "", "regularizer": point.regularizer,
-        "cameras": point.cameras, "shape": point.shape, "roi": point.roi_size, "dt_factor": point.dt_factor,
-        "dt_us": rig.dt / US, "iterations": point.iterations, "tv_iterations": point.tv_iterations,
-        "dtype": point.dtype, "device": "", "lam": point.lam, "eta": point.eta, "T": rig.T, "T_se": rig.T_se,
-        "subframes_evaluated": window.stop - window.start, "psnr_full_roi": None,
+        "scene": _scene_name(point.scene),
+        "sweep": "",
+        "label": "",
+        "regularizer": point.regularizer,
+        "cameras": point.cameras,
+        "shape": point.shape,
+        "roi": point.roi_size,
+        "dt_factor": point.dt_factor,
+        "dt_us": rig.dt / US,
+        "iterations": point.iterations,
+        "tv_iterations": point.tv_iterations,
+        "dtype": point.dtype,
+        "device": "",
+        "lam": point.lam,
+        "eta": point.eta,
+        "T": rig.T,
+        "T_se": rig.T_se,
+        "subframes_evaluated": window.stop - window.start,
+        "psnr_full_roi": None,
     }
     row.update(values)
     row["_point"] = point
@@ -119,7 +133,7 @@ def _full_roi_psnr(point, cache, window, truth_ref):
     from rsocl.analysis.metrics import psnr
 
     y, x, h, w = point.crop_box()
-    return psnr(full[window, y:y + h, x:x + w], truth_ref[window], data_range=1.0)
+    return psnr(full[window, y : y + h, x : x + w], truth_ref[window], data_range=1.0)
 
 
 def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: bool = False) -> dict:
@@ -142,19 +156,40 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: 
         psnr_value, mean_ssim, per = _metrics(estimate, truth_ref, window)
         if point.roi is None:
             cache[("cube", point)] = estimate
-        return _row(point, ref, window, psnr=psnr_value, ssim_mean=mean_ssim, ssim_per_subframe=per,
-                    seconds=seconds, seconds_per_iteration=None, peak_device_memory_bytes=0,
-                    device="host (NumPy)", dtype="float64", iterations=0, tv_iterations=None,
-                    dt_factor=1.0, dt_us=ref.dt / US, psnr_full_roi=_full_roi_psnr(point, cache, window, truth_ref),
-                    _history=None)
+        return _row(
+            point,
+            ref,
+            window,
+            psnr=psnr_value,
+            ssim_mean=mean_ssim,
+            ssim_per_subframe=per,
+            seconds=seconds,
+            seconds_per_iteration=None,
+            peak_device_memory_bytes=0,
+            device="host (NumPy)",
+            dtype="float64",
+            iterations=0,
+            tv_iterations=None,
+            dt_factor=1.0,
+            dt_us=ref.dt / US,
+            psnr_full_roi=_full_roi_psnr(point, cache, window, truth_ref),
+            _history=None,
+        )
 
     rig = point.rig()
     truth_own = _own_grid_truth(truth_ref, rig, ref)
     # a sub-frame of k*t_r integrates k times the light of one of t_r: scale the snapshots so
     # that the datacube stays in [0, 1] (the scale rsocl's lam and eta assume, README)
     g_scaled = g * (ref.dt / rig.dt)
-    kwargs: dict = dict(regularizer=point.regularizer, lam=None if point.tune else point.lam, eta=point.eta,
-                  tv_iterations=point.tv_iterations, device=point.device, dtype=point.dtype, tune=point.tune)
+    kwargs: dict = dict(
+        regularizer=point.regularizer,
+        lam=None if point.tune else point.lam,
+        eta=point.eta,
+        tv_iterations=point.tv_iterations,
+        device=point.device,
+        dtype=point.dtype,
+        tune=point.tune,
+    )
     warm = ("warm",) + tuple(v for f, v in asdict(point).items() if f not in ("scene", "iterations", "lam", "eta"))
     if warm not in cache:
         reconstruct(g_scaled, rig, iterations=1, **kwargs)
@@ -169,11 +204,28 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: 
     psnr_value, mean_ssim, per = _metrics(estimate, truth_ref, window)
     if point.roi is None:
         cache[("cube", point)] = estimate
-    memory = device_memory_bytes(rig, point.regularizer, point.dtype, device=point.device,
-                                 tv_iterations=point.tv_iterations, with_truth=False,
-                                 tuned=result.params["tuning"] is not None)
-    return _row(point, rig, window, psnr=psnr_value, ssim_mean=mean_ssim, ssim_per_subframe=per, seconds=seconds,
-                lam=result.params["lam"], regularizer_options=result.params["regularizer_options"],
-                seconds_per_iteration=float(result.history["time"][-1]) / result.iterations,
-                peak_device_memory_bytes=memory, device=result.params["device"],
-                psnr_full_roi=_full_roi_psnr(point, cache, window, truth_ref), _history=history)
+    memory = device_memory_bytes(
+        rig,
+        point.regularizer,
+        point.dtype,
+        device=point.device,
+        tv_iterations=point.tv_iterations,
+        with_truth=False,
+        tuned=result.params["tuning"] is not None,
+    )
+    return _row(
+        point,
+        rig,
+        window,
+        psnr=psnr_value,
+        ssim_mean=mean_ssim,
+        ssim_per_subframe=per,
+        seconds=seconds,
+        lam=result.params["lam"],
+        regularizer_options=result.params["regularizer_options"],
+        seconds_per_iteration=float(result.history["time"][-1]) / result.iterations,
+        peak_device_memory_bytes=memory,
+        device=result.params["device"],
+        psnr_full_roi=_full_roi_psnr(point, cache, window, truth_ref),
+        _history=history,
+    )

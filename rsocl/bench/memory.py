@@ -5,8 +5,17 @@ from __future__ import annotations
 __all__ = ["device_memory_bytes"]
 
 
-def device_memory_bytes(rig, regularizer="tv", dtype="float32", *, device=None, projection="exact",
-                        tv_iterations=None, with_truth=True, tuned=False) -> int:
+def device_memory_bytes(
+    rig,
+    regularizer="tv",
+    dtype="float32",
+    *,
+    device=None,
+    projection="exact",
+    tv_iterations=None,
+    with_truth=True,
+    tuned=False,
+) -> int:
     """Device memory of one :func:`rsocl.solver.reconstruct` run, bytes.
 
     PoCL (like OpenCL itself) exposes no allocation counter, so this is the count the run is

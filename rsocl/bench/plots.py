@@ -17,9 +17,18 @@ __all__ = ["pareto_plot", "cameras_plot", "iterations_plot"]
 SIZE = (6.0, 3.8)
 DPI = 90
 #: Marker colour per sweep (the first sweep label of a row).
-COLOURS = {"default": "black", "baseline": "tab:red", "cameras": "tab:blue", "iterations": "tab:orange",
-           "tv_iterations": "tab:green", "regularizer": "tab:purple", "dtype": "tab:brown", "dt": "tab:pink",
-           "roi": "tab:olive", "device": "tab:cyan"}
+COLOURS = {
+    "default": "black",
+    "baseline": "tab:red",
+    "cameras": "tab:blue",
+    "iterations": "tab:orange",
+    "tv_iterations": "tab:green",
+    "regularizer": "tab:purple",
+    "dtype": "tab:brown",
+    "dt": "tab:pink",
+    "roi": "tab:olive",
+    "device": "tab:cyan",
+}
 
 
 def _figure(size=SIZE):
@@ -75,14 +84,30 @@ def pareto_plot(path, rows, comparable, front, *, title="") -> Path:
         seen.add((sweep, hollow))
         x, y = max(row["seconds"], 1e-5), _psnr(row["psnr"])
         if sweep == "baseline":
-            ax.scatter([x], [y], s=30 if not hollow else 18, marker="x" if not hollow else "+", color=colour,
-                       label=label, zorder=3)
+            ax.scatter(
+                [x],
+                [y],
+                s=30 if not hollow else 18,
+                marker="x" if not hollow else "+",
+                color=colour,
+                label=label,
+                zorder=3,
+            )
             if not hollow:
-                ax.annotate(row.get("label", ""), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7,
-                            color=colour)
+                ax.annotate(
+                    row.get("label", ""), (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7, color=colour
+                )
         else:
-            ax.scatter([x], [y], s=26, marker="o", facecolors="none" if hollow else colour, edgecolors=colour,
-                       label=label, zorder=3)
+            ax.scatter(
+                [x],
+                [y],
+                s=26,
+                marker="o",
+                facecolors="none" if hollow else colour,
+                edgecolors=colour,
+                label=label,
+                zorder=3,
+            )
     if front:
         xs = [max(r["seconds"], 1e-5) for r in front]
         ys = [_psnr(r["psnr"]) for r in front]
@@ -131,11 +156,15 @@ def iterations_plot(path, history, rows, baseline_psnr=None, *, title="") -> Pat
     psnr = [_psnr(float(v)) for v in history["psnr"]]
     ax.plot(range(1, len(psnr) + 1), psnr, lw=1.2, label="PSNR per iteration (longest run)")
     if rows:
-        ax.plot([r["iterations"] for r in rows], [_psnr(r["psnr"]) for r in rows], "o", ms=4,
-                label="measured runs")
+        ax.plot([r["iterations"] for r in rows], [_psnr(r["psnr"]) for r in rows], "o", ms=4, label="measured runs")
         for r in rows:
-            ax.annotate(f"{r['seconds']:.1f} s", (r["iterations"], _psnr(r["psnr"])), textcoords="offset points",
-                        xytext=(3, -10), fontsize=7)
+            ax.annotate(
+                f"{r['seconds']:.1f} s",
+                (r["iterations"], _psnr(r["psnr"])),
+                textcoords="offset points",
+                xytext=(3, -10),
+                fontsize=7,
+            )
     if baseline_psnr is not None:
         ax.axhline(_psnr(baseline_psnr), color="tab:red", ls="--", lw=1, label="interp3d baseline")
     ax.set_xlabel("ADMM iteration")

@@ -102,8 +102,7 @@ class BenchPoint:
         from rsocl.model.rig import Rig
 
         k = self.dt_factor if dt_factor is None else dt_factor
-        full = Rig.paper_array(self.cameras, (self.shape, self.shape), t_e=self.t_e, t_r=self.t_r,
-                               dt=k * self.t_r)
+        full = Rig.paper_array(self.cameras, (self.shape, self.shape), t_e=self.t_e, t_r=self.t_r, dt=k * self.t_r)
         if self.roi is None:
             return full
         return full.crop(self.crop_box())

@@ -14,19 +14,48 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.files.atomic import atomic_path
-from rsocl.bench.analysis import (SPEED_PICK_DB, _comparable, _default_row, _reconstructions, _varied, pareto_front,
-                             picks)
+from rsocl.bench.analysis import (
+    SPEED_PICK_DB,
+    _comparable,
+    _default_row,
+    _reconstructions,
+    _varied,
+    pareto_front,
+    picks,
+)
 from rsocl.bench.point import US, BenchResult, _scene_name
-
+from rsocl.files.atomic import atomic_path
 
 __all__ = ["COLUMNS", "write_csv", "write_iterations_csv", "tradeoff_lines", "markdown", "write_outputs"]
 
 #: Columns of ``bench.csv``, in order.
-COLUMNS = ("scene", "sweep", "label", "regularizer", "cameras", "shape", "roi", "dt_factor", "dt_us", "iterations",
-           "tv_iterations", "dtype", "device", "lam", "eta", "T", "T_se", "subframes_evaluated", "psnr",
-           "ssim_mean", "seconds", "seconds_per_iteration", "peak_device_memory_bytes", "psnr_full_roi",
-           "ssim_per_subframe")
+COLUMNS = (
+    "scene",
+    "sweep",
+    "label",
+    "regularizer",
+    "cameras",
+    "shape",
+    "roi",
+    "dt_factor",
+    "dt_us",
+    "iterations",
+    "tv_iterations",
+    "dtype",
+    "device",
+    "lam",
+    "eta",
+    "T",
+    "T_se",
+    "subframes_evaluated",
+    "psnr",
+    "ssim_mean",
+    "seconds",
+    "seconds_per_iteration",
+    "peak_device_memory_bytes",
+    "psnr_full_roi",
+    "ssim_per_subframe",
+)
 
 
 def _fmt(value, digits=6):
@@ -91,7 +120,7 @@ def tradeoff_lines(result: BenchResult):
     lines = []
     if base is None:
         return ["(the default point did not run)"]
-    if result.timing_check:                      # the reference time: the mean of the default's two timings
+    if result.timing_check:  # the reference time: the mean of the default's two timings
         base = dict(base, seconds=sum(result.timing_check) / 2)
         lines.append(f"Times against the default point's mean of its two timings, {base['seconds']:.2f} s.")
         lines.append("")
@@ -106,7 +135,8 @@ def tradeoff_lines(result: BenchResult):
             f"memory ×{_ratio(row['peak_device_memory_bytes'], base['peak_device_memory_bytes']):.2f}; "
             f"PSNR {_num(row['psnr'], '.2f')} dB vs {_num(base['psnr'], '.2f')} dB "
             f"({row['psnr'] - base['psnr']:+.2f} dB against the same dt = t_r ground truth), "
-            f"SSIM {_ssim(row['ssim_mean'])} vs {_ssim(base['ssim_mean'])}.")
+            f"SSIM {_ssim(row['ssim_mean'])} vs {_ssim(base['ssim_mean'])}."
+        )
     for row in _varied(result, "roi"):
         p = row["_point"]
         if p == result.default:
@@ -120,7 +150,8 @@ def tradeoff_lines(result: BenchResult):
             f"(×{_ratio(row['seconds'], base['seconds']):.2f}), "
             f"memory ×{_ratio(row['peak_device_memory_bytes'], base['peak_device_memory_bytes']):.2f}; "
             f"PSNR in the crop {_num(row['psnr'], '.2f')} dB vs {_num(full, '.2f')} dB for the full-ROI "
-            f"reconstruction over the same pixels and sub-frames{diff}.")
+            f"reconstruction over the same pixels and sub-frames{diff}."
+        )
     return lines if any(line.startswith("- ") for line in lines) else ["(no dt or roi sweep in this run)"]
 
 
@@ -129,41 +160,64 @@ def markdown(result: BenchResult) -> str:
     d = result.default
     devices = {r["device"] for r in result.rows if not r["_point"].is_baseline}
     show_device = len(devices) > 1
-    lines = [f"# rsocl bench: {_scene_name(d.scene)}", "",
-             f"Paper array (angles 0, 90, 180, 270, 45, 135, 225, 315 in that order), t_e = {d.t_e / US:g} µs, "
-             f"t_r = {d.t_r / US:g} µs, scene resized to {d.shape}×{d.shape} (benchmark protocol). "
-             f"Default point: {d.cameras} cameras, dt = {d.dt_factor:g}·t_r, {d.regularizer} "
-             f"({d.iterations} iterations, {d.tv_iterations} inner), {d.dtype}, lam = {d.lam:g}, eta = {d.eta:g}. "
-             f"Device: {result.device}; {os.cpu_count()} CPU cores; whole run {result.seconds:.0f} s.", ""]
+    lines = [
+        f"# rsocl bench: {_scene_name(d.scene)}",
+        "",
+        f"Paper array (angles 0, 90, 180, 270, 45, 135, 225, 315 in that order), t_e = {d.t_e / US:g} µs, "
+        f"t_r = {d.t_r / US:g} µs, scene resized to {d.shape}×{d.shape} (benchmark protocol). "
+        f"Default point: {d.cameras} cameras, dt = {d.dt_factor:g}·t_r, {d.regularizer} "
+        f"({d.iterations} iterations, {d.tv_iterations} inner), {d.dtype}, lam = {d.lam:g}, eta = {d.eta:g}. "
+        f"Device: {result.device}; {os.cpu_count()} CPU cores; whole run {result.seconds:.0f} s.",
+        "",
+    ]
     if result.load and None not in result.load:
-        timing = (f"Load average {result.load[0]:.1f} at the start and {result.load[1]:.1f} at the end of the run "
-                  f"on {os.cpu_count()} cores")
+        timing = (
+            f"Load average {result.load[0]:.1f} at the start and {result.load[1]:.1f} at the end of the run "
+            f"on {os.cpu_count()} cores"
+        )
         if result.timing_check:
             a, b = result.timing_check
-            timing += (f"; the default point took {a:.2f} s at the start and {b:.2f} s when timed again at the end "
-                       f"({abs(b - a) / min(a, b) * 100:.0f}% apart): read time differences smaller than that as noise")
+            timing += (
+                f"; the default point took {a:.2f} s at the start and {b:.2f} s when timed again at the end "
+                f"({abs(b - a) / min(a, b) * 100:.0f}% apart): read time differences smaller than that as noise"
+            )
         lines += [timing + ".", ""]
-    lines += ["PSNR (dB, peak 1) and SSIM (mean over sub-frames) against the dt = t_r ground truth, over the "
-             "sub-frames some camera samples; seconds: the whole `reconstruct` call as a user makes it (no "
-             "ground truth on the device), compile excluded; "
-             "ms/it: the ADMM loop alone; memory: the exact sum of the device buffers rsocl allocates "
-             "(PoCL has no allocation counter). `interp3d`: per-pixel linear interpolation in time of the "
-             "snapshots (no solver). T follows the capture (the 45° cameras, 5 to 8, read longer diagonals) "
-             "and the scene is resampled to it by the protocol.", ""]
+    lines += [
+        "PSNR (dB, peak 1) and SSIM (mean over sub-frames) against the dt = t_r ground truth, over the "
+        "sub-frames some camera samples; seconds: the whole `reconstruct` call as a user makes it (no "
+        "ground truth on the device), compile excluded; "
+        "ms/it: the ADMM loop alone; memory: the exact sum of the device buffers rsocl allocates "
+        "(PoCL has no allocation counter). `interp3d`: per-pixel linear interpolation in time of the "
+        "snapshots (no solver). T follows the capture (the 45° cameras, 5 to 8, read longer diagonals) "
+        "and the scene is resampled to it by the protocol.",
+        "",
+    ]
     head = ["point", "regularizer", "cameras", "ROI", "dt (µs)", "iterations", "inner", "dtype"]
     head += ["device"] if show_device else []
     head += ["T", "PSNR (dB)", "SSIM", "seconds", "ms/it", "memory (MiB)"]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for row in result.rows:
         base = row["_point"].is_baseline
-        cells = [row["label"], row["regularizer"], str(row["cameras"]), f"{row['roi']}", f"{row['dt_us']:.0f}",
-                 "–" if base else str(row["iterations"]), "–" if row["tv_iterations"] is None else str(row["tv_iterations"]),
-                 "–" if base else row["dtype"]]
+        cells = [
+            row["label"],
+            row["regularizer"],
+            str(row["cameras"]),
+            f"{row['roi']}",
+            f"{row['dt_us']:.0f}",
+            "–" if base else str(row["iterations"]),
+            "–" if row["tv_iterations"] is None else str(row["tv_iterations"]),
+            "–" if base else row["dtype"],
+        ]
         cells += [row["device"]] if show_device else []
         spi = row["seconds_per_iteration"]
-        cells += [str(row["T"]), _num(row["psnr"], ".2f"), _ssim(row["ssim_mean"]), f"{row['seconds']:.3g}",
-                  "–" if spi is None else f"{spi * 1e3:.1f}",
-                  f"{row['peak_device_memory_bytes'] / 2**20:.2f}"]
+        cells += [
+            str(row["T"]),
+            _num(row["psnr"], ".2f"),
+            _ssim(row["ssim_mean"]),
+            f"{row['seconds']:.3g}",
+            "–" if spi is None else f"{spi * 1e3:.1f}",
+            f"{row['peak_device_memory_bytes'] / 2**20:.2f}",
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     if any(_ssim(row["ssim_mean"]) == "n/a" for row in result.rows):
         lines += ["", "SSIM n/a: the ROI's frames are under 3 pixels a side, SSIM's smallest window."]
@@ -173,31 +227,41 @@ def markdown(result: BenchResult) -> str:
     if quality is None:
         lines.append("(no reconstruction of the default capture ran)")
     else:
-        lines.append(f"- **pick for quality:** {quality['label']} — {_num(quality['psnr'], '.2f')} dB, "
-                     f"SSIM {_ssim(quality['ssim_mean'])}, {quality['seconds']:.2f} s.")
-        lines.append(f"- **pick for speed:** {speed['label']} — the fastest point of the Pareto front within "
-                     f"{SPEED_PICK_DB:g} dB of the best: {_num(speed['psnr'], '.2f')} dB, "
-                     f"SSIM {_ssim(speed['ssim_mean'])}, "
-                     f"{speed['seconds']:.2f} s.")
+        lines.append(
+            f"- **pick for quality:** {quality['label']} — {_num(quality['psnr'], '.2f')} dB, "
+            f"SSIM {_ssim(quality['ssim_mean'])}, {quality['seconds']:.2f} s."
+        )
+        lines.append(
+            f"- **pick for speed:** {speed['label']} — the fastest point of the Pareto front within "
+            f"{SPEED_PICK_DB:g} dB of the best: {_num(speed['psnr'], '.2f')} dB, "
+            f"SSIM {_ssim(speed['ssim_mean'])}, "
+            f"{speed['seconds']:.2f} s."
+        )
         coarse = [r for r in (quality, speed) if r["_point"].dt_factor > 1]
         if coarse:
             k = coarse[0]["_point"].dt_factor
-            lines.append(f"- a pick with dt = {k:g}·t_r delivers {1e-3 / (k * d.t_r):.1f} k sub-frames/s instead of "
-                         f"{1e-3 / d.t_r:.1f} k; its PSNR, against the dt = t_r ground truth, says this scene has "
-                         "little detail faster than that (a video with fewer frames than T is smooth in time).")
+            lines.append(
+                f"- a pick with dt = {k:g}·t_r delivers {1e-3 / (k * d.t_r):.1f} k sub-frames/s instead of "
+                f"{1e-3 / d.t_r:.1f} k; its PSNR, against the dt = t_r ground truth, says this scene has "
+                "little detail faster than that (a video with fewer frames than T is smooth in time)."
+            )
         interp = [r for r in result.rows if r["_point"].is_baseline and _comparable(r, d)]
         if interp:
             b = interp[0]
-            lines.append(f"- the baseline `interp3d` gives {_num(b['psnr'], '.2f')} dB "
-                         f"(SSIM {_ssim(b['ssim_mean'])}) in "
-                         f"{b['seconds'] * 1e3:.1f} ms: the reconstruction buys "
-                         f"{quality['psnr'] - b['psnr']:+.2f} dB at best, {speed['psnr'] - b['psnr']:+.2f} dB "
-                         "with the speed pick.")
+            lines.append(
+                f"- the baseline `interp3d` gives {_num(b['psnr'], '.2f')} dB "
+                f"(SSIM {_ssim(b['ssim_mean'])}) in "
+                f"{b['seconds'] * 1e3:.1f} ms: the reconstruction buys "
+                f"{quality['psnr'] - b['psnr']:+.2f} dB at best, {speed['psnr'] - b['psnr']:+.2f} dB "
+                "with the speed pick."
+            )
         recs = _reconstructions(result)
         front = [recs[i] for i in pareto_front(recs)]
-        lines.append("- Pareto front of the reconstructions (PSNR against seconds, default capture), fastest first: "
-                     + ", ".join(f"{r['label']} ({_num(r['psnr'], '.1f')} dB, {r['seconds']:.2g} s)" for r in front)
-                     + ".")
+        lines.append(
+            "- Pareto front of the reconstructions (PSNR against seconds, default capture), fastest first: "
+            + ", ".join(f"{r['label']} ({_num(r['psnr'], '.1f')} dB, {r['seconds']:.2g} s)" for r in front)
+            + "."
+        )
     if result.notes:
         lines += ["", "## Notes", ""] + [f"- {n}" for n in result.notes]
     return "\n".join(lines) + "\n"
@@ -218,11 +282,24 @@ def write_outputs(result: BenchResult, out) -> list:
     comparable = [r for r in result.rows if _comparable(r, d)]
     recs = _reconstructions(result)
     title = f"{_scene_name(d.scene)}, {d.shape}×{d.shape}"
-    files.append(bench_plots.pareto_plot(out / "pareto.png", result.rows, comparable,
-                                         [recs[i] for i in pareto_front(recs)], title=title))
-    files.append(bench_plots.cameras_plot(out / "cameras.png", _varied(result, "cameras"),
-                                          _varied(result, "cameras", baseline=True), title=title))
+    files.append(
+        bench_plots.pareto_plot(
+            out / "pareto.png", result.rows, comparable, [recs[i] for i in pareto_front(recs)], title=title
+        )
+    )
+    files.append(
+        bench_plots.cameras_plot(
+            out / "cameras.png", _varied(result, "cameras"), _varied(result, "cameras", baseline=True), title=title
+        )
+    )
     baseline = [r for r in comparable if r["_point"].is_baseline]
-    files.append(bench_plots.iterations_plot(out / "iterations.png", result.history(), _varied(result, "iterations"),
-                                             baseline[0]["psnr"] if baseline else None, title=title))
+    files.append(
+        bench_plots.iterations_plot(
+            out / "iterations.png",
+            result.history(),
+            _varied(result, "iterations"),
+            baseline[0]["psnr"] if baseline else None,
+            title=title,
+        )
+    )
     return files

@@ -27,29 +27,64 @@ import time
 from dataclasses import replace
 
 from rsocl.bench.analysis import SPEED_PICK_DB, pareto_front, picks  # noqa: F401
-from rsocl.model.interpolation import interp3d
 from rsocl.bench.measure import _device_of, run_point
 from rsocl.bench.memory import device_memory_bytes
 from rsocl.bench.point import BASELINE, BenchPoint, BenchResult, on_iterations_line
-from rsocl.bench.report import (COLUMNS, markdown, tradeoff_lines, write_csv, write_iterations_csv,  # noqa: F401
-                                write_outputs)
+from rsocl.bench.report import COLUMNS, markdown, tradeoff_lines, write_csv, write_iterations_csv, write_outputs  # noqa: F401
+from rsocl.model.interpolation import interp3d
 
-__all__ = ["BenchPoint", "BenchResult", "SWEEPS", "BASELINE", "run_point", "interp3d", "device_memory_bytes",
-           "sweep_point", "build_points", "parse_sweep", "run_bench", "canonical_device", "pareto_front", "picks",
-           "markdown", "write_csv", "write_outputs"]
+__all__ = [
+    "BenchPoint",
+    "BenchResult",
+    "SWEEPS",
+    "BASELINE",
+    "run_point",
+    "interp3d",
+    "device_memory_bytes",
+    "sweep_point",
+    "build_points",
+    "parse_sweep",
+    "run_bench",
+    "canonical_device",
+    "pareto_front",
+    "picks",
+    "markdown",
+    "write_csv",
+    "write_outputs",
+]
 
 
 # ---------------------------------------------------------------------- sweeps
 #: Sweep name -> the :class:`BenchPoint` field it varies.
-SWEEPS = {"cameras": "cameras", "iterations": "iterations", "tv_iterations": "tv_iterations",
-          "regularizer": "regularizer", "dtype": "dtype", "dt": "dt_factor", "roi": "roi", "device": "device",
-          "tune": "tune"}
+SWEEPS = {
+    "cameras": "cameras",
+    "iterations": "iterations",
+    "tv_iterations": "tv_iterations",
+    "regularizer": "regularizer",
+    "dtype": "dtype",
+    "dt": "dt_factor",
+    "roi": "roi",
+    "device": "device",
+    "tune": "tune",
+}
 #: Sweep values of the full run; iterations and roi as fractions of the default point's.
-FULL: dict[str, list] = {"cameras": [1, 2, 3, 4, 5, 6, 7, 8], "iterations": [0.125, 0.25, 0.5, 1.0, 1.5],
-        "tv_iterations": [2, 5, 10, 20], "dt": [1, 2, 3, 4], "roi": [0.5, 0.75, 1.0]}
+FULL: dict[str, list] = {
+    "cameras": [1, 2, 3, 4, 5, 6, 7, 8],
+    "iterations": [0.125, 0.25, 0.5, 1.0, 1.5],
+    "tv_iterations": [2, 5, 10, 20],
+    "dt": [1, 2, 3, 4],
+    "roi": [0.5, 0.75, 1.0],
+}
 #: The ``--quick`` run: fewer values, the sweeps that show the trade.
-QUICK: dict[str, list] = {"cameras": [1, 2, 4, 8], "iterations": [0.1, 0.25, 0.5, 1.0], "tv_iterations": [2, 5, 10],
-         "dt": [1, 2, 4], "roi": [0.5, 0.75, 1.0], "regularizer": ["tv"], "tune": [False, True]}
+QUICK: dict[str, list] = {
+    "cameras": [1, 2, 4, 8],
+    "iterations": [0.1, 0.25, 0.5, 1.0],
+    "tv_iterations": [2, 5, 10],
+    "dt": [1, 2, 4],
+    "roi": [0.5, 0.75, 1.0],
+    "regularizer": ["tv"],
+    "tune": [False, True],
+}
 
 
 def canonical_device(spec):
@@ -64,8 +99,8 @@ def canonical_device(spec):
 
 
 def _default_values(name, default: BenchPoint, quick: bool, notes: list):
-    from rsocl.device.context import list_devices
     from rsocl.common.registry import available
+    from rsocl.device.context import list_devices
 
     table = QUICK if quick else FULL
     if name in table:
@@ -109,8 +144,9 @@ def parse_sweep(text: str):
     try:
         return name, [kind(v.strip()) for v in values.split(",") if v.strip()]
     except ValueError:
-        raise ValueError(f"--sweep {name}: values must be {kind.__name__}s separated by commas, got {values!r}") \
-            from None
+        raise ValueError(
+            f"--sweep {name}: values must be {kind.__name__}s separated by commas, got {values!r}"
+        ) from None
 
 
 def _regularizer_point(default: BenchPoint, name: str):
@@ -177,16 +213,25 @@ def build_points(default: BenchPoint, sweeps=None, *, quick=False, baseline=True
         for value in values:
             try:
                 point = sweep_point(default, name, value)
-            except Exception as exc:                      # a broken plugin, an out-of-range value
+            except Exception as exc:  # a broken plugin, an out-of-range value
                 notes.append(f"{name}={value}: skipped ({type(exc).__name__}: {exc})")
                 continue
             add(point, name)
     if baseline:
         for point in list(order):
-            base = replace(default, cameras=point.cameras, roi=point.roi, regularizer=BASELINE, iterations=0,
-                           tv_iterations=None, dtype="float64", dt_factor=1.0, device=default.device)
+            base = replace(
+                default,
+                cameras=point.cameras,
+                roi=point.roi,
+                regularizer=BASELINE,
+                iterations=0,
+                tv_iterations=None,
+                dtype="float64",
+                dt_factor=1.0,
+                device=default.device,
+            )
             add(base, "baseline")
-    order.sort(key=lambda p: p.roi is not None)             # full-ROI runs first: the crops compare with them
+    order.sort(key=lambda p: p.roi is not None)  # full-ROI runs first: the crops compare with them
     return [(p, labels[p]) for p in order], notes
 
 
@@ -215,8 +260,9 @@ def _label(point: BenchPoint, default: BenchPoint) -> str:
     return " ".join(parts) or "default"
 
 
-def run_bench(default: BenchPoint, sweeps=None, *, quick=False, baseline=True, progress=True, cache=None,
-              repeat_default=True) -> BenchResult:
+def run_bench(
+    default: BenchPoint, sweeps=None, *, quick=False, baseline=True, progress=True, cache=None, repeat_default=True
+) -> BenchResult:
     """Build the points (:func:`build_points`) and measure each (:func:`run_point`).
 
     With ``repeat_default`` the default point is timed once more at the end
@@ -255,8 +301,7 @@ def run_bench(default: BenchPoint, sweeps=None, *, quick=False, baseline=True, p
     if repeat_default and first is not None and len(rows) > 1:
         timing_check = (first["seconds"], run_point(default, cache)["seconds"])
     device = _device_of(default.device).name
-    return BenchResult(rows, default, notes, time.perf_counter() - start, device, timing_check,
-                       (load_start, _load()))
+    return BenchResult(rows, default, notes, time.perf_counter() - start, device, timing_check, (load_start, _load()))
 
 
 def _load():

@@ -14,17 +14,24 @@ def add_parser(subparsers):
     from rsocl.bench.run import QUICK, SWEEPS
 
     p = subparsers.add_parser(
-        "bench", help="sweep settings on a scene: PSNR/SSIM against seconds and memory; CSV, Markdown, plots",
+        "bench",
+        help="sweep settings on a scene: PSNR/SSIM against seconds and memory; CSV, Markdown, plots",
         description="Measure what each setting buys: sweeps one knob at a time around a default point "
-                    "(4 cameras, 64x64, 200 ADMM-TV iterations with 10 inner, float32, dt = t_r), with a "
-                    "3-D interpolation baseline; writes bench.csv, iterations.csv, bench.md, pareto.png, "
-                    "cameras.png and iterations.png.")
+        "(4 cameras, 64x64, 200 ADMM-TV iterations with 10 inner, float32, dt = t_r), with a "
+        "3-D interpolation baseline; writes bench.csv, iterations.csv, bench.md, pareto.png, "
+        "cameras.png and iterations.png.",
+    )
     p.add_argument("--scene", default="builtin", help="'builtin' or a video file (.npz key 'video', .tif, .gif)")
-    p.add_argument("--sweep", action="append", default=None, metavar="NAME[=V1,V2,...]",
-                   help=f"sweep to run, repeatable: {', '.join(SWEEPS)} (default: all; --quick: "
-                        f"{', '.join(QUICK)})")
-    p.add_argument("--quick", action="store_true",
-                   help="32x32, 100 iterations, fewer values: about a minute on 2 CPU cores")
+    p.add_argument(
+        "--sweep",
+        action="append",
+        default=None,
+        metavar="NAME[=V1,V2,...]",
+        help=f"sweep to run, repeatable: {', '.join(SWEEPS)} (default: all; --quick: {', '.join(QUICK)})",
+    )
+    p.add_argument(
+        "--quick", action="store_true", help="32x32, 100 iterations, fewer values: about a minute on 2 CPU cores"
+    )
     p.add_argument("--out", default="rsocl-bench", help="output folder (default ./rsocl-bench)")
     p.add_argument("--device", default=None, help="OpenCL device for every point but the device sweep")
     p.add_argument("--t-e-us", type=float, default=180.0, help="exposure time, µs, > 0 (default 180)")
@@ -63,11 +70,14 @@ def default_point(args):
             raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
         from rsocl.model.scenes import load_video
 
-        load_video(scene)                   # an unreadable file is named now, not in every point's failure
+        load_video(scene)  # an unreadable file is named now, not in every point's failure
     quick = bool(args.quick)
-    for option, value, maximum in (("--cameras", args.cameras, 8), ("--shape", args.shape, None),
-                                   ("--iterations", args.iterations, None),
-                                   ("--tv-iterations", args.tv_iterations, None)):
+    for option, value, maximum in (
+        ("--cameras", args.cameras, 8),
+        ("--shape", args.shape, None),
+        ("--iterations", args.iterations, None),
+        ("--tv-iterations", args.tv_iterations, None),
+    ):
         if value is not None:
             check.positive_int(option, value, maximum=maximum)
     if args.lam is not None:
@@ -81,12 +91,18 @@ def default_point(args):
         return fallback if value is None else value
 
     point = BenchPoint(
-        scene=scene, cameras=pick(args.cameras, 4), shape=pick(args.shape, 32 if quick else 64),
+        scene=scene,
+        cameras=pick(args.cameras, 4),
+        shape=pick(args.shape, 32 if quick else 64),
         iterations=pick(args.iterations, 100 if quick else DEFAULTS["iterations"]),
         tv_iterations=pick(args.tv_iterations, DEFAULTS["tv_iterations"]),
-        device=canonical_device(args.device), lam=pick(args.lam, DEFAULTS["lam"]), eta=pick(args.eta, DEFAULTS["eta"]),
-        t_e=args.t_e_us * US, t_r=args.t_r_us * US)
-    side = point.shape                      # the default point's rig and datacube must fit this machine first
+        device=canonical_device(args.device),
+        lam=pick(args.lam, DEFAULTS["lam"]),
+        eta=pick(args.eta, DEFAULTS["eta"]),
+        t_e=args.t_e_us * US,
+        t_r=args.t_r_us * US,
+    )
+    side = point.shape  # the default point's rig and datacube must fit this machine first
     check_rig_memory(point.cameras, (side, side), f"--shape {side}", "choose a smaller --shape")
     check_datacube_memory(point.rig(), f"--shape {side}", "choose a smaller --shape")
     return point
@@ -135,9 +151,11 @@ def cmd_bench(args) -> int:
         speed, quality = picks(result)
         text = f"{len(result.rows)} points in {result.seconds:.0f} s; wrote {Path(args.out) / 'bench.md'}"
         if quality is not None:
-            text += (f"; quality: {quality['label']} {_num(quality['psnr'], '.2f')} dB; "
-                     f"speed: {speed['label']} {_num(speed['psnr'], '.2f')} dB in {speed['seconds']:.2f} s")
+            text += (
+                f"; quality: {quality['label']} {_num(quality['psnr'], '.2f')} dB; "
+                f"speed: {speed['label']} {_num(speed['psnr'], '.2f')} dB in {speed['seconds']:.2f} s"
+            )
         print(text)
-        for note in result.notes:                            # the table, which lists them, is not printed
+        for note in result.notes:  # the table, which lists them, is not printed
             print(f"rsocl bench: note: {note}", file=sys.stderr)
     return 0

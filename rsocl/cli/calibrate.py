@@ -87,7 +87,7 @@ def _read_image(path: Path, what: str) -> np.ndarray:
         # a file no plugin reads makes imageio try them all; its legacy ones warn of their own deprecation
         warnings.simplefilter("ignore", DeprecationWarning)
         image = np.asarray(iio.imread(path))
-    if image.ndim == 3 and image.shape[-1] in (3, 4):      # colour image of a grey target
+    if image.ndim == 3 and image.shape[-1] in (3, 4):  # colour image of a grey target
         image = image[..., :3].mean(axis=-1)
     return image
 
@@ -124,14 +124,17 @@ def load_frames(path, what="--frames"):
             if "frames" in keys:
                 frames = list(array("frames"))
             else:
-                cameras = sorted((k for k in keys if k.startswith("camera") and k[6:].isdigit()),
-                                 key=lambda k: int(k[6:]))
+                cameras = sorted(
+                    (k for k in keys if k.startswith("camera") and k[6:].isdigit()), key=lambda k: int(k[6:])
+                )
                 if not cameras:
-                    raise ValueError(f"{what}: {str(path)!r} has neither a 'frames' key nor 'camera0', "
-                                     f"'camera1', ... (keys: {keys})")
+                    raise ValueError(
+                        f"{what}: {str(path)!r} has neither a 'frames' key nor 'camera0', 'camera1', ... (keys: {keys})"
+                    )
                 if [int(k[6:]) for k in cameras] != list(range(len(cameras))):
-                    raise ValueError(f"{what}: {str(path)!r} has keys {cameras}; expected camera0 .. "
-                                     f"camera{len(cameras) - 1}")
+                    raise ValueError(
+                        f"{what}: {str(path)!r} has keys {cameras}; expected camera0 .. camera{len(cameras) - 1}"
+                    )
                 frames = [array(k) for k in cameras]
             extras = {k: array(k) for k in keys if k != "frames" and not k.startswith("camera")}
     elif path.suffix.lower() in _IMAGE_SUFFIXES:
@@ -143,8 +146,10 @@ def load_frames(path, what="--frames"):
     for c, frame in enumerate(frames):
         frame = np.asarray(frame)
         if frame.dtype.kind not in "biuf" or frame.ndim not in (2, 3) or 0 in frame.shape:
-            raise ValueError(f"{what}: camera {c}: expected a real (rows, columns) frame or a (K, rows, columns) "
-                             f"stack, got {frame.dtype} array of shape {frame.shape}")
+            raise ValueError(
+                f"{what}: camera {c}: expected a real (rows, columns) frame or a (K, rows, columns) "
+                f"stack, got {frame.dtype} array of shape {frame.shape}"
+            )
         out.append(frame.astype(np.float64))
     return out, extras
 
@@ -164,38 +169,70 @@ def _per_camera(frames, C, what):
 def add_parser(subparsers):
     """Add the ``calibrate`` sub-command to an :mod:`argparse` sub-parsers object; returns its parser."""
     p = subparsers.add_parser(
-        "calibrate", help="measure homographies, t_r and gains and write them into a rig file",
+        "calibrate",
+        help="measure homographies, t_r and gains and write them into a rig file",
         description="Measure each camera's registration (marker target), row time (flickering light) and "
-                    "photometric gain (flat field), and write them into the rig file.")
+        "photometric gain (flat field), and write them into the rig file.",
+    )
     p.add_argument("--rig", required=True, help="rig file (.toml) to update")
     p.add_argument("--out", default=None, help="write the updated rig file here instead (default: --rig)")
     g = p.add_argument_group("registration (marker target)")
-    g.add_argument("--frames", default=None,
-                   help="one frame per camera of the marker target: .npz ('frames' or camera0..), .npy, or folder")
-    g.add_argument("--markers-ref", nargs="+", default=None, metavar="X,Y",
-                   help="marker positions on the reference grid, pixels (x = column, y = row); default: the "
-                        "markers found in camera 0's frame, which must then have the rig's shape. With "
-                        "--identify largest, list the large marker first. Negative values: "
-                        "--markers-ref='-3,5 60,5 ...'")
-    g.add_argument("--identify", choices=["position", "largest"], default="position",
-                   help="how markers are matched across rotated cameras: 'position' (clockwise from top-left, "
-                        "turned by each camera's nominal angle from the rig file) or 'largest' (the target "
-                        "has one larger marker; it comes first)")
-    g.add_argument("--mirrored", type=int, nargs="+", default=[], metavar="C",
-                   help="cameras (indices) that see the target in a mirror, e.g. through a beam splitter: their "
-                        "homography mirrors the image (any other camera's may not)")
+    g.add_argument(
+        "--frames",
+        default=None,
+        help="one frame per camera of the marker target: .npz ('frames' or camera0..), .npy, or folder",
+    )
+    g.add_argument(
+        "--markers-ref",
+        nargs="+",
+        default=None,
+        metavar="X,Y",
+        help="marker positions on the reference grid, pixels (x = column, y = row); default: the "
+        "markers found in camera 0's frame, which must then have the rig's shape. With "
+        "--identify largest, list the large marker first. Negative values: "
+        "--markers-ref='-3,5 60,5 ...'",
+    )
+    g.add_argument(
+        "--identify",
+        choices=["position", "largest"],
+        default="position",
+        help="how markers are matched across rotated cameras: 'position' (clockwise from top-left, "
+        "turned by each camera's nominal angle from the rig file) or 'largest' (the target "
+        "has one larger marker; it comes first)",
+    )
+    g.add_argument(
+        "--mirrored",
+        type=int,
+        nargs="+",
+        default=[],
+        metavar="C",
+        help="cameras (indices) that see the target in a mirror, e.g. through a beam splitter: their "
+        "homography mirrors the image (any other camera's may not)",
+    )
     g.add_argument("--polarity", choices=["bright", "dark"], default="bright", help="bright or dark dots")
     g.add_argument("--threshold", type=float, default=None, help="dot/background threshold (default: automatic)")
-    g.add_argument("--png", default=None,
-                   help="overlay picture to write (default: <rig stem>-calibration.png next to the output)")
+    g.add_argument(
+        "--png", default=None, help="overlay picture to write (default: <rig stem>-calibration.png next to the output)"
+    )
     g = p.add_argument_group("row time (flickering light)")
-    g.add_argument("--flicker", default=None,
-                   help="frame(s) of an evenly lit scene under a flickering light: one 2-D .npy for all "
-                        "cameras, or one frame per camera")
-    g.add_argument("--flicker-hz", type=float, default=None,
-                   help="intensity flicker frequency, Hz (twice the mains frequency for lamps on AC)")
-    g.add_argument("--tolerance", type=float, default=0.01,
-                   help="largest accepted relative difference from the rig file's t_r (default 0.01)")
+    g.add_argument(
+        "--flicker",
+        default=None,
+        help="frame(s) of an evenly lit scene under a flickering light: one 2-D .npy for all "
+        "cameras, or one frame per camera",
+    )
+    g.add_argument(
+        "--flicker-hz",
+        type=float,
+        default=None,
+        help="intensity flicker frequency, Hz (twice the mains frequency for lamps on AC)",
+    )
+    g.add_argument(
+        "--tolerance",
+        type=float,
+        default=0.01,
+        help="largest accepted relative difference from the rig file's t_r (default 0.01)",
+    )
     g.add_argument("--force", action="store_true", help="write a measured t_r even when it fails the check")
     g = p.add_argument_group("photometric gain (flat field)")
     g.add_argument("--flat", default=None, help="flat-field frame(s) per camera, same exposure for all")
@@ -251,11 +288,14 @@ def _register(args, rigfile, updates):
         reference_points = parse_points(args.markers_ref)
     else:
         if tuple(frames[0].shape) != tuple(rigfile.shape):
-            raise ValueError(f"without --markers-ref, camera 0's frame is the reference grid and must have the "
-                             f"rig's shape {tuple(rigfile.shape)}, got {frames[0].shape}")
+            raise ValueError(
+                f"without --markers-ref, camera 0's frame is the reference grid and must have the "
+                f"rig's shape {tuple(rigfile.shape)}, got {frames[0].shape}"
+            )
         n = given.shape[1] if given is not None else 4
-        reference_points = given[0] if given is not None else \
-            detect_markers(frames[0], n, reference=reference, **options)
+        reference_points = (
+            given[0] if given is not None else detect_markers(frames[0], n, reference=reference, **options)
+        )
         say(args, "reference markers (camera 0): " + " ".join(f"{x:.2f},{y:.2f}" for x, y in reference_points))
     if len(reference_points) < 4:
         raise ValueError(f"a homography needs at least 4 markers, got {len(reference_points)}")
@@ -265,13 +305,24 @@ def _register(args, rigfile, updates):
         angle = _nominal_angle(camera, rigfile.shape)
         try:
             registration = register_camera(
-                frames[c], reference_points, reference=reference, angle=angle, frame_origin=origin,
-                sensor_points=None if given is None else given[c] + origin, mirrored=c in args.mirrored, **options)
+                frames[c],
+                reference_points,
+                reference=reference,
+                angle=angle,
+                frame_origin=origin,
+                sensor_points=None if given is None else given[c] + origin,
+                mirrored=c in args.mirrored,
+                **options,
+            )
             H = registration.homography
-            check_registration(registration.reference_points, registration.sensor_points, H, rigfile.shape,
-                               mirrored=c in args.mirrored)
-            measured = homography_angle(H, rigfile.shape) if not _has_nominal(camera) else \
-                check_rotation(H, rigfile.shape, angle, key=f"camera[{c}].{_nominal_key(camera)}")
+            check_registration(
+                registration.reference_points, registration.sensor_points, H, rigfile.shape, mirrored=c in args.mirrored
+            )
+            measured = (
+                homography_angle(H, rigfile.shape)
+                if not _has_nominal(camera)
+                else check_rotation(H, rigfile.shape, angle, key=f"camera[{c}].{_nominal_key(camera)}")
+            )
         except ValueError as exc:
             raise ValueError(f"camera {c}: {exc}") from None
         rows = registration.row_map(rigfile.shape)
@@ -282,8 +333,11 @@ def _register(args, rigfile, updates):
         name = camera.get("name")
         fit = f"rms {registration.rms_error:.2f} px" if len(reference_points) > 4 else "4 markers: exact fit"
         titles.append(f"camera {c}" + (f" ({name})" if name else "") + f": {measured:.1f}°, {fit}")
-        say(args, f"camera {c}: homography from {fit_summary(registration)}; rotation {measured:.2f}° (rig file: "
-                  f"{angle:g}°), sensor rows 0..{rows.max():.2f} over the ROI")
+        say(
+            args,
+            f"camera {c}: homography from {fit_summary(registration)}; rotation {measured:.2f}° (rig file: "
+            f"{angle:g}°), sensor rows 0..{rows.max():.2f} over the ROI",
+        )
     return frames, detected, reprojected, outlines, titles
 
 
@@ -343,7 +397,7 @@ def _updated(rigfile, updates):
     dt = rigfile.dt
     new_t_r = min(camera["t_r"] for camera in cameras)
     if dt is not None and math.isclose(dt, old_t_r, rel_tol=1e-9):
-        dt = new_t_r                                   # a dt equal to the row time follows the measured one
+        dt = new_t_r  # a dt equal to the row time follows the measured one
     try:
         return RigFile(shape=rigfile.shape, cameras=cameras, dt=dt, mask=rigfile.mask, path=rigfile.path)
     except ValueError as exc:
@@ -356,8 +410,8 @@ def cmd_calibrate(args) -> int:
     Raises ``ValueError`` / ``FileNotFoundError`` with a message naming the
     option and camera at fault; nothing is written then.
     """
-    from rsocl.hardware.calibration import marker_overlay_png
     from rsocl.files.rigfile import save_rigfile
+    from rsocl.hardware.calibration import marker_overlay_png
 
     if args.frames is None and args.flicker is None and args.flat is None:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
@@ -366,11 +420,14 @@ def cmd_calibrate(args) -> int:
     from rsocl.files.atomic import output_path
 
     reads = (("--frames", args.frames), ("--flicker", args.flicker), ("--flat", args.flat))
-    out = output_path(Path(args.out) if args.out else Path(args.rig), "--out", inputs=reads)   # before any work
+    out = output_path(Path(args.out) if args.out else Path(args.rig), "--out", inputs=reads)  # before any work
     png = None
     if args.frames is not None:
-        png = output_path(Path(args.png) if args.png else out.with_name(out.stem + "-calibration.png"), "--png",
-                          inputs=reads + (("--rig", args.rig), ("--out", out)))
+        png = output_path(
+            Path(args.png) if args.png else out.with_name(out.stem + "-calibration.png"),
+            "--png",
+            inputs=reads + (("--rig", args.rig), ("--out", out)),
+        )
     rigfile = load_rig_file(args.rig)
     updates: list[dict] = [{} for _ in rigfile.cameras]
     overlay = _register(args, rigfile, updates) if args.frames is not None else None

@@ -10,12 +10,14 @@ __all__ = ["add_parser", "cmd_capture"]
 def add_parser(subparsers):
     """Add ``capture`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser(
-        "capture", help="rig file (TOML) -> capture file (HDF5): synchronized sets from the cameras",
+        "capture",
+        help="rig file (TOML) -> capture file (HDF5): synchronized sets from the cameras",
         description="Capture synchronized sets from the cameras of a rig file. Each raw frame is written "
-                    "before the next is requested, to OUT.partial, renamed to OUT at the end; if a camera "
-                    "fails, OUT keeps everything captured and records the failure, and the exit status is 1. "
-                    "An OUT.partial left by a killed capture is never overwritten: the capture is refused "
-                    "(naming its complete sets) until it is renamed or removed.")
+        "before the next is requested, to OUT.partial, renamed to OUT at the end; if a camera "
+        "fails, OUT keeps everything captured and records the failure, and the exit status is 1. "
+        "An OUT.partial left by a killed capture is never overwritten: the capture is refused "
+        "(naming its complete sets) until it is renamed or removed.",
+    )
     p.add_argument("--rig", required=True, help="TOML rig file (seconds, degrees)")
     p.add_argument("--out", required=True, help="capture file to write (.h5)")
     p.add_argument("--sets", type=int, default=1, help="number of synchronized sets (default 1)")
@@ -34,7 +36,7 @@ def cmd_capture(args) -> int:
     from rsocl.hardware.capture import CaptureFailed, capture_sets
 
     quiet = bool(getattr(args, "quiet", False))
-    rigfile = load_rig_file(args.rig)                 # a shape beyond the host's memory: refused here
+    rigfile = load_rig_file(args.rig)  # a shape beyond the host's memory: refused here
     try:
         path = capture_sets(rigfile, args.out, sets=args.sets, timeout=args.timeout, progress=progress_bar(args))
     except CaptureFailed as exc:
@@ -44,6 +46,9 @@ def cmd_capture(args) -> int:
         from rsocl.files.hdf5 import load_capture_rig
 
         rig = load_capture_rig(path)
-        print(f"wrote {path}: {args.sets} set(s) from {rig.C} camera(s), {rig.shape[0]}x{rig.shape[1]}, "
-              f"T = {rig.T} sub-frames", flush=True)
+        print(
+            f"wrote {path}: {args.sets} set(s) from {rig.C} camera(s), {rig.shape[0]}x{rig.shape[1]}, "
+            f"T = {rig.T} sub-frames",
+            flush=True,
+        )
     return 0

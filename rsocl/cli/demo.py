@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
-from rsocl.cli.options import add_device_args, add_rig_args, add_solver_args, check_datacube_memory, quality_line, \
-    rig_from, run_reconstruction, say, tuning_plot_files
+from rsocl.cli.options import (
+    add_device_args,
+    add_rig_args,
+    add_solver_args,
+    check_datacube_memory,
+    quality_line,
+    rig_from,
+    run_reconstruction,
+    say,
+    tuning_plot_files,
+)
 
 __all__ = ["add_parser", "cmd_demo"]
 
@@ -35,15 +44,21 @@ def cmd_demo(args) -> int:
     truth = builtin_scene(rig.shape, rig.T)
     op = RollingShutterOperator(rig, device=args.device, dtype=args.dtype)
     g = op.forward(truth)
-    say(args, f"rig: {rig!r}\ndevice: {op.device.name}\ncompression: {rig.T} sub-frames from "
-              f"{rig.n_channels} snapshots (CR {rig.compression_ratio:.1f}x)")
+    say(
+        args,
+        f"rig: {rig!r}\ndevice: {op.device.name}\ncompression: {rig.T} sub-frames from "
+        f"{rig.n_channels} snapshots (CR {rig.compression_ratio:.1f}x)",
+    )
     result = run_reconstruction(args, g, rig, truth)
     print(quality_line(result, truth))
-    files = [save_reconstruction(out / "demo.h5", result.datacube, rig, params=result.params,
-                                 history=result.history, truth=truth),
-             comparison_gif(out / "demo.gif", truth, result.datacube),
-             snapshot_montage(out / "snapshots.png", g, rig=rig),
-             datacube_montage(out / "subframes.png", result.datacube, truth=truth)]
-    files += tuning_plot_files(args, result.params, out / "demo.gif")      # demo-tuning.png, after a search
+    files = [
+        save_reconstruction(
+            out / "demo.h5", result.datacube, rig, params=result.params, history=result.history, truth=truth
+        ),
+        comparison_gif(out / "demo.gif", truth, result.datacube),
+        snapshot_montage(out / "snapshots.png", g, rig=rig),
+        datacube_montage(out / "subframes.png", result.datacube, truth=truth),
+    ]
+    files += tuning_plot_files(args, result.params, out / "demo.gif")  # demo-tuning.png, after a search
     say(args, "wrote " + ", ".join(str(f) for f in files))
     return 0

@@ -27,8 +27,10 @@ def cmd_devices(args) -> int:
         mark = "*" if dev == default else " "
         fp64 = "fp64" if "cl_khr_fp64" in dev.extensions else "no fp64"
         # the ignore: pyopencl's stub declares device_type.to_string in an IntEnum body, so it types as a member
-        print(f"{mark} {pi}:{di}  {platform.name.strip()} / {dev.name.strip()}  "
-              f"[{cl.device_type.to_string(dev.type)}, {dev.max_compute_units} units, "  # type: ignore[operator]
-              f"{dev.global_mem_size / 2**30:.1f} GiB, max buffer {dev.max_mem_alloc_size / 2**30:.1f} GiB, {fp64}]")
+        print(
+            f"{mark} {pi}:{di}  {platform.name.strip()} / {dev.name.strip()}  "
+            f"[{cl.device_type.to_string(dev.type)}, {dev.max_compute_units} units, "  # type: ignore[operator]
+            f"{dev.global_mem_size / 2**30:.1f} GiB, max buffer {dev.max_mem_alloc_size / 2**30:.1f} GiB, {fp64}]"
+        )
     print("* = default choice")
     return 0

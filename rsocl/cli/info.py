@@ -16,8 +16,11 @@ def add_parser(subparsers):
     """Add ``info`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser("info", help="T, N_s, T_se, compression ratio and effective fps of a rig")
     add_rig_args(p, shape=(50, 50))
-    p.add_argument("--capture", default=None,
-                   help="read the rig from this capture file instead (the rig options cannot be given with it)")
+    p.add_argument(
+        "--capture",
+        default=None,
+        help="read the rig from this capture file instead (the rig options cannot be given with it)",
+    )
     p.add_argument("--camera-fps", type=float, default=67.0, help="camera frame rate, Hz (default 67)")
     p.set_defaults(func=cmd_info, check_options=check_info_args)
     return p
@@ -26,8 +29,11 @@ def add_parser(subparsers):
 def check_info_args(args) -> None:
     """Refuse rig options given with ``--capture`` (``rsocl.cli.main`` calls it before :func:`cmd_info`)."""
     if args.capture:
-        refuse_rig_args(args, "--capture", "the capture file holds the rig its snapshots were taken with, "
-                                           "which rsocl reconstruct uses as it is")
+        refuse_rig_args(
+            args,
+            "--capture",
+            "the capture file holds the rig its snapshots were taken with, which rsocl reconstruct uses as it is",
+        )
 
 
 def cmd_info(args) -> int:
@@ -44,8 +50,11 @@ def cmd_info(args) -> int:
         ("T (sub-frames)", f"{rig.T}"),
         ("N_s = ceil(t_e/t_r)", f"{rig.N_s}"),
         ("t_e/dt (exact rule)", f"{rig.exposure_subframes:.2f}"),
-        ("T_se (trimmed)", f"{rig.T_se} (sub-frames {rig.kept_subframes().start}..{rig.kept_subframes().stop - 1}, "
-                           f"each seen by >= {rig.min_cameras} cameras)"),
+        (
+            "T_se (trimmed)",
+            f"{rig.T_se} (sub-frames {rig.kept_subframes().start}..{rig.kept_subframes().stop - 1}, "
+            f"each seen by >= {rig.min_cameras} cameras)",
+        ),
         ("compression ratio", f"{rig.compression_ratio:.2f}x (T_se / snapshots)"),
         (f"effective fps at {args.camera_fps:g} fps", f"{rig.effective_fps(args.camera_fps):,.0f}"),
         ("datacube", f"{rig.datacube_bytes(4) / 2**20:.2f} MiB in float32"),

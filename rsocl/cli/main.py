@@ -24,8 +24,9 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``rsocl`` argument parser with every subcommand; each sets ``func`` to its ``cmd_*``."""
     from rsocl import __version__
 
-    parser = argparse.ArgumentParser(prog="rsocl", description="High-speed video from rotated rolling-shutter "
-                                                               "cameras, reconstructed on OpenCL.")
+    parser = argparse.ArgumentParser(
+        prog="rsocl", description="High-speed video from rotated rolling-shutter cameras, reconstructed on OpenCL."
+    )
     parser.add_argument("--version", action="version", version=f"rsocl {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for module in SUBCOMMANDS:
@@ -43,6 +44,7 @@ def _warning_line(command, shown=None):
         if issubclass(category, (DeprecationWarning, PendingDeprecationWarning)):
             return shown(message, category, filename, lineno, file, line)
         print(f"rsocl {command}: warning: {message}", file=sys.stderr if file is None else file)
+
     return show
 
 
@@ -60,7 +62,7 @@ def main(argv=None) -> int:
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _warning_line(args.command)
-            check_options = getattr(args, "check_options", None)    # combinations of shared options, checked first
+            check_options = getattr(args, "check_options", None)  # combinations of shared options, checked first
             if check_options is not None:
                 check_options(args)
             return int(args.func(args) or 0)
@@ -68,10 +70,13 @@ def main(argv=None) -> int:
         print(f"rsocl {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except MemoryError as exc:
-        print(f"rsocl {args.command}: error: out of host memory ({str(exc).strip() or 'MemoryError'}); "
-              "a smaller grid, fewer sets or tiles (rsocl plan) need less", file=sys.stderr)
+        print(
+            f"rsocl {args.command}: error: out of host memory ({str(exc).strip() or 'MemoryError'}); "
+            "a smaller grid, fewer sets or tiles (rsocl plan) need less",
+            file=sys.stderr,
+        )
         return 1
-    except BrokenPipeError:     # a reader that stopped reading: entry() ends quietly
+    except BrokenPipeError:  # a reader that stopped reading: entry() ends quietly
         raise
     except OSError as exc:
         print(f"rsocl {args.command}: error: {fault_line(exc)}", file=sys.stderr)
@@ -109,7 +114,7 @@ def entry(argv=None) -> int:
         sys.stdout.flush()
         return status
     except BrokenPipeError:
-        try:                    # the interpreter's final flush would fail again: send what is left nowhere
+        try:  # the interpreter's final flush would fail again: send what is left nowhere
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         except (AttributeError, OSError, ValueError):
             pass

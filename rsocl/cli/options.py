@@ -8,11 +8,31 @@ import math
 from rsocl.common.memory import check_host_memory, host_memory_bytes
 from rsocl.model.plausible import RIG_BYTES_PER_PIXEL, check_rig_memory
 
-__all__ = ["US", "RIG_BYTES_PER_PIXEL", "add_rig_args", "rig_from", "refuse_rig_args", "host_memory_bytes",
-           "check_host_memory", "check_rig_memory", "load_rig_file", "check_datacube_memory", "add_device_args",
-           "add_solver_args", "check_solver_args", "reg_options", "regularizer_from", "solver_options",
-           "progress_bar", "say", "tuning_plot_path", "tuning_plot_files", "run_reconstruction", "truth_quality",
-           "quality_line"]
+__all__ = [
+    "US",
+    "RIG_BYTES_PER_PIXEL",
+    "add_rig_args",
+    "rig_from",
+    "refuse_rig_args",
+    "host_memory_bytes",
+    "check_host_memory",
+    "check_rig_memory",
+    "load_rig_file",
+    "check_datacube_memory",
+    "add_device_args",
+    "add_solver_args",
+    "check_solver_args",
+    "reg_options",
+    "regularizer_from",
+    "solver_options",
+    "progress_bar",
+    "say",
+    "tuning_plot_path",
+    "tuning_plot_files",
+    "run_reconstruction",
+    "truth_quality",
+    "quality_line",
+]
 
 #: One microsecond, seconds (the command line gives times in µs).
 US = 1e-6
@@ -36,18 +56,34 @@ def add_rig_args(p, cameras=4, shape=(64, 64)):
     :func:`refuse_rig_args`.
     """
     g = p.add_argument_group("rig (the paper's array: angles 0, 90, 180, 270, 45, 135, 225, 315)")
-    g.add_argument("--cameras", type=int, default=cameras, action=_RigOption,
-                   help=f"number of cameras, 1..8 (default {cameras})")
-    g.add_argument("--shape", type=int, nargs=2, default=list(shape), metavar=("M", "N"), action=_RigOption,
-                   help=f"ROI rows and columns, pixels (default {shape[0]} {shape[1]})")
-    g.add_argument("--t-e-us", type=float, default=180.0, action=_RigOption,
-                   help="exposure time, µs, > 0 (default 180)")
-    g.add_argument("--t-r-us", type=float, default=35.0, action=_RigOption,
-                   help="row readout time, µs, > 0 (default 35)")
-    g.add_argument("--dt-us", type=float, default=None, action=_RigOption,
-                   help="sub-frame duration, µs, >= --t-r-us (default t_r)")
-    g.add_argument("--mask", choices=["exact", "binary"], default="exact", action=_RigOption,
-                   help="shutter weights (default exact)")
+    g.add_argument(
+        "--cameras", type=int, default=cameras, action=_RigOption, help=f"number of cameras, 1..8 (default {cameras})"
+    )
+    g.add_argument(
+        "--shape",
+        type=int,
+        nargs=2,
+        default=list(shape),
+        metavar=("M", "N"),
+        action=_RigOption,
+        help=f"ROI rows and columns, pixels (default {shape[0]} {shape[1]})",
+    )
+    g.add_argument(
+        "--t-e-us", type=float, default=180.0, action=_RigOption, help="exposure time, µs, > 0 (default 180)"
+    )
+    g.add_argument(
+        "--t-r-us", type=float, default=35.0, action=_RigOption, help="row readout time, µs, > 0 (default 35)"
+    )
+    g.add_argument(
+        "--dt-us", type=float, default=None, action=_RigOption, help="sub-frame duration, µs, >= --t-r-us (default t_r)"
+    )
+    g.add_argument(
+        "--mask",
+        choices=["exact", "binary"],
+        default="exact",
+        action=_RigOption,
+        help="shutter weights (default exact)",
+    )
     p.set_defaults(rig_options_given=())
 
 
@@ -57,8 +93,9 @@ def refuse_rig_args(args, option: str, why: str) -> None:
     rather than ignoring them."""
     given = getattr(args, "rig_options_given", ())
     if given:
-        raise ValueError(f"{', '.join(given)} cannot be used with {option}: {why}; "
-                         f"leave {'it' if len(given) == 1 else 'them'} out")
+        raise ValueError(
+            f"{', '.join(given)} cannot be used with {option}: {why}; leave {'it' if len(given) == 1 else 'them'} out"
+        )
 
 
 def rig_from(args):
@@ -79,17 +116,19 @@ def rig_from(args):
     if args.dt_us is not None:
         dt = check.positive("--dt-us", args.dt_us, "µs")
         if dt < t_r * (1 - SNAP):
-            raise ValueError(f"--dt-us must be >= --t-r-us = {t_r:g} µs (a sub-frame lasts at least one row time), "
-                             f"got {dt:g}")
+            raise ValueError(
+                f"--dt-us must be >= --t-r-us = {t_r:g} µs (a sub-frame lasts at least one row time), got {dt:g}"
+            )
     if t_e / dt > MAX_WINDOW:
-        raise ValueError(f"--t-e-us {t_e:g} µs is {math.ceil(t_e / dt):,} sub-frames of {dt:g} µs, more than the "
-                         f"{MAX_WINDOW:,} one exposure may span; give the exposure in µs (or a longer --dt-us)")
+        raise ValueError(
+            f"--t-e-us {t_e:g} µs is {math.ceil(t_e / dt):,} sub-frames of {dt:g} µs, more than the "
+            f"{MAX_WINDOW:,} one exposure may span; give the exposure in µs (or a longer --dt-us)"
+        )
     m, n = check.grid_shape("--shape", args.shape)
     cameras = check.positive_int("--cameras", args.cameras, maximum=8)
     check_rig_memory(cameras, (m, n), f"--shape {m} {n}")
     dt = None if args.dt_us is None else args.dt_us * US
-    return Rig.paper_array(cameras, (m, n), t_e=args.t_e_us * US, t_r=args.t_r_us * US,
-                           dt=dt, mask=args.mask)
+    return Rig.paper_array(cameras, (m, n), t_e=args.t_e_us * US, t_r=args.t_r_us * US, dt=dt, mask=args.mask)
 
 
 def load_rig_file(path):
@@ -109,15 +148,22 @@ def check_datacube_memory(rig, option=None, hint="choose a smaller grid or a lon
     """Refuse a rig whose ``(T, m, n)`` float32 datacube (a scene, a reconstruction) alone exceeds
     :func:`host_memory_bytes`, naming ``option`` (default ``--shape M N``)."""
     m, n = rig.shape
-    check_host_memory(4 * rig.T * m * n, option or f"--shape {m} {n}",
-                      f"the {rig.T} x {m} x {n} float32 datacube (T sub-frames x rows x columns)", hint)
+    check_host_memory(
+        4 * rig.T * m * n,
+        option or f"--shape {m} {n}",
+        f"the {rig.T} x {m} x {n} float32 datacube (T sub-frames x rows x columns)",
+        hint,
+    )
 
 
 def add_device_args(p):
     """Add ``--device``, ``--dtype`` and ``--quiet`` to parser ``p``."""
-    p.add_argument("--device", default=None,
-                   help="OpenCL device: 'P:D' indices from 'rsocl devices', or a name substring "
-                        "(default: RSOCL_DEVICE, PYOPENCL_CTX, else first GPU, else CPU)")
+    p.add_argument(
+        "--device",
+        default=None,
+        help="OpenCL device: 'P:D' indices from 'rsocl devices', or a name substring "
+        "(default: RSOCL_DEVICE, PYOPENCL_CTX, else first GPU, else CPU)",
+    )
     p.add_argument("--dtype", choices=["float32", "float64"], default="float32", help="device precision")
     p.add_argument("--quiet", action="store_true", help="no progress bar, only errors and the result line")
 
@@ -128,23 +174,44 @@ def add_solver_args(p):
 
     g = p.add_argument_group("solver (defaults for scenes in [0, 1])")
     g.add_argument("--iterations", type=int, default=DEFAULTS["iterations"])
-    g.add_argument("--lam", type=float, default=None,
-                   help=f"regularization weight (default: the regularizer's recommendation, else {DEFAULTS['lam']})")
-    g.add_argument("--eta", type=float, default=None,
-                   help=f"ADMM penalty; 0 runs GAP (default: the regularizer's recommendation, else {DEFAULTS['eta']})")
+    g.add_argument(
+        "--lam",
+        type=float,
+        default=None,
+        help=f"regularization weight (default: the regularizer's recommendation, else {DEFAULTS['lam']})",
+    )
+    g.add_argument(
+        "--eta",
+        type=float,
+        default=None,
+        help=f"ADMM penalty; 0 runs GAP (default: the regularizer's recommendation, else {DEFAULTS['eta']})",
+    )
     g.add_argument("--tv-iterations", type=int, default=None, help="inner denoiser iterations (TV default 10)")
     g.add_argument("--projection", choices=["exact", "paper"], default="exact")
     g.add_argument("--regularizer", default="tv", help="regularizer name (see 'rsocl plugins')")
-    g.add_argument("--reg-opt", action="append", default=[], metavar="KEY=VALUE",
-                   help="regularizer option, repeatable (iterations=N is --tv-iterations N: give one of them)")
-    g.add_argument("--fast", action="store_true",
-                   help="skip the parameter search: fixed lam and regularizer options, zero start (by default "
-                        "the values not given are chosen from the snapshots by cross-validation: a tuned run takes "
-                        "2-3x the time of a fixed one; a tiled run chooses once, on the centre tile, for every tile)")
-    g.add_argument("--blend", type=float, default=None, metavar="B",
-                   help="in [0, 1]: return start + B (result - start), the solver's result moved back towards the "
-                        "interpolation a self-tuned run starts from; 1: the solver's own result (default: the "
-                        "blend chosen from the snapshots with the other values)")
+    g.add_argument(
+        "--reg-opt",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="regularizer option, repeatable (iterations=N is --tv-iterations N: give one of them)",
+    )
+    g.add_argument(
+        "--fast",
+        action="store_true",
+        help="skip the parameter search: fixed lam and regularizer options, zero start (by default "
+        "the values not given are chosen from the snapshots by cross-validation: a tuned run takes "
+        "2-3x the time of a fixed one; a tiled run chooses once, on the centre tile, for every tile)",
+    )
+    g.add_argument(
+        "--blend",
+        type=float,
+        default=None,
+        metavar="B",
+        help="in [0, 1]: return start + B (result - start), the solver's result moved back towards the "
+        "interpolation a self-tuned run starts from; 1: the solver's own result (default: the "
+        "blend chosen from the snapshots with the other values)",
+    )
     p.set_defaults(check_options=check_solver_args)
 
 
@@ -160,8 +227,10 @@ def check_solver_args(args) -> None:
     if args.blend is not None:
         check.in_range("--blend", args.blend, 0.0, 1.0)
         if args.blend < 1 and args.fast:
-            raise ValueError(f"--blend {args.blend:g} moves the result towards the interpolation a self-tuned run "
-                             "starts from; --fast runs from zeros: leave out --fast or --blend")
+            raise ValueError(
+                f"--blend {args.blend:g} moves the result towards the interpolation a self-tuned run "
+                "starts from; --fast runs from zeros: leave out --fast or --blend"
+            )
     if args.tv_iterations is not None and "iterations" in options:
         given = options["iterations"]
         try:
@@ -169,8 +238,10 @@ def check_solver_args(args) -> None:
         except ValueError:
             same = False
         if not same:
-            raise ValueError(f"--reg-opt iterations={given} and --tv-iterations {args.tv_iterations} both set the "
-                             "regularizer's inner iterations, to different values; give one of them")
+            raise ValueError(
+                f"--reg-opt iterations={given} and --tv-iterations {args.tv_iterations} both set the "
+                "regularizer's inner iterations, to different values; give one of them"
+            )
     regularizer_from(args)
 
 
@@ -194,7 +265,7 @@ def progress_bar(args) -> bool:
         return False
     try:
         return bool(sys.stderr.isatty())
-    except (AttributeError, ValueError):           # a closed or replaced stream
+    except (AttributeError, ValueError):  # a closed or replaced stream
         return False
 
 
@@ -210,10 +281,20 @@ def solver_options(args) -> dict:
     """The solver and device arguments as the keyword arguments of :func:`rsocl.reconstruct`,
     :func:`rsocl.solver.sets.reconstruct_sets` and :func:`rsocl.scale.reconstruct_tiled` (the one map
     of the command line onto the API)."""
-    return {"regularizer": args.regularizer, "regularizer_options": reg_options(args.reg_opt),
-            "iterations": args.iterations, "lam": args.lam, "eta": args.eta, "tv_iterations": args.tv_iterations,
-            "projection": args.projection, "device": args.device, "dtype": args.dtype, "tune": not args.fast,
-            "blend": args.blend, "progress": not args.quiet}
+    return {
+        "regularizer": args.regularizer,
+        "regularizer_options": reg_options(args.reg_opt),
+        "iterations": args.iterations,
+        "lam": args.lam,
+        "eta": args.eta,
+        "tv_iterations": args.tv_iterations,
+        "projection": args.projection,
+        "device": args.device,
+        "dtype": args.dtype,
+        "tune": not args.fast,
+        "blend": args.blend,
+        "progress": not args.quiet,
+    }
 
 
 def say(args, *text):
@@ -242,7 +323,7 @@ def tuning_plot_files(args, params, gif) -> list:
         chosen += f", blend with the interpolation {params['blend']:.2f}"
     say(args, f"chosen from the snapshots: {chosen}")
     if not params["tuning"].get("candidates"):
-        return []                                   # set without a search (one snapshot per pixel): no criterion
+        return []  # set without a search (one snapshot per pixel): no criterion
     return [tuning_plot(tuning_plot_path(gif), params["tuning"])]
 
 

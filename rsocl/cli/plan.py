@@ -12,17 +12,27 @@ def add_parser(subparsers):
     """Add ``plan`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser("plan", help="propose dt, ROI and T_se for a scene, with memory and time, before running")
     add_rig_args(p, shape=(256, 256))
-    p.add_argument("--roi", type=int, nargs=4, metavar=("X", "Y", "WIDTH", "HEIGHT"), default=None,
-                   help="where the motion is: column and row of its top-left pixel, then width and height, reference "
-                        "pixels, the order of a rig file's roi = [x, y, width, height] (default: whole grid)")
+    p.add_argument(
+        "--roi",
+        type=int,
+        nargs=4,
+        metavar=("X", "Y", "WIDTH", "HEIGHT"),
+        default=None,
+        help="where the motion is: column and row of its top-left pixel, then width and height, reference "
+        "pixels, the order of a rig file's roi = [x, y, width, height] (default: whole grid)",
+    )
     p.add_argument("--speed", type=float, default=None, help="largest image speed, pixels/s")
     p.add_argument("--fps", type=float, default=None, help="sub-frame rate wanted, Hz")
     p.add_argument("--blur", type=float, default=1.0, help="motion allowed within a sub-frame, pixels (default 1)")
     p.add_argument("--iterations", type=int, default=200, help="ADMM iterations to cost, >= 1 (default 200)")
     p.add_argument("--regularizer", default="tv", help="regularizer name (see 'rsocl plugins')")
-    p.add_argument("--reg-opt", action="append", default=[], metavar="KEY=VALUE",
-                   help="regularizer option, repeatable (its workspace is counted: TV's fused=N keeps a second dual "
-                        "buffer)")
+    p.add_argument(
+        "--reg-opt",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="regularizer option, repeatable (its workspace is counted: TV's fused=N keeps a second dual buffer)",
+    )
     p.add_argument("--no-measure", action="store_true", help="memory only; do not time 3 iterations")
     add_device_args(p)
     add_plan_tiling_args(p)
@@ -38,9 +48,11 @@ def roi_from(roi, shape):
     x, y, width, height = (int(v) for v in roi)
     m, n = shape
     if not (0 <= x and 0 <= y and width >= 1 and height >= 1 and x + width <= n and y + height <= m):
-        raise ValueError(f"--roi is X Y WIDTH HEIGHT (top-left column and row, then width and height, pixels), inside "
-                         f"the grid of {n} columns x {m} rows: x + width <= {n}, y + height <= {m}; got {x} {y} "
-                         f"{width} {height}")
+        raise ValueError(
+            f"--roi is X Y WIDTH HEIGHT (top-left column and row, then width and height, pixels), inside "
+            f"the grid of {n} columns x {m} rows: x + width <= {n}, y + height <= {m}; got {x} {y} "
+            f"{width} {height}"
+        )
     return (y, x, height, width)
 
 
@@ -58,8 +70,18 @@ def cmd_plan(args) -> int:
     rig = rig_from(args)
     roi = roi_from(args.roi, rig.shape)
     check_plan_tiling_args(args, rig.shape if roi is None else rig.crop(roi).shape)
-    p = plan(rig, roi=roi, speed=args.speed, fps=args.fps, blur_pixels=args.blur, iterations=args.iterations,
-             regularizer=regularizer, dtype=args.dtype, device=args.device, measure=not args.no_measure)
+    p = plan(
+        rig,
+        roi=roi,
+        speed=args.speed,
+        fps=args.fps,
+        blur_pixels=args.blur,
+        iterations=args.iterations,
+        regularizer=regularizer,
+        dtype=args.dtype,
+        device=args.device,
+        measure=not args.no_measure,
+    )
     print(format_plan(p))
     print_plan_tiling(args, p)
     return 0

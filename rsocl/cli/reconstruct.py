@@ -6,8 +6,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rsocl.cli.options import add_device_args, add_solver_args, quality_line, run_reconstruction, say, \
-    solver_options, tuning_plot_files
+from rsocl.cli.options import (
+    add_device_args,
+    add_solver_args,
+    quality_line,
+    run_reconstruction,
+    say,
+    solver_options,
+    tuning_plot_files,
+)
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
 __all__ = ["add_parser", "cmd_reconstruct", "set_path", "check_set_outputs"]
@@ -17,16 +24,26 @@ def add_parser(subparsers):
     """Add ``reconstruct`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser("reconstruct", help="capture file -> reconstruction file and GIF")
     p.add_argument("capture", help="capture file (.h5) from 'rsocl simulate' or 'rsocl capture'")
-    p.add_argument("--out", required=True,
-                   help="reconstruction file to write (.h5; a capture of several sets writes one per set, "
-                        "OUT with '-setNNN' before the suffix), or a Zarr store (.zarr)")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="reconstruction file to write (.h5; a capture of several sets writes one per set, "
+        "OUT with '-setNNN' before the suffix), or a Zarr store (.zarr)",
+    )
     p.add_argument("--gif", default=None, help="GIF to write (default: next to an .h5 --out; of set 0)")
-    p.add_argument("--no-truth", action="store_true",
-                   help="ignore a ground truth stored in the capture: no PSNR/SSIM, none in the output")
+    p.add_argument(
+        "--no-truth",
+        action="store_true",
+        help="ignore a ground truth stored in the capture: no PSNR/SSIM, none in the output",
+    )
     p.add_argument("--first-set-only", action="store_true", help="of a capture of several sets, set 0 only")
-    p.add_argument("--batch", type=int, default=None,
-                   help="sets of a capture of several sets, reconstructed in one piece, run together in one batch "
-                        "(default: as many as fit the device, up to 32)")
+    p.add_argument(
+        "--batch",
+        type=int,
+        default=None,
+        help="sets of a capture of several sets, reconstructed in one piece, run together in one batch "
+        "(default: as many as fit the device, up to 32)",
+    )
     add_solver_args(p)
     add_device_args(p)
     add_reconstruct_tiling_args(p)
@@ -48,7 +65,7 @@ def check_set_outputs(args) -> None:
 
     capture = Path(args.capture)
     if str(args.out).rstrip("/").lower().endswith(".zarr") or not capture.is_file():
-        return                                        # a store is a folder; a missing capture is named on loading
+        return  # a store is a folder; a missing capture is named on loading
     out = Path(args.out)
     paths = [("--out", out)]
     if not (args.first_set_only or args.window is not None):
@@ -58,8 +75,10 @@ def check_set_outputs(args) -> None:
     for name, path in paths:
         output_path(path, name, inputs=(("capture", capture),))
         if _is_capture(path):
-            raise ValueError(f"{name} {str(path)!r} is a capture file; a reconstruction never replaces a capture: "
-                             "choose another --out")
+            raise ValueError(
+                f"{name} {str(path)!r} is a capture file; a reconstruction never replaces a capture: "
+                "choose another --out"
+            )
 
 
 def _is_capture(path: Path) -> bool:
@@ -92,7 +111,7 @@ def cmd_reconstruct(args) -> int:
     from rsocl.files.atomic import OutputError
     from rsocl.files.hdf5 import load_capture, load_snapshot_sets, save_reconstruction
 
-    if args.batch is not None and args.batch < 1:          # before anything runs, whatever the capture holds
+    if args.batch is not None and args.batch < 1:  # before anything runs, whatever the capture holds
         raise ValueError(f"--batch must be >= 1 (sets per batch), got {args.batch}")
     check_outputs(args)
     check_set_outputs(args)
@@ -100,7 +119,7 @@ def cmd_reconstruct(args) -> int:
     if code is not None:
         return code
 
-    capture = load_capture(args.capture, set_index=0)            # every set: load_snapshot_sets
+    capture = load_capture(args.capture, set_index=0)  # every set: load_snapshot_sets
     truth = capture.truth if not args.no_truth else None
     sets = None if args.first_set_only else load_snapshot_sets(args.capture)
     out = Path(args.out)
@@ -108,8 +127,9 @@ def cmd_reconstruct(args) -> int:
     if sets is None or sets.shape[0] == 1:
         result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
         print(quality_line(result, truth))
-        save_reconstruction(out, result.datacube, capture.rig, params=result.params, history=result.history,
-                            truth=truth)
+        save_reconstruction(
+            out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth
+        )
         comparison_gif(gif, truth, result.datacube)
         say(args, "wrote " + ", ".join(str(p) for p in [out, gif, *tuning_plot_files(args, result.params, gif)]))
         return 0
@@ -117,12 +137,13 @@ def cmd_reconstruct(args) -> int:
     say(args, f"{sets.shape[0]} sets in batches of {batch.params['batch']}")
     for i in range(batch.batch):
         one = batch.set(i)
-        known = truth if i == 0 else None              # the capture's truth is set 0's datacube
+        known = truth if i == 0 else None  # the capture's truth is set 0's datacube
         print(f"set {i}: " + quality_line(one, known))
         try:
-            save_reconstruction(set_path(out, i), one.datacube, capture.rig, params=one.params,
-                                history=one.history, truth=known)
-        except OutputError as exc:                     # a full disk: say which sets are on it
+            save_reconstruction(
+                set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history, truth=known
+            )
+        except OutputError as exc:  # a full disk: say which sets are on it
             if i:
                 exc.strerror = f"{exc.strerror}; sets 0 to {i - 1} are written ({set_path(out, 0)} ..)"
             raise

@@ -16,8 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["add_reconstruct_tiling_args", "check_outputs", "reconstruct_tiled_if_needed", "add_plan_tiling_args",
-           "check_plan_tiling_args", "print_plan_tiling"]
+__all__ = [
+    "add_reconstruct_tiling_args",
+    "check_outputs",
+    "reconstruct_tiled_if_needed",
+    "add_plan_tiling_args",
+    "check_plan_tiling_args",
+    "print_plan_tiling",
+]
 
 
 def _is_zarr(path) -> bool:
@@ -30,27 +36,62 @@ def add_reconstruct_tiling_args(p):
     from rsocl.scale.tiles import DEFAULT_HALO
 
     g = p.add_argument_group("tiles, sets and Dask (pip install 'rsocl[dask]' for clusters and Zarr stores)")
-    g.add_argument("--tile", type=int, nargs=2, metavar=("H", "W"), default=None,
-                   help="reconstruct in tiles of H x W reference pixels (default: one piece when it fits the "
-                        "device, else the tile 'rsocl plan' proposes)")
-    g.add_argument("--halo", type=int, default=None,
-                   help=f"pixels added on every side of a tile, cropped off after, in a run in tiles or windows "
-                        f"(default {DEFAULT_HALO}, or the grid's larger side where that is smaller)")
-    g.add_argument("--sets", action="store_true",
-                   help="reconstruct every set of the capture (snapshot_sets) into a [S, T, m, n] Zarr array")
-    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run the tiles on a running dask.distributed scheduler (default: RSOCL_SCHEDULER, else "
-                        "Dask's local scheduler); its workers must see the capture and --out paths")
-    g.add_argument("--workers", type=int, default=None, metavar="N",
-                   help="start a local cluster of N worker processes (each its own OpenCL context), 1 to 4 per "
-                        "CPU core")
-    g.add_argument("--retries", type=int, default=None,
-                   help=f"extra attempts of a failing tile, in a run in tiles or windows (default {RETRIES})")
-    g.add_argument("--window", type=int, default=None, metavar="F",
-                   help="multi-frame capture (frames, t_d): reconstruct it as a stream of windows of F frames")
-    g.add_argument("--overlap", type=int, default=None, metavar="V",
-                   help="with --window: frames shared by consecutive windows (default 1, or 0 with --window 1; 0 "
-                        "when the readout has gaps)")
+    g.add_argument(
+        "--tile",
+        type=int,
+        nargs=2,
+        metavar=("H", "W"),
+        default=None,
+        help="reconstruct in tiles of H x W reference pixels (default: one piece when it fits the "
+        "device, else the tile 'rsocl plan' proposes)",
+    )
+    g.add_argument(
+        "--halo",
+        type=int,
+        default=None,
+        help=f"pixels added on every side of a tile, cropped off after, in a run in tiles or windows "
+        f"(default {DEFAULT_HALO}, or the grid's larger side where that is smaller)",
+    )
+    g.add_argument(
+        "--sets",
+        action="store_true",
+        help="reconstruct every set of the capture (snapshot_sets) into a [S, T, m, n] Zarr array",
+    )
+    g.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the tiles on a running dask.distributed scheduler (default: RSOCL_SCHEDULER, else "
+        "Dask's local scheduler); its workers must see the capture and --out paths",
+    )
+    g.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="start a local cluster of N worker processes (each its own OpenCL context), 1 to 4 per CPU core",
+    )
+    g.add_argument(
+        "--retries",
+        type=int,
+        default=None,
+        help=f"extra attempts of a failing tile, in a run in tiles or windows (default {RETRIES})",
+    )
+    g.add_argument(
+        "--window",
+        type=int,
+        default=None,
+        metavar="F",
+        help="multi-frame capture (frames, t_d): reconstruct it as a stream of windows of F frames",
+    )
+    g.add_argument(
+        "--overlap",
+        type=int,
+        default=None,
+        metavar="V",
+        help="with --window: frames shared by consecutive windows (default 1, or 0 with --window 1; 0 "
+        "when the readout has gaps)",
+    )
 
 
 def check_outputs(args) -> None:
@@ -59,19 +100,23 @@ def check_outputs(args) -> None:
     from rsocl.files.atomic import output_path
 
     if args.window is not None and (_is_zarr(args.out) or args.sets):
-        raise ValueError("--window: a stream of frame windows is written to an HDF5 file (--out NAME.h5), "
-                         "one set at a time")
+        raise ValueError(
+            "--window: a stream of frame windows is written to an HDF5 file (--out NAME.h5), one set at a time"
+        )
     if args.window is not None and args.workers is not None:
-        raise ValueError("--workers: the windows of --window run one after another in this process (their tiles "
-                         "on Dask's local scheduler or --scheduler); leave out --workers")
+        raise ValueError(
+            "--workers: the windows of --window run one after another in this process (their tiles "
+            "on Dask's local scheduler or --scheduler); leave out --workers"
+        )
     if args.sets and getattr(args, "first_set_only", False):
-        raise ValueError("--sets and --first-set-only contradict each other: --sets reconstructs every set into a "
-                         "Zarr store, --first-set-only set 0 only; give one of them")
+        raise ValueError(
+            "--sets and --first-set-only contradict each other: --sets reconstructs every set into a "
+            "Zarr store, --first-set-only set 0 only; give one of them"
+        )
     if _is_zarr(args.out) and not args.sets:
-        _note_first_set(args, "the store gets set 0 (--sets: every set; --first-set-only says set 0 and "
-                              "silences this)")
+        _note_first_set(args, "the store gets set 0 (--sets: every set; --first-set-only says set 0 and silences this)")
     reads = (("capture", args.capture),)
-    tuned = not getattr(args, "fast", False)          # the search's plot: NAME-tuning.png
+    tuned = not getattr(args, "fast", False)  # the search's plot: NAME-tuning.png
     if _is_zarr(args.out):
         from rsocl.scale.store import check_store_path, require_zarr
 
@@ -79,8 +124,7 @@ def check_outputs(args) -> None:
         check_store_path(args.out, "--out")
         _gif_suffix(output_path(_zarr_gif(args), "--gif", inputs=reads), args)
         if tuned:
-            output_path(tuning_plot_path(Path(args.out).with_suffix(".gif")), "--out's NAME-tuning.png",
-                        inputs=reads)
+            output_path(tuning_plot_path(Path(args.out).with_suffix(".gif")), "--out's NAME-tuning.png", inputs=reads)
         return
     if args.sets:
         raise ValueError(f"--out: every set (--sets) goes to a Zarr store (--out NAME.zarr), got {args.out!r}")
@@ -89,7 +133,7 @@ def check_outputs(args) -> None:
     if gif.resolve() == out.resolve():
         raise ValueError(f"--gif {str(gif)!r} is the --out file; give the GIF another name")
     _gif_suffix(gif, args)
-    if tuned:                                         # next to the GIF
+    if tuned:  # next to the GIF
         output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
 
 
@@ -121,8 +165,14 @@ def _wants_tiles(args, capture) -> bool:
     from rsocl.scale.runner import SCHEDULER_ENV
     from rsocl.solver.memory import device_limit, memory_need
 
-    if (args.tile or args.sets or args.workers is not None or args.scheduler or os.environ.get(SCHEDULER_ENV)
-            or _is_zarr(args.out)):
+    if (
+        args.tile
+        or args.sets
+        or args.workers is not None
+        or args.scheduler
+        or os.environ.get(SCHEDULER_ENV)
+        or _is_zarr(args.out)
+    ):
         return True
     largest, total = memory_need(capture.rig, regularizer_from(args), dtype=args.dtype, projection=args.projection)
     return device_limit(get_device(args.device), largest, total) is not None
@@ -139,29 +189,41 @@ def _check_applies(args, run: str) -> None:
     """ValueError naming ``--overlap``, ``--halo`` or ``--batch`` when the run (``"window"``: a stream of
     windows, ``"tiles"``, ``"whole"``: in one piece) would ignore it."""
     if args.overlap is not None and run != "window":
-        raise ValueError("--overlap applies to --window (the frames consecutive windows share); without --window "
-                         "it would be ignored")
+        raise ValueError(
+            "--overlap applies to --window (the frames consecutive windows share); without --window it would be ignored"
+        )
     if args.retries is not None and run == "whole":
-        raise ValueError("--retries applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a "
-                         "Zarr --out or a capture too large for the device) or windows (--window), whose tiles run "
-                         "as tasks; this capture runs in one piece, where --retries would be ignored")
+        raise ValueError(
+            "--retries applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a "
+            "Zarr --out or a capture too large for the device) or windows (--window), whose tiles run "
+            "as tasks; this capture runs in one piece, where --retries would be ignored"
+        )
     if args.halo is not None and run == "whole":
-        raise ValueError("--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a Zarr "
-                         "--out or a capture too large for the device) or windows (--window); this capture runs in "
-                         "one piece, where --halo would be ignored")
+        raise ValueError(
+            "--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a Zarr "
+            "--out or a capture too large for the device) or windows (--window); this capture runs in "
+            "one piece, where --halo would be ignored"
+        )
     if args.batch is None:
         return
     if run != "whole":
-        how = ("--window reconstructs set 0, window by window" if run == "window" else
-               "a run in tiles runs every tile of every set as a task of its own")
-        raise ValueError(f"--batch applies to the sets of a capture reconstructed in one piece; {how}, where "
-                         "--batch would be ignored")
+        how = (
+            "--window reconstructs set 0, window by window"
+            if run == "window"
+            else "a run in tiles runs every tile of every set as a task of its own"
+        )
+        raise ValueError(
+            f"--batch applies to the sets of a capture reconstructed in one piece; {how}, where "
+            "--batch would be ignored"
+        )
     from rsocl.files.hdf5 import snapshot_set_count
 
     if args.first_set_only or snapshot_set_count(args.capture) == 1:
         which = "--first-set-only reconstructs set 0 only" if args.first_set_only else "the capture holds one set"
-        raise ValueError(f"--batch applies to a capture of several sets reconstructed together; {which}, where "
-                         "--batch would be ignored")
+        raise ValueError(
+            f"--batch applies to a capture of several sets reconstructed together; {which}, where "
+            "--batch would be ignored"
+        )
 
 
 def reconstruct_tiled_if_needed(args):
@@ -182,28 +244,46 @@ def reconstruct_tiled_if_needed(args):
         return None
     _check_applies(args, "tiles")
     if not _is_zarr(args.out):
-        _note_first_set(args, "a tiled run into an HDF5 file reconstructs set 0 (--out NAME.zarr --sets: every "
-                              "set, in tiles; --first-set-only says set 0 and silences this)")
+        _note_first_set(
+            args,
+            "a tiled run into an HDF5 file reconstructs set 0 (--out NAME.zarr --sets: every "
+            "set, in tiles; --first-set-only says set 0 and silences this)",
+        )
     from rsocl.scale.proposal import propose_tiling
     from rsocl.scale.tiled import TilesFailed, reconstruct_tiled
 
     tile = args.tile
     if tile is None:
-        tile = propose_tiling(capture.rig, halo=args.halo, regularizer=regularizer_from(args), dtype=args.dtype,
-                              projection=args.projection, device=args.device, measure=False).tile
+        tile = propose_tiling(
+            capture.rig,
+            halo=args.halo,
+            regularizer=regularizer_from(args),
+            dtype=args.dtype,
+            projection=args.projection,
+            device=args.device,
+            measure=False,
+        ).tile
         say(args, f"tiles of {tile[0]} x {tile[1]} pixels (proposed for this device; --tile H W to choose)")
     zarr_out = _is_zarr(args.out)
     try:
-        result = reconstruct_tiled(capture, capture.rig, tile=tile, halo=args.halo, out=args.out if zarr_out else None,
-                                   scheduler=args.scheduler, workers=args.workers, retries=_retries(args),
-                                   **solver_options(args))
+        result = reconstruct_tiled(
+            capture,
+            capture.rig,
+            tile=tile,
+            halo=args.halo,
+            out=args.out if zarr_out else None,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            retries=_retries(args),
+            **solver_options(args),
+        )
     except TilesFailed as exc:
         print(f"rsocl reconstruct: error: {exc}", file=sys.stderr, flush=True)
         return 1
     ran = len(result.pieces)
     kept = f", {result.skipped} already in the store" if result.skipped else ""
     text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
-    truth = None if args.no_truth else capture.truth()          # set 0's
+    truth = None if args.no_truth else capture.truth()  # set 0's
     first = np.asarray(result.datacube[0] if args.sets else result.datacube)
     if truth is not None:
         text = ("set 0: " if args.sets else "") + f"{truth_quality(first, truth)}, " + text
@@ -217,10 +297,11 @@ def reconstruct_tiled_if_needed(args):
         return 0
     from rsocl.files.hdf5 import save_reconstruction
 
-    history = {"tile_seconds": np.array([p.seconds for p in result.pieces]),
-               "tile_residual": np.array([p.residual for p in result.pieces])}
-    save_reconstruction(args.out, result.datacube, capture.rig, params=result.params, history=history,
-                        truth=truth)
+    history = {
+        "tile_seconds": np.array([p.seconds for p in result.pieces]),
+        "tile_residual": np.array([p.residual for p in result.pieces]),
+    }
+    save_reconstruction(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     comparison_gif(gif, truth, result.datacube)
     say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, result.params, gif)])))
@@ -235,17 +316,26 @@ def _stream(args, capture):
     from rsocl.scale.stream import default_overlap, reconstruct_stream
 
     loaded = load_capture(args.capture, set_index=0)
-    stream = reconstruct_stream(loaded.snapshots, loaded.rig, window=args.window, overlap=args.overlap, tile=args.tile,
-                                halo=args.halo, scheduler=args.scheduler, retries=_retries(args),
-                                **solver_options(args))
+    stream = reconstruct_stream(
+        loaded.snapshots,
+        loaded.rig,
+        window=args.window,
+        overlap=args.overlap,
+        tile=args.tile,
+        halo=args.halo,
+        scheduler=args.scheduler,
+        retries=_retries(args),
+        **solver_options(args),
+    )
     truth = None if args.no_truth else loaded.truth
     text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
     if truth is not None:
         text = f"{truth_quality(stream.datacube, truth)}, " + text
     print(text, flush=True)
     overlap = default_overlap(args.window) if args.overlap is None else args.overlap
-    params = dict(stream.results[0].params, window=args.window, overlap=overlap,
-                  windows=[list(w) for w in stream.windows])
+    params = dict(
+        stream.results[0].params, window=args.window, overlap=overlap, windows=[list(w) for w in stream.windows]
+    )
     save_reconstruction(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     comparison_gif(gif, truth, stream.datacube)
@@ -259,11 +349,19 @@ def add_plan_tiling_args(p):
 
     g = p.add_argument_group("tiling (proposed when the problem does not fit one device)")
     g.add_argument("--tile", type=int, nargs=2, metavar=("H", "W"), default=None, help="cost this tile instead")
-    g.add_argument("--halo", type=int, default=None,
-                   help=f"halo, pixels (default {DEFAULT_HALO}, or the grid's larger side where that is smaller)")
+    g.add_argument(
+        "--halo",
+        type=int,
+        default=None,
+        help=f"halo, pixels (default {DEFAULT_HALO}, or the grid's larger side where that is smaller)",
+    )
     g.add_argument("--sets", type=int, default=1, help="sets to reconstruct (default 1)")
-    g.add_argument("--memory-mib", type=float, default=None,
-                   help="device memory one task may use, MiB (default: half the device's)")
+    g.add_argument(
+        "--memory-mib",
+        type=float,
+        default=None,
+        help="device memory one task may use, MiB (default: half the device's)",
+    )
 
 
 def check_plan_tiling_args(args, shape) -> None:
@@ -297,7 +395,16 @@ def print_plan_tiling(args, p) -> None:
     if args.tile is None and p.proposed.fits and args.sets == 1 and args.memory_mib is None:
         return
     budget = None if args.memory_mib is None else int(args.memory_mib * 2**20)
-    tiling = propose_tiling(p.proposed.rig, tile=args.tile, halo=args.halo, sets=args.sets,
-                            iterations=args.iterations, regularizer=regularizer_from(args), dtype=args.dtype,
-                            device=args.device, budget_bytes=budget, measure=not args.no_measure)
+    tiling = propose_tiling(
+        p.proposed.rig,
+        tile=args.tile,
+        halo=args.halo,
+        sets=args.sets,
+        iterations=args.iterations,
+        regularizer=regularizer_from(args),
+        dtype=args.dtype,
+        device=args.device,
+        budget_bytes=budget,
+        measure=not args.no_measure,
+    )
     print(format_tiling(tiling))

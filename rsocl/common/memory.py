@@ -68,8 +68,10 @@ def check_host_memory(need, option: str, what: str, hint: str = "choose a smalle
     """
     limit = host_memory_bytes()
     if limit is not None and need > limit:
-        raise ValueError(f"{option}: {what} needs at least {size_text(need)} of host memory, more than this "
-                         f"machine's {size_text(limit)}; {hint}")
+        raise ValueError(
+            f"{option}: {what} needs at least {size_text(need)} of host memory, more than this "
+            f"machine's {size_text(limit)}; {hint}"
+        )
 
 
 def check_npy_size(name: str, path, member: str | None = None) -> None:
@@ -115,11 +117,17 @@ def check_npy_size(name: str, path, member: str | None = None) -> None:
     need = count * dtype.itemsize
     label = f"{name}: {str(path)!r}" + (f"[{member!r}]" if member is not None else "")
     sides = " x ".join(map(str, shape)) or "scalar"
-    check_host_memory(need, label, f"the {sides} {dtype} array its header claims ({count:,} elements)",
-                      "the file is damaged or too large for this machine")
+    check_host_memory(
+        need,
+        label,
+        f"the {sides} {dtype} array its header claims ({count:,} elements)",
+        "the file is damaged or too large for this machine",
+    )
     if need > held:
-        raise ValueError(f"{label}: its header claims a {sides} {dtype} array ({size_text(need)}), the file holds "
-                         f"{size_text(max(held, 0))} of data: it is truncated or damaged")
+        raise ValueError(
+            f"{label}: its header claims a {sides} {dtype} array ({size_text(need)}), the file holds "
+            f"{size_text(max(held, 0))} of data: it is truncated or damaged"
+        )
 
 
 def _npy_header(fh) -> tuple:

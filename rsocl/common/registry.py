@@ -43,14 +43,18 @@ class PluginInfo:
             raise self._broken(wrong) from wrong
         return obj
 
-    def _broken(self, exc) -> "PluginError":
-        return PluginError(f"plugin {self.name!r} ({self.group}) from distribution {self.distribution} "
-                           f"{self.version} failed to load: {type(exc).__name__}: {exc}")
+    def _broken(self, exc) -> PluginError:
+        return PluginError(
+            f"plugin {self.name!r} ({self.group}) from distribution {self.distribution} "
+            f"{self.version} failed to load: {type(exc).__name__}: {exc}"
+        )
 
 
 #: The class every plugin of a group must subclass, as ``module:name`` (imported on first use).
-BASES = {"rsocl.regularizers": "rsocl.solver.regularizer:Regularizer",
-         "rsocl.cameras": "rsocl.hardware.backend:CameraBackend"}
+BASES = {
+    "rsocl.regularizers": "rsocl.solver.regularizer:Regularizer",
+    "rsocl.cameras": "rsocl.hardware.backend:CameraBackend",
+}
 
 
 def _base(group: str) -> type:

@@ -16,8 +16,20 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["positive", "non_negative", "finite", "in_range", "positive_int", "choice", "finite_array", "grid_shape",
-           "reading", "cause", "unknown_keys", "existing_file"]
+__all__ = [
+    "positive",
+    "non_negative",
+    "finite",
+    "in_range",
+    "positive_int",
+    "choice",
+    "finite_array",
+    "grid_shape",
+    "reading",
+    "cause",
+    "unknown_keys",
+    "existing_file",
+]
 
 
 def finite(name: str, value) -> float:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import os
-import warnings
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -23,11 +22,19 @@ from rsocl.device.program import Kernels, build_program, c_type, kernel_source
 if TYPE_CHECKING:
     import pyopencl as cl
 
-__all__ = ["Device", "Kernels", "get_device", "device_for_queue", "list_devices", "c_type", "kernel_source",
-           "NoOpenCLError", "INSTALL_HINT"]
+__all__ = [
+    "Device",
+    "Kernels",
+    "get_device",
+    "device_for_queue",
+    "list_devices",
+    "c_type",
+    "kernel_source",
+    "NoOpenCLError",
+    "INSTALL_HINT",
+]
 
-INSTALL_HINT = ('install an OpenCL runtime, e.g. the CPU one that ships as a wheel: '
-                'pip install "rsocl[pocl]"')
+INSTALL_HINT = 'install an OpenCL runtime, e.g. the CPU one that ships as a wheel: pip install "rsocl[pocl]"'
 
 
 class NoOpenCLError(RuntimeError):
@@ -111,8 +118,7 @@ class Device:
     device: cl.Device
     limits: dict = field(default_factory=dict)
 
-    def limited(self, *, fp64=None, max_work_group_size=None, local_mem_bytes=None,
-                max_work_item_sizes=None) -> "Device":
+    def limited(self, *, fp64=None, max_work_group_size=None, local_mem_bytes=None, max_work_item_sizes=None) -> Device:
         """This device as one with lower limits would present itself: its own queue and program cache.
 
         ``fp64=False`` (or ``"no"``) hides ``cl_khr_fp64`` (``True``, ``"yes"``: as the device has
@@ -121,8 +127,12 @@ class Device:
         the kernels still run on this device.
         """
         limits = dict(self.limits)
-        given = {"fp64": fp64, "max_work_group_size": max_work_group_size, "local_mem_bytes": local_mem_bytes,
-                 "max_work_item_sizes": max_work_item_sizes}
+        given = {
+            "fp64": fp64,
+            "max_work_group_size": max_work_group_size,
+            "local_mem_bytes": local_mem_bytes,
+            "max_work_item_sizes": max_work_item_sizes,
+        }
         for name, value in given.items():
             if value is None:
                 continue
@@ -181,8 +191,9 @@ class Device:
     def max_work_item_sizes(self) -> tuple:
         """Most work items of a work group along each dimension (``CL_DEVICE_MAX_WORK_ITEM_SIZES``)."""
         own = self.limits.get("max_work_item_sizes", ())
-        return tuple(min(int(v), own[i]) if i < len(own) else int(v)
-                     for i, v in enumerate(self.device.max_work_item_sizes))
+        return tuple(
+            min(int(v), own[i]) if i < len(own) else int(v) for i, v in enumerate(self.device.max_work_item_sizes)
+        )
 
     @property
     def local_mem_bytes(self) -> int:
@@ -211,8 +222,10 @@ class Device:
         """Validate ``dtype`` (``"float32"`` or ``"float64"``) for this device."""
         dt = check.real_dtype("dtype", dtype)
         if dt == np.float64 and not self.has_fp64:
-            raise ValueError(f"dtype='float64' needs cl_khr_fp64, which device {self.name!r} does not support; "
-                             "use dtype='float32' or another device")
+            raise ValueError(
+                f"dtype='float64' needs cl_khr_fp64, which device {self.name!r} does not support; "
+                "use dtype='float32' or another device"
+            )
         return dt
 
     def check_fits(self, what: str, nbytes: int, total_bytes: int | None = None, dtype=None, also: str = ""):
@@ -227,11 +240,15 @@ class Device:
             hint += ", use float32"
         hint += ", or split it into tiles (rsocl plan proposes them; rsocl reconstruct --tile H W)"
         if nbytes > self.max_alloc_bytes:
-            raise ValueError(f"{what} needs a buffer of {nbytes / 2**20:.1f} MiB, above the device's "
-                             f"largest allocation of {self.max_alloc_bytes / 2**20:.1f} MiB ({self.name}); {hint}")
+            raise ValueError(
+                f"{what} needs a buffer of {nbytes / 2**20:.1f} MiB, above the device's "
+                f"largest allocation of {self.max_alloc_bytes / 2**20:.1f} MiB ({self.name}); {hint}"
+            )
         if total_bytes is not None and total_bytes > self.global_mem_bytes:
-            raise ValueError(f"{what} needs {total_bytes / 2**20:.1f} MiB of device memory in all, above the "
-                             f"device's {self.global_mem_bytes / 2**20:.1f} MiB ({self.name}); {hint}")
+            raise ValueError(
+                f"{what} needs {total_bytes / 2**20:.1f} MiB of device memory in all, above the "
+                f"device's {self.global_mem_bytes / 2**20:.1f} MiB ({self.name}); {hint}"
+            )
 
     def program(self, files, **defines):
         """Build (once per device and definitions) the program made of ``common.cl`` + ``files``."""
@@ -256,7 +273,7 @@ def _yes_or_no(name: str, value) -> bool:
     raise ValueError(f"{name} must be True or False (or 'yes' or 'no'), got {value!r}")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _device_for(spec: str | None) -> Device:
     cl = _cl()
     if spec is None and os.environ.get("PYOPENCL_CTX") and not os.environ.get("RSOCL_DEVICE"):

@@ -37,7 +37,7 @@ class Kernel:
 
     def set_arg(self, index: int, value):
         """Set argument ``index`` (an immutable by-value one only if it changed)."""
-        if not isinstance(value, _IMMUTABLE):       # buffers, local memory, None, arrays: always
+        if not isinstance(value, _IMMUTABLE):  # buffers, local memory, None, arrays: always
             self.kernel.set_arg(index, value)
             self._values.pop(index, None)
             return
@@ -53,14 +53,16 @@ class Kernel:
 
     def __call__(self, queue, global_size, local_size, *args, global_offset=None, wait_for=None):
         self.set_args(*args)
-        return self._cl.enqueue_nd_range_kernel(queue, self.kernel, global_size, local_size,
-                                                global_work_offset=global_offset, wait_for=wait_for)
+        return self._cl.enqueue_nd_range_kernel(
+            queue, self.kernel, global_size, local_size, global_work_offset=global_offset, wait_for=wait_for
+        )
 
     def enqueue(self, queue, global_size, local_size, global_offset=None):
         """Enqueue the kernel with the arguments as they were last set (no argument is set): for a
         kernel launched many times in a row with the same arguments, set once with :meth:`set_args`."""
-        return self._cl.enqueue_nd_range_kernel(queue, self.kernel, global_size, local_size,
-                                                global_work_offset=global_offset)
+        return self._cl.enqueue_nd_range_kernel(
+            queue, self.kernel, global_size, local_size, global_work_offset=global_offset
+        )
 
     def __getattr__(self, name):
         if name.startswith("_"):

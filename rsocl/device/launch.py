@@ -8,8 +8,15 @@ their bounds.
 
 from __future__ import annotations
 
-__all__ = ["voxel_grid", "exact_launches", "element_launches", "batch_launches", "voxel_launches", "flat_tile_grid",
-           "block_grid"]
+__all__ = [
+    "voxel_grid",
+    "exact_launches",
+    "element_launches",
+    "batch_launches",
+    "voxel_launches",
+    "flat_tile_grid",
+    "block_grid",
+]
 
 
 def voxel_grid(T: int, m: int, n: int):
@@ -100,6 +107,6 @@ def block_grid(m: int, n: int, width: int, rows: int, channels: int = 1, group: 
     max_x, max_y = (group, group) if max_items is None else (int(max_items[0]), int(max_items[1]))
     tiles, block_rows = -(-n // width), -(-m // rows)
     lx = min(group, tiles, max_x)
-    groups_y = -(-block_rows // max(1, min(group // lx, max_y)))    # as few groups as fit, of balanced size
+    groups_y = -(-block_rows // max(1, min(group // lx, max_y)))  # as few groups as fit, of balanced size
     ly = -(-block_rows // groups_y)
     return ((-(-tiles // lx) * lx, groups_y * ly, int(channels)), (lx, ly, 1))

@@ -31,8 +31,10 @@ def kernel_source(name: str) -> str:
 
 #: A build-log line that says nothing about the program: NVIDIA's OpenCL (drivers from about 550 on)
 #: writes it for every kernel of every program it compiles (``docs/implementation_notes.md``).
-_DRIVER_NOISE = re.compile(r"Warning: Function \w+ is a kernel, so overriding noinline attribute\. "
-                           r"The function may be inlined when called\.")
+_DRIVER_NOISE = re.compile(
+    r"Warning: Function \w+ is a kernel, so overriding noinline attribute\. "
+    r"The function may be inlined when called\."
+)
 
 
 def meaningful_log(log: str) -> str:
@@ -51,8 +53,8 @@ def build_program(context, files, defines) -> Kernels:
     lines += [f"#define {k} {v}" for k, v in defines]
     lines.append(f"#define REAL_IS_DOUBLE {int(dict(defines).get('REAL') == 'double')}")
     source = "\n".join(lines) + "\n" + "\n".join(kernel_source(f) for f in ("common.cl",) + tuple(files))
-    for attempt in (1, 2):      # once more on a failed clBuildProgram: processes filling PoCL's kernel cache
-        program = cl.Program(context, source)     # together can read another's half-written entry
+    for attempt in (1, 2):  # once more on a failed clBuildProgram: processes filling PoCL's kernel cache
+        program = cl.Program(context, source)  # together can read another's half-written entry
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:

@@ -60,12 +60,20 @@ def sum_sq_diff_async(a, b=None, weights=None, sets=None) -> PendingSum:
     dev = device_for_queue(a.queue)
     acc = dev.acc_dtype
     prog = dev.program(["reduce.cl"], REAL=c_type(a.dtype), ACC=c_type(acc))
-    local = 1 << (dev.group_limit(prog.sum_sq_diff, cap=LOCAL_SIZE).bit_length() - 1)    # a power of two
+    local = 1 << (dev.group_limit(prog.sum_sq_diff, cap=LOCAL_SIZE).bit_length() - 1)  # a power of two
     groups = max(1, min(max(1, MAX_GROUPS // count), -(-per_set // local)))
     partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, count * groups * acc.itemsize)
-    prog.sum_sq_diff(a.queue, (groups * local, count), (local, 1), a.data, None if b is None else b.data,
-                     None if weights is None else weights.data, partials,
-                     cl.LocalMemory(local * acc.itemsize), np.int32(per_set))
+    prog.sum_sq_diff(
+        a.queue,
+        (groups * local, count),
+        (local, 1),
+        a.data,
+        None if b is None else b.data,
+        None if weights is None else weights.data,
+        partials,
+        cl.LocalMemory(local * acc.itemsize),
+        np.int32(per_set),
+    )
     host = np.empty(count * groups, acc)
     event = cl.enqueue_copy(a.queue, host, partials, is_blocking=False)
     return PendingSum(host, event, sets)

@@ -25,8 +25,18 @@ import socket
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "output_path", "output_folder", "default_mode", "fsync_file", "fsync_directory",
-           "OutputError", "owned_prefix", "remove_stale", "process_running"]
+__all__ = [
+    "atomic_path",
+    "output_path",
+    "output_folder",
+    "default_mode",
+    "fsync_file",
+    "fsync_directory",
+    "OutputError",
+    "owned_prefix",
+    "remove_stale",
+    "process_running",
+]
 
 #: The rest of an :func:`atomic_path` temporary's name after its owner tag: :func:`tempfile.mkstemp`'s
 #: eight random characters and the suffix.
@@ -39,7 +49,7 @@ class OutputError(OSError):
 
     def __init__(self, path, cause: OSError, existed: bool):
         kept = "the existing file is unchanged" if existed else "no file was made"
-        if cause.errno:                           # HDF5's own words list buffers and offsets
+        if cause.errno:  # HDF5's own words list buffers and offsets
             why = f"{os.strerror(cause.errno)} (errno {cause.errno})"
         else:
             why = " ".join((cause.strerror or str(cause) or type(cause).__name__).split())
@@ -98,7 +108,7 @@ def remove_stale(directory, prefix: str, tail: str) -> list:
     for entry in entries:
         if not entry.name.startswith(start):
             continue
-        found = pattern.fullmatch(entry.name[len(start):])
+        found = pattern.fullmatch(entry.name[len(start) :])
         if not found or int(found.group(1)) == os.getpid() or process_running(int(found.group(1))):
             continue
         if entry.is_dir() and not entry.is_symlink():
@@ -169,7 +179,7 @@ def output_folder(path, name: str = "path") -> Path:
     if path.exists() and not path.is_dir():
         raise ValueError(f"{name} must name a folder (several files are written into it), {str(path)!r} is a file")
     existing = path
-    while not existing.exists():                 # the folder (and its parents) are made by the writer
+    while not existing.exists():  # the folder (and its parents) are made by the writer
         existing = existing.parent
     if not existing.is_dir():
         raise ValueError(f"{name}: {str(existing)!r} is a file, so the folder {str(path)!r} cannot be made")
@@ -262,4 +272,3 @@ def atomic_path(path):
             raise OutputError(path, exc, existed) from exc
         raise
     fsync_directory(directory)
-

@@ -28,12 +28,31 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike, PathLike
 from rsocl.files.atomic import atomic_path
-from rsocl.files.hdf5_header import FORMAT_VERSION, dumps_json, json_attr, open_checked, read_array, read_rig, \
-    new_file, real_dataset, write_header
+from rsocl.files.hdf5_header import (
+    FORMAT_VERSION,
+    dumps_json,
+    json_attr,
+    new_file,
+    open_checked,
+    read_array,
+    read_rig,
+    real_dataset,
+    write_header,
+)
 from rsocl.model.rig import Rig
 
-__all__ = ["Capture", "Reconstruction", "save_capture", "load_capture", "load_capture_rig", "load_snapshot_sets",
-           "snapshot_set_count", "save_reconstruction", "load_reconstruction", "FORMAT_VERSION"]
+__all__ = [
+    "Capture",
+    "Reconstruction",
+    "save_capture",
+    "load_capture",
+    "load_capture_rig",
+    "load_snapshot_sets",
+    "snapshot_set_count",
+    "save_reconstruction",
+    "load_reconstruction",
+    "FORMAT_VERSION",
+]
 
 
 @dataclass(frozen=True)
@@ -104,8 +123,9 @@ def _optional(h5, name, source, tail=None):
 
 
 # ---------------------------------------------------------------------- capture
-def save_capture(path: PathLike, snapshots: ArrayLike, rig: Rig, *, truth: ArrayLike | None = None,
-                 attrs: dict | None = None) -> Path:
+def save_capture(
+    path: PathLike, snapshots: ArrayLike, rig: Rig, *, truth: ArrayLike | None = None, attrs: dict | None = None
+) -> Path:
     """Write a capture (snapshots and the rig that took them) to one HDF5 file, atomically.
 
     Parameters
@@ -149,8 +169,9 @@ def save_capture(path: PathLike, snapshots: ArrayLike, rig: Rig, *, truth: Array
     """
     rig = _check_rig(rig)
     m, n = rig.shape
-    snapshots = _cube("snapshots", snapshots, (rig.n_channels, m, n),
-                      "[K = rig.n_channels, m, n] = rig's channels and shape")
+    snapshots = _cube(
+        "snapshots", snapshots, (rig.n_channels, m, n), "[K = rig.n_channels, m, n] = rig's channels and shape"
+    )
     if truth is not None:
         truth = _cube("truth", truth, (rig.T, m, n), "[T = rig.T, m, n]")
     meta = dumps_json("attrs", attrs)
@@ -211,18 +232,20 @@ def load_capture(path: PathLike, set_index: int | None = None) -> Capture:
         rig = read_rig(h5, source)
         count = int(h5["snapshot_sets"].shape[0]) if "snapshot_sets" in h5 else 1
         if set_index is not None and set_index >= count:
-            raise ValueError(f"set_index must be in [0, {count - 1}] ({source} holds {count} set(s)), "
-                             f"got {set_index}")
+            raise ValueError(f"set_index must be in [0, {count - 1}] ({source} holds {count} set(s)), got {set_index}")
         if set_index is None and count > 1:
             import warnings
 
-            warnings.warn(f"{source} holds {count} sets; load_capture reads set 0 (set_index=0 says so, "
-                          f"set_index=k reads set k, load_snapshot_sets reads every set)", stacklevel=2)
+            warnings.warn(
+                f"{source} holds {count} sets; load_capture reads set 0 (set_index=0 says so, "
+                f"set_index=k reads set k, load_snapshot_sets reads every set)",
+                stacklevel=2,
+            )
         if set_index:
             snapshots = real_dataset(h5, "snapshot_sets", source, (rig.n_channels,) + rig.shape)[set_index]
             if not np.all(np.isfinite(snapshots)):
                 raise ValueError(f"{source}: set {set_index} of dataset 'snapshot_sets' holds NaN or inf values")
-            truth = None                                  # the stored truth is set 0's datacube
+            truth = None  # the stored truth is set 0's datacube
         else:
             snapshots = read_array(h5, "snapshots", source, (rig.n_channels,) + rig.shape)
             truth = _optional(h5, "truth", source, rig.shape)
@@ -267,8 +290,15 @@ def load_snapshot_sets(path) -> np.ndarray | None:
 
 
 # ---------------------------------------------------------------------- reconstruction
-def save_reconstruction(path: PathLike, datacube: ArrayLike, rig: Rig, *, params: dict | None = None,
-                        history: dict | None = None, truth: ArrayLike | None = None) -> Path:
+def save_reconstruction(
+    path: PathLike,
+    datacube: ArrayLike,
+    rig: Rig,
+    *,
+    params: dict | None = None,
+    history: dict | None = None,
+    truth: ArrayLike | None = None,
+) -> Path:
     """Write a reconstruction (datacube, rig, solver parameters, traces) to one HDF5 file, atomically.
 
     Parameters
@@ -316,8 +346,10 @@ def save_reconstruction(path: PathLike, datacube: ArrayLike, rig: Rig, *, params
     rig = _check_rig(rig)
     datacube = _cube("datacube", datacube, None, "[T, m, n]")
     if datacube.shape[1:] != rig.shape or not 1 <= datacube.shape[0] <= rig.T:
-        raise ValueError(f"datacube must have shape [T, m, n] with (m, n) = rig.shape = {rig.shape} and "
-                         f"1 <= T <= rig.T = {rig.T}, got {datacube.shape}")
+        raise ValueError(
+            f"datacube must have shape [T, m, n] with (m, n) = rig.shape = {rig.shape} and "
+            f"1 <= T <= rig.T = {rig.T}, got {datacube.shape}"
+        )
     if truth is not None:
         truth = _cube("truth", truth, datacube.shape, "(the datacube's shape)")
     params_json = dumps_json("params", params)
@@ -330,8 +362,9 @@ def save_reconstruction(path: PathLike, datacube: ArrayLike, rig: Rig, *, params
                 raise ValueError(f"history names must be non-empty str without '/', got {name!r}")
             trace = np.asarray(trace)
             if trace.ndim != 1 or trace.dtype.kind not in "biuf":
-                raise ValueError(f"history[{name!r}] must be a 1-D real array, got shape {trace.shape} "
-                                 f"dtype {trace.dtype}")
+                raise ValueError(
+                    f"history[{name!r}] must be a 1-D real array, got shape {trace.shape} dtype {trace.dtype}"
+                )
             traces[name] = trace
     path = Path(os.fspath(path))
     with atomic_path(path) as tmp:
@@ -378,5 +411,10 @@ def load_reconstruction(path: PathLike) -> Reconstruction:
                 raise ValueError(f"{source}: 'history' must be a group of datasets")
             for name in h5["history"]:
                 history[name] = read_array(h5, f"history/{name}", source)
-        return Reconstruction(datacube=datacube, rig=rig, params=json_attr(h5, "params", source),
-                              history=history, truth=_optional(h5, "truth", source, rig.shape))
+        return Reconstruction(
+            datacube=datacube,
+            rig=rig,
+            params=json_attr(h5, "params", source),
+            history=history,
+            truth=_optional(h5, "truth", source, rig.shape),
+        )

@@ -31,8 +31,21 @@ from rsocl.common import validation as check
 from rsocl.common.memory import check_host_memory
 from rsocl.model.rig import Rig
 
-__all__ = ["FORMAT_VERSION", "json_default", "dumps_json", "write_rig", "read_rig", "str_attr", "write_header",
-           "open_checked", "json_attr", "read_array", "real_dataset", "new_file", "close_error"]
+__all__ = [
+    "FORMAT_VERSION",
+    "json_default",
+    "dumps_json",
+    "write_rig",
+    "read_rig",
+    "str_attr",
+    "write_header",
+    "open_checked",
+    "json_attr",
+    "read_array",
+    "real_dataset",
+    "new_file",
+    "close_error",
+]
 
 #: Version written to the ``format_version`` attribute; files with a larger
 #: version are refused.
@@ -65,8 +78,9 @@ def dumps_json(name: str, data) -> str:
     try:
         return json.dumps(data, default=json_default)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be JSON-serialisable (numbers, str, bool, None, lists, dicts, "
-                         f"NumPy scalars/arrays): {exc}") from None
+        raise ValueError(
+            f"{name} must be JSON-serialisable (numbers, str, bool, None, lists, dicts, NumPy scalars/arrays): {exc}"
+        ) from None
 
 
 # ---------------------------------------------------------------------- rig
@@ -100,8 +114,12 @@ def read_rig(h5, source: str) -> Rig:
             ref = camera.get("row_map")
             if isinstance(ref, dict):
                 stored = h5[ref["dataset"]]
-                check_host_memory(8 * stored.size, f"row map {ref['dataset']!r}", f"its {stored.shape} float64 "
-                                  "array", "the stored rig is damaged or too large for this machine")
+                check_host_memory(
+                    8 * stored.size,
+                    f"row map {ref['dataset']!r}",
+                    f"its {stored.shape} float64 array",
+                    "the stored rig is damaged or too large for this machine",
+                )
                 camera["row_map"] = np.asarray(stored[()], dtype=np.float64)
         rig = Rig.from_dict(data)
     except (KeyError, TypeError, AttributeError, json.JSONDecodeError) as exc:
@@ -137,9 +155,10 @@ def real_dataset(h5, name: str, source: str, tail=None):
         raise ValueError(f"{source}: {name!r} must be a dataset, it is a {type(item).__name__}")
     if item.dtype.kind not in "biuf":
         raise ValueError(f"{source}: dataset {name!r} must hold real numbers, it holds {item.dtype}")
-    if tail is not None and tuple(item.shape[-len(tail):]) != tuple(tail):
-        raise ValueError(f"{source}: dataset {name!r} has shape {item.shape}, the rig needs (..., "
-                         f"{', '.join(map(str, tail))})")
+    if tail is not None and tuple(item.shape[-len(tail) :]) != tuple(tail):
+        raise ValueError(
+            f"{source}: dataset {name!r} has shape {item.shape}, the rig needs (..., {', '.join(map(str, tail))})"
+        )
     return item
 
 
@@ -171,8 +190,10 @@ def open_checked(path, kind: str, name: str = "path"):
         h5 = h5py.File(path, "r")
     except OSError as exc:
         if "unable to lock file" in str(exc):
-            raise ValueError(f"{name}: {str(path)!r} is being written by another process (it holds the file's "
-                             "lock); read it once that process has finished") from None
+            raise ValueError(
+                f"{name}: {str(path)!r} is being written by another process (it holds the file's "
+                "lock); read it once that process has finished"
+            ) from None
         raise ValueError(f"{name}: {str(path)!r} is not a readable HDF5 file ({check.cause(exc)})") from None
     try:
         found = h5.attrs.get("rsocl_file")
@@ -183,8 +204,9 @@ def open_checked(path, kind: str, name: str = "path"):
             raise ValueError(f"{name}: {str(path)!r} is {what}, expected an rsocl {kind!r} file")
         version = h5.attrs.get("format_version")
         if version is None or not isinstance(version, numbers.Integral) or not 1 <= int(version) <= FORMAT_VERSION:
-            raise ValueError(f"{name}: {str(path)!r} has format_version {version!r}; this rsocl reads 1.."
-                             f"{FORMAT_VERSION}")
+            raise ValueError(
+                f"{name}: {str(path)!r} has format_version {version!r}; this rsocl reads 1..{FORMAT_VERSION}"
+            )
     except BaseException:
         h5.close()
         raise
@@ -223,5 +245,5 @@ def new_file(path):
         raise
     try:
         h5.close()
-    except Exception as exc:    # h5py's RuntimeError "Can't decrement id ref count (... errno = 28 ...)"
+    except Exception as exc:  # h5py's RuntimeError "Can't decrement id ref count (... errno = 28 ...)"
         raise close_error(exc) from exc

@@ -65,8 +65,7 @@ else:  # pragma: no cover
 __all__ = ["RigFile", "load_rigfile", "save_rigfile"]
 
 #: Model keys the rig file passes on to ``simulated`` cameras (see :meth:`RigFile.backends`).
-SIMULATED_MODEL_KEYS = ("shape", "dt", "mask", "t_e", "t_r", "t_a", "gain", "angle", "row_map", "scene_frames",
-                        "index")
+SIMULATED_MODEL_KEYS = ("shape", "dt", "mask", "t_e", "t_r", "t_a", "gain", "angle", "row_map", "scene_frames", "index")
 
 
 # ---------------------------------------------------------------------- RigFile
@@ -137,9 +136,17 @@ class RigFile:
         for i, cam in enumerate(self.cameras):
             config = dict(cam["config"])
             if cam["backend"] == "simulated":
-                model = {"shape": list(self.shape), "dt": rig.dt, "mask": rig.mask, "t_e": cam["t_e"],
-                         "t_r": cam["t_r"], "t_a": cam.get("t_a", 0.0), "gain": cam.get("gain", 1.0),
-                         "scene_frames": rig.T, "index": i}
+                model = {
+                    "shape": list(self.shape),
+                    "dt": rig.dt,
+                    "mask": rig.mask,
+                    "t_e": cam["t_e"],
+                    "t_r": cam["t_r"],
+                    "t_a": cam.get("t_a", 0.0),
+                    "gain": cam.get("gain", 1.0),
+                    "scene_frames": rig.T,
+                    "index": i,
+                }
                 if "angle" not in config and "row_map" not in config:
                     if rig.cameras[i].row_map is not None:
                         model["row_map"] = rig.row_map(i)
@@ -151,7 +158,7 @@ class RigFile:
         return out
 
     @classmethod
-    def from_rig(cls, rig: Rig, backend="simulated", configs=None) -> "RigFile":
+    def from_rig(cls, rig: Rig, backend="simulated", configs=None) -> RigFile:
         """A rig file for ``rig`` with every camera on ``backend`` (``configs``: one config dict per camera)."""
         if configs is None:
             configs = [{} for _ in rig.cameras]
@@ -159,8 +166,14 @@ class RigFile:
             raise ValueError(f"configs must hold one dict per camera ({rig.C}), got {len(configs)}")
         cameras = []
         for cam, config in zip(rig.cameras, configs):
-            d = {"backend": backend, "t_e": cam.t_e, "t_r": cam.t_r, "t_a": cam.t_a, "gain": cam.gain,
-                 "config": dict(config or {})}
+            d = {
+                "backend": backend,
+                "t_e": cam.t_e,
+                "t_r": cam.t_r,
+                "t_a": cam.t_a,
+                "gain": cam.gain,
+                "config": dict(config or {}),
+            }
             if cam.frames > 1:
                 d.update(frames=cam.frames, t_d=cam.t_d)
             if cam.row_map is not None:
@@ -199,9 +212,10 @@ def load_rigfile(path, check_shape=None) -> RigFile:
             data = tomllib.load(handle)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
-    except UnicodeDecodeError as exc:                    # a binary file (an .h5, a .npy, an image)
-        raise ValueError(f"{path}: not a TOML rig file (byte {exc.object[exc.start]:#04x} at offset {exc.start} "
-                         "is not UTF-8 text)") from None
+    except UnicodeDecodeError as exc:  # a binary file (an .h5, a .npy, an image)
+        raise ValueError(
+            f"{path}: not a TOML rig file (byte {exc.object[exc.start]:#04x} at offset {exc.start} is not UTF-8 text)"
+        ) from None
     try:
         unknown = sorted(set(data) - {"rig", "camera"})
         if unknown:

@@ -18,22 +18,58 @@ from rsocl.common.memory import check_npy_size
 from rsocl.model.rig import Camera
 from rsocl.model.row_map import row_map_from_homography
 
-__all__ = ["RIG_KEYS", "CAMERA_KEYS", "MISPLACED_CONFIG_KEYS", "check_rig_table", "check_camera", "resolve_path",
-           "to_camera"]
+__all__ = [
+    "RIG_KEYS",
+    "CAMERA_KEYS",
+    "MISPLACED_CONFIG_KEYS",
+    "check_rig_table",
+    "check_camera",
+    "resolve_path",
+    "to_camera",
+]
 
 #: Keys of the ``[rig]`` table.
 RIG_KEYS = ("shape", "dt", "mask")
 #: Keys of a ``[[camera]]`` table, in the order a rig file is written.
-CAMERA_KEYS = ("backend", "name", "address", "angle", "row_map_file", "homography", "t_e", "t_r", "t_a", "t_d",
-               "frames", "gain", "roi", "pixel_format", "config")
+CAMERA_KEYS = (
+    "backend",
+    "name",
+    "address",
+    "angle",
+    "row_map_file",
+    "homography",
+    "t_e",
+    "t_r",
+    "t_a",
+    "t_d",
+    "frames",
+    "gain",
+    "roi",
+    "pixel_format",
+    "config",
+)
 _GEOMETRY = ("angle", "row_map_file", "homography", "row_map")
 #: Keys refused in a ``[camera.config]`` table, with the table they belong in: the model reads them
 #: from ``[rig]`` and ``[[camera]]`` only (a simulated camera would render with a config ``angle``
 #: while the capture records the camera's own).
 MISPLACED_CONFIG_KEYS = {
     **{key: "[rig]" for key in RIG_KEYS},
-    **{key: "[[camera]]" for key in ("angle", "row_map_file", "row_map", "homography", "t_e", "t_r", "t_a", "t_d",
-                                     "frames", "gain", "roi")},
+    **{
+        key: "[[camera]]"
+        for key in (
+            "angle",
+            "row_map_file",
+            "row_map",
+            "homography",
+            "t_e",
+            "t_r",
+            "t_a",
+            "t_d",
+            "frames",
+            "gain",
+            "roi",
+        )
+    },
 }
 #: Keys the rig file fills in for a ``simulated`` camera from the rig itself; refused in its config.
 RIG_FILLED_KEYS = ("scene_frames", "index")
@@ -79,18 +115,21 @@ def check_camera(i, cam, shape, base_dir):
     unknown = sorted(set(cam) - set(CAMERA_KEYS) - {"row_map"})
     for key in unknown:
         if key in RIG_KEYS:
-            raise ValueError(f"{_where(i, key)} belongs in the [rig] table (rig.{key} = ...), not in [[camera]]; "
-                             "it is the same for every camera")
+            raise ValueError(
+                f"{_where(i, key)} belongs in the [rig] table (rig.{key} = ...), not in [[camera]]; "
+                "it is the same for every camera"
+            )
     if unknown:
         close = {key: difflib.get_close_matches(str(key), CAMERA_KEYS, n=1) for key in unknown}
         hints = "".join(f" ({key!r}: did you mean {close[key][0]!r}?)" for key in unknown if close[key])
-        raise ValueError(f"camera[{i}] has unknown key(s) {unknown}{hints}; known: {list(CAMERA_KEYS)}; the "
-                         "backend's own settings go in its [camera.config] table")
+        raise ValueError(
+            f"camera[{i}] has unknown key(s) {unknown}{hints}; known: {list(CAMERA_KEYS)}; the "
+            "backend's own settings go in its [camera.config] table"
+        )
     out = {}
     backend = cam.get("backend")
     if not isinstance(backend, str) or not backend:
-        raise ValueError(f"{_where(i, 'backend')} (camera plugin name, e.g. 'simulated') is required, got "
-                         f"{backend!r}")
+        raise ValueError(f"{_where(i, 'backend')} (camera plugin name, e.g. 'simulated') is required, got {backend!r}")
     out["backend"] = backend
     if cam.get("name") is not None:
         if not isinstance(cam["name"], str):
@@ -134,8 +173,13 @@ def check_camera(i, cam, shape, base_dir):
     elif "row_map" in geometry:  # built in Python, written as a .npy file by save_rigfile
         out["row_map"] = _check_row_map(i, "row_map", cam["row_map"], shape)
 
-    for key, required, default in (("t_e", True, None), ("t_r", True, None), ("t_a", False, 0.0),
-                                   ("gain", False, 1.0), ("t_d", False, None)):
+    for key, required, default in (
+        ("t_e", True, None),
+        ("t_r", True, None),
+        ("t_a", False, 0.0),
+        ("gain", False, 1.0),
+        ("t_d", False, None),
+    ):
         value = cam.get(key)
         if value is None:
             if required:
@@ -167,11 +211,15 @@ def _check_config_keys(i, config, backend):
         table = MISPLACED_CONFIG_KEYS.get(key)
         if table is not None:
             where = f"rig.{key}" if table == "[rig]" else _where(i, key)
-            raise ValueError(f"{_where(i, 'config')}.{key} belongs in the {table} table ({where} = ...), not in "
-                             "[camera.config]; move it there")
+            raise ValueError(
+                f"{_where(i, 'config')}.{key} belongs in the {table} table ({where} = ...), not in "
+                "[camera.config]; move it there"
+            )
         if backend == "simulated" and key in RIG_FILLED_KEYS:
-            raise ValueError(f"{_where(i, 'config')}.{key} is set from the rig (its sub-frames T and the camera's "
-                             "order) for every simulated camera; leave it out")
+            raise ValueError(
+                f"{_where(i, 'config')}.{key} is set from the rig (its sub-frames T and the camera's "
+                "order) for every simulated camera; leave it out"
+            )
 
 
 def resolve_path(name, base_dir) -> Path:
@@ -187,13 +235,16 @@ def _inside(i, name, base_dir) -> Path:
     if base_dir is None:
         return path
     if path.is_absolute():
-        raise ValueError(f"{_where(i, 'row_map_file')} must be a path relative to the rig file's folder, "
-                         f"got the absolute path {str(name)!r}")
+        raise ValueError(
+            f"{_where(i, 'row_map_file')} must be a path relative to the rig file's folder, "
+            f"got the absolute path {str(name)!r}"
+        )
     base = Path(base_dir).resolve()
     full = (base / path).resolve()
     if full != base and base not in full.parents:
-        raise ValueError(f"{_where(i, 'row_map_file')} must name a file in the rig file's folder or below it, "
-                         f"got {str(name)!r}")
+        raise ValueError(
+            f"{_where(i, 'row_map_file')} must name a file in the rig file's folder or below it, got {str(name)!r}"
+        )
     return Path(base_dir) / path
 
 
@@ -212,7 +263,7 @@ def _load_row_map(i, path, shape):
     check_npy_size(_where(i, "row_map_file"), path)
     try:
         array = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError) as exc:                # EOFError: an empty file
+    except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
         raise ValueError(f"{_where(i, 'row_map_file')}: {str(path)!r} is not a readable .npy array ({exc})") from None
     return _check_row_map(i, "row_map_file", array, shape)
 
@@ -223,5 +274,13 @@ def to_camera(cam, shape=None) -> Camera:
     if cam.get("homography") is not None and shape is not None:
         row_map = row_map_from_homography(cam["homography"], shape)
     angle = cam.get("angle", 0.0)
-    return Camera(angle, t_e=cam["t_e"], t_r=cam["t_r"], t_a=cam.get("t_a", 0.0), t_d=cam.get("t_d"),
-                  gain=cam.get("gain", 1.0), frames=cam.get("frames", 1), row_map=row_map)
+    return Camera(
+        angle,
+        t_e=cam["t_e"],
+        t_r=cam["t_r"],
+        t_a=cam.get("t_a", 0.0),
+        t_d=cam.get("t_d"),
+        gain=cam.get("gain", 1.0),
+        frames=cam.get("frames", 1),
+        row_map=row_map,
+    )

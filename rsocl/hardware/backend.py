@@ -142,8 +142,9 @@ class CameraBackend:
         """Select the pixel format (one of :attr:`pixel_formats`)."""
         self._need_open()
         if pixel_format not in self.pixel_formats:
-            raise ValueError(f"{self.name}: pixel_format must be one of {list(self.pixel_formats)}, "
-                             f"got {pixel_format!r}")
+            raise ValueError(
+                f"{self.name}: pixel_format must be one of {list(self.pixel_formats)}, got {pixel_format!r}"
+            )
         self._wrap(self._set_pixel_format, pixel_format)
 
     def set_trigger(self, mode: str = "software", source: str | None = None):

@@ -43,7 +43,6 @@ must then equal the rig's). Integer frames are converted to model units as
 from __future__ import annotations
 
 import os
-
 from pathlib import Path
 
 import numpy as np
@@ -91,7 +90,7 @@ def _register(rigfile: RigFile, rig, index: int, frame) -> np.ndarray:
         levels = 2 ** int(frame.bit_depth) - 1
         full_scale = frame.meta.get("full_scale")
         if full_scale is None:
-            full_scale = rig.cameras[index].t_e / rig.dt        # the exposure the device applied
+            full_scale = rig.cameras[index].t_e / rig.dt  # the exposure the device applied
         value = image.astype(np.float64) * (float(full_scale) / levels)
     else:
         value = image.astype(np.float64)
@@ -102,8 +101,10 @@ def _register(rigfile: RigFile, rig, index: int, frame) -> np.ndarray:
         origin = tuple(cam["roi"][:2]) if cam.get("roi") else (0, 0)
         value = warp_to_reference(value, H, rig.shape, frame_origin=origin, order=1, cval=0.0)
     if value.shape != rig.shape:
-        raise ValueError(f"camera {index}: frame shape {value.shape} is not the rig's shape {rig.shape} "
-                         "and the rig file gives no homography to register it")
+        raise ValueError(
+            f"camera {index}: frame shape {value.shape} is not the rig's shape {rig.shape} "
+            "and the rig file gives no homography to register it"
+        )
     if not np.all(np.isfinite(value)):
         raise ValueError(f"camera {index}: frame has NaN or inf values")
     return value
@@ -158,8 +159,11 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         if cam.frames != 1:
             raise ValueError(f"camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger")
     folder = Path(rigfile.path).parent if rigfile.path is not None else Path(".")
-    reads = [("rig file", rigfile.path)] + [("row_map_file", folder / cam["row_map_file"]) for cam in rigfile.cameras
-                                           if isinstance(cam.get("row_map_file"), (str, os.PathLike))]
+    reads = [("rig file", rigfile.path)] + [
+        ("row_map_file", folder / cam["row_map_file"])
+        for cam in rigfile.cameras
+        if isinstance(cam.get("row_map_file"), (str, os.PathLike))
+    ]
     out = output_path(out_path, "out", inputs=reads)
     partial = output_path(out.with_name(out.name + PARTIAL_SUFFIX), "out", inputs=reads)
     check_partial(partial)
@@ -189,7 +193,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         status = "complete" if failure is None else ("interrupted" if interrupted is not None else "failed")
         try:
             writer.finish(status, failure)
-        except Exception as exc:      # the file takes no more (disk full): whether it is readable decides below
+        except Exception as exc:  # the file takes no more (disk full): whether it is readable decides below
             failure = failure or dict(where, phase="write", type=type(exc).__name__, error=_one_line(exc))
     finally:
         closed = writer.close()
@@ -199,8 +203,12 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         error = CaptureFailed(
             f"the capture file could not be completed ({why}HDF5 could not close it): {str(partial)!r} is kept as "
             f"written, {writer.sets_complete} set(s) complete before the failure; {str(out)!r} {kept}",
-            path=partial, camera=None if failure is None else failure["camera"],
-            set_index=None if failure is None else failure["set"], phase="write", sets_complete=writer.sets_complete)
+            path=partial,
+            camera=None if failure is None else failure["camera"],
+            set_index=None if failure is None else failure["set"],
+            phase="write",
+            sets_complete=writer.sets_complete,
+        )
         if interrupted is not None:
             raise interrupted from error
         raise error
@@ -213,8 +221,12 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         raise CaptureFailed(
             f"{who}{failure['phase']} failed {when}: {failure['type']}: {failure['error']} "
             f"({writer.sets_complete} complete set(s) and the failure are in {out})",
-            path=out, camera=failure["camera"], set_index=failure["set"], phase=failure["phase"],
-            sets_complete=writer.sets_complete)
+            path=out,
+            camera=failure["camera"],
+            set_index=failure["set"],
+            phase=failure["phase"],
+            sets_complete=writer.sets_complete,
+        )
     return out
 
 
@@ -261,7 +273,7 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
         cam.start()
     with tqdm(total=sets, unit="set", desc="capture", disable=not progress) as bar:
         for j in range(sets):
-            for i, cam in enumerate(cameras):   # fire all triggers back to back
+            for i, cam in enumerate(cameras):  # fire all triggers back to back
                 at(i, j, "trigger")
                 cam.trigger()
             for i, cam in enumerate(cameras):
@@ -274,5 +286,3 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
             at(None, j, "write")
             writer.complete_set(j, cameras)
             bar.update(1)
-
-

@@ -73,20 +73,26 @@ def check_partial(partial: Path, name: str = "out") -> None:
 
     try:
         with h5py.File(partial, "r") as h5:
-            if "sets_complete" in h5.attrs:                 # written by rsocl capture after each set
+            if "sets_complete" in h5.attrs:  # written by rsocl capture after each set
                 sets = int(h5.attrs["sets_complete"])
-            else:                                           # another writer's capture file
+            else:  # another writer's capture file
                 sets = h5["snapshot_sets"].shape[0] if "snapshot_sets" in h5 else int("snapshots" in h5)
     except BlockingIOError:
-        raise ValueError(f"{name}: {str(partial)!r} is being written by another capture (it holds the file's "
-                         "lock); wait for it or choose another --out") from None
+        raise ValueError(
+            f"{name}: {str(partial)!r} is being written by another capture (it holds the file's "
+            "lock); wait for it or choose another --out"
+        ) from None
     except OSError as exc:
         why = " ".join(str(exc).split())
-        raise ValueError(f"{name}: {str(partial)!r} is left from an earlier capture and is not readable "
-                         f"({why}); it is kept: move or remove it, or choose another --out") from None
-    raise ValueError(f"{name}: {str(partial)!r} holds {sets} complete set(s) of an earlier capture that did not "
-                     "end; it is kept: rename it (it is a readable capture file) or remove it, or choose "
-                     "another --out")
+        raise ValueError(
+            f"{name}: {str(partial)!r} is left from an earlier capture and is not readable "
+            f"({why}); it is kept: move or remove it, or choose another --out"
+        ) from None
+    raise ValueError(
+        f"{name}: {str(partial)!r} holds {sets} complete set(s) of an earlier capture that did not "
+        "end; it is kept: rename it (it is a readable capture file) or remove it, or choose "
+        "another --out"
+    )
 
 
 class CaptureWriter:
@@ -121,9 +127,16 @@ class CaptureWriter:
         self.sets_complete = 0
         self.pending = {}
         self.meta = {
-            "source": "rsocl capture", "rig_file": None if rigfile.path is None else str(rigfile.path),
-            "sets_requested": sets, "sets_complete": 0, "timeout": timeout, "status": "running", "failure": None,
-            "started": _now(), "finished": None, "warnings": [],
+            "source": "rsocl capture",
+            "rig_file": None if rigfile.path is None else str(rigfile.path),
+            "sets_requested": sets,
+            "sets_complete": 0,
+            "timeout": timeout,
+            "status": "running",
+            "failure": None,
+            "started": _now(),
+            "finished": None,
+            "warnings": [],
             "cameras": [{"backend": b, "name": label} for (b, _), label in zip(rigfile.backends(), labels)],
             "units": "snapshots in model units (a scene in [0, 1] gives [0, gain*t_e/dt])",
         }
@@ -170,8 +183,10 @@ class CaptureWriter:
         self.rig = rig
         self.h5.flush()
         for i, applied, asked in changed:
-            self.warn(f"camera {i}: the device applied an exposure of {applied!r} s where the rig file says "
-                      f"t_e = {asked!r} s; the capture's rig uses {applied!r} s (T = {rig.T} sub-frames)")
+            self.warn(
+                f"camera {i}: the device applied an exposure of {applied!r} s where the rig file says "
+                f"t_e = {asked!r} s; the capture's rig uses {applied!r} s (T = {rig.T} sub-frames)"
+            )
 
     # ------------------------------------------------------------------ raw frames
     def add_raw(self, index: int, set_index: int, frame, camera) -> None:
@@ -182,8 +197,13 @@ class CaptureWriter:
             raise ValueError(f"camera {index}: frames must be 2-D images, got shape {image.shape}")
         name = f"raw/{index}"
         if name not in self.h5:
-            ds = self.h5.create_dataset(name, shape=(0,) + image.shape, maxshape=(None,) + image.shape,
-                                        dtype=image.dtype, chunks=(1,) + image.shape)
+            ds = self.h5.create_dataset(
+                name,
+                shape=(0,) + image.shape,
+                maxshape=(None,) + image.shape,
+                dtype=image.dtype,
+                chunks=(1,) + image.shape,
+            )
             ds.attrs["backend"] = camera.backend
             ds.attrs["name"] = camera.name
             ds.attrs["pixel_format"] = str(frame.pixel_format)
@@ -199,8 +219,10 @@ class CaptureWriter:
             group.create_dataset("meta", shape=(0,), maxshape=(None,), dtype=h5py.string_dtype(), chunks=(64,))
         ds = self.h5[name]
         if image.shape != ds.shape[1:] or image.dtype != ds.dtype:
-            raise ValueError(f"camera {index}: frame changed from {ds.shape[1:]} {ds.dtype} to "
-                             f"{image.shape} {image.dtype} during the capture")
+            raise ValueError(
+                f"camera {index}: frame changed from {ds.shape[1:]} {ds.dtype} to "
+                f"{image.shape} {image.dtype} during the capture"
+            )
         n = ds.shape[0]
         ds.resize(n + 1, axis=0)
         ds[n] = image
@@ -221,8 +243,13 @@ class CaptureWriter:
         stack = np.stack([self.pending[i] for i in range(self.K)])
         self.pending = {}
         if "snapshot_sets" not in self.h5:
-            self.h5.create_dataset("snapshot_sets", shape=(0, self.K, m, n), maxshape=(None, self.K, m, n),
-                                   dtype=np.float64, chunks=(1, self.K, m, n))
+            self.h5.create_dataset(
+                "snapshot_sets",
+                shape=(0, self.K, m, n),
+                maxshape=(None, self.K, m, n),
+                dtype=np.float64,
+                chunks=(1, self.K, m, n),
+            )
         ds = self.h5["snapshot_sets"]
         ds.resize(set_index + 1, axis=0)
         ds[set_index] = stack
@@ -246,11 +273,12 @@ class CaptureWriter:
         except Exception as exc:  # the truth is a bonus, never a reason to fail a capture
             self.warn(f"no ground truth: {type(exc).__name__}: {exc}")
             return None
-        if truth.ndim == 3 and truth.shape[0] > self.rig.T:   # the scene outlasts the exposures: its first T
-            truth = truth[:self.rig.T]
+        if truth.ndim == 3 and truth.shape[0] > self.rig.T:  # the scene outlasts the exposures: its first T
+            truth = truth[: self.rig.T]
         if truth.shape != (self.rig.T,) + self.rig.shape:
-            self.warn(f"no ground truth: the scene has shape {truth.shape}, the rig needs "
-                      f"{(self.rig.T,) + self.rig.shape}")
+            self.warn(
+                f"no ground truth: the scene has shape {truth.shape}, the rig needs {(self.rig.T,) + self.rig.shape}"
+            )
             return None
         return truth
 
@@ -269,7 +297,7 @@ class CaptureWriter:
         for step in (self.h5.flush, self.h5.close):
             try:
                 step()
-            except Exception:      # HDF5's RuntimeError/OSError: the data it holds cannot reach the disk
+            except Exception:  # HDF5's RuntimeError/OSError: the data it holds cannot reach the disk
                 closed = False
         return closed
 
@@ -353,7 +381,14 @@ def load_raw(path) -> RawCapture:
                 metas.append([])
         failure = json.loads(str_attr(h5, "failure", str(path))) if "failure" in h5.attrs else None
         status = str_attr(h5, "capture_status", str(path)) if "capture_status" in h5.attrs else "unknown"
-        return RawCapture(frames=frames, sets=sets, timestamps=stamps, frame_meta=metas,
-                          snapshot_sets=h5["snapshot_sets"][()] if "snapshot_sets" in h5 else None,
-                          status=status, sets_complete=int(h5.attrs.get("sets_complete", 0)), failure=failure,
-                          meta=json.loads(str_attr(h5, "meta", str(path))))
+        return RawCapture(
+            frames=frames,
+            sets=sets,
+            timestamps=stamps,
+            frame_meta=metas,
+            snapshot_sets=h5["snapshot_sets"][()] if "snapshot_sets" in h5 else None,
+            status=status,
+            sets_complete=int(h5.attrs.get("sets_complete", 0)),
+            failure=failure,
+            meta=json.loads(str_attr(h5, "meta", str(path))),
+        )

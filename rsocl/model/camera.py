@@ -70,8 +70,17 @@ class Camera:
            [0., 1., 2.]])
     """
 
-    def __init__(self, angle: float = 0.0, t_e: float | None = None, t_r: float | None = None, t_a: float = 0.0,
-                 t_d: float | None = None, gain: float = 1.0, frames: int = 1, row_map: ArrayLike | None = None) -> None:
+    def __init__(
+        self,
+        angle: float = 0.0,
+        t_e: float | None = None,
+        t_r: float | None = None,
+        t_a: float = 0.0,
+        t_d: float | None = None,
+        gain: float = 1.0,
+        frames: int = 1,
+        row_map: ArrayLike | None = None,
+    ) -> None:
         if t_e is None:
             raise ValueError("t_e (exposure time, seconds) is required")
         if t_r is None:
@@ -113,12 +122,18 @@ class Camera:
     def to_dict(self) -> dict:
         """Plain-data description (seconds, degrees); ``row_map`` stays an array."""
         return {
-            "angle": self.angle, "t_e": self.t_e, "t_r": self.t_r, "t_a": self.t_a,
-            "t_d": self.t_d, "gain": self.gain, "frames": self.frames, "row_map": self.row_map,
+            "angle": self.angle,
+            "t_e": self.t_e,
+            "t_r": self.t_r,
+            "t_a": self.t_a,
+            "t_d": self.t_d,
+            "gain": self.gain,
+            "frames": self.frames,
+            "row_map": self.row_map,
         }
 
     @classmethod
-    def from_dict(cls, data: dict) -> "Camera":
+    def from_dict(cls, data: dict) -> Camera:
         return cls(**data)
 
     def __eq__(self, other):
@@ -133,5 +148,4 @@ class Camera:
     def __repr__(self):
         where = "row_map" if self.row_map is not None else f"angle={self.angle:g}"
         extra = f", frames={self.frames}, t_d={self.t_d:g}" if self.frames > 1 else ""
-        return (f"Camera({where}, t_e={self.t_e:g}, t_r={self.t_r:g}, t_a={self.t_a:g}, "
-                f"gain={self.gain:g}{extra})")
+        return f"Camera({where}, t_e={self.t_e:g}, t_r={self.t_r:g}, t_a={self.t_a:g}, gain={self.gain:g}{extra})"

@@ -31,7 +31,7 @@ def psi_values(rig) -> np.ndarray:
     (no device): ``exact`` mask ``Σ_s |[s, s+1) ∩ [start, end]|²`` over ``s = 0 .. T-1``,
     ``binary`` mask the count of ``s`` in ``[start, end]``, each times the channel's gain squared."""
     win = rig.windows
-    gain2 = (win.gain ** 2)[:, None, None]
+    gain2 = (win.gain**2)[:, None, None]
     if rig.mask == "binary":
         first, last = binary_span(rig)
         return np.maximum(last - first + 1.0, 0.0) * gain2
@@ -39,11 +39,11 @@ def psi_values(rig) -> np.ndarray:
     start = np.clip(win.index + win.fraction, 0.0, T)
     end = np.clip(win.end, 0.0, T)
     a, e = np.floor(start), np.floor(end)
-    within = a == e                                       # the window lies in one sub-frame
+    within = a == e  # the window lies in one sub-frame
     head = np.where(within, end - start, a + 1.0 - start)
     tail = np.where(within, 0.0, end - e)
     full = np.where(within, 0.0, e - a - 1.0)
-    return (head ** 2 + full + tail ** 2) * gain2
+    return (head**2 + full + tail**2) * gain2
 
 
 def psi_mean(rig) -> float:
@@ -69,6 +69,8 @@ def default_scale(rig) -> float:
     """
     scale = psi_mean(rig) / REFERENCE_PSI
     if not scale > 0:
-        raise ValueError("the rig's exposure windows hold no sub-frame: every snapshot pixel has zero weight "
-                         "(check t_e, dt and the mask)")
+        raise ValueError(
+            "the rig's exposure windows hold no sub-frame: every snapshot pixel has zero weight "
+            "(check t_e, dt and the mask)"
+        )
     return 1.0 if abs(scale - 1.0) < 1e-9 else scale

@@ -122,22 +122,23 @@ def samples(g, rig, valid=None) -> Samples:
     (bool of that shape, or None: every sample)."""
     K = rig.n_channels
     length, centre = _sampled(rig)
-    seen = length > 0                                   # a binary window may hold no sub-frame start
+    seen = length > 0  # a binary window may hold no sub-frame start
     if not seen.all():
         valid = seen if valid is None else valid & seen
-        if not valid.any():                             # H is zero: the snapshots say nothing
+        if not valid.any():  # H is zero: the snapshots say nothing
             nothing = np.zeros((K,) + rig.shape)
             return Samples(nothing, nothing, np.zeros(rig.shape, dtype=np.int64), 0.0, empty=True)
     scaled = g / (rig.windows.gain[:, None, None] * np.where(seen, length, 1.0))
     if valid is not None:
-        centre = np.where(valid, centre, np.inf)          # left-out samples sort last
+        centre = np.where(valid, centre, np.inf)  # left-out samples sort last
         count = valid.sum(axis=0)
     else:
         count = np.full(rig.shape, K)
     order = np.argsort(centre, axis=0, kind="stable")
     fallback = float(np.mean(scaled[valid])) if valid is not None and np.any(count == 0) else 0.0
-    return Samples(np.take_along_axis(centre, order, axis=0), np.take_along_axis(scaled, order, axis=0),
-                   count, fallback)
+    return Samples(
+        np.take_along_axis(centre, order, axis=0), np.take_along_axis(scaled, order, axis=0), count, fallback
+    )
 
 
 def _interpolated(g, rig, valid):
@@ -161,7 +162,7 @@ def evaluate(found: Samples, subframes) -> np.ndarray:
     K = times.shape[0]
     query = np.asarray(subframes, dtype=np.float64) + 0.5
     hi = np.zeros((len(query),) + count.shape, dtype=np.int64)
-    for k in range(K):                                   # samples at or before each query time
+    for k in range(K):  # samples at or before each query time
         hi += times[k][None] <= query[:, None, None]
     hi = np.clip(hi, 1, np.maximum(count - 1, 1)[None])
     lo = hi - 1
@@ -169,12 +170,12 @@ def evaluate(found: Samples, subframes) -> np.ndarray:
     hi, lo = np.minimum(hi, top), np.minimum(lo, top)
     t_lo, t_hi = np.take_along_axis(times, lo, axis=0), np.take_along_axis(times, hi, axis=0)
     v_lo, v_hi = np.take_along_axis(values, lo, axis=0), np.take_along_axis(values, hi, axis=0)
-    with np.errstate(invalid="ignore"):                # inf - inf where a pixel lacks samples
+    with np.errstate(invalid="ignore"):  # inf - inf where a pixel lacks samples
         span = t_hi - t_lo
     ok = np.isfinite(span) & (span > 0)
     w = np.where(ok, (query[:, None, None] - t_lo) / np.where(ok, span, 1.0), 0.0)
     w = np.clip(w, 0.0, 1.0)
-    equal = np.isfinite(span) & (span == 0)             # samples at equal times: their mean
+    equal = np.isfinite(span) & (span == 0)  # samples at equal times: their mean
     w = np.where(equal, 0.5, w)
     out = v_lo + w * (v_hi - v_lo)
     out = np.where((count == 1)[None], values[0][None], out)

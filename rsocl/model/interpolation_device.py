@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device.program import c_type
 from rsocl.device.launch import batch_launches
+from rsocl.device.program import c_type
 from rsocl.model.interpolation import samples
 
 __all__ = ["interp3d_device"]
@@ -65,22 +65,34 @@ def interp3d_device(op, g, valid=None, solved=None, *, out=None):
         mask = None if valid is None or valid[b].all() else valid[b]
         found = samples(sets[b], rig, mask)
         times[b], values[b], count[b], fallback[b] = found.times, found.values, found.count, found.fallback
-        with np.errstate(invalid="ignore", divide="ignore"):       # left-out samples: inf - inf
+        with np.errstate(invalid="ignore", divide="ignore"):  # left-out samples: inf - inf
             span = np.diff(found.times, axis=0)
-            inverse[b, :K - 1] = np.where(np.isfinite(span) & (span > 0), 1.0 / span, 0.0)
+            inverse[b, : K - 1] = np.where(np.isfinite(span) & (span > 0), 1.0 / span, 0.0)
     want = (B, length) + shape
     if out is None:
         out = cla.empty(queue, want[1:] if one else want, dtype)
     elif out.dtype != dtype or out.size != int(np.prod(want)):
-        raise ValueError(f"out must hold {want[1:] if one else want} values of {dtype.name}, "
-                         f"got {out.shape} {out.dtype}")
-    up = [cla.to_device(queue, np.ascontiguousarray(a, dtype=t))
-          for a, t in ((times, dtype), (values, dtype), (inverse, dtype), (count, np.int32), (fallback, dtype))]
+        raise ValueError(
+            f"out must hold {want[1:] if one else want} values of {dtype.name}, got {out.shape} {out.dtype}"
+        )
+    up = [
+        cla.to_device(queue, np.ascontiguousarray(a, dtype=t))
+        for a, t in ((times, dtype), (values, dtype), (inverse, dtype), (count, np.int32), (fallback, dtype))
+    ]
     prog = op.device.program(["interp.cl"], REAL=c_type(dtype), NCH=K)
     kernel = prog.interp3d
     per_set = length * mn
     group = op.device.group_limit(kernel, cap=64)
     for gsize, local, offset in batch_launches(per_set, B, group):
-        kernel(queue, gsize, local, *(a.data for a in up), out.data, np.int32(first), np.int64(per_set),
-               np.int64(mn), global_offset=offset)
+        kernel(
+            queue,
+            gsize,
+            local,
+            *(a.data for a in up),
+            out.data,
+            np.int32(first),
+            np.int64(per_set),
+            np.int64(mn),
+            global_offset=offset,
+        )
     return out

@@ -82,8 +82,9 @@ class RollingShutterOperator:
     True
     """
 
-    def __init__(self, rig: Rig, device: str | Device | None = None, dtype: DTypeLike = "float32",
-                 subframes: slice | None = None) -> None:
+    def __init__(
+        self, rig: Rig, device: str | Device | None = None, dtype: DTypeLike = "float32", subframes: slice | None = None
+    ) -> None:
         import pyopencl.array as cla
 
         if not isinstance(rig, Rig):
@@ -101,8 +102,9 @@ class RollingShutterOperator:
         self.K, self.T, self.mn = rig.n_channels, stop - start, m * n
         self.L = rig.window_length
         itemsize = self.dtype.itemsize
-        self.device.check_fits(f"a datacube of T={self.T} x {m} x {n} in {self.dtype.name}",
-                               self.T * m * n * itemsize, dtype=self.dtype)
+        self.device.check_fits(
+            f"a datacube of T={self.T} x {m} x {n} in {self.dtype.name}", self.T * m * n * itemsize, dtype=self.dtype
+        )
         win = rig.windows
         self.first = cla.to_device(self.queue, np.ascontiguousarray(win.index - start, dtype=np.int32))
         self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype))
@@ -113,8 +115,12 @@ class RollingShutterOperator:
         #: rows per work item of those kernels (each row a tile of ``vector_width`` pixels)
         self.block_rows = BLOCK_ROWS
         self.program = self.device.program(
-            ["operator.cl"], REAL=c_type(self.dtype), ACC=c_type(self.device.acc_dtype),
-            MASK_BINARY=int(rig.mask == "binary"), **self.tile_defines)
+            ["operator.cl"],
+            REAL=c_type(self.dtype),
+            ACC=c_type(self.device.acc_dtype),
+            MASK_BINARY=int(rig.mask == "binary"),
+            **self.tile_defines,
+        )
         self._psi: cla.Array | None = None
 
     @property
@@ -136,8 +142,10 @@ class RollingShutterOperator:
         if not on_device:
             x = check.finite_array(name, x)
         if x.shape[-3:] != shape or x.ndim not in (3, 4) or (x.ndim == 4 and x.shape[0] < 1):
-            raise ValueError(f"{name} must have shape {shape} or (B, {', '.join(map(str, shape))}) for a batch "
-                             f"of B >= 1 sets, got {x.shape}")
+            raise ValueError(
+                f"{name} must have shape {shape} or (B, {', '.join(map(str, shape))}) for a batch "
+                f"of B >= 1 sets, got {x.shape}"
+            )
         if on_device:
             if x.dtype != self.dtype:
                 raise ValueError(f"{name} must have dtype {self.dtype.name} on the device, got {x.dtype}")
@@ -163,8 +171,9 @@ class RollingShutterOperator:
         """
         m, n = self.rig.shape
         group = self.device.group_limit(self.program.forward, self.program.adjoint_scatter, *kernels, cap=64)
-        return block_grid(m, n, self.vector_width, self.block_rows, channels, group=group,
-                          max_items=self.device.max_work_item_sizes)
+        return block_grid(
+            m, n, self.vector_width, self.block_rows, channels, group=group, max_items=self.device.max_work_item_sizes
+        )
 
     def element_launches(self, count: int, kernel: Kernel) -> list:
         """:func:`rsocl.device.launch.element_launches` within the device's and ``kernel``'s limits."""
@@ -185,8 +194,17 @@ class RollingShutterOperator:
     def forward_into(self, f: cla.Array, out: cla.Array) -> cla.Array:
         """``out = H f`` for device arrays (no checks, no allocation); a batch in one launch."""
         sets = self.sets_of(f, self.domain_shape)
-        self.program.forward(self.queue, *self.block_grid(self.K * sets), f.data, out.data, *self._geometry(),
-                             np.int32(self.K), np.int32(self.T), np.int32(self.L), *self._shape_args())
+        self.program.forward(
+            self.queue,
+            *self.block_grid(self.K * sets),
+            f.data,
+            out.data,
+            *self._geometry(),
+            np.int32(self.K),
+            np.int32(self.T),
+            np.int32(self.L),
+            *self._shape_args(),
+        )
         return out
 
     def adjoint_into(self, g: cla.Array, out: cla.Array, base: cla.Array | None = None) -> cla.Array:
@@ -199,9 +217,17 @@ class RollingShutterOperator:
         elif base is not out:
             # the ignore: pyopencl's stub types Array.data as an optional holder; an allocated array's is a Buffer
             cl.enqueue_copy(self.queue, out.data, base.data)  # type: ignore[arg-type]
-        self.program.adjoint_scatter(self.queue, *self.block_grid(self.sets_of(g, self.range_shape)), g.data,
-                                     out.data, *self._geometry(), np.int32(self.K), np.int32(self.T),
-                                     np.int32(self.L), *self._shape_args())
+        self.program.adjoint_scatter(
+            self.queue,
+            *self.block_grid(self.sets_of(g, self.range_shape)),
+            g.data,
+            out.data,
+            *self._geometry(),
+            np.int32(self.K),
+            np.int32(self.T),
+            np.int32(self.L),
+            *self._shape_args(),
+        )
         return out
 
     def forward(self, f: ArrayLike | cla.Array) -> np.ndarray | cla.Array:
@@ -221,8 +247,16 @@ class RollingShutterOperator:
         """Diagonal of ``H Hᵀ`` on the device, ``(K, m, n)``."""
         if self._psi is None:
             out = self.empty(self.range_shape)
-            self.program.psi(self.queue, (self.mn, self.K), None, out.data, *self._geometry(),
-                             np.int32(self.T), np.int32(self.L), np.int32(self.mn))
+            self.program.psi(
+                self.queue,
+                (self.mn, self.K),
+                None,
+                out.data,
+                *self._geometry(),
+                np.int32(self.T),
+                np.int32(self.L),
+                np.int32(self.mn),
+            )
             self._psi = out
         return self._psi
 
@@ -234,8 +268,17 @@ class RollingShutterOperator:
     def gram(self) -> np.ndarray:
         """Per-pixel ``K×K`` blocks of ``H Hᵀ`` as a ``(m, n, K, K)`` NumPy array."""
         out = self.empty((self.K, self.K) + self.rig.shape)
-        self.program.gram(self.queue, (self.mn,), None, out.data, *self._geometry(),
-                          np.int32(self.K), np.int32(self.T), np.int32(self.L), np.int32(self.mn))
+        self.program.gram(
+            self.queue,
+            (self.mn,),
+            None,
+            out.data,
+            *self._geometry(),
+            np.int32(self.K),
+            np.int32(self.T),
+            np.int32(self.L),
+            np.int32(self.mn),
+        )
         return np.moveaxis(out.get(), (0, 1), (2, 3))
 
     def __repr__(self):

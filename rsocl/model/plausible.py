@@ -15,8 +15,15 @@ import warnings
 
 from rsocl.common.memory import check_host_memory
 
-__all__ = ["T_E_PLAUSIBLE", "T_R_PLAUSIBLE", "MAX_WINDOW", "RIG_BYTES_PER_PIXEL", "warn_unlikely_times",
-           "check_window", "check_rig_memory"]
+__all__ = [
+    "T_E_PLAUSIBLE",
+    "T_R_PLAUSIBLE",
+    "MAX_WINDOW",
+    "RIG_BYTES_PER_PIXEL",
+    "warn_unlikely_times",
+    "check_window",
+    "check_rig_memory",
+]
 
 #: Longest exposure ``t_e`` (seconds) taken without a warning.
 T_E_PLAUSIBLE = 1.0
@@ -44,11 +51,18 @@ def warn_unlikely_times(name: str, t_e: float, t_r: float) -> None:
     UserWarning: camera t_e = 180 s is longer than 1 s; times are in seconds: did you mean 180 µs (t_e=0.00018)?
     """
     if t_e > T_E_PLAUSIBLE:
-        warnings.warn(f"{name} t_e = {t_e:g} s is longer than {T_E_PLAUSIBLE:g} s; times are in seconds: "
-                      f"{_in_us('t_e', t_e)}", UserWarning, stacklevel=3)
+        warnings.warn(
+            f"{name} t_e = {t_e:g} s is longer than {T_E_PLAUSIBLE:g} s; times are in seconds: {_in_us('t_e', t_e)}",
+            UserWarning,
+            stacklevel=3,
+        )
     if t_r > T_R_PLAUSIBLE:
-        warnings.warn(f"{name} t_r = {t_r:g} s is longer than {T_R_PLAUSIBLE * 1e3:g} ms per row; times are in "
-                      f"seconds: {_in_us('t_r', t_r)}", UserWarning, stacklevel=3)
+        warnings.warn(
+            f"{name} t_r = {t_r:g} s is longer than {T_R_PLAUSIBLE * 1e3:g} ms per row; times are in "
+            f"seconds: {_in_us('t_r', t_r)}",
+            UserWarning,
+            stacklevel=3,
+        )
 
 
 def check_window(name: str, t_e: float, dt: float) -> None:
@@ -56,9 +70,11 @@ def check_window(name: str, t_e: float, dt: float) -> None:
     span = t_e / dt
     if span > MAX_WINDOW:
         hint = _in_us(name.rsplit(".", 1)[-1], t_e) if t_e > T_E_PLAUSIBLE else "choose a longer dt"
-        raise ValueError(f"{name} = {t_e:g} s is {span:,.0f} sub-frames of dt = {dt:g} s, more than the "
-                         f"{MAX_WINDOW:,} one exposure may span (rsocl.model.plausible.MAX_WINDOW); times are in "
-                         f"seconds: {hint}")
+        raise ValueError(
+            f"{name} = {t_e:g} s is {span:,.0f} sub-frames of dt = {dt:g} s, more than the "
+            f"{MAX_WINDOW:,} one exposure may span (rsocl.model.plausible.MAX_WINDOW); times are in "
+            f"seconds: {hint}"
+        )
 
 
 def check_rig_memory(cameras: int, shape, option: str, hint: str = "choose a smaller grid") -> None:
@@ -66,6 +82,10 @@ def check_rig_memory(cameras: int, shape, option: str, hint: str = "choose a sma
     row maps and exposure windows alone (:data:`RIG_BYTES_PER_PIXEL`) exceed the host memory, before
     it is built."""
     m, n = shape
-    check_host_memory(cameras * m * n * RIG_BYTES_PER_PIXEL, option,
-                      f"a rig of {cameras} camera(s) on {m} x {n} pixels ({RIG_BYTES_PER_PIXEL} bytes per camera "
-                      "and pixel: row maps and exposure windows)", hint)
+    check_host_memory(
+        cameras * m * n * RIG_BYTES_PER_PIXEL,
+        option,
+        f"a rig of {cameras} camera(s) on {m} x {n} pixels ({RIG_BYTES_PER_PIXEL} bytes per camera "
+        "and pixel: row maps and exposure windows)",
+        hint,
+    )

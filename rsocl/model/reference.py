@@ -71,8 +71,7 @@ def project(rig: Rig, v, g, eta: float, projection: str = "exact") -> np.ndarray
     return np.asarray(v, dtype=np.float64) + adjoint(rig, z)
 
 
-def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float = 1.0,
-                 step: float = 1.0) -> np.ndarray:
+def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float = 1.0, step: float = 1.0) -> np.ndarray:
     """Chambolle's isotropic TV of a ``(T, m, n)`` array, as ``skimage.restoration.denoise_tv_chambolle``.
 
     With ``temporal_weight = 1`` and ``step = 1`` this is scikit-image's 3-D algorithm
@@ -98,13 +97,24 @@ def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float =
         g[0, :-1] = axis_weight[0] * np.diff(out, axis=0)
         g[1, :, :-1] = np.diff(out, axis=1)
         g[2, :, :, :-1] = np.diff(out, axis=2)
-        norm = np.sqrt((g ** 2).sum(axis=0))
+        norm = np.sqrt((g**2).sum(axis=0))
         p = (p - tau * g) / (1.0 + norm * (tau / weight))
     return out
 
 
-def admm(rig: Rig, g, *, iterations: int, lam: float, eta: float, tv_iterations: int,
-         temporal_weight: float = 1.0, projection: str = "exact", x0=None, step: float = 1.0) -> np.ndarray:
+def admm(
+    rig: Rig,
+    g,
+    *,
+    iterations: int,
+    lam: float,
+    eta: float,
+    tv_iterations: int,
+    temporal_weight: float = 1.0,
+    projection: str = "exact",
+    x0=None,
+    step: float = 1.0,
+) -> np.ndarray:
     """The ADMM-TV of docs/model.md with the reference pieces above; returns ``theta``.
 
     ``eta = 0`` is GAP: the dual ``b`` stays zero and the TV weight is ``lam``. ``step``: the TV

@@ -21,7 +21,7 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.model.camera import SNAP, Camera, _snap
-from rsocl.model.plausible import check_rig_memory, check_window, warn_unlikely_times
+from rsocl.model.plausible import check_rig_memory, check_window
 
 __all__ = ["Camera", "Rig", "ExposureWindows", "PAPER_ANGLES", "MAX_T"]
 
@@ -97,8 +97,9 @@ class Rig:
     3685
     """
 
-    def __init__(self, cameras: Camera | Sequence[Camera], shape: tuple[int, int], dt: float | None = None,
-                 mask: str = "exact") -> None:
+    def __init__(
+        self, cameras: Camera | Sequence[Camera], shape: tuple[int, int], dt: float | None = None, mask: str = "exact"
+    ) -> None:
         if isinstance(cameras, Camera):
             raise ValueError("cameras must be a list of Camera, got one Camera; pass [camera]")
         try:
@@ -129,34 +130,49 @@ class Rig:
             if cam.frames > 1 and cam.t_d is not None and cam.t_d < rows_read * cam.t_r - cam.t_e:
                 raise ValueError(
                     f"cameras[{i}].t_d must be >= rows*t_r - t_e = {rows_read:g}*{cam.t_r:g} - {cam.t_e:g} = "
-                    f"{rows_read * cam.t_r - cam.t_e:g} s in multi-frame mode, got {cam.t_d!r}")
+                    f"{rows_read * cam.t_r - cam.t_e:g} s in multi-frame mode, got {cam.t_d!r}"
+                )
         self._windows = self._compute_windows()
         ends = self._windows.end
         self.T = int(math.ceil(float(_snap(ends.max()))))
         if self.T > MAX_T:
             seconds, name = self._longest_time()
-            raise ValueError(f"{name} = {seconds:g} s makes the rig span T = {self.T:,} sub-frames of dt = "
-                             f"{self.dt:g} s, above the {MAX_T:,} a rig may span (rsocl.model.rig.MAX_T); "
-                             "times are in seconds: choose a shorter one or a longer dt")
+            raise ValueError(
+                f"{name} = {seconds:g} s makes the rig span T = {self.T:,} sub-frames of dt = "
+                f"{self.dt:g} s, above the {MAX_T:,} a rig may span (rsocl.model.rig.MAX_T); "
+                "times are in seconds: choose a shorter one or a longer dt"
+            )
         if self.T < 1:
-            raise ValueError(f"dt = {self.dt!r} s is so long against the exposures (longest t_e = "
-                             f"{max(c.t_e for c in cameras):g} s) that the rig has no sub-frame; choose a dt "
-                             "near the row time t_r")
+            raise ValueError(
+                f"dt = {self.dt!r} s is so long against the exposures (longest t_e = "
+                f"{max(c.t_e for c in cameras):g} s) that the rig has no sub-frame; choose a dt "
+                "near the row time t_r"
+            )
 
     def _longest_time(self) -> tuple:
         """``(seconds, name)`` of the longest of the times that add up to the latest exposure end:
         a camera's ``t_e``, ``t_a``, ``(frames - 1) * t_d`` or readout of its rows."""
         times = []
         for i, (cam, rows) in enumerate(zip(self.cameras, self._rows)):
-            times += [(cam.t_e, f"cameras[{i}].t_e"), (cam.t_a, f"cameras[{i}].t_a"),
-                      ((cam.frames - 1) * (cam.t_d or 0.0), f"cameras[{i}].t_d x (frames - 1)"),
-                      (float(rows.max()) * cam.t_r, f"cameras[{i}].t_r x its {float(rows.max()):g} rows")]
+            times += [
+                (cam.t_e, f"cameras[{i}].t_e"),
+                (cam.t_a, f"cameras[{i}].t_a"),
+                ((cam.frames - 1) * (cam.t_d or 0.0), f"cameras[{i}].t_d x (frames - 1)"),
+                (float(rows.max()) * cam.t_r, f"cameras[{i}].t_r x its {float(rows.max()):g} rows"),
+            ]
         return max(times, key=lambda item: item[0])
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def paper_array(cls, n_cameras: int = 4, shape: tuple[int, int] = (50, 50), t_e: float = 0.18e-3,
-                    t_r: float = 35e-6, dt: float | None = None, mask: str = "exact") -> "Rig":
+    def paper_array(
+        cls,
+        n_cameras: int = 4,
+        shape: tuple[int, int] = (50, 50),
+        t_e: float = 0.18e-3,
+        t_r: float = 35e-6,
+        dt: float | None = None,
+        mask: str = "exact",
+    ) -> Rig:
         """The paper's array: ``n_cameras`` (1..8) at angles 0, 90, 180, 270, 45, 135, 225, 315.
 
         ``shape`` in pixels, ``t_e``, ``t_r`` and ``dt`` in seconds (``dt`` and ``mask`` as in
@@ -199,7 +215,7 @@ class Rig:
         rows = self._rows[camera]
         if roi is not None:
             y, x, h, w = roi
-            rows = rows[y:y + h, x:x + w]
+            rows = rows[y : y + h, x : x + w]
         return rows.copy()
 
     def _compute_windows(self) -> ExposureWindows:
@@ -297,7 +313,7 @@ class Rig:
                     continue
                 np.add.at(seen, first[i].ravel(), 1)
                 np.add.at(seen, last[i].ravel() + 1, -1)
-            counts += (np.cumsum(seen)[: self.T] > 0)
+            counts += np.cumsum(seen)[: self.T] > 0
         return counts
 
     @property
@@ -343,7 +359,7 @@ class Rig:
         return self.T * self.shape[0] * self.shape[1] * itemsize
 
     # ------------------------------------------------------------------ rigs made from this one
-    def crop(self, roi, dt=None) -> "Rig":
+    def crop(self, roi, dt=None) -> Rig:
         """This rig restricted to ``roi = (y, x, height, width)`` of its reference grid, pixels (and
         sub-frames of ``dt`` seconds; None keeps this rig's).
 
@@ -354,34 +370,47 @@ class Rig:
         m, n = self.shape
         if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
             raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
-        cams = [Camera(**{**cam.to_dict(), "row_map": self.row_map(c, (y, x, h, w))})
-                for c, cam in enumerate(self.cameras)]
+        cams = [
+            Camera(**{**cam.to_dict(), "row_map": self.row_map(c, (y, x, h, w))}) for c, cam in enumerate(self.cameras)
+        ]
         return Rig(cams, (h, w), dt=self.dt if dt is None else dt, mask=self.mask)
 
-    def frames_window(self, k0: int, k1: int) -> "Rig":
+    def frames_window(self, k0: int, k1: int) -> Rig:
         """The rig of frames ``k0..k1-1`` of every camera, on this rig's sub-frame grid (same ``dt``):
         each trigger offset moves to ``t_a + k0*t_d``, so every exposure keeps its absolute start."""
-        cams = [Camera.from_dict({**cam.to_dict(), "t_a": cam.t_a + k0 * (cam.t_d or 0.0), "frames": k1 - k0})
-                for cam in self.cameras]
+        cams = [
+            Camera.from_dict({**cam.to_dict(), "t_a": cam.t_a + k0 * (cam.t_d or 0.0), "frames": k1 - k0})
+            for cam in self.cameras
+        ]
         return Rig(cams, self.shape, dt=self.dt, mask=self.mask)
 
     # ------------------------------------------------------------------ files
     def to_dict(self) -> dict:
         """Plain-data description; see :meth:`from_dict`."""
-        return {"shape": list(self.shape), "dt": self.dt, "mask": self.mask,
-                "cameras": [cam.to_dict() for cam in self.cameras]}
+        return {
+            "shape": list(self.shape),
+            "dt": self.dt,
+            "mask": self.mask,
+            "cameras": [cam.to_dict() for cam in self.cameras],
+        }
 
     @classmethod
-    def from_dict(cls, data: dict) -> "Rig":
+    def from_dict(cls, data: dict) -> Rig:
         cams = [Camera.from_dict(dict(c)) for c in data["cameras"]]
         return cls(cams, tuple(data["shape"]), dt=data["dt"], mask=data["mask"])
 
     def __eq__(self, other):
         if not isinstance(other, Rig):
             return NotImplemented
-        return (self.shape == other.shape and self.dt == other.dt and self.mask == other.mask
-                and self.cameras == other.cameras)
+        return (
+            self.shape == other.shape
+            and self.dt == other.dt
+            and self.mask == other.mask
+            and self.cameras == other.cameras
+        )
 
     def __repr__(self):
-        return (f"Rig({self.C} cameras, shape={self.shape}, dt={self.dt:g} s, mask={self.mask!r}, "
-                f"T={self.T}, T_se={self.T_se})")
+        return (
+            f"Rig({self.C} cameras, shape={self.shape}, dt={self.dt:g} s, mask={self.mask!r}, "
+            f"T={self.T}, T_se={self.T_se})"
+        )

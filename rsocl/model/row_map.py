@@ -48,8 +48,10 @@ def row_map_from_homography(H, shape) -> np.ndarray:
     if np.all(w < 0):  # H and -H are the same homography
         H, w = -H, -w
     if not np.all(w > 0):
-        raise ValueError("homography maps part of the reference ROI to infinity or behind the camera "
-                         f"(w <= 0 at {int(np.count_nonzero(w <= 0))} pixel(s))")
+        raise ValueError(
+            "homography maps part of the reference ROI to infinity or behind the camera "
+            f"(w <= 0 at {int(np.count_nonzero(w <= 0))} pixel(s))"
+        )
     r = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
     r = r - r.min()
     return _snap(r)

@@ -48,19 +48,20 @@ def _background(shape, rng) -> np.ndarray:
     image = data.camera().astype(np.float64) / 255.0
     m, n = shape
     rows, cols = image.shape
-    if m * cols >= n * rows:                      # target is taller: full height, crop columns
+    if m * cols >= n * rows:  # target is taller: full height, crop columns
         width = max(1, int(round(rows * n / m)))
         start = int(rng.integers(0, cols - width + 1))
-        image = image[:, start:start + width]
-    else:                                         # target is wider: full width, crop rows
+        image = image[:, start : start + width]
+    else:  # target is wider: full width, crop rows
         height = max(1, int(round(cols * m / n)))
         start = int(rng.integers(0, rows - height + 1))
-        image = image[start:start + height, :]
+        image = image[start : start + height, :]
     return resize(image, shape, order=1, anti_aliasing=True, mode="reflect")
 
 
-def builtin_scene(shape: tuple[int, int] = (64, 64), T: int = 55, *, dtype: DTypeLike = np.float32,
-                  seed: int = 0) -> np.ndarray:
+def builtin_scene(
+    shape: tuple[int, int] = (64, 64), T: int = 55, *, dtype: DTypeLike = np.float32, seed: int = 0
+) -> np.ndarray:
     """A synthetic high-speed scene: a bright disc crossing the frame and a rotating bar.
 
     The background is scikit-image's ``camera`` photograph (shipped inside the scikit-image wheel,
@@ -163,8 +164,10 @@ def _to_frames(array: np.ndarray, source: str, *, rgb_last: bool) -> np.ndarray:
     if rgb_last and array.ndim == 4 and array.shape[-1] in (3, 4):
         array = _rgb_to_gray(array[..., :3])
     if array.ndim != 3:
-        raise ValueError(f"{source}: video must be 3-D [frames, h, w] (or [frames, h, w, 3|4] RGB), "
-                         f"got {array.ndim}-D shape {array.shape}")
+        raise ValueError(
+            f"{source}: video must be 3-D [frames, h, w] (or [frames, h, w, 3|4] RGB), "
+            f"got {array.ndim}-D shape {array.shape}"
+        )
     if 0 in array.shape:
         raise ValueError(f"{source}: video must not be empty, got shape {array.shape}")
     return array
@@ -172,7 +175,7 @@ def _to_frames(array: np.ndarray, source: str, *, rgb_last: bool) -> np.ndarray:
 
 def _rgb_to_gray(rgb: np.ndarray) -> np.ndarray:
     if np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 0], rgb[..., 2]):
-        return np.ascontiguousarray(rgb[..., 0])          # already gray: exact
+        return np.ascontiguousarray(rgb[..., 0])  # already gray: exact
     from skimage.color import rgb2gray
 
     if rgb.dtype.kind in "ui":
@@ -195,7 +198,7 @@ def _read_tiff(path: Path) -> np.ndarray:
             with check.reading("path", path, "a TIFF video"):
                 data = series.asarray()
             axes = series.axes
-            if "S" in axes:                              # samples (RGB) axis: move last, then gray
+            if "S" in axes:  # samples (RGB) axis: move last, then gray
                 data = np.moveaxis(data, axes.index("S"), -1)
                 axes = axes.replace("S", "") + "S"
                 if data.shape[-1] in (3, 4):
@@ -282,10 +285,11 @@ def load_video(path: PathLike, *, key: str = "video") -> np.ndarray:
         with check.reading("path", source, "a GIF video"):
             video = np.asarray(iio.imread(path, index=None, plugin="pillow", extension=".gif"))
         if video.ndim == 2 or (video.ndim == 3 and video.shape[-1] in (3, 4)):
-            video = video[None]                       # a single frame
+            video = video[None]  # a single frame
         return _to_frames(video, source, rgb_last=True)
-    raise ValueError(f"path: unsupported video file suffix {path.suffix!r} ({source}); "
-                     f"supported: {', '.join(VIDEO_SUFFIXES)}")
+    raise ValueError(
+        f"path: unsupported video file suffix {path.suffix!r} ({source}); supported: {', '.join(VIDEO_SUFFIXES)}"
+    )
 
 
 # ---------------------------------------------------------------------- protocol

@@ -28,8 +28,10 @@ def check_photons(name: str, photons) -> float:
     """``photons`` (photo-electrons at full scale) as a float in ``(0, MAX_PHOTONS]``; ValueError naming ``name``."""
     photons = check.positive(name, photons, "photo-electrons")
     if photons > MAX_PHOTONS:
-        raise ValueError(f"{name} must be in (0, {MAX_PHOTONS:g}] photo-electrons at full scale (the Poisson "
-                         f"sampler's largest mean), got {photons!r}")
+        raise ValueError(
+            f"{name} must be in (0, {MAX_PHOTONS:g}] photo-electrons at full scale (the Poisson "
+            f"sampler's largest mean), got {photons!r}"
+        )
     return photons
 
 
@@ -48,9 +50,18 @@ def full_scale(rig: Rig) -> float:
     return float(np.max(w.gain * w.length))
 
 
-def simulate(truth: ArrayLike, rig: Rig, *, noise: str = "none", sigma: float = 0.0, photons: float | None = None,
-             bit_depth: int | None = None, seed: int | None = 0, device: str | Device | None = None,
-             dtype: DTypeLike = "float64") -> np.ndarray:
+def simulate(
+    truth: ArrayLike,
+    rig: Rig,
+    *,
+    noise: str = "none",
+    sigma: float = 0.0,
+    photons: float | None = None,
+    bit_depth: int | None = None,
+    seed: int | None = 0,
+    device: str | Device | None = None,
+    dtype: DTypeLike = "float64",
+) -> np.ndarray:
     """Snapshots ``(K, m, n)`` of the datacube ``truth`` ``(T, m, n)`` seen by ``rig``.
 
     Parameters
@@ -118,6 +129,6 @@ def simulate(truth: ArrayLike, rig: Rig, *, noise: str = "none", sigma: float = 
         g = rng.poisson(g * (photons / scale)) * (scale / photons)
     if bit_depth is not None:
         bits = check.positive_int("bit_depth", bit_depth, maximum=32)
-        levels = 2 ** bits - 1
+        levels = 2**bits - 1
         g = np.round(np.clip(g, 0.0, scale) / scale * levels) * (scale / levels)
     return g

@@ -6,5 +6,14 @@ from rsocl.scale.stream import StreamResult, reconstruct_stream
 from rsocl.scale.tiled import TiledResult, TilesFailed, reconstruct_tiled
 from rsocl.scale.tiles import DEFAULT_HALO, Tile, TileGrid, tile_grid
 
-__all__ = ["reconstruct_tiled", "TiledResult", "TilesFailed", "reconstruct_stream", "StreamResult", "DEFAULT_HALO",
-           "Tile", "TileGrid", "tile_grid"]
+__all__ = [
+    "reconstruct_tiled",
+    "TiledResult",
+    "TilesFailed",
+    "reconstruct_stream",
+    "StreamResult",
+    "DEFAULT_HALO",
+    "Tile",
+    "TileGrid",
+    "tile_grid",
+]

@@ -42,8 +42,10 @@ class ArraySets:
         elif g.ndim == 4 and g.shape[1:] == expected and g.shape[0] >= 1:
             self.n_sets = g.shape[0]
         else:
-            raise ValueError(f"{name} must have shape (K, m, n) = {expected} or (S, K, m, n) with S >= 1 sets "
-                             f"for this rig, got {g.shape}")
+            raise ValueError(
+                f"{name} must have shape (K, m, n) = {expected} or (S, K, m, n) with S >= 1 sets "
+                f"for this rig, got {g.shape}"
+            )
         self.g, self.rig, self.name = g, rig, name
         for set_index, one in self.sets():
             check.finite_array(self.where(set_index), one)
@@ -63,7 +65,6 @@ class ArraySets:
         rows, cols = tile.outer_slices
         g = self.g if set_index is None else self.g[set_index]
         return np.ascontiguousarray(g[:, rows, cols])
-
 
 
 class CaptureSets:
@@ -86,8 +87,9 @@ class CaptureSets:
             if self.dataset not in h5:
                 hint = " (it holds one set: leave out --sets)" if all_sets else ""
                 raise ValueError(f"{name}: {str(self.path)!r} has no dataset {self.dataset!r}{hint}")
-            shape = real_dataset(h5, self.dataset, f"{name}: {str(self.path)!r}",
-                                 (self.rig.n_channels,) + self.rig.shape).shape
+            shape = real_dataset(
+                h5, self.dataset, f"{name}: {str(self.path)!r}", (self.rig.n_channels,) + self.rig.shape
+            ).shape
             self.has_truth = "truth" in h5
         self.n_sets = shape[0] if all_sets else None
 
@@ -120,7 +122,6 @@ class CaptureSets:
             return h5["truth"][()]
 
 
-
 def _fill(g, rig: Rig, valid) -> float:
     """The :func:`~rsocl.model.interpolation.interp3d` value of a pixel with no valid sample in the
     set ``g``: the mean of the set's valid samples (0.0 when every pixel has one)."""
@@ -147,8 +148,10 @@ def scan(source, saturation=None) -> tuple:
             continue
         valid = g < saturation
         if not valid.any():
-            raise ValueError(f"every snapshot pixel of {source.where(set_index)} is >= saturation = "
-                             f"{saturation!r}: nothing left to fit")
+            raise ValueError(
+                f"every snapshot pixel of {source.where(set_index)} is >= saturation = "
+                f"{saturation!r}: nothing left to fit"
+            )
         saturated += int(valid.size - np.count_nonzero(valid))
         fills.append(_fill(g, source.rig, valid))
     return digest.hexdigest(), saturated, tuple(fills)

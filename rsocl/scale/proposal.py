@@ -72,20 +72,33 @@ def tiling_cost(rig: Rig, tile, halo, *, regularizer="tv", dtype="float32", proj
     """
     worst, most, voxels = None, 0, 0
     for t in tile_grid(rig.shape, tile, halo):
-        solved = rig.sampled_range(t.roi)          # the tile's rig's, from the whole rig's windows
+        solved = rig.sampled_range(t.roi)  # the tile's rig's, from the whole rig's windows
         h, w = t.outer_shape
         v = (solved.stop - solved.start) * h * w
         voxels += v
         if v > most:
             worst, most = t, v
     assert worst is not None  # tile_grid yields at least one tile
-    largest, total = memory_need(tile_rig(rig, worst), make_regularizer(regularizer), dtype=dtype,
-                                 projection=projection)
+    largest, total = memory_need(
+        tile_rig(rig, worst), make_regularizer(regularizer), dtype=dtype, projection=projection
+    )
     return total, largest, voxels, worst, most
 
 
-def propose_tiling(rig: Rig, *, tile=None, halo=None, sets=1, iterations=200, regularizer="tv",
-                   dtype="float32", projection="exact", device=None, budget_bytes=None, measure=True) -> Tiling:
+def propose_tiling(
+    rig: Rig,
+    *,
+    tile=None,
+    halo=None,
+    sets=1,
+    iterations=200,
+    regularizer="tv",
+    dtype="float32",
+    projection="exact",
+    device=None,
+    budget_bytes=None,
+    measure=True,
+) -> Tiling:
     """The tiling of ``rig`` for ``device``: ``tile`` checked, or the largest that fits proposed.
 
     Parameters
@@ -121,9 +134,11 @@ def propose_tiling(rig: Rig, *, tile=None, halo=None, sets=1, iterations=200, re
         tile = check_tile(tile, rig.shape)
         cost = tiling_cost(rig, tile, halo, **kwargs)
         if not fits(cost):
-            raise ValueError(f"tile: a task of tile {tile[0]}x{tile[1]} with halo {halo} needs "
-                             f"{cost[0] / 2**20:.1f} MiB (largest buffer {cost[1] / 2**20:.1f} MiB), above the "
-                             f"budget of {budget / 2**20:.1f} MiB or the device's limits ({dev.name})")
+            raise ValueError(
+                f"tile: a task of tile {tile[0]}x{tile[1]} with halo {halo} needs "
+                f"{cost[0] / 2**20:.1f} MiB (largest buffer {cost[1] / 2**20:.1f} MiB), above the "
+                f"budget of {budget / 2**20:.1f} MiB or the device's limits ({dev.name})"
+            )
     else:
         for side in sorted({min(c, m) for c in CANDIDATES} | {min(c, n) for c in CANDIDATES}, reverse=True):
             tile = (min(side, m), min(side, n))
@@ -131,33 +146,63 @@ def propose_tiling(rig: Rig, *, tile=None, halo=None, sets=1, iterations=200, re
             if fits(cost):
                 break
         else:
-            hint = ("raise budget_bytes (rsocl plan --memory-mib) or dt (fewer sub-frames)" if budget_bytes is not None
-                    else "raise dt (fewer sub-frames) or use a device with more memory")
-            raise ValueError(f"no tile of {CANDIDATES[-1]} pixels a side or more fits the budget of "
-                             f"{budget / 2**20:.1f} MiB per task on {dev.name}; {hint}")
+            hint = (
+                "raise budget_bytes (rsocl plan --memory-mib) or dt (fewer sub-frames)"
+                if budget_bytes is not None
+                else "raise dt (fewer sub-frames) or use a device with more memory"
+            )
+            raise ValueError(
+                f"no tile of {CANDIDATES[-1]} pixels a side or more fits the budget of "
+                f"{budget / 2**20:.1f} MiB per task on {dev.name}; {hint}"
+            )
     total, largest, voxels, worst, worst_voxels = cost
     untiled = rig.sampled_range()
-    result = Tiling(rig, tile, halo, tile_grid(rig.shape, tile, halo).grid, sets, total, largest, voxels,
-                    (untiled.stop - untiled.start) * m * n, worst_voxels, iterations, budget)
+    result = Tiling(
+        rig,
+        tile,
+        halo,
+        tile_grid(rig.shape, tile, halo).grid,
+        sets,
+        total,
+        largest,
+        voxels,
+        (untiled.stop - untiled.start) * m * n,
+        worst_voxels,
+        iterations,
+        budget,
+    )
     if measure:
         sub = tile_rig(rig, worst)
-        result.seconds_per_iteration = estimate(sub, iterations=iterations, regularizer=regularizer, dtype=dtype,
-                                                device=dev, measure=True, projection=projection).seconds_per_iteration
+        result.seconds_per_iteration = estimate(
+            sub,
+            iterations=iterations,
+            regularizer=regularizer,
+            dtype=dtype,
+            device=dev,
+            measure=True,
+            projection=projection,
+        ).seconds_per_iteration
     return result
 
 
 def format_tiling(t: Tiling) -> str:
     """The proposal as a few lines of text."""
-    lines = [f"tiling: {t.tile[0]} x {t.tile[1]} pixels with a halo of {t.halo} "
-             f"({t.grid[0]} x {t.grid[1]} tiles{f' x {t.sets} sets' if t.sets > 1 else ''} = {t.tasks} tasks)",
-             f"per-task device memory: {t.memory_bytes / 2**20:.1f} MiB at most (largest buffer "
-             f"{t.buffer_bytes / 2**20:.1f} MiB; budget {t.budget_bytes / 2**20:.1f} MiB)",
-             f"modelled voxels: {t.voxels / t.untiled_voxels:.2f}x the untiled problem's "
-             f"({t.voxels:,} against {t.untiled_voxels:,}, halos included, per set)"]
+    lines = [
+        f"tiling: {t.tile[0]} x {t.tile[1]} pixels with a halo of {t.halo} "
+        f"({t.grid[0]} x {t.grid[1]} tiles{f' x {t.sets} sets' if t.sets > 1 else ''} = {t.tasks} tasks)",
+        f"per-task device memory: {t.memory_bytes / 2**20:.1f} MiB at most (largest buffer "
+        f"{t.buffer_bytes / 2**20:.1f} MiB; budget {t.budget_bytes / 2**20:.1f} MiB)",
+        f"modelled voxels: {t.voxels / t.untiled_voxels:.2f}x the untiled problem's "
+        f"({t.voxels:,} against {t.untiled_voxels:,}, halos included, per set)",
+    ]
     if t.seconds_per_iteration is not None and t.seconds is not None:
-        lines.append(f"time: {t.seconds_per_iteration * 1e3:.1f} ms/iteration measured on the largest tile; "
-                     f"all {t.tasks} tasks x {t.iterations} iterations on one device: about {t.seconds:.0f} s "
-                     f"({t.seconds / 60:.1f} min); N devices (--workers N): about 1/N of it")
-    lines.append(f"run it: rsocl reconstruct CAPTURE --out rec.zarr --tile {t.tile[0]} {t.tile[1]}"
-                 + (f" --halo {t.halo}" if t.halo != check_halo(None, t.rig.shape) else ""))
+        lines.append(
+            f"time: {t.seconds_per_iteration * 1e3:.1f} ms/iteration measured on the largest tile; "
+            f"all {t.tasks} tasks x {t.iterations} iterations on one device: about {t.seconds:.0f} s "
+            f"({t.seconds / 60:.1f} min); N devices (--workers N): about 1/N of it"
+        )
+    lines.append(
+        f"run it: rsocl reconstruct CAPTURE --out rec.zarr --tile {t.tile[0]} {t.tile[1]}"
+        + (f" --halo {t.halo}" if t.halo != check_halo(None, t.rig.shape) else "")
+    )
     return "\n".join(lines)

@@ -28,7 +28,16 @@ from dataclasses import dataclass
 
 from rsocl.scale.work import solve_tile
 
-__all__ = ["SCHEDULER_ENV", "RETRIES", "WORKERS_PER_CORE", "Failure", "Engine", "have_dask", "max_workers", "non_negative_int"]
+__all__ = [
+    "SCHEDULER_ENV",
+    "RETRIES",
+    "WORKERS_PER_CORE",
+    "Failure",
+    "Engine",
+    "have_dask",
+    "max_workers",
+    "non_negative_int",
+]
 
 #: Environment variable read when no ``scheduler`` is given.
 SCHEDULER_ENV = "RSOCL_SCHEDULER"
@@ -88,8 +97,10 @@ def _check_address(address):
         if scheme in ("tcp", "tls", "ws", "wss"):
             parse_host_port(location)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"scheduler must be the address of a dask.distributed scheduler, tcp://host:port (or "
-                         f"host:port), got {address!r} ({exc})") from None
+        raise ValueError(
+            f"scheduler must be the address of a dask.distributed scheduler, tcp://host:port (or "
+            f"host:port), got {address!r} ({exc})"
+        ) from None
 
 
 def _cause(exc) -> str:
@@ -125,17 +136,20 @@ class Engine:
         if workers is not None:
             cap = max_workers()
             if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or not 1 <= workers <= cap:
-                raise ValueError(f"workers must be an integer in [1, {cap}] (a local cluster of at most "
-                                 f"{WORKERS_PER_CORE} worker processes per CPU core, {cap // WORKERS_PER_CORE} "
-                                 f"core(s) here), got {workers!r}")
+                raise ValueError(
+                    f"workers must be an integer in [1, {cap}] (a local cluster of at most "
+                    f"{WORKERS_PER_CORE} worker processes per CPU core, {cap // WORKERS_PER_CORE} "
+                    f"core(s) here), got {workers!r}"
+                )
             workers = int(workers)
         if scheduler is not None and workers is not None:
-            raise ValueError(f"give scheduler (a running cluster, here {scheduler!r}) or workers (a local "
-                             f"cluster of {workers}), not both")
+            raise ValueError(
+                f"give scheduler (a running cluster, here {scheduler!r}) or workers (a local "
+                f"cluster of {workers}), not both"
+            )
         if (scheduler is not None or workers is not None) and not have_dask():
             what = "scheduler" if scheduler is not None else "workers"
-            raise ValueError(f"{what}: running on a Dask cluster needs dask[distributed]: "
-                             "pip install 'rsocl[dask]'")
+            raise ValueError(f"{what}: running on a Dask cluster needs dask[distributed]: pip install 'rsocl[dask]'")
         if scheduler is not None:
             _check_address(scheduler)
         self.scheduler, self.workers = scheduler, workers
@@ -149,16 +163,24 @@ class Engine:
         from distributed import Client, LocalCluster
 
         if self.workers is not None:
-            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                        host="127.0.0.1", dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            self.cluster = LocalCluster(
+                n_workers=self.workers,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                dashboard_address="127.0.0.1:0",
+                silence_logs=logging.ERROR,
+            )
             self.client = Client(self.cluster)
         else:
             try:
                 self.client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s")
             except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError on a bad address
-                raise ValueError(f"scheduler: cannot reach a dask.distributed scheduler at {self.scheduler!r} "
-                                 f"({_cause(exc)}); start one (dask scheduler) or leave scheduler unset "
-                                 "for the local scheduler") from None
+                raise ValueError(
+                    f"scheduler: cannot reach a dask.distributed scheduler at {self.scheduler!r} "
+                    f"({_cause(exc)}); start one (dask scheduler) or leave scheduler unset "
+                    "for the local scheduler"
+                ) from None
         return self
 
     def __exit__(self, *exc):
@@ -210,9 +232,12 @@ class Engine:
         from dask.callbacks import Callback
 
         token = uuid.uuid4().hex[:8]
-        tasks = [dask.delayed(_attempts, pure=False)(job, payload, settings, retries,
-                                                     dask_key_name=f"rsocl-tile-{token}-{i}")
-                 for i, job in enumerate(jobs)]
+        tasks = [
+            dask.delayed(_attempts, pure=False)(
+                job, payload, settings, retries, dask_key_name=f"rsocl-tile-{token}-{i}"
+            )
+            for i, job in enumerate(jobs)
+        ]
 
         class Bar(Callback):
             def _posttask(self, key, result, dsk, state, worker_id):
@@ -229,8 +254,12 @@ class Engine:
         client = self.client
         shared = client.scatter(payload, broadcast=True, hash=False)
         token = uuid.uuid4().hex[:8]
-        futures = {client.submit(solve_tile, job, shared, settings, key=f"rsocl-tile-{token}-{i}",
-                                 retries=retries, pure=False): job for i, job in enumerate(jobs)}
+        futures = {
+            client.submit(
+                solve_tile, job, shared, settings, key=f"rsocl-tile-{token}-{i}", retries=retries, pure=False
+            ): job
+            for i, job in enumerate(jobs)
+        }
         pieces, failures = [], []
         for future in as_completed(futures):
             job = futures[future]

@@ -45,8 +45,16 @@ from rsocl.files.hdf5 import FORMAT_VERSION
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import expand
 
-__all__ = ["CHUNK_BYTES", "require_zarr", "check_store_path", "StoreSpec", "prepare_store", "write_piece",
-           "load_store", "StoredReconstruction"]
+__all__ = [
+    "CHUNK_BYTES",
+    "require_zarr",
+    "check_store_path",
+    "StoreSpec",
+    "prepare_store",
+    "write_piece",
+    "load_store",
+    "StoredReconstruction",
+]
 
 #: Target size of one chunk of ``datacube``, bytes.
 CHUNK_BYTES = 4 * 2**20
@@ -65,8 +73,9 @@ def require_zarr(name="out"):
     try:
         import zarr
     except ImportError:
-        raise ValueError(f"{name}: writing a Zarr store needs zarr >= 3 (Python >= 3.11): "
-                         "pip install 'rsocl[dask]'") from None
+        raise ValueError(
+            f"{name}: writing a Zarr store needs zarr >= 3 (Python >= 3.11): pip install 'rsocl[dask]'"
+        ) from None
     if int(zarr.__version__.split(".")[0]) < 3:
         raise ValueError(f"{name}: rsocl writes Zarr v3 stores with zarr >= 3, found zarr {zarr.__version__}")
     return zarr
@@ -113,11 +122,22 @@ class StoreSpec:
             if camera.get("row_map") is not None:
                 camera["row_map"] = {"dataset": f"{_ROW_MAPS}/{index}"}
         tiling = {"tile": list(self.tile), "halo": self.halo, "grid": list(self.grid), "sets": self.sets}
-        return {"rsocl_file": "reconstruction", "format_version": FORMAT_VERSION,
-                "rig": json.dumps(data, allow_nan=False), "T": rig.T, "T_se": rig.T_se, "dt": rig.dt,
-                "mask": rig.mask, "n_cameras": rig.C, "n_channels": rig.n_channels, "shape": list(rig.shape),
-                "params": json.dumps(self.params), "tiling": json.dumps(tiling), "input_digest": self.input_digest,
-                "dtype": self.dtype}
+        return {
+            "rsocl_file": "reconstruction",
+            "format_version": FORMAT_VERSION,
+            "rig": json.dumps(data, allow_nan=False),
+            "T": rig.T,
+            "T_se": rig.T_se,
+            "dt": rig.dt,
+            "mask": rig.mask,
+            "n_cameras": rig.C,
+            "n_channels": rig.n_channels,
+            "shape": list(rig.shape),
+            "params": json.dumps(self.params),
+            "tiling": json.dumps(tiling),
+            "input_digest": self.input_digest,
+            "dtype": self.dtype,
+        }
 
 
 def prepare_store(path, spec: StoreSpec, name="out") -> np.ndarray:
@@ -151,11 +171,16 @@ def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> np.ndarray:
         raise ValueError(f"{name}: {str(path)!r} is not an rsocl reconstruction store; choose another path")
     differ = [key for key in _IDENTITY if found.get(key) != attrs[key]]
     old_params, new_params = json.loads(found.get("params", "{}")), json.loads(attrs["params"])
-    differ += [f"params.{k}" for k in sorted(set(old_params) | set(new_params))
-               if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)]
+    differ += [
+        f"params.{k}"
+        for k in sorted(set(old_params) | set(new_params))
+        if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)
+    ]
     if differ:
-        raise ValueError(f"{name}: {str(path)!r} holds another reconstruction (it differs in "
-                         f"{', '.join(differ)}); remove it or choose another path")
+        raise ValueError(
+            f"{name}: {str(path)!r} holds another reconstruction (it differs in "
+            f"{', '.join(differ)}); remove it or choose another path"
+        )
     return np.asarray(group["tiles"][..., 0]) > 0
 
 
@@ -172,8 +197,13 @@ def _create(zarr, path: Path, spec: StoreSpec) -> bool:
         shape = spec.prefix_shape + (spec.rig.T,) + spec.rig.shape
         group.create_array("datacube", shape=shape, chunks=spec.chunks(), dtype=spec.dtype, fill_value=0)
         marks = (spec.sets or 1,) + tuple(spec.grid)
-        group.create_array("tiles", shape=marks + (len(TILE_FIELDS),), chunks=(1, 1, 1, len(TILE_FIELDS)),
-                           dtype="float64", fill_value=0)
+        group.create_array(
+            "tiles",
+            shape=marks + (len(TILE_FIELDS),),
+            chunks=(1, 1, 1, len(TILE_FIELDS)),
+            dtype="float64",
+            fill_value=0,
+        )
         for index, camera in enumerate(spec.rig.cameras):
             if camera.row_map is not None:
                 group.create_array(f"{_ROW_MAPS}/{index}", data=spec.rig.row_map(index))
@@ -223,8 +253,9 @@ def write_piece(path: str, tile, piece, span: tuple) -> None:
     block = expand(np.asarray(piece.block, dtype=datacube.dtype), piece.start, 0, T, span)
     datacube[prefix + (slice(0, T), rows, cols)] = block
     s = piece.set_index or 0
-    marks[(s,) + tuple(tile.index)] = np.array([1, piece.start, piece.stop, piece.seconds, piece.iterations,
-                                                piece.residual], dtype=np.float64)
+    marks[(s,) + tuple(tile.index)] = np.array(
+        [1, piece.start, piece.stop, piece.seconds, piece.iterations, piece.residual], dtype=np.float64
+    )
 
 
 @dataclass(frozen=True)
@@ -258,5 +289,10 @@ def load_store(path) -> StoredReconstruction:
         ref = camera.get("row_map")
         if isinstance(ref, dict):
             camera["row_map"] = np.asarray(group[ref["dataset"]][...], dtype=np.float64)
-    return StoredReconstruction(group["datacube"], Rig.from_dict(data), json.loads(attrs["params"]),
-                                json.loads(attrs["tiling"]), np.asarray(group["tiles"][...]))
+    return StoredReconstruction(
+        group["datacube"],
+        Rig.from_dict(data),
+        json.loads(attrs["params"]),
+        json.loads(attrs["tiling"]),
+        np.asarray(group["tiles"][...]),
+    )

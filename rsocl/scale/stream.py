@@ -28,8 +28,10 @@ __all__ = ["default_overlap", "frame_windows", "window_channels", "reconstruct_s
 def _frames(rig: Rig) -> int:
     counts = {cam.frames for cam in rig.cameras}
     if len(counts) != 1:
-        raise ValueError(f"rig: every camera must capture the same number of frames for a stream, got "
-                         f"{[cam.frames for cam in rig.cameras]}")
+        raise ValueError(
+            f"rig: every camera must capture the same number of frames for a stream, got "
+            f"{[cam.frames for cam in rig.cameras]}"
+        )
     return counts.pop()
 
 
@@ -107,9 +109,11 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
     from rsocl.scale.tiled import reconstruct_tiled
 
     if kwargs.get("out") is not None:
-        raise ValueError(f"out: a stream of frame windows is assembled in memory (StreamResult.datacube) and "
-                         f"writes no Zarr store, got out={kwargs['out']!r}; leave out out and save the result "
-                         f"(e.g. rsocl.files.hdf5.save_reconstruction)")
+        raise ValueError(
+            f"out: a stream of frame windows is assembled in memory (StreamResult.datacube) and "
+            f"writes no Zarr store, got out={kwargs['out']!r}; leave out out and save the result "
+            f"(e.g. rsocl.files.hdf5.save_reconstruction)"
+        )
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     g = check.finite_array("g", snapshots)
@@ -120,25 +124,28 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
     spans = [r.sampled_range() for r in rigs]
     T = rig.T
     s = np.arange(T)
-    depth = np.stack([np.minimum(s - span.start, span.stop - 1 - s) for span in spans])   # < 0 outside a span
+    depth = np.stack([np.minimum(s - span.start, span.stop - 1 - s) for span in spans])  # < 0 outside a span
     owner = depth.argmax(axis=0)
     tile = rig.shape if tile is None else tile
     datacube: np.ndarray | None = None
     results: list = []
     for w, ((k0, k1), sub) in enumerate(zip(windows, rigs)):
         if progress:
-            print(f"window {w + 1}/{len(windows)}: frames {k0}..{k1 - 1}, sub-frames {spans[w].start}.."
-                  f"{spans[w].stop - 1}", flush=True)
+            print(
+                f"window {w + 1}/{len(windows)}: frames {k0}..{k1 - 1}, sub-frames {spans[w].start}.."
+                f"{spans[w].stop - 1}",
+                flush=True,
+            )
         result = reconstruct_tiled(g[window_channels(rig, k0, k1)], sub, tile=tile, progress=progress, **kwargs)
         if not results and result.tuning is not None:
-            kwargs["tune"] = result.tuning              # the first window's choice, for every later window
+            kwargs["tune"] = result.tuning  # the first window's choice, for every later window
         elif not results:
-            kwargs["tune"] = False                      # nothing was left to choose
+            kwargs["tune"] = False  # nothing was left to choose
         results.append(result)
         cube = np.asarray(result.datacube)
         if datacube is None:
             datacube = np.zeros((T,) + rig.shape, dtype=cube.dtype)
         mine = np.nonzero(owner == w)[0]
-        datacube[mine] = cube[np.minimum(mine, cube.shape[0] - 1)]    # past the window's T: its last, held
+        datacube[mine] = cube[np.minimum(mine, cube.shape[0] - 1)]  # past the window's T: its last, held
     assert datacube is not None  # frame_windows gives at least one window
     return StreamResult(datacube, rig, windows, [(s.start, s.stop) for s in spans], owner, results)

@@ -101,17 +101,21 @@ def _check_tile_memory(rig, grid, reg, dtype, projection, device):
     limit = device_limit(dev, largest, total)
     if limit is not None:
         h, w = worst.outer_shape
-        raise ValueError(f"tile: a tile of {grid.tile[0]}x{grid.tile[1]} ({h}x{w} with the halo) needs {limit} "
-                         f"({dev.name}); choose a smaller tile (rsocl plan proposes one)")
+        raise ValueError(
+            f"tile: a tile of {grid.tile[0]}x{grid.tile[1]} ({h}x{w} with the halo) needs {limit} "
+            f"({dev.name}); choose a smaller tile (rsocl plan proposes one)"
+        )
 
 
 def _check_device(device, engine):
     """ValueError naming ``device`` when it is a :class:`~rsocl.device.Device` and the tasks run in
     other processes (a cluster's workers), which open their own OpenCL contexts from a spec."""
     if isinstance(device, Device) and engine.mode == "distributed":
-        raise ValueError(f"device must be a device spec string for the workers of {engine.description} (each "
-                         f"worker process opens its own OpenCL context), e.g. 'pocl', '0:0' or 'nvidia' (rsocl "
-                         f"devices lists them), or None to let each worker choose; got a Device ({device.name})")
+        raise ValueError(
+            f"device must be a device spec string for the workers of {engine.description} (each "
+            f"worker process opens its own OpenCL context), e.g. 'pocl', '0:0' or 'nvidia' (rsocl "
+            f"devices lists them), or None to let each worker choose; got a Device ({device.name})"
+        )
 
 
 def _settings(request: Request, tuning, saturation, fills):
@@ -125,19 +129,60 @@ def _settings(request: Request, tuning, saturation, fills):
     blend = applied_blend(tuning) if request.blend is None else request.blend
     device = request.device
     assert settled.lam is not None and settled.eta is not None  # a Request's settings are settled
-    settings = TileSettings(request.name, options, settled.iterations, settled.lam, settled.eta,
-                            settled.tv_iterations, settled.projection, str(np.dtype(request.dtype)), saturation, device,
-                            start, fill, blend)
-    params = run_params(request, reg, settled, lam=settled.lam, eta=settled.eta,
-                        device=device.name if isinstance(device, Device) else device, saturation=saturation,
-                        tuning=tuning, blend=blend, start=start)
+    settings = TileSettings(
+        request.name,
+        options,
+        settled.iterations,
+        settled.lam,
+        settled.eta,
+        settled.tv_iterations,
+        settled.projection,
+        str(np.dtype(request.dtype)),
+        saturation,
+        device,
+        start,
+        fill,
+        blend,
+    )
+    params = run_params(
+        request,
+        reg,
+        settled,
+        lam=settled.lam,
+        eta=settled.eta,
+        device=device.name if isinstance(device, Device) else device,
+        saturation=saturation,
+        tuning=tuning,
+        blend=blend,
+        start=start,
+    )
     return settings, params
 
 
-def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None, iterations=None,
-                      lam=None, eta=None, tv_iterations=None, projection="exact", device=None, dtype="float32",
-                      regularizer_options=None, saturation=None, out=None, scheduler=None, workers=None,
-                      retries=RETRIES, tune=True, blend=None, progress=False) -> TiledResult:
+def reconstruct_tiled(
+    snapshots,
+    rig: Rig,
+    regularizer="tv",
+    *,
+    tile,
+    halo=None,
+    iterations=None,
+    lam=None,
+    eta=None,
+    tv_iterations=None,
+    projection="exact",
+    device=None,
+    dtype="float32",
+    regularizer_options=None,
+    saturation=None,
+    out=None,
+    scheduler=None,
+    workers=None,
+    retries=RETRIES,
+    tune=True,
+    blend=None,
+    progress=False,
+) -> TiledResult:
     """Reconstruct ``snapshots`` tile by tile (and set by set) as tasks of a Dask graph.
 
     Parameters
@@ -197,14 +242,29 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     source = _source(snapshots, rig)
     if not isinstance(regularizer, str):
-        raise ValueError(f"regularizer must be a registry name for a tiled reconstruction (each task builds its "
-                         f"own), got {regularizer!r}")
+        raise ValueError(
+            f"regularizer must be a registry name for a tiled reconstruction (each task builds its "
+            f"own), got {regularizer!r}"
+        )
     retries = non_negative_int("retries", retries)
     if saturation is not None:
         saturation = check.positive("saturation", saturation, "(snapshot units)")
-    request = make_request(rig, regularizer, sets=source.n_sets, iterations=iterations, lam=lam, eta=eta,
-                           tv_iterations=tv_iterations, projection=projection, dtype=dtype, device=device,
-                           regularizer_options=regularizer_options, tune=tune, blend=blend, progress=progress)
+    request = make_request(
+        rig,
+        regularizer,
+        sets=source.n_sets,
+        iterations=iterations,
+        lam=lam,
+        eta=eta,
+        tv_iterations=tv_iterations,
+        projection=projection,
+        dtype=dtype,
+        device=device,
+        regularizer_options=regularizer_options,
+        tune=tune,
+        blend=blend,
+        progress=progress,
+    )
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
     _check_device(device, engine)
@@ -213,17 +273,23 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
         from rsocl.scale.store import check_store_path, require_zarr
 
         require_zarr("out")
-        store = check_store_path(out, "out").absolute()   # workers may run in another folder
+        store = check_store_path(out, "out").absolute()  # workers may run in another folder
     if engine.mode != "distributed":
         _check_tile_memory(rig, grid, request.regularizer, dtype, request.settings.projection, device)
     span = rig.sampled_range()
-    with engine:                        # a cluster is reached (or started) before the input is read
+    with engine:  # a cluster is reached (or started) before the input is read
         began = time.perf_counter()
         digest, saturated, fills = scan(source, saturation)
         tuning = tune_tiles(source, grid, request, saturation)
         settings, params = _settings(request, tuning, saturation, fills if source.n_sets else fills[0])
-        params.update({"saturated_pixels": saturated, "solved_subframes": [span.start, span.stop],
-                       "tile": list(grid.tile), "halo": grid.halo})
+        params.update(
+            {
+                "saturated_pixels": saturated,
+                "solved_subframes": [span.start, span.stop],
+                "tile": list(grid.tile),
+                "halo": grid.halo,
+            }
+        )
         done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)
         if store is not None:
             from rsocl.scale.store import StoreSpec, prepare_store
@@ -231,11 +297,21 @@ def reconstruct_tiled(snapshots, rig: Rig, regularizer="tv", *, tile, halo=None,
             spec = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, settings.dtype, params, digest)
             done = prepare_store(store, spec)
         sets = [None] if source.n_sets is None else list(range(source.n_sets))
-        jobs = [Job(s, t, source.block(s, t), (span.start, span.stop), None if store is None else str(store))
-                for s in sets for t in grid if not done[(s or 0,) + t.index]]
+        jobs = [
+            Job(s, t, source.block(s, t), (span.start, span.stop), None if store is None else str(store))
+            for s in sets
+            for t in grid
+            if not done[(s or 0,) + t.index]
+        ]
         payload = RigPayload.of(rig)
-        pieces, failures = engine.run(jobs, payload, settings, retries=retries, progress=progress,
-                                      desc="tiles" if source.n_sets is None else "tiles x sets")
+        pieces, failures = engine.run(
+            jobs,
+            payload,
+            settings,
+            retries=retries,
+            progress=progress,
+            desc="tiles" if source.n_sets is None else "tiles x sets",
+        )
         seconds = time.perf_counter() - began
     if store is not None:
         from rsocl.scale.store import load_store

@@ -25,7 +25,18 @@ import numpy as np
 from rsocl.model.rig import Rig
 from rsocl.solver.held import held_index
 
-__all__ = ["DEFAULT_HALO", "Tile", "TileGrid", "tile_grid", "check_tile", "check_halo", "tile_rig", "place", "expand", "core_block"]
+__all__ = [
+    "DEFAULT_HALO",
+    "Tile",
+    "TileGrid",
+    "tile_grid",
+    "check_tile",
+    "check_halo",
+    "tile_rig",
+    "place",
+    "expand",
+    "core_block",
+]
 
 #: Halo on every side of a tile, pixels (how far tiles with it differ from the untiled run:
 #: docs/scale.md).
@@ -136,8 +147,7 @@ def check_tile(tile, shape, name="tile") -> tuple:
     except (TypeError, ValueError):
         ok = False
     if not ok or not (1 <= h <= m and 1 <= w <= n):
-        raise ValueError(f"{name} must be (H, W) pixels with 1 <= H <= m = {m} and 1 <= W <= n = {n}, "
-                         f"got {tile!r}")
+        raise ValueError(f"{name} must be (H, W) pixels with 1 <= H <= m = {m} and 1 <= W <= n = {n}, got {tile!r}")
     return (h, w)
 
 

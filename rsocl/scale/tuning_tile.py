@@ -106,6 +106,6 @@ def tune_tiles(source, grid: TileGrid, request: Request, saturation=None):
         try:
             return _search(crop, request, saturation)
         except ValueError as exc:
-            if "device" not in str(exc):            # only a search too large for the device falls back
+            if "device" not in str(exc):  # only a search too large for the device falls back
                 raise
     return _search(_tuning_block(source, grid, saturation), request, saturation)

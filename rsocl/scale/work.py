@@ -58,8 +58,9 @@ class TileSettings:
     fill: float | tuple = 0.0
     blend: float = 1.0
 
-    def for_set(self, set_index) -> "TileSettings":
+    def for_set(self, set_index) -> TileSettings:
         """The settings of set ``set_index``'s tasks: its own ``lam``, ``eta`` and ``fill`` where they are per set."""
+
         def own(value):
             return value[set_index] if isinstance(value, tuple) else value
 
@@ -74,7 +75,7 @@ class RigPayload:
     data: dict
 
     @classmethod
-    def of(cls, rig: Rig) -> "RigPayload":
+    def of(cls, rig: Rig) -> RigPayload:
         """The payload of ``rig``, keyed by the SHA-256 of its description and row maps."""
         data = rig.to_dict()
         digest = hashlib.sha256(repr({**data, "cameras": None}).encode())
@@ -244,16 +245,35 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     else:
         with _lock_for(device):
             began = time.perf_counter()
-            result = reconstruct(g, rig, settings.regularizer, iterations=settings.iterations, lam=settings.lam,
-                                 eta=settings.eta, tv_iterations=settings.tv_iterations,
-                                 projection=settings.projection, device=device, dtype=settings.dtype,
-                                 regularizer_options=settings.options, saturation=settings.saturation, x0=x0,
-                                 tune=False,  # the capture's settings, never a tile's own choice
-                                 blend=settings.blend)
+            result = reconstruct(
+                g,
+                rig,
+                settings.regularizer,
+                iterations=settings.iterations,
+                lam=settings.lam,
+                eta=settings.eta,
+                tv_iterations=settings.tv_iterations,
+                projection=settings.projection,
+                device=device,
+                dtype=settings.dtype,
+                regularizer_options=settings.options,
+                saturation=settings.saturation,
+                x0=x0,
+                tune=False,  # the capture's settings, never a tile's own choice
+                blend=settings.blend,
+            )
             seconds = time.perf_counter() - began
-        piece = Piece(job.set_index, job.tile.index, solved.start, solved.stop,
-                      core_block(result.datacube, job.tile, solved), seconds, result.iterations,
-                      float(result.history["residual"][-1]), device.name)
+        piece = Piece(
+            job.set_index,
+            job.tile.index,
+            solved.start,
+            solved.stop,
+            core_block(result.datacube, job.tile, solved),
+            seconds,
+            result.iterations,
+            float(result.history["residual"][-1]),
+            device.name,
+        )
     if job.store is not None:
         from rsocl.scale.store import write_piece
 

@@ -115,8 +115,9 @@ class ADMM:
     passes for either after the first iteration.
     """
 
-    def __init__(self, op: RollingShutterOperator, g, regularizer, *, lam, eta, projection="exact", x0=None,
-                 valid=None):
+    def __init__(
+        self, op: RollingShutterOperator, g, regularizer, *, lam, eta, projection="exact", x0=None, valid=None
+    ):
         import pyopencl as cl
         import pyopencl.array as cla
 
@@ -141,10 +142,15 @@ class ADMM:
         self.u = cla.empty(queue, shape, op.dtype)
         self.hx = cla.empty(queue, batch + op.range_shape, op.dtype)
         self.program = op.device.program(
-            ["admm.cl"], REAL=c_type(op.dtype), MASK_BINARY=int(op.rig.mask == "binary"),
-            NCH=op.K, PROJECTION_EXACT=int(projection == "exact"), **op.tile_defines)
+            ["admm.cl"],
+            REAL=c_type(op.dtype),
+            MASK_BINARY=int(op.rig.mask == "binary"),
+            NCH=op.K,
+            PROJECTION_EXACT=int(projection == "exact"),
+            **op.tile_defines,
+        )
         self.per_set = int(np.prod(op.domain_shape))
-        dev, prog = op.device, self.program                       # exact grids: no bounds tests
+        dev, prog = op.device, self.program  # exact grids: no bounds tests
         self.voxels = batch_launches(self.per_set, self.sets, dev.group_limit(prog.admm_dual, cap=64))
         self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
         self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project,))
@@ -160,12 +166,24 @@ class ADMM:
         step enqueues them and sets only the by-value arguments that change (the first iteration's flags)."""
         op, prog, key = self.op, self.program, ("ADMM", id(self))
         self._dual = prog.instance("admm_dual", key)
-        self._dual.set_args(self.theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0),
-                            np.int32(self.per_set))
+        self._dual.set_args(
+            self.theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0), np.int32(self.per_set)
+        )
         self._project = prog.instance("admm_project", key)
-        self._project.set_args(self.f.data, self.g.data, *op._geometry(), self.inverse.data, self.eta_device.data,
-                               np.int32(self.own_inverse), self.b.data, self.u.data, np.int32(self.fused),
-                               np.int32(op.T), np.int32(op.L), *op._shape_args())
+        self._project.set_args(
+            self.f.data,
+            self.g.data,
+            *op._geometry(),
+            self.inverse.data,
+            self.eta_device.data,
+            np.int32(self.own_inverse),
+            self.b.data,
+            self.u.data,
+            np.int32(self.fused),
+            np.int32(op.T),
+            np.int32(op.L),
+            *op._shape_args(),
+        )
         self._difference = prog.instance("admm_difference", key)
         self._difference.set_args(self.f.data, self.b.data, self.u.data)
 
@@ -188,13 +206,17 @@ class ADMM:
         """Whether every set has its own inverse blocks, and the blocks (``(K, K, m, n)`` or ``(K, m, n)``
         per set): one set of blocks serves the batch unless ``eta`` or the valid pixels differ."""
         sets = self.sets
-        valid = None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool).reshape((-1,) + op.range_shape)
+        valid = (
+            None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool).reshape((-1,) + op.range_shape)
+        )
         own = own_inverses(projection, self.etas, valid, sets)
         count = sets if own else 1
         if projection == "paper":
             psi = op.psi
-            blocks = [psi if valid is None else np.where(valid[i if own else 0], psi, np.inf)  # r/(eta+inf) = 0
-                      for i in range(count)]
+            blocks = [
+                psi if valid is None else np.where(valid[i if own else 0], psi, np.inf)  # r/(eta+inf) = 0
+                for i in range(count)
+            ]
         else:
             gram = op.gram()
             rcond = RCOND[op.dtype.name]
@@ -203,7 +225,7 @@ class ADMM:
                 if valid is None:
                     inverse = block_inverse(gram, self.etas[i], rcond)
                 else:
-                    keep = np.moveaxis(valid[i if own else 0].astype(np.float64), 0, -1)      # (m, n, K)
+                    keep = np.moveaxis(valid[i if own else 0].astype(np.float64), 0, -1)  # (m, n, K)
                     mask = keep[..., :, None] * keep[..., None, :]
                     inverse = block_inverse(gram * mask, self.etas[i], rcond) * mask
                 blocks.append(np.moveaxis(inverse, (2, 3), (0, 1)))
@@ -226,7 +248,7 @@ class ADMM:
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
         queue = self.op.queue
-        if not (self.fused and self.iteration > 0):           # else the denoiser made the dual update
+        if not (self.fused and self.iteration > 0):  # else the denoiser made the dual update
             self._dual.set_arg(4, np.int32(self.iteration > 0))
             for gsize, lsize, offset in self.voxels:
                 self._dual.enqueue(queue, gsize, lsize, offset)
@@ -244,8 +266,9 @@ class ADMM:
         """``theta = x0 + alpha (theta - x0)`` (enqueued): the estimate moved back towards the start ``x0``
         (a device array of ``theta``'s shape), ``alpha`` in [0, 1] (1: unchanged)."""
         if x0.shape != self.theta.shape or x0.dtype != self.theta.dtype:
-            raise ValueError(f"x0 must match theta ({self.theta.shape}, {self.theta.dtype}), "
-                             f"got {x0.shape}, {x0.dtype}")
+            raise ValueError(
+                f"x0 must match theta ({self.theta.shape}, {self.theta.dtype}), got {x0.shape}, {x0.dtype}"
+            )
         alpha = self.theta.dtype.type(check.in_range("blend", alpha, 0.0, 1.0))
         dev, kernel = self.op.device, self.program.admm_blend
         for gsize, lsize, offset in element_launches(self.sets * self.per_set, dev.group_limit(kernel, cap=64)):
@@ -257,7 +280,7 @@ class ADMM:
         """
         return self.residual_async().result()
 
-    def residual_async(self) -> "PendingResidual":
+    def residual_async(self) -> PendingResidual:
         """Enqueue :meth:`residual` of the current ``theta``; ``.result()`` waits for it.
 
         The next :meth:`step` may be enqueued before the result is read: the device

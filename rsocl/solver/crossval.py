@@ -32,8 +32,15 @@ from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import ADMM
 from rsocl.solver.holdout import default_patterns, fold_masks
 
-__all__ = ["LAM_FACTORS", "CANDIDATE_FRACTION", "SearchSpace", "Tuning", "tune_parameters", "run_folds",
-           "applied_blend"]
+__all__ = [
+    "LAM_FACTORS",
+    "CANDIDATE_FRACTION",
+    "SearchSpace",
+    "Tuning",
+    "tune_parameters",
+    "run_folds",
+    "applied_blend",
+]
 
 #: ``lam`` candidates, as factors of the recommended ``lam`` (TV: 0.03, 0.1, 0.3).
 LAM_FACTORS = (0.3, 1.0, 3.0)
@@ -123,22 +130,40 @@ class Tuning:
     blend: float | None = None
 
     @classmethod
-    def from_params(cls, record: dict) -> "Tuning":
+    def from_params(cls, record: dict) -> Tuning:
         """The choice recorded by :meth:`as_params` (e.g. ``Result.params["tuning"]``), to run again with."""
-        candidates = [{k: (math.inf if k == "score" and v is None else v) for k, v in c.items()}
-                      for c in record.get("candidates", [])]
-        return cls(dict(record["chosen"]), candidates, dict(record.get("fixed", {})),
-                   record.get("iterations_per_candidate", 0), record.get("block", 0),
-                   record.get("held_out_pixels", 0), record.get("seconds", 0.0), record.get("folds", 1),
-                   dict(record.get("preset", {})), record.get("blend"))
+        candidates = [
+            {k: (math.inf if k == "score" and v is None else v) for k, v in c.items()}
+            for c in record.get("candidates", [])
+        ]
+        return cls(
+            dict(record["chosen"]),
+            candidates,
+            dict(record.get("fixed", {})),
+            record.get("iterations_per_candidate", 0),
+            record.get("block", 0),
+            record.get("held_out_pixels", 0),
+            record.get("seconds", 0.0),
+            record.get("folds", 1),
+            dict(record.get("preset", {})),
+            record.get("blend"),
+        )
 
     def as_params(self) -> dict:
         """A JSON-ready record for :attr:`rsocl.solver.result.Result.params`."""
-        return {"criterion": "block cross-validation: relative error of held-out snapshot pixels",
-                "chosen": dict(self.chosen), "fixed": dict(self.fixed),
-                "candidates": [{k: (v if math.isfinite(v) else None) for k, v in c.items()} for c in self.candidates],
-                "iterations_per_candidate": self.iterations, "block": self.block, "held_out_pixels": self.held_out,
-                "folds": self.folds, "seconds": self.seconds, "preset": dict(self.preset), "blend": self.blend}
+        return {
+            "criterion": "block cross-validation: relative error of held-out snapshot pixels",
+            "chosen": dict(self.chosen),
+            "fixed": dict(self.fixed),
+            "candidates": [{k: (v if math.isfinite(v) else None) for k, v in c.items()} for c in self.candidates],
+            "iterations_per_candidate": self.iterations,
+            "block": self.block,
+            "held_out_pixels": self.held_out,
+            "folds": self.folds,
+            "seconds": self.seconds,
+            "preset": dict(self.preset),
+            "blend": self.blend,
+        }
 
 
 def _midpoints(values, best):
@@ -159,8 +184,7 @@ def run_folds(op, g_device, folds, reg, lam, *, eta, projection, iterations):
     err = moved = 0.0
     for fold in folds:
         if fold.solver is None:
-            fold.solver = ADMM(op, g_device, reg, lam=lam, eta=eta, projection=projection, x0=fold.x0,
-                               valid=fold.fit)
+            fold.solver = ADMM(op, g_device, reg, lam=lam, eta=eta, projection=projection, x0=fold.x0, valid=fold.fit)
         else:
             fold.solver.restart(reg, lam, fold.x0)
         solver = fold.solver
@@ -172,8 +196,21 @@ def run_folds(op, g_device, folds, reg, lam, *, eta, projection, iterations):
     return err, moved
 
 
-def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, eta, projection="exact", valid=None,
-                    iterations=60, patterns=None, progress=False, runner=None) -> Tuning:
+def tune_parameters(
+    op,
+    g_device,
+    g,
+    make_regularizer,
+    space: SearchSpace,
+    *,
+    eta,
+    projection="exact",
+    valid=None,
+    iterations=60,
+    patterns=None,
+    progress=False,
+    runner=None,
+) -> Tuning:
     """Search the parameters that predict held-out snapshot pixels best (see the module doc).
 
     Parameters
@@ -231,11 +268,15 @@ def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, et
         folds.append(_fold(op, g_device, g, block, fit, scored))
         held_out += int(scored.sum())
     scale = sum(sum_sq_diff(g_device, weights=fold.weights) for fold in folds)
-    start_err = sum(sum_sq_diff(g_device, fold.start_prediction, weights=fold.weights)   # |g - H x0|^2
-                    for fold in folds)
+    start_err = sum(
+        sum_sq_diff(g_device, fold.start_prediction, weights=fold.weights)  # |g - H x0|^2
+        for fold in folds
+    )
     tunable = space.tunable
-    current = {"lam": lams[len(lams) // 2], **{name: float(sorted(values)[(len(values) - 1) // 2])
-                                                for name, values in tunable.items()}}
+    current = {
+        "lam": lams[len(lams) // 2],
+        **{name: float(sorted(values)[(len(values) - 1) // 2]) for name, values in tunable.items()},
+    }
     scores: dict = {}
     blends: dict = {}
     candidates = []
@@ -252,8 +293,9 @@ def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, et
         if key in scores:
             return scores[key]
         reg = make_regularizer({**preset, **{k: v for k, v in point.items() if k != "lam"}})
-        err, moved = (runner or run_folds)(op, g_device, folds, reg, point["lam"], eta=eta, projection=projection,
-                                           iterations=iterations)
+        err, moved = (runner or run_folds)(
+            op, g_device, folds, reg, point["lam"], eta=eta, projection=projection, iterations=iterations
+        )
         value = float(math.sqrt(err / scale)) if scale > 0 else float(math.sqrt(err))
         if not math.isfinite(value):
             value = math.inf
@@ -270,7 +312,7 @@ def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, et
             coarse = sorted(float(v) for v in values)
             for v in coarse:
                 score({**current, name: v})
-            best = min(coarse, key=lambda v: score({**current, name: v}))            # run above: cached
+            best = min(coarse, key=lambda v: score({**current, name: v}))  # run above: cached
             refined = coarse + _midpoints(coarse, best)
             for v in refined:
                 score({**current, name: v})
@@ -281,10 +323,18 @@ def tune_parameters(op, g_device, g, make_regularizer, space: SearchSpace, *, et
     finally:
         if bar is not None:
             bar.close()
-    return Tuning(chosen={**preset, **current}, candidates=candidates, fixed=dict(space.fixed), iterations=iterations,
-                  block=blocks[0] if len(blocks) == 1 else blocks, held_out=held_out,
-                  seconds=time.perf_counter() - start, folds=len(patterns), preset=preset,
-                  blend=blends[tuple(sorted(current.items()))])
+    return Tuning(
+        chosen={**preset, **current},
+        candidates=candidates,
+        fixed=dict(space.fixed),
+        iterations=iterations,
+        block=blocks[0] if len(blocks) == 1 else blocks,
+        held_out=held_out,
+        seconds=time.perf_counter() - start,
+        folds=len(patterns),
+        preset=preset,
+        blend=blends[tuple(sorted(current.items()))],
+    )
 
 
 def _fold(op, g_device, g, block, fit, scored) -> _Fold:
@@ -294,9 +344,11 @@ def _fold(op, g_device, g, block, fit, scored) -> _Fold:
 
     rig = op.rig
     if not scored.any() or not fit.any():
-        raise ValueError(f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
-                         f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}"
-                         "; fix lam and the regularizer's options or pass tune=False")
+        raise ValueError(
+            f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
+            f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}"
+            "; fix lam and the regularizer's options or pass tune=False"
+        )
     x0 = interp3d_device(op, g, fit, _solved(rig, op))
     weights = cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype))
     start_prediction = cla.empty_like(g_device)

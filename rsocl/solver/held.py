@@ -43,7 +43,7 @@ class HeldSumSquares:
     def __init__(self, truth, solved: slice, T: int):
         truth = np.asarray(truth, dtype=np.float64)
         self.batched = truth.ndim == 4
-        self.ends = []                 # (position in the solved range, count, mean planes, spread per set)
+        self.ends = []  # (position in the solved range, count, mean planes, spread per set)
         last = solved.stop - solved.start - 1
         for position, frames in ((0, slice(0, solved.start)), (last, slice(solved.stop, int(T)))):
             part = truth[..., frames, :, :]

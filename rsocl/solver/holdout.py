@@ -14,8 +14,17 @@ import numpy as np
 
 from rsocl.common import validation as check
 
-__all__ = ["FOLDS", "MIN_BLOCK", "holdout", "default_block", "default_folds", "fold_patterns", "default_patterns",
-           "fold_masks", "can_hold_out"]
+__all__ = [
+    "FOLDS",
+    "MIN_BLOCK",
+    "holdout",
+    "default_block",
+    "default_folds",
+    "fold_patterns",
+    "default_patterns",
+    "fold_masks",
+    "can_hold_out",
+]
 
 #: Hold-out patterns pooled at least (:func:`default_folds`; more when one pattern leaves a camera
 #: never held out): fold ``k`` shifts the held-out cameras by ``k*P // folds``.
@@ -45,7 +54,7 @@ def default_folds(shape, channels: int, block: int | None = None, minimum: int |
     m, n = check.grid_shape("shape", shape)
     channels = check.positive_int("channels", channels)
     block = default_block((m, n)) if block is None else check.positive_int("block", block)
-    blocks = (-(-m // block), -(-n // block))              # the pattern on the grid of blocks
+    blocks = (-(-m // block), -(-n // block))  # the pattern on the grid of blocks
     period = max(channels, 2)
     minimum = FOLDS if minimum is None else check.positive_int("minimum", minimum)
     for folds in range(min(minimum, period), period + 1):
@@ -116,5 +125,7 @@ def can_hold_out(shape, channels: int, valid=None) -> bool:
     to fit and to score, among the ``valid`` ones (None: all). Not so for one camera on a grid of
     2x2 pixels or fewer, whose one block holds the only camera out."""
     usable = np.ones((channels,) + tuple(shape), bool) if valid is None else np.asarray(valid, bool)
-    return all(fit.any() and scored.any()
-               for fit, scored in fold_masks(shape, channels, usable, default_patterns(shape, channels)))
+    return all(
+        fit.any() and scored.any()
+        for fit, scored in fold_masks(shape, channels, usable, default_patterns(shape, channels))
+    )

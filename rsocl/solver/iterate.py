@@ -60,8 +60,10 @@ class _History:
     def _hint(self) -> str:
         if self.settings.projection == "paper":
             psi = float(self.staged.op.psi.max())
-            return (" The paper's diagonal step (projection='paper') is stable only when eta is large "
-                    f"against psi (max psi = {psi:.3g}); use projection='exact' or raise eta.")
+            return (
+                " The paper's diagonal step (projection='paper') is stable only when eta is large "
+                f"against psi (max psi = {psi:.3g}); use projection='exact' or raise eta."
+            )
         return " Check lam, eta and the data scale."
 
     def check_end(self):
@@ -75,10 +77,14 @@ class _History:
         if not bad.any():
             return
         where = f" in set(s) {np.flatnonzero(bad).tolist()}" if np.ndim(self.values["residual"][-1]) else ""
-        warnings.warn(f"ADMM ended unstable{where}: the last residual {np.round(last[bad], 4).tolist()} is above 1 "
-                      "(the snapshots are fitted worse than by zeros) and more than "
-                      f"{END_GROWTH:g} times the smallest of the run, {np.round(lowest[bad], 4).tolist()}; "
-                      f"the result does not reconstruct the data.{self._hint()}", RuntimeWarning, stacklevel=4)
+        warnings.warn(
+            f"ADMM ended unstable{where}: the last residual {np.round(last[bad], 4).tolist()} is above 1 "
+            "(the snapshots are fitted worse than by zeros) and more than "
+            f"{END_GROWTH:g} times the smallest of the run, {np.round(lowest[bad], 4).tolist()}; "
+            f"the result does not reconstruct the data.{self._hint()}",
+            RuntimeWarning,
+            stacklevel=4,
+        )
 
     def check_stall(self, final=False):
         """Raise ``FloatingPointError`` when the residual (per set) has not moved by :data:`STALL_TOL` from
@@ -102,20 +108,24 @@ class _History:
             f"ADMM never moved{where}: the residual stayed at [{shown(np.atleast_1d(first)[np.atleast_1d(still)])}] "
             f"over {count} iterations with eta = {shown(self.solver.eta)} and lam = {shown(self.solver.lam)}: an eta "
             f"far above the data term's curvature (psi up to {psi:.3g}) leaves the data step at zero; choose eta "
-            f"{low}up to about 4 psi = {4 * psi:.3g} (leave eta and lam out for the defaults)")
+            f"{low}up to about 4 psi = {4 * psi:.3g} (leave eta and lam out for the defaults)"
+        )
 
     def _diverged(self, it, residual, bad):
         hint = self._hint()
         lowest = self.lowest
-        why = (f" (more than {GROWTH:g} times the smallest residual so far, or than 1, the residual of a zero "
-               f"estimate)")
+        why = f" (more than {GROWTH:g} times the smallest residual so far, or than 1, the residual of a zero estimate)"
         if np.ndim(residual):
             sets = np.flatnonzero(bad).tolist()
-            return FloatingPointError(f"ADMM diverged at iteration {it + 1} in set(s) {sets}: the residuals are "
-                                      f"{np.asarray(residual)[sets].tolist()}{why}, the smallest so far "
-                                      f"{np.asarray(lowest)[sets].tolist()}.{hint}")
-        return FloatingPointError(f"ADMM diverged at iteration {it + 1}: the residual is {residual}{why}, the "
-                                  f"smallest so far {float(lowest):.3g}.{hint}")
+            return FloatingPointError(
+                f"ADMM diverged at iteration {it + 1} in set(s) {sets}: the residuals are "
+                f"{np.asarray(residual)[sets].tolist()}{why}, the smallest so far "
+                f"{np.asarray(lowest)[sets].tolist()}.{hint}"
+            )
+        return FloatingPointError(
+            f"ADMM diverged at iteration {it + 1}: the residual is {residual}{why}, the "
+            f"smallest so far {float(lowest):.3g}.{hint}"
+        )
 
     def _psnr(self):
         staged, solver = self.staged, self.solver
@@ -175,8 +185,14 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> d
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=settings.iterations, desc=f"ADMM-{solver.regularizer.name}", unit="it", leave=False,
-                   mininterval=0.5, disable=None)
+        bar = tqdm(
+            total=settings.iterations,
+            desc=f"ADMM-{solver.regularizer.name}",
+            unit="it",
+            leave=False,
+            mininterval=0.5,
+            disable=None,
+        )
     rig = staged.op.rig
     history = _History(solver, staged, settings, rig.T * rig.shape[0] * rig.shape[1], bar)
     if solver.batched and bar is not None:
@@ -207,7 +223,7 @@ def _run_pipelined(solver, history, iterations):
     residual in a device slot, the slots are read in one copy every ``solver.residuals.slots``
     iterations, and each copy is waited for only after the next group of iterations is enqueued."""
     slots = solver.residuals.slots
-    pending = None                                  # (first iteration, residuals on their way)
+    pending = None  # (first iteration, residuals on their way)
     for it in range(iterations):
         solver.step()
         solver.residual_into(it % slots)
@@ -240,8 +256,10 @@ def collect(solver, staged, problem) -> tuple:
     valid = problem.valid
     sets = problem.batch or 1
     saturated = np.zeros(sets, int) if valid is None else (~valid).reshape(sets, -1).sum(axis=1)
-    record = {"saturated_pixels": saturated.tolist() if batch else int(saturated.sum()),
-              "solved_subframes": [solved.start, solved.stop]}
+    record = {
+        "saturated_pixels": saturated.tolist() if batch else int(saturated.sum()),
+        "solved_subframes": [solved.start, solved.stop],
+    }
     if batch:
         record["sets"] = problem.batch
     return datacube, record

@@ -21,8 +21,17 @@ from rsocl.model.operator import geometry_bytes
 from rsocl.solver.holdout import default_patterns
 from rsocl.solver.search_batch import batch_bytes, batches_pay
 
-__all__ = ["state_bytes", "problem_bytes", "workspace_memory", "batch_memory", "memory_bytes", "memory_need",
-           "search_memory", "search_peak", "device_limit"]
+__all__ = [
+    "state_bytes",
+    "problem_bytes",
+    "workspace_memory",
+    "batch_memory",
+    "memory_bytes",
+    "memory_need",
+    "search_memory",
+    "search_peak",
+    "device_limit",
+]
 
 
 def state_bytes(cube, K: int, dtype, projection: str, sets: int = 1, own_inverse: bool = False) -> int:
@@ -63,12 +72,12 @@ def workspace_memory(cube, dtype, reg, sets: int, device=None) -> int:
     cube = tuple(int(v) for v in cube)
     if getattr(reg, "batched", False):
         return _workspace(reg, (sets,) + cube, dtype, device)
-    return _workspace(reg, cube, dtype, device) + (2 * int(np.prod(cube)) * np.dtype(dtype).itemsize
-                                                   if sets > 1 else 0)
+    return _workspace(reg, cube, dtype, device) + (2 * int(np.prod(cube)) * np.dtype(dtype).itemsize if sets > 1 else 0)
 
 
-def batch_memory(cube, K: int, dtype, reg, projection: str, sets: int, *, truth=False, own_inverse=False,
-                 start=False, device=None):
+def batch_memory(
+    cube, K: int, dtype, reg, projection: str, sets: int, *, truth=False, own_inverse=False, start=False, device=None
+):
     """``(largest buffer, total)`` device bytes of an ADMM run on ``sets`` sets of ``cube = (T, m, n)``:
     the staged problem (:func:`problem_bytes`, with the ground truth when ``truth`` and a start cube
     when ``start``), the solver's arrays (:func:`state_bytes`) and the regularizer's workspace
@@ -79,15 +88,28 @@ def batch_memory(cube, K: int, dtype, reg, projection: str, sets: int, *, truth=
     itemsize = np.dtype(dtype).itemsize
     cube_bytes = int(np.prod(cube)) * itemsize
     work = workspace_memory(cube, dtype, reg, sets, device)
-    total = (problem_bytes(cube, K, dtype, sets, truth=truth, start=start)
-             + state_bytes(cube, K, dtype, projection, sets, own_inverse) + work)
+    total = (
+        problem_bytes(cube, K, dtype, sets, truth=truth, start=start)
+        + state_bytes(cube, K, dtype, projection, sets, own_inverse)
+        + work
+    )
     return max(sets * cube_bytes, work if getattr(reg, "batched", False) else 0), total
 
 
 def memory_bytes(op, reg, projection: str, sets: int, *, truth=False, own_inverse=False, start=False):
     """:func:`batch_memory` for the operator ``op`` (its solved sub-frames, channels and dtype)."""
-    return batch_memory(op.domain_shape, op.K, op.dtype, reg, projection, sets, truth=truth, own_inverse=own_inverse,
-                        start=start, device=op.device)
+    return batch_memory(
+        op.domain_shape,
+        op.K,
+        op.dtype,
+        reg,
+        projection,
+        sets,
+        truth=truth,
+        own_inverse=own_inverse,
+        start=start,
+        device=op.device,
+    )
 
 
 def memory_need(rig, regularizer, *, dtype="float32", projection="exact", start=True) -> tuple:
@@ -116,11 +138,15 @@ def search_memory(op, reg, projection: str, batch) -> int:
     cube = op.domain_shape
     itemsize = np.dtype(op.dtype).itemsize
     snap = op.K * int(np.prod(cube[1:])) * itemsize
-    per_fold = (state_bytes(cube, op.K, op.dtype, projection, 1) + int(np.prod(cube)) * itemsize + 2 * snap
-                + workspace_memory(cube, op.dtype, reg, 1, op.device))
+    per_fold = (
+        state_bytes(cube, op.K, op.dtype, projection, 1)
+        + int(np.prod(cube)) * itemsize
+        + 2 * snap
+        + workspace_memory(cube, op.dtype, reg, 1, op.device)
+    )
     folds = len(default_patterns(op.rig.shape, op.K))
     extra = folds * per_fold
-    if batches_pay(op.device):                      # the folds run as one batch (rsocl.solver.search_batch)
+    if batches_pay(op.device):  # the folds run as one batch (rsocl.solver.search_batch)
         extra += batch_bytes(op, folds)
     if batch is not None:
         extra += problem_bytes(cube, op.K, op.dtype, 1)
@@ -138,8 +164,10 @@ def search_peak(op, reg, projection: str, batch, *, truth=False, start=False) ->
 def device_limit(device, largest: int, total: int) -> str | None:
     """Why buffers of ``largest`` and ``total`` bytes do not fit ``device`` (None when they fit)."""
     if largest > device.max_alloc_bytes:
-        return (f"a buffer of {largest / 2**20:.1f} MiB, above the device's largest allocation of "
-                f"{device.max_alloc_bytes / 2**20:.1f} MiB")
+        return (
+            f"a buffer of {largest / 2**20:.1f} MiB, above the device's largest allocation of "
+            f"{device.max_alloc_bytes / 2**20:.1f} MiB"
+        )
     if total > device.global_mem_bytes:
         return f"{total / 2**20:.1f} MiB in all, above the device's {device.global_mem_bytes / 2**20:.1f} MiB"
     return None

@@ -32,8 +32,19 @@ from rsocl.solver.request import Request, first_value, make_regularizer, make_re
 from rsocl.solver.result import Result
 from rsocl.solver.search_batch import BatchedFolds, batches_pay
 
-__all__ = ["Prepared", "prepare", "tune", "run", "check_problem", "make_request", "make_regularizer", "Request",
-           "Tuning", "run_params", "applied_blend"]
+__all__ = [
+    "Prepared",
+    "prepare",
+    "tune",
+    "run",
+    "check_problem",
+    "make_request",
+    "make_regularizer",
+    "Request",
+    "Tuning",
+    "run_params",
+    "applied_blend",
+]
 
 
 @dataclass
@@ -64,8 +75,9 @@ def prepare(request: Request, problem: Problem, *, start: bool | None = None) ->
     """
     if start is None:
         start = problem.interpolate or request.starts_from_interpolation
-    staged = stage_on_device(problem, request.regularizer, request.settings, device=request.device,
-                             dtype=request.dtype, start=start)
+    staged = stage_on_device(
+        problem, request.regularizer, request.settings, device=request.device, dtype=request.dtype, start=start
+    )
     return Prepared(request, problem, staged)
 
 
@@ -99,17 +111,34 @@ def run(prepared: Prepared, tuning: Tuning | None = None) -> Result:
     reg, settings = request.settled(tuning)
     if (tuning is not None or problem.interpolate) and staged.x0 is None:
         staged.x0 = interpolation_start(problem, staged)
-    solver = ADMM(staged.op, staged.g, reg, lam=settings.lam, eta=settings.eta, projection=settings.projection,
-                  x0=staged.x0, valid=problem.valid)
+    solver = ADMM(
+        staged.op,
+        staged.g,
+        reg,
+        lam=settings.lam,
+        eta=settings.eta,
+        projection=settings.projection,
+        x0=staged.x0,
+        valid=problem.valid,
+    )
     blend = request.blend
     if blend is None:
         blend = applied_blend(tuning) if problem.x0 is None and staged.x0 is not None else 1.0
     history = run_iterations(solver, staged, settings, progress=request.progress, blend=blend)
     datacube, extra = collect(solver, staged, problem)
     start = "x0" if problem.x0 is not None else ("interp3d" if staged.x0 is not None else "zeros")
-    params = run_params(request, reg, settings, lam=_plain(solver.lam), eta=_plain(solver.eta),
-                        device=staged.op.device.name, saturation=problem.saturation, tuning=tuning, blend=blend,
-                        start=start)
+    params = run_params(
+        request,
+        reg,
+        settings,
+        lam=_plain(solver.lam),
+        eta=_plain(solver.eta),
+        device=staged.op.device.name,
+        saturation=problem.saturation,
+        tuning=tuning,
+        blend=blend,
+        start=start,
+    )
     return Result(datacube, history, problem.rig, {**params, **extra})
 
 
@@ -140,14 +169,19 @@ def _choose_unset(prepared: Prepared, checked=False):
     if space is None:
         return None
     if not can_hold_out(rig.shape, rig.n_channels, problem.valid):
-        warnings.warn(f"the snapshots of a {rig.n_channels}-camera rig on {rig.shape[0]}x"
-                      f"{rig.shape[1]} pixels leave no pixels to hold out for choosing the parameters: "
-                      "the run uses the fixed defaults (as tune=False); fix lam and the regularizer's options to "
-                      "silence this", UserWarning, stacklevel=5)
+        warnings.warn(
+            f"the snapshots of a {rig.n_channels}-camera rig on {rig.shape[0]}x"
+            f"{rig.shape[1]} pixels leave no pixels to hold out for choosing the parameters: "
+            "the run uses the fixed defaults (as tune=False); fix lam and the regularizer's options to "
+            "silence this",
+            UserWarning,
+            stacklevel=5,
+        )
         return None
-    if rig.n_channels == 1:         # one snapshot per pixel: the criterion cannot rank priors in time
-        preset = {k: float(v) for k, v in getattr(request.regularizer, "one_snapshot", {}).items()
-                  if k in space.tunable}
+    if rig.n_channels == 1:  # one snapshot per pixel: the criterion cannot rank priors in time
+        preset = {
+            k: float(v) for k, v in getattr(request.regularizer, "one_snapshot", {}).items() if k in space.tunable
+        }
         space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
         if not space.tunable and (preset or np.isscalar(space.lam)):
             # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)
@@ -157,25 +191,39 @@ def _choose_unset(prepared: Prepared, checked=False):
         _check_search_fits(prepared)
     patterns = default_patterns(rig.shape, rig.n_channels)
     return tune_parameters(
-        staged.op, staged.g, problem.g, request.with_options, space, eta=first_value(settings.eta),
-        projection=settings.projection, valid=problem.valid,
-        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / len(patterns))), patterns=patterns,
-        progress=request.progress, runner=BatchedFolds() if batches_pay(staged.op.device) else None)
+        staged.op,
+        staged.g,
+        problem.g,
+        request.with_options,
+        space,
+        eta=first_value(settings.eta),
+        projection=settings.projection,
+        valid=problem.valid,
+        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / len(patterns))),
+        patterns=patterns,
+        progress=request.progress,
+        runner=BatchedFolds() if batches_pay(staged.op.device) else None,
+    )
 
 
 def _check_search_fits(prepared: Prepared):
     """Raise before the search when it and the staged problem together would not fit the device."""
     problem, reg, projection = prepared.problem, prepared.request.regularizer, prepared.request.settings.projection
     op = prepared.staged.op
-    peak = search_peak(op, reg, projection, problem.batch, truth=problem.truth is not None,
-                       start=problem.x0 is not None)
+    peak = search_peak(
+        op, reg, projection, problem.batch, truth=problem.truth is not None, start=problem.x0 is not None
+    )
     extra = search_memory(op, reg, projection, problem.batch)
     largest = memory_bytes(op, reg, projection, 1)[0]
-    op.device.check_fits(f"choosing the parameters from the data (ADMM with {reg.name} on "
-                         f"T={op.T} x {problem.rig.shape[0]} x {problem.rig.shape[1]}, "
-                         f"{extra / 2**20:.1f} MiB beside the staged problem's {(peak - extra) / 2**20:.1f} MiB)",
-                         largest, total_bytes=peak, dtype=op.dtype,
-                         also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fast)")
+    op.device.check_fits(
+        f"choosing the parameters from the data (ADMM with {reg.name} on "
+        f"T={op.T} x {problem.rig.shape[0]} x {problem.rig.shape[1]}, "
+        f"{extra / 2**20:.1f} MiB beside the staged problem's {(peak - extra) / 2**20:.1f} MiB)",
+        largest,
+        total_bytes=peak,
+        dtype=op.dtype,
+        also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fast)",
+    )
 
 
 def _search_first_set(prepared: Prepared):
@@ -186,8 +234,18 @@ def _search_first_set(prepared: Prepared):
     if request.search_space() is None:
         return None
     _check_search_fits(prepared)
-    one = replace(problem, g=problem.g[0], valid=None if problem.valid is None else problem.valid[0],
-                  x0=None, truth=None, batch=None)
-    first = replace(request, settings=replace(request.settings, lam=first_value(request.settings.lam),
-                                              eta=first_value(request.settings.eta)))
+    one = replace(
+        problem,
+        g=problem.g[0],
+        valid=None if problem.valid is None else problem.valid[0],
+        x0=None,
+        truth=None,
+        batch=None,
+    )
+    first = replace(
+        request,
+        settings=replace(
+            request.settings, lam=first_value(request.settings.lam), eta=first_value(request.settings.eta)
+        ),
+    )
     return _choose_unset(prepare(first, one, start=False), checked=True)

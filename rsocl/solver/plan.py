@@ -62,8 +62,9 @@ class Plan:
     notes: list = field(default_factory=list)
 
 
-def estimate(rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", device=None,
-             measure=True, projection="exact") -> Estimate:
+def estimate(
+    rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", device=None, measure=True, projection="exact"
+) -> Estimate:
     """Memory (from the buffer sizes, :func:`rsocl.solver.memory.memory_need` of the configured
     regularizer: a name takes its default options, an instance its own) and, when ``measure`` and
     it fits, time per iteration (3 timed iterations)."""
@@ -85,8 +86,19 @@ def estimate(rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", dev
     return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations, limit is None, limit)
 
 
-def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iterations=200, regularizer="tv",
-         dtype="float32", device=None, measure=True) -> Plan:
+def plan(
+    rig: Rig,
+    *,
+    roi=None,
+    speed=None,
+    fps=None,
+    blur_pixels=1.0,
+    iterations=200,
+    regularizer="tv",
+    dtype="float32",
+    device=None,
+    measure=True,
+) -> Plan:
     """Propose ``dt`` and ROI for ``rig`` and a scene; estimate both problems' cost.
 
     Parameters
@@ -112,7 +124,9 @@ def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iteration
         speed = check.positive("speed", speed, "pixels/s")
         blur_pixels = check.positive("blur_pixels", blur_pixels, "pixels")
         bound = min(bound, blur_pixels / speed)
-        notes.append(f"speed {speed:g} px/s with {blur_pixels:g} px per sub-frame: dt <= {blur_pixels / speed * 1e6:.1f} µs")
+        notes.append(
+            f"speed {speed:g} px/s with {blur_pixels:g} px per sub-frame: dt <= {blur_pixels / speed * 1e6:.1f} µs"
+        )
     if fps is not None:
         fps = check.positive("fps", fps, "Hz")
         bound = min(bound, 1.0 / fps)
@@ -123,8 +137,10 @@ def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iteration
     else:
         k = max(1, math.floor(bound / t_r * (1 + 1e-9)))
         if bound < t_r:
-            notes.append(f"the motion needs dt <= {bound * 1e6:.2f} µs, below t_r = {t_r * 1e6:.2f} µs: "
-                         f"dt = t_r, with {t_r / bound:.1f}x the blur asked for")
+            notes.append(
+                f"the motion needs dt <= {bound * 1e6:.2f} µs, below t_r = {t_r * 1e6:.2f} µs: "
+                f"dt = t_r, with {t_r / bound:.1f}x the blur asked for"
+            )
     dt = k * t_r
     roi = (0, 0) + rig.shape if roi is None else tuple(int(v) for v in roi)
     proposed = rig.crop(roi, dt=dt)
@@ -136,13 +152,26 @@ def plan(rig: Rig, *, roi=None, speed=None, fps=None, blur_pixels=1.0, iteration
 
 def format_plan(p: Plan) -> str:
     """A small table: the unplanned problem beside the proposal."""
+
     def col(e: Estimate):
-        secs = "-" if e.seconds_per_iteration is None else f"{e.seconds_per_iteration * 1e3:.1f} ms x {e.iterations} = {e.seconds:.1f} s"
+        secs = (
+            "-"
+            if e.seconds_per_iteration is None
+            else f"{e.seconds_per_iteration * 1e3:.1f} ms x {e.iterations} = {e.seconds:.1f} s"
+        )
         if not e.fits:
             secs = "does not fit the device: tile it"
-        return [f"{e.rig.shape[0]} x {e.rig.shape[1]}", f"{e.rig.dt * 1e6:g} µs", f"{e.rig.T}",
-                f"{e.subframes}", f"{e.rig.T_se}", f"{e.rig.compression_ratio:.1f}x",
-                f"{e.memory_bytes / 2**20:.1f} MiB", secs]
+        return [
+            f"{e.rig.shape[0]} x {e.rig.shape[1]}",
+            f"{e.rig.dt * 1e6:g} µs",
+            f"{e.rig.T}",
+            f"{e.subframes}",
+            f"{e.rig.T_se}",
+            f"{e.rig.compression_ratio:.1f}x",
+            f"{e.memory_bytes / 2**20:.1f} MiB",
+            secs,
+        ]
+
     rows = ["ROI", "dt", "T", "sub-frames solved", "T_se", "compression", "device memory", "time"]
     a, b = col(p.full), col(p.proposed)
     width = max(len(r) for r in rows)
@@ -152,6 +181,9 @@ def format_plan(p: Plan) -> str:
     y, x, h, w = p.roi
     lines.append(f"proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): {x} {y} {w} {h}")
     lines += [f"note: {n}" for n in p.notes]
-    lines += [f"note: the {label} problem does not fit one device: it needs {e.limit}"
-              for label, e in (("given", p.full), ("proposed", p.proposed)) if not e.fits]
+    lines += [
+        f"note: the {label} problem does not fit one device: it needs {e.limit}"
+        for label, e in (("given", p.full), ("proposed", p.proposed))
+        if not e.fits
+    ]
     return "\n".join(lines)

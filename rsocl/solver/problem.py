@@ -27,8 +27,19 @@ from rsocl.solver.memory import memory_bytes
 if TYPE_CHECKING:
     import pyopencl.array as cla
 
-__all__ = ["DEFAULTS", "PAPER_ETA", "Problem", "Settings", "Staged", "per_set_value", "match_batch",
-           "check_problem", "check_settings", "check_representable", "stage_on_device"]
+__all__ = [
+    "DEFAULTS",
+    "PAPER_ETA",
+    "Problem",
+    "Settings",
+    "Staged",
+    "per_set_value",
+    "match_batch",
+    "check_problem",
+    "check_settings",
+    "check_representable",
+    "stage_on_device",
+]
 
 #: Defaults for data scaled to [0, 1] per sub-frame intensity (snapshots then lie in
 #: [0, t_e/dt]): 200 ADMM iterations, ``lam = 0.1``, ``eta = 0.2``, 10 inner TV iterations
@@ -73,10 +84,11 @@ class Settings:
     tol: float | None
     callback: object
 
-    def settled_for(self, reg, dtype, scale: float = 1.0) -> "Settings":
+    def settled_for(self, reg, dtype, scale: float = 1.0) -> Settings:
         """``lam``/``eta`` filled from the regularizer's recommendation, else :data:`DEFAULTS` (``eta``
-        of the paper's projection: :data:`PAPER_ETA`), times ``scale`` (:func:`rsocl.model.curvature.default_scale` of the rig: the data term's curvature
-        against the paper's configuration, for which the defaults hold). A default ``lam`` is not
+        of the paper's projection: :data:`PAPER_ETA`), times ``scale``
+        (:func:`rsocl.model.curvature.default_scale` of the rig: the data term's curvature against
+        the paper's configuration, for which the defaults hold). A default ``lam`` is not
         scaled for a set the caller runs as GAP (``eta = 0``), whose denoiser weight is ``lam``
         itself: with per-set ``eta`` mixing GAP and ADMM sets, the default ``lam`` is per set too,
         so each set gets the ``lam`` it gets on its own.
@@ -85,8 +97,9 @@ class Settings:
         """
         dtype = check.real_dtype("dtype", dtype)
         if dtype.name not in reg.dtypes:
-            raise ValueError(f"dtype {dtype.name!r} is not supported by regularizer {reg!r}; "
-                             f"supported: {list(reg.dtypes)}")
+            raise ValueError(
+                f"dtype {dtype.name!r} is not supported by regularizer {reg!r}; supported: {list(reg.dtypes)}"
+            )
         recommended = {**DEFAULTS, **getattr(reg, "recommended", {})}
         default_eta = PAPER_ETA if self.projection == "paper" else recommended["eta"]
         eta = default_eta * scale if self.eta is None else self.eta
@@ -96,7 +109,7 @@ class Settings:
             lam = float(lams.flat[0]) if np.all(lams == lams.flat[0]) else tuple(float(v) for v in lams)
         return replace(self, lam=lam, eta=eta)
 
-    def for_batch(self, batch) -> "Settings":
+    def for_batch(self, batch) -> Settings:
         """These settings for a problem of ``batch`` sets (None: one set); per-set values are checked
         against the count (a ValueError naming the parameter)."""
         for name in ("lam", "eta"):
@@ -118,8 +131,10 @@ def match_batch(name: str, value, batch):
     if not isinstance(value, tuple):
         return
     if batch is None:
-        raise ValueError(f"{name} has {len(value)} values (one per set), but g holds one set (K, m, n); "
-                         f"give g as (B, K, m, n) for a batch, or one number")
+        raise ValueError(
+            f"{name} has {len(value)} values (one per set), but g holds one set (K, m, n); "
+            f"give g as (B, K, m, n) for a batch, or one number"
+        )
     if len(value) != batch:
         raise ValueError(f"{name} must have one value per set: {batch} for this batch, got {len(value)}")
 
@@ -155,13 +170,23 @@ def warn_off_scale(g, rig, valid=None) -> None:
     if ratio[k] > OFF_SCALE:
         camera, frame = rig.channels[k]
         which = f"camera {camera}" + (f" (frame {frame})" if rig.cameras[camera].frames > 1 else "")
-        warnings.warn(f"g: snapshots of {which} reach {peak[k]:.4g}, {ratio[k]:.3g} times its full scale "
-                      f"{full[k]:.4g} (gain x t_e/dt, a white scene): rsocl works on data in [0, 1] per sub-frame; "
-                      "scale that camera's snapshots (or its gain)", UserWarning, stacklevel=3)
+        warnings.warn(
+            f"g: snapshots of {which} reach {peak[k]:.4g}, {ratio[k]:.3g} times its full scale "
+            f"{full[k]:.4g} (gain x t_e/dt, a white scene): rsocl works on data in [0, 1] per sub-frame; "
+            "scale that camera's snapshots (or its gain)",
+            UserWarning,
+            stacklevel=3,
+        )
 
 
-def check_problem(g: ArrayLike, rig: Rig, *, x0: ArrayLike | str | None = None, truth: ArrayLike | None = None,
-                  saturation: float | None = None) -> Problem:
+def check_problem(
+    g: ArrayLike,
+    rig: Rig,
+    *,
+    x0: ArrayLike | str | None = None,
+    truth: ArrayLike | None = None,
+    saturation: float | None = None,
+) -> Problem:
     """Validate the snapshots and the arrays that go with them against ``rig``.
 
     ``g`` is ``(K, m, n)``, or ``(B, K, m, n)`` for a batch of ``B`` sets of the same rig; ``x0`` an
@@ -178,13 +203,18 @@ def check_problem(g: ArrayLike, rig: Rig, *, x0: ArrayLike | str | None = None, 
     expected = (rig.n_channels,) + rig.shape
     batch = g.shape[0] if g.ndim == 4 and g.shape[1:] == expected else None
     if g.shape != expected and (batch is None or batch < 1):
-        raise ValueError(f"g must have shape (K, m, n) = {expected} for this rig, or (B, K, m, n) = "
-                         f"(B, {', '.join(map(str, expected))}) for a batch of B >= 1 sets, got {g.shape}")
+        raise ValueError(
+            f"g must have shape (K, m, n) = {expected} for this rig, or (B, K, m, n) = "
+            f"(B, {', '.join(map(str, expected))}) for a batch of B >= 1 sets, got {g.shape}"
+        )
     m, n = rig.shape
     sets = f"{batch} sets x " if batch else ""
-    check_host_memory(4 * (batch or 1) * rig.T * m * n, f"rig shape {m}x{n} and T = {rig.T}",
-                      f"the {sets}{rig.T} x {m} x {n} float32 datacube", "choose a smaller grid, fewer sets "
-                      "or a run in tiles (rsocl.scale)")
+    check_host_memory(
+        4 * (batch or 1) * rig.T * m * n,
+        f"rig shape {m}x{n} and T = {rig.T}",
+        f"the {sets}{rig.T} x {m} x {n} float32 datacube",
+        "choose a smaller grid, fewer sets or a run in tiles (rsocl.scale)",
+    )
     valid = None
     if saturation is not None:
         saturation = check.positive("saturation", saturation, "(snapshot units)")
@@ -196,17 +226,22 @@ def check_problem(g: ArrayLike, rig: Rig, *, x0: ArrayLike | str | None = None, 
         dark = ~np.where(valid, g != 0, False).reshape(batch or 1, -1).any(axis=1)
         if dark.any():
             which = "" if batch is None else f" of set(s) {np.flatnonzero(dark).tolist()}"
-            warnings.warn(f"saturation = {saturation!r} keeps only snapshot pixels that are 0{which} (the brightest is "
-                          f"{float(np.max(g)):.4g}): the reconstruction will be zero; saturation is in snapshot units",
-                          UserWarning, stacklevel=3)
+            warnings.warn(
+                f"saturation = {saturation!r} keeps only snapshot pixels that are 0{which} (the brightest is "
+                f"{float(np.max(g)):.4g}): the reconstruction will be zero; saturation is in snapshot units",
+                UserWarning,
+                stacklevel=3,
+            )
     warn_off_scale(g, rig, valid)
     cube = (rig.T,) + rig.shape
-    return Problem(g, rig, valid, _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch), saturation,
-                   batch, interpolate)
+    return Problem(
+        g, rig, valid, _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch), saturation, batch, interpolate
+    )
 
 
-def check_settings(*, iterations=None, lam=None, eta=None, tv_iterations=None, projection="exact", tol=None,
-                   callback=None) -> Settings:
+def check_settings(
+    *, iterations=None, lam=None, eta=None, tv_iterations=None, projection="exact", tol=None, callback=None
+) -> Settings:
     """Validate the solver settings (None keeps a default); ``lam``/``eta`` may give one value per set
     (see :func:`per_set_value`; :meth:`Settings.for_batch` checks the count)."""
     if callback is not None and not callable(callback):
@@ -218,7 +253,8 @@ def check_settings(*, iterations=None, lam=None, eta=None, tv_iterations=None, p
         tv_iterations=None if tv_iterations is None else check.positive_int("tv_iterations", tv_iterations),
         projection=check.choice("projection", projection, {"exact", "paper"}),
         tol=None if tol is None else check.non_negative("tol", tol),
-        callback=callback)
+        callback=callback,
+    )
 
 
 @dataclass
@@ -248,12 +284,13 @@ def check_representable(problem: Problem, dtype):
         array = getattr(problem, name)
         peak = float(np.max(np.abs(array))) if array is not None and array.size else 0.0
         if peak > top:
-            raise ValueError(f"{name} holds values up to {peak:.3g}, beyond {dtype.name}'s largest {top:.3g}; "
-                             "scale the data (rsocl works on data in [0, 1] per sub-frame) or use dtype='float64'")
+            raise ValueError(
+                f"{name} holds values up to {peak:.3g}, beyond {dtype.name}'s largest {top:.3g}; "
+                "scale the data (rsocl works on data in [0, 1] per sub-frame) or use dtype='float64'"
+            )
 
 
-def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32",
-                    start=False) -> Staged:
+def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32", start=False) -> Staged:
     """Build the operator for the sampled sub-frames, check the memory, upload the arrays.
 
     Only the sub-frames some camera samples are modelled; the others hold the nearest modelled one
@@ -271,11 +308,22 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     sets = problem.batch or 1
     valid = problem.valid
     own = own_inverses(settings.projection, settings.eta, valid, sets)
-    largest, need = memory_bytes(op, reg, settings.projection, sets, truth=problem.truth is not None,
-                                 own_inverse=own, start=bool(start) or problem.x0 is not None)
+    largest, need = memory_bytes(
+        op,
+        reg,
+        settings.projection,
+        sets,
+        truth=problem.truth is not None,
+        own_inverse=own,
+        start=bool(start) or problem.x0 is not None,
+    )
     batch = "" if problem.batch is None else f"{sets} sets of "
-    op.device.check_fits(f"ADMM with {reg.name} on {batch}T={op.T} x {rig.shape[0]} x {rig.shape[1]} "
-                         f"({op.dtype.name})", largest, total_bytes=need, dtype=op.dtype)
+    op.device.check_fits(
+        f"ADMM with {reg.name} on {batch}T={op.T} x {rig.shape[0]} x {rig.shape[1]} ({op.dtype.name})",
+        largest,
+        total_bytes=need,
+        dtype=op.dtype,
+    )
 
     def upload(array):
         return cla.to_device(op.queue, np.ascontiguousarray(array, dtype=op.dtype))

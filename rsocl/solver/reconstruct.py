@@ -24,9 +24,10 @@ from __future__ import annotations
 from rsocl.common.hints import ArrayLike, Callback, DTypeLike, Options, PerSet
 from rsocl.device.context import Device
 from rsocl.model.rig import Rig
-from rsocl.solver.pipeline import prepare, run, tune as choose
-from rsocl.solver.problem import check_problem
 from rsocl.solver.crossval import Tuning
+from rsocl.solver.pipeline import prepare, run
+from rsocl.solver.pipeline import tune as choose
+from rsocl.solver.problem import check_problem
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.request import make_request
 from rsocl.solver.result import Result
@@ -34,13 +35,28 @@ from rsocl.solver.result import Result
 __all__ = ["reconstruct", "Result"]
 
 
-def reconstruct(g: ArrayLike, rig: Rig, regularizer: str | Regularizer = "tv", *, iterations: int | None = None,
-                lam: PerSet | None = None, eta: PerSet | None = None, tv_iterations: int | None = None,
-                projection: str = "exact", device: str | Device | None = None, dtype: DTypeLike = "float32",
-                callback: Callback | None = None, x0: ArrayLike | str | None = None, tol: float | None = None,
-                truth: ArrayLike | None = None, regularizer_options: Options | None = None,
-                saturation: float | None = None, tune: bool | Tuning = True, blend: float | None = None,
-                progress: bool = False) -> Result:
+def reconstruct(
+    g: ArrayLike,
+    rig: Rig,
+    regularizer: str | Regularizer = "tv",
+    *,
+    iterations: int | None = None,
+    lam: PerSet | None = None,
+    eta: PerSet | None = None,
+    tv_iterations: int | None = None,
+    projection: str = "exact",
+    device: str | Device | None = None,
+    dtype: DTypeLike = "float32",
+    callback: Callback | None = None,
+    x0: ArrayLike | str | None = None,
+    tol: float | None = None,
+    truth: ArrayLike | None = None,
+    regularizer_options: Options | None = None,
+    saturation: float | None = None,
+    tune: bool | Tuning = True,
+    blend: float | None = None,
+    progress: bool = False,
+) -> Result:
     """Reconstruct the ``(T, m, n)`` datacube from snapshots ``g`` ``(K, m, n)`` with ADMM.
 
     For a batch of sets, ``g`` ``(B, K, m, n)`` -> ``(B, T, m, n)``; ``lam``, ``eta`` may then be one
@@ -95,9 +111,24 @@ def reconstruct(g: ArrayLike, rig: Rig, regularizer: str | Regularizer = "tv", *
     smallest (the paper's diagonal step at small ``eta``) returns with a ``RuntimeWarning``.
     """
     problem = check_problem(g, rig, x0=x0, truth=truth, saturation=saturation)
-    request = make_request(rig, regularizer, sets=problem.batch, x0_given=x0 is not None, iterations=iterations,
-                           lam=lam, eta=eta, tv_iterations=tv_iterations, projection=projection, tol=tol,
-                           callback=callback, dtype=dtype, device=device, regularizer_options=regularizer_options,
-                           tune=tune, blend=blend, progress=progress)
+    request = make_request(
+        rig,
+        regularizer,
+        sets=problem.batch,
+        x0_given=x0 is not None,
+        iterations=iterations,
+        lam=lam,
+        eta=eta,
+        tv_iterations=tv_iterations,
+        projection=projection,
+        tol=tol,
+        callback=callback,
+        dtype=dtype,
+        device=device,
+        regularizer_options=regularizer_options,
+        tune=tune,
+        blend=blend,
+        progress=progress,
+    )
     prepared = prepare(request, problem)
     return run(prepared, choose(prepared))

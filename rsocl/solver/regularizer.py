@@ -111,8 +111,9 @@ class Regularizer:
     def __init__(self, **options: Any) -> None:
         unknown = sorted(set(options) - set(self.options))
         if unknown:
-            raise ValueError(f"unknown option(s) {unknown} for regularizer {self.name!r}; "
-                             f"known: {sorted(self.options)}")
+            raise ValueError(
+                f"unknown option(s) {unknown} for regularizer {self.name!r}; known: {sorted(self.options)}"
+            )
         self.values = {key: opt.default for key, opt in self.options.items()}
         for key, value in options.items():
             self.values[key] = self.options[key].convert(key, value)

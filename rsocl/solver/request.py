@@ -26,12 +26,22 @@ from rsocl.solver.crossval import LAM_FACTORS, SearchSpace, Tuning
 from rsocl.solver.problem import Settings, check_settings
 from rsocl.solver.regularizer import Regularizer
 
-__all__ = ["Given", "Request", "make_request", "make_regularizer", "check_tune", "check_blend", "chosen_options",
-           "first_value", "run_params"]
+__all__ = [
+    "Given",
+    "Request",
+    "make_request",
+    "make_regularizer",
+    "check_tune",
+    "check_blend",
+    "chosen_options",
+    "first_value",
+    "run_params",
+]
 
 
-def make_regularizer(regularizer: str | Regularizer, options: Options | None = None,
-                     tv_iterations: int | None = None) -> Regularizer:
+def make_regularizer(
+    regularizer: str | Regularizer, options: Options | None = None, tv_iterations: int | None = None
+) -> Regularizer:
     """A regularizer instance from a registry name (with options) or an instance (without).
 
     Parameters
@@ -59,8 +69,10 @@ def make_regularizer(regularizer: str | Regularizer, options: Options | None = N
         if options:
             raise ValueError("regularizer_options apply to a regularizer given by name, not to an instance")
         if tv_iterations is not None and tv_iterations != getattr(regularizer, "iterations", None):
-            raise ValueError(f"tv_iterations applies to a regularizer given by name; the instance {regularizer!r} "
-                             "keeps its own options (set its 'iterations' when making it)")
+            raise ValueError(
+                f"tv_iterations applies to a regularizer given by name; the instance {regularizer!r} "
+                "keeps its own options (set its 'iterations' when making it)"
+            )
         return regularizer
     if not isinstance(regularizer, str):
         raise ValueError(f"regularizer must be a name or a Regularizer, got {regularizer!r}")
@@ -71,8 +83,10 @@ def make_regularizer(regularizer: str | Regularizer, options: Options | None = N
         if "iterations" in options:
             made = cls(**options)
             if made.iterations != tv_iterations:
-                raise ValueError(f"tv_iterations = {tv_iterations!r} and regularizer_options['iterations'] = "
-                                 f"{options['iterations']!r} disagree; give the inner iterations once")
+                raise ValueError(
+                    f"tv_iterations = {tv_iterations!r} and regularizer_options['iterations'] = "
+                    f"{options['iterations']!r} disagree; give the inner iterations once"
+                )
             return made
         options["iterations"] = tv_iterations
     return cls(**options)
@@ -89,9 +103,11 @@ def check_tune(tune: bool | Tuning, reg: Regularizer | None = None) -> bool | Tu
     if isinstance(tune, Tuning):
         foreign = sorted(set(chosen_options(tune)) - set(reg.values)) if reg is not None else []
         if foreign and reg is not None:
-            raise ValueError(f"tune: the earlier Tuning chose {foreign}, options {reg.name!r} does not have "
-                             f"(it has {sorted(reg.values)}); pass tune=True to choose for {reg.name!r}, or "
-                             "tune=False for its fixed defaults")
+            raise ValueError(
+                f"tune: the earlier Tuning chose {foreign}, options {reg.name!r} does not have "
+                f"(it has {sorted(reg.values)}); pass tune=True to choose for {reg.name!r}, or "
+                "tune=False for its fixed defaults"
+            )
         return tune
     if isinstance(tune, (bool, np.bool_)):
         return bool(tune)
@@ -106,9 +122,11 @@ def check_blend(blend: float | None, has_start: bool) -> float | None:
         return None
     blend = check.in_range("blend", blend, 0.0, 1.0)
     if blend < 1 and not has_start:
-        raise ValueError(f"blend = {blend:g} moves the result towards the run's start, and this run starts from "
-                         "zeros (tune=False, or nothing left to choose from the data): give the start as x0 (an "
-                         "array or 'interp3d'), or leave blend None")
+        raise ValueError(
+            f"blend = {blend:g} moves the result towards the run's start, and this run starts from "
+            "zeros (tune=False, or nothing left to choose from the data): give the start as x0 (an "
+            "array or 'interp3d'), or leave blend None"
+        )
     return blend
 
 
@@ -203,7 +221,7 @@ class Request:
         else:
             lam = first_value(fixed_lam)
         if (not tunable and np.isscalar(lam)) or (np.isscalar(lam) and lam == 0):
-            return None                # nothing to choose; lam = 0 makes the regularizer's options moot
+            return None  # nothing to choose; lam = 0 makes the regularizer's options moot
         fixed = {k: v for k, v in reg.values.items() if k in given}
         if fixed_lam is not None:
             fixed["lam"] = lam
@@ -235,9 +253,10 @@ class Request:
             settings = replace(settings, lam=tuning.chosen["lam"])
         return reg, settings
 
-    def for_sets(self, part: slice) -> "Request":
+    def for_sets(self, part: slice) -> Request:
         """This request for the sets ``part`` of its per-set values (the caller's ``lam``/``eta`` cut and
         settled again, as a request for those sets alone)."""
+
         def cut(value):
             return value[part] if isinstance(value, tuple) else value
 
@@ -247,17 +266,31 @@ class Request:
         settings = settings.settled_for(self.regularizer, self.dtype, scale=default_scale(self.rig)).for_batch(count)
         return replace(self, given=given, settings=settings, sets=count)
 
-    def with_tuning(self, tuning: Tuning) -> "Request":
+    def with_tuning(self, tuning: Tuning) -> Request:
         """This request running ``tuning`` (an earlier choice) instead of a search."""
         return replace(self, tune=tuning)
 
 
-def make_request(rig: Rig, regularizer: str | Regularizer = "tv", *, sets: int | None = None, x0_given: bool = False,
-                 iterations: int | None = None, lam: PerSet | None = None, eta: PerSet | None = None,
-                 tv_iterations: int | None = None, projection: str = "exact", tol: float | None = None,
-                 callback: Callback | None = None, dtype: DTypeLike = "float32", device: str | Device | None = None,
-                 regularizer_options: Options | None = None, tune: bool | Tuning = True, blend: float | None = None,
-                 progress: bool = False) -> Request:
+def make_request(
+    rig: Rig,
+    regularizer: str | Regularizer = "tv",
+    *,
+    sets: int | None = None,
+    x0_given: bool = False,
+    iterations: int | None = None,
+    lam: PerSet | None = None,
+    eta: PerSet | None = None,
+    tv_iterations: int | None = None,
+    projection: str = "exact",
+    tol: float | None = None,
+    callback: Callback | None = None,
+    dtype: DTypeLike = "float32",
+    device: str | Device | None = None,
+    regularizer_options: Options | None = None,
+    tune: bool | Tuning = True,
+    blend: float | None = None,
+    progress: bool = False,
+) -> Request:
     """Check what a reconstruction is asked to do, once, before any device work.
 
     Parameters
@@ -291,8 +324,15 @@ def make_request(rig: Rig, regularizer: str | Regularizer = "tv", *, sets: int |
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     tune = check_tune(tune)
-    checked = check_settings(iterations=iterations, lam=lam, eta=eta, tv_iterations=tv_iterations,
-                             projection=projection, tol=tol, callback=callback)
+    checked = check_settings(
+        iterations=iterations,
+        lam=lam,
+        eta=eta,
+        tv_iterations=tv_iterations,
+        projection=projection,
+        tol=tol,
+        callback=callback,
+    )
     reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
     tune = check_tune(tune, reg)
     given = Given(regularizer, dict(regularizer_options or {}), checked.lam, checked.eta)
@@ -302,9 +342,19 @@ def make_request(rig: Rig, regularizer: str | Regularizer = "tv", *, sets: int |
     return replace(request, blend=blend)
 
 
-def run_params(request: Request, reg: Regularizer, settings: Settings, *, lam: PerSet | None,
-               eta: PerSet | None, device: str | None, saturation: float | None, tuning: Tuning | None,
-               blend: float, start: str) -> dict:
+def run_params(
+    request: Request,
+    reg: Regularizer,
+    settings: Settings,
+    *,
+    lam: PerSet | None,
+    eta: PerSet | None,
+    device: str | None,
+    saturation: float | None,
+    tuning: Tuning | None,
+    blend: float,
+    start: str,
+) -> dict:
     """The ``params`` record of a run (every path's: one set, a batch, tiles), JSON-ready.
 
     Parameters
@@ -323,7 +373,18 @@ def run_params(request: Request, reg: Regularizer, settings: Settings, *, lam: P
     start : str
         ``"x0"``, ``"interp3d"`` or ``"zeros"``.
     """
-    return {"regularizer": request.name, "regularizer_options": dict(reg.values), "iterations": settings.iterations,
-            "lam": lam, "eta": eta, "projection": settings.projection,
-            "dtype": np.dtype(request.dtype).name, "device": device, "tol": settings.tol, "saturation": saturation,
-            "tuning": None if tuning is None else tuning.as_params(), "blend": blend, "start": start}
+    return {
+        "regularizer": request.name,
+        "regularizer_options": dict(reg.values),
+        "iterations": settings.iterations,
+        "lam": lam,
+        "eta": eta,
+        "projection": settings.projection,
+        "dtype": np.dtype(request.dtype).name,
+        "device": device,
+        "tol": settings.tol,
+        "saturation": saturation,
+        "tuning": None if tuning is None else tuning.as_params(),
+        "blend": blend,
+        "start": start,
+    }

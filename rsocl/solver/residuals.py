@@ -58,19 +58,35 @@ class DeviceResiduals:
             raise ValueError(f"slots must be >= 1, got {slots!r}")
         dev = op.device
         self.acc = dev.acc_dtype
-        self.program = dev.program(["residual.cl"], REAL=c_type(op.dtype), ACC=c_type(self.acc),
-                                   MASK_BINARY=int(op.rig.mask == "binary"), **op.tile_defines)
+        self.program = dev.program(
+            ["residual.cl"],
+            REAL=c_type(op.dtype),
+            ACC=c_type(self.acc),
+            MASK_BINARY=int(op.rig.mask == "binary"),
+            **op.tile_defines,
+        )
         kernel = self.program.instance("residual_partials", ("DeviceResiduals", id(self)))
         channels = op.K * (sets or 1)
         self.grid = op.block_grid(channels, kernels=(kernel,))
         gsize, lsize = self.grid
-        self.per_slot = int(np.prod([g // l for g, l in zip(gsize, lsize)]))
+        self.per_slot = int(np.prod([size // local for size, local in zip(gsize, lsize)]))
         self.partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, self.slots * self.per_slot * self.acc.itemsize)
         self.local = cl.LocalMemory(int(lsize[0] * lsize[1]) * self.acc.itemsize)
         self.g_norm2 = sum_sq_diff(g, weights=valid, sets=sets)
-        self.kernel = kernel                        # this object's own: its arguments are set here once
-        kernel.set_args(None, g.data, None if valid is None else valid.data, *op._geometry(), self.partials,
-                        self.local, np.int32(0), np.int32(op.K), np.int32(op.T), np.int32(op.L), *op._shape_args())
+        self.kernel = kernel  # this object's own: its arguments are set here once
+        kernel.set_args(
+            None,
+            g.data,
+            None if valid is None else valid.data,
+            *op._geometry(),
+            self.partials,
+            self.local,
+            np.int32(0),
+            np.int32(op.K),
+            np.int32(op.T),
+            np.int32(op.L),
+            *op._shape_args(),
+        )
 
     def enqueue(self, theta, slot: int):
         """Enqueue the residual of device array ``theta`` into ``slot`` (0 .. slots - 1); nothing is read."""
@@ -80,7 +96,7 @@ class DeviceResiduals:
         self.kernel.set_arg(9, np.int32(slot))
         self.kernel.enqueue(self.op.queue, *self.grid)
 
-    def read(self, count: int) -> "PendingResiduals":
+    def read(self, count: int) -> PendingResiduals:
         """Enqueue the copy of slots ``0 .. count - 1`` to the host (not waited for)."""
         import pyopencl as cl
 

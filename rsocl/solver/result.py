@@ -49,7 +49,7 @@ class Result:
         """The ``T_se`` sub-frames kept by the rig's trimming rule (of every set of a batch)."""
         return self.datacube[..., self.rig.kept_subframes(), :, :]
 
-    def set(self, index: int) -> "Result":
+    def set(self, index: int) -> Result:
         """Set ``index`` of a batch as a single-set :class:`Result` (its column of the history)."""
         if self.batch is None:
             raise ValueError("set() needs a batch result (datacube (B, T, m, n)); this one holds one set")

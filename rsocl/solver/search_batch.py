@@ -79,7 +79,7 @@ class BatchedFolds:
         errs = sum_sq_diff(self.g, solver.hx, weights=self.weights, sets=sets)
         moved = sum_sq_diff(solver.hx, self.predictions, weights=self.weights, sets=sets)
         err_sum = moved_sum = 0.0
-        for e, mv in zip(errs.tolist(), moved.tolist()):     # in fold order, as one fold after the other
+        for e, mv in zip(errs.tolist(), moved.tolist()):  # in fold order, as one fold after the other
             err_sum += e
             moved_sum += mv
         return err_sum, moved_sum

@@ -19,7 +19,8 @@ from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
 from rsocl.solver.crossval import Tuning
 from rsocl.solver.memory import batch_memory
-from rsocl.solver.pipeline import prepare, run, tune as choose
+from rsocl.solver.pipeline import prepare, run
+from rsocl.solver.pipeline import tune as choose
 from rsocl.solver.problem import check_problem
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.request import make_regularizer, make_request
@@ -39,11 +40,22 @@ GPU_BATCH_VOXELS = 2**24
 CACHE_FRACTION = 0.75
 
 
-def batch_size(rig: Rig, regularizer: str | Regularizer = "tv", *, sets: int | None = None,
-               dtype: DTypeLike = "float32", device: str | Device | None = None, projection: str = "exact",
-               truth: bool = False, own_inverse: bool = False, start: bool = False, limit: int | None = None,
-               memory_fraction: float = 0.8, regularizer_options: Options | None = None,
-               cache_fraction: float = CACHE_FRACTION) -> int:
+def batch_size(
+    rig: Rig,
+    regularizer: str | Regularizer = "tv",
+    *,
+    sets: int | None = None,
+    dtype: DTypeLike = "float32",
+    device: str | Device | None = None,
+    projection: str = "exact",
+    truth: bool = False,
+    own_inverse: bool = False,
+    start: bool = False,
+    limit: int | None = None,
+    memory_fraction: float = 0.8,
+    regularizer_options: Options | None = None,
+    cache_fraction: float = CACHE_FRACTION,
+) -> int:
     """The largest number of sets of ``rig`` that one batch may hold on ``device``.
 
     Parameters
@@ -98,34 +110,53 @@ def batch_size(rig: Rig, regularizer: str | Regularizer = "tv", *, sets: int | N
         limit = min(limit, sets)
 
     def need(b, with_start=bool(start)):
-        return batch_memory(cube, rig.n_channels, dt, reg, projection, b, truth=truth, own_inverse=own_inverse,
-                            start=with_start)
+        return batch_memory(
+            cube, rig.n_channels, dt, reg, projection, b, truth=truth, own_inverse=own_inverse, start=with_start
+        )
 
     largest, total = need(1)
-    dev.check_fits(f"ADMM with {reg.name} on T={cube[0]} x {rig.shape[0]} x {rig.shape[1]} ({dt.name})",
-                   largest, total_bytes=total)
+    dev.check_fits(
+        f"ADMM with {reg.name} on T={cube[0]} x {rig.shape[0]} x {rig.shape[1]} ({dt.name})", largest, total_bytes=total
+    )
     budget = fraction * dev.global_mem_bytes
     cache = None
     if cache_fraction is not None and dev.is_cpu and dev.cache_bytes > 0:
         cache = cache_fraction * dev.cache_bytes
+
     def fits(b):
         largest, total = need(b)
         return largest <= dev.max_alloc_bytes and total <= budget and (cache is None or need(b, False)[1] <= cache)
 
-    best, above = 1, limit + 1              # memory grows with the batch: bisect for the largest that fits
+    best, above = 1, limit + 1  # memory grows with the batch: bisect for the largest that fits
     while above - best > 1:
         middle = (best + above) // 2
         best, above = (middle, above) if fits(middle) else (best, middle)
     return best
 
 
-def reconstruct_sets(g: ArrayLike, rig: Rig, *, batch: int | None = None, lam: PerSet | None = None,
-                     eta: PerSet | None = None, x0: ArrayLike | str | None = None, truth: ArrayLike | None = None,
-                     progress: bool = False, device: str | Device | None = None, dtype: DTypeLike = "float32",
-                     regularizer: str | Regularizer = "tv", regularizer_options: Options | None = None,
-                     projection: str = "exact", iterations: int | None = None, tv_iterations: int | None = None,
-                     callback: Callback | None = None, tol: float | None = None, saturation: float | None = None,
-                     tune: bool | Tuning = True, blend: float | None = None) -> Result:
+def reconstruct_sets(
+    g: ArrayLike,
+    rig: Rig,
+    *,
+    batch: int | None = None,
+    lam: PerSet | None = None,
+    eta: PerSet | None = None,
+    x0: ArrayLike | str | None = None,
+    truth: ArrayLike | None = None,
+    progress: bool = False,
+    device: str | Device | None = None,
+    dtype: DTypeLike = "float32",
+    regularizer: str | Regularizer = "tv",
+    regularizer_options: Options | None = None,
+    projection: str = "exact",
+    iterations: int | None = None,
+    tv_iterations: int | None = None,
+    callback: Callback | None = None,
+    tol: float | None = None,
+    saturation: float | None = None,
+    tune: bool | Tuning = True,
+    blend: float | None = None,
+) -> Result:
     """Reconstruct ``S`` sets ``g`` ``(S, K, m, n)`` in batches of ``batch`` sets (default: :func:`batch_size`).
 
     ``lam``/``eta`` are one number or one per set; ``x0``/``truth`` one ``(T, m, n)`` cube for every set
@@ -149,15 +180,38 @@ def reconstruct_sets(g: ArrayLike, rig: Rig, *, batch: int | None = None, lam: P
             raise ValueError(f"{name} must have one cube per set: {count} sets, got {np.shape(cube)[0]}")
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
-    request = make_request(rig, regularizer, sets=count, x0_given=x0 is not None, iterations=iterations, lam=lam,
-                           eta=eta, tv_iterations=tv_iterations, projection=projection, tol=tol, callback=callback,
-                           dtype=dtype, device=device, regularizer_options=regularizer_options, tune=tune,
-                           blend=blend)               # the bar counts sets, not each batch's iterations
+    request = make_request(
+        rig,
+        regularizer,
+        sets=count,
+        x0_given=x0 is not None,
+        iterations=iterations,
+        lam=lam,
+        eta=eta,
+        tv_iterations=tv_iterations,
+        projection=projection,
+        tol=tol,
+        callback=callback,
+        dtype=dtype,
+        device=device,
+        regularizer_options=regularizer_options,
+        tune=tune,
+        blend=blend,
+    )  # the bar counts sets, not each batch's iterations
     if batch is None:
         valid = None if saturation is None else g < check.positive("saturation", saturation, "(snapshot units)")
         own = own_inverses(projection, 0.0 if eta is None else eta, valid, count)
-        batch = batch_size(rig, request.regularizer, sets=count, dtype=dtype, device=device, projection=projection,
-                           truth=truth is not None, own_inverse=own, start=x0 is not None or tune is not False)
+        batch = batch_size(
+            rig,
+            request.regularizer,
+            sets=count,
+            dtype=dtype,
+            device=device,
+            projection=projection,
+            truth=truth is not None,
+            own_inverse=own,
+            start=x0 is not None or tune is not False,
+        )
     batch = check.positive_int("batch", batch)
     bar = None
     if progress:

@@ -32,6 +32,5 @@ class Shrink(Regularizer):
             src = ("#pragma OPENCL EXTENSION cl_khr_fp64 : enable\n" if real == "double" else "") + SOURCE
             programs[key] = cl.Kernel(cl.Program(x.queue.context, src).build(options=options), "shrink")
         scalar = x.dtype.type
-        programs[key](x.queue, (x.size,), None, x.data, out.data, scalar(weight), scalar(self.center),
-                      np.int32(x.size))
+        programs[key](x.queue, (x.size,), None, x.data, out.data, scalar(weight), scalar(self.center), np.int32(x.size))
         return out

@@ -49,8 +49,22 @@ from rsocl.hardware.calibration.photometric import flat_field_gain
 from rsocl.hardware.calibration.timing import band_period, check_row_time, estimate_row_time
 
 __all__ = [
-    "detect_markers", "order_markers", "estimate_homography", "project_points", "reprojection_error",
-    "homography_difference", "homography_angle", "rotation_homography", "row_map_from_homography",
-    "warp_to_reference", "reference_outline", "CameraRegistration", "register_camera", "band_period",
-    "estimate_row_time", "check_row_time", "flat_field_gain", "marker_overlay_png",
+    "detect_markers",
+    "order_markers",
+    "estimate_homography",
+    "project_points",
+    "reprojection_error",
+    "homography_difference",
+    "homography_angle",
+    "rotation_homography",
+    "row_map_from_homography",
+    "warp_to_reference",
+    "reference_outline",
+    "CameraRegistration",
+    "register_camera",
+    "band_period",
+    "estimate_row_time",
+    "check_row_time",
+    "flat_field_gain",
+    "marker_overlay_png",
 ]

@@ -17,8 +17,9 @@ def _image(name: str, image) -> np.ndarray:
 def _points(name: str, points, minimum: int = 1) -> np.ndarray:
     points = check.finite_array(name, points).astype(np.float64)
     if points.ndim != 2 or points.shape[1] != 2 or points.shape[0] < minimum:
-        raise ValueError(f"{name} must be an (N, 2) array of (x, y) points with N >= {minimum}, "
-                         f"got shape {points.shape}")
+        raise ValueError(
+            f"{name} must be an (N, 2) array of (x, y) points with N >= {minimum}, got shape {points.shape}"
+        )
     return points
 
 

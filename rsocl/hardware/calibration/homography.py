@@ -51,8 +51,9 @@ def estimate_homography(reference_points, sensor_points) -> np.ndarray:
     src = _points("reference_points", reference_points, minimum=4)
     dst = _points("sensor_points", sensor_points, minimum=4)
     if src.shape != dst.shape:
-        raise ValueError(f"reference_points and sensor_points must hold the same markers, got {len(src)} and "
-                         f"{len(dst)} points")
+        raise ValueError(
+            f"reference_points and sensor_points must hold the same markers, got {len(src)} and {len(dst)} points"
+        )
     for name, pts in (("reference_points", src), ("sensor_points", dst)):
         centred = pts - pts.mean(axis=0)
         if len(pts) == 4:
@@ -61,8 +62,10 @@ def estimate_homography(reference_points, sensor_points) -> np.ndarray:
             for a, b, c in triples:
                 u, v = pts[b] - pts[a], pts[c] - pts[a]
                 if abs(u[0] * v[1] - u[1] * v[0]) < 1e-6 * scale:
-                    raise ValueError(f"{name}: points {a}, {b}, {c} are collinear; a homography needs four "
-                                     f"points with no three on a line")
+                    raise ValueError(
+                        f"{name}: points {a}, {b}, {c} are collinear; a homography needs four "
+                        f"points with no three on a line"
+                    )
         elif np.linalg.matrix_rank(centred, tol=1e-6 * max(float(np.abs(centred).max()), 1e-300)) < 2:
             raise ValueError(f"{name}: all points lie on a line")
     if hasattr(ProjectiveTransform, "from_estimate"):
@@ -100,8 +103,10 @@ def reprojection_error(H, reference_points, sensor_points) -> np.ndarray:
     reference_points = _points("reference_points", reference_points)
     sensor_points = _points("sensor_points", sensor_points)
     if reference_points.shape != sensor_points.shape:
-        raise ValueError(f"reference_points and sensor_points must have the same shape, got "
-                         f"{reference_points.shape} and {sensor_points.shape}")
+        raise ValueError(
+            f"reference_points and sensor_points must have the same shape, got "
+            f"{reference_points.shape} and {sensor_points.shape}"
+        )
     return np.hypot(*(project_points(H, reference_points) - sensor_points).T)
 
 
@@ -187,12 +192,14 @@ def reference_outline(H, shape, *, frame_origin=(0, 0), samples=16) -> np.ndarra
     samples = check.positive_int("samples", samples)
     t = np.arange(samples) / samples
     left, top, right, bottom = -0.5, -0.5, n - 0.5, m - 0.5
-    border = np.concatenate([
-        np.column_stack([left + t * (right - left), np.full(samples, top)]),
-        np.column_stack([np.full(samples, right), top + t * (bottom - top)]),
-        np.column_stack([right - t * (right - left), np.full(samples, bottom)]),
-        np.column_stack([np.full(samples, left), bottom - t * (bottom - top)]),
-    ])
+    border = np.concatenate(
+        [
+            np.column_stack([left + t * (right - left), np.full(samples, top)]),
+            np.column_stack([np.full(samples, right), top + t * (bottom - top)]),
+            np.column_stack([right - t * (right - left), np.full(samples, bottom)]),
+            np.column_stack([np.full(samples, left), bottom - t * (bottom - top)]),
+        ]
+    )
     return project_points(H, border) - np.asarray(_origin(frame_origin))
 
 
@@ -251,8 +258,12 @@ def warp_to_reference(frame, H, shape, *, frame_origin=(0, 0), order=1, cval=0.0
     x0, y0 = _origin(frame_origin)
     transform = _transform(np.array([[1, 0, -x0], [0, 1, -y0], [0, 0, 1.0]]) @ H)
     stack = frame.reshape((-1,) + frame.shape[-2:]).astype(np.float64, copy=False)
-    out = np.stack([warp(image, transform, output_shape=shape, order=order, cval=cval, preserve_range=True,
-                         clip=False) for image in stack])
+    out = np.stack(
+        [
+            warp(image, transform, output_shape=shape, order=order, cval=cval, preserve_range=True, clip=False)
+            for image in stack
+        ]
+    )
     return out.reshape(frame.shape[:-2] + shape)
 
 
@@ -287,7 +298,7 @@ class CameraRegistration:
     @property
     def rms_error(self) -> float:
         """Root-mean-square reprojection error, sensor pixels."""
-        return float(np.sqrt(np.mean(self.errors ** 2)))
+        return float(np.sqrt(np.mean(self.errors**2)))
 
     def row_map(self, shape) -> np.ndarray:
         """Row-time map for a reference ROI of ``shape`` (see :func:`row_map_from_homography`)."""
@@ -298,8 +309,17 @@ class CameraRegistration:
         return warp_to_reference(frame, self.homography, shape, **options)
 
 
-def register_camera(frame, reference_points, *, sensor_points=None, frame_origin=(0, 0), reference=None, angle=0.0,
-                    mirrored=False, **detect_options) -> CameraRegistration:
+def register_camera(
+    frame,
+    reference_points,
+    *,
+    sensor_points=None,
+    frame_origin=(0, 0),
+    reference=None,
+    angle=0.0,
+    mirrored=False,
+    **detect_options,
+) -> CameraRegistration:
     """Detect the markers in one camera frame (or take them as given) and fit its homography.
 
     Parameters
@@ -341,8 +361,9 @@ def register_camera(frame, reference_points, *, sensor_points=None, frame_origin
             raise ValueError("register_camera needs a frame or sensor_points")
         first = 0 if reference == "largest" else None
         ordered_reference = order_markers(reference_points, first=first)
-        sensor = detect_markers(frame, len(reference_points), reference=reference, angle=angle,
-                                mirrored=mirrored, **detect_options) + np.asarray(_origin(frame_origin))
-    check_pairing(ordered_reference, sensor, mirrored=mirrored)    # four markers would fit any pairing exactly
+        sensor = detect_markers(
+            frame, len(reference_points), reference=reference, angle=angle, mirrored=mirrored, **detect_options
+        ) + np.asarray(_origin(frame_origin))
+    check_pairing(ordered_reference, sensor, mirrored=mirrored)  # four markers would fit any pairing exactly
     H = estimate_homography(ordered_reference, sensor)
     return CameraRegistration(H, ordered_reference, sensor)

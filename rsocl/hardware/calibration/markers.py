@@ -14,7 +14,6 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.hardware.calibration._common import _image, _points
 
-
 #: Default start of the marker order: the marker nearest the top-left
 #: direction from the markers' centre (angle of ``(-1, -1)`` in image
 #: coordinates, y down), radians.
@@ -82,8 +81,19 @@ def order_markers(points, *, first=None, angle=0.0, mirrored=False) -> np.ndarra
     return points[_marker_order(points, first, angle, mirrored)]
 
 
-def detect_markers(image, n=4, *, polarity="bright", threshold=None, smooth=1.0, min_area=4,
-                   reference=None, angle=0.0, mirrored=False, return_areas=False):
+def detect_markers(
+    image,
+    n=4,
+    *,
+    polarity="bright",
+    threshold=None,
+    smooth=1.0,
+    min_area=4,
+    reference=None,
+    angle=0.0,
+    mirrored=False,
+    return_areas=False,
+):
     """Find ``n`` marker dots in a frame and return their ordered centroids.
 
     Parameters
@@ -169,9 +179,11 @@ def detect_markers(image, n=4, *, polarity="bright", threshold=None, smooth=1.0,
     labels = label(smoothed > level, connectivity=2)
     regions = [r for r in regionprops(labels) if r.area >= min_area]
     if len(regions) < n:
-        raise ValueError(f"found {len(regions)} marker blob(s) of >= {min_area} pixels, need {n}; threshold "
-                         f"{level if polarity == 'bright' else -level:.6g} ({polarity} dots). Check the "
-                         f"polarity, or pass threshold=")
+        raise ValueError(
+            f"found {len(regions)} marker blob(s) of >= {min_area} pixels, need {n}; threshold "
+            f"{level if polarity == 'bright' else -level:.6g} ({polarity} dots). Check the "
+            f"polarity, or pass threshold="
+        )
     regions.sort(key=lambda r: r.area, reverse=True)
     chosen = regions[:n]
     weights = np.clip(signed - level, 0.0, None)
@@ -182,8 +194,10 @@ def detect_markers(image, n=4, *, polarity="bright", threshold=None, smooth=1.0,
         r0, c0, r1, c1 = region.bbox
         if r0 == 0 or c0 == 0 or r1 == rows or c1 == cols:
             cy, cx = region.centroid
-            raise ValueError(f"marker blob near (x, y) = ({cx:.1f}, {cy:.1f}) touches the frame edge; its centroid "
-                             f"would be biased. Move the target or crop the frame")
+            raise ValueError(
+                f"marker blob near (x, y) = ({cx:.1f}, {cy:.1f}) touches the frame edge; its centroid "
+                f"would be biased. Move the target or crop the frame"
+            )
         w = weights[coords[:, 0], coords[:, 1]]
         if w.sum() <= 0:
             w = np.ones(len(coords))
@@ -194,9 +208,11 @@ def detect_markers(image, n=4, *, polarity="bright", threshold=None, smooth=1.0,
     first = None
     if reference == "largest":
         if n > 1 and areas[0] < LARGEST_MARGIN * areas[1]:
-            raise ValueError(f"reference='largest': the two largest markers have areas {areas[0]} and {areas[1]} "
-                             f"pixels (ratio {areas[0] / areas[1]:.2f} < {LARGEST_MARGIN}); cannot tell which "
-                             f"one is the reference marker")
+            raise ValueError(
+                f"reference='largest': the two largest markers have areas {areas[0]} and {areas[1]} "
+                f"pixels (ratio {areas[0] / areas[1]:.2f} < {LARGEST_MARGIN}); cannot tell which "
+                f"one is the reference marker"
+            )
         first = 0
     order = _marker_order(centroids, first, angle, mirrored)
     if return_areas:

@@ -17,8 +17,9 @@ from rsocl.files.atomic import atomic_path
 from rsocl.hardware.calibration._common import _image, _points
 
 
-def marker_overlay_png(path, frames, detected, reprojected=None, *, outlines=None, titles=None, cmap="gray",
-                       dpi=100) -> Path:
+def marker_overlay_png(
+    path, frames, detected, reprojected=None, *, outlines=None, titles=None, cmap="gray", dpi=100
+) -> Path:
     """Write a PNG of each camera's frame with its markers drawn over it.
 
     Detected markers are circles, numbered in marker order; markers
@@ -106,14 +107,14 @@ def marker_overlay_png(path, frames, detected, reprojected=None, *, outlines=Non
         for k, (x, y) in enumerate(points):
             ax.annotate(str(k), (x, y), xytext=(6, 6), textcoords="offset points", color="yellow", fontsize=8)
         if reprojected[index] is not None:
-            ax.scatter(reprojected[index][:, 0], reprojected[index][:, 1], s=50, marker="x", c="red",
-                       linewidths=1.2)
+            ax.scatter(reprojected[index][:, 0], reprojected[index][:, 1], s=50, marker="x", c="red", linewidths=1.2)
         ax.set_xlim(-0.5, frame.shape[1] - 0.5)
         ax.set_ylim(frame.shape[0] - 0.5, -0.5)
         ax.set_title(str(titles[index]), fontsize=9)
-    handles = [Line2D([], [], marker="o", linestyle="", markerfacecolor="none", markeredgecolor="lime",
-                      label="detected"),
-               Line2D([], [], marker="x", linestyle="", color="red", label="reprojected from reference")]
+    handles = [
+        Line2D([], [], marker="o", linestyle="", markerfacecolor="none", markeredgecolor="lime", label="detected"),
+        Line2D([], [], marker="x", linestyle="", color="red", label="reprojected from reference"),
+    ]
     if any(o is not None for o in outlines):
         handles.append(Line2D([], [], color="cyan", label="reference ROI"))
     try:

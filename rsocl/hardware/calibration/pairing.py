@@ -49,8 +49,9 @@ def flipped_triangles(reference_points, sensor_points, *, mirrored=False):
     ref = _points("reference_points", reference_points, minimum=3)
     sensor = _points("sensor_points", sensor_points, minimum=3)
     if ref.shape != sensor.shape:
-        raise ValueError(f"reference_points and sensor_points must hold the same markers, got {len(ref)} and "
-                         f"{len(sensor)} points")
+        raise ValueError(
+            f"reference_points and sensor_points must hold the same markers, got {len(ref)} and {len(sensor)} points"
+        )
     triples = list(combinations(range(len(ref)), 3))
     a, b = _turns(ref, triples), _turns(sensor, triples)
     expected = -1.0 if mirrored else 1.0
@@ -98,14 +99,24 @@ def check_pairing(reference_points, sensor_points, *, mirrored=False) -> None:
     if not flipped:
         return
     if len(flipped) == checked:
-        raise ValueError(f"every triangle of the {len(ref)} markers turns the other way on the sensor: the "
-                         + ("camera sees the target unmirrored, not in a mirror as --mirrored says"
-                            if mirrored else "camera sees the target mirrored (a beam splitter: give "
-                            "--mirrored for it), or the markers are listed in the opposite turning sense"))
+        raise ValueError(
+            f"every triangle of the {len(ref)} markers turns the other way on the sensor: the "
+            + (
+                "camera sees the target unmirrored, not in a mirror as --mirrored says"
+                if mirrored
+                else "camera sees the target mirrored (a beam splitter: give "
+                "--mirrored for it), or the markers are listed in the opposite turning sense"
+            )
+        )
     names = [f"{k} ({ref[k, 0]:g},{ref[k, 1]:g})" for k in _suspects(flipped)]
-    who = (f"markers {', '.join(names[:-1])} and {names[-1]} look swapped"
-           if len(names) > 1 else f"marker {names[0]} looks misplaced")
+    who = (
+        f"markers {', '.join(names[:-1])} and {names[-1]} look swapped"
+        if len(names) > 1
+        else f"marker {names[0]} looks misplaced"
+    )
     shown = ", ".join(str(t) for t in flipped[:4]) + (", ..." if len(flipped) > 4 else "")
-    raise ValueError(f"{who}: the marker triangles {shown} turn the other way on the sensor than on the "
-                     "reference, which no camera does; check the markers' order (--markers-ref, the "
-                     "'markers' array, --identify)")
+    raise ValueError(
+        f"{who}: the marker triangles {shown} turn the other way on the sensor than on the "
+        "reference, which no camera does; check the markers' order (--markers-ref, the "
+        "'markers' array, --identify)"
+    )

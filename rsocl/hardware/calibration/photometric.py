@@ -56,23 +56,29 @@ def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1) ->
     trim = check.finite("trim", trim)
     if not 0 <= trim < 0.5:
         raise ValueError(f"trim must be in [0, 0.5), got {trim!r}")
-    darks = np.broadcast_to(np.asarray(dark, dtype=np.float64), (C,)) if np.ndim(dark) == 0 else \
-        check.finite_array("dark", dark).astype(np.float64)
+    darks = (
+        np.broadcast_to(np.asarray(dark, dtype=np.float64), (C,))
+        if np.ndim(dark) == 0
+        else check.finite_array("dark", dark).astype(np.float64)
+    )
     if darks.shape != (C,):
         raise ValueError(f"dark must be one value or one per camera ({C}), got shape {darks.shape}")
     levels = np.empty(C)
     for c, flat in enumerate(frames):
         if flat.ndim not in (2, 3) or 0 in flat.shape:
-            raise ValueError(f"frames[{c}] must be a (rows, columns) frame or a (K, rows, columns) stack, "
-                             f"got shape {flat.shape}")
+            raise ValueError(
+                f"frames[{c}] must be a (rows, columns) frame or a (K, rows, columns) stack, got shape {flat.shape}"
+            )
         rows, cols = flat.shape[-2:]
         dr, dc = (rows - max(1, round(rows * region))) // 2, (cols - max(1, round(cols * region))) // 2
-        centre = flat[..., dr:rows - dr, dc:cols - dc].astype(np.float64)
-        scale = float(np.max(np.abs(centre))) or 1.0        # the mean of values near the float range's top
-        levels[c] = float(trim_mean(centre.ravel() / scale, trim)) * scale - darks[c]   # does not overflow
+        centre = flat[..., dr : rows - dr, dc : cols - dc].astype(np.float64)
+        scale = float(np.max(np.abs(centre))) or 1.0  # the mean of values near the float range's top
+        levels[c] = float(trim_mean(centre.ravel() / scale, trim)) * scale - darks[c]  # does not overflow
         if not levels[c] > 0:
-            raise ValueError(f"camera {c}: flat-field level minus dark is {levels[c]:.6g}, must be > 0 "
-                             f"(is the dark level right, is the light on?)")
+            raise ValueError(
+                f"camera {c}: flat-field level minus dark is {levels[c]:.6g}, must be > 0 "
+                f"(is the dark level right, is the light on?)"
+            )
     if relative_to == "mean":
         levels = levels / levels.max()
         return levels / levels.mean()

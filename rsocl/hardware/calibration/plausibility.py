@@ -24,8 +24,17 @@ import numpy as np
 from rsocl.hardware.calibration._common import _homography, _points, _shape
 from rsocl.hardware.calibration.pairing import check_pairing, flipped_triangles
 
-__all__ = ["MAX_SCALE_RATIO", "MAX_ANISOTROPY", "MAX_TURN", "flipped_triangles", "check_pairing",
-           "check_registration", "check_rotation", "leave_one_out_errors", "fit_summary"]
+__all__ = [
+    "MAX_SCALE_RATIO",
+    "MAX_ANISOTROPY",
+    "MAX_TURN",
+    "flipped_triangles",
+    "check_pairing",
+    "check_registration",
+    "check_rotation",
+    "leave_one_out_errors",
+    "fit_summary",
+]
 
 #: Largest ratio of the local scale (sensor pixels per reference pixel) between two corners of the grid.
 MAX_SCALE_RATIO = 3.0
@@ -33,6 +42,8 @@ MAX_SCALE_RATIO = 3.0
 MAX_ANISOTROPY = 3.0
 #: Largest difference, degrees, between the measured rotation and the rig file's nominal one.
 MAX_TURN = 45.0
+
+
 def _jacobians(H, points) -> np.ndarray:
     """``(N, 2, 2)`` derivative of the homography's map at ``points``."""
     q = np.column_stack([points, np.ones(len(points))]) @ H.T
@@ -79,14 +90,18 @@ def check_registration(reference_points, sensor_points, H, shape, *, mirrored=Fa
     scale = np.sqrt(singular[:, 0] * singular[:, 1])
     ratio = float(scale.max() / max(scale.min(), 1e-300))
     if ratio > MAX_SCALE_RATIO:
-        raise ValueError(f"the homography magnifies one corner of the grid {ratio:.1f}x as much as another "
-                         f"(at most {MAX_SCALE_RATIO:g} for a camera facing a flat target): the markers are "
-                         "probably paired wrongly; check their order (--markers-ref, the 'markers' array)")
+        raise ValueError(
+            f"the homography magnifies one corner of the grid {ratio:.1f}x as much as another "
+            f"(at most {MAX_SCALE_RATIO:g} for a camera facing a flat target): the markers are "
+            "probably paired wrongly; check their order (--markers-ref, the 'markers' array)"
+        )
     stretch = float((singular[:, 0] / np.maximum(singular[:, 1], 1e-300)).max())
     if stretch > MAX_ANISOTROPY:
-        raise ValueError(f"the homography stretches the grid {stretch:.1f}x more along one direction than "
-                         f"the other (at most {MAX_ANISOTROPY:g} for a camera facing a flat target): the markers "
-                         "are probably paired wrongly; check their order (--markers-ref, the 'markers' array)")
+        raise ValueError(
+            f"the homography stretches the grid {stretch:.1f}x more along one direction than "
+            f"the other (at most {MAX_ANISOTROPY:g} for a camera facing a flat target): the markers "
+            "are probably paired wrongly; check their order (--markers-ref, the 'markers' array)"
+        )
 
 
 def check_rotation(H, shape, nominal, *, key="angle", limit=MAX_TURN) -> float:
@@ -97,9 +112,11 @@ def check_rotation(H, shape, nominal, *, key="angle", limit=MAX_TURN) -> float:
 
     turn = (homography_angle(H, shape) - nominal + 180.0) % 360.0 - 180.0
     if abs(turn) > limit:
-        raise ValueError(f"the markers give a rotation of {nominal + turn:.1f}°, {abs(turn):.0f}° from the rig "
-                         f"file's {key} = {nominal:g}° (at most {limit:g}°): the markers are paired a turn apart (their "
-                         f"order shifted), or {key} is wrong; check the markers' order or correct {key}")
+        raise ValueError(
+            f"the markers give a rotation of {nominal + turn:.1f}°, {abs(turn):.0f}° from the rig "
+            f"file's {key} = {nominal:g}° (at most {limit:g}°): the markers are paired a turn apart (their "
+            f"order shifted), or {key} is wrong; check the markers' order or correct {key}"
+        )
     return nominal + turn
 
 
@@ -118,7 +135,7 @@ def leave_one_out_errors(reference_points, sensor_points):
     for k in range(len(ref)):
         keep = np.arange(len(ref)) != k
         H = estimate_homography(ref[keep], sensor[keep])
-        out[k] = float(np.hypot(*(project_points(H, ref[k:k + 1])[0] - sensor[k])))
+        out[k] = float(np.hypot(*(project_points(H, ref[k : k + 1])[0] - sensor[k])))
     return out
 
 
@@ -132,7 +149,11 @@ def fit_summary(registration) -> str:
     N = len(registration.reference_points)
     loo = leave_one_out_errors(registration.reference_points, registration.sensor_points)
     if loo is None:
-        return (f"{N} markers fit a homography exactly, so they cannot check it (no rms); 5 or more markers "
-                "give a leave-one-out check")
-    return (f"{N} markers: rms reprojection {registration.rms_error:.3f} px, leave-one-out largest "
-            f"{float(loo.max()):.3f} px")
+        return (
+            f"{N} markers fit a homography exactly, so they cannot check it (no rms); 5 or more markers "
+            "give a leave-one-out check"
+        )
+    return (
+        f"{N} markers: rms reprojection {registration.rms_error:.3f} px, leave-one-out largest "
+        f"{float(loo.max()):.3f} px"
+    )

@@ -71,23 +71,26 @@ def band_period(profile, *, min_periods=2.0) -> float:
     index = int(np.flatnonzero(valid)[np.argmax(spectrum[valid])])
     f0 = freqs[index]
     if 0 < index < len(spectrum) - 1:
-        a, b, c = np.log(spectrum[index - 1:index + 2] + 1e-300)
+        a, b, c = np.log(spectrum[index - 1 : index + 2] + 1e-300)
         denominator = a - 2 * b + c
         if denominator < 0:
             f0 = freqs[index] + 0.5 * (a - c) / denominator * (freqs[1] - freqs[0])
     low, high = max(f0 - 1.0 / N, 0.5 / N), min(f0 + 1.0 / N, 0.5)
-    best = minimize_scalar(lambda f: _sinusoid_fit(profile, f)[0], bounds=(low, high), method="bounded",
-                           options={"xatol": 1e-9})
+    best = minimize_scalar(
+        lambda f: _sinusoid_fit(profile, f)[0], bounds=(low, high), method="bounded", options={"xatol": 1e-9}
+    )
     frequency = float(best.x)
     rss, coefficients = _sinusoid_fit(profile, frequency)
     amplitude = float(np.hypot(coefficients[2], coefficients[3]))
     noise = math.sqrt(rss / max(N - 5, 1))
     if amplitude < 5 * noise * math.sqrt(2.0 / N):
-        raise ValueError(f"no significant band found: fitted amplitude {amplitude:.3g} against a residual of "
-                         f"{noise:.3g} per sample")
+        raise ValueError(
+            f"no significant band found: fitted amplitude {amplitude:.3g} against a residual of {noise:.3g} per sample"
+        )
     if frequency < min_periods / N or frequency >= 0.5:
-        raise ValueError(f"band period {1 / frequency:.3g} samples is outside the measurable range "
-                         f"(2 .. {N / min_periods:.3g})")
+        raise ValueError(
+            f"band period {1 / frequency:.3g} samples is outside the measurable range (2 .. {N / min_periods:.3g})"
+        )
     return 1.0 / frequency
 
 
@@ -159,12 +162,16 @@ def check_row_time(estimated, expected, tolerance=0.01, *, raise_error=True) -> 
     expected = check.positive("expected", expected, "seconds")
     tolerance = check.non_negative("tolerance", tolerance)
     relative = estimated / expected - 1.0
-    detail = (f"measured {estimated * 1e6:.4g} µs, rig file {expected * 1e6:.4g} µs "
-              f"({relative * 100:+.2f} %, tolerance {tolerance * 100:g} %)")
+    detail = (
+        f"measured {estimated * 1e6:.4g} µs, rig file {expected * 1e6:.4g} µs "
+        f"({relative * 100:+.2f} %, tolerance {tolerance * 100:g} %)"
+    )
     if abs(relative) <= tolerance:
         return "t_r ok: " + detail
-    message = ("t_r mismatch: " + detail + "; check the flicker frequency (lamps flicker at twice the mains "
-               "frequency) and the camera's readout settings")
+    message = (
+        "t_r mismatch: " + detail + "; check the flicker frequency (lamps flicker at twice the mains "
+        "frequency) and the camera's readout settings"
+    )
     if raise_error:
         raise ValueError(message)
     return message
