@@ -41,8 +41,9 @@ from rsocl.files.hdf5 import (
 from rsocl.model.interpolation import interp3d
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Camera, Rig
-from rsocl.model.scenes import benchmark_protocol, builtin_scene, load_scene, load_video
+from rsocl.model.scenes import benchmark_protocol, builtin_scene, load_scene
 from rsocl.model.simulate import simulate
+from rsocl.model.video import load_video
 from rsocl.solver.reconstruct import Result, reconstruct
 from rsocl.solver.regularizer import Option, Regularizer
 from rsocl.solver.sets import batch_size, reconstruct_sets
