@@ -30,19 +30,14 @@ True
 from rsocl import testing
 from rsocl.analysis.metrics import psnr, ssim
 from rsocl.device.context import get_device, list_devices
-from rsocl.files.hdf5 import (
-    Capture,
-    Reconstruction,
-    load_capture,
-    load_reconstruction,
-    save_capture,
-    save_reconstruction,
-)
+from rsocl.files.hdf5 import Capture, load_capture, save_capture
+from rsocl.files.hdf5_reconstruction import Reconstruction, load_reconstruction, save_reconstruction
 from rsocl.model.interpolation import interp3d
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Camera, Rig
-from rsocl.model.scenes import benchmark_protocol, builtin_scene, load_scene, load_video
+from rsocl.model.scenes import benchmark_protocol, builtin_scene, load_scene
 from rsocl.model.simulate import simulate
+from rsocl.model.video import load_video
 from rsocl.solver.reconstruct import Result, reconstruct
 from rsocl.solver.regularizer import Option, Regularizer
 from rsocl.solver.sets import batch_size, reconstruct_sets

@@ -250,7 +250,7 @@ def test_a_full_disk_while_reconstructing_is_one_line_and_keeps_the_earlier_resu
     shutil.copy(three_sets, capture)
     out = tmp_path / "r.h5"
     out.write_bytes(b"an earlier result")
-    monkeypatch.setattr("rsocl.files.hdf5.write_header", _disk_full)
+    monkeypatch.setattr("rsocl.files.hdf5_reconstruction.write_header", _disk_full)
     rc = main(
         ["reconstruct", str(capture), "--out", str(out), "--first-set-only", "--fast", "--iterations", "2", "--quiet"]
     )
@@ -451,16 +451,16 @@ def test_a_close_that_cannot_write_is_an_oserror_with_its_errno(tmp_path, monkey
 
 
 def test_a_full_disk_part_way_through_the_sets_says_which_are_written(three_sets, tmp_path, capsys, monkeypatch):
-    from rsocl.files import hdf5
+    from rsocl.files import hdf5_reconstruction
 
-    real = hdf5.save_reconstruction
+    real = hdf5_reconstruction.save_reconstruction
 
     def save(path, *args, **kwargs):
         if "set002" in str(path):
             raise OutputError(path, OSError(errno.ENOSPC, "No space left on device"), existed=False)
         return real(path, *args, **kwargs)
 
-    monkeypatch.setattr(hdf5, "save_reconstruction", save)
+    monkeypatch.setattr(hdf5_reconstruction, "save_reconstruction", save)
     shutil.copy(three_sets, tmp_path / "c.h5")
     rc = main(
         [

@@ -22,6 +22,7 @@ MODULES = [
     "rsocl.model.simulate",
     "rsocl.analysis.metrics",
     "rsocl.files.hdf5",
+    "rsocl.files.hdf5_reconstruction",
     "rsocl.common.validation",
     "rsocl_plugins.tv",
 ]

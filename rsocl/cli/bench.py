@@ -68,7 +68,7 @@ def default_point(args):
     if scene != "builtin":
         if not Path(scene).exists():
             raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
-        from rsocl.model.scenes import load_video
+        from rsocl.model.video import load_video
 
         load_video(scene)  # an unreadable file is named now, not in every point's failure
     quick = bool(args.quick)

@@ -109,7 +109,8 @@ def cmd_reconstruct(args) -> int:
     """
     from rsocl.analysis.visual import comparison_gif
     from rsocl.files.atomic import OutputError
-    from rsocl.files.hdf5 import load_capture, load_snapshot_sets, save_reconstruction
+    from rsocl.files.hdf5 import load_capture, load_snapshot_sets
+    from rsocl.files.hdf5_reconstruction import save_reconstruction
 
     if args.batch is not None and args.batch < 1:  # before anything runs, whatever the capture holds
         raise ValueError(f"--batch must be >= 1 (sets per batch), got {args.batch}")

@@ -117,7 +117,8 @@ def scene_datacube(args, rig):
     (and resampled in time) with a one-line warning saying from what to what and how to keep its size."""
     import warnings
 
-    from rsocl.model.scenes import benchmark_protocol, load_scene, load_video
+    from rsocl.model.scenes import benchmark_protocol, load_scene
+    from rsocl.model.video import load_video
 
     if args.scene == "builtin":
         return load_scene(args.scene, rig.shape, rig.T)

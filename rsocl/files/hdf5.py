@@ -1,20 +1,18 @@
-"""HDF5 files for captures (snapshots + rig) and reconstructions (datacube + rig).
+"""HDF5 files of captures: the snapshots and the rig that took them.
 
-One file per capture and per reconstruction, written atomically (see
-:mod:`rsocl.files.atomic`): a crash or error never leaves a partial file and never
-clobbers an existing one.
+One file per capture, written atomically (see :mod:`rsocl.files.atomic`): a crash or error never
+leaves a partial file and never clobbers an existing one. Reconstruction files are
+:mod:`rsocl.files.hdf5_reconstruction`; its names are importable from here too, so this module
+gives the whole file format.
 
 Layout (format version 1)
 -------------------------
-Root attributes, both kinds: the header of :mod:`rsocl.files.hdf5_header` (kind, format
+Root attributes: the header of :mod:`rsocl.files.hdf5_header` (kind ``"capture"``, format
 version, the rig).
 
-Capture: dataset ``snapshots`` ``[K, m, n]``, optional ``truth`` ``[T, m, n]``,
-attribute ``meta`` (JSON object).
-
-Reconstruction: dataset ``datacube`` ``[T, m, n]``, optional ``truth`` (same
-shape), attribute ``params`` (JSON object), group ``history`` of 1-D datasets
-(insertion order kept).
+Dataset ``snapshots`` ``[K, m, n]``, optional ``truth`` ``[T, m, n]``, attribute ``meta`` (JSON
+object); a capture of several sets (``rsocl capture --sets S``) adds ``snapshot_sets``
+``[S, K, m, n]``.
 """
 
 from __future__ import annotations
@@ -25,20 +23,23 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike, PathLike
 from rsocl.files.atomic import atomic_path
 from rsocl.files.hdf5_header import (
     FORMAT_VERSION,
+    check_cube,
+    check_rig,
     dumps_json,
     json_attr,
     new_file,
     open_checked,
+    optional_array,
     read_array,
     read_rig,
     real_dataset,
     write_header,
 )
+from rsocl.files.hdf5_reconstruction import Reconstruction, load_reconstruction, save_reconstruction
 from rsocl.model.rig import Rig
 
 __all__ = [
@@ -75,51 +76,6 @@ class Capture:
     rig: Rig
     truth: np.ndarray | None
     meta: dict
-
-
-@dataclass(frozen=True)
-class Reconstruction:
-    """A loaded reconstruction file.
-
-    Attributes
-    ----------
-    datacube : ndarray, shape (T, m, n)
-        The reconstructed sub-frames.
-    rig : Rig
-        The camera array of the capture.
-    params : dict
-        Solver parameters (JSON data).
-    history : dict of str -> ndarray
-        Per-iteration traces (1-D arrays), e.g. residual or PSNR.
-    truth : ndarray, shape (T, m, n), or None
-        Ground truth, when known.
-    """
-
-    datacube: np.ndarray
-    rig: Rig
-    params: dict
-    history: dict
-    truth: np.ndarray | None
-
-
-# ---------------------------------------------------------------------- checks
-def _cube(name: str, array, expected_shape=None, what="") -> np.ndarray:
-    array = check.finite_array(name, array)
-    if array.ndim != 3:
-        raise ValueError(f"{name} must be 3-D {what}, got shape {array.shape}")
-    if expected_shape is not None and array.shape != tuple(expected_shape):
-        raise ValueError(f"{name} must have shape {tuple(expected_shape)} {what}, got {array.shape}")
-    return array
-
-
-def _check_rig(rig) -> Rig:
-    if not isinstance(rig, Rig):
-        raise ValueError(f"rig must be an rsocl.model.rig.Rig, got {type(rig).__name__}")
-    return rig
-
-
-def _optional(h5, name, source, tail=None):
-    return read_array(h5, name, source, tail) if name in h5 else None
 
 
 # ---------------------------------------------------------------------- capture
@@ -167,13 +123,13 @@ def save_capture(
     (True, (2, 8, 8), {'scene': 'dark'})
     >>> folder.cleanup()
     """
-    rig = _check_rig(rig)
+    rig = check_rig(rig)
     m, n = rig.shape
-    snapshots = _cube(
+    snapshots = check_cube(
         "snapshots", snapshots, (rig.n_channels, m, n), "[K = rig.n_channels, m, n] = rig's channels and shape"
     )
     if truth is not None:
-        truth = _cube("truth", truth, (rig.T, m, n), "[T = rig.T, m, n]")
+        truth = check_cube("truth", truth, (rig.T, m, n), "[T = rig.T, m, n]")
     meta = dumps_json("attrs", attrs)
     path = Path(os.fspath(path))
     with atomic_path(path) as tmp:
@@ -248,7 +204,7 @@ def load_capture(path: PathLike, set_index: int | None = None) -> Capture:
             truth = None  # the stored truth is set 0's datacube
         else:
             snapshots = read_array(h5, "snapshots", source, (rig.n_channels,) + rig.shape)
-            truth = _optional(h5, "truth", source, rig.shape)
+            truth = optional_array(h5, "truth", source, rig.shape)
         return Capture(snapshots=snapshots, rig=rig, truth=truth, meta=json_attr(h5, "meta", source))
 
 
@@ -287,134 +243,3 @@ def load_snapshot_sets(path) -> np.ndarray | None:
     if sets.ndim != 4 or sets.shape[0] < 1 or not np.all(np.isfinite(sets)):
         raise ValueError(f"{source}: dataset 'snapshot_sets' must be finite (S >= 1, K, m, n), got {sets.shape}")
     return sets
-
-
-# ---------------------------------------------------------------------- reconstruction
-def save_reconstruction(
-    path: PathLike,
-    datacube: ArrayLike,
-    rig: Rig,
-    *,
-    params: dict | None = None,
-    history: dict | None = None,
-    truth: ArrayLike | None = None,
-) -> Path:
-    """Write a reconstruction (datacube, rig, solver parameters, traces) to one HDF5 file, atomically.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        Destination file (conventionally ``.h5``); its directory must exist.
-    datacube : array_like, shape (T, m, n)
-        Reconstructed sub-frames: ``(m, n) = rig.shape`` and
-        ``1 <= T <= rig.T`` (all sub-frames, or a trimmed range such as the
-        ``rig.T_se`` kept ones).
-    rig : Rig
-        The camera array of the capture.
-    params : dict of str -> JSON-serialisable, optional
-        Solver parameters (e.g. ``lam``, ``eta``, iterations), JSON attribute.
-    history : dict of str -> 1-D array_like, optional
-        Per-iteration traces, stored as datasets ``history/<name>`` in the
-        given order. Names must be non-empty and contain no ``/``.
-    truth : array_like, optional
-        Ground truth with the same shape as ``datacube``.
-
-    Returns
-    -------
-    pathlib.Path
-        ``path``.
-
-    Raises
-    ------
-    ValueError
-        On shape mismatches, non-finite datacube/truth, bad history names or
-        non-1-D traces, or non-JSON ``params``.
-
-    Examples
-    --------
-    >>> import os, tempfile, numpy as np, rsocl
-    >>> folder = tempfile.TemporaryDirectory()
-    >>> rig = rsocl.Rig.paper_array(2, shape=(8, 8), t_e=180e-6, t_r=35e-6)
-    >>> cube = np.zeros((rig.T,) + rig.shape)
-    >>> path = rsocl.save_reconstruction(os.path.join(folder.name, "rec.h5"), cube, rig,
-    ...                                  params={"lam": 0.1}, history={"residual": [1.0, 0.5]})
-    >>> result = rsocl.load_reconstruction(path)
-    >>> result.params, list(result.history), result.datacube.shape == cube.shape
-    ({'lam': 0.1}, ['residual'], True)
-    >>> folder.cleanup()
-    """
-    rig = _check_rig(rig)
-    datacube = _cube("datacube", datacube, None, "[T, m, n]")
-    if datacube.shape[1:] != rig.shape or not 1 <= datacube.shape[0] <= rig.T:
-        raise ValueError(
-            f"datacube must have shape [T, m, n] with (m, n) = rig.shape = {rig.shape} and "
-            f"1 <= T <= rig.T = {rig.T}, got {datacube.shape}"
-        )
-    if truth is not None:
-        truth = _cube("truth", truth, datacube.shape, "(the datacube's shape)")
-    params_json = dumps_json("params", params)
-    traces = {}
-    if history is not None:
-        if not isinstance(history, dict):
-            raise ValueError(f"history must be a dict of name -> 1-D array, got {type(history).__name__}")
-        for name, trace in history.items():
-            if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
-                raise ValueError(f"history names must be non-empty str without '/', got {name!r}")
-            trace = np.asarray(trace)
-            if trace.ndim != 1 or trace.dtype.kind not in "biuf":
-                raise ValueError(
-                    f"history[{name!r}] must be a 1-D real array, got shape {trace.shape} dtype {trace.dtype}"
-                )
-            traces[name] = trace
-    path = Path(os.fspath(path))
-    with atomic_path(path) as tmp:
-        with new_file(tmp) as h5:
-            write_header(h5, "reconstruction", rig)
-            h5.attrs["params"] = params_json
-            h5.create_dataset("datacube", data=datacube)
-            if truth is not None:
-                h5.create_dataset("truth", data=truth)
-            group = h5.create_group("history", track_order=True)
-            for name, trace in traces.items():
-                group.create_dataset(name, data=trace)
-    return path
-
-
-def load_reconstruction(path: PathLike) -> Reconstruction:
-    """Read a file written by :func:`save_reconstruction`.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        The reconstruction file.
-
-    Returns
-    -------
-    Reconstruction
-        ``datacube``, ``rig``, ``params``, ``history`` (in saved order) and
-        ``truth`` (or None).
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``path`` does not exist.
-    ValueError
-        If the file is not an rsocl reconstruction file or is damaged.
-    """
-    source = str(path)
-    with open_checked(path, "reconstruction") as h5:
-        rig = read_rig(h5, source)
-        datacube = read_array(h5, "datacube", source, rig.shape)
-        history = {}
-        if "history" in h5:
-            if not hasattr(h5["history"], "items"):
-                raise ValueError(f"{source}: 'history' must be a group of datasets")
-            for name in h5["history"]:
-                history[name] = read_array(h5, f"history/{name}", source)
-        return Reconstruction(
-            datacube=datacube,
-            rig=rig,
-            params=json_attr(h5, "params", source),
-            history=history,
-            truth=_optional(h5, "truth", source, rig.shape),
-        )

@@ -12,7 +12,8 @@ Root attributes (format version 1):
 
 :func:`write_header` writes them, :func:`open_checked` opens a file and checks its kind and
 version, :func:`read_rig` reads the rig back; JSON attributes go through :func:`dumps_json`.
-:func:`new_file` creates a file whose failed close (a full disk) is an ``OSError``.
+:func:`new_file` creates a file whose failed close (a full disk) is an ``OSError``. The checks the
+writers and readers of both kinds share: :func:`check_rig`, :func:`check_cube`, :func:`optional_array`.
 """
 
 from __future__ import annotations
@@ -43,6 +44,9 @@ __all__ = [
     "json_attr",
     "read_array",
     "real_dataset",
+    "optional_array",
+    "check_rig",
+    "check_cube",
     "new_file",
     "close_error",
 ]
@@ -141,6 +145,29 @@ def json_attr(h5, name: str, source: str):
 def read_array(h5, name: str, source: str, tail=None):
     """Dataset ``name`` of ``h5`` as a real-valued array, checked by :func:`real_dataset`."""
     return real_dataset(h5, name, source, tail)[()]
+
+
+def optional_array(h5, name: str, source: str, tail=None):
+    """Dataset ``name`` of ``h5`` read by :func:`read_array`, or None when the file has no ``name``."""
+    return read_array(h5, name, source, tail) if name in h5 else None
+
+
+def check_rig(rig) -> Rig:
+    """``rig`` when it is a :class:`~rsocl.model.rig.Rig`; a ValueError naming ``rig`` otherwise."""
+    if not isinstance(rig, Rig):
+        raise ValueError(f"rig must be an rsocl.model.rig.Rig, got {type(rig).__name__}")
+    return rig
+
+
+def check_cube(name: str, array, expected_shape=None, what="") -> np.ndarray:
+    """``array`` as a finite 3-D array (of ``expected_shape`` when given); a ValueError naming ``name``
+    and the shape it must have (``what`` says it in words) otherwise."""
+    array = check.finite_array(name, array)
+    if array.ndim != 3:
+        raise ValueError(f"{name} must be 3-D {what}, got shape {array.shape}")
+    if expected_shape is not None and array.shape != tuple(expected_shape):
+        raise ValueError(f"{name} must have shape {tuple(expected_shape)} {what}, got {array.shape}")
+    return array
 
 
 def real_dataset(h5, name: str, source: str, tail=None):

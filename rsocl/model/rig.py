@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -22,6 +21,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.model.camera import SNAP, Camera, _snap
 from rsocl.model.plausible import check_rig_memory, check_window
+from rsocl.model.windows import ExposureWindows, exposure_windows, weighted_bounds
 
 __all__ = ["Camera", "Rig", "ExposureWindows", "PAPER_ANGLES", "MAX_T"]
 
@@ -35,33 +35,6 @@ PAPER_ANGLES = (0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0)
 #: in the wrong unit (an exposure, trigger offset or frame period in µs given as seconds), and is
 #: refused naming it before anything of size ``T`` is allocated.
 MAX_T = 2**24
-
-
-@dataclass(frozen=True)
-class ExposureWindows:
-    """Per-channel, per-pixel exposure windows in units of ``dt``.
-
-    Attributes
-    ----------
-    index : ndarray of int32, shape (K, m, n)
-        ``floor(start/dt)``: the first sub-frame the window can touch.
-    fraction : ndarray of float64, shape (K, m, n)
-        ``start/dt - index``, in [0, 1).
-    length : ndarray of float64, shape (K,)
-        Exposure ``t_e/dt`` of each channel, in sub-frames.
-    gain : ndarray of float64, shape (K,)
-        Gain of each channel.
-    """
-
-    index: np.ndarray
-    fraction: np.ndarray
-    length: np.ndarray
-    gain: np.ndarray
-
-    @property
-    def end(self) -> np.ndarray:
-        """Window end in sub-frames, ``(K, m, n)`` float64."""
-        return self.index + self.fraction + self.length[:, None, None]
 
 
 class Rig:
@@ -132,7 +105,12 @@ class Rig:
                     f"cameras[{i}].t_d must be >= rows*t_r - t_e = {rows_read:g}*{cam.t_r:g} - {cam.t_e:g} = "
                     f"{rows_read * cam.t_r - cam.t_e:g} s in multi-frame mode, got {cam.t_d!r}"
                 )
-        self._windows = self._compute_windows()
+        self._windows = exposure_windows(
+            self.start_times(),
+            np.array([self.cameras[c].t_e for c, _ in self.channels]),
+            np.array([self.cameras[c].gain for c, _ in self.channels]),
+            dt,
+        )
         ends = self._windows.end
         self.T = int(math.ceil(float(_snap(ends.max()))))
         if self.T > MAX_T:
@@ -218,16 +196,6 @@ class Rig:
             rows = rows[y : y + h, x : x + w]
         return rows.copy()
 
-    def _compute_windows(self) -> ExposureWindows:
-        start = _snap(self.start_times() / self.dt)
-        index = np.floor(start)
-        fraction = start - index
-        length = np.array([self.cameras[c].t_e / self.dt for c, _ in self.channels])
-        gain = np.array([self.cameras[c].gain for c, _ in self.channels])
-        if index.max() >= 2**31 - 1:
-            raise ValueError(f"exposure starts {index.max():.3g} sub-frames after t=0; reduce t_a/t_d or raise dt")
-        return ExposureWindows(index.astype(np.int32), fraction, _snap(length), gain)
-
     @property
     def windows(self) -> ExposureWindows:
         """Exposure windows in units of ``dt`` (see :class:`ExposureWindows`)."""
@@ -246,15 +214,7 @@ class Rig:
         first, last : ndarray of int, shape (K, m, n)
             Inclusive sub-frame indices (clipped to ``[0, T-1]``).
         """
-        w = self._windows
-        start = w.index + w.fraction
-        end = w.end
-        if self.mask == "exact":
-            first = np.floor(start)
-            last = np.ceil(end) - 1
-        else:
-            first = np.ceil(start)
-            last = np.floor(end)
+        first, last = weighted_bounds(self._windows, self.mask)
         first = np.clip(first, 0, self.T - 1).astype(np.int64)
         last = np.clip(last, 0, self.T - 1).astype(np.int64)
         return first, last
@@ -263,13 +223,8 @@ class Rig:
     def _pixel_bounds(self) -> tuple:
         """Per pixel, over the channels, ``(m, n)`` each: the first and the last sub-frame with a
         non-zero weight (not clipped to ``[0, T-1]``) and the latest window end, sub-frames."""
-        w = self._windows
-        start, end = w.index + w.fraction, w.end
-        if self.mask == "exact":
-            first, last = np.floor(start), np.ceil(end) - 1
-        else:
-            first, last = np.ceil(start), np.floor(end)
-        return first.min(axis=0), last.max(axis=0), end.max(axis=0)
+        first, last = weighted_bounds(self._windows, self.mask)
+        return first.min(axis=0), last.max(axis=0), self._windows.end.max(axis=0)
 
     def sampled_range(self, roi: tuple[int, int, int, int] | None = None) -> slice:
         """Sub-frames some camera samples at some pixel: ``slice(first, last + 1)``.

@@ -10,7 +10,7 @@ Layout (a Zarr v3 group)
   ``done`` (1 once the tile's data are written, else 0), the first and one-past-last solved
   sub-frame, seconds, iterations and final residual of the tile's run;
 - arrays ``rig_row_maps/<camera>`` for cameras with a row map;
-- the attributes of an HDF5 reconstruction file (:mod:`rsocl.files.hdf5`): ``rsocl_file =
+- the attributes of an HDF5 reconstruction file (:mod:`rsocl.files.hdf5_reconstruction`): ``rsocl_file =
   "reconstruction"``, ``format_version``, ``rig`` (JSON; row maps referenced as
   ``{"dataset": "rig_row_maps/<camera>"}``), ``params`` (JSON), and the readable copies ``T``,
   ``T_se``, ``dt``, ``mask``, ``n_cameras``, ``n_channels``, ``shape``; plus ``tiling`` (JSON:
@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.files.atomic import fsync_directory, fsync_file, owned_prefix, remove_stale
-from rsocl.files.hdf5 import FORMAT_VERSION
+from rsocl.files.hdf5_header import FORMAT_VERSION
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import expand
 
