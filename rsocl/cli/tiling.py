@@ -1,4 +1,4 @@
-"""Tiles, sets, Dask and Zarr for ``rsocl reconstruct`` and ``rsocl plan`` (arguments and commands).
+"""Tiles, sets, Dask and Zarr for ``rsocl reconstruct`` and ``rsocl plan``: the options and the choice of run.
 
 ``rsocl reconstruct`` runs tiled when asked (``--tile``, ``--sets``, ``--scheduler``/``RSOCL_SCHEDULER``,
 ``--workers``, an ``--out`` ending in ``.zarr``) or when the capture does not fit the device in
@@ -6,6 +6,8 @@ one piece (then with the tile ``rsocl plan`` would propose). A tiled run (and a 
 windows) chooses the unset parameters once for every tile, as ``rsocl.scale.reconstruct_tiled``
 does; ``--fast`` keeps the fixed defaults. ``rsocl plan`` prints a tiling
 proposal when the problem does not fit one device, or for ``--tile``.
+
+:mod:`rsocl.cli.tiled_run` runs the reconstruction in tiles or windows and writes its outputs.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
+from rsocl.cli.tiled_run import is_zarr, run_stream, run_tiles, zarr_gif
 
 __all__ = [
     "add_reconstruct_tiling_args",
@@ -24,10 +26,6 @@ __all__ = [
     "check_plan_tiling_args",
     "print_plan_tiling",
 ]
-
-
-def _is_zarr(path) -> bool:
-    return str(path).rstrip("/").lower().endswith(".zarr")
 
 
 # ---------------------------------------------------------------------- reconstruct
@@ -99,7 +97,7 @@ def check_outputs(args) -> None:
     from rsocl.cli.options import tuning_plot_path
     from rsocl.files.atomic import output_path
 
-    if args.window is not None and (_is_zarr(args.out) or args.sets):
+    if args.window is not None and (is_zarr(args.out) or args.sets):
         raise ValueError(
             "--window: a stream of frame windows is written to an HDF5 file (--out NAME.h5), one set at a time"
         )
@@ -113,16 +111,16 @@ def check_outputs(args) -> None:
             "--sets and --first-set-only contradict each other: --sets reconstructs every set into a "
             "Zarr store, --first-set-only set 0 only; give one of them"
         )
-    if _is_zarr(args.out) and not args.sets:
+    if is_zarr(args.out) and not args.sets:
         _note_first_set(args, "the store gets set 0 (--sets: every set; --first-set-only says set 0 and silences this)")
     reads = (("capture", args.capture),)
     tuned = not getattr(args, "fast", False)  # the search's plot: NAME-tuning.png
-    if _is_zarr(args.out):
+    if is_zarr(args.out):
         from rsocl.scale.store import check_store_path, require_zarr
 
         require_zarr("--out")
         check_store_path(args.out, "--out")
-        _gif_suffix(output_path(_zarr_gif(args), "--gif", inputs=reads), args)
+        _gif_suffix(output_path(zarr_gif(args), "--gif", inputs=reads), args)
         if tuned:
             output_path(tuning_plot_path(Path(args.out).with_suffix(".gif")), "--out's NAME-tuning.png", inputs=reads)
         return
@@ -140,12 +138,6 @@ def check_outputs(args) -> None:
 def _gif_suffix(gif, args) -> None:
     if gif.suffix.lower() != ".gif":
         raise ValueError(f"--gif must name a .gif file (the animation is written as a GIF), got {args.gif!r}")
-
-
-def _zarr_gif(args) -> Path:
-    """The GIF of a Zarr run: ``--gif``, else ``NAME.gif`` next to ``--out NAME.zarr`` (written when the
-    capture holds a ground truth, or ``--gif`` asks)."""
-    return Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
 
 
 def _note_first_set(args, what: str) -> None:
@@ -171,18 +163,11 @@ def _wants_tiles(args, capture) -> bool:
         or args.workers is not None
         or args.scheduler
         or os.environ.get(SCHEDULER_ENV)
-        or _is_zarr(args.out)
+        or is_zarr(args.out)
     ):
         return True
     largest, total = memory_need(capture.rig, regularizer_from(args), dtype=args.dtype, projection=args.projection)
     return device_limit(get_device(args.device), largest, total) is not None
-
-
-def _retries(args) -> int:
-    """``--retries``, or :data:`rsocl.scale.runner.RETRIES` when not given."""
-    from rsocl.scale.runner import RETRIES
-
-    return RETRIES if args.retries is None else args.retries
 
 
 def _check_applies(args, run: str) -> None:
@@ -231,116 +216,24 @@ def reconstruct_tiled_if_needed(args):
 
     ``--overlap``, ``--halo`` and ``--batch`` are refused, naming the option, where the run would
     ignore them (:func:`_check_applies`)."""
-    from rsocl.cli.options import regularizer_from, say, solver_options, truth_quality, tuning_plot_files
     from rsocl.scale.inputs import CaptureSets
 
     capture = CaptureSets(args.capture, all_sets=args.sets)
     if args.window is not None:
         _check_applies(args, "window")
         _note_first_set(args, "--window reconstructs set 0 (--first-set-only says set 0 and silences this)")
-        return _stream(args, capture)
+        return run_stream(args)
     if not _wants_tiles(args, capture):
         _check_applies(args, "whole")
         return None
     _check_applies(args, "tiles")
-    if not _is_zarr(args.out):
+    if not is_zarr(args.out):
         _note_first_set(
             args,
             "a tiled run into an HDF5 file reconstructs set 0 (--out NAME.zarr --sets: every "
             "set, in tiles; --first-set-only says set 0 and silences this)",
         )
-    from rsocl.scale.proposal import propose_tiling
-    from rsocl.scale.tiled import TilesFailed, reconstruct_tiled
-
-    tile = args.tile
-    if tile is None:
-        tile = propose_tiling(
-            capture.rig,
-            halo=args.halo,
-            regularizer=regularizer_from(args),
-            dtype=args.dtype,
-            projection=args.projection,
-            device=args.device,
-            measure=False,
-        ).tile
-        say(args, f"tiles of {tile[0]} x {tile[1]} pixels (proposed for this device; --tile H W to choose)")
-    zarr_out = _is_zarr(args.out)
-    try:
-        result = reconstruct_tiled(
-            capture,
-            capture.rig,
-            tile=tile,
-            halo=args.halo,
-            out=args.out if zarr_out else None,
-            scheduler=args.scheduler,
-            workers=args.workers,
-            retries=_retries(args),
-            **solver_options(args),
-        )
-    except TilesFailed as exc:
-        print(f"rsocl reconstruct: error: {exc}", file=sys.stderr, flush=True)
-        return 1
-    ran = len(result.pieces)
-    kept = f", {result.skipped} already in the store" if result.skipped else ""
-    text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
-    truth = None if args.no_truth else capture.truth()  # set 0's
-    first = np.asarray(result.datacube[0] if args.sets else result.datacube)
-    if truth is not None:
-        text = ("set 0: " if args.sets else "") + f"{truth_quality(first, truth)}, " + text
-    print(text, flush=True)
-    from rsocl.analysis.visual import comparison_gif
-
-    if zarr_out:
-        gif = [comparison_gif(_zarr_gif(args), truth, first)] if truth is not None or args.gif else []
-        plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
-        say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
-        return 0
-    from rsocl.files.hdf5 import save_reconstruction
-
-    history = {
-        "tile_seconds": np.array([p.seconds for p in result.pieces]),
-        "tile_residual": np.array([p.residual for p in result.pieces]),
-    }
-    save_reconstruction(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
-    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
-    comparison_gif(gif, truth, result.datacube)
-    say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, result.params, gif)])))
-    return 0
-
-
-def _stream(args, capture):
-    """``--window``: the capture as a stream of overlapping frame windows, into an HDF5 file."""
-    from rsocl.analysis.visual import comparison_gif
-    from rsocl.cli.options import say, solver_options, truth_quality, tuning_plot_files
-    from rsocl.files.hdf5 import load_capture, save_reconstruction
-    from rsocl.scale.stream import default_overlap, reconstruct_stream
-
-    loaded = load_capture(args.capture, set_index=0)
-    stream = reconstruct_stream(
-        loaded.snapshots,
-        loaded.rig,
-        window=args.window,
-        overlap=args.overlap,
-        tile=args.tile,
-        halo=args.halo,
-        scheduler=args.scheduler,
-        retries=_retries(args),
-        **solver_options(args),
-    )
-    truth = None if args.no_truth else loaded.truth
-    text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
-    if truth is not None:
-        text = f"{truth_quality(stream.datacube, truth)}, " + text
-    print(text, flush=True)
-    overlap = default_overlap(args.window) if args.overlap is None else args.overlap
-    params = dict(
-        stream.results[0].params, window=args.window, overlap=overlap, windows=[list(w) for w in stream.windows]
-    )
-    save_reconstruction(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
-    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
-    comparison_gif(gif, truth, stream.datacube)
-    say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, params, gif)])))
-    return 0
+    return run_tiles(args, capture)
 
 
 # ---------------------------------------------------------------------- plan

@@ -1,0 +1,134 @@
+"""Running ``rsocl reconstruct`` in tiles or as a stream of windows, and writing what it made.
+
+:mod:`rsocl.cli.tiling` decides whether a run goes in tiles (:func:`run_tiles`), as a stream of frame
+windows (:func:`run_stream`) or in one piece, and checks the options first; the functions here run
+the reconstruction through :mod:`rsocl.scale` and write the result (an HDF5 file or a Zarr store),
+the comparison GIF and the tuning plots.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["is_zarr", "zarr_gif", "run_tiles", "run_stream"]
+
+
+def is_zarr(path) -> bool:
+    """Whether ``path`` names a Zarr store (ends in ``.zarr``)."""
+    return str(path).rstrip("/").lower().endswith(".zarr")
+
+
+def zarr_gif(args) -> Path:
+    """The GIF of a Zarr run: ``--gif``, else ``NAME.gif`` next to ``--out NAME.zarr`` (written when the
+    capture holds a ground truth, or ``--gif`` asks)."""
+    return Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
+
+
+def _retries(args) -> int:
+    """``--retries``, or :data:`rsocl.scale.runner.RETRIES` when not given."""
+    from rsocl.scale.runner import RETRIES
+
+    return RETRIES if args.retries is None else args.retries
+
+
+def run_tiles(args, capture):
+    """Reconstruct ``capture`` (a :class:`rsocl.scale.inputs.CaptureSets`) in tiles of ``--tile``, or of
+    the tile :func:`rsocl.scale.proposal.propose_tiling` proposes for the device, into ``--out`` (an
+    HDF5 file, or a Zarr store of every set with ``--sets``); the exit code (1 when tiles failed)."""
+    from rsocl.cli.options import regularizer_from, say, solver_options, truth_quality, tuning_plot_files
+    from rsocl.scale.proposal import propose_tiling
+    from rsocl.scale.tiled import TilesFailed, reconstruct_tiled
+
+    tile = args.tile
+    if tile is None:
+        tile = propose_tiling(
+            capture.rig,
+            halo=args.halo,
+            regularizer=regularizer_from(args),
+            dtype=args.dtype,
+            projection=args.projection,
+            device=args.device,
+            measure=False,
+        ).tile
+        say(args, f"tiles of {tile[0]} x {tile[1]} pixels (proposed for this device; --tile H W to choose)")
+    zarr_out = is_zarr(args.out)
+    try:
+        result = reconstruct_tiled(
+            capture,
+            capture.rig,
+            tile=tile,
+            halo=args.halo,
+            out=args.out if zarr_out else None,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            retries=_retries(args),
+            **solver_options(args),
+        )
+    except TilesFailed as exc:
+        print(f"rsocl reconstruct: error: {exc}", file=sys.stderr, flush=True)
+        return 1
+    ran = len(result.pieces)
+    kept = f", {result.skipped} already in the store" if result.skipped else ""
+    text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
+    truth = None if args.no_truth else capture.truth()  # set 0's
+    first = np.asarray(result.datacube[0] if args.sets else result.datacube)
+    if truth is not None:
+        text = ("set 0: " if args.sets else "") + f"{truth_quality(first, truth)}, " + text
+    print(text, flush=True)
+    from rsocl.analysis.visual import comparison_gif
+
+    if zarr_out:
+        gif = [comparison_gif(zarr_gif(args), truth, first)] if truth is not None or args.gif else []
+        plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
+        say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
+        return 0
+    from rsocl.files.hdf5 import save_reconstruction
+
+    history = {
+        "tile_seconds": np.array([p.seconds for p in result.pieces]),
+        "tile_residual": np.array([p.residual for p in result.pieces]),
+    }
+    save_reconstruction(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
+    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
+    comparison_gif(gif, truth, result.datacube)
+    say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, result.params, gif)])))
+    return 0
+
+
+def run_stream(args):
+    """``--window``: set 0 of the capture as a stream of overlapping frame windows, into an HDF5 file;
+    the exit code."""
+    from rsocl.analysis.visual import comparison_gif
+    from rsocl.cli.options import say, solver_options, truth_quality, tuning_plot_files
+    from rsocl.files.hdf5 import load_capture, save_reconstruction
+    from rsocl.scale.stream import default_overlap, reconstruct_stream
+
+    loaded = load_capture(args.capture, set_index=0)
+    stream = reconstruct_stream(
+        loaded.snapshots,
+        loaded.rig,
+        window=args.window,
+        overlap=args.overlap,
+        tile=args.tile,
+        halo=args.halo,
+        scheduler=args.scheduler,
+        retries=_retries(args),
+        **solver_options(args),
+    )
+    truth = None if args.no_truth else loaded.truth
+    text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
+    if truth is not None:
+        text = f"{truth_quality(stream.datacube, truth)}, " + text
+    print(text, flush=True)
+    overlap = default_overlap(args.window) if args.overlap is None else args.overlap
+    params = dict(
+        stream.results[0].params, window=args.window, overlap=overlap, windows=[list(w) for w in stream.windows]
+    )
+    save_reconstruction(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
+    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
+    comparison_gif(gif, truth, stream.datacube)
+    say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, params, gif)])))
+    return 0
