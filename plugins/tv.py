@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.device.context import c_type, device_for_queue
+from rsocl.device.context import device_for_queue
 from rsocl.device.launch import batch_launches, voxel_launches
+from rsocl.device.program import c_type
 from rsocl.solver.regularizer import Option, Regularizer
 from rsocl_plugins import tv_fused
 

@@ -57,7 +57,7 @@ def test_fits_check_names_the_numbers(device):
 
 def test_kernels_ship_as_package_data():
     for name in ("common.cl", "operator.cl", "tv.cl", "admm.cl", "reduce.cl"):
-        assert "__kernel" in devmod.kernel_source(name) or name == "common.cl"
+        assert "__kernel" in progmod.kernel_source(name) or name == "common.cl"
 
 
 NVIDIA_LOG = (

@@ -17,19 +17,16 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.common.validation import positive_int as check_positive
-from rsocl.device.program import Kernels, build_program, c_type, kernel_source
+from rsocl.device.program import build_program
 
 if TYPE_CHECKING:
     import pyopencl as cl
 
 __all__ = [
     "Device",
-    "Kernels",
     "get_device",
     "device_for_queue",
     "list_devices",
-    "c_type",
-    "kernel_source",
     "NoOpenCLError",
     "INSTALL_HINT",
 ]

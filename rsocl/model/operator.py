@@ -14,9 +14,10 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike, DTypeLike
-from rsocl.device.context import Device, c_type, get_device
+from rsocl.device.context import Device, get_device
 from rsocl.device.kernel import Kernel
 from rsocl.device.launch import block_grid, element_launches
+from rsocl.device.program import c_type
 from rsocl.model.rig import Rig
 
 if TYPE_CHECKING:

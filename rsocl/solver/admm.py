@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.device.context import c_type
 from rsocl.device.launch import batch_launches, element_launches
+from rsocl.device.program import c_type
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.solver.residuals import DeviceResiduals
 

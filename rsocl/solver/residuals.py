@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from rsocl.device.context import c_type
+from rsocl.device.program import c_type
 from rsocl.device.reduction import sum_sq_diff
 
 __all__ = ["DeviceResiduals", "PendingResiduals"]
