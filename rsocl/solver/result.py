@@ -40,6 +40,16 @@ class Result:
         return len(self.history["residual"])
 
     @property
+    def seconds(self) -> float | None:
+        """Wall time of the whole reconstruction, seconds (search included); None when not recorded."""
+        return self.params.get("seconds")
+
+    @property
+    def search_seconds(self) -> float | None:
+        """Wall time of the parameter search, seconds (0 when none ran); None when not recorded."""
+        return self.params.get("search_seconds")
+
+    @property
     def batch(self) -> int | None:
         """Number of sets of a batch; None for a single set."""
         return self.datacube.shape[0] if self.datacube.ndim == 4 else None
