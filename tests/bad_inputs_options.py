@@ -24,4 +24,25 @@ CASES = [
     Bad("api-iterations-zero", ["iterations"], api=_reconstruct(iterations=0)),
     Bad("api-lam-negative", ["lam"], api=_reconstruct(lam=-1.0)),
     Bad("api-tv-fused-below-the-device-choice", ["fused", "-1"], api=_reconstruct(regularizer_options={"fused": -2})),
+    Bad("api-quality-unknown", ["quality", "fast, balanced, best", "'medium'"], api=_reconstruct(quality="medium")),
+    Bad("api-iterations-not-auto", ["iterations", "'auto'", "'many'"], api=_reconstruct(iterations="many")),
+    Bad(
+        "api-iterations-auto-on-fast",
+        ["iterations='auto'", "quality 'fast'"],
+        api=_reconstruct(quality="fast", iterations="auto"),
+    ),
+    Bad("cli-quality-unknown", ["--quality", "medium"], argv=["demo", "--quality", "medium", "--out", "{tmp}/d"]),
+    Bad(
+        "cli-iterations-not-auto", ["--iterations", "'many'"], argv=["demo", "--iterations", "many", "--out", "{tmp}/d"]
+    ),
+    Bad(
+        "cli-iterations-auto-on-fast",
+        ["iterations='auto'", "quality 'fast'"],
+        argv=["demo", "--fast", "--iterations", "auto", "--out", "{tmp}/d"],
+    ),
+    Bad(
+        "cli-fast-and-quality-best",
+        ["--fast", "--quality best"],
+        argv=["demo", "--fast", "--quality", "best", "--out", "{tmp}/d"],
+    ),
 ]
