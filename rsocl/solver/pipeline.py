@@ -274,7 +274,7 @@ def _check_search_fits(prepared: Prepared):
         largest,
         total_bytes=peak,
         dtype=op.dtype,
-        also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fast)",
+        also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fixed)",
     )
 
 
