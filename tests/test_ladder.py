@@ -185,3 +185,12 @@ def test_the_command_line_takes_auto_iterations(tmp_path, capsys):
     params = load_reconstruction(out).params
     assert params["auto_iterations"] is True and params["iterations_run"] < ladder.AUTO_CAP
     assert f"{params['iterations_run']} iterations in " in capsys.readouterr().out
+
+
+def test_every_rung_gives_one_camera_the_regularizers_preset():
+    rig = rsocl.Rig([rsocl.Camera(0, t_e=1.8e-4, t_r=3.5e-5)], (16, 16))
+    g = _snapshots(rig, _moving(rig))
+    for quality in ladder.QUALITIES:
+        result = rsocl.reconstruct(g, rig, quality=quality, iterations=12)
+        assert result.params["tuning"]["preset"] == {"temporal_weight": 10.0}
+        assert result.params["regularizer_options"]["temporal_weight"] == 10.0

@@ -210,9 +210,9 @@ def _choose_unset(prepared: Prepared, checked=False, search=None):
         )
         return None
     if rig.n_channels == 1:  # one snapshot per pixel: the criterion cannot rank priors in time
-        preset = {
-            k: float(v) for k, v in getattr(request.regularizer, "one_snapshot", {}).items() if k in space.tunable
-        }
+        reg = request.regularizer  # its preset applies on every rung, whether the rung searches options or not
+        unset = set(getattr(reg, "tunable", {})) - request.given.option_names(reg)
+        preset = {k: float(v) for k, v in getattr(reg, "one_snapshot", {}).items() if k in unset}
         space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
         if not space.tunable and (preset or np.isscalar(space.lam)):
             # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)

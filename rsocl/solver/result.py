@@ -27,7 +27,9 @@ class Result:
     rig : Rig
     params : dict
         Everything needed to repeat the run (for a batch: ``lam``, ``eta`` and
-        ``saturated_pixels`` one per set, ``sets`` the number of sets).
+        ``saturated_pixels`` one per set, ``sets`` the number of sets), with ``quality`` (the rung),
+        ``iterations_run``, ``seconds`` (the whole run) and ``search_seconds`` (the search's share),
+        wall clock; ``static_pixels`` where the static-part fix ran (:mod:`rsocl.solver.static`).
     """
 
     datacube: np.ndarray
