@@ -17,6 +17,14 @@ def _reconstruct(**kw):
     return lambda tmp: rsocl.reconstruct(g, rig, **kw)
 
 
+def _tiled(**kw):
+    from rsocl.scale import reconstruct_tiled
+
+    rig = _rig()
+    g = np.zeros((len(rig.cameras),) + tuple(rig.shape), np.float32)
+    return lambda tmp: reconstruct_tiled(g, rig, tile=(4, 4), **kw)
+
+
 CASES = [
     Bad("simulate-shape-zero", ["--shape"], argv=["simulate", "builtin", "--shape", "0", "8", "--out", "{tmp}/s.h5"]),
     Bad("simulate-cameras-zero", ["--cameras"], argv=["simulate", "builtin", "--cameras", "0", "--out", "{tmp}/s.h5"]),
@@ -45,4 +53,5 @@ CASES = [
         ["--fast", "--quality best"],
         argv=["demo", "--fast", "--quality", "best", "--out", "{tmp}/d"],
     ),
+    Bad("api-tiled-iterations-auto", ["iterations='auto'", "tiled"], api=_tiled(iterations="auto")),
 ]

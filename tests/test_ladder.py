@@ -194,3 +194,20 @@ def test_every_rung_gives_one_camera_the_regularizers_preset():
         result = rsocl.reconstruct(g, rig, quality=quality, iterations=12)
         assert result.params["tuning"]["preset"] == {"temporal_weight": 10.0}
         assert result.params["regularizer_options"]["temporal_weight"] == 10.0
+
+
+def test_sets_and_tiles_follow_the_rung():
+    from rsocl.scale import reconstruct_tiled
+    from rsocl.solver.sets import reconstruct_sets
+
+    rig = _rig((16, 16))
+    g = np.stack([_snapshots(rig, _moving(rig)), _snapshots(rig, _still(rig))])
+    sets = reconstruct_sets(g, rig, quality="fast", batch=1)
+    assert sets.params["quality"] == "fast" and sets.iterations == ladder.RUNGS["fast"].iterations
+    assert len(sets.params["tuning"]["candidates"]) == 1 and sets.search_seconds < sets.seconds
+    one = rsocl.reconstruct(g[0], rig, quality="fast")
+    np.testing.assert_allclose(sets.datacube[0], one.datacube, atol=1e-5)
+    tiled = reconstruct_tiled(g[1], rig, tile=(16, 16), halo=0, quality="best", iterations=12)
+    alone = rsocl.reconstruct(g[1], rig, quality="best", iterations=12)
+    assert tiled.params["quality"] == "best" and tiled.tuning.folds == alone.params["tuning"]["folds"] >= 2
+    np.testing.assert_allclose(tiled.datacube, alone.datacube, atol=1e-5)
