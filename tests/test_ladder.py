@@ -211,3 +211,17 @@ def test_sets_and_tiles_follow_the_rung():
     alone = rsocl.reconstruct(g[1], rig, quality="best", iterations=12)
     assert tiled.params["quality"] == "best" and tiled.tuning.folds == alone.params["tuning"]["folds"] >= 2
     np.testing.assert_allclose(tiled.datacube, alone.datacube, atol=1e-5)
+
+
+def test_rsocl_bench_sweeps_the_rungs():
+    from rsocl.bench.point import BenchPoint
+    from rsocl.bench.run import parse_sweep, run_bench
+
+    assert parse_sweep("quality=fast,best") == ("quality", ["fast", "best"])
+    with pytest.raises(ValueError, match="quality must be one of fast, balanced, best"):
+        BenchPoint(quality="medium")
+    result = run_bench(BenchPoint(shape=16), ["quality"], progress=False, repeat_default=False, baseline=False)
+    rows = {row["label"]: row for row in result.rows}
+    assert set(rows) == {"default", "quality fast", "quality balanced", "quality best"}
+    assert rows["quality fast"]["iterations"] == ladder.RUNGS["fast"].iterations
+    assert all(5 < row["psnr"] < 60 and row["seconds"] > 0 for row in rows.values())
