@@ -13,7 +13,7 @@ Three parts, each run at every ``--steps`` value:
   ``benchmarks/quality_scenes.py`` at 64x64 and three at 128x128, self-tuned default (which starts
   from ``interp3d``);
 - **fixed settings from zeros**: the same array, three scenes at each size, ``tune=False``
-  (``rsocl reconstruct --fast``: temporal weight 3, ``lam`` 0.1, start from zeros), where the
+  (``rsocl reconstruct --fixed``: temporal weight 3, ``lam`` 0.1, start from zeros), where the
   step sets how far 200 iterations get;
 - **large denoising weight**: a 7-camera rig of 41x11 pixels with exposures as short as a row
   (``lam`` 3, so ``lam / eta`` = 112), fixed settings, 200 iterations, four temporal weights.

@@ -17,6 +17,14 @@ def _reconstruct(**kw):
     return lambda tmp: rsocl.reconstruct(g, rig, **kw)
 
 
+def _tiled(**kw):
+    from rsocl.scale import reconstruct_tiled
+
+    rig = _rig()
+    g = np.zeros((len(rig.cameras),) + tuple(rig.shape), np.float32)
+    return lambda tmp: reconstruct_tiled(g, rig, tile=(4, 4), **kw)
+
+
 CASES = [
     Bad("simulate-shape-zero", ["--shape"], argv=["simulate", "builtin", "--shape", "0", "8", "--out", "{tmp}/s.h5"]),
     Bad("simulate-cameras-zero", ["--cameras"], argv=["simulate", "builtin", "--cameras", "0", "--out", "{tmp}/s.h5"]),
@@ -24,4 +32,26 @@ CASES = [
     Bad("api-iterations-zero", ["iterations"], api=_reconstruct(iterations=0)),
     Bad("api-lam-negative", ["lam"], api=_reconstruct(lam=-1.0)),
     Bad("api-tv-fused-below-the-device-choice", ["fused", "-1"], api=_reconstruct(regularizer_options={"fused": -2})),
+    Bad("api-quality-unknown", ["quality", "fast, balanced, best", "'medium'"], api=_reconstruct(quality="medium")),
+    Bad("api-iterations-not-auto", ["iterations", "'auto'", "'many'"], api=_reconstruct(iterations="many")),
+    Bad(
+        "api-iterations-auto-on-fast",
+        ["iterations='auto'", "quality 'fast'"],
+        api=_reconstruct(quality="fast", iterations="auto"),
+    ),
+    Bad("cli-quality-unknown", ["--quality", "medium"], argv=["demo", "--quality", "medium", "--out", "{tmp}/d"]),
+    Bad(
+        "cli-iterations-not-auto", ["--iterations", "'many'"], argv=["demo", "--iterations", "many", "--out", "{tmp}/d"]
+    ),
+    Bad(
+        "cli-iterations-auto-on-fast",
+        ["iterations='auto'", "quality 'fast'"],
+        argv=["demo", "--fast", "--iterations", "auto", "--out", "{tmp}/d"],
+    ),
+    Bad(
+        "cli-fast-and-quality-best",
+        ["--fast", "--quality best"],
+        argv=["demo", "--fast", "--quality", "best", "--out", "{tmp}/d"],
+    ),
+    Bad("api-tiled-iterations-auto", ["iterations='auto'", "tiled"], api=_tiled(iterations="auto")),
 ]

@@ -131,7 +131,7 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
     assert result.params["lam"] == result.params["tuning"]["chosen"]["lam"]
     assert (tmp_path / "rec-tuning.png").stat().st_size > 0
     fast = tmp_path / "fast.h5"
-    assert main(["reconstruct", str(cap), "--out", str(fast), "--iterations", "5", "--quiet", "--fast"]) == 0
+    assert main(["reconstruct", str(cap), "--out", str(fast), "--iterations", "5", "--quiet", "--fixed"]) == 0
     assert load_reconstruction(fast).params["tuning"] is None and not (tmp_path / "fast-tuning.png").exists()
     # --blend: the caller's blend with the interpolation replaces the search's
     for blend in ("1", "0.3"):
@@ -163,9 +163,9 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
         (["--blend", "1.5"], "--blend must be in [0.0, 1.0], got 1.5"),
         (["--blend", "nan"], "--blend must be finite"),
         (
-            ["--fast", "--blend", "0.5"],
+            ["--fixed", "--blend", "0.5"],
             "--blend 0.5 moves the result towards the interpolation a self-tuned run starts "
-            "from; --fast runs from zeros: leave out --fast or --blend",
+            "from; --fixed runs from zeros: leave out --fixed or --blend",
         ),
         (
             ["--lam", "0.1", "--reg-opt", "temporal_weight=3", "--blend", "0.5"],
@@ -322,7 +322,7 @@ def test_a_capture_of_several_sets_is_reconstructed_in_batches(tmp_path, capsys)
                 "2",
                 "--dtype",
                 "float64",
-                "--fast",
+                "--fixed",
             ]
         )
         == 0

@@ -91,7 +91,7 @@ def test_every_set_into_one_store(capture, tmp_path):
                 "0",
                 "--iterations",
                 "4",
-                "--fast",
+                "--fixed",
                 "--quiet",
             ]
         )

@@ -269,7 +269,7 @@ def test_rsocl_reconstruct_on_the_cluster_of_rsocl_scheduler_and_on_its_own_work
         "3",
         "--iterations",
         "3",
-        "--fast",
+        "--fixed",
         "--quiet",
     ]
     monkeypatch.setenv("RSOCL_SCHEDULER", cluster[0].scheduler_address)

@@ -181,25 +181,29 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: 
     # a sub-frame of k*t_r integrates k times the light of one of t_r: scale the snapshots so
     # that the datacube stays in [0, 1] (the scale rsocl's lam and eta assume, README)
     g_scaled = g * (ref.dt / rig.dt)
+    tuned = point.tune or point.quality is not None
     kwargs: dict = dict(
         regularizer=point.regularizer,
-        lam=None if point.tune else point.lam,
+        lam=None if tuned else point.lam,
         eta=point.eta,
         tv_iterations=point.tv_iterations,
         device=point.device,
         dtype=point.dtype,
-        tune=point.tune,
+        tune=tuned,
     )
+    if point.quality is not None:
+        kwargs["quality"] = point.quality
+    iterations = None if point.quality is not None else point.iterations  # a rung runs its own
     warm = ("warm",) + tuple(v for f, v in asdict(point).items() if f not in ("scene", "iterations", "lam", "eta"))
     if warm not in cache:
         reconstruct(g_scaled, rig, iterations=1, **kwargs)
         cache[warm] = True
     start = time.perf_counter()
-    result = reconstruct(g_scaled, rig, iterations=point.iterations, **kwargs)
+    result = reconstruct(g_scaled, rig, iterations=iterations, **kwargs)
     seconds = time.perf_counter() - start
     history = None
     if with_history:
-        history = reconstruct(g_scaled, rig, iterations=point.iterations, truth=truth_own, **kwargs).history
+        history = reconstruct(g_scaled, rig, iterations=iterations, truth=truth_own, **kwargs).history
     estimate = result.datacube.astype(np.float64)[_reference_index(rig, ref)]
     psnr_value, mean_ssim, per = _metrics(estimate, truth_ref, window)
     if point.roi is None:
@@ -221,6 +225,7 @@ def run_point(point: BenchPoint, truth_cache: dict | None = None, with_history: 
         ssim_mean=mean_ssim,
         ssim_per_subframe=per,
         seconds=seconds,
+        iterations=result.iterations,
         lam=result.params["lam"],
         regularizer_options=result.params["regularizer_options"],
         seconds_per_iteration=float(result.history["time"][-1]) / result.iterations,

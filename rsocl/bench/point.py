@@ -47,6 +47,10 @@ class BenchPoint:
         True: the self-tuned default of :func:`rsocl.solver.reconstruct` (``lam`` and the
         regularizer's tunable options chosen from the snapshots, warm start from interp3d;
         ``lam`` above is then ignored); False: the fixed settings.
+    quality : str or None
+        A rung of :mod:`rsocl.solver.ladder` (``"fast"``, ``"balanced"``, ``"best"``): the self-tuned
+        run of that rung at its own iterations (``iterations``, ``lam`` and ``tune`` are then
+        ignored); None: ``tune`` decides.
     """
 
     scene: str = "builtin"
@@ -64,9 +68,14 @@ class BenchPoint:
     t_e: float = 180e-6
     t_r: float = 35e-6
     tune: bool = False
+    quality: str | None = None
 
     def __post_init__(self):
         from rsocl.common import validation as check
+        from rsocl.solver.ladder import check_quality
+
+        if self.quality is not None:
+            check_quality(self.quality)
 
         check.positive_int("cameras", self.cameras, maximum=8)
         check.positive_int("shape", self.shape)

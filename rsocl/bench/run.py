@@ -66,6 +66,7 @@ SWEEPS = {
     "roi": "roi",
     "device": "device",
     "tune": "tune",
+    "quality": "quality",
 }
 #: Sweep values of the full run; iterations and roi as fractions of the default point's.
 FULL: dict[str, list] = {
@@ -123,6 +124,10 @@ def _default_values(name, default: BenchPoint, quick: bool, notes: list):
         return list(FULL["tv_iterations"])
     if name == "tune":
         return [False, True]
+    if name == "quality":
+        from rsocl.solver.ladder import QUALITIES
+
+        return list(QUALITIES)
     raise ValueError(f"unknown sweep {name!r}; known: {sorted(SWEEPS)}")
 
 
@@ -257,6 +262,8 @@ def _label(point: BenchPoint, default: BenchPoint) -> str:
         parts.append(f"dev {point.device}")
     if point.tune != default.tune:
         parts.append("self-tuned" if point.tune else "fixed")
+    if point.quality != default.quality:
+        parts.append(f"quality {point.quality}")
     return " ".join(parts) or "default"
 
 

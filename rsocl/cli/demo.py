@@ -29,7 +29,7 @@ def add_parser(subparsers):
 
 
 def cmd_demo(args) -> int:
-    """Write ``demo.h5``, ``demo.gif``, ``snapshots.png``, ``subframes.png`` and (unless ``--fast``)
+    """Write ``demo.h5``, ``demo.gif``, ``snapshots.png``, ``subframes.png`` and (unless ``--fixed``)
     ``demo-tuning.png``, the parameter search, to ``--out``; returns 0."""
     from rsocl.analysis.visual import comparison_gif, datacube_montage, snapshot_montage
     from rsocl.files.atomic import output_folder

@@ -170,10 +170,26 @@ def add_device_args(p):
 
 def add_solver_args(p):
     """Add the solver group (iterations, lam, eta, inner iterations, projection, regularizer) to ``p``."""
+    from rsocl.solver.ladder import QUALITIES, RUNGS
     from rsocl.solver.problem import DEFAULTS
 
     g = p.add_argument_group("solver (defaults for scenes in [0, 1])")
-    g.add_argument("--iterations", type=int, default=DEFAULTS["iterations"])
+    g.add_argument(
+        "--iterations",
+        type=iterations_arg,
+        default=None,
+        metavar="N|auto",
+        help="ADMM iterations (default: the --quality rung's: "
+        + ", ".join(f"{name} {r.iterations}" for name, r in RUNGS.items())
+        + "); auto: until the residual settles, with a cap",
+    )
+    g.add_argument(
+        "--quality",
+        choices=QUALITIES,
+        default=None,
+        help="rung of the speed/quality ladder: its iterations, parameter search and static-part fix "
+        "(default balanced; docs/quality_ladder.md)",
+    )
     g.add_argument(
         "--lam",
         type=float,
@@ -196,12 +212,13 @@ def add_solver_args(p):
         metavar="KEY=VALUE",
         help="regularizer option, repeatable (iterations=N is --tv-iterations N: give one of them)",
     )
+    g.add_argument("--fast", action="store_true", help="--quality fast: the cheapest rung of the ladder")
     g.add_argument(
-        "--fast",
+        "--fixed",
         action="store_true",
-        help="skip the parameter search: fixed lam and regularizer options, zero start (by default "
-        "the values not given are chosen from the snapshots by cross-validation: a tuned run takes "
-        "2-3x the time of a fixed one; a tiled run chooses once, on the centre tile, for every tile)",
+        help="no parameter search: the fixed lam and regularizer options, zero start (by default the "
+        "values not given are chosen from the snapshots by cross-validation, as --quality says; a "
+        "tiled run chooses once, on the centre block, for every tile)",
     )
     g.add_argument(
         "--blend",
@@ -219,17 +236,22 @@ def check_solver_args(args) -> None:
     """Refuse solver options that contradict each other, before the command runs (``rsocl.cli.main``
     calls it): ``--reg-opt iterations=N`` with a different ``--tv-iterations M`` (one of them was
     silently ignored); a ``--reg-opt`` that is not ``KEY=VALUE``; an unknown ``--regularizer`` or an
-    option it refuses (name or range); ``--blend`` outside [0, 1], or below 1 with ``--fast`` (a zero
-    start), before anything is simulated, loaded or run."""
+    option it refuses (name or range); ``--blend`` outside [0, 1], or below 1 with ``--fixed`` (a zero
+    start); ``--fast`` with another ``--quality``; ``--iterations auto`` on a rung that refuses it,
+    before anything is simulated, loaded or run."""
     from rsocl.common import validation as check
+    from rsocl.solver.ladder import check_iterations
 
     options = reg_options(args.reg_opt)
+    if args.fast and args.quality not in (None, "fast"):
+        raise ValueError(f"--fast is --quality fast; it contradicts --quality {args.quality}: give one of them")
+    check_iterations(args.iterations, quality_of(args))
     if args.blend is not None:
         check.in_range("--blend", args.blend, 0.0, 1.0)
-        if args.blend < 1 and args.fast:
+        if args.blend < 1 and args.fixed:
             raise ValueError(
                 f"--blend {args.blend:g} moves the result towards the interpolation a self-tuned run "
-                "starts from; --fast runs from zeros: leave out --fast or --blend"
+                "starts from; --fixed runs from zeros: leave out --fixed or --blend"
             )
     if args.tv_iterations is not None and "iterations" in options:
         given = options["iterations"]
@@ -243,6 +265,26 @@ def check_solver_args(args) -> None:
                 "regularizer's inner iterations, to different values; give one of them"
             )
     regularizer_from(args)
+
+
+def iterations_arg(text: str):
+    """``--iterations``: a positive integer or ``auto``."""
+    if text.strip() == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a positive integer or 'auto', got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer or 'auto', got {text!r}")
+    return value
+
+
+def quality_of(args) -> str:
+    """The rung ``--quality`` and ``--fast`` name (default :data:`rsocl.solver.ladder.DEFAULT_QUALITY`)."""
+    from rsocl.solver.ladder import DEFAULT_QUALITY
+
+    return "fast" if args.fast else (args.quality or DEFAULT_QUALITY)
 
 
 def reg_options(pairs):
@@ -291,7 +333,8 @@ def solver_options(args) -> dict:
         "projection": args.projection,
         "device": args.device,
         "dtype": args.dtype,
-        "tune": not args.fast,
+        "tune": not args.fixed,
+        "quality": quality_of(args),
         "blend": args.blend,
         "progress": not args.quiet,
     }
@@ -344,10 +387,14 @@ def truth_quality(datacube, truth) -> str:
 
 
 def quality_line(result, truth):
-    """``PSNR .. dB, SSIM .., N iterations in .. s (.. ms/iteration)`` (PSNR and SSIM only with a truth:
-    :func:`truth_quality`)."""
-    seconds = result.history["time"][-1]
-    text = f"{result.iterations} iterations in {seconds:.2f} s ({seconds / result.iterations * 1e3:.1f} ms/iteration)"
+    """``PSNR .. dB, SSIM .., N iterations in X s (search Y s of Z s total)`` (PSNR and SSIM only with a
+    truth: :func:`truth_quality`): X the iterations' wall time, Y the search's, Z the whole run's."""
+    import numpy as np
+
+    seconds = float(np.nanmax(result.history["time"][-1]))
+    total = result.seconds if result.seconds is not None else seconds
+    search = result.search_seconds or 0.0
+    text = f"{result.iterations} iterations in {seconds:.2f} s (search {search:.2f} s of {total:.2f} s total)"
     if truth is not None:
         text = f"{truth_quality(result.datacube, truth)}, " + text
     return text

@@ -4,7 +4,7 @@
 ``--workers``, an ``--out`` ending in ``.zarr``) or when the capture does not fit the device in
 one piece (then with the tile ``rsocl plan`` would propose). A tiled run (and a stream of
 windows) chooses the unset parameters once for every tile, as ``rsocl.scale.reconstruct_tiled``
-does; ``--fast`` keeps the fixed defaults. ``rsocl plan`` prints a tiling
+does; ``--fixed`` keeps the fixed defaults. ``rsocl plan`` prints a tiling
 proposal when the problem does not fit one device, or for ``--tile``.
 
 :mod:`rsocl.cli.tiled_run` runs the reconstruction in tiles or windows and writes its outputs.

@@ -143,6 +143,7 @@ def _settings(request: Request, tuning, saturation, fills):
         start,
         fill,
         blend,
+        request.quality,
     )
     params = run_params(
         request,
@@ -182,6 +183,7 @@ def reconstruct_tiled(
     tune=True,
     blend=None,
     progress=False,
+    quality="balanced",
 ) -> TiledResult:
     """Reconstruct ``snapshots`` tile by tile (and set by set) as tasks of a Dask graph.
 
@@ -232,6 +234,9 @@ def reconstruct_tiled(
         start of a self-tuned run.
     progress : bool
         A progress bar over the tuning candidates and the tasks.
+    quality : {"fast", "balanced", "best"}
+        The rung of :mod:`rsocl.solver.ladder` the search and every tile follow (iterations, search);
+        ``iterations="auto"`` is refused (every tile runs the same count).
 
     Raises
     ------
@@ -264,7 +269,13 @@ def reconstruct_tiled(
         tune=tune,
         blend=blend,
         progress=progress,
+        quality=quality,
     )
+    if request.auto:
+        raise ValueError(
+            "iterations='auto' applies to rsocl.reconstruct and reconstruct_sets; a tiled run gives every "
+            "tile one count: give a number"
+        )
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
     _check_device(device, engine)

@@ -22,6 +22,7 @@ import numpy as np
 from rsocl.device.context import Device, get_device, list_devices
 from rsocl.model.rig import Rig
 from rsocl.scale.tiles import Tile, core_block, tile_rig
+from rsocl.solver.crossval import Tuning
 
 __all__ = ["TileSettings", "RigPayload", "FileBlock", "Job", "Piece", "solve_tile", "worker_device"]
 
@@ -42,6 +43,8 @@ class TileSettings:
     start; with ``"interp3d"`` the interpolation's value there, the mean of the set's valid
     samples, :func:`rsocl.scale.inputs.scan`). ``blend`` moves each tile's result back towards its
     start (:func:`rsocl.reconstruct`'s ``blend``; 1: not at all), as the capture's search chose it.
+    ``quality`` names the rung (:mod:`rsocl.solver.ladder`) whose static-part fix a tile started from
+    the interpolation gets, as the untiled tuned run does.
     """
 
     regularizer: str
@@ -57,6 +60,7 @@ class TileSettings:
     start: str = "zeros"
     fill: float | tuple = 0.0
     blend: float = 1.0
+    quality: str = "balanced"
 
     def for_set(self, set_index) -> TileSettings:
         """The settings of set ``set_index``'s tasks: its own ``lam``, ``eta`` and ``fill`` where they are per set."""
@@ -259,8 +263,11 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
                 regularizer_options=settings.options,
                 saturation=settings.saturation,
                 x0=x0,
-                tune=False,  # the capture's settings, never a tile's own choice
+                # the capture's settings, never a tile's own choice; a tile started from the interpolation
+                # runs as tuned with them (its rung's static-part fix)
+                tune=False if x0 is None else Tuning(chosen={}),
                 blend=settings.blend,
+                quality=settings.quality,
             )
             seconds = time.perf_counter() - began
         piece = Piece(

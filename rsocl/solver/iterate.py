@@ -17,6 +17,7 @@ import numpy as np
 
 from rsocl.device.reduction import sum_sq_diff
 from rsocl.solver.held import hold
+from rsocl.solver.ladder import auto_stop
 
 __all__ = ["run_iterations", "collect"]
 
@@ -37,8 +38,8 @@ END_GROWTH = 10.0
 class _History:
     """Per-iteration records of a run; :meth:`record` says when the run should stop."""
 
-    def __init__(self, solver, staged, settings, total_size, bar):
-        self.solver, self.staged, self.settings, self.bar = solver, staged, settings, bar
+    def __init__(self, solver, staged, settings, total_size, bar, auto=False):
+        self.solver, self.staged, self.settings, self.bar, self.auto = solver, staged, settings, bar, auto
         self.total_size = total_size
         self.values = {"residual": [], "time": []}
         self.lowest = None
@@ -141,6 +142,10 @@ class _History:
     def blend(self, alpha):
         """Move the estimate towards the run's start by ``alpha`` and book the result as the last record."""
         self.solver.blend_towards(self.staged.x0, alpha)
+        self.rebook()
+
+    def rebook(self):
+        """Book the estimate as it is now as the last record (its residual, and PSNR with a truth)."""
         self.values["residual"][-1] = self.solver.residual()
         if self.staged.truth is not None:
             self.values["psnr"][-1] = self._psnr()
@@ -163,6 +168,8 @@ class _History:
             self.bar.set_postfix(residual=f"{np.max(residual):.3g}", **extra)
         if settings.callback is not None and settings.callback(it, residual, self.solver.theta):
             return True
+        if self.auto and auto_stop(values["residual"]):
+            return True
         if settings.tol is not None and it > 0:
             prev = np.asarray(values["residual"][-2])
             change = np.abs(prev - residual)
@@ -171,8 +178,12 @@ class _History:
         return False
 
 
-def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> dict:
+def run_iterations(solver, staged, settings, *, progress=False, blend=None, auto=False, fix=None) -> dict:
     """Run up to ``settings.iterations`` ADMM steps; the history as a dict of arrays.
+
+    With ``auto`` the run stops once its residual has settled (:func:`rsocl.solver.ladder.auto_stop`);
+    ``fix(solver)``, when given, changes the estimate last (the static-part fix), and the last record
+    is that of the estimate it leaves.
 
     With nothing to look at ``theta`` between iterations (no callback, no truth, no tol), the
     residuals stay on the device and are read a group at a time (:func:`_run_pipelined`) while the
@@ -194,10 +205,10 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> d
             disable=None,
         )
     rig = staged.op.rig
-    history = _History(solver, staged, settings, rig.T * rig.shape[0] * rig.shape[1], bar)
+    history = _History(solver, staged, settings, rig.T * rig.shape[0] * rig.shape[1], bar, auto)
     if solver.batched and bar is not None:
         bar.set_description(f"ADMM-{solver.regularizer.name}, {solver.sets} sets")
-    pipelined = settings.callback is None and staged.truth is None and settings.tol is None
+    pipelined = settings.callback is None and staged.truth is None and settings.tol is None and not auto
     staged.op.queue.finish()
     history.start = time.perf_counter()
     try:
@@ -212,6 +223,8 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None) -> d
         history.check_end()
         if blend is not None and blend < 1 and history.values["residual"]:
             history.blend(blend)
+        if fix is not None and history.values["residual"] and fix(solver):
+            history.rebook()
     finally:
         if bar is not None:
             bar.close()

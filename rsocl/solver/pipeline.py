@@ -16,6 +16,7 @@ set and the choice serves every set (one capture, one setting). :func:`run` then
 
 from __future__ import annotations
 
+import time
 import warnings
 from dataclasses import dataclass, replace
 
@@ -23,20 +24,22 @@ import numpy as np
 
 from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import ADMM
-from rsocl.solver.crossval import CANDIDATE_FRACTION, Tuning, applied_blend, tune_parameters
-from rsocl.solver.holdout import can_hold_out, default_patterns
+from rsocl.solver.crossval import Tuning, applied_blend, tune_parameters
+from rsocl.solver.holdout import can_hold_out
 from rsocl.solver.iterate import collect, run_iterations
 from rsocl.solver.memory import memory_bytes, search_memory, search_peak
 from rsocl.solver.problem import Problem, Staged, check_problem, stage_on_device
 from rsocl.solver.request import Request, first_value, make_regularizer, make_request, run_params
 from rsocl.solver.result import Result
 from rsocl.solver.search_batch import BatchedFolds, batches_pay
+from rsocl.solver.static import static_fix
 
 __all__ = [
     "Prepared",
     "prepare",
     "tune",
     "run",
+    "tune_and_run",
     "check_problem",
     "make_request",
     "make_regularizer",
@@ -104,8 +107,10 @@ def run(prepared: Prepared, tuning: Tuning | None = None) -> Result:
     Values the caller fixed (``lam``, options) win over ``tuning``'s. The run starts from the
     caller's ``x0``, else from the ``interp3d`` interpolation when tuned or asked for, else from
     zeros; the result is blended towards that start by the request's ``blend`` (None: the
-    search's). ``params`` is :func:`~rsocl.solver.request.run_params`'s record with the saturated
-    pixels and the solved sub-frames.
+    search's). A tuned run from the interpolation then moves the static part of the scene back
+    towards it by the rung's ``static`` weight (:mod:`rsocl.solver.static`; ``params["static_pixels"]``).
+    ``params`` is :func:`~rsocl.solver.request.run_params`'s record with the saturated pixels, the
+    solved sub-frames and the iterations that ran (``iterations_run``).
     """
     request, problem, staged = prepared.request, prepared.problem, prepared.staged
     reg, settings = request.settled(tuning)
@@ -124,9 +129,20 @@ def run(prepared: Prepared, tuning: Tuning | None = None) -> Result:
     blend = request.blend
     if blend is None:
         blend = applied_blend(tuning) if problem.x0 is None and staged.x0 is not None else 1.0
-    history = run_iterations(solver, staged, settings, progress=request.progress, blend=blend)
-    datacube, extra = collect(solver, staged, problem)
     start = "x0" if problem.x0 is not None else ("interp3d" if staged.x0 is not None else "zeros")
+    static: dict = {}
+    fix = None
+    if tuning is not None and start == "interp3d" and request.rung.static > 0:
+
+        def fix(solver):
+            static["static_pixels"] = static_fix(solver, staged.x0, problem.g, request.rung.static)
+            return bool(np.any(static["static_pixels"]))
+
+    history = run_iterations(
+        solver, staged, settings, progress=request.progress, blend=blend, auto=request.auto, fix=fix
+    )
+    datacube, extra = collect(solver, staged, problem)
+    extra.update(static)
     params = run_params(
         request,
         reg,
@@ -139,7 +155,21 @@ def run(prepared: Prepared, tuning: Tuning | None = None) -> Result:
         blend=blend,
         start=start,
     )
+    extra["iterations_run"] = len(history["residual"])
     return Result(datacube, history, problem.rig, {**params, **extra})
+
+
+def tune_and_run(prepared: Prepared, started: float | None = None) -> Result:
+    """:func:`run` with :func:`tune`'s values, timed: ``params["search_seconds"]`` is the wall time of
+    the search (about 0 without one), ``params["seconds"]`` the whole time since ``started`` (a
+    :func:`time.perf_counter` reading; None: since the search began), seconds."""
+    begun = time.perf_counter()
+    tuning = tune(prepared)
+    searched = time.perf_counter() - begun
+    result = run(prepared, tuning)
+    result.params["search_seconds"] = searched
+    result.params["seconds"] = time.perf_counter() - (begun if started is None else started)
+    return result
 
 
 def _plain(value):
@@ -152,11 +182,12 @@ def interpolation_start(problem, staged):
     return interp3d_device(staged.op, problem.g, problem.valid, staged.solved)
 
 
-def _choose_unset(prepared: Prepared, checked=False):
+def _choose_unset(prepared: Prepared, checked=False, search=None):
     """Run :func:`tune_parameters` over what the caller left unset on one set; None when nothing is.
 
-    ``prepared`` holds one set. Each candidate runs :data:`~rsocl.solver.crossval.CANDIDATE_FRACTION`
-    of the run's iterations, split among the hold-out patterns (at least 10 per pattern). Unless
+    ``prepared`` holds one set. The request's rung (:mod:`rsocl.solver.ladder`) sets the search: its
+    ``lam`` candidates, hold-out folds and iterations per candidate; on a frame its crop applies to,
+    the search runs on that central block (over the block's own rig). Unless
     ``checked`` (the caller did it, for a batch), the search's memory beside the staged problem is
     checked first. A rig with one snapshot per pixel gets the regularizer's
     :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values instead of a search for them,
@@ -179,17 +210,22 @@ def _choose_unset(prepared: Prepared, checked=False):
         )
         return None
     if rig.n_channels == 1:  # one snapshot per pixel: the criterion cannot rank priors in time
-        preset = {
-            k: float(v) for k, v in getattr(request.regularizer, "one_snapshot", {}).items() if k in space.tunable
-        }
+        reg = request.regularizer  # its preset applies on every rung, whether the rung searches options or not
+        unset = set(getattr(reg, "tunable", {})) - request.given.option_names(reg)
+        preset = {k: float(v) for k, v in getattr(reg, "one_snapshot", {}).items() if k in unset}
         space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
         if not space.tunable and (preset or np.isscalar(space.lam)):
             # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)
             lam = space.lam if isinstance(space.lam, (float, int, np.number)) else first_value(settings.lam)
             return Tuning(chosen={**preset, "lam": float(lam)}, fixed=space.fixed, preset=preset)
+    if search is None:
+        search, box = request.rung.search_for(rig.shape)
+        if box is not None:
+            return _choose_unset(_cropped(prepared, box), checked, search)
     if not checked:
         _check_search_fits(prepared)
-    patterns = default_patterns(rig.shape, rig.n_channels)
+    patterns = search.patterns(rig.shape, rig.n_channels)
+    base = request.rung.iterations if request.auto else settings.iterations
     return tune_parameters(
         staged.op,
         staged.g,
@@ -199,11 +235,27 @@ def _choose_unset(prepared: Prepared, checked=False):
         eta=first_value(settings.eta),
         projection=settings.projection,
         valid=problem.valid,
-        iterations=max(10, round(CANDIDATE_FRACTION * settings.iterations / len(patterns))),
+        iterations=search.candidate_iterations(base, len(patterns)),
         patterns=patterns,
         progress=request.progress,
         runner=BatchedFolds() if batches_pay(staged.op.device) else None,
     )
+
+
+def _cropped(prepared: Prepared, box) -> Prepared:
+    """``prepared``'s single set cut to ``box = (y, x, height, width)`` and staged on its own."""
+    y, x, h, w = box
+    problem = prepared.problem
+    cut = (..., slice(y, y + h), slice(x, x + w))
+    one = replace(
+        problem,
+        g=np.ascontiguousarray(problem.g[cut]),
+        rig=problem.rig.crop(box),
+        valid=None if problem.valid is None else np.ascontiguousarray(problem.valid[cut]),
+        x0=None,
+        truth=None,
+    )
+    return prepare(prepared.request, one, start=False)
 
 
 def _check_search_fits(prepared: Prepared):
@@ -222,7 +274,7 @@ def _check_search_fits(prepared: Prepared):
         largest,
         total_bytes=peak,
         dtype=op.dtype,
-        also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fast)",
+        also="fix lam and the regularizer's options or pass tune=False (rsocl reconstruct --fixed)",
     )
 
 

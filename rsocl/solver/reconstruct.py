@@ -21,12 +21,14 @@ batch is tuned on its first set and the choice serves every set.
 
 from __future__ import annotations
 
+import time
+
 from rsocl.common.hints import ArrayLike, Callback, DTypeLike, Options, PerSet
 from rsocl.device.context import Device
 from rsocl.model.rig import Rig
 from rsocl.solver.crossval import Tuning
-from rsocl.solver.pipeline import prepare, run
-from rsocl.solver.pipeline import tune as choose
+from rsocl.solver.ladder import DEFAULT_QUALITY
+from rsocl.solver.pipeline import prepare, tune_and_run
 from rsocl.solver.problem import check_problem
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.request import make_request
@@ -40,7 +42,7 @@ def reconstruct(
     rig: Rig,
     regularizer: str | Regularizer = "tv",
     *,
-    iterations: int | None = None,
+    iterations: int | str | None = None,
     lam: PerSet | None = None,
     eta: PerSet | None = None,
     tv_iterations: int | None = None,
@@ -56,6 +58,7 @@ def reconstruct(
     tune: bool | Tuning = True,
     blend: float | None = None,
     progress: bool = False,
+    quality: str = DEFAULT_QUALITY,
 ) -> Result:
     """Reconstruct the ``(T, m, n)`` datacube from snapshots ``g`` ``(K, m, n)`` with ADMM.
 
@@ -69,9 +72,10 @@ def reconstruct(
     rig : Rig
     regularizer : str or Regularizer
         Registry name (``"tv"``) or an instance; ``regularizer_options``: options of a named one.
-    iterations : int
-        ADMM iterations; ``tv_iterations``: inner denoiser iterations (defaults:
-        :data:`rsocl.solver.problem.DEFAULTS`).
+    iterations : int or "auto"
+        ADMM iterations (default: the ``quality`` rung's); ``"auto"``: until the residual settles, with a
+        cap (:func:`rsocl.solver.ladder.auto_stop`; the count that ran is ``Result.params["iterations_run"]``).
+        ``tv_iterations``: inner denoiser iterations (default: :data:`rsocl.solver.problem.DEFAULTS`).
     lam, eta : float
         Regularization strength and ADMM penalty, >= 0 (default: the regularizer's
         ``recommended``, else :data:`~rsocl.solver.problem.DEFAULTS` (``eta``
@@ -98,6 +102,9 @@ def reconstruct(
         Choose ``lam`` and the tunable options (TV: ``temporal_weight``) the caller left unset
         from the snapshots alone (:func:`rsocl.solver.pipeline.tune`); a ``Tuning``: run with that
         earlier choice, without a search; False: fixed defaults.
+    quality : {"fast", "balanced", "best"}
+        The rung of the speed/quality ladder a tuned run follows: its iterations, its search and the
+        static-part fix (:mod:`rsocl.solver.ladder`; measured in ``docs/quality_ladder.md``).
     blend : float or None
         In [0, 1]: return ``x0 + blend (theta - x0)``, the solver's result moved back towards the
         run's start: ``x0`` when given, else the interpolation a self-tuned run starts from (a run
@@ -106,10 +113,13 @@ def reconstruct(
         (:mod:`rsocl.solver.crossval`) when the run starts from the interpolation, else 1. Recorded
         in ``Result.params["blend"]``.
 
+    ``Result.seconds`` is the whole run's wall time and ``Result.search_seconds`` the search's share.
+
     A run whose residual ``‖g - H theta‖ / ‖g‖`` turns NaN or grows past 1000 times its smallest
     raises ``FloatingPointError``; one that stays bounded but ends above 1 and 10 times its
     smallest (the paper's diagonal step at small ``eta``) returns with a ``RuntimeWarning``.
     """
+    started = time.perf_counter()
     problem = check_problem(g, rig, x0=x0, truth=truth, saturation=saturation)
     request = make_request(
         rig,
@@ -129,6 +139,6 @@ def reconstruct(
         tune=tune,
         blend=blend,
         progress=progress,
+        quality=quality,
     )
-    prepared = prepare(request, problem)
-    return run(prepared, choose(prepared))
+    return tune_and_run(prepare(request, problem), started)

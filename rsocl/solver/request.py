@@ -16,13 +16,14 @@ from typing import Any
 
 import numpy as np
 
-from rsocl.common import validation as check
 from rsocl.common.hints import Callback, DTypeLike, Options, PerSet
 from rsocl.common.registry import load
 from rsocl.device.context import Device
 from rsocl.model.curvature import default_scale
 from rsocl.model.rig import Rig
-from rsocl.solver.crossval import LAM_FACTORS, SearchSpace, Tuning
+from rsocl.solver.checks import check_blend
+from rsocl.solver.crossval import SearchSpace, Tuning
+from rsocl.solver.ladder import DEFAULT_QUALITY, Rung, check_iterations, rung
 from rsocl.solver.problem import Settings, check_settings
 from rsocl.solver.regularizer import Regularizer
 
@@ -114,22 +115,6 @@ def check_tune(tune: bool | Tuning, reg: Regularizer | None = None) -> bool | Tu
     raise ValueError(f"tune must be True, False or an rsocl.solver.crossval.Tuning, got {tune!r}")
 
 
-def check_blend(blend: float | None, has_start: bool) -> float | None:
-    """``blend`` checked in [0, 1] (None: the search's choice, passes). A value below 1 moves the result
-    towards the run's start, so it needs one (``has_start``: ``x0`` given, or the interpolation a
-    self-tuned run starts from); a run from zeros refuses it."""
-    if blend is None:
-        return None
-    blend = check.in_range("blend", blend, 0.0, 1.0)
-    if blend < 1 and not has_start:
-        raise ValueError(
-            f"blend = {blend:g} moves the result towards the run's start, and this run starts from "
-            "zeros (tune=False, or nothing left to choose from the data): give the start as x0 (an "
-            "array or 'interp3d'), or leave blend None"
-        )
-    return blend
-
-
 def first_value(value: Any) -> Any:
     """The first set's value of a per-set tuple, else the value."""
     return value[0] if isinstance(value, tuple) else value
@@ -183,6 +168,11 @@ class Request:
         Sets of a batch the per-set values are for (None: one set, or no per-set values).
     progress : bool
         Progress bars.
+    quality : str
+        The rung of :mod:`rsocl.solver.ladder` the search and the run follow.
+    auto : bool
+        Whether the run stops when its residual has settled (``iterations="auto"``; ``settings.iterations``
+        is then the cap).
     """
 
     rig: Rig
@@ -195,6 +185,13 @@ class Request:
     device: str | Device | None = None
     sets: int | None = None
     progress: bool = False
+    quality: str = DEFAULT_QUALITY
+    auto: bool = False
+
+    @property
+    def rung(self) -> Rung:
+        """The :class:`~rsocl.solver.ladder.Rung` named by ``quality``."""
+        return rung(self.quality)
 
     @property
     def name(self) -> str:
@@ -209,15 +206,15 @@ class Request:
 
     def search_space(self) -> SearchSpace | None:
         """What the search chooses (:class:`~rsocl.solver.crossval.SearchSpace`; the ``lam`` candidates are
-        the settled ``lam`` times :data:`~rsocl.solver.crossval.LAM_FACTORS`), or None when the caller left
-        nothing to choose. For per-set values, the first set's."""
-        reg = self.regularizer
+        the settled ``lam`` times the rung's ``lam_factors``, the options those the rung searches), or None
+        when the caller left nothing to choose. For per-set values, the first set's."""
+        reg, search = self.regularizer, self.rung.search
         given = self.given.option_names(reg)
-        tunable = {k: v for k, v in getattr(reg, "tunable", {}).items() if k not in given}
+        tunable = {k: v for k, v in getattr(reg, "tunable", {}).items() if k not in given and search.options}
         lam0 = first_value(self.settings.lam)
         fixed_lam = self.given.lam
         if fixed_lam is None:
-            lam = [lam0 * f for f in LAM_FACTORS] if lam0 > 0 else lam0
+            lam = [lam0 * f for f in search.lam_factors] if lam0 > 0 else lam0
         else:
             lam = first_value(fixed_lam)
         if (not tunable and np.isscalar(lam)) or (np.isscalar(lam) and lam == 0):
@@ -277,7 +274,7 @@ def make_request(
     *,
     sets: int | None = None,
     x0_given: bool = False,
-    iterations: int | None = None,
+    iterations: int | str | None = None,
     lam: PerSet | None = None,
     eta: PerSet | None = None,
     tv_iterations: int | None = None,
@@ -290,6 +287,7 @@ def make_request(
     tune: bool | Tuning = True,
     blend: float | None = None,
     progress: bool = False,
+    quality: str = DEFAULT_QUALITY,
 ) -> Request:
     """Check what a reconstruction is asked to do, once, before any device work.
 
@@ -297,7 +295,7 @@ def make_request(
     ----------
     rig : Rig
     regularizer, regularizer_options, iterations, lam, eta, tv_iterations, projection, tol, callback, dtype,
-    device, tune, blend, progress
+    device, tune, blend, progress, quality
         As :func:`rsocl.reconstruct`.
     sets : int or None
         Sets of a batch (None: one set); per-set ``lam``/``eta`` are checked against it.
@@ -324,6 +322,7 @@ def make_request(
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     tune = check_tune(tune)
+    iterations, auto = check_iterations(iterations, quality)
     checked = check_settings(
         iterations=iterations,
         lam=lam,
@@ -337,7 +336,7 @@ def make_request(
     tune = check_tune(tune, reg)
     given = Given(regularizer, dict(regularizer_options or {}), checked.lam, checked.eta)
     settings = checked.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(sets)
-    request = Request(rig, reg, settings, given, tune, None, dtype, device, sets, bool(progress))
+    request = Request(rig, reg, settings, given, tune, None, dtype, device, sets, bool(progress), quality, auto)
     blend = check_blend(blend, x0_given or request.starts_from_interpolation)
     return replace(request, blend=blend)
 
@@ -377,6 +376,8 @@ def run_params(
         "regularizer": request.name,
         "regularizer_options": dict(reg.values),
         "iterations": settings.iterations,
+        "quality": request.quality,
+        "auto_iterations": request.auto,
         "lam": lam,
         "eta": eta,
         "projection": settings.projection,

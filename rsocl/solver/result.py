@@ -27,7 +27,9 @@ class Result:
     rig : Rig
     params : dict
         Everything needed to repeat the run (for a batch: ``lam``, ``eta`` and
-        ``saturated_pixels`` one per set, ``sets`` the number of sets).
+        ``saturated_pixels`` one per set, ``sets`` the number of sets), with ``quality`` (the rung),
+        ``iterations_run``, ``seconds`` (the whole run) and ``search_seconds`` (the search's share),
+        wall clock; ``static_pixels`` where the static-part fix ran (:mod:`rsocl.solver.static`).
     """
 
     datacube: np.ndarray
@@ -38,6 +40,16 @@ class Result:
     @property
     def iterations(self) -> int:
         return len(self.history["residual"])
+
+    @property
+    def seconds(self) -> float | None:
+        """Wall time of the whole reconstruction, seconds (search included); None when not recorded."""
+        return self.params.get("seconds")
+
+    @property
+    def search_seconds(self) -> float | None:
+        """Wall time of the parameter search, seconds (0 when none ran); None when not recorded."""
+        return self.params.get("search_seconds")
 
     @property
     def batch(self) -> int | None:

@@ -10,6 +10,8 @@ global memory cache (the measurements behind these limits: ``docs/solver-notes.m
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from rsocl.common import validation as check
@@ -18,9 +20,9 @@ from rsocl.device.context import Device, get_device
 from rsocl.model.rig import Rig
 from rsocl.solver.admm import own_inverses
 from rsocl.solver.crossval import Tuning
+from rsocl.solver.ladder import DEFAULT_QUALITY
 from rsocl.solver.memory import batch_memory
-from rsocl.solver.pipeline import prepare, run
-from rsocl.solver.pipeline import tune as choose
+from rsocl.solver.pipeline import prepare, tune_and_run
 from rsocl.solver.problem import check_problem
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.request import make_regularizer, make_request
@@ -149,20 +151,21 @@ def reconstruct_sets(
     regularizer: str | Regularizer = "tv",
     regularizer_options: Options | None = None,
     projection: str = "exact",
-    iterations: int | None = None,
+    iterations: int | str | None = None,
     tv_iterations: int | None = None,
     callback: Callback | None = None,
     tol: float | None = None,
     saturation: float | None = None,
     tune: bool | Tuning = True,
     blend: float | None = None,
+    quality: str = DEFAULT_QUALITY,
 ) -> Result:
     """Reconstruct ``S`` sets ``g`` ``(S, K, m, n)`` in batches of ``batch`` sets (default: :func:`batch_size`).
 
     ``lam``/``eta`` are one number or one per set; ``x0``/``truth`` one ``(T, m, n)`` cube for every set
     or ``(S, T, m, n)``; the other arguments are :func:`rsocl.solver.reconstruct.reconstruct`'s, checked
-    once for every batch (:func:`~rsocl.solver.request.make_request`). A self-tuned run (the default)
-    chooses its values on the first set, and every later batch runs with them, each set from its own
+    once for every batch (:func:`~rsocl.solver.request.make_request`), ``quality`` included. A self-tuned
+    run (the default) chooses its values on the first set, and every later batch runs with them, each set from its own
     ``interp3d`` start. Returns one batch :class:`Result` of all ``S`` sets: datacube ``(S, T, m, n)``,
     every history entry ``(iterations, S)`` (``time`` counts from the start of each set's batch; with
     ``tol`` a batch that stopped early is padded with NaN), ``params["batch"]`` the batch size.
@@ -197,6 +200,7 @@ def reconstruct_sets(
         regularizer_options=regularizer_options,
         tune=tune,
         blend=blend,
+        quality=quality,
     )  # the bar counts sets, not each batch's iterations
     if batch is None:
         valid = None if saturation is None else g < check.positive("saturation", saturation, "(snapshot units)")
@@ -219,13 +223,14 @@ def reconstruct_sets(
 
         bar = tqdm(total=count, desc="sets", unit="set", leave=False, disable=None)
     results = []
+    started = time.perf_counter()
     try:
         for start in range(0, count, batch):
             part = slice(start, min(start + batch, count))
             pick = {k: (np.asarray(v)[part] if v is not None and np.ndim(v) == 4 else v) for k, v in cubes.items()}
             problem = check_problem(g[part], rig, x0=pick["x0"], truth=pick["truth"], saturation=saturation)
             prepared = prepare(request.for_sets(part), problem)
-            results.append(run(prepared, choose(prepared)))
+            results.append(tune_and_run(prepared, started))
             if start == 0 and results[0].params.get("tuning"):
                 # one capture, one setting: the first batch's choice serves the later batches
                 request = request.with_tuning(Tuning.from_params(results[0].params["tuning"]))
@@ -249,11 +254,16 @@ def _joined(results, batch) -> Result:
             columns.append(np.concatenate([values, pad]))
         history[key] = np.concatenate(columns, axis=1)
     params = dict(results[0].params)
-    for key in ("lam", "eta", "saturated_pixels"):
+    for key in ("lam", "eta", "saturated_pixels", "static_pixels"):
+        if key not in params:
+            continue
         per_set = [r.params[key] for r in results]
         if any(isinstance(v, list) for v in per_set):
             params[key] = [x for r, v in zip(results, per_set) for x in (v if isinstance(v, list) else [v] * r.batch)]
     params["sets"] = sum(r.batch for r in results)
+    params["seconds"] = results[-1].params["seconds"]  # each counts from the start of the whole run
+    params["search_seconds"] = sum(r.params["search_seconds"] for r in results)
+    params["iterations_run"] = max(r.params["iterations_run"] for r in results)
     params["batch"] = batch
     datacube = np.concatenate([r.datacube for r in results])
     return Result(datacube, history, results[0].rig, params)

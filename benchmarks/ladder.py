@@ -1,0 +1,166 @@
+"""The quality ladder measured: time, PSNR and SSIM of every rung against interp3d and a fixed run.
+
+For each case of :data:`quality.CASES` picked by ``--sizes`` and ``--scenes`` (scenes of
+:mod:`quality_scenes`; Runner and Traffic only where ``../shared/data`` holds them), with the paper's
+4-camera array (t_e = 180 µs, t_r = 35 µs, dt = t_r): ``interp3d`` (no solver), the fixed run
+(``tune=False``: temporal weight 3, lam 0.1, zero start, the ``balanced`` rung's iterations) and
+``rsocl.reconstruct(quality=...)`` for every rung of :mod:`rsocl.solver.ladder` at its own
+iterations, then ``balanced`` with ``iterations="auto"``. Per run: PSNR (dB, peak 1), mean SSIM,
+wall seconds, the search's seconds (``Result.search_seconds``) and the iterations that ran. Each
+case's runs are timed one after the other after a kernel build, so the time ratios of a case share
+the machine's load. Results are cached per run (``--cache``). Writes docs/quality_ladder.md
+(``--out``) with the provenance header, and ``--plot`` a Pareto plot (time against PSNR and SSIM).
+
+    python benchmarks/ladder.py [--sizes 64 128] [--scenes builtin] [--out docs/quality_ladder.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import rsocl
+from rsocl.analysis.metrics import psnr, ssim
+from rsocl.model.interpolation import interp3d
+from rsocl.solver.ladder import QUALITIES, RUNGS
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from case_cache import Cache  # noqa: E402
+from provenance import DOCS, header_lines, write_page  # noqa: E402
+from quality import CASES  # noqa: E402
+from quality_scenes import available, case_data  # noqa: E402
+
+#: The runs of a case, in the table's order: (label, keyword arguments of rsocl.reconstruct).
+RUNS = [("fixed", {"tune": False, "iterations": RUNGS["balanced"].iterations})] + [
+    (q, {"quality": q}) for q in QUALITIES
+]
+RUNS.append(("balanced, auto", {"quality": "balanced", "iterations": "auto"}))
+
+
+def measure(g, rig, truth, device, **kwargs) -> dict:
+    """One reconstruction's PSNR, SSIM, seconds, search seconds and iterations."""
+    start = time.perf_counter()
+    res = rsocl.reconstruct(g, rig, device=device, **kwargs)
+    seconds = time.perf_counter() - start
+    mean_ssim, _ = ssim(res.datacube, truth, data_range=1.0)
+    return {
+        "psnr": float(psnr(res.datacube, truth, data_range=1.0)),
+        "ssim": float(mean_ssim),
+        "seconds": seconds,
+        "search": float(res.search_seconds or 0.0),
+        "iterations": int(res.iterations),
+    }
+
+
+def run_case(scene, size, noise, device, cache) -> dict:
+    """Every run of one case (a dict of label -> measures), computed or from the cache."""
+    rig = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6)
+    truth, g = case_data(scene, rig, 1000.0 if noise == "poisson" else None)
+    g = np.asarray(g, np.float32)
+    prefix = f"{scene}|{size}|{noise}|"
+    rsocl.reconstruct(g, rig, iterations=2, tune=False, device=device)  # kernel builds, not timed
+    ip = interp3d(g, rig)
+    out = {
+        "interp3d": cache.get(
+            prefix + "interp3d",
+            lambda: {"psnr": float(psnr(ip, truth, data_range=1.0)), "ssim": float(ssim(ip, truth, data_range=1.0)[0])},
+        )
+    }
+    for label, kwargs in RUNS:
+        out[label] = cache.get(prefix + label, lambda kw=kwargs: measure(g, rig, truth, device, **kw))
+    return out
+
+
+def rows(scene, size, noise, r) -> list:
+    """The Markdown rows of one case: one per run."""
+    base, fixed = r["interp3d"], r["fixed"]["seconds"]
+    lines = [f"| {scene} | {size} | {noise} | interp3d | {base['psnr']:.2f} | {base['ssim']:.3f} | | | | |"]
+    for label, _ in RUNS:
+        m = r[label]
+        lines.append(
+            f"| {scene} | {size} | {noise} | {label} | {m['psnr']:.2f} | {m['ssim']:.3f} | "
+            f"{m['psnr'] - base['psnr']:+.2f} | {m['iterations']} | {m['seconds']:.2f} ({m['search']:.2f}) | "
+            f"{m['seconds'] / fixed:.2f}x |"
+        )
+    return lines
+
+
+def pareto_plot(path, results) -> None:
+    """Seconds against PSNR and SSIM, one line per case through its rungs (the fixed run and interp3d marked)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for (scene, size, noise), r in results:
+        times = [r[q]["seconds"] for q in QUALITIES]
+        for ax, key in zip(axes, ("psnr", "ssim")):
+            (line,) = ax.plot(times, [r[q][key] for q in QUALITIES], "o-", label=f"{scene} {size} {noise}")
+            ax.plot([r["fixed"]["seconds"]], [r["fixed"][key]], "x", color=line.get_color())
+            ax.axhline(r["interp3d"][key], color=line.get_color(), lw=0.6, ls=":")
+    for ax, name in zip(axes, ("PSNR, dB", "SSIM")):
+        ax.set_xlabel("seconds (search included)")
+        ax.set_ylabel(name)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("rungs fast, balanced, best (o-); fixed run (x); interp3d (dotted)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="grid sides to run, pixels")
+    parser.add_argument("--scenes", nargs="+", default=None, help="scenes of quality.CASES to run (default: all)")
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-ladder-cache.json")
+    parser.add_argument("--out", type=Path, default=DOCS / "quality_ladder.md", help="the Markdown page to write")
+    parser.add_argument("--plot", type=Path, default=None, help="a PNG of the Pareto front")
+    args = parser.parse_args(argv)
+    cache = Cache(args.cache)
+    op = rsocl.RollingShutterOperator(rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6), device=args.device)
+    page = header_lines("The quality ladder", op.device, None if argv is None else [__file__, *argv])
+    page += [
+        "Paper array (4 cameras, t_e = 180 µs, t_r = 35 µs, dt = t_r), TV, float32. PSNR in dB with peak 1, "
+        "mean SSIM. Runs: `interp3d` (no solver); `fixed` = `tune=False` (temporal weight 3, lam 0.1, zero "
+        "start, 200 iterations); `fast`, `balanced`, `best` = `rsocl.reconstruct(quality=...)` at the "
+        'rung\'s own iterations (rsocl/solver/ladder.py); `balanced, auto` with `iterations="auto"`. '
+        "Seconds: the whole call, the search's share in brackets; the ratio is to the fixed run of the same "
+        "case. Noise `poisson`: 1000 photo-electrons at full scale and 1 % read noise.",
+        "",
+        "| scene | size | noise | run | PSNR | SSIM | - interp3d dB | iterations | seconds (search) | / fixed |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    print("\n".join(page), flush=True)
+    results, skipped = [], []
+    for scene, size, noise in CASES:
+        if size not in args.sizes or (args.scenes is not None and scene not in args.scenes):
+            continue
+        if not available(scene):
+            skipped.append(scene)
+            continue
+        r = run_case(scene, size, noise, args.device, cache)
+        results.append(((scene, size, noise), r))
+        for line in rows(scene, size, noise, r):
+            page.append(line)
+            print(line, flush=True)
+    if skipped:
+        page += ["", f"Skipped (no ../shared/data): {', '.join(sorted(set(skipped)))}."]
+    if results:
+        page += ["", "Worst and mean PSNR of each rung against interp3d over these cases:", ""]
+        for label, _ in RUNS:
+            diff = [r[label]["psnr"] - r["interp3d"]["psnr"] for _, r in results]
+            page.append(f"- {label}: worst {min(diff):+.2f} dB, mean {float(np.mean(diff)):+.2f} dB")
+    if args.plot is not None and results:
+        pareto_plot(args.plot, results)
+        page += ["", f"![time against PSNR and SSIM]({args.plot.name})"]
+    write_page(args.out, page)
+
+
+if __name__ == "__main__":
+    main()
