@@ -120,6 +120,16 @@ def test_per_set_outputs_are_written_when_they_collide_with_nothing(three_sets, 
 
 
 # ---------------------------------------------------------------------- 2. a partial capture is never truncated
+def _complete_sets(path) -> int:
+    """``sets_complete`` of a capture file another process is writing, read past its lock (0 while
+    the file is missing or caught mid-write)."""
+    try:
+        with h5py.File(path, "r", locking=False) as h5:
+            return int(h5.attrs.get("sets_complete", 0))
+    except (OSError, KeyError, ValueError):
+        return 0
+
+
 def test_a_partial_capture_left_by_a_kill_is_kept_and_refused(tmp_path):
     rig = _rig_file(tmp_path)
     out = tmp_path / "k.h5"
@@ -142,7 +152,7 @@ def test_a_partial_capture_left_by_a_kill_is_kept_and_refused(tmp_path):
     )
     try:
         deadline = time.monotonic() + 120
-        while (not partial.exists() or partial.stat().st_size < 60_000) and time.monotonic() < deadline:
+        while _complete_sets(partial) < 1 and time.monotonic() < deadline:
             assert child.poll() is None, child.stderr.read()
             time.sleep(0.05)
         # while it runs, a second capture to the same --out is refused: the first holds the file's lock
