@@ -181,8 +181,6 @@ def reconstruct_sets(
     for name, cube in cubes.items():
         if cube is not None and np.ndim(cube) == 4 and np.shape(cube)[0] != count:
             raise ValueError(f"{name} must have one cube per set: {count} sets, got {np.shape(cube)[0]}")
-    if not isinstance(rig, Rig):
-        raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     request = make_request(
         rig,
         regularizer,
