@@ -8,6 +8,8 @@ same way a third party declares its own, so there is no special path for them.
 
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass
 from importlib import metadata
 
@@ -74,12 +76,35 @@ def _check_group(group):
         raise ValueError(f"group must be one of {list(GROUPS)}, got {group!r}")
 
 
+#: ``{group: (fingerprint, entries)}``: the last :func:`_entries` of each group and the :func:`_fingerprint`
+#: it was read under.
+_READ: dict = {}
+
+
+def _fingerprint() -> tuple:
+    """Each ``sys.path`` folder with its modification time (ns): installing or removing a distribution
+    changes its folder's time, as adding a folder to ``sys.path`` changes the tuple."""
+    stamps: list[tuple[str, int | None]] = []
+    for entry in sys.path:
+        try:
+            stamps.append((entry, os.stat(entry or ".").st_mtime_ns))
+        except OSError:
+            stamps.append((entry, None))
+    return tuple(stamps)
+
+
 def _entries(group):
     """``{name: {distribution: PluginInfo}}`` of ``group``.
 
-    Only the distributions that declare an entry point of ``group`` have their metadata parsed,
-    since every ``reconstruct`` call looks one up (measured: ``docs/implementation_notes.md``).
+    Every ``reconstruct`` call (and every candidate of its search) looks a regularizer up, and reading
+    every distribution's entry points takes milliseconds (``docs/implementation_notes.md``). So a
+    group's entries are read again only when :func:`_fingerprint` changed since the last read, and then
+    only the distributions that declare an entry point of ``group`` have their metadata parsed.
     """
+    stamp = _fingerprint()
+    last = _READ.get(group)
+    if last is not None and last[0] == stamp:
+        return last[1]
     found = {}
     for dist in metadata.distributions():
         mine = [ep for ep in dist.entry_points if ep.group == group]
@@ -88,6 +113,7 @@ def _entries(group):
         dist_name, version = dist.metadata["Name"] or "?", dist.version or "?"
         for ep in mine:
             found.setdefault(ep.name, {})[dist_name] = PluginInfo(group, ep.name, ep.value, dist_name, version, ep)
+    _READ[group] = (stamp, found)
     return found
 
 
