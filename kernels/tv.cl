@@ -7,7 +7,9 @@
  * values: p[0] along y, p[1] along x, p[2] along t.
  * The host defines TEMPORAL 0|1. One work item per voxel, two kernels per
  * iteration (primal then dual), each reading its neighbours once; the first iteration,
- * from p = 0, is one kernel (tv_dual_first). Needs common.cl. */
+ * from p = 0, is one kernel (tv_dual_first). Or one kernel per iteration (tv_step) from one
+ * copy of p into another, each work item computing the primal of its voxel and of the three
+ * next ones itself. Needs common.cl. */
 #ifndef TEMPORAL
 #define TEMPORAL 1
 #endif
@@ -120,4 +122,51 @@ __kernel void tv_dual_first(__global const real *img, __global real *p, __global
                             __global const real *steps, real wt, int T, int m, int n, int sets)
 {
     dual_update(img, p, xnext, steps, wt, T, m, n, sets, 1);
+}
+
+/* out = img + d(p) at voxel i = (x, y, s) of its set: tv_primal's sum, with every neighbour
+ * read at a clamped index and selected (no invariant of p relied on). */
+inline real primal_at(__global const real *img, __global const real *p, real wt, size_t N, size_t mn,
+                      size_t n, size_t i, int x, int y, int s)
+{
+    real d = -(p[i] + p[N + i]);
+    real py = p[y > 0 ? i - n : i];
+    real px = p[N + (x > 0 ? i - 1 : i)];
+    d += y > 0 ? py : (real)0;
+    d += x > 0 ? px : (real)0;
+#if TEMPORAL
+    real pt = p[2 * N + (s > 0 ? i - mn : i)];
+    d -= wt * p[2 * N + i];
+    d += s > 0 ? wt * pt : (real)0;
+#endif
+    return img[i] + d;
+}
+
+/* One whole Chambolle iteration: the primal out = img + d(p_in) at this voxel and its next ones along
+ * y, x and t (computed here, not read), then p_out = the dual step of p_in from the gradient of out.
+ * p_in and p_out are two copies of p (ping-pong), so no work item reads what another writes:
+ * one launch per iteration where tv_primal and tv_dual take two. The same arithmetic as they do,
+ * in the same order.  global size (n, m, B*T) */
+__kernel void tv_step(__global const real *img, __global const real *p_in, __global real *p_out,
+                      __global const real *steps, real wt, int T, int m, int n, int sets)
+{
+    int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
+    int set = st / T, s = st - set * T;
+    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n, nn = (size_t)n;
+    size_t i = ((size_t)st * m + y) * n + x;
+    real tau = steps[2 * set], tau_over_weight = steps[2 * set + 1];
+    real o = primal_at(img, p_in, wt, N, mn, nn, i, x, y, s);
+    real gy = y < m - 1 ? primal_at(img, p_in, wt, N, mn, nn, i + nn, x, y + 1, s) - o : (real)0;
+    real gx = x < n - 1 ? primal_at(img, p_in, wt, N, mn, nn, i + 1, x + 1, y, s) - o : (real)0;
+    real norm2 = gy * gy + gx * gx;
+#if TEMPORAL
+    real gt = s < T - 1 ? wt * (primal_at(img, p_in, wt, N, mn, nn, i + mn, x, y, s + 1) - o) : (real)0;
+    norm2 += gt * gt;
+#endif
+    real scale = (real)1 / ((real)1 + vector_friendly_sqrt(norm2) * tau_over_weight);
+    p_out[i] = (p_in[i] - tau * gy) * scale;
+    p_out[N + i] = (p_in[N + i] - tau * gx) * scale;
+#if TEMPORAL
+    p_out[2 * N + i] = (p_in[2 * N + i] - tau * gt) * scale;
+#endif
 }

@@ -8,7 +8,7 @@ from rsocl.device.context import device_for_queue
 from rsocl.device.launch import batch_launches, voxel_launches
 from rsocl.device.program import c_type
 from rsocl.solver.regularizer import Option, Regularizer
-from rsocl_plugins import tv_fused
+from rsocl_plugins import tv_fused, tv_plain
 
 __all__ = ["TV"]
 
@@ -30,6 +30,21 @@ FUSED = -1
 GPU_FUSED = 0
 
 
+#: Default of the ``one_launch`` option: the device's choice, :func:`device_one_launch`.
+ONE_LAUNCH = -1
+
+#: ``one_launch`` of the device's choice on a device that is not a CPU: one launch per Chambolle
+#: iteration (``tv_step``), which halves the plain path's launches and the bytes it moves per iteration
+#: (counted: docs/launches.md). On a CPU device its recomputed neighbours cost more than the launch.
+GPU_ONE_LAUNCH = 1
+
+
+def device_one_launch(device) -> int:
+    """``one_launch`` that the default (:data:`ONE_LAUNCH`) stands for on ``device`` (an rsocl Device): 0 on a
+    CPU device, :data:`GPU_ONE_LAUNCH` on others."""
+    return 0 if device.is_cpu else GPU_ONE_LAUNCH
+
+
 def device_fused(device) -> int:
     """``fused`` that the default (:data:`FUSED`) stands for on ``device`` (an rsocl Device): 0 on a CPU
     device, :data:`GPU_FUSED` on others."""
@@ -44,7 +59,8 @@ def edge_weights(n: int, dtype) -> np.ndarray:
 def launches(prog, device, T: int, m: int, n: int):
     """Exact launch grids of the TV kernels of ``prog`` (no bounds test in them), in work groups
     of whole rows up to :data:`GROUP`, capped by what ``device`` (an rsocl Device) and the kernels allow."""
-    group = device.group_limit(prog.tv_primal, prog.tv_dual, prog.tv_dual_first, prog.tv_primal_update, cap=GROUP)
+    kernels = (prog.tv_primal, prog.tv_dual, prog.tv_dual_first, prog.tv_primal_update, prog.tv_step)
+    group = device.group_limit(*kernels, cap=GROUP)
     return voxel_launches(T, m, n, group=group, max_x=device.max_work_item_sizes[0])
 
 
@@ -68,9 +84,13 @@ class TV(Regularizer):
     fused : int
         Most iterations per launch on tiles held in local memory, with the ADMM's dual update folded
         into the last launch (:mod:`rsocl_plugins.tv_fused`, same result to float rounding);
-        0: the plain path, two launches per iteration; -1..1000, default -1: the device's choice
-        (:func:`device_fused`: the plain path on a CPU device, the fused path on others). A device
-        whose local memory is too small for tiles that save bytes takes the plain path.
+        0: the plain path; -1..1000, default -1: the device's choice (:func:`device_fused`: the plain path
+        on every device, :data:`GPU_FUSED`). A device whose local memory is too small for tiles that
+        save bytes takes the plain path.
+    one_launch : int
+        The plain path's launches: 1: one per Chambolle iteration, from one copy of the dual into another
+        (:mod:`rsocl_plugins.tv_plain`); 0: two per iteration on one copy; -1..1, default -1: the device's
+        choice (:func:`device_one_launch`: two on a CPU device, one on others). Same result to float rounding.
 
     Examples
     --------
@@ -114,6 +134,14 @@ class TV(Regularizer):
             -1,
             1000,
         ),
+        "one_launch": Option(
+            ONE_LAUNCH,
+            "",
+            "the plain path in one launch per Chambolle iteration on two copies of the dual (1), "
+            "in two on one copy (0), or as the device chooses (-1)",
+            -1,
+            1,
+        ),
     }
 
     #: Both paths take the ADMM's dual update into their last launch (:meth:`denoise_and_update`).
@@ -124,11 +152,12 @@ class TV(Regularizer):
         return 3 if self.temporal_weight > 0 else 2
 
     def workspace_bytes(self, shape, dtype, device=None) -> int:
-        # the dual p (planes of the input's size; two copies on the fused path, which reads one and
-        # writes the other) and xnext (n values); the device's choice (fused = -1) counted for
-        # ``device``, or as on a CPU without one
+        # the dual p (planes of the input's size; two copies on the fused path and on the one-launch plain
+        # path, which read one and write the other) and xnext (n values); the device's choices (-1)
+        # counted for ``device``, or as on a CPU without one
         fused = self.fused if self.fused >= 0 else (0 if device is None else device_fused(device))
-        copies = 2 if fused > 0 else 1
+        one = self.one_launch if self.one_launch >= 0 else (0 if device is None else device_one_launch(device))
+        copies = 2 if fused > 0 or one > 0 else 1
         return (copies * self.planes * int(np.prod(shape)) + int(shape[-1])) * np.dtype(dtype).itemsize
 
     def _steps(self, queue, weights, dtype):
@@ -217,6 +246,24 @@ class TV(Regularizer):
                 raise ValueError(f"{self.name}: {name} must match u ({u.shape}, {u.dtype}), got {array.shape}")
         return self._run(u, weights if u.ndim == 4 else float(weights[0]), theta, (b, f, dual))
 
+    def bind(self, x, weight, out, dual=None):
+        """:meth:`Regularizer.bind <rsocl.solver.regularizer.Regularizer.bind>`: on the plain path, the
+        arguments checked and the launches bound once (:mod:`rsocl_plugins.tv_plain`); a call then only
+        enqueues them."""
+        weights, out = self._checked(x, weight, out)
+        if dual is not None:
+            for name, array in zip(("b", "f"), dual[:2]):
+                if array.shape != x.shape or array.dtype != x.dtype:
+                    raise ValueError(f"{self.name}: {name} must match u ({x.shape}, {x.dtype}), got {array.shape}")
+        plain = self.iterations > 1 and (self.fused == 0 or self.fused_plan(x) is None)
+        if not plain or (dual is None and not np.any(weights)):
+            return super().bind(x, weight, out, dual)
+        if out.base_data.int_ptr == x.base_data.int_ptr:
+            raise ValueError("out must be another buffer than x (every TV iteration reads x)")
+        sets = x.shape[0] if x.ndim == 4 else 1
+        steps = self._steps(x.queue, np.broadcast_to(weights, (sets,)), x.dtype)
+        return tv_plain.Bound(x.queue, *self._plain_sequence(x, steps, out, dual))
+
     def _run(self, x, weight, out, dual):
         if out.base_data.int_ptr == x.base_data.int_ptr:
             raise ValueError("out must be another buffer than x (every TV iteration reads x)")
@@ -246,42 +293,34 @@ class TV(Regularizer):
                 )
         return out
 
-    def _run_plain(self, x, steps, out, dual=None):
-        import pyopencl as cl
+    def one_launch_on(self, device) -> bool:
+        """Whether the plain path on ``device`` takes one launch per Chambolle iteration (``one_launch``
+        resolved: :func:`device_one_launch` for -1)."""
+        return bool(device_one_launch(device) if self.one_launch < 0 else self.one_launch)
 
-        sets = x.shape[0] if x.ndim == 4 else 1
-        T, m, n = x.shape[-3:]
+    def _plain_sequence(self, x, steps, out, dual, shared=None):
+        """``(arrays, launches)`` of the plain path (:func:`rsocl_plugins.tv_plain.sequence`; ``shared``: its
+        tag of kernel objects shared between calls, None: kernel objects of their own)."""
+        dev = device_for_queue(x.queue)
+        one = self.one_launch_on(dev)
         prog = self._program(x, "tv.cl")
-        (p,), xnext = self._buffers(x, 1)
         grids = self.__dict__.setdefault("_grids", {})
-        key = (x.shape, x.queue.int_ptr, device_for_queue(x.queue).max_work_group_size)
+        key = (x.shape, x.queue.int_ptr, dev.max_work_group_size)
         if key not in grids:
             grids.clear()
-            grids[key] = launches(prog, device_for_queue(x.queue), sets * T, m, n)
-        wt = x.dtype.type(self.temporal_weight if self.planes == 3 else 0.0)
-        sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(sets))
+            grids[key] = launches(prog, dev, (x.shape[0] if x.ndim == 4 else 1) * x.shape[-3], *x.shape[-2:])
+        p, xnext = self._buffers(x, 2 if one else 1)
+        arrays = tv_plain.Arrays(x, out, steps, tuple(p), xnext, None if dual is None else tuple(dual))
+        weight = float(self.temporal_weight) if self.planes == 3 else 0.0
+        return arrays, tv_plain.sequence(prog, grids[key], arrays, weight, self.iterations, one, shared)
 
-        def each(kernel):  # with the arguments set once per call
-            for gsize, lsize, offset in grids[key]:
-                kernel.enqueue(x.queue, gsize, lsize, offset)
+    def _run_plain(self, x, steps, out, dual=None):
+        import pyopencl as cl
 
         if self.iterations == 1:  # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
-        # iteration 0 from p = 0 (out = x): one kernel that only writes p
-        prog.tv_dual_first.set_args(x.data, p.data, xnext.data, steps.data, wt, *sizes)
-        each(prog.tv_dual_first)
-        prog.tv_primal.set_args(x.data, p.data, out.data, wt, *sizes)
-        prog.tv_dual.set_args(out.data, p.data, xnext.data, steps.data, wt, *sizes)
-        for _ in range(1, self.iterations - 1):
-            each(prog.tv_primal)
-            each(prog.tv_dual)
-        if dual is None:
-            each(prog.tv_primal)
-        else:  # the last primal step makes the ADMM's dual update
-            b, f, on = dual
-            prog.tv_primal_update.set_args(x.data, p.data, out.data, wt, *sizes, b.data, f.data, on.data)
-            each(prog.tv_primal_update)
+        tv_plain.enqueue(x.queue, self._plain_sequence(x, steps, out, dual, shared="call")[1])
         return out
 
     def _run_fused(self, x, steps, out, dual, plan):

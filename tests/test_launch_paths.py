@@ -1,7 +1,8 @@
-"""The ADMM's launch paths: the CPU device's (separate dual and difference passes, the plain TV) and
-the one of other devices (the TV's fused path, the dual update and u = f - b folded into the TV's
-and the projection's launches), run here by making the device read as a GPU. Both against the
-NumPy reference ADMM; the launch counts per iteration of each."""
+"""The ADMM's launch paths: the CPU device's (separate dual and difference passes, the plain TV in two
+launches per Chambolle iteration) and the ones of other devices (the dual update and u = f - b folded
+into the TV's and the projection's launches; the plain TV in one launch per iteration, or the fused
+TV), run here by making the device read as a GPU. Against the NumPy reference ADMM; the launch counts
+per iteration of each."""
 
 from contextlib import contextmanager
 
@@ -12,7 +13,7 @@ import rsocl
 import rsocl_plugins.tv as tv_module
 from rsocl.device.context import Device
 from rsocl.model import reference as ref
-from rsocl_plugins.tv import GPU_FUSED, STEP, TV, device_fused
+from rsocl_plugins.tv import GPU_FUSED, GPU_ONE_LAUNCH, STEP, TV, device_fused, device_one_launch
 
 #: ``fused`` of the fewer-launch path that a GPU run measures against the plain one (benchmarks/launches.py)
 LEAN = 16
@@ -24,13 +25,6 @@ def not_cpu(monkeypatch, device):
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
     assert not device.is_cpu
     return device
-
-
-@pytest.fixture()
-def gpu_like(monkeypatch, not_cpu):
-    """:func:`not_cpu` with the TV's fused path as its choice (``GPU_FUSED = LEAN``): the fewer-launch path."""
-    monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
-    return not_cpu
 
 
 @pytest.fixture(scope="module")
@@ -75,11 +69,23 @@ def test_the_device_default_of_fused(device, monkeypatch):
     assert device_fused(device) == LEAN
 
 
+def test_the_device_default_of_one_launch(device, monkeypatch):
+    assert device_one_launch(device) == 0 and not TV().one_launch_on(device)  # a CPU: two launches
+    assert TV(one_launch=1).one_launch_on(device)
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    assert device_one_launch(device) == GPU_ONE_LAUNCH == 1 and TV().one_launch_on(device)
+    assert not TV(one_launch=0).one_launch_on(device)
+
+
 @pytest.mark.parametrize("eta", [0.3, 0.0])
-def test_gpu_path_matches_the_reference(problem, gpu_like, dtype, eta):
+@pytest.mark.parametrize("lean", [False, True])
+def test_gpu_path_matches_the_reference(problem, not_cpu, monkeypatch, dtype, eta, lean):
+    # the default of other devices (the plain TV in one launch per iteration) and the fused TV
+    if lean:
+        monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     rig, g = problem
     kw = dict(iterations=6, lam=0.05, eta=eta, tv_iterations=4)
-    got = rsocl.reconstruct(g, rig, dtype=dtype, device=gpu_like, regularizer_options={"temporal_weight": 2.5}, **kw)
+    got = rsocl.reconstruct(g, rig, dtype=dtype, device=not_cpu, regularizer_options={"temporal_weight": 2.5}, **kw)
     want = ref.admm(rig, g, temporal_weight=2.5, step=STEP, **kw)
     tol = 2e-4 if dtype == "float32" else 1e-10
     np.testing.assert_allclose(got.datacube, want, atol=tol * np.abs(want).max())
@@ -101,9 +107,12 @@ def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
     # CPU: admm_dual, admm_project, admm_difference, the plain TV of 10 iterations (1 + 9 + 8), the residual
     assert _launches_per_iteration(rig, g, device) == 22
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
-    # other devices, plain TV (GPU_FUSED): the projection with u = f - b, the plain TV whose last launch
-    # makes the dual update (1 + 9 + 8), the residual
-    assert GPU_FUSED == 0 and _launches_per_iteration(rig, g, device) == 20
+    # other devices, plain TV (GPU_FUSED) in one launch per Chambolle iteration (GPU_ONE_LAUNCH): the
+    # projection with u = f - b, the TV whose last launch makes the dual update (1 + 8 + 1), the residual
+    assert GPU_FUSED == 0 and GPU_ONE_LAUNCH == 1 and _launches_per_iteration(rig, g, device) == 12
+    # the same TV in two launches per iteration (1 + 8 + 8 + 1)
+    monkeypatch.setattr(tv_module, "GPU_ONE_LAUNCH", 0)
+    assert _launches_per_iteration(rig, g, device) == 20
     # the fused TV: the projection, the fused TV, the residual
     monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     plan = TV().fused_plan(_cube(device, rig))
@@ -122,7 +131,12 @@ def test_memory_counts_the_dual_buffers_of_the_devices_choice(device, monkeypatc
     assert TV().workspace_bytes(shape, np.float32, device=device) == plain  # the CPU's plain path
     assert TV(fused=3).workspace_bytes(shape, np.float32, device=device) > plain
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
-    assert TV().workspace_bytes(shape, np.float32, device=device) == plain  # GPU_FUSED: the plain path
+    one_launch = TV(one_launch=1).workspace_bytes(shape, np.float32)
+    assert one_launch > plain  # two copies of the dual
+    # GPU_FUSED: the plain path; GPU_ONE_LAUNCH: in one launch per iteration
+    assert TV().workspace_bytes(shape, np.float32, device=device) == one_launch
+    assert TV(one_launch=0).workspace_bytes(shape, np.float32, device=device) == plain
     monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     assert TV().workspace_bytes(shape, np.float32, device=device) == TV(fused=3).workspace_bytes(shape, np.float32)
-    assert TV(fused=0).workspace_bytes(shape, np.float32, device=device) == plain
+    assert TV(fused=0).workspace_bytes(shape, np.float32, device=device) == one_launch
+    assert TV(fused=0, one_launch=0).workspace_bytes(shape, np.float32, device=device) == plain

@@ -18,25 +18,30 @@ def _denoise(device, x, weight, dtype, **options):
 
 @pytest.mark.parametrize("shape", [(7, 13, 17), (1, 9, 6), (5, 1, 8), (4, 6, 1), (3, 5, 67), (2, 3, 130)])
 @pytest.mark.parametrize("iterations", [1, 2, 15])
-def test_3d_matches_skimage(device, dtype, rng, shape, iterations):
+@pytest.mark.parametrize("one_launch", [0, 1])
+def test_3d_matches_skimage(device, dtype, rng, shape, iterations, one_launch):
     x = rng.random(shape)
-    got = _denoise(device, x, 0.25, dtype, iterations=iterations, temporal_weight=1.0, step=1.0)
+    options = dict(iterations=iterations, temporal_weight=1.0, step=1.0, one_launch=one_launch)
+    got = _denoise(device, x, 0.25, dtype, **options)
     want = denoise_tv_chambolle(x.astype(dtype), weight=0.25, eps=0, max_num_iter=iterations)
     np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
 
 
 @pytest.mark.parametrize("iterations", [1, 3, 20])
-def test_2d_per_subframe_matches_skimage(device, dtype, rng, iterations):
+@pytest.mark.parametrize("one_launch", [0, 1])
+def test_2d_per_subframe_matches_skimage(device, dtype, rng, iterations, one_launch):
     x = rng.random((5, 12, 10))
-    got = _denoise(device, x, 0.4, dtype, iterations=iterations, temporal_weight=0.0, step=1.0)
+    options = dict(iterations=iterations, temporal_weight=0.0, step=1.0, one_launch=one_launch)
+    got = _denoise(device, x, 0.4, dtype, **options)
     want = np.stack([denoise_tv_chambolle(f.astype(dtype), weight=0.4, eps=0, max_num_iter=iterations) for f in x])
     np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
 
 
 @pytest.mark.parametrize("temporal_weight, step", [(0.3, STEP), (2.0, STEP), (2.0, 0.4), (1.0, 1.0)])
-def test_temporal_weight_and_step_match_reference(device, dtype, rng, temporal_weight, step):
+@pytest.mark.parametrize("one_launch", [0, 1])
+def test_temporal_weight_and_step_match_reference(device, dtype, rng, temporal_weight, step, one_launch):
     x = rng.random((6, 8, 9))
-    options = {} if step == STEP else {"step": step}
+    options = {"one_launch": one_launch} if step == STEP else {"step": step, "one_launch": one_launch}
     got = _denoise(device, x, 0.2, dtype, iterations=12, temporal_weight=temporal_weight, **options)
     want = ref.tv_chambolle(x, 0.2, 12, temporal_weight, step)
     np.testing.assert_allclose(got, want, atol=1e-4 if dtype == "float32" else 1e-10)
@@ -95,14 +100,56 @@ def test_input_is_validated(device):
 
 
 def test_workspace_bytes_counts_the_dual_and_the_edge_weights():
-    # p: 3 planes in 3-D, 2 in 2-D; xnext: one value per column
+    # p: 3 planes in 3-D, 2 in 2-D; xnext: one value per column; two copies of p in one launch per iteration
     assert TV().workspace_bytes((5, 7, 9), np.float32) == (3 * 5 * 7 * 9 + 9) * 4
     assert TV(temporal_weight=0).workspace_bytes((5, 7, 9), np.float64) == (2 * 5 * 7 * 9 + 9) * 8
+    assert TV(one_launch=1).workspace_bytes((5, 7, 9), np.float32) == (2 * 3 * 5 * 7 * 9 + 9) * 4
 
 
-@pytest.mark.parametrize("fused", [0, 3])
+@pytest.mark.parametrize("iterations", [2, 3, 4, 11])
+def test_one_launch_per_iteration_equals_two_on_a_batch(device, dtype, rng, iterations):
+    # tv_step from one copy of p into the other (either parity of the last copy), per-set weights
+    # (one of them 0), against the two-launch path: the same arithmetic, so equal to rounding
+    import pyopencl.array as cla
+
+    x = cla.to_device(device.queue, rng.random((3, 6, 7, 9)).astype(dtype))
+    weights = np.array([0.3, 0.0, 1.5])
+    two = TV(iterations=iterations, temporal_weight=2.5, one_launch=0).denoise(x, weights).get()
+    one = TV(iterations=iterations, temporal_weight=2.5, one_launch=1).denoise(x, weights).get()
+    np.testing.assert_allclose(one, two, atol=1e-6 if dtype == "float32" else 1e-13)
+    np.testing.assert_array_equal(one[1], x.get()[1])
+
+
+@pytest.mark.parametrize("one_launch", [0, 1])
+def test_a_bound_call_denoises_what_the_arrays_hold_when_it_runs(device, rng, one_launch):
+    import pyopencl.array as cla
+
+    tv = TV(iterations=6, one_launch=one_launch)
+    a, b = rng.random((2, 4, 8, 8)).astype(np.float32)
+    x = cla.to_device(device.queue, a)
+    out = cla.empty_like(x)
+    run = tv.bind(x, 0.2, out)
+    run()
+    want = TV(iterations=6).denoise(cla.to_device(device.queue, a), 0.2).get()
+    np.testing.assert_allclose(out.get(), want, atol=1e-6)
+    x.set(b)  # new contents, the same array: the bound launches read them
+    run()
+    want = TV(iterations=6).denoise(cla.to_device(device.queue, b), 0.2).get()
+    np.testing.assert_allclose(out.get(), want, atol=1e-6)
+    with pytest.raises(ValueError, match="out must match x"):
+        tv.bind(x, 0.2, cla.empty(device.queue, (4, 8, 7), np.float32))
+    with pytest.raises(ValueError, match="weight must be finite and >= 0"):
+        tv.bind(x, -1.0, out)
+    with pytest.raises(ValueError, match="out must be another buffer than x"):
+        tv.bind(x, 0.2, x)
+
+
+@pytest.mark.parametrize("fused, one_launch", [(0, 0), (0, 1), (3, 0)])
 @pytest.mark.parametrize("iterations", [1, 2, 7])
-def test_denoise_and_update_is_denoise_then_the_admm_dual_update(device, dtype, rng, fused, iterations):
+@pytest.mark.parametrize("bound", [False, True])
+def test_denoise_and_update_is_denoise_then_the_admm_dual_update(
+    device, dtype, rng, fused, one_launch, iterations, bound
+):
     # the plain path's last primal step (tv_primal_update) and the fused path's last launch make
     # b = theta - u, f = theta + b in the sets with a dual, f = theta in the others
     import pyopencl.array as cla
@@ -111,10 +158,14 @@ def test_denoise_and_update_is_denoise_then_the_admm_dual_update(device, dtype, 
     u = rng.random((3, 5, 9, 11))
     weights = np.array([0.2, 0.0, 0.5])
     on = np.array([1, 1, 0], np.int32)
-    tv = TV(iterations=iterations, temporal_weight=2.0, fused=fused)
+    tv = TV(iterations=iterations, temporal_weight=2.0, fused=fused, one_launch=one_launch)
     want = tv.denoise(cla.to_device(q, u.astype(dtype)), weights).get()
     dev = {k: cla.to_device(q, v.astype(dtype)) for k, v in (("u", u), ("theta", 0 * u), ("b", u + 3), ("f", u + 5))}
-    tv.denoise_and_update(dev["u"], weights, dev["theta"], dev["b"], dev["f"], cla.to_device(q, on))
+    arrays = (dev["u"], weights, dev["theta"], dev["b"], dev["f"], cla.to_device(q, on))
+    if bound:  # the ADMM's way: bound once (rsocl.solver.regularizer.Regularizer.bind), then called
+        tv.bind(*arrays[:3], arrays[3:])()
+    else:
+        tv.denoise_and_update(*arrays)
     u_stored = u.astype(dtype)
     tol = 1e-6 if dtype == "float32" else 1e-13
     np.testing.assert_allclose(dev["theta"].get(), want, atol=tol)

@@ -158,6 +158,7 @@ class ADMM:
         self.residuals = DeviceResiduals(op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS)
         self.g_norm2 = self.residuals.g_norm2
         self.iteration = 0
+        self._denoiser = None  # the regularizer's bound call, made at the first step
         self._bind_kernels()
         cl.enqueue_barrier(queue)
 
@@ -244,6 +245,7 @@ class ADMM:
             cl.enqueue_copy(self.op.queue, dest.data, x0.data)
         cl.enqueue_fill_buffer(self.op.queue, self.b.data, np.zeros(1, self.op.dtype), 0, self.b.nbytes)
         self.iteration = 0
+        self._denoiser = None
 
     def step(self):
         """One ADMM iteration (enqueued; nothing is read back)."""
@@ -254,12 +256,13 @@ class ADMM:
                 self._dual.enqueue(queue, gsize, lsize, offset)
         self._project.set_arg(11, np.int32(self.fused))
         self._project.enqueue(queue, *self.blocks)
-        if self.fused:
-            self.regularizer.denoise_and_update(self.u, self.weight, self.theta, self.b, self.f, self.dual_on)
-        else:
+        if not self.fused:
             for gsize, lsize, offset in self.elements:
                 self._difference.enqueue(queue, gsize, lsize, offset)
-            self.regularizer.denoise(self.u, self.weight, out=self.theta)
+        if self._denoiser is None:  # theta = denoise(u), with the dual update when fused: bound once
+            dual = (self.b, self.f, self.dual_on) if self.fused else None
+            self._denoiser = self.regularizer.bind(self.u, self.weight, self.theta, dual)
+        self._denoiser()
         self.iteration += 1
 
     def blend_towards(self, x0, alpha: float):

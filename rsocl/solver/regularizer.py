@@ -11,6 +11,8 @@ takes the whole batch in that hook (in one launch per pass), the others get one 
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -143,6 +145,24 @@ class Regularizer:
         regularizer's to say.
         """
         import pyopencl as cl
+
+        weights, out = self._checked(x, weight, out)
+        if not np.any(weights):
+            # the ignore: pyopencl's stub types an Array's queue and data as optional; an allocated array has both
+            cl.enqueue_copy(x.queue, out.data, x.data)  # type: ignore[arg-type]
+            return out
+        try:
+            if x.ndim == 3:
+                return self._denoise(x, float(weights[0]), out)
+            if self.batched:
+                return self._denoise(x, weights, out)
+            return self._set_by_set(x, weights, out)
+        except ValueError as exc:
+            raise ValueError(f"{self!r}: {exc}") from exc
+
+    def _checked(self, x, weight, out):
+        """``denoise``'s arguments checked: ``(weights, out)``, the weights one per set (float64) and ``out``
+        allocated when None."""
         import pyopencl.array as cla
 
         if not isinstance(x, cla.Array):
@@ -156,18 +176,32 @@ class Regularizer:
             out = cla.empty_like(x)
         elif out.shape != x.shape or out.dtype != x.dtype:
             raise ValueError(f"{self.name}: out must match x ({x.shape}, {x.dtype}), got {out.shape}, {out.dtype}")
-        if not np.any(weights):
-            # the ignore: pyopencl's stub types an Array's queue and data as optional; an allocated array has both
-            cl.enqueue_copy(x.queue, out.data, x.data)  # type: ignore[arg-type]
-            return out
-        try:
-            if x.ndim == 3:
-                return self._denoise(x, float(weights[0]), out)
-            if self.batched:
-                return self._denoise(x, weights, out)
-            return self._set_by_set(x, weights, out)
-        except ValueError as exc:
-            raise ValueError(f"{self!r}: {exc}") from exc
+        return weights, out
+
+    def bind(
+        self, x: cla.Array, weight: PerSet | ArrayLike, out: cla.Array, dual: tuple | None = None
+    ) -> Callable[[], Any]:
+        """``denoise(x, weight, out=out)`` as a call without arguments, for a loop that makes it many times
+        on the same arrays (their contents may change between calls, not the arrays or ``weight``).
+
+        With ``dual = (b, f, on)`` the call is ``denoise_and_update(x, weight, out, b, f, on)`` (a regularizer
+        with :attr:`fuses_dual`). This default binds the call as it is; a regularizer may check its
+        arguments and prepare its launches once here instead of on every call.
+
+        Examples
+        --------
+        >>> import numpy as np, pyopencl.array as cla, rsocl
+        >>> from rsocl_plugins.tv import TV
+        >>> queue = rsocl.get_device().queue
+        >>> x = cla.to_device(queue, np.ones((3, 4, 4), np.float32))
+        >>> out = cla.empty_like(x)
+        >>> run = TV().bind(x, 0.1, out)
+        >>> run(); float(out.get().max())
+        1.0
+        """
+        if dual is None:
+            return functools.partial(self.denoise, x, weight, out)
+        return functools.partial(self.denoise_and_update, x, weight, out, *dual)
 
     def check_weights(self, weight: PerSet | ArrayLike, sets: int | None = None) -> np.ndarray:
         """``weight`` as a float64 array (one value, or ``sets`` values for a batch), each finite and >= 0."""

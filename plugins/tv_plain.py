@@ -1,0 +1,115 @@
+"""The TV's plain path: Chambolle's iterations on one work item per voxel (``kernels/tv.cl``), bound once.
+
+Two ways through the same arithmetic:
+
+- two launches per iteration on one copy of the dual ``p``: ``tv_primal`` writes the primal, then
+  ``tv_dual`` reads it and updates ``p`` in place;
+- one launch per iteration on two copies of ``p`` (``one_launch``): ``tv_step`` reads one copy and
+  writes the other, each work item computing the primal of its voxel and of its three next neighbours
+  itself, so no launch writes the primal. Fewer launches and fewer bytes, more arithmetic.
+
+Both start with ``tv_dual_first`` (the first iteration from ``p = 0``) and end with the primal of the last
+``p`` (``tv_primal``, or ``tv_primal_update`` when the ADMM's dual update is folded in). A run of
+``iterations`` Chambolle iterations is ``2 iterations - 2`` launches of the first kind and
+``iterations`` of the second, for each launch grid of :func:`rsocl_plugins.tv.launches`.
+
+:func:`sequence` sets every kernel argument and returns the launches; :class:`Bound` keeps them with
+their arrays for a caller that runs the denoiser many times on the same arrays.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import pyopencl.array as cla
+
+__all__ = ["Arrays", "Bound", "sequence", "enqueue"]
+
+#: Tags that make each sequence's kernel objects its own (rsocl.device.Kernels.instance).
+_TAGS = itertools.count()
+
+
+@dataclass(frozen=True)
+class Arrays:
+    """The device arrays a plain TV run reads and writes: input ``x`` and output ``out`` (``(T, m, n)``
+    or ``(B, T, m, n)``), the per-set ``steps`` of ``tv.cl``, the dual copies ``p`` (one, or two for
+    ``one_launch``), ``xnext``, and the ADMM's ``(b, f, dual)`` when its dual update is folded in."""
+
+    x: cla.Array
+    out: cla.Array
+    steps: cla.Array
+    p: tuple
+    xnext: cla.Array
+    dual: tuple | None = None
+
+
+def sequence(prog, grids, arrays: Arrays, weight: float, iterations: int, one_launch: bool, shared=None) -> list:
+    """The launches ``(kernel, global, local, offset)`` of one plain TV run of ``iterations`` (>= 2)
+    Chambolle iterations on ``arrays``, with temporal weight ``weight`` (0: 2-D), every argument set.
+
+    With ``shared=None`` each kernel object is this sequence's own: enqueuing the list again runs the
+    denoiser again on the arrays' current contents (:class:`Bound`). With a ``shared`` tag the kernel
+    objects are those of every sequence made with that tag (no new kernel objects): the list is good
+    until the next such sequence sets their arguments, so it is enqueued at once.
+    """
+    if iterations < 2:
+        raise ValueError(f"iterations must be >= 2 for a launch sequence, got {iterations}")
+    if len(arrays.p) != (2 if one_launch else 1):
+        raise ValueError(f"one_launch={one_launch} takes {2 if one_launch else 1} dual copies, got {len(arrays.p)}")
+    x, out = arrays.x, arrays.out
+    sets = x.shape[0] if x.ndim == 4 else 1
+    T, m, n = x.shape[-3:]
+    wt = x.dtype.type(weight)
+    sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(sets))
+    tag, made = next(_TAGS) if shared is None else shared, itertools.count()
+
+    def bound(name, *args):
+        kernel = prog.instance(name, ("tv_plain", tag, next(made)))
+        kernel.set_args(*args)
+        return [(kernel, gsize, lsize, offset) for gsize, lsize, offset in grids]
+
+    p0 = arrays.p[0]
+    steps, xnext = arrays.steps.data, arrays.xnext.data
+    launches = bound("tv_dual_first", x.data, p0.data, xnext, steps, wt, *sizes)
+    if one_launch:
+        pa, pb = arrays.p
+        forth = bound("tv_step", x.data, pa.data, pb.data, steps, wt, *sizes)
+        back = bound("tv_step", x.data, pb.data, pa.data, steps, wt, *sizes)
+        for k in range(iterations - 2):
+            launches += back if k % 2 else forth
+        last = arrays.p[(iterations - 2) % 2]
+    else:
+        primal = bound("tv_primal", x.data, p0.data, out.data, wt, *sizes)
+        dual = bound("tv_dual", out.data, p0.data, xnext, steps, wt, *sizes)
+        for _ in range(iterations - 2):
+            launches += primal + dual
+        last = p0
+    if arrays.dual is None:
+        launches += bound("tv_primal", x.data, last.data, out.data, wt, *sizes)
+    else:  # the last primal step makes the ADMM's dual update
+        b, f, on = arrays.dual
+        launches += bound("tv_primal_update", x.data, last.data, out.data, wt, *sizes, b.data, f.data, on.data)
+    return launches
+
+
+def enqueue(queue, launches) -> None:
+    """Enqueue the launches of :func:`sequence` on ``queue``, in order."""
+    for kernel, gsize, lsize, offset in launches:
+        kernel.enqueue(queue, gsize, lsize, offset)
+
+
+class Bound:
+    """A plain TV run bound to its arrays: calling it enqueues the launches of :func:`sequence` (made
+    with kernel objects of its own) on ``queue``. It holds the arrays, so none of them, the dual
+    copies included, is released while it lives."""
+
+    def __init__(self, queue, arrays: Arrays, launches: list):
+        self.queue, self.arrays, self.launches = queue, arrays, launches
+
+    def __call__(self) -> None:
+        enqueue(self.queue, self.launches)
