@@ -124,16 +124,15 @@ __kernel void tv_dual_first(__global const real *img, __global real *p, __global
     dual_update(img, p, xnext, steps, wt, T, m, n, sets, 1);
 }
 
-/* out = img + d(p) at voxel i = (x, y, s) of its set: tv_primal's sum, with every neighbour
- * read at a clamped index and selected (no invariant of p relied on). */
+/* out = img + d(p) at voxel i, on row y and sub-frame s of its set: tv_primal's sum, with its
+ * reads (the x - 1 neighbour at i - 1 always, on p[1] = 0 at x = n - 1).  i >= 0 */
 inline real primal_at(__global const real *img, __global const real *p, real wt, size_t N, size_t mn,
-                      size_t n, size_t i, int x, int y, int s)
+                      size_t n, size_t i, int y, int s)
 {
     real d = -(p[i] + p[N + i]);
     real py = p[y > 0 ? i - n : i];
-    real px = p[N + (x > 0 ? i - 1 : i)];
     d += y > 0 ? py : (real)0;
-    d += x > 0 ? px : (real)0;
+    d += p[N + i - 1];
 #if TEMPORAL
     real pt = p[2 * N + (s > 0 ? i - mn : i)];
     d -= wt * p[2 * N + i];
@@ -142,25 +141,31 @@ inline real primal_at(__global const real *img, __global const real *p, real wt,
     return img[i] + d;
 }
 
-/* One whole Chambolle iteration: the primal out = img + d(p_in) at this voxel and its next ones along
- * y, x and t (computed here, not read), then p_out = the dual step of p_in from the gradient of out.
- * p_in and p_out are two copies of p (ping-pong), so no work item reads what another writes:
- * one launch per iteration where tv_primal and tv_dual take two. The same arithmetic as they do,
- * in the same order.  global size (n, m, B*T) */
+/* One whole Chambolle iteration: the primal out = img + d(p_in) at this voxel and at its next ones
+ * along y, x and t (computed here, not read), then p_out = the dual step of p_in from the gradient of
+ * out. p_in and p_out are two copies of p (ping-pong): no work item reads what another writes, so one
+ * launch per iteration where tv_primal and tv_dual take two; the same arithmetic as theirs, in the same
+ * order. At the far edges the next voxel is this one (the difference is 0); along x the next voxel is
+ * read in the next row and its difference multiplied by xnext, as tv_dual does, and the primal at
+ * i + 1 reads p[1] at i, which is 0 at x = n - 1 in both copies.  global size (n, m, B*T) */
 __kernel void tv_step(__global const real *img, __global const real *p_in, __global real *p_out,
-                      __global const real *steps, real wt, int T, int m, int n, int sets)
+                      __global const real *xnext, __global const real *steps, real wt, int T, int m, int n,
+                      int sets)
 {
     int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
     int set = st / T, s = st - set * T;
     size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n, nn = (size_t)n;
     size_t i = ((size_t)st * m + y) * n + x;
     real tau = steps[2 * set], tau_over_weight = steps[2 * set + 1];
-    real o = primal_at(img, p_in, wt, N, mn, nn, i, x, y, s);
-    real gy = y < m - 1 ? primal_at(img, p_in, wt, N, mn, nn, i + nn, x, y + 1, s) - o : (real)0;
-    real gx = x < n - 1 ? primal_at(img, p_in, wt, N, mn, nn, i + 1, x + 1, y, s) - o : (real)0;
+    real o = primal_at(img, p_in, wt, N, mn, nn, i, y, s);
+    int yn = y < m - 1 ? y + 1 : y;                             /* uniform in a row */
+    real gy = primal_at(img, p_in, wt, N, mn, nn, i + (size_t)(yn - y) * nn, yn, s) - o;
+    size_t ix = (y < m - 1 || st < sets * T - 1) ? i + 1 : (x < n - 1 ? i + 1 : i);
+    real gx = (primal_at(img, p_in, wt, N, mn, nn, ix, y, s) - o) * xnext[x];   /* exactly 0 at x = n - 1 */
     real norm2 = gy * gy + gx * gx;
 #if TEMPORAL
-    real gt = s < T - 1 ? wt * (primal_at(img, p_in, wt, N, mn, nn, i + mn, x, y, s + 1) - o) : (real)0;
+    int sn = s < T - 1 ? s + 1 : s;                             /* uniform in a work group */
+    real gt = wt * (primal_at(img, p_in, wt, N, mn, nn, i + (size_t)(sn - s) * mn, y, sn) - o);
     norm2 += gt * gt;
 #endif
     real scale = (real)1 / ((real)1 + vector_friendly_sqrt(norm2) * tau_over_weight);

@@ -78,8 +78,8 @@ def sequence(prog, grids, arrays: Arrays, weight: float, iterations: int, one_la
     launches = bound("tv_dual_first", x.data, p0.data, xnext, steps, wt, *sizes)
     if one_launch:
         pa, pb = arrays.p
-        forth = bound("tv_step", x.data, pa.data, pb.data, steps, wt, *sizes)
-        back = bound("tv_step", x.data, pb.data, pa.data, steps, wt, *sizes)
+        forth = bound("tv_step", x.data, pa.data, pb.data, xnext, steps, wt, *sizes)
+        back = bound("tv_step", x.data, pb.data, pa.data, xnext, steps, wt, *sizes)
         for k in range(iterations - 2):
             launches += back if k % 2 else forth
         last = arrays.p[(iterations - 2) % 2]
