@@ -13,17 +13,18 @@ device: a kernel with one work item and one buffer argument, enqueued in a loop.
   kernels' own work is negligible) over its launches, and the same for the trivial kernel's
   loop. Their ratio says how far the solver's host path is from the floor.
 
-Two paths are measured (``--paths``): ``device``, what the device chooses (on a CPU device the
-plain TV and the ADMM's separate dual and difference passes), and ``lean``, the fewest-launch
-path: a device that is not a CPU (the dual update and ``u = f - b`` folded into the TV's and the
-projection's launches) with the TV's fused path as its choice, run on any device by reading it as a
-GPU for the run.
+Four paths are measured (``--paths``, :data:`PATHS`): ``device``, what the device chooses; ``gpu``, what
+rsocl chooses on a device that is not a CPU (the dual update and ``u = f - b`` folded into the TV's and the
+projection's launches, the plain TV in one launch per Chambolle iteration); ``gpu-two``, that with the
+plain TV in two launches per iteration; ``lean``, that with the TV's fused path. On a CPU device the last
+three run by reading the device as a GPU for the run.
 
 Rounds alternate the trivial loop and the ADMM runs of each path, and the median of the rounds is reported.
-Then the passes that the lean path folds are timed against the separate ones they replace, in
-alternating rounds (:func:`passes`): what a CPU device's choice of path rests on.
+Then the passes that the GPU paths fold are timed against the separate ones they replace, in
+alternating rounds (:func:`passes`): what a device's choice of path rests on.
 
-    python benchmarks/launches.py [--shapes 8 50 64] [--paths device lean] [--rounds 5] [--out docs/launches.md]
+    python benchmarks/launches.py [--shapes 8 50 64] [--paths device gpu gpu-two lean] [--rounds 5]
+        [--out docs/launches.md]
 """
 
 from __future__ import annotations
@@ -107,25 +108,34 @@ def case(m: int):
 #: ``fused`` of the lean path: as many Chambolle iterations per launch as the TV's tile plan allows.
 LEAN_FUSED = 16
 
+#: The paths: (read the device as one that is not a CPU, ``GPU_FUSED``, ``GPU_ONE_LAUNCH``); None: as it is.
+PATHS = {
+    "device": (False, None, None),
+    "gpu": (True, None, None),
+    "gpu-two": (True, 0, 0),
+    "lean": (True, LEAN_FUSED, None),
+}
+
 
 @contextmanager
 def path(name: str):
-    """Run the block on the ``device`` path (the device's own choice) or the ``lean`` one (the device read
-    as one that is not a CPU, so the ADMM folds its passes as on a GPU, and the TV's fused path,
-    :data:`LEAN_FUSED`, as that device's choice)."""
+    """Run the block on path ``name`` of :data:`PATHS`: ``device``, the device's own choice; ``gpu``, the
+    device read as one that is not a CPU, with the choices rsocl makes for such a device (the ADMM's passes
+    folded, the plain TV in one launch per Chambolle iteration); ``gpu-two``, that with the plain TV in two
+    launches per iteration; ``lean``, that with the fused TV (:data:`LEAN_FUSED`)."""
     import rsocl_plugins.tv as tv
     from rsocl.device.context import Device
 
-    if name == "device":
-        yield
-        return
-    saved = Device.is_cpu, tv.GPU_FUSED
-    Device.is_cpu = property(lambda self: False)
-    tv.GPU_FUSED = LEAN_FUSED
+    as_gpu, fused, one_launch = PATHS[name]
+    saved = Device.is_cpu, tv.GPU_FUSED, tv.GPU_ONE_LAUNCH
+    if as_gpu:
+        Device.is_cpu = property(lambda self: False)
+    tv.GPU_FUSED = tv.GPU_FUSED if fused is None else fused
+    tv.GPU_ONE_LAUNCH = tv.GPU_ONE_LAUNCH if one_launch is None else one_launch
     try:
         yield
     finally:
-        Device.is_cpu, tv.GPU_FUSED = saved
+        Device.is_cpu, tv.GPU_FUSED, tv.GPU_ONE_LAUNCH = saved
 
 
 def run(rig, g, iterations: int, device, name: str = "device"):
@@ -145,7 +155,7 @@ def per_iteration(rig, g, device, short: int, long: int, name: str = "device"):
     return {k: (c_long[k] - c_short[k]) / span for k in COUNTED}, (t_long - t_short) / span
 
 
-def measure(shapes, rounds: int, short: int, long: int, device, paths=("device", "lean")):
+def measure(shapes, rounds: int, short: int, long: int, device, paths=tuple(PATHS)):
     """Alternating rounds of the trivial loop and each shape's runs on each path (their order reversed
     every other round); per-shape and path medians."""
     cases = {m: case(m) for m in shapes}
@@ -191,7 +201,8 @@ def passes(m: int, device, rounds: int, reps: int = 100):
 
     - the residual: ``forward`` + ``sum_sq_diff`` against ``residual_partials`` (one launch);
     - ``u = f - b``: ``admm_project`` + ``admm_difference`` against ``admm_project`` writing u itself;
-    - the ADMM's dual update: ``tv_primal`` + ``admm_dual`` against ``tv_primal_update``.
+    - the ADMM's dual update: ``tv_primal`` + ``admm_dual`` against ``tv_primal_update``;
+    - one Chambolle iteration: ``tv_primal`` + ``tv_dual`` against ``tv_step`` (two copies of p).
     """
     import pyopencl.array as cla
 
@@ -209,7 +220,8 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     q, prog, T = op.queue, s.program, op.T
     tv_prog = tv._program(s.u, "tv.cl")
     grids = tv_launches(tv_prog, device, T, m, m)
-    (p,), _ = tv._buffers(s.u, 1)
+    (p, p2), xnext = tv._buffers(s.u, 2)
+    steps = tv._steps(q, [0.5], s.u.dtype)
     wt, sizes = np.float32(3.0), (np.int32(T), np.int32(m), np.int32(m), np.int32(1))
 
     def project(difference):
@@ -269,6 +281,16 @@ def passes(m: int, device, rounds: int, reps: int = 100):
                 global_offset=off,
             )
 
+    def primal_dual():
+        for gs, ls, off in grids:
+            tv_prog.tv_primal(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, global_offset=off)
+        for gs, ls, off in grids:
+            tv_prog.tv_dual(q, gs, ls, s.theta.data, p.data, xnext.data, steps.data, wt, *sizes, global_offset=off)
+
+    def one_step():
+        for gs, ls, off in grids:
+            tv_prog.tv_step(q, gs, ls, s.u.data, p.data, p2.data, xnext.data, steps.data, wt, *sizes, global_offset=off)
+
     def forward_then_sum():
         op.forward_into(s.theta, s.hx)
         sum_sq_diff_async(s.g, s.hx)
@@ -281,6 +303,7 @@ def passes(m: int, device, rounds: int, reps: int = 100):
             lambda: project(1),
         ),
         ("dual update: tv_primal + admm_dual | tv_primal_update", primal_then_dual, primal_update),
+        ("Chambolle iteration: tv_primal + tv_dual | tv_step", primal_dual, one_step),
     ]
 
     def timed(fn):
@@ -359,13 +382,15 @@ def page(floor, trivial, rows, device, args, passes_rows=None) -> list:
     lines += [""] + command_buffers(device)
     lines += [
         "",
-        "Paths: `device` is the device's own choice; `lean` is the fewest-launch path, a device that is not",
-        "a CPU with the fused TV (the TV's fused path, the ADMM's dual update and u = f - b folded into the",
-        "TV's and the projection's launches), run here by reading the device as a GPU. Both read the residuals",
-        "of 8 iterations (`rsocl.solver.admm.RESIDUAL_SLOTS`) in one copy. On a CPU device the lean path's",
-        "times are those",
-        "of a GPU's work groups (the fused TV's tiles of hundreds of work items with barriers) run by a CPU:",
-        "there its launch count is the measurement, its time says nothing about a GPU.",
+        "Paths: `device` is the device's own choice. `gpu` is what rsocl chooses on a device that is not a",
+        "CPU: the ADMM's dual update and u = f - b folded into the TV's and the projection's launches, the",
+        "plain TV in one launch per Chambolle iteration (`tv_step` on two copies of the dual); `gpu-two` is",
+        "that with the plain TV in two launches per iteration (`tv_primal`, `tv_dual`); `lean` that with the",
+        "fused TV (tiles in local memory). On a CPU device these three run by reading the device as a GPU, and",
+        "their times are those of a GPU's choices run by a CPU (the fused TV's tiles of hundreds of work",
+        "items with barriers, tv_step's recomputed neighbours): there the launch counts are the",
+        "measurement, the times say nothing about a GPU. Every path reads the residuals",
+        "of 8 iterations (`rsocl.solver.admm.RESIDUAL_SLOTS`) in one copy.",
         "",
         "µs / launch is the iteration's wall time over its launches: on a CPU device the kernels'",
         "own work shares the cores with the host, so only the smallest ROI isolates the host path.",
@@ -379,9 +404,9 @@ def main(argv=None):
     p.add_argument(
         "--paths",
         nargs="+",
-        choices=("device", "lean"),
-        default=["device", "lean"],
-        help="launch paths (default: both)",
+        choices=tuple(PATHS),
+        default=list(PATHS),
+        help="launch paths (default: all)",
     )
     p.add_argument("--rounds", type=int, default=5, help="alternating rounds (default 5)")
     p.add_argument(
