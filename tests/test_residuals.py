@@ -43,13 +43,16 @@ def test_device_residual_matches_the_numpy_forward_model(device, dtype, rng, sha
 
     res = DeviceResiduals(op, dev(g), dev(w) if weighted else None, sets, slots=3)
     theta_dev = dev(theta)
-    res.enqueue(theta_dev, 2)
-    got = np.atleast_1d(res.read(3).result()[2])
+    zeros = dev(np.zeros_like(theta))
+    res.enqueue(zeros, 0), res.enqueue(theta_dev, 2), res.enqueue(zeros, 1)  # every slot read is written
+    got = [np.atleast_1d(r) for r in res.read(3).result()]
     # the reference works on the stored (rounded) values
     stored = lambda a: cut(a).astype(op.dtype).astype(np.float64).reshape((batch,) + a.shape[1:])  # noqa: E731
     want = _want(rig, stored(theta), stored(g), stored(w))
     tol = 2e-6 if dtype == "float32" else 1e-12
-    np.testing.assert_allclose(got, want, rtol=tol)
+    np.testing.assert_allclose(got[2], want, rtol=tol)
+    zero = _want(rig, 0 * stored(theta), stored(g), stored(w))  # 1, and 0 for an all-zero set
+    np.testing.assert_allclose(got[0], zero, rtol=tol), np.testing.assert_allclose(got[1], zero, rtol=tol)
 
 
 def test_slots_read_together_equal_slots_read_alone(device, rng):
