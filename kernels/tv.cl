@@ -25,18 +25,13 @@
  *  - the invariant p[1] = 0 at x = n - 1 (the x difference there is 0 from p = 0 on, so
  *    every step keeps it 0): the primal reads p[1] at i - 1 with no select at x = 0. */
 
-/* out = img + d(p), d the (negative) divergence of p.  global size (n, m, B*T) */
-__kernel void tv_primal(__global const real *img, __global const real *p, __global real *out,
-                        real wt, int T, int m, int n, int sets)
+/* out = img + d(p) at voxel i, on row y and sub-frame s of its set, d the (negative) divergence of p.
+ * The x - 1 neighbour is read at i - 1 always: at x = 0 that is p[1] at x = n - 1 of the row before,
+ * which is 0 (see above), or p[0] at the very last voxel (y = m - 1: 0 too) when i = 0. */
+inline real primal_at(__global const real *img, __global const real *p, real wt, size_t N, size_t mn,
+                      size_t n, size_t i, int y, int s)
 {
-    int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
-    int s = st - st / T * T;
-    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
-    size_t i = ((size_t)st * m + y) * n + x;
     real d = -(p[i] + p[N + i]);
-    /* The x - 1 neighbour is read at i - 1 always: at x = 0 that is p[1] at x = n - 1 of the
-     * row before, which is 0 (see above), or p[0] at the very last voxel (y = m - 1: 0 too)
-     * when i = 0. */
     real py = p[y > 0 ? i - n : i];
     d += y > 0 ? py : (real)0;
     d += p[N + i - 1];
@@ -45,7 +40,17 @@ __kernel void tv_primal(__global const real *img, __global const real *p, __glob
     d -= wt * p[2 * N + i];
     d += s > 0 ? wt * pt : (real)0;
 #endif
-    out[i] = img[i] + d;
+    return img[i] + d;
+}
+
+/* out = img + d(p).  global size (n, m, B*T) */
+__kernel void tv_primal(__global const real *img, __global const real *p, __global real *out,
+                        real wt, int T, int m, int n, int sets)
+{
+    int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
+    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
+    size_t i = ((size_t)st * m + y) * n + x;
+    out[i] = primal_at(img, p, wt, N, mn, (size_t)n, i, y, st - st / T * T);
 }
 
 /* tv_primal, and then the ADMM's next dual update from the denoiser's input img = u and output
@@ -59,16 +64,7 @@ __kernel void tv_primal_update(__global const real *img, __global const real *p,
     int set = st / T, s = st - set * T;
     size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
     size_t i = ((size_t)st * m + y) * n + x;
-    real d = -(p[i] + p[N + i]);
-    real py = p[y > 0 ? i - n : i];         /* the neighbours as in tv_primal */
-    d += y > 0 ? py : (real)0;
-    d += p[N + i - 1];
-#if TEMPORAL
-    real pt = p[2 * N + (s > 0 ? i - mn : i)];
-    d -= wt * p[2 * N + i];
-    d += s > 0 ? wt * pt : (real)0;
-#endif
-    real u = img[i], th = u + d;
+    real u = img[i], th = primal_at(img, p, wt, N, mn, (size_t)n, i, y, s);
     out[i] = th;
     if (dual[set]) {                        /* uniform in a work group (one sub-frame of one set) */
         real bn = th - u;
@@ -122,23 +118,6 @@ __kernel void tv_dual_first(__global const real *img, __global real *p, __global
                             __global const real *steps, real wt, int T, int m, int n, int sets)
 {
     dual_update(img, p, xnext, steps, wt, T, m, n, sets, 1);
-}
-
-/* out = img + d(p) at voxel i, on row y and sub-frame s of its set: tv_primal's sum, with its
- * reads (the x - 1 neighbour at i - 1 always, on p[1] = 0 at x = n - 1).  i >= 0 */
-inline real primal_at(__global const real *img, __global const real *p, real wt, size_t N, size_t mn,
-                      size_t n, size_t i, int y, int s)
-{
-    real d = -(p[i] + p[N + i]);
-    real py = p[y > 0 ? i - n : i];
-    d += y > 0 ? py : (real)0;
-    d += p[N + i - 1];
-#if TEMPORAL
-    real pt = p[2 * N + (s > 0 ? i - mn : i)];
-    d -= wt * p[2 * N + i];
-    d += s > 0 ? wt * pt : (real)0;
-#endif
-    return img[i] + d;
 }
 
 /* One whole Chambolle iteration: the primal out = img + d(p_in) at this voxel and at its next ones
