@@ -74,6 +74,7 @@ class DeviceResiduals:
         self.local = cl.LocalMemory(int(lsize[0] * lsize[1]) * self.acc.itemsize)
         self.g_norm2 = sum_sq_diff(g, weights=valid, sets=sets)
         self.kernel = kernel  # this object's own: its arguments are set here once
+        self._theta = None  # the buffer argument 0 holds (the estimate whose residual is enqueued)
         kernel.set_args(
             None,
             g.data,
@@ -92,7 +93,9 @@ class DeviceResiduals:
         """Enqueue the residual of device array ``theta`` into ``slot`` (0 .. slots - 1); nothing is read."""
         if not 0 <= slot < self.slots:
             raise ValueError(f"slot must be in [0, {self.slots - 1}], got {slot!r}")
-        self.kernel.set_arg(0, theta.data)
+        if theta.data is not self._theta:  # an ADMM passes the same buffer every iteration: set once
+            self.kernel.set_arg(0, theta.data)
+            self._theta = theta.data
         self.kernel.set_arg(9, np.int32(slot))
         self.kernel.enqueue(self.op.queue, *self.grid)
 
