@@ -262,7 +262,8 @@ class TV(Regularizer):
             raise ValueError("out must be another buffer than x (every TV iteration reads x)")
         sets = x.shape[0] if x.ndim == 4 else 1
         steps = self._steps(x.queue, np.broadcast_to(weights, (sets,)), x.dtype)
-        return tv_plain.Bound(x.queue, *self._plain_sequence(x, steps, out, dual))
+        prog, grids, arrays, weight, one = self._plain_parts(x, steps, out, dual)
+        return tv_plain.Bound(x.queue, prog, grids, arrays, weight, self.iterations, one)
 
     def _run(self, x, weight, out, dual):
         if out.base_data.int_ptr == x.base_data.int_ptr:
@@ -298,9 +299,9 @@ class TV(Regularizer):
         resolved: :func:`device_one_launch` for -1)."""
         return bool(device_one_launch(device) if self.one_launch < 0 else self.one_launch)
 
-    def _plain_sequence(self, x, steps, out, dual, shared=None):
-        """``(arrays, launches)`` of the plain path (:func:`rsocl_plugins.tv_plain.sequence`; ``shared``: its
-        tag of kernel objects shared between calls, None: kernel objects of their own)."""
+    def _plain_parts(self, x, steps, out, dual):
+        """``(prog, grids, arrays, weight, one_launch)``: the arguments of
+        :func:`rsocl_plugins.tv_plain.sequence` (and :class:`~rsocl_plugins.tv_plain.Bound`) but ``iterations``."""
         dev = device_for_queue(x.queue)
         one = self.one_launch_on(dev)
         prog = self._program(x, "tv.cl")
@@ -312,7 +313,7 @@ class TV(Regularizer):
         p, xnext = self._buffers(x, 2 if one else 1)
         arrays = tv_plain.Arrays(x, out, steps, tuple(p), xnext, None if dual is None else tuple(dual))
         weight = float(self.temporal_weight) if self.planes == 3 else 0.0
-        return arrays, tv_plain.sequence(prog, grids[key], arrays, weight, self.iterations, one, shared)
+        return prog, grids[key], arrays, weight, one
 
     def _run_plain(self, x, steps, out, dual=None):
         import pyopencl as cl
@@ -320,7 +321,8 @@ class TV(Regularizer):
         if self.iterations == 1:  # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
-        tv_plain.enqueue(x.queue, self._plain_sequence(x, steps, out, dual, shared="call")[1])
+        prog, grids, arrays, weight, one = self._plain_parts(x, steps, out, dual)
+        tv_plain.enqueue(x.queue, tv_plain.sequence(prog, grids, arrays, weight, self.iterations, one))
         return out
 
     def _run_fused(self, x, steps, out, dual, plan):

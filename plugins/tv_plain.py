@@ -30,9 +30,6 @@ if TYPE_CHECKING:
 
 __all__ = ["Arrays", "Bound", "sequence", "enqueue"]
 
-#: Tags that make each sequence's kernel objects its own (rsocl.device.Kernels.instance).
-_TAGS = itertools.count()
-
 
 @dataclass(frozen=True)
 class Arrays:
@@ -48,14 +45,14 @@ class Arrays:
     dual: tuple | None = None
 
 
-def sequence(prog, grids, arrays: Arrays, weight: float, iterations: int, one_launch: bool, shared=None) -> list:
+def sequence(prog, grids, arrays: Arrays, weight: float, iterations: int, one_launch: bool, owner=None) -> list:
     """The launches ``(kernel, global, local, offset)`` of one plain TV run of ``iterations`` (>= 2)
     Chambolle iterations on ``arrays``, with temporal weight ``weight`` (0: 2-D), every argument set.
 
-    With ``shared=None`` each kernel object is this sequence's own: enqueuing the list again runs the
-    denoiser again on the arrays' current contents (:class:`Bound`). With a ``shared`` tag the kernel
-    objects are those of every sequence made with that tag (no new kernel objects): the list is good
-    until the next such sequence sets their arguments, so it is enqueued at once.
+    With an ``owner`` the kernel objects are its own while it lives (``prog.lease``): enqueuing the list
+    again runs the denoiser again on the arrays' current contents (:class:`Bound`). Without one they are
+    the program's objects for calls that enqueue their sequence at once (the next sequence made without
+    an owner sets their arguments again).
     """
     if iterations < 2:
         raise ValueError(f"iterations must be >= 2 for a launch sequence, got {iterations}")
@@ -66,10 +63,10 @@ def sequence(prog, grids, arrays: Arrays, weight: float, iterations: int, one_la
     T, m, n = x.shape[-3:]
     wt = x.dtype.type(weight)
     sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(sets))
-    tag, made = next(_TAGS) if shared is None else shared, itertools.count()
+    made = itertools.count()
 
     def bound(name, *args):
-        kernel = prog.instance(name, ("tv_plain", tag, next(made)))
+        kernel = prog.lease(name, owner) if owner is not None else prog.instance(name, ("tv_plain", next(made)))
         kernel.set_args(*args)
         return [(kernel, gsize, lsize, offset) for gsize, lsize, offset in grids]
 
@@ -104,12 +101,13 @@ def enqueue(queue, launches) -> None:
 
 
 class Bound:
-    """A plain TV run bound to its arrays: calling it enqueues the launches of :func:`sequence` (made
-    with kernel objects of its own) on ``queue``. It holds the arrays, so none of them, the dual
-    copies included, is released while it lives."""
+    """A plain TV run bound to its arrays (the arguments of :func:`sequence`, ``owner`` aside): calling it
+    enqueues the launches, made with kernel objects of its own, on ``queue``. It holds the arrays, so
+    none of them, the dual copies included, is released while it lives."""
 
-    def __init__(self, queue, arrays: Arrays, launches: list):
-        self.queue, self.arrays, self.launches = queue, arrays, launches
+    def __init__(self, queue, prog, grids, arrays: Arrays, weight: float, iterations: int, one_launch: bool):
+        self.queue, self.arrays = queue, arrays
+        self.launches = sequence(prog, grids, arrays, weight, iterations, one_launch, owner=self)
 
     def __call__(self) -> None:
         enqueue(self.queue, self.launches)

@@ -132,3 +132,22 @@ def test_enqueue_launches_with_the_arguments_last_set(program, device):
     fill.set_args(b.data, np.float32(2), np.int32(1))  # value arguments unchanged, the buffer changed
     fill.enqueue(q, (8,), None)
     np.testing.assert_array_equal(b.get(), np.full(8, 3, np.float32))
+
+
+def test_a_leased_kernel_is_its_owners_alone_and_goes_to_the_next_owner_after_it(device):
+    import gc
+
+    prog = device.program(["tv.cl"], REAL="float", TEMPORAL=1)
+
+    class Owner:
+        pass
+
+    first, second = Owner(), Owner()
+    a, b = prog.lease("tv_step", first), prog.lease("tv_step", second)
+    assert a is not b and a.function_name == "tv_step"
+    assert prog.lease("tv_step", first) is not a  # a second lease of one owner: another object
+    del first
+    gc.collect()
+    third = Owner()
+    got = {id(prog.lease("tv_step", third)), id(prog.lease("tv_step", third))}
+    assert id(a) in got and id(b) not in got  # the gone owner's objects, never the live owner's

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 import warnings
+import weakref
 from importlib import resources
 
 import numpy as np
@@ -100,6 +101,19 @@ class Kernels:
                 del instances[next(iter(instances))]
             instances[k] = kernel
         return instances[k]
+
+    def lease(self, name: str, owner) -> Kernel:
+        """A kernel object ``name`` for ``owner`` (any object that can be weakly referenced) alone, while
+        ``owner`` lives; then it goes back to this program's pool and a later owner gets it.
+
+        For an object made again and again (a solver per call and per search candidate) that sets every
+        argument it uses once and then only enqueues: its kernel objects are reused, not created each
+        time (creating one costs tens of launches on PoCL: docs/implementation_notes.md).
+        """
+        pool = self.__dict__.setdefault("_pool", {}).setdefault(name, [])
+        kernel = pool.pop() if pool else self._create(name)
+        weakref.finalize(owner, pool.append, kernel)
+        return kernel
 
     def _create(self, name: str) -> Kernel:
         import pyopencl as cl

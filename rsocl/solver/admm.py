@@ -163,14 +163,14 @@ class ADMM:
         cl.enqueue_barrier(queue)
 
     def _bind_kernels(self):
-        """This solver's own kernel objects (rsocl.device.Kernels.instance), their arguments set once: a
+        """This solver's own kernel objects (rsocl.device.Kernels.lease), their arguments set once: a
         step enqueues them and sets only the by-value arguments that change (the first iteration's flags)."""
-        op, prog, key = self.op, self.program, ("ADMM", id(self))
-        self._dual = prog.instance("admm_dual", key)
+        op, prog = self.op, self.program
+        self._dual = prog.lease("admm_dual", self)
         self._dual.set_args(
             self.theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0), np.int32(self.per_set)
         )
-        self._project = prog.instance("admm_project", key)
+        self._project = prog.lease("admm_project", self)
         self._project.set_args(
             self.f.data,
             self.g.data,
@@ -185,7 +185,7 @@ class ADMM:
             np.int32(op.L),
             *op._shape_args(),
         )
-        self._difference = prog.instance("admm_difference", key)
+        self._difference = prog.lease("admm_difference", self)
         self._difference.set_args(self.f.data, self.b.data, self.u.data)
 
     @property

@@ -65,7 +65,7 @@ class DeviceResiduals:
             MASK_BINARY=int(op.rig.mask == "binary"),
             **op.tile_defines,
         )
-        kernel = self.program.instance("residual_partials", ("DeviceResiduals", id(self)))
+        kernel = self.program.lease("residual_partials", self)
         channels = op.K * (sets or 1)
         self.grid = op.block_grid(channels, kernels=(kernel,))
         gsize, lsize = self.grid
