@@ -174,7 +174,7 @@ class TV(Regularizer):
             w = np.asarray(weights, dtype=np.float64)
             on = w > 0
             steps = np.stack([np.where(on, tau, 0.0), np.where(on, tau / np.where(on, w, 1.0), 0.0)], axis=1)
-            cache[key] = cla.to_device(queue, steps.astype(dtype).ravel())
+            cache[key] = cla.to_device(queue, steps.astype(dtype).ravel(), async_=True)
         return cache[key]
 
     def _program(self, x, name):
@@ -228,7 +228,7 @@ class TV(Regularizer):
             cache.clear()
             cache[key] = (
                 [cla.empty(x.queue, (self.planes,) + x.shape, x.dtype) for _ in range(copies)],
-                cla.to_device(x.queue, edge_weights(x.shape[-1], x.dtype)),
+                cla.to_device(x.queue, edge_weights(x.shape[-1], x.dtype), async_=True),
             )
         return cache[key]
 

@@ -76,7 +76,7 @@ def interp3d_device(op, g, valid=None, solved=None, *, out=None):
             f"out must hold {want[1:] if one else want} values of {dtype.name}, got {out.shape} {out.dtype}"
         )
     up = [
-        cla.to_device(queue, np.ascontiguousarray(a, dtype=t))
+        cla.to_device(queue, np.ascontiguousarray(a, dtype=t), async_=True)
         for a, t in ((times, dtype), (values, dtype), (inverse, dtype), (count, np.int32), (fallback, dtype))
     ]
     prog = op.device.program(["interp.cl"], REAL=c_type(dtype), NCH=K)

@@ -107,10 +107,10 @@ class RollingShutterOperator:
             f"a datacube of T={self.T} x {m} x {n} in {self.dtype.name}", self.T * m * n * itemsize, dtype=self.dtype
         )
         win = rig.windows
-        self.first = cla.to_device(self.queue, np.ascontiguousarray(win.index - start, dtype=np.int32))
-        self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype))
-        self.length = cla.to_device(self.queue, win.length.astype(self.dtype))
-        self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype))
+        self.first = cla.to_device(self.queue, np.ascontiguousarray(win.index - start, dtype=np.int32), async_=True)
+        self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype), async_=True)
+        self.length = cla.to_device(self.queue, win.length.astype(self.dtype), async_=True)
+        self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype), async_=True)
         #: pixels per work item of the forward, adjoint and ADMM projection kernels
         self.vector_width = VECTOR_WIDTH[self.dtype.name]
         #: rows per work item of those kernels (each row a tile of ``vector_width`` pixels)

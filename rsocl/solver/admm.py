@@ -131,11 +131,11 @@ class ADMM:
         shape = batch + op.domain_shape
         self.valid = None
         if valid is not None and not np.all(valid):
-            self.valid = cla.to_device(queue, np.ascontiguousarray(valid, dtype=op.dtype))
+            self.valid = cla.to_device(queue, np.ascontiguousarray(valid, dtype=op.dtype), async_=True)
         self.own_inverse, inverse = self._inverses(op, projection, valid, batch)
-        self.inverse = cla.to_device(queue, np.ascontiguousarray(inverse, dtype=op.dtype))
-        self.eta_device = cla.to_device(queue, self.etas.astype(op.dtype))
-        self.dual_on = cla.to_device(queue, (self.etas > 0).astype(np.int32))
+        self.inverse = cla.to_device(queue, np.ascontiguousarray(inverse, dtype=op.dtype), async_=True)
+        self.eta_device = cla.to_device(queue, self.etas.astype(op.dtype), async_=True)
+        self.dual_on = cla.to_device(queue, (self.etas > 0).astype(np.int32), async_=True)
         self.theta = cla.zeros(queue, shape, op.dtype) if x0 is None else x0.copy()
         self.b = cla.zeros(queue, shape, op.dtype)
         self.f = self.theta.copy()

@@ -326,7 +326,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     )
 
     def upload(array):
-        return cla.to_device(op.queue, np.ascontiguousarray(array, dtype=op.dtype))
+        return cla.to_device(op.queue, np.ascontiguousarray(array, dtype=op.dtype), async_=True)
 
     cut = (Ellipsis, solved, slice(None), slice(None))
     staged = Staged(op, solved, upload(problem.g), None if problem.x0 is None else upload(problem.x0[cut]))
