@@ -1,12 +1,12 @@
 """The TV's fused path against its plain path: time per denoising call and bytes moved, in one run.
 
 For each ROI size, a datacube of the paper array's T sub-frames (float32, random values) is
-denoised with 10 Chambolle iterations (3-D, temporal weight 3) by ``TV(fused=0)`` (the plain path)
-and by ``TV(fused=k)`` for each ``--fused`` k, in ``--rounds`` rounds that run every variant in
-turn; each round times ``--calls`` calls per variant (device-synced). The page gives the median
-time per call, the ratio to the plain path within each round (median and range), the tile the
-planner picked and the bytes per voxel-iteration counted by ``rsocl_plugins.tv_fused``, and the
-largest difference between fused and plain results.
+denoised with 10 Chambolle iterations (3-D, temporal weight 3) by ``TV(fused=0, one_launch=0)``
+(the plain path, two launches per iteration) and by ``TV(fused=k)`` for each ``--fused`` k, in
+``--rounds`` rounds that run every variant in turn; each round times ``--calls`` calls per variant
+(device-synced). The page gives the median time per call, the ratio to the plain path within each
+round (median and range), the tile the planner picked and the bytes per voxel-iteration counted by
+``rsocl_plugins.tv_fused``, and the largest difference between fused and plain results.
 
 Then the same comparison inside whole reconstructions: the paper configuration (4 cameras, 50x50,
 T = 55, 200 ADMM iterations of 10 TV iterations, fixed settings, float32) in batches of
@@ -49,7 +49,7 @@ def measure(dev, side, fused, rounds, calls):
     T = rsocl.Rig.paper_array(4, (side, side), t_e=0.18e-3, t_r=35e-6).T
     x = cla.to_device(dev.queue, np.random.default_rng(0).random((T, side, side)).astype(np.float32))
     out = cla.empty_like(x)
-    variants = {k: TV(iterations=ITERATIONS, fused=k) for k in (0, *fused)}
+    variants = {k: TV(iterations=ITERATIONS, fused=k, one_launch=0) for k in (0, *fused)}
     plain = variants[0].denoise(x, 0.1).get()
     worst = {k: float(np.abs(reg.denoise(x, 0.1).get() - plain).max()) for k, reg in variants.items()}
     seconds = {k: [] for k in variants}
@@ -85,9 +85,9 @@ def measure_admm(dev, batch, fused, rounds):
     g = g[0] if batch == 1 else g
 
     def run(k):
-        return rsocl.reconstruct(
-            g, rig, iterations=ADMM_ITERATIONS, tune=False, device=dev, regularizer_options={"fused": k}
-        )
+        options = {"fused": k, "one_launch": 0}
+        kw = dict(tune=False, device=dev, regularizer_options=options)
+        return rsocl.reconstruct(g, rig, iterations=ADMM_ITERATIONS, **kw)
 
     results = {k: run(k).datacube for k in (0, *fused)}  # compiles every variant once
     worst = {k: float(np.abs(cube - results[0]).max()) for k, cube in results.items()}
