@@ -35,7 +35,7 @@ ONE_LAUNCH = -1
 
 #: ``one_launch`` of the device's choice on a device that is not a CPU: one launch per Chambolle
 #: iteration (``tv_step``), which halves the plain path's launches and the bytes it moves per iteration
-#: (counted: docs/launches.md). On a CPU device its recomputed neighbours cost more than the launch.
+#: (counted: docs/regularizer_defaults.md). On a CPU device its recomputed neighbours cost more than the launch.
 GPU_ONE_LAUNCH = 1
 
 
@@ -241,33 +241,34 @@ class TV(Regularizer):
         ``f = theta``. That is the last launch's work (the fused path's last launch, the plain path's last
         primal step); with one Chambolle iteration, one more pass."""
         weights = self.check_weights(weight, u.shape[0] if u.ndim == 4 else None)
-        for name, array in (("theta", theta), ("b", b), ("f", f)):
+        self._check_like(u, theta=theta, b=b, f=f)
+        return self._run(u, weights if u.ndim == 4 else float(weights[0]), theta, (b, f, dual))
+
+    def _check_like(self, u, **arrays):
+        """Raise unless every one of ``arrays`` has ``u``'s shape and dtype and ``theta`` (the output, when
+        given) is another buffer than ``u``."""
+        for name, array in arrays.items():
             if array.shape != u.shape or array.dtype != u.dtype:
                 raise ValueError(f"{self.name}: {name} must match u ({u.shape}, {u.dtype}), got {array.shape}")
-        return self._run(u, weights if u.ndim == 4 else float(weights[0]), theta, (b, f, dual))
+        if "theta" in arrays and arrays["theta"].base_data.int_ptr == u.base_data.int_ptr:
+            raise ValueError("out must be another buffer than x (every TV iteration reads x)")
 
     def bind(self, x, weight, out, dual=None):
         """:meth:`Regularizer.bind <rsocl.solver.regularizer.Regularizer.bind>`: on the plain path, the
         arguments checked and the launches bound once (:mod:`rsocl_plugins.tv_plain`); a call then only
         enqueues them."""
         weights, out = self._checked(x, weight, out)
-        if dual is not None:
-            for name, array in zip(("b", "f"), dual[:2]):
-                if array.shape != x.shape or array.dtype != x.dtype:
-                    raise ValueError(f"{self.name}: {name} must match u ({x.shape}, {x.dtype}), got {array.shape}")
+        self._check_like(x, theta=out, **({} if dual is None else {"b": dual[0], "f": dual[1]}))
         plain = self.iterations > 1 and (self.fused == 0 or self.fused_plan(x) is None)
         if not plain or (dual is None and not np.any(weights)):
             return super().bind(x, weight, out, dual)
-        if out.base_data.int_ptr == x.base_data.int_ptr:
-            raise ValueError("out must be another buffer than x (every TV iteration reads x)")
         sets = x.shape[0] if x.ndim == 4 else 1
         steps = self._steps(x.queue, np.broadcast_to(weights, (sets,)), x.dtype)
         prog, grids, arrays, weight, one = self._plain_parts(x, steps, out, dual)
         return tv_plain.Bound(x.queue, prog, grids, arrays, weight, self.iterations, one)
 
     def _run(self, x, weight, out, dual):
-        if out.base_data.int_ptr == x.base_data.int_ptr:
-            raise ValueError("out must be another buffer than x (every TV iteration reads x)")
+        self._check_like(x, theta=out)
         sets = x.shape[0] if x.ndim == 4 else 1
         steps = self._steps(x.queue, np.broadcast_to(weight, (sets,)), x.dtype)
         plan = self.fused_plan(x) if self.fused != 0 else None
