@@ -283,7 +283,7 @@ def test_tuned_sets_in_several_batches_share_the_first_batchs_choice(sets):
 
 
 def test_own_inverses_rule():
-    from rsocl.solver.admm import own_inverses
+    from rsocl.solver.inverse import own_inverses
 
     same = np.ones((3, 4, 2, 2), bool)
     differ = same.copy()
@@ -309,19 +309,19 @@ def test_the_memory_count_and_the_solver_agree_on_per_set_inverses(sets, monkeyp
     elif case == "saturation per set":
         kwargs["saturation"] = float(np.quantile(g[0], 0.9))  # set 1 (half the scale) loses fewer pixels
     counted, allocated = [], []
-    memory_bytes, inverses = problem.memory_bytes, admm.ADMM._inverses
+    memory_bytes, inverses = problem.memory_bytes, admm.inverse_blocks
 
     def count(*args, **kw):
         counted.append(kw["own_inverse"])
         return memory_bytes(*args, **kw)
 
-    def allocate(self, *args):
-        own, blocks = inverses(self, *args)
+    def allocate(*args, **kw):
+        own, blocks = inverses(*args, **kw)
         allocated.append(bool(own))
         return own, blocks
 
     monkeypatch.setattr(problem, "memory_bytes", count)
-    monkeypatch.setattr(admm.ADMM, "_inverses", allocate)
+    monkeypatch.setattr(admm, "inverse_blocks", allocate)
     rsocl.reconstruct(g, rig, iterations=2, projection=projection, tune=False, **kwargs)
     assert counted == allocated
     assert allocated == [case == "saturation per set" or (case == "eta per set" and projection == "exact")]

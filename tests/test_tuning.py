@@ -369,8 +369,8 @@ def test_the_memory_counts_bound_what_the_search_and_the_run_hold(
     mask they count always and a few small per-set values: neither an under-count (an allocation
     failure mid-run) nor a refusal of what fits."""
     from rsocl.solver import crossval
-    from rsocl.solver.admm import own_inverses
     from rsocl.solver.holdout import default_patterns
+    from rsocl.solver.inverse import own_inverses
     from rsocl.solver.memory import memory_bytes, search_peak
     from rsocl.solver.request import make_regularizer
 

@@ -268,6 +268,10 @@ class RollingShutterOperator:
 
     def gram(self) -> np.ndarray:
         """Per-pixel ``K×K`` blocks of ``H Hᵀ`` as a ``(m, n, K, K)`` NumPy array."""
+        return np.moveaxis(self.gram_device().get(), (0, 1), (2, 3))
+
+    def gram_device(self):
+        """Per-pixel ``K×K`` blocks of ``H Hᵀ`` as a ``(K, K, m, n)`` device array (enqueued)."""
         out = self.empty((self.K, self.K) + self.rig.shape)
         self.program.gram(
             self.queue,
@@ -280,7 +284,7 @@ class RollingShutterOperator:
             np.int32(self.L),
             np.int32(self.mn),
         )
-        return np.moveaxis(out.get(), (0, 1), (2, 3))
+        return out
 
     def __repr__(self):
         return f"RollingShutterOperator({self.rig!r}, device={self.device.name!r}, dtype={self.dtype.name!r})"

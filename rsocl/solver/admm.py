@@ -17,60 +17,14 @@ from rsocl.common import validation as check
 from rsocl.device.launch import batch_launches, element_launches
 from rsocl.device.program import c_type
 from rsocl.model.operator import RollingShutterOperator
+from rsocl.solver.inverse import inverse_blocks
 from rsocl.solver.residuals import DeviceResiduals
 
-__all__ = ["ADMM", "block_inverse", "own_inverses", "RESIDUAL_SLOTS"]
+__all__ = ["ADMM", "RESIDUAL_SLOTS"]
 
 #: Iterations whose residuals the device holds before the host reads them in one copy, in a run that
 #: does not look at each residual (:meth:`ADMM.residual_into`, :meth:`ADMM.read_residuals`).
 RESIDUAL_SLOTS = 8
-
-
-#: Eigenvalues of ``eta I + M`` below this fraction of the largest one (per pixel) are
-#: treated as zero: the pseudo-inverse of GAP, and no 1/eta blow-up for a tiny eta. Per storage
-#: dtype of the run: the data step divides the residual ``g - H v``, which carries that dtype's
-#: rounding, by these eigenvalues. In float32, directions down to 1e-8 of the largest made GAP
-#: diverge within 4 iterations even with the identity as denoiser (6 cameras at random angles,
-#: ``t_e`` = 0.85 ``t_r``, 30x5 pixels, where 16 of 879 eigenvalues lie between 1e-10 and 1e-7
-#: of their block's largest); from 1e-7 on it held, at 1e-6 with a margin of 10.
-RCOND = {"float64": 1e-10, "float32": 1e-6}
-
-
-def block_inverse(gram: np.ndarray, eta: float, rcond: float = RCOND["float64"]) -> np.ndarray:
-    """``(eta I + M)⁻¹`` for each symmetric per-pixel block of ``gram`` (``(..., K, K)``), in float64.
-
-    Computed from the eigen-decomposition ``M = V diag(λ) Vᵀ`` as
-    ``V diag(1/(eta + λ)) Vᵀ``, with the directions where ``eta + λ`` is below
-    ``rcond`` (:data:`RCOND` of the run's dtype) times the block's largest eigenvalue left out.
-    For ``eta = 0`` (GAP) this is the pseudo-inverse: pixels no camera samples and cameras with
-    identical windows give a zero or least-norm update, never a division by zero;
-    for a tiny ``eta`` the unsampled directions stay at zero instead of ``1/eta``.
-    """
-    gram = np.asarray(gram, dtype=np.float64)
-    lam, vec = np.linalg.eigh(gram)
-    lam = np.clip(lam, 0.0, None) + eta
-    top = lam.max(axis=-1, keepdims=True)
-    keep = lam > rcond * top
-    inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
-    return np.einsum("...ij,...j,...kj->...ik", vec, inv, vec)
-
-
-def own_inverses(projection: str, etas, valid, sets: int) -> bool:
-    """Whether every set of a batch of ``sets`` needs its own inverse blocks: the rule :class:`ADMM`
-    allocates by and the memory counts use.
-
-    One set of blocks serves the batch unless the valid snapshot pixels differ between sets
-    (``valid``: None for all pixels, or booleans of ``sets`` equal-sized sets), or, for the exact
-    projection, whose blocks hold ``eta``, ``etas`` (one value or one per set) differ.
-    """
-    if sets <= 1:
-        return False
-    if projection == "exact" and len(set(np.ravel(etas).tolist())) > 1:
-        return True
-    if valid is None:
-        return False
-    valid = np.asarray(valid, dtype=bool).reshape(sets, -1)
-    return bool((valid != valid[:1]).any())
 
 
 def _per_set(name, value, sets):
@@ -132,8 +86,7 @@ class ADMM:
         self.valid = None
         if valid is not None and not np.all(valid):
             self.valid = cla.to_device(queue, np.ascontiguousarray(valid, dtype=op.dtype), async_=True)
-        self.own_inverse, inverse = self._inverses(op, projection, valid, batch)
-        self.inverse = cla.to_device(queue, np.ascontiguousarray(inverse, dtype=op.dtype), async_=True)
+        self.own_inverse, self.inverse = inverse_blocks(op, projection, self.etas, valid, self.sets, self.valid)
         self.eta_device = cla.to_device(queue, self.etas.astype(op.dtype), async_=True)
         self.dual_on = cla.to_device(queue, (self.etas > 0).astype(np.int32), async_=True)
         self.theta = cla.zeros(queue, shape, op.dtype) if x0 is None else x0.copy()
@@ -202,35 +155,6 @@ class ADMM:
     def weight(self):
         """The denoiser's weight ``lam / eta`` (``lam`` where ``eta = 0``): a float, or one per set."""
         return self.weights if self.batched else float(self.weights[0])
-
-    def _inverses(self, op, projection, valid, batch):
-        """Whether every set has its own inverse blocks, and the blocks (``(K, K, m, n)`` or ``(K, m, n)``
-        per set): one set of blocks serves the batch unless ``eta`` or the valid pixels differ."""
-        sets = self.sets
-        valid = (
-            None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool).reshape((-1,) + op.range_shape)
-        )
-        own = own_inverses(projection, self.etas, valid, sets)
-        count = sets if own else 1
-        if projection == "paper":
-            psi = op.psi
-            blocks = [
-                psi if valid is None else np.where(valid[i if own else 0], psi, np.inf)  # r/(eta+inf) = 0
-                for i in range(count)
-            ]
-        else:
-            gram = op.gram()
-            rcond = RCOND[op.dtype.name]
-            blocks = []
-            for i in range(count):
-                if valid is None:
-                    inverse = block_inverse(gram, self.etas[i], rcond)
-                else:
-                    keep = np.moveaxis(valid[i if own else 0].astype(np.float64), 0, -1)  # (m, n, K)
-                    mask = keep[..., :, None] * keep[..., None, :]
-                    inverse = block_inverse(gram * mask, self.etas[i], rcond) * mask
-                blocks.append(np.moveaxis(inverse, (2, 3), (0, 1)))
-        return int(own), np.stack(blocks) if own else blocks[0]
 
     def restart(self, regularizer, lam, x0):
         """Start over from ``theta = x0`` (a device array, copied) with another regularizer and

@@ -20,8 +20,8 @@ from rsocl.common.hints import ArrayLike
 from rsocl.common.memory import check_host_memory
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
-from rsocl.solver.admm import own_inverses
 from rsocl.solver.held import HeldSumSquares
+from rsocl.solver.inverse import own_inverses
 from rsocl.solver.memory import memory_bytes
 
 if TYPE_CHECKING:

@@ -18,8 +18,8 @@ from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike, Callback, DTypeLike, Options, PerSet
 from rsocl.device.context import Device, get_device
 from rsocl.model.rig import Rig
-from rsocl.solver.admm import own_inverses
 from rsocl.solver.crossval import Tuning
+from rsocl.solver.inverse import own_inverses
 from rsocl.solver.ladder import DEFAULT_QUALITY
 from rsocl.solver.memory import batch_memory
 from rsocl.solver.pipeline import prepare, tune_and_run
