@@ -226,7 +226,7 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     grids = tv_launches(tv_prog, device, T, m, m)
     (p, p2), xnext = tv._buffers(s.u, 2)
     steps = tv._steps(q, [0.5], s.u.dtype)
-    wt, sizes = np.float32(3.0), (np.int32(T), np.int32(m), np.int32(m), np.int32(1))
+    sizes = (np.int32(T), np.int32(m), np.int32(m), np.int32(1))
 
     def project(difference):
         prog.admm_project(
@@ -253,7 +253,7 @@ def passes(m: int, device, rounds: int, reps: int = 100):
 
     def primal_then_dual():
         for gs, ls, off in grids:
-            tv_prog.tv_primal(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, global_offset=off)
+            tv_prog.tv_primal(q, gs, ls, s.u.data, p.data, s.theta.data, steps.data, *sizes, global_offset=off)
         for gs, ls, off in s.voxels:
             prog.admm_dual(
                 q,
@@ -277,7 +277,7 @@ def passes(m: int, device, rounds: int, reps: int = 100):
                 s.u.data,
                 p.data,
                 s.theta.data,
-                wt,
+                steps.data,
                 *sizes,
                 s.b.data,
                 s.f.data,
@@ -287,13 +287,13 @@ def passes(m: int, device, rounds: int, reps: int = 100):
 
     def primal_dual():
         for gs, ls, off in grids:
-            tv_prog.tv_primal(q, gs, ls, s.u.data, p.data, s.theta.data, wt, *sizes, global_offset=off)
+            tv_prog.tv_primal(q, gs, ls, s.u.data, p.data, s.theta.data, steps.data, *sizes, global_offset=off)
         for gs, ls, off in grids:
-            tv_prog.tv_dual(q, gs, ls, s.theta.data, p.data, xnext.data, steps.data, wt, *sizes, global_offset=off)
+            tv_prog.tv_dual(q, gs, ls, s.theta.data, p.data, xnext.data, steps.data, *sizes, global_offset=off)
 
     def one_step():
         for gs, ls, off in grids:
-            tv_prog.tv_step(q, gs, ls, s.u.data, p.data, p2.data, xnext.data, steps.data, wt, *sizes, global_offset=off)
+            tv_prog.tv_step(q, gs, ls, s.u.data, p.data, p2.data, xnext.data, steps.data, *sizes, global_offset=off)
 
     def forward_then_sum():
         op.forward_into(s.theta, s.hx)

@@ -189,7 +189,7 @@ def kernel_rows(dev, rig):
     tv = dev.program(["tv.cl"], REAL="float", TEMPORAL=1)
     voxels = tv_plugin.launches(tv, dev, T, m, n)  # as the TV plugin launches them
     sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(1))
-    steps = cla.to_device(q, np.array([1 / 6, 0.5], np.float32))  # tau and tau / weight of the one set
+    steps = cla.to_device(q, np.array([1 / 6, 0.5, 1.0], np.float32))  # tau, tau / weight, temporal weight
     # sampled voxels per channel and pixel: the window loop reads only those
     first, last = rig.sampled_window()
     samples = int(np.sum(last - first + 1))
@@ -209,7 +209,7 @@ def kernel_rows(dev, rig):
             (1 + 3 + 1) * N * f32,
             None,
             lambda: [
-                tv.tv_primal(q, gs, ls, x.data, p.data, y.data, np.float32(1), *sizes, global_offset=off)
+                tv.tv_primal(q, gs, ls, x.data, p.data, y.data, steps.data, *sizes, global_offset=off)
                 for gs, ls, off in voxels
             ],
         ),
@@ -218,7 +218,7 @@ def kernel_rows(dev, rig):
             (1 + 3 + 3) * N * f32 + n * f32,
             None,
             lambda: [
-                tv.tv_dual(q, gs, ls, y.data, p.data, xnext.data, steps.data, np.float32(1), *sizes, global_offset=off)
+                tv.tv_dual(q, gs, ls, y.data, p.data, xnext.data, steps.data, *sizes, global_offset=off)
                 for gs, ls, off in voxels
             ],
         ),

@@ -88,7 +88,7 @@ class Case:
         self.d_out = cla.empty(self.queue, self.img.shape, np.float32)
         self.xnext = edge_weights(n, np.float32)
         self.d_xnext = cla.to_device(self.queue, self.xnext)
-        self.d_steps = cla.to_device(self.queue, np.array([STEP, STEP_OVER_WEIGHT], np.float32))
+        self.d_steps = cla.to_device(self.queue, np.array([STEP, STEP_OVER_WEIGHT, WEIGHT], np.float32))
         self.sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(1))
 
     def device_primal(self):
@@ -100,7 +100,7 @@ class Case:
                 self.d_img.data,
                 self.d_p.data,
                 self.d_out.data,
-                np.float32(WEIGHT),
+                self.d_steps.data,
                 *self.sizes,
                 global_offset=offset,
             )
@@ -115,7 +115,6 @@ class Case:
                 self.d_p.data,
                 self.d_xnext.data,
                 self.d_steps.data,
-                np.float32(WEIGHT),
                 *self.sizes,
                 global_offset=offset,
             )

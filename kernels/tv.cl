@@ -2,9 +2,10 @@
  * skimage.restoration.denoise_tv_chambolle), 2-D per sub-frame or 3-D with a
  * temporal weight. Layout x[B][T][m][n]: a batch of B sets end to end (B = 1: one set), each
  * denoised on its own (no temporal difference across a set boundary), with its own step
- * lengths steps[2 set] = tau, steps[2 set + 1] = tau / weight (both 0 for weight 0: p stays 0,
- * the output is the input). The dual p holds NP = 2 (+1 if TEMPORAL) planes of N = B*T*m*n
- * values: p[0] along y, p[1] along x, p[2] along t.
+ * lengths steps[3 set] = tau, steps[3 set + 1] = tau / weight (both 0 for weight 0: p stays 0,
+ * the output is the input) and its own temporal weight wt = steps[3 set + 2] (sets of one batch
+ * may differ). The dual p holds NP = 2 (+1 if TEMPORAL) planes of N = B*T*m*n values: p[0] along
+ * y, p[1] along x, p[2] along t.
  * The host defines TEMPORAL 0|1. One work item per voxel, two kernels per
  * iteration (primal then dual), each reading its neighbours once; the first iteration,
  * from p = 0, is one kernel (tv_dual_first). Or one kernel per iteration (tv_step) from one
@@ -45,26 +46,27 @@ inline real primal_at(__global const real *img, __global const real *p, real wt,
 
 /* out = img + d(p).  global size (n, m, B*T) */
 __kernel void tv_primal(__global const real *img, __global const real *p, __global real *out,
-                        real wt, int T, int m, int n, int sets)
+                        __global const real *steps, int T, int m, int n, int sets)
 {
     int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
+    int set = st / T;
     size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
     size_t i = ((size_t)st * m + y) * n + x;
-    out[i] = primal_at(img, p, wt, N, mn, (size_t)n, i, y, st - st / T * T);
+    out[i] = primal_at(img, p, steps[3 * set + 2], N, mn, (size_t)n, i, y, st - set * T);
 }
 
 /* tv_primal, and then the ADMM's next dual update from the denoiser's input img = u and output
  * theta = out: b = theta - u and f = theta + b in the sets where dual[set], else f = theta (the last
  * primal step of a call made inside the ADMM).  global size (n, m, B*T) */
 __kernel void tv_primal_update(__global const real *img, __global const real *p, __global real *out,
-                               real wt, int T, int m, int n, int sets,
+                               __global const real *steps, int T, int m, int n, int sets,
                                __global real *bvar, __global real *fvar, __global const int *dual)
 {
     int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
     int set = st / T, s = st - set * T;
     size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
     size_t i = ((size_t)st * m + y) * n + x;
-    real u = img[i], th = primal_at(img, p, wt, N, mn, (size_t)n, i, y, s);
+    real u = img[i], th = primal_at(img, p, steps[3 * set + 2], N, mn, (size_t)n, i, y, s);
     out[i] = th;
     if (dual[set]) {                        /* uniform in a work group (one sub-frame of one set) */
         real bn = th - u;
@@ -79,13 +81,13 @@ __kernel void tv_primal_update(__global const real *img, __global const real *p,
  * from_zero, p is taken as 0 and not read (the first iteration, where out = img).
  * At the far edges the clamped neighbour is the voxel itself: the difference is 0. */
 inline void dual_update(__global const real *out, __global real *p, __global const real *xnext,
-                        __global const real *steps, real wt, int T, int m, int n, int sets, int from_zero)
+                        __global const real *steps, int T, int m, int n, int sets, int from_zero)
 {
     int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
     int set = st / T, s = st - set * T;
     size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n;
     size_t i = ((size_t)st * m + y) * n + x;
-    real tau = steps[2 * set], tau_over_weight = steps[2 * set + 1];
+    real tau = steps[3 * set], tau_over_weight = steps[3 * set + 1];
     real o = out[i];
     real gy = out[y < m - 1 ? i + n : i] - o;
     /* out[i + 1] is in the buffer except for the last voxel: read it plainly (a vector
@@ -94,7 +96,7 @@ inline void dual_update(__global const real *out, __global real *p, __global con
     real gx = (right - o) * xnext[x];            /* exactly 0 at x = n - 1 */
     real norm2 = gy * gy + gx * gx;
 #if TEMPORAL
-    real gt = wt * (out[s < T - 1 ? i + mn : i] - o);
+    real gt = steps[3 * set + 2] * (out[s < T - 1 ? i + mn : i] - o);
     norm2 += gt * gt;
 #endif
     real scale = (real)1 / ((real)1 + vector_friendly_sqrt(norm2) * tau_over_weight);
@@ -107,17 +109,17 @@ inline void dual_update(__global const real *out, __global real *p, __global con
 
 /* The dual step, in place.  global size (n, m, B*T) */
 __kernel void tv_dual(__global const real *out, __global real *p, __global const real *xnext,
-                      __global const real *steps, real wt, int T, int m, int n, int sets)
+                      __global const real *steps, int T, int m, int n, int sets)
 {
-    dual_update(out, p, xnext, steps, wt, T, m, n, sets, 0);
+    dual_update(out, p, xnext, steps, T, m, n, sets, 0);
 }
 
 /* The first dual step from p = 0, where out = img + d(0) = img: it reads img and only
  * writes p (no fill of p, no first primal step).  global size (n, m, B*T) */
 __kernel void tv_dual_first(__global const real *img, __global real *p, __global const real *xnext,
-                            __global const real *steps, real wt, int T, int m, int n, int sets)
+                            __global const real *steps, int T, int m, int n, int sets)
 {
-    dual_update(img, p, xnext, steps, wt, T, m, n, sets, 1);
+    dual_update(img, p, xnext, steps, T, m, n, sets, 1);
 }
 
 /* One whole Chambolle iteration: the primal out = img + d(p_in) at this voxel and at its next ones
@@ -128,14 +130,13 @@ __kernel void tv_dual_first(__global const real *img, __global real *p, __global
  * read in the next row and its difference multiplied by xnext, as tv_dual does, and the primal at
  * i + 1 reads p[1] at i, which is 0 at x = n - 1 in both copies.  global size (n, m, B*T) */
 __kernel void tv_step(__global const real *img, __global const real *p_in, __global real *p_out,
-                      __global const real *xnext, __global const real *steps, real wt, int T, int m, int n,
-                      int sets)
+                      __global const real *xnext, __global const real *steps, int T, int m, int n, int sets)
 {
     int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
     int set = st / T, s = st - set * T;
     size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n, nn = (size_t)n;
     size_t i = ((size_t)st * m + y) * n + x;
-    real tau = steps[2 * set], tau_over_weight = steps[2 * set + 1];
+    real tau = steps[3 * set], tau_over_weight = steps[3 * set + 1], wt = steps[3 * set + 2];
     real o = primal_at(img, p_in, wt, N, mn, nn, i, y, s);
     int yn = y < m - 1 ? y + 1 : y;                             /* uniform in a row */
     real gy = primal_at(img, p_in, wt, N, mn, nn, i + (size_t)(yn - y) * nn, yn, s) - o;

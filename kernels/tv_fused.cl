@@ -9,8 +9,9 @@
  * so the host gives the region `updates` layers of halo above and `updates` (+1 for the final
  * primal, -1 when p starts at 0) below, except along the domain's edges, where the algorithm's own
  * boundary rules apply. Layouts as tv.cl: x[B][T][m][n] (B sets end to end, no temporal
- * difference across a set boundary), p: NP planes of N = B*T*m*n values, steps[2 set] = tau and
- * steps[2 set + 1] = tau / weight. The host defines TEMPORAL 0|1 (NP = 3|2). Needs common.cl.
+ * difference across a set boundary), p: NP planes of N = B*T*m*n values, steps[3 set] = tau,
+ * steps[3 set + 1] = tau / weight and steps[3 set + 2] = the set's temporal weight. The host
+ * defines TEMPORAL 0|1 (NP = 3|2). Needs common.cl.
  *
  * Grid: local size (LX, LY, 1); group (gx, gy, gz) takes the tile of AX x AY x AT voxels at
  * x = gx*AX, y = gy*AY, t = (gz % tiles_t)*AT of set gz / tiles_t. `local` holds 5 arrays (img,
@@ -193,7 +194,7 @@ inline real fused_primal(__local const real *IMG, __local const real *P0, __loca
 
 __kernel void tv_fused(__global const real *img, __global const real *pin, __global real *pout,
                        __global real *out, __global real *bvar, __global real *fvar,
-                       __global const int *dual, __global const real *steps, real wt,
+                       __global const int *dual, __global const real *steps,
                        int T, int m, int n, int sets, int tiles_t, int AX, int AY, int AT,
                        int halo_lo, int halo_hi, int halo_t_lo, int halo_t_hi,
                        int updates, int mode, int cap, __local real *local_mem)
@@ -202,7 +203,7 @@ __kernel void tv_fused(__global const real *img, __global const real *pin, __glo
     const int LX = get_local_size(0), LY = get_local_size(1);
     const int gz = get_group_id(2), set = gz / tiles_t, tz = gz - set * tiles_t;
     const size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n, base = (size_t)set * T * mn;
-    const real tau = steps[2 * set], tau_over_weight = steps[2 * set + 1];
+    const real tau = steps[3 * set], tau_over_weight = steps[3 * set + 1], wt = steps[3 * set + 2];
 
     box_t in;                                    /* the tile's interior */
     in.x0 = get_group_id(0) * AX; in.x1 = min(in.x0 + AX, n);

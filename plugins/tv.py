@@ -77,7 +77,8 @@ class TV(Regularizer):
         Chambolle iterations per call, 1..100000 (default 10).
     temporal_weight : float
         Weight of the temporal difference, 0..1000: ``1`` is scikit-image's 3-D TV, ``0`` 2-D TV on
-        each sub-frame (default 3).
+        each sub-frame (default 3). The sets of one batch may each have their own (all above 0, or all 0):
+        :meth:`for_sets <rsocl.solver.regularizer.Regularizer.for_sets>`, :meth:`temporal_weights`.
     step : float
         Dual step ``tau`` as a fraction of scikit-image's ``1 / (2 (2 + w²))`` for temporal weight
         ``w``, 0.01..1 (default 0.9; ``1`` is scikit-image's step, at the edge of stability).
@@ -111,6 +112,7 @@ class TV(Regularizer):
     name = "tv"
     batched = True
     tunable = {"temporal_weight": (1.0, 3.0, 10.0, 30.0)}
+    per_set_options = ("temporal_weight",)
     #: One snapshot per pixel (one camera): temporal weight 10, not searched (docs/regularizer_defaults.md).
     one_snapshot = {"temporal_weight": 10.0}
     options = {
@@ -160,20 +162,44 @@ class TV(Regularizer):
         copies = 2 if fused > 0 or one > 0 else 1
         return (copies * self.planes * int(np.prod(shape)) + int(shape[-1])) * np.dtype(dtype).itemsize
 
+    def temporal_weights(self, sets: int) -> np.ndarray:
+        """The temporal weight of each of ``sets`` sets (float64; 0 for 2-D TV): the option's, or one per
+        set for an instance of :meth:`for_sets`.
+
+        Raises ValueError when the instance holds weights for another number of sets.
+        """
+        own = self.__dict__.get("_set_weights")
+        if own is None:
+            return np.full(sets, float(self.temporal_weight) if self.planes == 3 else 0.0)
+        if len(own) != sets:
+            raise ValueError(f"{self.name}: this instance holds temporal weights for {len(own)} sets, got {sets}")
+        return np.array(own, dtype=np.float64)
+
+    @classmethod
+    def _for_sets(cls, instances):
+        """Per-set temporal weights (:meth:`Regularizer.for_sets`), all 3-D or all 2-D."""
+        weights = [float(r.temporal_weight) for r in instances]
+        if len({w > 0 for w in weights}) > 1:
+            return None  # 2-D and 3-D sets have different kernels
+        combined = cls(**instances[0].values)
+        combined.__dict__["_set_weights"] = tuple(weights)
+        return combined
+
     def _steps(self, queue, weights, dtype):
-        """The per-set ``(tau, tau / weight)`` of ``tv.cl`` on the device (``(0, 0)`` for weight 0)."""
+        """The per-set ``(tau, tau / weight, temporal weight)`` of ``tv.cl`` on the device (``tau`` and
+        ``tau / weight`` 0 for weight 0)."""
         import pyopencl.array as cla
 
-        wt = float(self.temporal_weight) if self.temporal_weight > 0 else 0.0
-        tau = float(self.step) / (2.0 * (2.0 + wt * wt))
+        w = np.asarray(weights, dtype=np.float64)
+        wt = self.temporal_weights(len(w))
         cache = self.__dict__.setdefault("_step_cache", {})
-        key = (np.asarray(weights, np.float64).tobytes(), np.dtype(dtype).str, queue.int_ptr)
+        key = (w.tobytes(), np.dtype(dtype).str, queue.int_ptr)
         if key not in cache:
             if len(cache) > 8:
                 cache.clear()
-            w = np.asarray(weights, dtype=np.float64)
             on = w > 0
-            steps = np.stack([np.where(on, tau, 0.0), np.where(on, tau / np.where(on, w, 1.0), 0.0)], axis=1)
+            tau = float(self.step) / (2.0 * (2.0 + wt * wt))
+            steps = np.stack([np.where(on, tau, 0.0), np.where(on, tau / np.where(on, w, 1.0), 0.0), wt], axis=1)
             cache[key] = cla.to_device(queue, steps.astype(dtype).ravel(), async_=True)
         return cache[key]
 
@@ -264,8 +290,8 @@ class TV(Regularizer):
             return super().bind(x, weight, out, dual)
         sets = x.shape[0] if x.ndim == 4 else 1
         steps = self._steps(x.queue, np.broadcast_to(weights, (sets,)), x.dtype)
-        prog, grids, arrays, weight, one = self._plain_parts(x, steps, out, dual)
-        return tv_plain.Bound(x.queue, prog, grids, arrays, weight, self.iterations, one)
+        prog, grids, arrays, one = self._plain_parts(x, steps, out, dual)
+        return tv_plain.Bound(x.queue, prog, grids, arrays, self.iterations, one)
 
     def _run(self, x, weight, out, dual):
         self._check_like(x, theta=out)
@@ -273,7 +299,11 @@ class TV(Regularizer):
         steps = self._steps(x.queue, np.broadcast_to(weight, (sets,)), x.dtype)
         plan = self.fused_plan(x) if self.fused != 0 else None
         if plan is not None:
-            return self._run_fused(x, steps, out, dual, plan)
+            buffers, _ = self._buffers(x, max(1, plan.p_buffers()))
+            adm = dual if dual is not None else (out, out, self._no_dual(x.queue))
+            return tv_fused.enqueue(
+                self._program(x, "tv_fused.cl"), plan, x, steps, out, buffers, adm, dual is not None
+            )
         self._run_plain(x, steps, out, dual)
         if dual is not None and self.iterations == 1:  # no primal step to take it
             b, f, on = dual
@@ -301,7 +331,7 @@ class TV(Regularizer):
         return bool(device_one_launch(device) if self.one_launch < 0 else self.one_launch)
 
     def _plain_parts(self, x, steps, out, dual):
-        """``(prog, grids, arrays, weight, one_launch)``: the arguments of
+        """``(prog, grids, arrays, one_launch)``: the arguments of
         :func:`rsocl_plugins.tv_plain.sequence` (and :class:`~rsocl_plugins.tv_plain.Bound`) but ``iterations``."""
         dev = device_for_queue(x.queue)
         one = self.one_launch_on(dev)
@@ -313,8 +343,7 @@ class TV(Regularizer):
             grids[key] = launches(prog, dev, (x.shape[0] if x.ndim == 4 else 1) * x.shape[-3], *x.shape[-2:])
         p, xnext = self._buffers(x, 2 if one else 1)
         arrays = tv_plain.Arrays(x, out, steps, tuple(p), xnext, None if dual is None else tuple(dual))
-        weight = float(self.temporal_weight) if self.planes == 3 else 0.0
-        return prog, grids[key], arrays, weight, one
+        return prog, grids[key], arrays, one
 
     def _run_plain(self, x, steps, out, dual=None):
         import pyopencl as cl
@@ -322,58 +351,8 @@ class TV(Regularizer):
         if self.iterations == 1:  # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
-        prog, grids, arrays, weight, one = self._plain_parts(x, steps, out, dual)
-        tv_plain.enqueue(x.queue, tv_plain.sequence(prog, grids, arrays, weight, self.iterations, one))
-        return out
-
-    def _run_fused(self, x, steps, out, dual, plan):
-        import pyopencl as cl
-
-        sets, T, m, n = plan.shape
-        prog = self._program(x, "tv_fused.cl")
-        buffers, _ = self._buffers(x, max(1, plan.p_buffers()))
-        b, f, on = dual if dual is not None else (out, out, self._no_dual(x.queue))
-        local = cl.LocalMemory(plan.local_values() * x.dtype.itemsize)
-        gsize, lsize = plan.grid()
-        wt = x.dtype.type(self.temporal_weight if self.planes == 3 else 0.0)
-        for i, launch in enumerate(plan.launches):
-            (below, above), (t_below, t_above) = launch.halos(plan.temporal)
-            p_in, p_out = buffers[(i - 1) % len(buffers)], buffers[i % len(buffers)]
-            mode = launch.mode | (4 if dual is not None and launch.final else 0)
-            kernel = prog.instance("tv_fused", i)
-            kernel(
-                x.queue,
-                gsize,
-                lsize,
-                x.data,
-                p_in.data,
-                p_out.data,
-                out.data,
-                b.data,
-                f.data,
-                on.data,
-                steps.data,
-                wt,
-                *(
-                    np.int32(v)
-                    for v in (
-                        T,
-                        m,
-                        n,
-                        sets,
-                        plan.tiles_t(),
-                        *plan.tile,
-                        below,
-                        above,
-                        t_below,
-                        t_above,
-                        launch.updates,
-                        mode,
-                        plan.cap,
-                    )
-                ),
-                local,
-            )
+        prog, grids, arrays, one = self._plain_parts(x, steps, out, dual)
+        tv_plain.enqueue(x.queue, tv_plain.sequence(prog, grids, arrays, self.iterations, one))
         return out
 
     def _no_dual(self, queue):

@@ -17,7 +17,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["Launch", "FusedPlan", "plan", "schedule", "plain_values"]
+import numpy as np
+
+__all__ = ["Launch", "FusedPlan", "plan", "schedule", "plain_values", "enqueue"]
 
 #: A plan is kept only when it moves at most this share of the plain path's bytes.
 KEEP_BELOW = 0.9
@@ -191,3 +193,37 @@ def _tile(T, m, n, below, above, t_below, t_above, cap_max):
                 if best_key is None or key < best_key:
                     best, best_key = ((ax, ay, at), rx * ry * rt), key
     return best
+
+
+def enqueue(prog, plan: FusedPlan, x, steps, out, buffers, dual, update: bool):
+    """Enqueue the launches of ``plan`` (``tv_fused`` of ``prog``): ``out = denoise(x)`` with the per-set
+    ``steps`` of ``tv.cl``, on the dual ``buffers`` (``plan.p_buffers()`` of them, at least one), and with
+    ``update`` the ADMM's dual update of ``dual = (b, f, on)`` in the last launch (without it, any three
+    arrays of the right types: they are not written). Returns ``out``."""
+    import pyopencl as cl
+
+    sets, T, m, n = plan.shape
+    b, f, on = dual
+    local = cl.LocalMemory(plan.local_values() * x.dtype.itemsize)
+    gsize, lsize = plan.grid()
+    for i, launch in enumerate(plan.launches):
+        (below, above), (t_below, t_above) = launch.halos(plan.temporal)
+        p_in, p_out = buffers[(i - 1) % len(buffers)], buffers[i % len(buffers)]
+        mode = launch.mode | (4 if update and launch.final else 0)
+        sizes = (T, m, n, sets, plan.tiles_t(), *plan.tile, below, above, t_below, t_above, launch.updates, mode)
+        prog.instance("tv_fused", i)(
+            x.queue,
+            gsize,
+            lsize,
+            x.data,
+            p_in.data,
+            p_out.data,
+            out.data,
+            b.data,
+            f.data,
+            on.data,
+            steps.data,
+            *(np.int32(v) for v in (*sizes, plan.cap)),
+            local,
+        )
+    return out

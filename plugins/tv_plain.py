@@ -34,8 +34,9 @@ __all__ = ["Arrays", "Bound", "sequence", "enqueue"]
 @dataclass(frozen=True)
 class Arrays:
     """The device arrays a plain TV run reads and writes: input ``x`` and output ``out`` (``(T, m, n)``
-    or ``(B, T, m, n)``), the per-set ``steps`` of ``tv.cl``, the dual copies ``p`` (one, or two for
-    ``one_launch``), ``xnext``, and the ADMM's ``(b, f, dual)`` when its dual update is folded in."""
+    or ``(B, T, m, n)``), the per-set ``steps`` of ``tv.cl`` (step lengths and temporal weight), the
+    dual copies ``p`` (one, or two for ``one_launch``), ``xnext``, and the ADMM's ``(b, f, dual)`` when
+    its dual update is folded in."""
 
     x: cla.Array
     out: cla.Array
@@ -45,9 +46,9 @@ class Arrays:
     dual: tuple | None = None
 
 
-def sequence(prog, grids, arrays: Arrays, weight: float, iterations: int, one_launch: bool, owner=None) -> list:
+def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: bool, owner=None) -> list:
     """The launches ``(kernel, global, local, offset)`` of one plain TV run of ``iterations`` (>= 2)
-    Chambolle iterations on ``arrays``, with temporal weight ``weight`` (0: 2-D), every argument set.
+    Chambolle iterations on ``arrays``, every argument set.
 
     With an ``owner`` the kernel objects are its own while it lives (``prog.lease``): enqueuing the list
     again runs the denoiser again on the arrays' current contents (:class:`Bound`). Without one they are
@@ -61,7 +62,6 @@ def sequence(prog, grids, arrays: Arrays, weight: float, iterations: int, one_la
     x, out = arrays.x, arrays.out
     sets = x.shape[0] if x.ndim == 4 else 1
     T, m, n = x.shape[-3:]
-    wt = x.dtype.type(weight)
     sizes = (np.int32(T), np.int32(m), np.int32(n), np.int32(sets))
     made = itertools.count()
 
@@ -72,25 +72,25 @@ def sequence(prog, grids, arrays: Arrays, weight: float, iterations: int, one_la
 
     p0 = arrays.p[0]
     steps, xnext = arrays.steps.data, arrays.xnext.data
-    launches = bound("tv_dual_first", x.data, p0.data, xnext, steps, wt, *sizes)
+    launches = bound("tv_dual_first", x.data, p0.data, xnext, steps, *sizes)
     if one_launch:
         pa, pb = arrays.p
-        forth = bound("tv_step", x.data, pa.data, pb.data, xnext, steps, wt, *sizes)
-        back = bound("tv_step", x.data, pb.data, pa.data, xnext, steps, wt, *sizes)
+        forth = bound("tv_step", x.data, pa.data, pb.data, xnext, steps, *sizes)
+        back = bound("tv_step", x.data, pb.data, pa.data, xnext, steps, *sizes)
         for k in range(iterations - 2):
             launches += back if k % 2 else forth
         last = arrays.p[(iterations - 2) % 2]
     else:
-        primal = bound("tv_primal", x.data, p0.data, out.data, wt, *sizes)
-        dual = bound("tv_dual", out.data, p0.data, xnext, steps, wt, *sizes)
+        primal = bound("tv_primal", x.data, p0.data, out.data, steps, *sizes)
+        dual = bound("tv_dual", out.data, p0.data, xnext, steps, *sizes)
         for _ in range(iterations - 2):
             launches += primal + dual
         last = p0
     if arrays.dual is None:
-        launches += bound("tv_primal", x.data, last.data, out.data, wt, *sizes)
+        launches += bound("tv_primal", x.data, last.data, out.data, steps, *sizes)
     else:  # the last primal step makes the ADMM's dual update
         b, f, on = arrays.dual
-        launches += bound("tv_primal_update", x.data, last.data, out.data, wt, *sizes, b.data, f.data, on.data)
+        launches += bound("tv_primal_update", x.data, last.data, out.data, steps, *sizes, b.data, f.data, on.data)
     return launches
 
 
@@ -105,9 +105,9 @@ class Bound:
     enqueues the launches, made with kernel objects of its own, on ``queue``. It holds the arrays, so
     none of them, the dual copies included, is released while it lives."""
 
-    def __init__(self, queue, prog, grids, arrays: Arrays, weight: float, iterations: int, one_launch: bool):
+    def __init__(self, queue, prog, grids, arrays: Arrays, iterations: int, one_launch: bool):
         self.queue, self.arrays = queue, arrays
-        self.launches = sequence(prog, grids, arrays, weight, iterations, one_launch, owner=self)
+        self.launches = sequence(prog, grids, arrays, iterations, one_launch, owner=self)
 
     def __call__(self) -> None:
         enqueue(self.queue, self.launches)

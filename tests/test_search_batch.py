@@ -1,7 +1,10 @@
-"""The parameter search with its folds run as one batch (rsocl.solver.search_batch), forced on the
-CPU device here: the same scores to rounding and the same choices as the folds run one after the other."""
+"""The parameter search with its folds and candidates run as batches (rsocl.solver.search_batch), forced
+on the CPU device here: the same scores to rounding and the same choices as one candidate and one fold
+after the other; and TV's per-set temporal weights that let candidates share a batch."""
 
 import numpy as np
+import pyopencl.array as cla
+import pytest
 
 import rsocl
 from rsocl.device.context import Device
@@ -52,24 +55,78 @@ def test_batched_folds_score_and_choose_as_the_folds_one_after_the_other(dtype):
     np.testing.assert_allclose(batched.blend, one_by_one.blend, rtol=tol, atol=tol)
 
 
-def test_the_self_tuned_run_batches_its_search_only_where_batches_pay(device, monkeypatch):
+def _spy_batches(monkeypatch):
+    """The candidates of every batch BatchedFolds runs, as lists of lam values."""
     import rsocl.solver.search_batch as search_batch
 
+    batches = []
+    real = search_batch.BatchedFolds._run
+
+    def spy(self, op, g_device, folds, reg, lams, *args):
+        batches.append(list(lams))
+        return real(self, op, g_device, folds, reg, lams, *args)
+
+    monkeypatch.setattr(search_batch.BatchedFolds, "_run", spy)
+    return batches
+
+
+def test_candidates_of_a_round_share_a_batch_and_choose_as_one_at_a_time(monkeypatch):
+    batches = _spy_batches(monkeypatch)
+    together = _search(BatchedFolds(), "float32")
+    rounds = list(batches)
+    batches.clear()
+    alone = _search(BatchedFolds(capacity=1), "float32")
+    assert all(len(b) == 1 for b in batches) and len(batches) > len(rounds)
+    # the coarse temporal weights in one batch, then the midpoints with the lam round of every weight
+    # the midpoints may leave chosen in another: the lam round finds its scores ready
+    assert len(rounds) == 2 and len(rounds[0]) == 3 and 3 <= len(rounds[1]) <= 8
+    assert together.chosen == alone.chosen
+    keys = [{k: v for k, v in c.items() if k not in ("score", "blend")} for c in alone.candidates]
+    assert [{k: v for k, v in c.items() if k not in ("score", "blend")} for c in together.candidates] == keys
+    np.testing.assert_allclose(
+        [c["score"] for c in together.candidates], [c["score"] for c in alone.candidates], rtol=1e-5
+    )
+
+
+def test_the_self_tuned_run_batches_its_search_only_where_batches_pay(device, monkeypatch):
+    batches = _spy_batches(monkeypatch)
     assert not batches_pay(device)  # the CPU device: folds one after the other
-    calls = []
-    real = search_batch.BatchedFolds.__call__
-
-    def spy(self, *args, **kwargs):
-        calls.append(1)
-        return real(self, *args, **kwargs)
-
-    monkeypatch.setattr(search_batch.BatchedFolds, "__call__", spy)
     rig = rsocl.Rig.paper_array(4, SHAPE, t_e=0.18e-3, t_r=35e-6)
     g = ref.forward(rig, builtin_scene(rig.shape, rig.T))
     cpu = rsocl.reconstruct(g, rig, iterations=20, device=device)
-    assert not calls
+    assert not batches
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
     gpu = rsocl.reconstruct(g, rig, iterations=20, device=device)
-    assert calls
+    assert batches and max(len(b) for b in batches) > 1
     assert gpu.params["tuning"]["chosen"] == cpu.params["tuning"]["chosen"]
     assert gpu.params["tuning"]["folds"] == cpu.params["tuning"]["folds"]
+
+
+@pytest.mark.parametrize("path", [dict(fused=0, one_launch=0), dict(fused=0, one_launch=1), dict(fused=3)])
+def test_tv_with_a_temporal_weight_per_set_denoises_each_set_as_alone(device, path):
+    from rsocl_plugins.tv import TV
+
+    rng = np.random.default_rng(5)
+    x = rng.random((3, 9, 10, 12)).astype(np.float32)
+    weights = [1.0, 3.0, 30.0]
+    combined = TV.for_sets([TV(temporal_weight=w, iterations=6, **path) for w in weights])
+    np.testing.assert_array_equal(combined.temporal_weights(3), weights)
+    x_dev = cla.to_device(device.queue, x)
+    got = combined.denoise(x_dev, [0.1, 0.2, 0.05]).get()
+    for i, (w, lam) in enumerate(zip(weights, [0.1, 0.2, 0.05])):
+        alone = TV(temporal_weight=w, iterations=6, **path).denoise(cla.to_device(device.queue, x[i]), lam).get()
+        np.testing.assert_array_equal(got[i], alone)
+    with pytest.raises(ValueError, match="temporal weights for 3 sets"):
+        combined.denoise(cla.to_device(device.queue, x[:2]), 0.1)
+
+
+def test_which_regularizers_combine_for_a_batch():
+    from rsocl_plugins.dct import DCT
+    from rsocl_plugins.tv import TV
+
+    one = TV(temporal_weight=3.0)
+    assert TV.for_sets([one, TV(temporal_weight=3.0)]) is one  # equal options: the first
+    assert TV.for_sets([TV(temporal_weight=1.0), TV(temporal_weight=3.0, iterations=5)]) is None
+    assert TV.for_sets([TV(temporal_weight=0.0), TV(temporal_weight=3.0)]) is None  # 2-D and 3-D
+    assert TV.for_sets([one, DCT()]) is None
+    assert DCT.for_sets([DCT(), DCT()]) is not None

@@ -9,7 +9,10 @@ The search is a coordinate search in log space: each tunable option of the regul
 ``temporal_weight``, :attr:`rsocl.solver.regularizer.Regularizer.tunable`) over its coarse
 values at the middle ``lam``, then the geometric midpoints next to the best value; then ``lam``
 over its candidates. Every candidate starts from the same warm start (``interp3d`` of the fitted
-pixels) and runs ``iterations`` ADMM steps; values the caller fixed are not searched.
+pixels) and runs ``iterations`` ADMM steps; values the caller fixed are not searched. A runner that
+takes several candidates at once (``run_many``: :class:`rsocl.solver.search_batch.BatchedFolds`) gets
+each round's candidates in one call, the ``lam`` round's run ahead with the last option's midpoints;
+the search books and chooses exactly as one candidate at a time.
 
 The same held-out pixels choose how far the result moves from its start: the returned estimate
 is ``x0 + blend (theta - x0)``, ``blend`` in [0, 1], whose held-out error is a quadratic in
@@ -28,8 +31,7 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.device.reduction import sum_sq_diff
-from rsocl.model.interpolation_device import interp3d_device
-from rsocl.solver.admm import ADMM
+from rsocl.solver.folds import make_fold, run_folds
 from rsocl.solver.holdout import default_patterns, fold_masks
 
 __all__ = [
@@ -71,19 +73,6 @@ class SearchSpace:
     lam: float | list[float] | tuple[float, ...]
     fixed: dict = field(default_factory=dict)
     preset: dict = field(default_factory=dict)
-
-
-@dataclass
-class _Fold:
-    """One hold-out pattern's state during the search: the snapshot pixels that fit the candidates
-    (``fit``), its warm start ``x0`` and that start's prediction ``H x0`` of the snapshots, the
-    held-out pixels as weights on the device, and the pattern's solver (made by its first candidate)."""
-
-    fit: np.ndarray
-    x0: object
-    weights: object
-    start_prediction: object
-    solver: object = None
 
 
 @dataclass
@@ -177,25 +166,6 @@ def _midpoints(values, best):
     return out
 
 
-def run_folds(op, g_device, folds, reg, lam, *, eta, projection, iterations):
-    """``(err, moved)``: one candidate (regularizer ``reg``, ``lam``) run ``iterations`` ADMM steps on each
-    fold in turn, its held-out sums of squares ``‖g - H theta‖²`` and ``‖H theta - H x0‖²`` added over the
-    folds in order. Each fold keeps its solver and restarts it for the next candidate."""
-    err = moved = 0.0
-    for fold in folds:
-        if fold.solver is None:
-            fold.solver = ADMM(op, g_device, reg, lam=lam, eta=eta, projection=projection, x0=fold.x0, valid=fold.fit)
-        else:
-            fold.solver.restart(reg, lam, fold.x0)
-        solver = fold.solver
-        for _ in range(iterations):
-            solver.step()
-        op.forward_into(solver.theta, solver.hx)
-        err += sum_sq_diff(g_device, solver.hx, weights=fold.weights)
-        moved += sum_sq_diff(solver.hx, fold.start_prediction, weights=fold.weights)
-    return err, moved
-
-
 def tune_parameters(
     op,
     g_device,
@@ -265,7 +235,7 @@ def tune_parameters(
     usable = np.ones((rig.n_channels,) + rig.shape, bool) if valid is None else np.asarray(valid, bool)
     folds, held_out = [], 0
     for (block, _), (fit, scored) in zip(patterns, fold_masks(rig.shape, rig.n_channels, usable, patterns)):
-        folds.append(_fold(op, g_device, g, block, fit, scored))
+        folds.append(make_fold(op, g_device, g, block, fit, scored))
         held_out += int(scored.sum())
     scale = sum(sum_sq_diff(g_device, weights=fold.weights) for fold in folds)
     start_err = sum(
@@ -288,14 +258,40 @@ def tune_parameters(
         planned = sum(len(v) + 2 for v in tunable.values()) + max(len(lams) - 1, 0) + 1
         bar = tqdm(total=planned, desc="tuning", unit="candidate", leave=False, disable=None)
 
+    ready: dict = {}  # (err, moved) of candidates run ahead in a batch, until score() books them
+    many = getattr(runner, "run_many", None)
+
+    def regularizer(point):
+        return make_regularizer({**preset, **{k: v for k, v in point.items() if k != "lam"}})
+
+    def prefetch(points):
+        """Run the ``points`` not yet scored as one batch where the runner takes several (``run_many``)."""
+        todo = {tuple(sorted(p.items())): p for p in points}
+        todo = {k: p for k, p in todo.items() if k not in scores and k not in ready}
+        if many is None or len(todo) < 2:
+            return
+        points = list(todo.values())
+        kw = dict(eta=eta, projection=projection, iterations=iterations)
+        results = many(op, g_device, folds, [regularizer(p) for p in points], [p["lam"] for p in points], **kw)
+        ready.update(zip(todo, results))
+
     def score(point):
         key = tuple(sorted(point.items()))
         if key in scores:
             return scores[key]
-        reg = make_regularizer({**preset, **{k: v for k, v in point.items() if k != "lam"}})
-        err, moved = (runner or run_folds)(
-            op, g_device, folds, reg, point["lam"], eta=eta, projection=projection, iterations=iterations
-        )
+        if key in ready:
+            err, moved = ready.pop(key)
+        else:
+            err, moved = (runner or run_folds)(
+                op,
+                g_device,
+                folds,
+                regularizer(point),
+                point["lam"],
+                eta=eta,
+                projection=projection,
+                iterations=iterations,
+            )
         value = float(math.sqrt(err / scale)) if scale > 0 else float(math.sqrt(err))
         if not math.isfinite(value):
             value = math.inf
@@ -308,15 +304,21 @@ def tune_parameters(
         return value
 
     try:
-        for name, values in tunable.items():
+        for index, (name, values) in enumerate(tunable.items()):
             coarse = sorted(float(v) for v in values)
+            prefetch([{**current, name: v} for v in coarse])
             for v in coarse:
                 score({**current, name: v})
             best = min(coarse, key=lambda v: score({**current, name: v}))  # run above: cached
             refined = coarse + _midpoints(coarse, best)
+            ahead = [{**current, name: v} for v in refined]
+            if index == len(tunable) - 1:  # the lam round next: its candidates for each value the round may choose
+                ahead += [{**current, name: v, "lam": lam} for v in [best] + _midpoints(coarse, best) for lam in lams]
+            prefetch(ahead)
             for v in refined:
                 score({**current, name: v})
             current[name] = min(refined, key=lambda v: score({**current, name: v}))
+        prefetch([{**current, "lam": v} for v in lams])
         for v in lams:
             score({**current, "lam": v})
         current["lam"] = min(lams, key=lambda v: score({**current, "lam": v}))
@@ -337,25 +339,6 @@ def tune_parameters(
     )
 
 
-def _fold(op, g_device, g, block, fit, scored) -> _Fold:
-    """A hold-out pattern's :class:`_Fold`: its warm start (``interp3d`` of the fitted pixels), that
-    start's prediction and the held-out weights on the device."""
-    import pyopencl.array as cla
-
-    rig = op.rig
-    if not scored.any() or not fit.any():
-        raise ValueError(
-            f"tuning needs snapshot pixels to fit and to hold out; with block = {block} pixels on "
-            f"a {rig.shape[0]}x{rig.shape[1]} grid there are {int(fit.sum())} and {int(scored.sum())}"
-            "; fix lam and the regularizer's options or pass tune=False"
-        )
-    x0 = interp3d_device(op, g, fit, _solved(rig, op))
-    weights = cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype))
-    start_prediction = cla.empty_like(g_device)
-    op.forward_into(x0, start_prediction)
-    return _Fold(fit, x0, weights, start_prediction)
-
-
 def applied_blend(tuning: Tuning | None) -> float:
     """The blend a run that starts from the interpolation applies with ``tuning`` (a :class:`Tuning` or
     None): the search's, or 1 (the solver's own result) without a search or a recorded blend."""
@@ -370,11 +353,3 @@ def _blend(start_err: float, moved: float, err: float) -> float:
     if not (math.isfinite(err) and math.isfinite(moved)) or moved <= 0:
         return 1.0
     return float(min(1.0, max(0.0, 0.5 * (start_err + moved - err) / moved)))
-
-
-def _solved(rig, op) -> slice:
-    """The sub-frames ``op`` models, as a slice of the rig's ``T``."""
-    solved = rig.sampled_range()
-    if solved.stop - solved.start != op.T:
-        raise ValueError(f"the operator models {op.T} sub-frames, the rig samples {solved.stop - solved.start}")
-    return solved

@@ -19,7 +19,7 @@ import numpy as np
 
 from rsocl.model.operator import geometry_bytes
 from rsocl.solver.holdout import default_patterns
-from rsocl.solver.search_batch import batch_bytes, batches_pay
+from rsocl.solver.search_batch import batch_bytes, batches_pay, candidate_capacity
 
 __all__ = [
     "state_bytes",
@@ -130,9 +130,9 @@ def search_memory(op, reg, projection: str, batch) -> int:
     """Device bytes the search allocates beside the staged problem, freed before the run's solver is
     made: per hold-out pattern (:func:`~rsocl.solver.holdout.default_patterns`) one set's ADMM arrays, its
     warm start, its warm start's prediction of the snapshots, held-out weights and regularizer
-    workspace (a fold's solver keeps the previous candidate's regularizer until its own turn), with the
-    stacked copies of the folds run as one batch where batches pay
-    (:func:`~rsocl.solver.search_batch.batch_bytes`); and for
+    workspace (a fold's solver keeps the previous candidate's regularizer until its own turn); where
+    batches pay, the solver of the candidates x folds batch (:func:`~rsocl.solver.search_batch.candidate_capacity`
+    candidates) and its stacked copies (:func:`~rsocl.solver.search_batch.batch_bytes`); and for
     a batch (``batch`` sets, None: one set) the first set staged on its own (operator geometry and
     snapshots)."""
     cube = op.domain_shape
@@ -146,8 +146,10 @@ def search_memory(op, reg, projection: str, batch) -> int:
     )
     folds = len(default_patterns(op.rig.shape, op.K))
     extra = folds * per_fold
-    if batches_pay(op.device):  # the folds run as one batch (rsocl.solver.search_batch)
-        extra += batch_bytes(op, folds)
+    if batches_pay(op.device):  # candidates x folds run as one batch (rsocl.solver.search_batch)
+        candidates = candidate_capacity(op, folds)
+        solver = state_bytes(cube, op.K, op.dtype, projection, 1) + workspace_memory(cube, op.dtype, reg, 1, op.device)
+        extra += (candidates - 1) * folds * solver + batch_bytes(op, candidates * folds)
     if batch is not None:
         extra += problem_bytes(cube, op.K, op.dtype, 1)
     return extra

@@ -85,6 +85,8 @@ class Regularizer:
         criterion cannot rank priors in time. When they leave only ``lam`` unset, ``lam`` keeps its
         default and nothing is searched. Measured per regularizer; empty: searched as always.
 
+    per_set_options : tuple of str
+        Options whose value may differ from set to set of one batch (:meth:`for_sets`); empty: none.
     batched : bool
         True when ``_denoise`` takes a batch ``(B, T, m, n)`` with a float64 array of ``B``
         weights itself; otherwise :meth:`denoise` hands it one set at a time.
@@ -104,6 +106,7 @@ class Regularizer:
     batched = False
     tunable: dict = {}
     one_snapshot: dict = {}
+    per_set_options: tuple = ()
 
     @property
     def fuses_dual(self) -> bool:
@@ -125,6 +128,32 @@ class Regularizer:
         if key in values:
             return values[key]
         raise AttributeError(key)
+
+    @classmethod
+    def for_sets(cls, instances: list) -> Regularizer | None:
+        """One regularizer that denoises set ``i`` of a batch of ``len(instances)`` sets as ``instances[i]``
+        does alone, or None when there is none: when they are not all of this class, or differ in an
+        option outside :attr:`per_set_options`. Instances with equal options give the first of them.
+
+        >>> from rsocl_plugins.tv import TV
+        >>> TV.for_sets([TV(temporal_weight=1.0), TV(temporal_weight=3.0)]).temporal_weights(2)
+        array([1., 3.])
+        """
+        if not instances or any(type(r) is not cls for r in instances):
+            return None
+        first = instances[0]
+        if all(r.values == first.values for r in instances):
+            return first
+        fixed = [{k: v for k, v in r.values.items() if k not in cls.per_set_options} for r in instances]
+        if any(f != fixed[0] for f in fixed):
+            return None
+        return cls._for_sets(instances)
+
+    @classmethod
+    def _for_sets(cls, instances: list) -> Regularizer | None:
+        """:meth:`for_sets` of instances that differ only in :attr:`per_set_options`: a subclass that lists
+        such options makes the one instance here (None: it cannot for these values)."""
+        return None
 
     def fuses_dual_on(self, device) -> bool:
         """Whether an ADMM on ``device`` (an rsocl Device) leaves its dual update to ``denoise_and_update``

@@ -1,13 +1,17 @@
-"""The parameter search's folds as one batch: a candidate runs on every hold-out pattern at once.
+"""The parameter search as batches: a candidate runs on every hold-out pattern at once, and the
+candidates of one round of the search run together.
 
 The folds of :func:`rsocl.solver.crossval.tune_parameters` are independent ADMM runs of the same
 shape: the same snapshots and regularizer, each with its own fitted pixels, warm start and held-out
 weights. :class:`BatchedFolds` stacks them into one batch of sets (the fitted pixels as each set's
 valid pixels, :class:`~rsocl.solver.admm.ADMM`), so a candidate costs the launches of one run
-instead of one per fold. Each set computes what its fold computes alone; the sums over the folds are
-added in the same order, so the scores agree to float rounding and the search makes the same
-choices. :func:`batches_pay` says on which devices the search takes it: where launches, not the
-kernels' work, dominate a small run (not on a CPU device).
+instead of one per fold. Candidates whose regularizers combine into one (:meth:`Regularizer.for_sets
+<rsocl.solver.regularizer.Regularizer.for_sets>`: TV's temporal weight may differ from set to set)
+run as one batch of candidates x folds (:meth:`BatchedFolds.run_many`), up to
+:func:`candidate_capacity` candidates at a time. Each set computes what its fold computes alone; the
+sums over the folds are added in the same order, so the scores agree to float rounding and the search
+makes the same choices. :func:`batches_pay` says on which devices the search takes it: where
+launches, not the kernels' work, dominate a small run (not on a CPU device).
 """
 
 from __future__ import annotations
@@ -17,13 +21,28 @@ import numpy as np
 from rsocl.device.reduction import sum_sq_diff
 from rsocl.solver.admm import ADMM
 
-__all__ = ["BatchedFolds", "batches_pay", "batch_bytes"]
+__all__ = ["BatchedFolds", "batches_pay", "batch_bytes", "candidate_capacity", "CANDIDATES", "CANDIDATE_VOXELS"]
+
+#: Candidates one batch of the search holds at most: the largest round of the TV search (two midpoints
+#: and three ``lam`` values for each of the three temporal weights the midpoints may leave chosen).
+CANDIDATES = 8
+#: Voxels of one batch of the search (candidates x folds sets) at most: the largest batch of sets
+#: :func:`rsocl.solver.sets.batch_size` gives a GPU (``GPU_BATCH_VOXELS``).
+CANDIDATE_VOXELS = 2**24
 
 
 def batches_pay(device) -> bool:
     """Whether the search runs its folds as one batch on ``device`` (an rsocl Device): on a device that is
     not a CPU, where a batch costs the launches of one set."""
     return not device.is_cpu
+
+
+def candidate_capacity(op, folds: int) -> int:
+    """Candidates :class:`BatchedFolds` runs in one batch with ``folds`` hold-out patterns on ``op``'s
+    datacube: :data:`CANDIDATES`, fewer where ``candidates x folds`` sets would pass
+    :data:`CANDIDATE_VOXELS` (at least 1)."""
+    per_candidate = int(folds) * int(np.prod(op.domain_shape))
+    return max(1, min(CANDIDATES, CANDIDATE_VOXELS // max(per_candidate, 1)))
 
 
 def batch_bytes(op, folds: int) -> int:
@@ -36,11 +55,17 @@ def batch_bytes(op, folds: int) -> int:
 
 class BatchedFolds:
     """A runner for :func:`~rsocl.solver.crossval.tune_parameters` (called as
-    :func:`~rsocl.solver.crossval.run_folds`) that runs a candidate on all folds as one batch.
+    :func:`~rsocl.solver.folds.run_folds`) that runs a candidate on all folds as one batch, and with
+    :meth:`run_many` several candidates on all folds as one batch.
 
     The batch (its stacked snapshots, warm starts, weights and predictions, and one
-    :class:`~rsocl.solver.admm.ADMM` of one set per fold) is made by the first candidate and
-    restarted for the next ones.
+    :class:`~rsocl.solver.admm.ADMM` of one set per candidate and fold) is made for the first batch of
+    its size and restarted for the next ones.
+
+    Parameters
+    ----------
+    capacity : int or None
+        Candidates per batch at most; None: :func:`candidate_capacity`.
 
     Examples
     --------
@@ -48,8 +73,8 @@ class BatchedFolds:
     >>> runner = BatchedFolds()       # tune_parameters(..., runner=runner)
     """
 
-    def __init__(self):
-        self.solver = None
+    def __init__(self, capacity: int | None = None):
+        self.solver, self.candidates, self.capacity = None, 0, capacity
 
     def _stack(self, op, arrays):
         """One device array of the ``arrays`` (device arrays of one shape) end to end."""
@@ -62,24 +87,60 @@ class BatchedFolds:
         return out
 
     def __call__(self, op, g_device, folds, reg, lam, *, eta, projection, iterations):
-        sets = len(folds)
-        if self.solver is None:
-            self.g = self._stack(op, [g_device] * sets)
-            self.x0 = self._stack(op, [fold.x0 for fold in folds])
-            self.weights = self._stack(op, [fold.weights for fold in folds])
-            self.predictions = self._stack(op, [fold.start_prediction for fold in folds])
-            valid = np.stack([np.asarray(fold.fit, bool) for fold in folds])
-            self.solver = ADMM(op, self.g, reg, lam=lam, eta=eta, projection=projection, x0=self.x0, valid=valid)
+        return self.run_many(op, g_device, folds, [reg], [lam], eta=eta, projection=projection, iterations=iterations)[
+            0
+        ]
+
+    def run_many(self, op, g_device, folds, regs, lams, *, eta, projection, iterations) -> list:
+        """``[(err, moved), ...]``: :func:`~rsocl.solver.folds.run_folds` of each candidate ``(regs[i],
+        lams[i])``, in batches of candidates whose regularizers combine (:meth:`Regularizer.for_sets
+        <rsocl.solver.regularizer.Regularizer.for_sets>`), at most ``capacity`` candidates each."""
+        capacity = self.capacity or candidate_capacity(op, len(folds))
+        results: list = [None] * len(regs)
+        todo = list(range(len(regs)))
+        while todo:
+            group = [todo[0]]
+            for i in todo[1:]:
+                if len(group) < capacity and self._combined(regs, group + [i], len(folds)) is not None:
+                    group.append(i)
+            reg = self._combined(regs, group, len(folds))
+            batch = self._run(op, g_device, folds, reg, [lams[i] for i in group], eta, projection, iterations)
+            for i, result in zip(group, batch):
+                results[i] = result
+            todo = [i for i in todo if i not in group]
+        return results
+
+    @staticmethod
+    def _combined(regs, group, folds):
+        """The regularizer of candidates ``group`` with ``folds`` sets each (None: they do not combine)."""
+        return type(regs[group[0]]).for_sets([regs[i] for i in group for _ in range(folds)])
+
+    def _run(self, op, g_device, folds, reg, lams, eta, projection, iterations):
+        count, F = len(lams), len(folds)
+        if self.solver is None or self.candidates != count:
+            self.solver = self.g = self.x0 = self.weights = self.predictions = None  # freed before the new batch
+            self.g = self._stack(op, [g_device] * (count * F))
+            self.x0 = self._stack(op, [fold.x0 for fold in folds] * count)
+            self.weights = self._stack(op, [fold.weights for fold in folds] * count)
+            self.predictions = self._stack(op, [fold.start_prediction for fold in folds] * count)
+            valid = np.stack([np.asarray(fold.fit, bool) for fold in folds] * count)
+            per_set = np.repeat(np.asarray(lams, np.float64), F)
+            self.solver = ADMM(op, self.g, reg, lam=per_set, eta=eta, projection=projection, x0=self.x0, valid=valid)
+            self.candidates = count
         else:
-            self.solver.restart(reg, lam, self.x0)
+            self.solver.restart(reg, np.repeat(np.asarray(lams, np.float64), F), self.x0)
         solver = self.solver
         for _ in range(iterations):
             solver.step()
         op.forward_into(solver.theta, solver.hx)
-        errs = sum_sq_diff(self.g, solver.hx, weights=self.weights, sets=sets)
-        moved = sum_sq_diff(solver.hx, self.predictions, weights=self.weights, sets=sets)
-        err_sum = moved_sum = 0.0
-        for e, mv in zip(errs.tolist(), moved.tolist()):  # in fold order, as one fold after the other
-            err_sum += e
-            moved_sum += mv
-        return err_sum, moved_sum
+        sets = count * F
+        errs = sum_sq_diff(self.g, solver.hx, weights=self.weights, sets=sets).tolist()
+        moved = sum_sq_diff(solver.hx, self.predictions, weights=self.weights, sets=sets).tolist()
+        out = []
+        for c in range(count):
+            err_sum = moved_sum = 0.0
+            for e, mv in zip(errs[c * F : (c + 1) * F], moved[c * F : (c + 1) * F]):  # in fold order
+                err_sum += e
+                moved_sum += mv
+            out.append((err_sum, moved_sum))
+        return out
