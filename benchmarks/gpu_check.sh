@@ -1,17 +1,18 @@
 #!/usr/bin/env bash
 # One prepared check on a lent NVIDIA GPU machine (H100 or H200, no network, PyTorch with CUDA
-# preinstalled as python3), in about 8 minutes of one command:
+# preinstalled as python3), in about 9 minutes of one command:
 #   1. install pyopencl and the rest from the carried wheels (.whl/, made by benchmarks/gpu_wheels.sh)
 #      and rsocl from this tree into /tmp/site; point pyopencl's ICD loader at NVIDIA's OpenCL;
 #   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped;
 #   3. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
 #   4. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), capped;
-#   5. benchmarks/inverse.py where the tree has it (the inverse blocks on the device against the host), capped.
+#   5. benchmarks/inverse.py where the tree has it (the inverse blocks on the device against the host), capped;
+#   6. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped.
 # Pages and logs go to $OUT (the device tool's folder that comes back; ./out/gpu elsewhere).
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (150), PEER_CAP (240), LAUNCH_CAP (60), INVERSE_CAP (30) in seconds; PEER_ARGS replaces the peer's arguments;
+# Knobs: TEST_WORKERS (12), TEST_CAP (120), PEER_CAP (240), LAUNCH_CAP (60), INVERSE_CAP (25), SEARCH_CAP (50) in seconds; PEER_ARGS replaces the peer's arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -22,7 +23,8 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-150} PEER_CAP=${PEER_CAP:-240} LAUNCH_CAP=${LAUNCH_CAP:-60} INVERSE_CAP=${INVERSE_CAP:-30}
+TEST_CAP=${TEST_CAP:-120} PEER_CAP=${PEER_CAP:-240} LAUNCH_CAP=${LAUNCH_CAP:-60} INVERSE_CAP=${INVERSE_CAP:-25}
+SEARCH_CAP=${SEARCH_CAP:-50}
 PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
 T0=$(date +%s)
@@ -97,6 +99,14 @@ if [ -f benchmarks/inverse.py ]; then
     timeout -k 5 "$INVERSE_CAP" "$PYTHON" -P benchmarks/inverse.py --device "$DEVICE" --sizes 50 128 512 --rounds 3 --calls 5 \
         --out "$OUT/inverse.md" >> "$OUT/inverse.log" 2>&1
     echo "inverse exit status $?" | tee -a "$OUT/inverse.log"
+fi
+
+# ---------------------------------------------------------------- 6. the self-tuned default against a fixed run
+if [ -f benchmarks/search_launches.py ]; then
+    stamp "benchmarks/search_launches.py (cap ${SEARCH_CAP} s)" | tee "$OUT/search.log"
+    timeout -k 5 "$SEARCH_CAP" "$PYTHON" -P benchmarks/search_launches.py --device "$DEVICE" --sizes 50 128 \
+        --out "$OUT/search_launches.md" >> "$OUT/search.log" 2>&1
+    echo "search_launches exit status $?" | tee -a "$OUT/search.log"
 fi
 
 stamp "done; the peer's page:"
