@@ -70,6 +70,7 @@ def test_the_device_default_of_fused(device, monkeypatch):
 
 
 def test_the_device_default_of_one_launch(device, monkeypatch):
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: True))  # as a CPU device, whatever it is
     assert device_one_launch(device) == 0 and not TV().one_launch_on(device)  # a CPU: two launches
     assert TV(one_launch=1).one_launch_on(device)
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
@@ -104,6 +105,7 @@ def test_gpu_path_of_a_batch_equals_its_sets_on_the_cpu_path(problem, device, mo
 
 def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
     rig, g = problem
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: True))  # as a CPU device, whatever it is
     # CPU: admm_dual, admm_project, admm_difference, the plain TV of 10 iterations (1 + 9 + 8), the residual
     assert _launches_per_iteration(rig, g, device) == 22
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
@@ -127,6 +129,7 @@ def _cube(device, rig):
 
 
 def test_memory_counts_the_dual_buffers_of_the_devices_choice(device, monkeypatch):
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: True))  # as a CPU device, whatever it is
     shape, plain = (12, 16, 16), TV().workspace_bytes((12, 16, 16), np.float32)
     assert TV().workspace_bytes(shape, np.float32, device=device) == plain  # the CPU's plain path
     assert TV(fused=3).workspace_bytes(shape, np.float32, device=device) > plain

@@ -37,12 +37,22 @@ def batches_pay(device) -> bool:
     return not device.is_cpu
 
 
+#: Datacubes of device memory one set of the search's batch takes at most: the ADMM's four, the TV's dual
+#: in two copies of three planes, the warm start's copy and one to spare.
+CUBES_PER_SET = 12
+#: Share of the device's global memory the candidates of one batch may take.
+MEMORY_SHARE = 0.25
+
+
 def candidate_capacity(op, folds: int) -> int:
     """Candidates :class:`BatchedFolds` runs in one batch with ``folds`` hold-out patterns on ``op``'s
     datacube: :data:`CANDIDATES`, fewer where ``candidates x folds`` sets would pass
-    :data:`CANDIDATE_VOXELS` (at least 1)."""
-    per_candidate = int(folds) * int(np.prod(op.domain_shape))
-    return max(1, min(CANDIDATES, CANDIDATE_VOXELS // max(per_candidate, 1)))
+    :data:`CANDIDATE_VOXELS` or :data:`MEMORY_SHARE` of the device's memory at :data:`CUBES_PER_SET`
+    datacubes a set (at least 1)."""
+    voxels = int(folds) * int(np.prod(op.domain_shape))
+    by_voxels = CANDIDATE_VOXELS // max(voxels, 1)
+    by_memory = int(MEMORY_SHARE * op.device.global_mem_bytes) // max(voxels * CUBES_PER_SET * op.dtype.itemsize, 1)
+    return max(1, min(CANDIDATES, by_voxels, by_memory))
 
 
 def batch_bytes(op, folds: int) -> int:
