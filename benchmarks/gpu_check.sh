@@ -12,7 +12,7 @@
 # Pages and logs go to $OUT (the device tool's folder that comes back; ./out/gpu elsewhere).
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (120), PEER_CAP (240), LAUNCH_CAP (60), INVERSE_CAP (25), SEARCH_CAP (50) in seconds; PEER_ARGS replaces the peer's arguments;
+# Knobs: TEST_WORKERS (12), TEST_CAP (100), PEER_CAP (240), LAUNCH_CAP (60), INVERSE_CAP (25), SEARCH_CAP (50) in seconds; PEER_ARGS replaces the peer's arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -23,7 +23,7 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-120} PEER_CAP=${PEER_CAP:-240} LAUNCH_CAP=${LAUNCH_CAP:-60} INVERSE_CAP=${INVERSE_CAP:-25}
+TEST_CAP=${TEST_CAP:-100} PEER_CAP=${PEER_CAP:-240} LAUNCH_CAP=${LAUNCH_CAP:-60} INVERSE_CAP=${INVERSE_CAP:-25}
 SEARCH_CAP=${SEARCH_CAP:-50}
 PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
