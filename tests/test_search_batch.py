@@ -17,7 +17,7 @@ from rsocl.solver.search_batch import BatchedFolds, batches_pay
 SHAPE = (16, 20)
 
 
-def _search(runner, dtype):
+def _search(runner, dtype, make=None):
     from rsocl.solver.problem import check_problem, check_settings, stage_on_device
     from rsocl.solver.request import make_regularizer
 
@@ -33,7 +33,7 @@ def _search(runner, dtype):
         staged.op,
         staged.g,
         problem.g,
-        lambda options: make_regularizer("tv", options),
+        make or (lambda options: make_regularizer("tv", options)),
         space,
         eta=settings.eta,
         iterations=8,
@@ -55,8 +55,9 @@ def test_batched_folds_score_and_choose_as_the_folds_one_after_the_other(dtype):
     np.testing.assert_allclose(batched.blend, one_by_one.blend, rtol=tol, atol=tol)
 
 
-def _spy_batches(monkeypatch):
-    """The candidates of every batch BatchedFolds runs, as lists of lam values."""
+def _spy_batches(monkeypatch, regs=None):
+    """The candidates of every batch BatchedFolds runs, as lists of lam values (and each batch's
+    regularizer appended to ``regs``)."""
     import rsocl.solver.search_batch as search_batch
 
     batches = []
@@ -64,6 +65,8 @@ def _spy_batches(monkeypatch):
 
     def spy(self, op, g_device, folds, reg, lams, *args):
         batches.append(list(lams))
+        if regs is not None:
+            regs.append(reg)
         return real(self, op, g_device, folds, reg, lams, *args)
 
     monkeypatch.setattr(search_batch.BatchedFolds, "_run", spy)
@@ -86,6 +89,23 @@ def test_candidates_of_a_round_share_a_batch_and_choose_as_one_at_a_time(monkeyp
     np.testing.assert_allclose(
         [c["score"] for c in together.candidates], [c["score"] for c in alone.candidates], rtol=1e-5
     )
+
+
+def test_candidates_whose_regularizers_do_not_combine_run_in_groups(monkeypatch):
+    """A regularizer without per-set options (here TV with none declared): candidates that differ in an
+    option run in batches of their own, those that differ only in lam together; the same choices."""
+    from rsocl_plugins.tv import TV
+
+    class WholeBatchTV(TV):
+        per_set_options = ()
+
+    regs = []
+    batches = _spy_batches(monkeypatch, regs)
+    grouped = _search(BatchedFolds(), "float32", make=lambda options: WholeBatchTV(**options))
+    assert all(type(r) is WholeBatchTV and "_set_weights" not in r.__dict__ for r in regs)  # one weight a batch
+    assert any(len(b) > 1 for b in batches) and len(batches) > 2  # lam variants together, weights apart
+    alone = _search(BatchedFolds(capacity=1), "float32")
+    assert grouped.chosen == alone.chosen
 
 
 def test_the_self_tuned_run_batches_its_search_only_where_batches_pay(device, monkeypatch):
