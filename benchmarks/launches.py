@@ -12,6 +12,9 @@ device: a kernel with one work item and one buffer argument, enqueued in a loop.
 - **Host µs per launch**: the wall time of an iteration of the tiny case (so small that the
   kernels' own work is negligible) over its launches, and the same for the trivial kernel's
   loop. Their ratio says how far the solver's host path is from the floor.
+- **Against a bare replay** (:func:`replay_us`, the smallest ROI): the same launches that rsocl's
+  loop makes, recorded during a run and enqueued again with nothing between them: rsocl's host
+  path over the cost of these very kernels' enqueues on this device.
 
 Four paths are measured (``--paths``, :data:`PATHS`): ``device``, what the device chooses; ``gpu``, what
 rsocl chooses on a device that is not a CPU (the dual update and ``u = f - b`` folded into the TV's and the
@@ -155,6 +158,65 @@ def per_iteration(rig, g, device, short: int, long: int, name: str = "device"):
     return {k: (c_long[k] - c_short[k]) / span for k in COUNTED}, (t_long - t_short) / span
 
 
+#: Iterations of launches the replay repeats, and how many times (:func:`replay_us`).
+REPLAY_ITERATIONS, REPLAY_REPEATS = 8, 25
+
+
+def replay_us(rig, g, device, name: str, per_iteration: int) -> float:
+    """Host µs per launch of the kernel launches rsocl's loop makes on path ``name``, replayed in a bare loop.
+
+    During a fixed-setting run, once 4 iterations have passed, the last :data:`REPLAY_ITERATIONS`
+    iterations' launches (``per_iteration`` each: every kernel enqueued through
+    :class:`rsocl.device.kernel.Kernel`, the same kernel objects and grids, arguments as they are set) are
+    enqueued :data:`REPLAY_REPEATS` times with plain ``pyopencl.enqueue_nd_range_kernel`` calls and no
+    Python in between, then waited for: what the same launches cost without rsocl's host path.
+    """
+    import pyopencl as cl
+
+    from rsocl.device import kernel as kernel_module
+
+    log, result = [], []
+    body_size = per_iteration * REPLAY_ITERATIONS
+    target = [0]  # set once the set-up's launches are known: no replay before
+    enqueue, call = kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__
+
+    def replay(queue):
+        body = log[-body_size:]
+        queue.finish()
+        t0 = time.perf_counter()
+        for _ in range(REPLAY_REPEATS):
+            for q, k, gsize, lsize, offset in body:
+                cl.enqueue_nd_range_kernel(q, k, gsize, lsize, global_work_offset=offset)
+        queue.finish()
+        result.append((time.perf_counter() - t0) / (REPLAY_REPEATS * body_size) * 1e6)
+
+    def logged(self, queue, gsize, lsize, offset):
+        log.append((queue, self.kernel, gsize, lsize, offset))
+        if len(log) == target[0] and not result:
+            replay(queue)  # inside the run: every buffer the launches name is alive
+
+    def hooked_enqueue(self, queue, gsize, lsize, global_offset=None):
+        logged(self, queue, gsize, lsize, global_offset)
+        return enqueue(self, queue, gsize, lsize, global_offset)
+
+    def hooked_call(self, queue, gsize, lsize, *args, global_offset=None, wait_for=None):
+        event = call(self, queue, gsize, lsize, *args, global_offset=global_offset, wait_for=wait_for)
+        logged(self, queue, gsize, lsize, global_offset)
+        return event
+
+    kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__ = hooked_enqueue, hooked_call
+    try:
+        with path(name):
+            rsocl.reconstruct(g, rig, iterations=1, tune=False, x0="interp3d", device=device)
+            setup = len(log) - per_iteration  # a call's launches before its first iteration
+            log.clear()
+            target[0] = setup + per_iteration * (REPLAY_ITERATIONS + 4)
+            rsocl.reconstruct(g, rig, iterations=REPLAY_ITERATIONS + 8, tune=False, x0="interp3d", device=device)
+    finally:
+        kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__ = enqueue, call
+    return result[0] if result else float("nan")
+
+
 def measure(shapes, rounds: int, short: int, long: int, device, paths=tuple(PATHS)):
     """Alternating rounds of the trivial loop and each shape's runs on each path (their order reversed
     every other round); per-shape and path medians."""
@@ -163,6 +225,7 @@ def measure(shapes, rounds: int, short: int, long: int, device, paths=tuple(PATH
         for name in paths:
             run(rig, g, 2, device, name)
     trivial = []
+    replays = {name: [] for name in paths}  # at the smallest ROI, which isolates the host path
     rows = {(m, name): [] for m in shapes for name in paths}
     calls = {(m, name): [] for m in shapes for name in paths}
     launches = {}
@@ -174,6 +237,11 @@ def measure(shapes, rounds: int, short: int, long: int, device, paths=tuple(PATH
                 launches[m, name] = kinds
                 rows[m, name].append(seconds)
                 calls[m, name].append(statistics.median(run(rig, g, 1, device, name)[0] for _ in range(5)))
+                if m == min(shapes):
+                    kernels = int(round(kinds["enqueue_nd_range_kernel"]))
+                    replays[name].append(
+                        (seconds / sum(kinds.values()) * 1e6, replay_us(rig, g, device, name, kernels))
+                    )
     floor = statistics.median(trivial)
     out = []
     for m in shapes:
@@ -196,7 +264,7 @@ def measure(shapes, rounds: int, short: int, long: int, device, paths=tuple(PATH
                     "call_rounds_ms": [v * 1e3 for v in calls[m, name]],
                 }
             )
-    return floor, trivial, out
+    return floor, trivial, out, replays
 
 
 def passes(m: int, device, rounds: int, reps: int = 100):
@@ -345,7 +413,7 @@ def command_buffers(device) -> list:
     ]
 
 
-def page(floor, trivial, rows, device, args, passes_rows=None) -> list:
+def page(floor, trivial, rows, device, args, passes_rows=None, replays=None) -> list:
     lines = header_lines("Launches per ADMM-TV iteration and host time per launch", device)
     lines += [
         "",
@@ -370,6 +438,24 @@ def page(floor, trivial, rows, device, args, passes_rows=None) -> list:
             f"{r['call_ms']:.1f} ({', '.join(f'{v:.1f}' for v in r['call_rounds_ms'])}) | "
             f"{r['call_ms'] * 1e3 / floor:.0f} |"
         )
+    if replays:
+        m = min(r["m"] for r in rows)
+        lines += [
+            "",
+            f"The host path against a bare replay of its own launches ({m}×{m}, `replay_us`: the launches of "
+            f"{REPLAY_ITERATIONS} iterations, same kernels, grids and arguments, enqueued {REPLAY_REPEATS} times "
+            "with nothing between them; µs per launch, one measurement per round):",
+            "",
+            "| path | rsocl µs / launch | replay µs / launch | rsocl / replay (rounds) |",
+            "|---|---|---|---|",
+        ]
+        for name, pairs in replays.items():
+            ratios = [a / b for a, b in pairs]
+            lines.append(
+                f"| {name} | {statistics.median(a for a, _ in pairs):.1f} | "
+                f"{statistics.median(b for _, b in pairs):.1f} | "
+                f"{statistics.median(ratios):.2f} ({', '.join(f'{r:.2f}' for r in ratios)}) |"
+            )
     if passes_rows:
         lines += [
             "",
@@ -429,9 +515,9 @@ def main(argv=None):
     if args.long <= args.short or args.short < 1:
         p.error(f"--long ({args.long}) must exceed --short ({args.short}) >= 1")
     device = get_device(args.device)
-    floor, trivial, rows = measure(args.shapes, args.rounds, args.short, args.long, device, tuple(args.paths))
+    floor, trivial, rows, replays = measure(args.shapes, args.rounds, args.short, args.long, device, tuple(args.paths))
     passes_rows = {m: passes(m, device, args.rounds) for m in args.shapes if m >= 8} if args.passes else None
-    lines = page(floor, trivial, rows, device, args, passes_rows)
+    lines = page(floor, trivial, rows, device, args, passes_rows, replays)
     print("\n".join(lines))
     if args.out:
         write_page(args.out, lines)
