@@ -138,17 +138,12 @@ def search_memory(op, reg, projection: str, batch) -> int:
     cube = op.domain_shape
     itemsize = np.dtype(op.dtype).itemsize
     snap = op.K * int(np.prod(cube[1:])) * itemsize
-    per_fold = (
-        state_bytes(cube, op.K, op.dtype, projection, 1)
-        + int(np.prod(cube)) * itemsize
-        + 2 * snap
-        + workspace_memory(cube, op.dtype, reg, 1, op.device)
-    )
+    solver = state_bytes(cube, op.K, op.dtype, projection, 1) + workspace_memory(cube, op.dtype, reg, 1, op.device)
+    per_fold = solver + int(np.prod(cube)) * itemsize + 2 * snap
     folds = len(default_patterns(op.rig.shape, op.K))
     extra = folds * per_fold
     if batches_pay(op.device):  # candidates x folds run as one batch (rsocl.solver.search_batch)
         candidates = candidate_capacity(op, folds)
-        solver = state_bytes(cube, op.K, op.dtype, projection, 1) + workspace_memory(cube, op.dtype, reg, 1, op.device)
         extra += (candidates - 1) * folds * solver + batch_bytes(op, candidates * folds)
     if batch is not None:
         extra += problem_bytes(cube, op.K, op.dtype, 1)
