@@ -110,10 +110,11 @@ class BatchedFolds:
         todo = list(range(len(regs)))
         while todo:
             group = [todo[0]]
-            for i in todo[1:]:
-                if len(group) < capacity and self._combined(regs, group + [i], len(folds)) is not None:
-                    group.append(i)
             reg = self._combined(regs, group, len(folds))
+            for i in todo[1:]:
+                wider = self._combined(regs, group + [i], len(folds)) if len(group) < capacity else None
+                if wider is not None:
+                    group, reg = group + [i], wider
             batch = self._run(op, g_device, folds, reg, [lams[i] for i in group], eta, projection, iterations)
             for i, result in zip(group, batch):
                 results[i] = result
