@@ -1,5 +1,5 @@
-/* The ADMM data step of docs/model.md. Needs common.cl; the host defines NCH (channels) and
- * PROJECTION_EXACT 0|1.
+/* The ADMM data step of docs/model.md. Needs common.cl and residual.cl; the host defines NCH
+ * (channels), ACC and PROJECTION_EXACT 0|1.
  *
  *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [sets with eta > 0]
  *                                             f  = v = theta + b
@@ -7,6 +7,7 @@
  *                   of TILE_R x TILE_W px)                   | r / (eta + psi)    (paper, Eq. 15)
  *                                             f += Hᵀ z     (window loops only)
  *                                             [difference = 1: then u = f - b over the block's column]
+ *                                             [slot >= 0: first the residual of theta into a slot]
  *   admm_difference (one work item per voxel) u = f - b     (input of the denoiser)
  *   admm_blend      (one work item per voxel) theta = x0 + alpha (theta - x0)  (after the last iteration)
  *
@@ -72,37 +73,23 @@ inline void column_difference(__global const real *f, __global const real *b, __
         }
 }
 
-/* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R), sets): one work item per block of
- * TILE_R x TILE_W pixels of one set (common.cl); blocks cut by the ROI's edge take project_pixel.
- * eta[set]; the inverse of set s starts at s * own_inverse * (its size per set). With difference = 1
- * the work item then writes u = f - b over its block's whole column (the admm_difference pass,
- * while the block is in cache). */
-__kernel void admm_project(__global real *f_all, __global const real *g_all,
-                           __global const int *first, __global const real *frac,
-                           __global const real *len, __global const real *gain,
-                           __global const real *inverse_all, __global const real *etas, int own_inverse,
-                           __global const real *b_all, __global real *u_all, int difference,
-                           int T, int L, int m_, int n_)
+/* The projection of the block of TILE_R x TILE_W pixels at (x0, y0) inside the ROI of one set (f, g,
+ * inverse, b, u: that set's); a block cut by the ROI's edge takes project_pixel. With difference = 1
+ * it then writes u = f - b over the block's whole column (the admm_difference pass, while the block
+ * is in cache). */
+inline void project_block(__global real *f, __global const real *g, __global const int *first,
+                          __global const real *frac, __global const real *len, __global const real *gain,
+                          __global const real *inverse, real eta, __global const real *b, __global real *u,
+                          int difference, int T, int L, size_t m, size_t n, size_t x0, size_t y0)
 {
-    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2);
-    size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
-    if (x0 >= n || y0 >= m) return;
-    size_t cube = (size_t)T * mn;
-    __global real *f = f_all + set * cube;
-    __global const real *g = g_all + set * (size_t)NCH * mn;
-#if PROJECTION_EXACT
-    __global const real *inverse = inverse_all + set * (size_t)own_inverse * NCH * NCH * mn;
-#else
-    __global const real *inverse = inverse_all + set * (size_t)own_inverse * NCH * mn;
-#endif
-    real eta = etas[set];
+    size_t mn = m * n;
     if (x0 + TILE_W > n || y0 + TILE_R > m) {
         for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
             for (size_t x = x0; x < x0 + TILE_W && x < n; ++x)
                 project_pixel(f, g, first, frac, len, gain, inverse, eta, T, L, mn, y * n + x);
         if (difference) {
             size_t rows = m - y0 < TILE_R ? m - y0 : TILE_R, width = n - x0 < TILE_W ? n - x0 : TILE_W;
-            column_difference(f, b_all + set * cube, u_all + set * cube, T, mn, n, y0 * n + x0, rows, width);
+            column_difference(f, b, u, T, mn, n, y0 * n + x0, rows, width);
         }
         return;
     }
@@ -130,8 +117,46 @@ __kernel void admm_project(__global real *f_all, __global const real *g_all,
         }
         block_scatter(f, first, frac, len[k], q0, T, L, mn, n, p0, scale);
     }
-    if (difference)
-        column_difference(f, b_all + set * cube, u_all + set * cube, T, mn, n, p0, TILE_R, TILE_W);
+    if (difference) column_difference(f, b, u, T, mn, n, p0, TILE_R, TILE_W);
+}
+
+/* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R), sets): one work item per block of
+ * TILE_R x TILE_W pixels of one set (common.cl). eta[set]; the inverse of set s starts at
+ * s * own_inverse * (its size per set). With slot >= 0 the launch first adds the residual of the
+ * estimate theta (weights w, which may be 0) into that slot of the partials, as residual_partials
+ * (residual.cl) on the same blocks and work groups would (scratch: NCH x the group's items): the
+ * residual of the previous iteration's estimate, without a launch of its own. */
+__kernel void admm_project(__global real *f_all, __global const real *g_all,
+                           __global const int *first, __global const real *frac,
+                           __global const real *len, __global const real *gain,
+                           __global const real *inverse_all, __global const real *etas, int own_inverse,
+                           __global const real *b_all, __global real *u_all, int difference,
+                           __global const real *theta_all, __global const real *w_all,
+                           __global acc_t *partials, __local acc_t *scratch, int slot,
+                           int T, int L, int m_, int n_)
+{
+    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2);
+    size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
+    size_t cube = (size_t)T * mn;
+    __global const real *g = g_all + set * (size_t)NCH * mn;
+    acc_t sums[NCH];
+    for (int k = 0; k < NCH; ++k) sums[k] = (acc_t)0;
+    if (x0 < n && y0 < m) {
+        if (slot >= 0) {
+            __global const real *w = w_all ? w_all + set * (size_t)NCH * mn : 0;
+            for (int k = 0; k < NCH; ++k)
+                sums[k] = block_residual(theta_all + set * cube, g, w, first, frac, len[k], gain[k], (size_t)k, T,
+                                         L, m, n, x0, y0);
+        }
+#if PROJECTION_EXACT
+        __global const real *inverse = inverse_all + set * (size_t)own_inverse * NCH * NCH * mn;
+#else
+        __global const real *inverse = inverse_all + set * (size_t)own_inverse * NCH * mn;
+#endif
+        project_block(f_all + set * cube, g, first, frac, len, gain, inverse, etas[set], b_all + set * cube,
+                      u_all + set * cube, difference, T, L, m, n, x0, y0);
+    }
+    group_partials(sums, NCH, set * NCH, get_global_size(2) * NCH, slot, scratch, partials);
 }
 
 __kernel void admm_difference(__global const real *f, __global const real *b, __global real *u)

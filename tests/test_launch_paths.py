@@ -106,20 +106,21 @@ def test_gpu_path_of_a_batch_equals_its_sets_on_the_cpu_path(problem, device, mo
 def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
     rig, g = problem
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: True))  # as a CPU device, whatever it is
-    # CPU: admm_dual, admm_project, admm_difference, the plain TV of 10 iterations (1 + 9 + 8), the residual
-    assert _launches_per_iteration(rig, g, device) == 22
+    # CPU: admm_dual, admm_project (with the residual of the previous iteration's estimate),
+    # admm_difference, the plain TV of 10 iterations (1 + 9 + 8)
+    assert _launches_per_iteration(rig, g, device) == 21
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
     # other devices, plain TV (GPU_FUSED) in one launch per Chambolle iteration (GPU_ONE_LAUNCH): the
-    # projection with u = f - b, the TV whose last launch makes the dual update (1 + 8 + 1), the residual
-    assert GPU_FUSED == 0 and GPU_ONE_LAUNCH == 1 and _launches_per_iteration(rig, g, device) == 12
+    # projection with u = f - b and the residual, the TV whose last launch makes the dual update (1 + 8 + 1)
+    assert GPU_FUSED == 0 and GPU_ONE_LAUNCH == 1 and _launches_per_iteration(rig, g, device) == 11
     # the same TV in two launches per iteration (1 + 8 + 8 + 1)
     monkeypatch.setattr(tv_module, "GPU_ONE_LAUNCH", 0)
-    assert _launches_per_iteration(rig, g, device) == 20
-    # the fused TV: the projection, the fused TV, the residual
+    assert _launches_per_iteration(rig, g, device) == 19
+    # the fused TV: the projection, the fused TV
     monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     plan = TV().fused_plan(_cube(device, rig))
     assert plan is not None
-    assert _launches_per_iteration(rig, g, device) == 2 + len(plan.launches) <= 12
+    assert _launches_per_iteration(rig, g, device) == 1 + len(plan.launches) <= 11
 
 
 def _cube(device, rig):

@@ -87,3 +87,45 @@ def test_residuals_read_in_groups_equal_the_waited_ones(iterations):
     assert np.shape(fast.history["residual"]) == (iterations, 2)
     np.testing.assert_array_equal(fast.history["residual"], waited.history["residual"])
     np.testing.assert_array_equal(fast.datacube, waited.datacube)
+
+
+def _solver(device, rig, g, valid, dtype):
+    import pyopencl.array as cla
+
+    from rsocl.solver.admm import ADMM
+    from rsocl_plugins.tv import TV
+
+    op = RollingShutterOperator(rig, device=device, dtype=dtype)
+    g_dev = cla.to_device(op.queue, np.ascontiguousarray(g, dtype=op.dtype))
+    return ADMM(op, g_dev, TV(iterations=3), lam=(0.05, 0.1), eta=(0.3, 0.2), valid=valid)
+
+
+# float32 on a device without fp64 sums in float32; "no room": the device's local memory too small
+# for the projection's sums, so the residual keeps its own launch
+@pytest.mark.parametrize("case", ["float64", "float32 without fp64", "gpu", "no room"])
+def test_the_projection_puts_the_residual_the_separate_launch_gives(device, monkeypatch, case):
+    rig = rsocl.Rig.paper_array(4, (10, 9), t_e=1e-4, t_r=3e-5)  # blocks cut by both edges
+    rng = np.random.default_rng(5)
+    g = np.stack([ref.forward(rig, rng.random((rig.T,) + rig.shape)) for _ in range(2)])
+    valid = rng.random(g.shape) > 0.2
+    dtype = "float32" if case == "float32 without fp64" else "float64"
+    if case == "float32 without fp64":
+        device = device.limited(fp64=False)
+    elif case == "no room":
+        device = device.limited(local_mem_bytes=256)
+    elif case == "gpu":  # the dual update folded into the TV's and the projection's launches
+        from rsocl.device.context import Device
+
+        monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    folded, alone = _solver(device, rig, g, valid, dtype), _solver(device, rig, g, valid, dtype)
+    assert folded.folds_residual == (case != "no room")
+    slots = folded.residuals.slots
+    for it in range(11):  # the residual of iteration it - 1, in the next iteration's projection
+        folded.step(residual_slot=None if it == 0 else (it - 1) % slots)
+        alone.step()
+        alone.residual_into(it % slots)
+    folded.residual_into(10 % slots)
+    np.testing.assert_array_equal(folded.theta.get(), alone.theta.get())
+    assert np.array_equal(folded.read_residuals(slots).result(), alone.read_residuals(slots).result())
+    with pytest.raises(ValueError, match=r"slot must be in \[0, 7\]"):
+        folded.step(residual_slot=slots)

@@ -4,12 +4,17 @@ One iteration is the data step in three launches (``admm_dual``: dual update and
 ``v = theta + b``; ``admm_project``: ``f = v + Hᵀ(eta I + H Hᵀ)⁻¹(g - H v)`` per pixel;
 ``admm_difference``: ``u = f - b``) and the regularizer's ``theta = denoise(u, lam/eta)``; a
 regularizer that fuses the dual update (the TV) takes the first and last of them into its own and the
-projection's launches. The residual of the history is one more launch (:mod:`rsocl.solver.residuals`).
+projection's launches. The residual of the history is one more launch (:mod:`rsocl.solver.residuals`),
+or, in a run that reads the residuals a group at a time, the next iteration's projection computes it
+(``step(residual_slot=...)``).
 A batch of sets runs every launch once for all of them. Nothing crosses to the host but
 the few partial sums of the history.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -95,8 +100,9 @@ class ADMM:
         self.u = cla.empty(queue, shape, op.dtype)
         self.hx = cla.empty(queue, batch + op.range_shape, op.dtype)
         self.program = op.device.program(
-            ["admm.cl"],
+            ["residual.cl", "admm.cl"],
             REAL=c_type(op.dtype),
+            ACC=c_type(op.device.acc_dtype),
             MASK_BINARY=int(op.rig.mask == "binary"),
             NCH=op.K,
             PROJECTION_EXACT=int(projection == "exact"),
@@ -106,19 +112,33 @@ class ADMM:
         dev, prog = op.device, self.program  # exact grids: no bounds tests
         self.voxels = batch_launches(self.per_set, self.sets, dev.group_limit(prog.admm_dual, cap=64))
         self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
-        self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project,))
         self.fused = bool(regularizer.fuses_dual_on(op.device))
-        self.residuals = DeviceResiduals(op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS)
+        self.residuals = DeviceResiduals(
+            op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS, kernels=(prog.admm_project,)
+        )
+        self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project, self.residuals.kernel))
+        self.folds_residual = self._scratch_bytes() <= dev.local_mem_bytes // 2
         self.g_norm2 = self.residuals.g_norm2
         self.iteration = 0
-        self._denoiser = None  # the regularizer's bound call, made at the first step
+        self._denoiser: Callable[[], Any] | None = None  # the regularizer's bound call, made at the first step
         self._bind_kernels()
         cl.enqueue_barrier(queue)
+
+    def _scratch_bytes(self) -> int:
+        """Local memory of a projection that adds the residual: one sum per channel and work item."""
+        if self.blocks[0][:2] != self.residuals.grid[0][:2] or self.blocks[1] != self.residuals.grid[1]:
+            raise RuntimeError(
+                f"the projection's blocks {self.blocks} differ from the residual's {self.residuals.grid}"
+            )
+        return self.op.K * int(np.prod(self.blocks[1])) * self.residuals.acc.itemsize
 
     def _bind_kernels(self):
         """This solver's own kernel objects (rsocl.device.Kernels.lease), their arguments set once: a
         step enqueues them and sets only the by-value arguments that change (the first iteration's flags)."""
+        import pyopencl as cl
+
         op, prog = self.op, self.program
+        self._project_flags = {11: int(self.fused), 16: -1}  # the by-value arguments a step may change
         self._dual = prog.lease("admm_dual", self)
         self._dual.set_args(
             self.theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0), np.int32(self.per_set)
@@ -134,6 +154,11 @@ class ADMM:
             self.b.data,
             self.u.data,
             np.int32(self.fused),
+            self.theta.data,
+            None if self.valid is None else self.valid.data,
+            self.residuals.partials,
+            cl.LocalMemory(self._scratch_bytes() if self.folds_residual else self.residuals.acc.itemsize),
+            np.int32(-1),
             np.int32(op.T),
             np.int32(op.L),
             *op._shape_args(),
@@ -171,14 +196,25 @@ class ADMM:
         self.iteration = 0
         self._denoiser = None
 
-    def step(self):
-        """One ADMM iteration (enqueued; nothing is read back)."""
+    def step(self, residual_slot: int | None = None):
+        """One ADMM iteration (enqueued; nothing is read back).
+
+        ``residual_slot``: also put the residual of the estimate as it is before this iteration (the
+        previous iteration's) in that device slot (0 .. :data:`RESIDUAL_SLOTS` - 1, as
+        :meth:`residual_into`), in the projection's launch where its local memory allows.
+        """
         queue = self.op.queue
+        if residual_slot is not None:
+            self.residuals.check_slot(residual_slot)
+            if not self.folds_residual:
+                self.residuals.enqueue(self.theta, residual_slot)
         if not (self.fused and self.iteration > 0):  # else the denoiser made the dual update
             self._dual.set_arg(4, np.int32(self.iteration > 0))
             for gsize, lsize, offset in self.voxels:
                 self._dual.enqueue(queue, gsize, lsize, offset)
-        self._project.set_arg(11, np.int32(self.fused))
+        folded = residual_slot if residual_slot is not None and self.folds_residual else -1
+        self._project_flag(11, int(self.fused))
+        self._project_flag(16, folded)
         self._project.enqueue(queue, *self.blocks)
         if not self.fused:
             for gsize, lsize, offset in self.elements:
@@ -188,6 +224,12 @@ class ADMM:
             self._denoiser = self.regularizer.bind(self.u, self.weight, self.theta, dual)
         self._denoiser()
         self.iteration += 1
+
+    def _project_flag(self, index: int, value: int):
+        """Set the projection's by-value argument ``index`` to ``value`` where it holds another."""
+        if self._project_flags[index] != value:
+            self._project.set_arg(index, np.int32(value))
+            self._project_flags[index] = value
 
     def blend_towards(self, x0, alpha: float):
         """``theta = x0 + alpha (theta - x0)`` (enqueued): the estimate moved back towards the start ``x0``

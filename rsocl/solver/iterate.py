@@ -186,11 +186,12 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None, auto
     is that of the estimate it leaves.
 
     With nothing to look at ``theta`` between iterations (no callback, no truth, no tol), the
-    residuals stay on the device and are read a group at a time (:func:`_run_pipelined`) while the
-    device runs the next group: the host never waits on an idle device, and a divergence is raised
-    a group or two after the iteration that diverged. With ``blend`` below 1 the estimate is then moved back towards
-    the run's start ``staged.x0`` (:meth:`~rsocl.solver.admm.ADMM.blend_towards`), and the last
-    record's residual and PSNR are those of the returned estimate.
+    residuals stay on the device (each computed in the next iteration's projection) and are read a
+    group at a time (:func:`_run_pipelined`) while the device runs the next group: the host never
+    waits on an idle device, and a divergence is raised a group or two after the iteration that
+    diverged. With ``blend`` below 1 the estimate is then moved back towards the run's start
+    ``staged.x0`` (:meth:`~rsocl.solver.admm.ADMM.blend_towards`), and the last record's residual
+    and PSNR are those of the returned estimate.
     """
     bar = None
     if progress:
@@ -232,19 +233,27 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None, auto
 
 
 def _run_pipelined(solver, history, iterations):
-    """The iterations of a run that does not look at each residual: every iteration leaves its
-    residual in a device slot, the slots are read in one copy every ``solver.residuals.slots``
-    iterations, and each copy is waited for only after the next group of iterations is enqueued."""
+    """The iterations of a run that does not look at each residual: every iteration's residual goes to
+    a device slot, computed by the next iteration's projection (the last one's by a launch of its
+    own); the slots are read in one copy every ``solver.residuals.slots`` iterations, and each copy is
+    waited for only after the next group of iterations is enqueued."""
     slots = solver.residuals.slots
     pending = None  # (first iteration, residuals on their way)
+
+    def read(last):  # the residuals of the group that ends with iteration `last` are in their slots
+        nonlocal pending
+        current = (last - last % slots, solver.read_residuals(last % slots + 1))
+        if pending is not None:
+            _book(history, *pending)
+        pending = current
+
     for it in range(iterations):
-        solver.step()
-        solver.residual_into(it % slots)
-        if (it + 1) % slots == 0 or it == iterations - 1:
-            current = (it - it % slots, solver.read_residuals(it % slots + 1))
-            if pending is not None:
-                _book(history, *pending)
-            pending = current
+        solver.step(residual_slot=None if it == 0 else (it - 1) % slots)
+        if it > 0 and it % slots == 0:
+            read(it - 1)
+    if iterations > 0:
+        solver.residual_into((iterations - 1) % slots)
+        read(iterations - 1)
     if pending is not None:
         _book(history, *pending)
 

@@ -2,12 +2,13 @@
 
 One launch of ``residual_partials`` (``kernels/residual.cl``) computes ``H theta`` and the weighted
 sum of squares of ``g - H theta`` block by block, and leaves one partial per work group in a
-*slot* of a device buffer. A run that looks at each residual reads one slot per iteration; a run
-that does not writes the residuals of ``slots`` iterations into their own slots and reads them in
-one copy (:meth:`DeviceResiduals.read`), while the device goes on with the next iterations. The
-host adds the partials with ``math.fsum``, so the value does not depend on how it was read.
-The queue must be in order (rsocl's queues are): a slot is written again only after the copy
-enqueued before it.
+*slot* of a device buffer; a kernel named in ``kernels`` (the ADMM's projection) may write the same
+partials from its own launch on the same blocks and work groups (:attr:`DeviceResiduals.grid`).
+A run that looks at each residual reads one slot per iteration; a run that does not writes the
+residuals of ``slots`` iterations into their own slots and reads them in one copy
+(:meth:`DeviceResiduals.read`), while the device goes on with the next iterations. The host adds
+the partials with ``math.fsum``, so the value does not depend on how it was read. The queue must
+be in order (rsocl's queues are): a slot is written again only after the copy enqueued before it.
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ class DeviceResiduals:
         ``B`` for a batch (one residual per set), None for one set.
     slots : int
         Iterations whose residuals the device holds at once, >= 1.
+    kernels : tuple of pyopencl.Kernel
+        Other kernels that write the slots on this object's blocks and work groups: the work groups
+        stay within their limits too.
 
     Examples
     --------
@@ -49,7 +53,7 @@ class DeviceResiduals:
     [0.0]
     """
 
-    def __init__(self, op, g, valid, sets, slots: int):
+    def __init__(self, op, g, valid, sets, slots: int, kernels: tuple = ()):
         import pyopencl as cl
 
         self.op, self.g, self.valid, self.sets = op, g, valid, sets
@@ -67,7 +71,7 @@ class DeviceResiduals:
         )
         kernel = self.program.lease("residual_partials", self)
         channels = op.K * (sets or 1)
-        self.grid = op.block_grid(channels, kernels=(kernel,))
+        self.grid = op.block_grid(channels, kernels=(kernel, *kernels))
         gsize, lsize = self.grid
         self.per_slot = int(np.prod([size // local for size, local in zip(gsize, lsize)]))
         self.partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, self.slots * self.per_slot * self.acc.itemsize)
@@ -91,13 +95,17 @@ class DeviceResiduals:
 
     def enqueue(self, theta, slot: int):
         """Enqueue the residual of device array ``theta`` into ``slot`` (0 .. slots - 1); nothing is read."""
-        if not 0 <= slot < self.slots:
-            raise ValueError(f"slot must be in [0, {self.slots - 1}], got {slot!r}")
+        self.check_slot(slot)
         if theta.data is not self._theta:  # an ADMM passes the same buffer every iteration: set once
             self.kernel.set_arg(0, theta.data)
             self._theta = theta.data
         self.kernel.set_arg(9, np.int32(slot))
         self.kernel.enqueue(self.op.queue, *self.grid)
+
+    def check_slot(self, slot: int):
+        """ValueError unless ``slot`` is one of this object's slots (0 .. slots - 1)."""
+        if not 0 <= slot < self.slots:
+            raise ValueError(f"slot must be in [0, {self.slots - 1}], got {slot!r}")
 
     def read(self, count: int) -> PendingResiduals:
         """Enqueue the copy of slots ``0 .. count - 1`` to the host (not waited for)."""
