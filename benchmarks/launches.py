@@ -272,6 +272,8 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     enqueues each (a finish around each round): ``[(name, separate µs, folded µs, folded / separate per round)]``.
 
     - the residual: ``forward`` + ``sum_sq_diff`` against ``residual_partials`` (one launch);
+    - the residual in the projection: ``admm_project`` + ``residual_partials`` against ``admm_project``
+      adding the residual of the estimate to its own launch;
     - ``u = f - b``: ``admm_project`` + ``admm_difference`` against ``admm_project`` writing u itself;
     - the ADMM's dual update: ``tv_primal`` + ``admm_dual`` against ``tv_primal_update``;
     - one Chambolle iteration: ``tv_primal`` + ``tv_dual`` against ``tv_step`` (two copies of p).
@@ -296,23 +298,10 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     steps = tv._steps(q, [0.5], s.u.dtype)
     sizes = (np.int32(T), np.int32(m), np.int32(m), np.int32(1))
 
-    def project(difference):
-        prog.admm_project(
-            q,
-            *s.blocks,
-            s.f.data,
-            s.g.data,
-            *op._geometry(),
-            s.inverse.data,
-            s.eta_device.data,
-            np.int32(0),
-            s.b.data,
-            s.u.data,
-            np.int32(difference),
-            np.int32(T),
-            np.int32(op.L),
-            *op._shape_args(),
-        )
+    def project(difference, slot=-1):  # the solver's own projection, with u = f - b and the residual or not
+        s._project_flag(11, difference)
+        s._project_flag(16, slot)
+        s._project.enqueue(q, *s.blocks)
 
     def project_then_difference():
         project(0)
@@ -367,8 +356,17 @@ def passes(m: int, device, rounds: int, reps: int = 100):
         op.forward_into(s.theta, s.hx)
         sum_sq_diff_async(s.g, s.hx)
 
+    def project_then_residual():
+        project(1)
+        s.residual_into(0)
+
     pairs = [
         ("residual: forward + sum_sq_diff | residual_partials", forward_then_sum, lambda: s.residual_into(0)),
+        (
+            "residual in the projection: admm_project + residual_partials | admm_project with the residual",
+            project_then_residual,
+            lambda: project(1, 0),
+        ),
         (
             "u = f - b: admm_project + admm_difference | admm_project writing u",
             project_then_difference,
