@@ -118,7 +118,6 @@ class ADMM:
         )
         self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project, self.residuals.kernel))
         self.folds_residual = self._scratch_bytes() <= dev.local_mem_bytes // 2
-        self.g_norm2 = self.residuals.g_norm2
         self.iteration = 0
         self._denoiser: Callable[[], Any] | None = None  # the regularizer's bound call, made at the first step
         self._bind_kernels()
@@ -165,6 +164,11 @@ class ADMM:
         )
         self._difference = prog.lease("admm_difference", self)
         self._difference.set_args(self.f.data, self.b.data, self.u.data)
+
+    @property
+    def g_norm2(self):
+        """``‖g‖²`` over the valid snapshot pixels: a float, or one per set (float64 array) for a batch."""
+        return self.residuals.g_norm2
 
     @property
     def lam(self):

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from rsocl.device.program import c_type
-from rsocl.device.reduction import sum_sq_diff
+from rsocl.device.reduction import PendingSum, sum_sq_diff_async
 
 __all__ = ["DeviceResiduals", "PendingResiduals"]
 
@@ -76,7 +76,7 @@ class DeviceResiduals:
         self.per_slot = int(np.prod([size // local for size, local in zip(gsize, lsize)]))
         self.partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, self.slots * self.per_slot * self.acc.itemsize)
         self.local = cl.LocalMemory(int(lsize[0] * lsize[1]) * self.acc.itemsize)
-        self.g_norm2 = sum_sq_diff(g, weights=valid, sets=sets)
+        self._g_norm2 = sum_sq_diff_async(g, weights=valid, sets=sets)  # waited for at the first read
         self.kernel = kernel  # this object's own: its arguments are set here once
         self._theta = None  # the buffer argument 0 holds (the estimate whose residual is enqueued)
         kernel.set_args(
@@ -102,6 +102,11 @@ class DeviceResiduals:
         self.kernel.set_arg(9, np.int32(slot))
         self.kernel.enqueue(self.op.queue, *self.grid)
 
+    @property
+    def g_norm2(self):
+        """``‖g‖²`` over the valid pixels: a float, or one per set (float64 array) for a batch (waits for it)."""
+        return self._g_norm2.result()
+
     def check_slot(self, slot: int):
         """ValueError unless ``slot`` is one of this object's slots (0 .. slots - 1)."""
         if not 0 <= slot < self.slots:
@@ -113,15 +118,15 @@ class DeviceResiduals:
 
         host = np.empty(int(count) * self.per_slot, self.acc)
         event = cl.enqueue_copy(self.op.queue, host, self.partials, is_blocking=False)
-        return PendingResiduals(host, event, int(count), self.sets, self.g_norm2)
+        return PendingResiduals(host, event, int(count), self.sets, self._g_norm2)
 
 
 class PendingResiduals:
     """Residuals of ``count`` slots on their way to the host; :meth:`result` waits for them."""
 
-    def __init__(self, host, event, count, sets, g_norm2):
+    def __init__(self, host, event, count, sets, g_norm2: PendingSum):
         self._host, self._event, self._count, self._sets, self._g_norm2 = host, event, count, sets, g_norm2
-        self._values = None
+        self._values: list | None = None
 
     def result(self) -> list:
         """One residual per slot read: a float, or one per set (float64 array) for a batch.
@@ -131,7 +136,7 @@ class PendingResiduals:
         if self._values is None:
             self._event.wait()
             rows = self._host.astype(np.float64).reshape(self._count, self._sets or 1, -1)
-            g2 = np.atleast_1d(np.asarray(self._g_norm2, dtype=np.float64))
+            g2 = np.atleast_1d(np.asarray(self._g_norm2.result(), dtype=np.float64))
             values = []
             for slot in rows:
                 r2 = np.array([math.fsum(row.tolist()) for row in slot])
