@@ -100,15 +100,15 @@ def _solver(device, rig, g, valid, dtype):
     return ADMM(op, g_dev, TV(iterations=3), lam=(0.05, 0.1), eta=(0.3, 0.2), valid=valid)
 
 
-# float32 on a device without fp64 sums in float32; "no room": the device's local memory too small
+# float32 sums in float64, or in float32 on a device without fp64; "no room": the device's local memory too small
 # for the projection's sums, so the residual keeps its own launch
-@pytest.mark.parametrize("case", ["float64", "float32 without fp64", "gpu", "no room"])
+@pytest.mark.parametrize("case", ["float64", "float32", "float32 without fp64", "gpu", "no room"])
 def test_the_projection_puts_the_residual_the_separate_launch_gives(device, monkeypatch, case):
     rig = rsocl.Rig.paper_array(4, (10, 9), t_e=1e-4, t_r=3e-5)  # blocks cut by both edges
     rng = np.random.default_rng(5)
     g = np.stack([ref.forward(rig, rng.random((rig.T,) + rig.shape)) for _ in range(2)])
     valid = rng.random(g.shape) > 0.2
-    dtype = "float32" if case == "float32 without fp64" else "float64"
+    dtype = "float32" if case.startswith("float32") else "float64"
     if case == "float32 without fp64":
         device = device.limited(fp64=False)
     elif case == "no room":
