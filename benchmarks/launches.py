@@ -299,8 +299,8 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     sizes = (np.int32(T), np.int32(m), np.int32(m), np.int32(1))
 
     def project(difference, slot=-1):  # the solver's own projection, with u = f - b and the residual or not
-        s._project_flag(11, difference)
-        s._project_flag(16, slot)
+        s._project.set_arg(11, np.int32(difference))
+        s._project.set_arg(16, np.int32(slot))
         s._project.enqueue(q, *s.blocks)
 
     def project_then_difference():

@@ -137,7 +137,6 @@ class ADMM:
         import pyopencl as cl
 
         op, prog = self.op, self.program
-        self._project_flags = {11: int(self.fused), 16: -1}  # the by-value arguments a step may change
         self._dual = prog.lease("admm_dual", self)
         self._dual.set_args(
             self.theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0), np.int32(self.per_set)
@@ -217,8 +216,8 @@ class ADMM:
             for gsize, lsize, offset in self.voxels:
                 self._dual.enqueue(queue, gsize, lsize, offset)
         folded = residual_slot if residual_slot is not None and self.folds_residual else -1
-        self._project_flag(11, int(self.fused))
-        self._project_flag(16, folded)
+        self._project.set_arg(11, np.int32(self.fused))  # by-value arguments: set only when they change
+        self._project.set_arg(16, np.int32(folded))
         self._project.enqueue(queue, *self.blocks)
         if not self.fused:
             for gsize, lsize, offset in self.elements:
@@ -228,12 +227,6 @@ class ADMM:
             self._denoiser = self.regularizer.bind(self.u, self.weight, self.theta, dual)
         self._denoiser()
         self.iteration += 1
-
-    def _project_flag(self, index: int, value: int):
-        """Set the projection's by-value argument ``index`` to ``value`` where it holds another."""
-        if self._project_flags[index] != value:
-            self._project.set_arg(index, np.int32(value))
-            self._project_flags[index] = value
 
     def blend_towards(self, x0, alpha: float):
         """``theta = x0 + alpha (theta - x0)`` (enqueued): the estimate moved back towards the start ``x0``
