@@ -77,10 +77,10 @@ inline void column_difference(__global const real *f, __global const real *b, __
  * inverse, b, u: that set's); a block cut by the ROI's edge takes project_pixel. With difference = 1
  * it then writes u = f - b over the block's whole column (the admm_difference pass, while the block
  * is in cache). */
-inline void project_block(__global real *f, __global const real *g, __global const int *first,
-                          __global const real *frac, __global const real *len, __global const real *gain,
-                          __global const real *inverse, real eta, __global const real *b, __global real *u,
-                          int difference, int T, int L, size_t m, size_t n, size_t x0, size_t y0)
+static inline void project_block(__global real *f, __global const real *g, __global const int *first,
+                                 __global const real *frac, __global const real *len, __global const real *gain,
+                                 __global const real *inverse, real eta, __global const real *b, __global real *u,
+                                 int difference, int T, int L, size_t m, size_t n, size_t x0, size_t y0)
 {
     size_t mn = m * n;
     if (x0 + TILE_W > n || y0 + TILE_R > m) {

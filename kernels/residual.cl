@@ -15,9 +15,9 @@
 /* w (g - gain H f)^2 in acc_t over the block of TILE_R x TILE_W pixels at (x0, y0) of channel k (the
  * part inside the ROI for a block cut by its edge), the difference taken from H f rounded to real,
  * as the forward kernel stores it. f, g, w: one set's estimate, snapshots and weights (w may be 0). */
-inline acc_t block_residual(__global const real *f, __global const real *g, __global const real *w,
-                            __global const int *first, __global const real *frac, real len, real gain,
-                            size_t k, int T, int L, size_t m, size_t n, size_t x0, size_t y0)
+static inline acc_t block_residual(__global const real *f, __global const real *g, __global const real *w,
+                                   __global const int *first, __global const real *frac, real len, real gain,
+                                   size_t k, int T, int L, size_t m, size_t n, size_t x0, size_t y0)
 {
     size_t mn = m * n;
     acc_t sum = (acc_t)0;
@@ -52,8 +52,8 @@ inline acc_t block_residual(__global const real *f, __global const real *g, __gl
  * (layout above; `channels` is the launch's total); where slot < 0 it touches neither scratch nor
  * partials. Every item of the group must call it: its barrier is not in a branch (a barrier in a
  * branch, though every item takes it, crashes PoCL 3.0). */
-inline void group_partials(const acc_t *sums, int count, size_t c0, size_t channels, int slot,
-                           __local acc_t *scratch, __global acc_t *partials)
+static inline void group_partials(const acc_t *sums, int count, size_t c0, size_t channels, int slot,
+                                  __local acc_t *scratch, __global acc_t *partials)
 {
     size_t lx = get_local_size(0), items = lx * get_local_size(1), lid = get_local_id(1) * lx + get_local_id(0);
     if (slot >= 0)
