@@ -1,17 +1,20 @@
 """The TV's plain path: Chambolle's iterations on one work item per voxel (``kernels/tv.cl``), bound once.
 
-Two ways through the same arithmetic:
+Three ways through the same arithmetic (``one_launch``):
 
-- two launches per iteration on one copy of the dual ``p``: ``tv_primal`` writes the primal, then
+- 0: two launches per iteration on one copy of the dual ``p``: ``tv_primal`` writes the primal, then
   ``tv_dual`` reads it and updates ``p`` in place;
-- one launch per iteration on two copies of ``p`` (``one_launch``): ``tv_step`` reads one copy and
-  writes the other, each work item computing the primal of its voxel and of its three next neighbours
-  itself, so no launch writes the primal. Fewer launches and fewer bytes, more arithmetic.
+- 1: one launch per iteration on two copies of ``p``: ``tv_step`` reads one copy and writes the
+  other, each work item computing the primal of its voxel and of its three next neighbours itself, so
+  no launch writes the primal. Fewer launches and fewer bytes, more arithmetic;
+- 2: one launch per two iterations on two copies of ``p``: ``tv_step2``, each work item also stepping
+  the dual of the twelve voxels around it that the second iteration reads (an odd count of steps ends
+  with one ``tv_step``). Half the launches of 1 for about 13 times its arithmetic.
 
-Both start with ``tv_dual_first`` (the first iteration from ``p = 0``) and end with the primal of the last
+All start with ``tv_dual_first`` (the first iteration from ``p = 0``) and end with the primal of the last
 ``p`` (``tv_primal``, or ``tv_primal_update`` when the ADMM's dual update is folded in). A run of
-``iterations`` Chambolle iterations is ``2 iterations - 2`` launches of the first kind and
-``iterations`` of the second, for each launch grid of :func:`rsocl_plugins.tv.launches`.
+``iterations`` Chambolle iterations is ``2 iterations - 2`` launches with 0, ``iterations`` with 1 and
+``2 + ceil((iterations - 2) / 2)`` with 2, for each launch grid of :func:`rsocl_plugins.tv.launches`.
 
 :func:`sequence` sets every kernel argument and returns the launches; :class:`Bound` keeps them with
 their arrays for a caller that runs the denoiser many times on the same arrays.
@@ -35,7 +38,7 @@ __all__ = ["Arrays", "Bound", "sequence", "enqueue"]
 class Arrays:
     """The device arrays a plain TV run reads and writes: input ``x`` and output ``out`` (``(T, m, n)``
     or ``(B, T, m, n)``), the per-set ``steps`` of ``tv.cl`` (step lengths and temporal weight), the
-    dual copies ``p`` (one, or two for ``one_launch``), ``xnext``, and the ADMM's ``(b, f, dual)`` when
+    dual copies ``p`` (one, or two for ``one_launch`` 1 and 2), ``xnext``, and the ADMM's ``(b, f, dual)`` when
     its dual update is folded in."""
 
     x: cla.Array
@@ -46,9 +49,9 @@ class Arrays:
     dual: tuple | None = None
 
 
-def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: bool, owner=None) -> list:
+def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: int, owner=None) -> list:
     """The launches ``(kernel, global, local, offset)`` of one plain TV run of ``iterations`` (>= 2)
-    Chambolle iterations on ``arrays``, every argument set.
+    Chambolle iterations on ``arrays``, every argument set; ``one_launch`` 0, 1 or 2 (module docstring).
 
     With an ``owner`` the kernel objects are its own while it lives (``prog.lease``): enqueuing the list
     again runs the denoiser again on the arrays' current contents (:class:`Bound`). Without one they are
@@ -57,8 +60,12 @@ def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: bool, own
     """
     if iterations < 2:
         raise ValueError(f"iterations must be >= 2 for a launch sequence, got {iterations}")
-    if len(arrays.p) != (2 if one_launch else 1):
-        raise ValueError(f"one_launch={one_launch} takes {2 if one_launch else 1} dual copies, got {len(arrays.p)}")
+    one_launch = int(one_launch)
+    if one_launch not in (0, 1, 2):
+        raise ValueError(f"one_launch must be 0, 1 or 2, got {one_launch}")
+    copies = 2 if one_launch else 1
+    if len(arrays.p) != copies:
+        raise ValueError(f"one_launch={one_launch} takes {copies} dual copies, got {len(arrays.p)}")
     x, out = arrays.x, arrays.out
     sets = x.shape[0] if x.ndim == 4 else 1
     T, m, n = x.shape[-3:]
@@ -75,11 +82,15 @@ def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: bool, own
     launches = bound("tv_dual_first", x.data, p0.data, xnext, steps, *sizes)
     if one_launch:
         pa, pb = arrays.p
-        forth = bound("tv_step", x.data, pa.data, pb.data, xnext, steps, *sizes)
-        back = bound("tv_step", x.data, pb.data, pa.data, xnext, steps, *sizes)
-        for k in range(iterations - 2):
-            launches += back if k % 2 else forth
-        last = arrays.p[(iterations - 2) % 2]
+        doubles = (iterations - 2) // 2 if one_launch == 2 else 0
+        kinds = ["tv_step2"] * doubles + ["tv_step"] * (iterations - 2 - 2 * doubles)
+        ping_pong = {}  # (kernel, direction): its launches, bound once
+        for k, name in enumerate(kinds):
+            if (name, k % 2) not in ping_pong:
+                src, dst = (pa, pb) if k % 2 == 0 else (pb, pa)
+                ping_pong[name, k % 2] = bound(name, x.data, src.data, dst.data, xnext, steps, *sizes)
+            launches += ping_pong[name, k % 2]
+        last = arrays.p[len(kinds) % 2]
     else:
         primal = bound("tv_primal", x.data, p0.data, out.data, steps, *sizes)
         dual = bound("tv_dual", out.data, p0.data, xnext, steps, *sizes)
@@ -105,7 +116,7 @@ class Bound:
     enqueues the launches, made with kernel objects of its own, on ``queue``. It holds the arrays, so
     none of them, the dual copies included, is released while it lives."""
 
-    def __init__(self, queue, prog, grids, arrays: Arrays, iterations: int, one_launch: bool):
+    def __init__(self, queue, prog, grids, arrays: Arrays, iterations: int, one_launch: int):
         self.queue, self.arrays = queue, arrays
         self.launches = sequence(prog, grids, arrays, iterations, one_launch, owner=self)
 

@@ -79,11 +79,14 @@ def test_the_device_default_of_one_launch(device, monkeypatch):
 
 
 @pytest.mark.parametrize("eta", [0.3, 0.0])
-@pytest.mark.parametrize("lean", [False, True])
-def test_gpu_path_matches_the_reference(problem, not_cpu, monkeypatch, dtype, eta, lean):
-    # the default of other devices (the plain TV in one launch per iteration) and the fused TV
-    if lean:
+@pytest.mark.parametrize("path", ["one launch", "pairs", "lean"])
+def test_gpu_path_matches_the_reference(problem, not_cpu, monkeypatch, dtype, eta, path):
+    # the default of other devices (the plain TV in one launch per iteration), the plain TV in one
+    # launch per two iterations, and the fused TV
+    if path == "lean":
         monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
+    elif path == "pairs":
+        monkeypatch.setattr(tv_module, "GPU_ONE_LAUNCH", 2)
     rig, g = problem
     kw = dict(iterations=6, lam=0.05, eta=eta, tv_iterations=4)
     got = rsocl.reconstruct(g, rig, dtype=dtype, device=not_cpu, regularizer_options={"temporal_weight": 2.5}, **kw)
@@ -113,6 +116,9 @@ def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
     # other devices, plain TV (GPU_FUSED) in one launch per Chambolle iteration (GPU_ONE_LAUNCH): the
     # projection with u = f - b and the residual, the TV whose last launch makes the dual update (1 + 8 + 1)
     assert GPU_FUSED == 0 and GPU_ONE_LAUNCH == 1 and _launches_per_iteration(rig, g, device) == 11
+    # the same TV in one launch per two iterations (1 + 4 + 1)
+    monkeypatch.setattr(tv_module, "GPU_ONE_LAUNCH", 2)
+    assert _launches_per_iteration(rig, g, device) == 7
     # the same TV in two launches per iteration (1 + 8 + 8 + 1)
     monkeypatch.setattr(tv_module, "GPU_ONE_LAUNCH", 0)
     assert _launches_per_iteration(rig, g, device) == 19

@@ -123,7 +123,9 @@ def test_the_self_tuned_run_batches_its_search_only_where_batches_pay(device, mo
     assert gpu.params["tuning"]["folds"] == cpu.params["tuning"]["folds"]
 
 
-@pytest.mark.parametrize("path", [dict(fused=0, one_launch=0), dict(fused=0, one_launch=1), dict(fused=3)])
+@pytest.mark.parametrize(
+    "path", [dict(fused=0, one_launch=0), dict(fused=0, one_launch=1), dict(fused=0, one_launch=2), dict(fused=3)]
+)
 def test_tv_with_a_temporal_weight_per_set_denoises_each_set_as_alone(device, path):
     from rsocl_plugins.tv import TV
 

@@ -18,7 +18,7 @@ def _denoise(device, x, weight, dtype, **options):
 
 @pytest.mark.parametrize("shape", [(7, 13, 17), (1, 9, 6), (5, 1, 8), (4, 6, 1), (3, 5, 67), (2, 3, 130)])
 @pytest.mark.parametrize("iterations", [1, 2, 15])
-@pytest.mark.parametrize("one_launch", [0, 1])
+@pytest.mark.parametrize("one_launch", [0, 1, 2])
 def test_3d_matches_skimage(device, dtype, rng, shape, iterations, one_launch):
     x = rng.random(shape)
     options = dict(iterations=iterations, temporal_weight=1.0, step=1.0, one_launch=one_launch)
@@ -28,7 +28,7 @@ def test_3d_matches_skimage(device, dtype, rng, shape, iterations, one_launch):
 
 
 @pytest.mark.parametrize("iterations", [1, 3, 20])
-@pytest.mark.parametrize("one_launch", [0, 1])
+@pytest.mark.parametrize("one_launch", [0, 1, 2])
 def test_2d_per_subframe_matches_skimage(device, dtype, rng, iterations, one_launch):
     x = rng.random((5, 12, 10))
     options = dict(iterations=iterations, temporal_weight=0.0, step=1.0, one_launch=one_launch)
@@ -38,7 +38,7 @@ def test_2d_per_subframe_matches_skimage(device, dtype, rng, iterations, one_lau
 
 
 @pytest.mark.parametrize("temporal_weight, step", [(0.3, STEP), (2.0, STEP), (2.0, 0.4), (1.0, 1.0)])
-@pytest.mark.parametrize("one_launch", [0, 1])
+@pytest.mark.parametrize("one_launch", [0, 1, 2])
 def test_temporal_weight_and_step_match_reference(device, dtype, rng, temporal_weight, step, one_launch):
     x = rng.random((6, 8, 9))
     options = {"one_launch": one_launch} if step == STEP else {"step": step, "one_launch": one_launch}
@@ -120,7 +120,24 @@ def test_one_launch_per_iteration_equals_two_on_a_batch(device, dtype, rng, iter
     np.testing.assert_array_equal(one[1], x.get()[1])
 
 
-@pytest.mark.parametrize("one_launch", [0, 1])
+# shapes with one voxel along an axis, rows of one pixel and of more than a work group; even and odd
+# counts of steps (an odd count ends with one tv_step after the pairs)
+@pytest.mark.parametrize("shape", [(3, 6, 7, 9), (2, 1, 9, 6), (2, 5, 1, 8), (2, 4, 6, 1), (1, 3, 5, 67)])
+@pytest.mark.parametrize("temporal_weight", [2.5, 0.0])
+@pytest.mark.parametrize("iterations", [2, 3, 4, 5, 11])
+def test_two_iterations_per_launch_equal_one_per_launch(device, dtype, rng, shape, temporal_weight, iterations):
+    # tv_step2 steps the dual of the voxels around its own itself: the same arithmetic as two
+    # tv_step launches, so the same values, on a batch with per-set weights (one of them 0)
+    import pyopencl.array as cla
+
+    x = cla.to_device(device.queue, rng.random(shape).astype(dtype))
+    weights = np.array([0.3, 0.0, 1.5])[: shape[0]]
+    one = TV(iterations=iterations, temporal_weight=temporal_weight, one_launch=1).denoise(x, weights).get()
+    pairs = TV(iterations=iterations, temporal_weight=temporal_weight, one_launch=2).denoise(x, weights).get()
+    np.testing.assert_array_equal(pairs, one)
+
+
+@pytest.mark.parametrize("one_launch", [0, 1, 2])
 def test_a_bound_call_denoises_what_the_arrays_hold_when_it_runs(device, rng, one_launch):
     import pyopencl.array as cla
 
@@ -144,7 +161,7 @@ def test_a_bound_call_denoises_what_the_arrays_hold_when_it_runs(device, rng, on
         tv.bind(x, 0.2, x)
 
 
-@pytest.mark.parametrize("fused, one_launch", [(0, 0), (0, 1), (3, 0)])
+@pytest.mark.parametrize("fused, one_launch", [(0, 0), (0, 1), (0, 2), (3, 0)])
 @pytest.mark.parametrize("iterations", [1, 2, 7])
 @pytest.mark.parametrize("bound", [False, True])
 def test_denoise_and_update_is_denoise_then_the_admm_dual_update(
