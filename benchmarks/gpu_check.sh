@@ -6,13 +6,13 @@
 #   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped;
 #   3. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
 #   4. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
-#      iteration, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), capped;
+#      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), capped;
 #   5. benchmarks/inverse.py where the tree has it (the inverse blocks on the device against the host), capped;
 #   6. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped.
 # Pages and logs go to $OUT (the device tool's folder that comes back; ./out/gpu elsewhere).
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (100), PEER_CAP (240), LAUNCH_CAP (60), INVERSE_CAP (25), SEARCH_CAP (50) in seconds; PEER_ARGS replaces the peer's arguments;
+# Knobs: TEST_WORKERS (12), TEST_CAP (90), PEER_CAP (240), LAUNCH_CAP (70), INVERSE_CAP (25), SEARCH_CAP (50) in seconds; PEER_ARGS replaces the peer's arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -23,7 +23,7 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-100} PEER_CAP=${PEER_CAP:-240} LAUNCH_CAP=${LAUNCH_CAP:-60} INVERSE_CAP=${INVERSE_CAP:-25}
+TEST_CAP=${TEST_CAP:-90} PEER_CAP=${PEER_CAP:-240} LAUNCH_CAP=${LAUNCH_CAP:-70} INVERSE_CAP=${INVERSE_CAP:-25}
 SEARCH_CAP=${SEARCH_CAP:-50}
 PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
@@ -85,7 +85,7 @@ echo "peer exit status ${PIPESTATUS[0]} (124: stopped at the cap; the page holds
 # ---------------------------------------------------------------- 4. launches per iteration
 if [ -f benchmarks/launches.py ]; then
     stamp "benchmarks/launches.py (cap ${LAUNCH_CAP} s)" | tee "$OUT/launches.log"
-    timeout -k 5 "$LAUNCH_CAP" "$PYTHON" -P benchmarks/launches.py --device "$DEVICE" --rounds 3 --paths device gpu-two lean \
+    timeout -k 5 "$LAUNCH_CAP" "$PYTHON" -P benchmarks/launches.py --device "$DEVICE" --rounds 3 --paths device gpu-two gpu-pairs lean \
         --out "$OUT/launches.md" \
         >> "$OUT/launches.log" 2>&1
     echo "launches exit status $?" | tee -a "$OUT/launches.log"

@@ -16,17 +16,18 @@ device: a kernel with one work item and one buffer argument, enqueued in a loop.
   loop makes, recorded during a run and enqueued again with nothing between them: rsocl's host
   path over the cost of these very kernels' enqueues on this device.
 
-Four paths are measured (``--paths``, :data:`PATHS`): ``device``, what the device chooses; ``gpu``, what
+Five paths are measured (``--paths``, :data:`PATHS`): ``device``, what the device chooses; ``gpu``, what
 rsocl chooses on a device that is not a CPU (the dual update and ``u = f - b`` folded into the TV's and the
 projection's launches, the plain TV in one launch per Chambolle iteration); ``gpu-two``, that with the
-plain TV in two launches per iteration; ``lean``, that with the TV's fused path. On a CPU device the last
-three run by reading the device as a GPU for the run.
+plain TV in two launches per iteration; ``gpu-pairs``, that with one launch per two iterations;
+``lean``, that with the TV's fused path. On a CPU device the last four run by reading the device as a
+GPU for the run.
 
 Rounds alternate the trivial loop and the ADMM runs of each path, and the median of the rounds is reported.
 Then the passes that the GPU paths fold are timed against the separate ones they replace, in
 alternating rounds (:func:`passes`): what a device's choice of path rests on.
 
-    python benchmarks/launches.py [--shapes 8 50 64] [--paths device gpu gpu-two lean] [--rounds 5]
+    python benchmarks/launches.py [--shapes 8 50 64] [--paths device gpu gpu-two gpu-pairs lean] [--rounds 5]
         [--out docs/launches.md]
 """
 
@@ -116,6 +117,7 @@ PATHS = {
     "device": (False, None, None),
     "gpu": (True, None, None),
     "gpu-two": (True, 0, 0),
+    "gpu-pairs": (True, 0, 2),
     "lean": (True, LEAN_FUSED, None),
 }
 
@@ -125,7 +127,8 @@ def path(name: str):
     """Run the block on path ``name`` of :data:`PATHS`: ``device``, the device's own choice; ``gpu``, the
     device read as one that is not a CPU, with the choices rsocl makes for such a device (the ADMM's passes
     folded, the plain TV in one launch per Chambolle iteration); ``gpu-two``, that with the plain TV in two
-    launches per iteration; ``lean``, that with the fused TV (:data:`LEAN_FUSED`)."""
+    launches per iteration; ``gpu-pairs``, that with one launch per two iterations (``tv_step2``); ``lean``,
+    that with the fused TV (:data:`LEAN_FUSED`)."""
     import rsocl_plugins.tv as tv
     from rsocl.device.context import Device
 
@@ -276,7 +279,8 @@ def passes(m: int, device, rounds: int, reps: int = 100):
       adding the residual of the estimate to its own launch;
     - ``u = f - b``: ``admm_project`` + ``admm_difference`` against ``admm_project`` writing u itself;
     - the ADMM's dual update: ``tv_primal`` + ``admm_dual`` against ``tv_primal_update``;
-    - one Chambolle iteration: ``tv_primal`` + ``tv_dual`` against ``tv_step`` (two copies of p).
+    - one Chambolle iteration: ``tv_primal`` + ``tv_dual`` against ``tv_step`` (two copies of p);
+    - two Chambolle iterations: two ``tv_step`` against one ``tv_step2``.
     """
     import pyopencl.array as cla
 
@@ -352,6 +356,15 @@ def passes(m: int, device, rounds: int, reps: int = 100):
         for gs, ls, off in grids:
             tv_prog.tv_step(q, gs, ls, s.u.data, p.data, p2.data, xnext.data, steps.data, *sizes, global_offset=off)
 
+    def two_steps():
+        one_step()
+        for gs, ls, off in grids:
+            tv_prog.tv_step(q, gs, ls, s.u.data, p2.data, p.data, xnext.data, steps.data, *sizes, global_offset=off)
+
+    def step_pair():
+        for gs, ls, off in grids:
+            tv_prog.tv_step2(q, gs, ls, s.u.data, p.data, p2.data, xnext.data, steps.data, *sizes, global_offset=off)
+
     def forward_then_sum():
         op.forward_into(s.theta, s.hx)
         sum_sq_diff_async(s.g, s.hx)
@@ -374,6 +387,7 @@ def passes(m: int, device, rounds: int, reps: int = 100):
         ),
         ("dual update: tv_primal + admm_dual | tv_primal_update", primal_then_dual, primal_update),
         ("Chambolle iteration: tv_primal + tv_dual | tv_step", primal_dual, one_step),
+        ("two Chambolle iterations: tv_step + tv_step | tv_step2", two_steps, step_pair),
     ]
 
     def timed(fn):
@@ -475,10 +489,12 @@ def page(floor, trivial, rows, device, args, passes_rows=None, replays=None) -> 
         "Paths: `device` is the device's own choice. `gpu` is what rsocl chooses on a device that is not a",
         "CPU: the ADMM's dual update and u = f - b folded into the TV's and the projection's launches, the",
         "plain TV in one launch per Chambolle iteration (`tv_step` on two copies of the dual); `gpu-two` is",
-        "that with the plain TV in two launches per iteration (`tv_primal`, `tv_dual`); `lean` that with the",
-        "fused TV (tiles in local memory). On a CPU device these three run by reading the device as a GPU, and",
-        "their times are those of a GPU's choices run by a CPU (the fused TV's tiles of hundreds of work",
-        "items with barriers, tv_step's recomputed neighbours): there the launch counts are the",
+        "that with the plain TV in two launches per iteration (`tv_primal`, `tv_dual`); `gpu-pairs` that with",
+        "one launch per two iterations (`tv_step2`, each work item also stepping the dual of the twelve voxels",
+        "around it); `lean` that with the fused TV (tiles in local memory). On a CPU device these four run by",
+        "reading the device as a GPU, and their times are those of a GPU's choices run by a CPU (the fused",
+        "TV's tiles of hundreds of work items with barriers, the recomputed neighbours of tv_step and",
+        "tv_step2): there the launch counts are the",
         "measurement, the times say nothing about a GPU. Every path reads the residuals",
         "of 8 iterations (`rsocl.solver.admm.RESIDUAL_SLOTS`) in one copy.",
         "",
