@@ -30,8 +30,8 @@
 /* out = img + d(p) at voxel i, on row y and sub-frame s of its set, d the (negative) divergence of p.
  * The x - 1 neighbour is read at i - 1 always: at x = 0 that is p[1] at x = n - 1 of the row before,
  * which is 0 (see above), or p[0] at the very last voxel (y = m - 1: 0 too) when i = 0. */
-inline real primal_at(__global const real *img, __global const real *p, real wt, size_t N, size_t mn,
-                      size_t n, size_t i, int y, int s)
+static inline real primal_at(__global const real *img, __global const real *p, real wt, size_t N, size_t mn,
+                             size_t n, size_t i, int y, int s)
 {
     real d = -(p[i] + p[N + i]);
     real py = p[y > 0 ? i - n : i];
@@ -81,8 +81,8 @@ __kernel void tv_primal_update(__global const real *img, __global const real *p,
 /* p <- (p - tau grad(out)) / (1 + tau/weight |grad(out)|) at voxel (x, y, s) of its set; with
  * from_zero, p is taken as 0 and not read (the first iteration, where out = img).
  * At the far edges the clamped neighbour is the voxel itself: the difference is 0. */
-inline void dual_update(__global const real *out, __global real *p, __global const real *xnext,
-                        __global const real *steps, int T, int m, int n, int sets, int from_zero)
+static inline void dual_update(__global const real *out, __global real *p, __global const real *xnext,
+                               __global const real *steps, int T, int m, int n, int sets, int from_zero)
 {
     int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
     int set = st / T, s = st - set * T;
@@ -123,45 +123,40 @@ __kernel void tv_dual_first(__global const real *img, __global real *p, __global
     dual_update(img, p, xnext, steps, T, m, n, sets, 1);
 }
 
-/* The dual step of one Chambolle iteration at voxel (x, y) of sub-frame s of its set (st = set * T + s
- * the global sub-frame): the primal out = img + d(p_in) at this voxel and at its next ones along y, x
- * and t (computed here, not read), then q = the three components of p_in stepped from the gradient of
- * out. At the far edges the next voxel is this one (the difference is 0); along x the next voxel is read
- * in the next row and its difference multiplied by xnext, as tv_dual does, and the primal at i + 1
- * reads p[1] at i, which is 0 at x = n - 1. The same arithmetic as tv_primal and tv_dual, in the same
- * order. */
 typedef struct { real y, x, t; } dual3;   /* the three components of p at one voxel (t: 0 in 2-D) */
 
-static inline dual3 step_at(__global const real *img, __global const real *p_in, __global const real *xnext,
-                            real tau, real tau_over_weight, real wt, int T, int m, int n, int sets,
-                            int x, int y, int st, int s)
-{
-    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n, nn = (size_t)n;
-    size_t i = ((size_t)st * m + y) * n + x;
-    real o = primal_at(img, p_in, wt, N, mn, nn, i, y, s);
-    int yn = y < m - 1 ? y + 1 : y;                             /* uniform in a row */
-    real gy = primal_at(img, p_in, wt, N, mn, nn, i + (size_t)(yn - y) * nn, yn, s) - o;
-    size_t ix = (y < m - 1 || st < sets * T - 1) ? i + 1 : (x < n - 1 ? i + 1 : i);
-    real gx = (primal_at(img, p_in, wt, N, mn, nn, ix, y, s) - o) * xnext[x];   /* exactly 0 at x = n - 1 */
-    real norm2 = gy * gy + gx * gx;
-#if TEMPORAL
-    int sn = s < T - 1 ? s + 1 : s;                             /* uniform in a work group */
-    real gt = wt * (primal_at(img, p_in, wt, N, mn, nn, i + (size_t)(sn - s) * mn, y, sn) - o);
-    norm2 += gt * gt;
-#endif
-    real scale = (real)1 / ((real)1 + vector_friendly_sqrt(norm2) * tau_over_weight);
-    dual3 q;
-    q.y = (p_in[i] - tau * gy) * scale;
-    q.x = (p_in[N + i] - tau * gx) * scale;
-#if TEMPORAL
-    q.t = (p_in[2 * N + i] - tau * gt) * scale;
-#else
-    q.t = (real)0;
-#endif
-    return q;
-}
+/* STEP_AT(q, X, Y, ST, S): q (a dual3) = the dual step of one Chambolle iteration at voxel (X, Y) of
+ * sub-frame S of its set (ST = set * T + S the global sub-frame): the primal out = img + d(p_in) at
+ * this voxel and at its next ones along y, x and t (computed here, not read), then the three
+ * components of p_in stepped from the gradient of out. At the far edges the next voxel is this one
+ * (the difference is 0); along x the next voxel is read in the next row and its difference
+ * multiplied by xnext, as tv_dual does, and the primal at i + 1 reads p[1] at i, which is 0 at
+ * x = n - 1. The arithmetic of tv_primal and tv_dual, in their order (in 2-D the t terms add 0).
+ * It reads the caller's img, p_in, xnext, tau, tow (tau / weight), wt, T, m, n, sets, N, mn and nn.
+ * A macro, not a function, so that every compiler inlines it: PoCL 3.0 left a function of this
+ * size a call where tv_step2 takes it thirteen times, and ran 4 times slower. */
+#define STEP_AT(q, X, Y, ST, S)                                                                           \
+    do {                                                                                                  \
+        int sx_ = (X), sy_ = (Y), sst_ = (ST), ss_ = (S);                                                 \
+        size_t si_ = ((size_t)sst_ * m + sy_) * nn + sx_;                                                  \
+        real so_ = primal_at(img, p_in, wt, N, mn, nn, si_, sy_, ss_);                                    \
+        int syn_ = sy_ < m - 1 ? sy_ + 1 : sy_;                          /* uniform in a row */           \
+        real sgy_ = primal_at(img, p_in, wt, N, mn, nn, si_ + (size_t)(syn_ - sy_) * nn, syn_, ss_) - so_; \
+        size_t six_ = (sy_ < m - 1 || sst_ < sets * T - 1) ? si_ + 1 : (sx_ < n - 1 ? si_ + 1 : si_);     \
+        real sgx_ = (primal_at(img, p_in, wt, N, mn, nn, six_, sy_, ss_) - so_) * xnext[sx_];             \
+        int ssn_ = ss_ < T - 1 ? ss_ + 1 : ss_;                          /* uniform in a work group */    \
+        real sgt_ = TEMPORAL                                                                              \
+            ? wt * (primal_at(img, p_in, wt, N, mn, nn, si_ + (size_t)(ssn_ - ss_) * mn, sy_, ssn_) - so_) \
+            : (real)0;                                                                                    \
+        real snorm2_ = sgy_ * sgy_ + sgx_ * sgx_;                                                         \
+        snorm2_ += sgt_ * sgt_;                                                                           \
+        real sscale_ = (real)1 / ((real)1 + vector_friendly_sqrt(snorm2_) * tow);                         \
+        (q).y = (p_in[si_] - tau * sgy_) * sscale_;                                                       \
+        (q).x = (p_in[N + si_] - tau * sgx_) * sscale_;                                                   \
+        (q).t = TEMPORAL ? (p_in[2 * N + si_] - tau * sgt_) * sscale_ : (real)0;                          \
+    } while (0)
 
-/* One whole Chambolle iteration per launch: step_at from one copy of p into another (ping-pong): no
+/* One whole Chambolle iteration per launch: STEP_AT from one copy of p into another (ping-pong): no
  * work item reads what another writes, so one launch per iteration where tv_primal and tv_dual take
  * two.  global size (n, m, B*T) */
 __kernel void tv_step(__global const real *img, __global const real *p_in, __global real *p_out,
@@ -169,9 +164,11 @@ __kernel void tv_step(__global const real *img, __global const real *p_in, __glo
 {
     int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
     int set = st / T, s = st - set * T;
-    size_t N = (size_t)sets * T * m * n, i = ((size_t)st * m + y) * n + x;
-    dual3 q = step_at(img, p_in, xnext, steps[3 * set], steps[3 * set + 1], steps[3 * set + 2], T, m, n, sets, x, y,
-                      st, s);
+    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n, nn = (size_t)n;
+    size_t i = ((size_t)st * m + y) * n + x;
+    real tau = steps[3 * set], tow = steps[3 * set + 1], wt = steps[3 * set + 2];
+    dual3 q;
+    STEP_AT(q, x, y, st, s);
     p_out[i] = q.y;
     p_out[N + i] = q.x;
 #if TEMPORAL
@@ -183,7 +180,8 @@ __kernel void tv_step(__global const real *img, __global const real *p_in, __glo
  * the components d reads at the previous voxels: qy = q.y at i - n (used where y > 0), qx = q.x at
  * i - 1 (0 at x = 0, where the stored p[1] of the row before is 0), qt = q.t at i - mn (used where
  * s > 0). primal_at's arithmetic, in its order. */
-inline real primal_of(__global const real *img, size_t i, dual3 q, real qy, real qx, real qt, real wt, int y, int s)
+static inline real primal_of(__global const real *img, size_t i, dual3 q, real qy, real qx, real qt, real wt,
+                             int y, int s)
 {
     real d = -(q.y + q.x);
     d += y > 0 ? qy : (real)0;
@@ -196,7 +194,7 @@ inline real primal_of(__global const real *img, size_t i, dual3 q, real qy, real
 }
 
 /* Two whole Chambolle iterations per launch, from one copy of p into another: each work item steps
- * the dual at its voxel and at the twelve around it that the second iteration's primals read (step_at,
+ * the dual at its voxel and at the twelve around it that the second iteration's primals read (STEP_AT,
  * each from the first copy; at an edge the neighbour is clamped to a voxel of the set and its value
  * discarded by a select, so every work item does the same work), then the second step at its voxel.
  * The same arithmetic as two tv_step launches (values equal; a zero's sign may differ). About 13 times
@@ -212,20 +210,28 @@ __kernel void tv_step2(__global const real *img, __global const real *p_in, __gl
     real tau = steps[3 * set], tow = steps[3 * set + 1], wt = steps[3 * set + 2], zero = (real)0;
     int yp = y > 0 ? y - 1 : y, yn = y < m - 1 ? y + 1 : y;   /* clamped neighbours */
     int xp = x > 0 ? x - 1 : x, xn = x < n - 1 ? x + 1 : x;
-#define STEP(X, Y, ST, S) step_at(img, p_in, xnext, tau, tow, wt, T, m, n, sets, X, Y, ST, S)
     /* the first step at this voxel (c), at the next ones along y (u) and x (r), and at the previous
      * ones each of these reads (suffix: along which axis) */
-    dual3 c = STEP(x, y, st, s), cy = STEP(x, yp, st, s), cx = STEP(xp, y, st, s);
-    dual3 u = STEP(x, yn, st, s), ux = STEP(xp, yn, st, s);
-    dual3 r = STEP(xn, y, st, s), ry = STEP(xn, yp, st, s);
+    dual3 c, cy, cx, u, ux, r, ry;
+    STEP_AT(c, x, y, st, s);
+    STEP_AT(cy, x, yp, st, s);
+    STEP_AT(cx, xp, y, st, s);
+    STEP_AT(u, x, yn, st, s);
+    STEP_AT(ux, xp, yn, st, s);
+    STEP_AT(r, xn, y, st, s);
+    STEP_AT(ry, xn, yp, st, s);
 #if TEMPORAL
     int sp = s > 0 ? s - 1 : s, sn = s < T - 1 ? s + 1 : s;  /* and at the next one along t (f) */
-    dual3 ct = STEP(x, y, st + sp - s, sp), ut = STEP(x, yn, st + sp - s, sp), rt = STEP(xn, y, st + sp - s, sp);
-    dual3 f = STEP(x, y, st + sn - s, sn), fy = STEP(x, yp, st + sn - s, sn), fx = STEP(xp, y, st + sn - s, sn);
+    dual3 ct, ut, rt, f, fy, fx;
+    STEP_AT(ct, x, y, st + sp - s, sp);
+    STEP_AT(ut, x, yn, st + sp - s, sp);
+    STEP_AT(rt, xn, y, st + sp - s, sp);
+    STEP_AT(f, x, y, st + sn - s, sn);
+    STEP_AT(fy, x, yp, st + sn - s, sn);
+    STEP_AT(fx, xp, y, st + sn - s, sn);
 #else
     dual3 ct = c, ut = c, rt = c;                           /* not read in 2-D */
 #endif
-#undef STEP
     /* the primals of the stepped dual at this voxel and at its next ones */
     real o = primal_of(img, i, c, cy.y, x > 0 ? cx.x : zero, ct.t, wt, y, s);
     real gy = y < m - 1 ? primal_of(img, i + nn, u, c.y, x > 0 ? ux.x : zero, ut.t, wt, y + 1, s) - o : zero;
