@@ -32,6 +32,7 @@ CASES = [
     Bad("api-iterations-zero", ["iterations"], api=_reconstruct(iterations=0)),
     Bad("api-lam-negative", ["lam"], api=_reconstruct(lam=-1.0)),
     Bad("api-tv-fused-below-the-device-choice", ["fused", "-1"], api=_reconstruct(regularizer_options={"fused": -2})),
+    Bad("api-tv-one-launch-above-two", ["one_launch", "2"], api=_reconstruct(regularizer_options={"one_launch": 3})),
     Bad("api-quality-unknown", ["quality", "fast, balanced, best", "'medium'"], api=_reconstruct(quality="medium")),
     Bad("api-iterations-not-auto", ["iterations", "'auto'", "'many'"], api=_reconstruct(iterations="many")),
     Bad(

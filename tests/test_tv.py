@@ -120,6 +120,21 @@ def test_one_launch_per_iteration_equals_two_on_a_batch(device, dtype, rng, iter
     np.testing.assert_array_equal(one[1], x.get()[1])
 
 
+def test_a_plain_sequence_names_its_launch_mode_and_dual_copies(device):
+    import pyopencl.array as cla
+
+    from rsocl_plugins import tv_plain
+
+    tv = TV(iterations=4, one_launch=2)
+    x = cla.zeros(device.queue, (3, 4, 5), np.float32)
+    prog, grids, arrays, one = tv._plain_parts(x, tv._steps(device.queue, [0.2], x.dtype), cla.empty_like(x), None)
+    assert one == 2 and len(arrays.p) == 2
+    with pytest.raises(ValueError, match="one_launch must be 0, 1 or 2, got 3"):
+        tv_plain.sequence(prog, grids, arrays, 4, 3)
+    with pytest.raises(ValueError, match="one_launch=0 takes 1 dual copies, got 2"):
+        tv_plain.sequence(prog, grids, arrays, 4, 0)
+
+
 # shapes with one voxel along an axis, rows of one pixel and of more than a work group; even and odd
 # counts of steps (an odd count ends with one tv_step after the pairs)
 @pytest.mark.parametrize("shape", [(3, 6, 7, 9), (2, 1, 9, 6), (2, 5, 1, 8), (2, 4, 6, 1), (1, 3, 5, 67)])
