@@ -27,22 +27,42 @@
  *  - the invariant p[1] = 0 at x = n - 1 (the x difference there is 0 from p = 0 on, so
  *    every step keeps it 0): the primal reads p[1] at i - 1 with no select at x = 0. */
 
-/* out = img + d(p) at voxel i, on row y and sub-frame s of its set, d the (negative) divergence of p.
- * The x - 1 neighbour is read at i - 1 always: at x = 0 that is p[1] at x = n - 1 of the row before,
- * which is 0 (see above), or p[0] at the very last voxel (y = m - 1: 0 too) when i = 0. */
+typedef struct { real y, x, t; } dual3;   /* the three components of p at one voxel (t: 0 in 2-D) */
+
+/* out = img + d(p) at voxel i (row y, sub-frame s of its set), d the (negative) divergence of p, from
+ * the components d reads: q = p at i, qy = p[0] at i - n (used where y > 0), qx = p[1] at i - 1,
+ * qt = p[2] at i - mn (used where s > 0). */
+static inline real primal_of(__global const real *img, size_t i, dual3 q, real qy, real qx, real qt, real wt,
+                             int y, int s)
+{
+    real d = -(q.y + q.x);
+    d += y > 0 ? qy : (real)0;
+    d += qx;
+#if TEMPORAL
+    d -= wt * q.t;
+    d += s > 0 ? wt * qt : (real)0;
+#endif
+    return img[i] + d;
+}
+
+/* primal_of with the components read from p. The x - 1 neighbour is read at i - 1 always: at x = 0
+ * that is p[1] at x = n - 1 of the row before, which is 0 (see above), or p[0] at the very last voxel
+ * (y = m - 1: 0 too) when i = 0. */
 static inline real primal_at(__global const real *img, __global const real *p, real wt, size_t N, size_t mn,
                              size_t n, size_t i, int y, int s)
 {
-    real d = -(p[i] + p[N + i]);
-    real py = p[y > 0 ? i - n : i];
-    d += y > 0 ? py : (real)0;
-    d += p[N + i - 1];
+    dual3 q;                                    /* read in primal_of's order */
+    q.y = p[i];
+    q.x = p[N + i];
+    real qy = p[y > 0 ? i - n : i], qx = p[N + i - 1];
 #if TEMPORAL
-    real pt = p[2 * N + (s > 0 ? i - mn : i)];
-    d -= wt * p[2 * N + i];
-    d += s > 0 ? wt * pt : (real)0;
+    real qt = p[2 * N + (s > 0 ? i - mn : i)];
+    q.t = p[2 * N + i];
+#else
+    real qt = (real)0;
+    q.t = (real)0;
 #endif
-    return img[i] + d;
+    return primal_of(img, i, q, qy, qx, qt, wt, y, s);
 }
 
 /* out = img + d(p).  global size (n, m, B*T) */
@@ -123,8 +143,6 @@ __kernel void tv_dual_first(__global const real *img, __global real *p, __global
     dual_update(img, p, xnext, steps, T, m, n, sets, 1);
 }
 
-typedef struct { real y, x, t; } dual3;   /* the three components of p at one voxel (t: 0 in 2-D) */
-
 /* STEP_AT(q, X, Y, ST, S): q (a dual3) = the dual step of one Chambolle iteration at voxel (X, Y) of
  * sub-frame S of its set (ST = set * T + S the global sub-frame): the primal out = img + d(p_in) at
  * this voxel and at its next ones along y, x and t (computed here, not read), then the three
@@ -176,23 +194,6 @@ __kernel void tv_step(__global const real *img, __global const real *p_in, __glo
 #endif
 }
 
-/* The primal img + d(q) at voxel i (row y, sub-frame s of its set) from the stepped dual: q at i, and
- * the components d reads at the previous voxels: qy = q.y at i - n (used where y > 0), qx = q.x at
- * i - 1 (0 at x = 0, where the stored p[1] of the row before is 0), qt = q.t at i - mn (used where
- * s > 0). primal_at's arithmetic, in its order. */
-static inline real primal_of(__global const real *img, size_t i, dual3 q, real qy, real qx, real qt, real wt,
-                             int y, int s)
-{
-    real d = -(q.y + q.x);
-    d += y > 0 ? qy : (real)0;
-    d += qx;
-#if TEMPORAL
-    d -= wt * q.t;
-    d += s > 0 ? wt * qt : (real)0;
-#endif
-    return img[i] + d;
-}
-
 /* Two whole Chambolle iterations per launch, from one copy of p into another: each work item steps
  * the dual at its voxel and at the twelve around it that the second iteration's primals read (STEP_AT,
  * each from the first copy; at an edge the neighbour is clamped to a voxel of the set and its value
@@ -232,7 +233,8 @@ __kernel void tv_step2(__global const real *img, __global const real *p_in, __gl
 #else
     dual3 ct = c, ut = c, rt = c;                           /* not read in 2-D */
 #endif
-    /* the primals of the stepped dual at this voxel and at its next ones */
+    /* the primals of the stepped dual at this voxel and at its next ones (at x = 0 the p[1] of the row
+     * before, which primal_at reads, is 0: passed as zero) */
     real o = primal_of(img, i, c, cy.y, x > 0 ? cx.x : zero, ct.t, wt, y, s);
     real gy = y < m - 1 ? primal_of(img, i + nn, u, c.y, x > 0 ? ux.x : zero, ut.t, wt, y + 1, s) - o : zero;
     real gx = x < n - 1 ? (primal_of(img, i + 1, r, ry.y, c.x, rt.t, wt, y, s) - o) * xnext[x] : zero;
