@@ -117,7 +117,9 @@ class ADMM:
             op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS, kernels=(prog.admm_project,)
         )
         self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project, self.residuals.kernel))
-        self.folds_residual = self._scratch_bytes() <= dev.local_mem_bytes // 2
+        scratch = self._scratch_bytes()
+        self.folds_residual = scratch <= dev.local_mem_bytes // 2
+        self._scratch = cl.LocalMemory(scratch if self.folds_residual else self.residuals.acc.itemsize)
         self.iteration = 0
         self._denoiser: Callable[[], Any] | None = None  # the regularizer's bound call, made at the first step
         self._bind_kernels()
@@ -134,8 +136,6 @@ class ADMM:
     def _bind_kernels(self):
         """This solver's own kernel objects (rsocl.device.Kernels.lease), their arguments set once: a
         step enqueues them and sets only the by-value arguments that change (the first iteration's flags)."""
-        import pyopencl as cl
-
         op, prog = self.op, self.program
         self._dual = prog.lease("admm_dual", self)
         self._dual.set_args(
@@ -155,7 +155,7 @@ class ADMM:
             self.theta.data,
             None if self.valid is None else self.valid.data,
             self.residuals.partials,
-            cl.LocalMemory(self._scratch_bytes() if self.folds_residual else self.residuals.acc.itemsize),
+            self._scratch,
             np.int32(-1),
             np.int32(op.T),
             np.int32(op.L),
