@@ -8,11 +8,14 @@
 #   4. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), capped;
 #   5. benchmarks/inverse.py where the tree has it (the inverse blocks on the device against the host), capped;
-#   6. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped.
-# Pages and logs go to $OUT (the device tool's folder that comes back; ./out/gpu elsewhere).
+#   6. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped;
+#   7. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under cProfile.
+# Seven files go to $OUT (the device tool's folder that comes back, at most 8 files; ./out/gpu elsewhere):
+# check.log (every step but the tests), tests.log, peer.md, launches.md, inverse.md, search_launches.md, profile.txt.
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (90), PEER_CAP (240), LAUNCH_CAP (70), INVERSE_CAP (25), SEARCH_CAP (50) in seconds; PEER_ARGS replaces the peer's arguments;
+# Knobs: TEST_WORKERS (12), TEST_CAP (95), PEER_CAP (250), LAUNCH_CAP (70), INVERSE_CAP (25), SEARCH_CAP (50),
+# PROFILE_CAP (25) in seconds; PEER_ARGS replaces the peer's arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -23,9 +26,9 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-90} PEER_CAP=${PEER_CAP:-240} LAUNCH_CAP=${LAUNCH_CAP:-70} INVERSE_CAP=${INVERSE_CAP:-25}
-SEARCH_CAP=${SEARCH_CAP:-50}
-PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256}
+TEST_CAP=${TEST_CAP:-95} PEER_CAP=${PEER_CAP:-250} LAUNCH_CAP=${LAUNCH_CAP:-70} INVERSE_CAP=${INVERSE_CAP:-25}
+SEARCH_CAP=${SEARCH_CAP:-50} PROFILE_CAP=${PROFILE_CAP:-25}
+PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --tv-one-launch 2 --variant-cases paper batch64 size64 size128 size256}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
 T0=$(date +%s)
 stamp() { echo "=== [$(( $(date +%s) - T0 )) s] $*"; }
@@ -57,14 +60,14 @@ if [ "$DEVICE" = nvidia ] && [ ! -e /etc/OpenCL/vendors/nvidia.icd ]; then
     export OCL_ICD_VENDORS=/tmp/icd
     echo "OCL_ICD_VENDORS=/tmp/icd -> $lib"
 fi
-} 2>&1 | tee "$OUT/setup.log"
+} 2>&1 | tee "$OUT/check.log"
 [ "${PIPESTATUS[0]}" = 0 ] || exit 1
 [ -e /tmp/icd/nvidia.icd ] && export OCL_ICD_VENDORS=/tmp/icd
 export PYTHONPATH="$SITE" RSOCL_DEVICE="$DEVICE"
 # -P: the installed rsocl, never the source folder rsocl/ of the working directory
-"$PYTHON" -P -c "import rsocl; print('rsocl', rsocl.__file__); import torch; print('torch', torch.__version__, 'CUDA', torch.cuda.is_available())" 2>&1 | tee -a "$OUT/setup.log"
-"$PYTHON" -P -m rsocl.cli devices 2>&1 | tee -a "$OUT/setup.log"
-nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1 | tee -a "$OUT/setup.log"
+"$PYTHON" -P -c "import rsocl; print('rsocl', rsocl.__file__); import torch; print('torch', torch.__version__, 'CUDA', torch.cuda.is_available())" 2>&1 | tee -a "$OUT/check.log"
+"$PYTHON" -P -m rsocl.cli devices 2>&1 | tee -a "$OUT/check.log"
+nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1 | tee -a "$OUT/check.log"
 
 # ---------------------------------------------------------------- 2. the test suite on the GPU
 stamp "tests (cap ${TEST_CAP} s)" | tee "$OUT/tests.log"
@@ -76,38 +79,67 @@ timeout -k 10 "$TEST_CAP" "$PYTHON" -P -m pytest -q -p no:cacheprovider "${flags
 echo "tests exit status ${PIPESTATUS[0]} (124: stopped at the cap)" | tee -a "$OUT/tests.log"
 
 # ---------------------------------------------------------------- 3. the PyTorch peer
-stamp "benchmarks/peer.py $PEER_ARGS (cap ${PEER_CAP} s)" | tee "$OUT/peer.log"
+stamp "benchmarks/peer.py $PEER_ARGS (cap ${PEER_CAP} s)" | tee -a "$OUT/check.log"
 # shellcheck disable=SC2086
 timeout -k 10 "$PEER_CAP" "$PYTHON" -P benchmarks/peer.py --device "$DEVICE" --out "$OUT/peer.md" $PEER_ARGS 2>&1 \
-    | tee -a "$OUT/peer.log" | grep -v '^|' | tail -n 40
-echo "peer exit status ${PIPESTATUS[0]} (124: stopped at the cap; the page holds the cases done)" | tee -a "$OUT/peer.log"
+    | tee -a "$OUT/check.log" | grep -v '^|' | tail -n 40
+echo "peer exit status ${PIPESTATUS[0]} (124: stopped at the cap; the page holds the cases done)" | tee -a "$OUT/check.log"
 
 # ---------------------------------------------------------------- 4. launches per iteration
 if [ -f benchmarks/launches.py ]; then
-    stamp "benchmarks/launches.py (cap ${LAUNCH_CAP} s)" | tee "$OUT/launches.log"
+    stamp "benchmarks/launches.py (cap ${LAUNCH_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$LAUNCH_CAP" "$PYTHON" -P benchmarks/launches.py --device "$DEVICE" --rounds 3 --paths device gpu-two gpu-pairs lean \
         --out "$OUT/launches.md" \
-        >> "$OUT/launches.log" 2>&1
-    echo "launches exit status $?" | tee -a "$OUT/launches.log"
+        >> "$OUT/check.log" 2>&1
+    echo "launches exit status $?" | tee -a "$OUT/check.log"
 else
     stamp "benchmarks/launches.py is not in this tree: skipped"
 fi
 
 # ---------------------------------------------------------------- 5. inverse blocks
 if [ -f benchmarks/inverse.py ]; then
-    stamp "benchmarks/inverse.py (cap ${INVERSE_CAP} s)" | tee "$OUT/inverse.log"
+    stamp "benchmarks/inverse.py (cap ${INVERSE_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$INVERSE_CAP" "$PYTHON" -P benchmarks/inverse.py --device "$DEVICE" --sizes 50 128 512 --rounds 3 --calls 5 \
-        --out "$OUT/inverse.md" >> "$OUT/inverse.log" 2>&1
-    echo "inverse exit status $?" | tee -a "$OUT/inverse.log"
+        --out "$OUT/inverse.md" >> "$OUT/check.log" 2>&1
+    echo "inverse exit status $?" | tee -a "$OUT/check.log"
 fi
 
 # ---------------------------------------------------------------- 6. the self-tuned default against a fixed run
 if [ -f benchmarks/search_launches.py ]; then
-    stamp "benchmarks/search_launches.py (cap ${SEARCH_CAP} s)" | tee "$OUT/search.log"
+    stamp "benchmarks/search_launches.py (cap ${SEARCH_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$SEARCH_CAP" "$PYTHON" -P benchmarks/search_launches.py --device "$DEVICE" --sizes 50 128 \
-        --out "$OUT/search_launches.md" >> "$OUT/search.log" 2>&1
-    echo "search_launches exit status $?" | tee -a "$OUT/search.log"
+        --out "$OUT/search_launches.md" >> "$OUT/check.log" 2>&1
+    echo "search_launches exit status $?" | tee -a "$OUT/check.log"
 fi
+
+# ---------------------------------------------------------------- 7. one paper set's host work, profiled
+stamp "profile of one paper set (cap ${PROFILE_CAP} s)" | tee -a "$OUT/check.log"
+timeout -k 5 "$PROFILE_CAP" "$PYTHON" -P - > "$OUT/profile.txt" 2>&1 <<'PY'
+import cProfile, pstats, statistics, sys, time
+sys.path.insert(0, "benchmarks")
+import numpy as np, rsocl
+from paper_config import paper_rig
+from rsocl.model.scenes import builtin_scene
+rig = paper_rig()
+g = rsocl.RollingShutterOperator(rig).forward(builtin_scene(rig.shape, rig.T, seed=0))
+opts = dict(lam=0.1, eta=0.2, tune=False)
+for _ in range(3):
+    rsocl.reconstruct(g, rig, iterations=200, **opts)
+for it in (1, 200):
+    walls, loops = [], []
+    for _ in range(10):
+        t0 = time.perf_counter(); res = rsocl.reconstruct(g, rig, iterations=it, **opts)
+        walls.append(time.perf_counter() - t0); loops.append(float(res.history["time"][-1]))
+    print(f"{it} iterations: call {statistics.median(walls) * 1e3:.2f} ms, loop {statistics.median(loops) * 1e3:.2f} ms (medians of 10)")
+prof = cProfile.Profile(); prof.enable()
+for _ in range(5):
+    rsocl.reconstruct(g, rig, iterations=200, **opts)
+prof.disable()
+for key in ("tottime", "cumulative"):
+    pstats.Stats(prof).sort_stats(key).print_stats(30)
+PY
+echo "profile exit status $?" | tee -a "$OUT/check.log"
+head -n 2 "$OUT/profile.txt"
 
 stamp "done; the peer's page:"
 cat "$OUT/peer.md" 2>/dev/null | sed -n '/^## Times/,$p'

@@ -123,6 +123,21 @@ class Compiled:
 
 
 RUNNERS = {"eager": Eager, "graph": Graph, "compile": Compiled}
+#: Name prefix of an rsocl run with the TV's ``one_launch`` option set (``--tv-one-launch``).
+VARIANT = "rsocl one_launch="
+
+
+def variant_names(args, name):
+    """rsocl's runs beside its defaults in case ``name``: one per ``--tv-one-launch`` value, in the cases of
+    ``--variant-cases``."""
+    if "all" not in args.variant_cases and name not in args.variant_cases:
+        return []
+    return [f"{VARIANT}{n}" for n in dict.fromkeys(args.tv_one_launch)]
+
+
+def variant_options(impl):
+    """``regularizer_options`` of rsocl run ``impl`` (None: the defaults)."""
+    return {"one_launch": int(impl[len(VARIANT) :])} if impl.startswith(VARIANT) else None
 
 
 def cases(args):
@@ -169,14 +184,16 @@ def measure_case(case, args, device, torch_device, tv):
     g = g[0] if sets == 1 else g
     opts = dict(lam=LAM, eta=ETA, tune=False, device=device)
 
-    def run_rsocl():
+    def run_rsocl(impl="rsocl"):
         t0 = time.perf_counter()
-        res = rsocl.reconstruct(g, rig, iterations=iterations, **opts)
+        res = rsocl.reconstruct(g, rig, iterations=iterations, regularizer_options=variant_options(impl), **opts)
         seconds = time.perf_counter() - t0
         return res.datacube, (float(np.max(res.history["time"][-1])) / iterations if per_iteration else seconds)
 
-    rsocl.reconstruct(g, rig, iterations=2, **opts)  # kernel builds
-    record = {"seconds": {"rsocl": []}, "x": {}, "first": {}, "errors": {}}
+    variants = variant_names(args, name)
+    for impl in ["rsocl", *variants]:  # kernel builds
+        rsocl.reconstruct(g, rig, iterations=2, regularizer_options=variant_options(impl), **opts)
+    record = {"seconds": {impl: [] for impl in ["rsocl", *variants]}, "x": {}, "first": {}, "errors": {}}
     runners, peer = {}, None
     modes = modes_for(name, args, torch_device)
     if modes:
@@ -217,11 +234,11 @@ def measure_case(case, args, device, torch_device, tv):
                 record["errors"][mode] = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"[:200]
                 runners.pop(mode, None)
                 print(f"  {name}: {mode} failed: {record['errors'][mode]}", file=sys.stderr, flush=True)
-        impls = ["rsocl"] + list(runners)
+        impls = ["rsocl", *variants, *runners]
         for r in range(args.rounds):
             k = r % len(impls)
             for impl in impls[k:] + impls[:k]:
-                x, sec = run_rsocl() if impl == "rsocl" else run_peer(impl)
+                x, sec = run_rsocl(impl) if impl.startswith("rsocl") else run_peer(impl)
                 record["seconds"][impl].append(sec)
                 record["x"][impl] = x
             print(
@@ -255,14 +272,25 @@ def row(cells):
     return "| " + " | ".join(cells) + " |"
 
 
+def ratio_cell(numerator, denominator):
+    """``median (min-max)`` of the per-round ratios of two lists of times; "–" where one is empty."""
+    if not numerator or not denominator:
+        return "–"
+    ratios = [a / b for a, b in zip(numerator, denominator)]
+    return f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})"
+
+
 def tables(done, modes):
-    """Markdown lines: times, ratios (rsocl time / peer time) and the equality check."""
-    heads = [LABELS[m] for m in modes]
+    """Markdown lines: times, ratios (rsocl time / peer time; an rsocl variant's time / rsocl's) and the
+    equality check."""
+    variants = list(dict.fromkeys(i for _, rec in done for i in rec["seconds"] if i.startswith(VARIANT)))
+    others = variants + list(modes)
+    heads = [LABELS.get(m, m) for m in others]
     lines = ["## Times (median of the rounds)", "", row(["case", "rsocl"] + heads), row(["---"] * (2 + len(heads)))]
     for case, rec in done:
         name, _, sets, _, _ = case
         cells = [describe(*case[:4])]
-        for impl in ["rsocl"] + list(modes):
+        for impl in ["rsocl"] + others:
             if impl in rec["errors"]:
                 cells.append("failed")
             elif rec["seconds"].get(impl):
@@ -270,33 +298,30 @@ def tables(done, modes):
             else:
                 cells.append("–")
         lines.append(row(cells))
-    if not modes:
+    if not others:
         return lines + ["", "No PyTorch peer ran (torch is not installed).", ""]
     lines += [
         "",
         "## rsocl's time over the peer's (below 1: rsocl is faster)",
         "",
-        "Median over the rounds of the ratio within each round, and its range.",
+        "Median over the rounds of the ratio within each round, and its range"
+        + ("; for an rsocl variant, its time over rsocl's defaults'." if variants else "."),
         "",
-        row(["case"] + heads),
+        row(["case"] + [f"{h} / rsocl" for h in variants] + [LABELS[m] for m in modes]),
         row(["---"] * (1 + len(heads))),
     ]
     for case, rec in done:
+        sec = rec["seconds"]
         cells = [describe(*case[:4])]
-        for m in modes:
-            peer = rec["seconds"].get(m)
-            if not peer:
-                cells.append("failed" if m in rec["errors"] else "–")
-                continue
-            ratios = [a / b for a, b in zip(rec["seconds"]["rsocl"], peer)]
-            cells.append(f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})")
+        cells += [ratio_cell(sec.get(v), sec["rsocl"]) for v in variants]
+        cells += ["failed" if m in rec["errors"] else ratio_cell(sec["rsocl"], sec.get(m)) for m in modes]
         lines.append(row(cells))
     lines += [
         "",
         "## Same results",
         "",
         "PSNR (dB, peak 1) against the built-in scene's truth; for a batch the mean over the sets, and the "
-        "largest PSNR difference over them. Largest |peer − rsocl| over the datacube(s).",
+        "largest PSNR difference over them. Largest |other − rsocl| over the datacube(s).",
         "",
         row(["case", "rsocl PSNR"] + [f"{h}: PSNR − rsocl's, largest difference" for h in heads]),
         row(["---"] * (2 + len(heads))),
@@ -304,7 +329,7 @@ def tables(done, modes):
     for case, rec in done:
         base = rec["psnr"]["rsocl"]
         cells = [describe(*case[:4]), f"{np.mean(base):.4f}"]
-        for m in modes:
+        for m in others:
             if m not in rec["psnr"]:
                 cells.append("failed" if m in rec["errors"] else "–")
                 continue
@@ -361,11 +386,23 @@ def main(argv=None):
         default=["paper", "batch64"],
         help="cases where torch.compile runs ('all': every case)",
     )
+    parser.add_argument(
+        "--tv-one-launch",
+        type=int,
+        nargs="*",
+        default=[],
+        help="rsocl runs beside its defaults with the TV's one_launch option at these values (0, 1, 2)",
+    )
+    parser.add_argument(
+        "--variant-cases", nargs="+", default=["all"], help="cases of the --tv-one-launch runs ('all': every case)"
+    )
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'gpu' / 'peer.md'})")
     args = parser.parse_args(argv)
     if min([args.iterations, args.size_iterations, args.rounds] + args.batches + args.sizes) < 1:
         raise SystemExit("--iterations, --size-iterations, --rounds, --batches and --sizes must be >= 1")
+    if any(n not in (0, 1, 2) for n in args.tv_one_launch):
+        raise SystemExit(f"--tv-one-launch: values 0, 1 or 2, got {args.tv_one_launch}")
     argv = None if argv is None else [__file__, *argv]
     device = rsocl.device.get_device(args.device)
     torch_device = None

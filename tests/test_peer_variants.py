@@ -1,0 +1,45 @@
+"""``benchmarks/peer.py``'s rsocl runs beside its defaults (``--tv-one-launch``): their columns, their ratio
+to rsocl's defaults and their equality check, with or without torch."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import peer  # noqa: E402
+
+ARGS = ["--cases", "size8", "--sizes", "8", "--size-iterations", "2", "--rounds", "2", "--modes", "eager"]
+ARGS += ["--torch-device", "cpu"]
+
+
+def test_one_launch_variant_has_its_column_ratio_and_check(tmp_path):
+    assert peer.variant_options("rsocl one_launch=2") == {"one_launch": 2}
+    assert peer.variant_options("rsocl") is None
+    out = tmp_path / "peer.md"
+    peer.main([*ARGS, "--tv-one-launch", "2", "--out", str(out)])
+    lines = out.read_text().splitlines()
+    times = lines.index("## Times (median of the rounds)")
+    assert "rsocl one_launch=2" in lines[times + 2].split("|")[3]
+    ratio_head = next(line for line in lines if line.startswith("| case | rsocl one_launch=2 / rsocl"))
+    ratio_row = lines[lines.index(ratio_head) + 2]
+    median = float(ratio_row.split("|")[2].split()[0])
+    assert median > 0
+    same = [line for line in lines if line.startswith("| one set 8×8") and " dB, " in line]
+    assert len(same) == 1
+    delta, largest = same[0].split("|")[3].split(" dB, ")
+    assert abs(float(delta)) < 1e-4 and float(largest) < 1e-5  # the same iterations, TV launched differently
+
+
+def test_variant_cases_leave_other_cases_without_the_variant(tmp_path):
+    out = tmp_path / "peer.md"
+    peer.main([*ARGS, "--tv-one-launch", "2", "--variant-cases", "paper", "--out", str(out)])
+    text = out.read_text()
+    assert "rsocl one_launch=2" not in text  # size8 is not among the variant's cases
+
+
+@pytest.mark.parametrize("value", ["3", "-1"])
+def test_bad_one_launch_value_names_the_option(value):
+    with pytest.raises(SystemExit, match="--tv-one-launch: values 0, 1 or 2"):
+        peer.main([*ARGS, "--tv-one-launch", value])
