@@ -1,21 +1,22 @@
 #!/usr/bin/env bash
 # One prepared check on a lent NVIDIA GPU machine (H100 or H200, no network, PyTorch with CUDA
-# preinstalled as python3), in about 9 minutes of one command:
+# preinstalled as python3), in at most 9 minutes of one command (the sum of the caps):
 #   1. install pyopencl and the rest from the carried wheels (.whl/, made by benchmarks/gpu_wheels.sh)
 #      and rsocl from this tree into /tmp/site; point pyopencl's ICD loader at NVIDIA's OpenCL;
 #   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped;
-#   3. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
-#   4. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
+#   3. benchmarks/blocks.py where the tree has it (the operator kernels' block layout, GPU_BLOCK), capped;
+#   4. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
+#   5. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), capped;
-#   5. benchmarks/inverse.py where the tree has it (the inverse blocks on the device against the host), capped;
-#   6. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped;
-#   7. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under cProfile.
-# Seven files go to $OUT (the device tool's folder that comes back, at most 8 files; ./out/gpu elsewhere):
-# check.log (every step but the tests), tests.log, peer.md, launches.md, inverse.md, search_launches.md, profile.txt.
+#   6. benchmarks/inverse.py where the tree has it (the inverse blocks on the device against the host), capped;
+#   7. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped;
+#   8. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under cProfile.
+# Eight files go to $OUT (the device tool's folder that comes back, at most 8 files; ./out/gpu elsewhere): check.log
+# (every step but the tests), tests.log, blocks.md, peer.md, launches.md, inverse.md, search_launches.md, profile.txt.
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (95), PEER_CAP (250), LAUNCH_CAP (70), INVERSE_CAP (25), SEARCH_CAP (50),
-# PROFILE_CAP (25) in seconds; PEER_ARGS replaces the peer's arguments;
+# Knobs: TEST_WORKERS (12), TEST_CAP (80), PEER_CAP (220), LAUNCH_CAP (40), INVERSE_CAP (35), SEARCH_CAP (35),
+# PROFILE_CAP (20), BLOCKS_CAP (90) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -26,9 +27,10 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-95} PEER_CAP=${PEER_CAP:-250} LAUNCH_CAP=${LAUNCH_CAP:-70} INVERSE_CAP=${INVERSE_CAP:-25}
-SEARCH_CAP=${SEARCH_CAP:-50} PROFILE_CAP=${PROFILE_CAP:-25}
-PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --tv-one-launch 2 --variant-cases paper batch64 size64 size128 size256}
+TEST_CAP=${TEST_CAP:-80} PEER_CAP=${PEER_CAP:-220} LAUNCH_CAP=${LAUNCH_CAP:-40} INVERSE_CAP=${INVERSE_CAP:-35}
+SEARCH_CAP=${SEARCH_CAP:-35} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-90}
+BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
+PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --tv-one-launch 2 --variant-cases paper size64}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
 T0=$(date +%s)
 stamp() { echo "=== [$(( $(date +%s) - T0 )) s] $*"; }
@@ -63,8 +65,9 @@ fi
 } 2>&1 | tee "$OUT/check.log"
 [ "${PIPESTATUS[0]}" = 0 ] || exit 1
 [ -e /tmp/icd/nvidia.icd ] && export OCL_ICD_VENDORS=/tmp/icd
-export PYTHONPATH="$SITE" RSOCL_DEVICE="$DEVICE"
-# -P: the installed rsocl, never the source folder rsocl/ of the working directory
+# PYTHONSAFEPATH (-P for every process, the tests' subprocesses too): the installed rsocl, never the
+# source folder rsocl/ of the working directory (which lacks rsocl.kernels)
+export PYTHONPATH="$SITE" RSOCL_DEVICE="$DEVICE" PYTHONSAFEPATH=1
 "$PYTHON" -P -c "import rsocl; print('rsocl', rsocl.__file__); import torch; print('torch', torch.__version__, 'CUDA', torch.cuda.is_available())" 2>&1 | tee -a "$OUT/check.log"
 "$PYTHON" -P -m rsocl.cli devices 2>&1 | tee -a "$OUT/check.log"
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1 | tee -a "$OUT/check.log"
@@ -78,14 +81,23 @@ timeout -k 10 "$TEST_CAP" "$PYTHON" -P -m pytest -q -p no:cacheprovider "${flags
     | tee -a "$OUT/tests.log" | tail -n 60
 echo "tests exit status ${PIPESTATUS[0]} (124: stopped at the cap)" | tee -a "$OUT/tests.log"
 
-# ---------------------------------------------------------------- 3. the PyTorch peer
+# ---------------------------------------------------------------- 3. the block layout of the operator kernels
+if [ -f benchmarks/blocks.py ]; then
+    stamp "benchmarks/blocks.py (cap ${BLOCKS_CAP} s)" | tee -a "$OUT/check.log"
+    # shellcheck disable=SC2086
+    timeout -k 5 "$BLOCKS_CAP" "$PYTHON" -P benchmarks/blocks.py --device "$DEVICE" $BLOCKS_ARGS --out "$OUT/blocks.md" \
+        >> "$OUT/check.log" 2>&1
+    echo "blocks exit status $?" | tee -a "$OUT/check.log"
+fi
+
+# ---------------------------------------------------------------- 4. the PyTorch peer
 stamp "benchmarks/peer.py $PEER_ARGS (cap ${PEER_CAP} s)" | tee -a "$OUT/check.log"
 # shellcheck disable=SC2086
 timeout -k 10 "$PEER_CAP" "$PYTHON" -P benchmarks/peer.py --device "$DEVICE" --out "$OUT/peer.md" $PEER_ARGS 2>&1 \
     | tee -a "$OUT/check.log" | grep -v '^|' | tail -n 40
 echo "peer exit status ${PIPESTATUS[0]} (124: stopped at the cap; the page holds the cases done)" | tee -a "$OUT/check.log"
 
-# ---------------------------------------------------------------- 4. launches per iteration
+# ---------------------------------------------------------------- 5. launches per iteration
 if [ -f benchmarks/launches.py ]; then
     stamp "benchmarks/launches.py (cap ${LAUNCH_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$LAUNCH_CAP" "$PYTHON" -P benchmarks/launches.py --device "$DEVICE" --rounds 3 --paths device gpu-two gpu-pairs lean \
@@ -96,15 +108,15 @@ else
     stamp "benchmarks/launches.py is not in this tree: skipped"
 fi
 
-# ---------------------------------------------------------------- 5. inverse blocks
+# ---------------------------------------------------------------- 6. inverse blocks
 if [ -f benchmarks/inverse.py ]; then
     stamp "benchmarks/inverse.py (cap ${INVERSE_CAP} s)" | tee -a "$OUT/check.log"
-    timeout -k 5 "$INVERSE_CAP" "$PYTHON" -P benchmarks/inverse.py --device "$DEVICE" --sizes 50 128 512 --rounds 3 --calls 5 \
+    timeout -k 5 "$INVERSE_CAP" "$PYTHON" -P benchmarks/inverse.py --device "$DEVICE" --sizes 50 128 256 --rounds 3 --calls 5 \
         --out "$OUT/inverse.md" >> "$OUT/check.log" 2>&1
     echo "inverse exit status $?" | tee -a "$OUT/check.log"
 fi
 
-# ---------------------------------------------------------------- 6. the self-tuned default against a fixed run
+# ---------------------------------------------------------------- 7. the self-tuned default against a fixed run
 if [ -f benchmarks/search_launches.py ]; then
     stamp "benchmarks/search_launches.py (cap ${SEARCH_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$SEARCH_CAP" "$PYTHON" -P benchmarks/search_launches.py --device "$DEVICE" --sizes 50 128 \
@@ -112,7 +124,7 @@ if [ -f benchmarks/search_launches.py ]; then
     echo "search_launches exit status $?" | tee -a "$OUT/check.log"
 fi
 
-# ---------------------------------------------------------------- 7. one paper set's host work, profiled
+# ---------------------------------------------------------------- 8. one paper set's host work, profiled
 stamp "profile of one paper set (cap ${PROFILE_CAP} s)" | tee -a "$OUT/check.log"
 timeout -k 5 "$PROFILE_CAP" "$PYTHON" -P - > "$OUT/profile.txt" 2>&1 <<'PY'
 import cProfile, pstats, statistics, sys, time
@@ -137,6 +149,12 @@ for _ in range(5):
 prof.disable()
 for key in ("tottime", "cumulative"):
     pstats.Stats(prof).sort_stats(key).print_stats(30)
+print("=== 20 calls of 1 iteration (the fixed cost of a call)")
+prof = cProfile.Profile(); prof.enable()
+for _ in range(20):
+    rsocl.reconstruct(g, rig, iterations=1, **opts)
+prof.disable()
+pstats.Stats(prof).sort_stats("cumulative").print_stats(45)
 PY
 echo "profile exit status $?" | tee -a "$OUT/check.log"
 head -n 2 "$OUT/profile.txt"

@@ -71,8 +71,9 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
  * [0, T): every load and store is one contiguous vector, where a pixel-per-work-item loop
  * makes per-lane gathers (docs/implementation_notes.md).
  * Lanes outside their own window get weight 0, so results equal the scalar loops above.
- * The host defines TILE_W (default: 32 bytes of reals); pixels of blocks cut by the ROI's
- * right or bottom edge take the scalar loops. */
+ * The host defines TILE_W (default: 32 bytes of reals; on devices that are not CPUs, one pixel:
+ * rsocl.model.operator.GPU_BLOCK); pixels of blocks cut by the ROI's right or bottom edge take the
+ * scalar loops. */
 #ifndef TILE_W
 #if REAL_IS_DOUBLE
 #define TILE_W 4
@@ -82,15 +83,24 @@ inline void window_scatter(__global real *f, int first, real frac, real len,
 #endif
 #define RSOCL_CAT_(a, b) a##b
 #define RSOCL_CAT(a, b) RSOCL_CAT_(a, b)
+#if TILE_W == 1
+typedef real realw;                 /* one pixel per row of a block: scalars (GPUs) */
+typedef int intw;
+#define convert_realw RSOCL_CAT(convert_, REAL)
+#else
 typedef RSOCL_CAT(REAL, TILE_W) realw;
 typedef RSOCL_CAT(int, TILE_W) intw;
 #define convert_realw RSOCL_CAT(convert_, RSOCL_CAT(REAL, TILE_W))
+#endif
 
 /* Tile loads and stores at any alignment, written element by element: LLVM merges them
  * into one unaligned vector load or store. PoCL 3.0 calls vload8/vstore8 as library
  * functions (not inlined, with spills around each call), which slows the forward kernel
  * (docs/implementation_notes.md). */
-#if TILE_W == 2
+#if TILE_W == 1
+#define RSOCL_TILE(p) (p)[0]
+#define RSOCL_STORE(v, p) ((p)[0] = (v))
+#elif TILE_W == 2
 #define RSOCL_TILE(p) (p)[0], (p)[1]
 #define RSOCL_STORE(v, p) ((p)[0] = (v).s0, (p)[1] = (v).s1)
 #elif TILE_W == 4
@@ -108,7 +118,7 @@ typedef RSOCL_CAT(int, TILE_W) intw;
                            (p)[8] = (v).s8, (p)[9] = (v).s9, (p)[10] = (v).sa, (p)[11] = (v).sb, \
                            (p)[12] = (v).sc, (p)[13] = (v).sd, (p)[14] = (v).se, (p)[15] = (v).sf)
 #else
-#error "TILE_W must be 2, 4, 8 or 16"
+#error "TILE_W must be 1, 2, 4, 8 or 16"
 #endif
 inline realw load_w(__global const real *p) { return (realw)(RSOCL_TILE(p)); }
 inline intw load_iw(__global const int *p) { return (intw)(RSOCL_TILE(p)); }

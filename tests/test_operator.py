@@ -131,10 +131,16 @@ def test_shape_and_dtype_errors(device):
 
 @pytest.mark.filterwarnings("ignore:camera t_e = .* is longer than 1 s:UserWarning")  # a long exposure, on purpose
 def test_datacube_too_large_for_device_is_refused(device):
-    # an exposure of twice as many 10 µs sub-frames of 64x64 (float32) as the device's largest
-    # buffer holds: 16 GB on PoCL's 1 GiB limit, 42 GB on an H100's 20 GiB
-    subframes = 2 * device.max_alloc_bytes // (64 * 64 * 4)
-    rig = Rig([Camera(0, t_e=subframes * 1e-5, t_r=1e-5)], (64, 64))
+    # an exposure of twice as many 10 µs sub-frames of m x m (float32) as the device's largest
+    # buffer holds (2 GiB on PoCL's 1 GiB limit, 40 GiB on an H100's 20 GiB), m grown until the
+    # exposure spans at most half of MAX_WINDOW sub-frames, so that limit is not the one met
+    from rsocl.model.plausible import MAX_WINDOW
+
+    m = 64
+    while 2 * device.max_alloc_bytes // (m * m * 4) > MAX_WINDOW // 2:
+        m *= 2
+    subframes = 2 * device.max_alloc_bytes // (m * m * 4)
+    rig = Rig([Camera(0, t_e=subframes * 1e-5, t_r=1e-5)], (m, m))
     with pytest.raises(ValueError, match="largest allocation"):
         RollingShutterOperator(rig, device=device)
 
@@ -169,3 +175,30 @@ def test_tiles_and_cut_windows_match_zero_padded_reference(shape, mask, dtype, d
     tol = TOL[dtype]
     assert _rel(op.forward(f_cut), ref.forward(rig, f_full)) < tol
     assert _rel(op.adjoint(g), ref.adjoint(rig, g)[cut]) < tol
+
+
+@pytest.mark.parametrize("block", [(1, 1), (2, 1), (1, 3), (4, 2), (8, 4)])
+@pytest.mark.parametrize("shape", [(13, 13), (3, 7), (8, 21)])
+def test_gpu_block_layouts_match_the_reference(block, shape, dtype, device, rng, monkeypatch):
+    """On a device that is not a CPU the block kernels take ``GPU_BLOCK`` pixels x rows per work item
+    (one pixel by default); every layout, whole blocks and blocks cut by the edges, equals H, Hᵀ and
+    the residual of the reference, and a reconstruction equals the CPU layout's."""
+    import rsocl
+    from rsocl.device.context import Device
+    from rsocl.model import operator as operator_module
+
+    rig = Rig([Camera(0, t_e=1.6e-4, t_r=3e-5), Camera(90, t_e=1.6e-4, t_r=3e-5, t_a=2e-5)], shape)
+    f = rng.random((rig.T,) + shape)
+    g = ref.forward(rig, f)
+    opts = dict(iterations=4, lam=0.1, eta=0.2, tune=False, device=device, dtype=dtype)
+    base = rsocl.reconstruct(g, rig, **opts)
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    monkeypatch.setattr(operator_module, "GPU_BLOCK", block)
+    op = RollingShutterOperator(rig, device=device, dtype=dtype)
+    assert (op.vector_width, op.block_rows) == block
+    tol = TOL[dtype]
+    assert _rel(op.forward(f), g) < tol
+    assert _rel(op.adjoint(g), ref.adjoint(rig, g)) < tol
+    res = rsocl.reconstruct(g, rig, **opts)
+    assert _rel(res.datacube, base.datacube) < 10 * tol
+    assert _rel(res.history["residual"], base.history["residual"]) < 10 * tol  # summed in other groups

@@ -25,10 +25,24 @@ if TYPE_CHECKING:
 
 __all__ = ["RollingShutterOperator", "geometry_bytes"]
 
-#: Pixels per work item (one explicit vector of this many lanes): 32 bytes per load.
+#: Pixels per work item on a CPU device (one explicit vector of this many lanes): 32 bytes per load.
 VECTOR_WIDTH = {"float32": 8, "float64": 4}
-#: rows per work item of the forward, adjoint and ADMM projection kernels (``TILE_R``)
+#: rows per work item of the forward, adjoint and ADMM projection kernels on a CPU device (``TILE_R``)
 BLOCK_ROWS = 4
+#: ``(pixels, rows)`` per work item of those kernels on a device that is not a CPU (``TILE_W``, ``TILE_R``):
+#: measured in docs/gpu/blocks.md.
+GPU_BLOCK = (1, 1)
+
+
+def block_shape(device, dtype) -> tuple[int, int]:
+    """``(TILE_W, TILE_R)``: pixels along a row and rows per work item of the block kernels (forward,
+    adjoint, residual, ADMM projection) on ``device`` (an rsocl Device) for ``dtype``:
+    :data:`VECTOR_WIDTH` × :data:`BLOCK_ROWS` on a CPU device (explicit vectors for its SIMD units),
+    :data:`GPU_BLOCK` on others (many work items on neighbouring addresses)."""
+    if device.is_cpu:
+        return VECTOR_WIDTH[np.dtype(dtype).name], BLOCK_ROWS
+    width, rows = (int(v) for v in GPU_BLOCK)
+    return width, rows
 
 
 def geometry_bytes(K: int, pixels: int, dtype) -> int:
@@ -111,10 +125,9 @@ class RollingShutterOperator:
         self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype), async_=True)
         self.length = cla.to_device(self.queue, win.length.astype(self.dtype), async_=True)
         self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype), async_=True)
-        #: pixels per work item of the forward, adjoint and ADMM projection kernels
-        self.vector_width = VECTOR_WIDTH[self.dtype.name]
-        #: rows per work item of those kernels (each row a tile of ``vector_width`` pixels)
-        self.block_rows = BLOCK_ROWS
+        #: pixels per row of a work item's block of the forward, adjoint and ADMM projection kernels, and
+        #: rows per block (:func:`block_shape`)
+        self.vector_width, self.block_rows = block_shape(self.device, self.dtype)
         self.program = self.device.program(
             ["operator.cl"],
             REAL=c_type(self.dtype),
