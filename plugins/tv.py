@@ -34,9 +34,9 @@ GPU_FUSED = 0
 ONE_LAUNCH = -1
 
 #: ``one_launch`` of the device's choice on a device that is not a CPU: one launch per Chambolle
-#: iteration (``tv_step``), which halves the plain path's launches and the bytes it moves per iteration
-#: (counted: docs/regularizer_defaults.md). On a CPU device its recomputed neighbours cost more than the launch.
-#: 2 (``tv_step2``, one launch per two iterations) waits for a GPU's timing (``benchmarks/launches.py``).
+#: iteration (``tv_step``), which halves the plain path's launches and the bytes it moves per iteration;
+#: on a CPU device its recomputed neighbours cost more than the launch. Measured, with 2 (``tv_step2``)
+#: against it: docs/regularizer_defaults.md.
 GPU_ONE_LAUNCH = 1
 
 
