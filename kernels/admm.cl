@@ -7,7 +7,7 @@
  *                   of TILE_R x TILE_W px)                   | r / (eta + psi)    (paper, Eq. 15)
  *                                             f += Hᵀ z     (window loops only)
  *                                             [difference = 1: then u = f - b over the block's column]
- *                                             [slot >= 0: first the residual of theta into a slot]
+ *                                             [slot >= 0 (global offset): first the residual of theta]
  *   admm_difference (one work item per voxel) u = f - b     (input of the denoiser)
  *   admm_blend      (one work item per voxel) theta = x0 + alpha (theta - x0)  (after the last iteration)
  *
@@ -122,20 +122,23 @@ static inline void project_block(__global real *f, __global const real *g, __glo
 
 /* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R), sets): one work item per block of
  * TILE_R x TILE_W pixels of one set (common.cl). eta[set]; the inverse of set s starts at
- * s * own_inverse * (its size per set). With slot >= 0 the launch first adds the residual of the
- * estimate theta (weights w, which may be 0) into that slot of the partials, as residual_partials
- * (residual.cl) on the same blocks and work groups would (scratch: NCH x the group's items): the
- * residual of the previous iteration's estimate, without a launch of its own. */
+ * s * own_inverse * (its size per set). The residual slot is the global offset along the sets,
+ * less one: the host enqueues with offset (0, 0, slot + 1), so no argument changes from one
+ * iteration to the next. With slot >= 0 the launch first adds the residual of the estimate theta
+ * (weights w, which may be 0) into that slot of the partials, as residual_partials (residual.cl)
+ * on the same blocks and work groups would (scratch: NCH x the group's items): the residual of the
+ * previous iteration's estimate, without a launch of its own. */
 __kernel void admm_project(__global real *f_all, __global const real *g_all,
                            __global const int *first, __global const real *frac,
                            __global const real *len, __global const real *gain,
                            __global const real *inverse_all, __global const real *etas, int own_inverse,
                            __global const real *b_all, __global real *u_all, int difference,
                            __global const real *theta_all, __global const real *w_all,
-                           __global acc_t *partials, __local acc_t *scratch, int slot,
+                           __global acc_t *partials, __local acc_t *scratch,
                            int T, int L, int m_, int n_)
 {
-    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2);
+    int slot = (int)get_global_offset(2) - 1;
+    size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2) - get_global_offset(2);
     size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
     size_t cube = (size_t)T * mn;
     __global const real *g = g_all + set * (size_t)NCH * mn;

@@ -129,3 +129,17 @@ def test_the_projection_puts_the_residual_the_separate_launch_gives(device, monk
     assert np.array_equal(folded.read_residuals(slots).result(), alone.read_residuals(slots).result())
     with pytest.raises(ValueError, match=r"slot must be in \[0, 7\]"):
         folded.step(residual_slot=slots)
+
+
+def test_steps_after_the_first_set_no_argument_of_the_projection(device):
+    """Each iteration's residual goes to its own slot without a by-value argument changing (the slot is the
+    launch's global offset): on PoCL setting one costs several times a launch's host time."""
+    rig = rsocl.Rig.paper_array(4, (10, 9), t_e=1e-4, t_r=3e-5)
+    rng = np.random.default_rng(6)
+    g = np.stack([ref.forward(rig, rng.random((rig.T,) + rig.shape)) for _ in range(2)])
+    solver = _solver(device, rig, g, None, "float32")
+    solver.step()
+    set_once = dict(solver._project._values)
+    for it in range(1, 2 * solver.residuals.slots + 1):
+        solver.step(residual_slot=(it - 1) % solver.residuals.slots)
+    assert solver._project._values == set_once

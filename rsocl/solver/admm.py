@@ -120,6 +120,8 @@ class ADMM:
         scratch = self._scratch_bytes()
         self.folds_residual = scratch <= dev.local_mem_bytes // 2
         self._scratch = cl.LocalMemory(scratch if self.folds_residual else self.residuals.acc.itemsize)
+        #: the projection's global offsets: index slot + 1 (slot -1: no residual) holds (0, 0, slot + 1)
+        self._slot_offsets = [(0, 0, k) for k in range(RESIDUAL_SLOTS + 1)]
         self.iteration = 0
         self._denoiser: Callable[[], Any] | None = None  # the regularizer's bound call, made at the first step
         self._bind_kernels()
@@ -156,7 +158,6 @@ class ADMM:
             None if self.valid is None else self.valid.data,
             self.residuals.partials,
             self._scratch,
-            np.int32(-1),
             np.int32(op.T),
             np.int32(op.L),
             *op._shape_args(),
@@ -216,9 +217,8 @@ class ADMM:
             for gsize, lsize, offset in self.voxels:
                 self._dual.enqueue(queue, gsize, lsize, offset)
         folded = residual_slot if residual_slot is not None and self.folds_residual else -1
-        self._project.set_arg(11, np.int32(self.fused))  # by-value arguments: set only when they change
-        self._project.set_arg(16, np.int32(folded))
-        self._project.enqueue(queue, *self.blocks)
+        self._project.set_arg(11, np.int32(self.fused))  # set only when it changes
+        self._project.enqueue(queue, *self.blocks, self._slot_offsets[folded + 1])  # the slot: kernels/admm.cl
         if not self.fused:
             for gsize, lsize, offset in self.elements:
                 self._difference.enqueue(queue, gsize, lsize, offset)
