@@ -7,7 +7,8 @@
 #   3. benchmarks/blocks.py where the tree has it (the operator kernels' block layout, GPU_BLOCK), capped;
 #   4. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
 #   5. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
-#      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), capped;
+#      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), then
+#      benchmarks/launch_cost.py (a launch's host time by arguments and grid, into check.log), capped;
 #   6. benchmarks/inverse.py where the tree has it (the inverse blocks on the device against the host), capped;
 #   7. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped;
 #   8. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under cProfile.
@@ -15,8 +16,8 @@
 # (every step but the tests), tests.log, blocks.md, peer.md, launches.md, inverse.md, search_launches.md, profile.txt.
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (80), PEER_CAP (220), LAUNCH_CAP (40), INVERSE_CAP (35), SEARCH_CAP (35),
-# PROFILE_CAP (20), BLOCKS_CAP (90) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
+# Knobs: TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), INVERSE_CAP (30), SEARCH_CAP (30),
+# PROFILE_CAP (20), BLOCKS_CAP (80), COST_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -27,8 +28,8 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-80} PEER_CAP=${PEER_CAP:-220} LAUNCH_CAP=${LAUNCH_CAP:-40} INVERSE_CAP=${INVERSE_CAP:-35}
-SEARCH_CAP=${SEARCH_CAP:-35} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-90}
+TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} INVERSE_CAP=${INVERSE_CAP:-30}
+SEARCH_CAP=${SEARCH_CAP:-30} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
 PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --tv-one-launch 2 --variant-cases paper size64}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
@@ -106,6 +107,11 @@ if [ -f benchmarks/launches.py ]; then
     echo "launches exit status $?" | tee -a "$OUT/check.log"
 else
     stamp "benchmarks/launches.py is not in this tree: skipped"
+fi
+if [ -f benchmarks/launch_cost.py ]; then
+    stamp "benchmarks/launch_cost.py (cap ${COST_CAP} s)" | tee -a "$OUT/check.log"
+    timeout -k 5 "$COST_CAP" "$PYTHON" -P benchmarks/launch_cost.py --device "$DEVICE" --rounds 5 >> "$OUT/check.log" 2>&1
+    echo "launch_cost exit status $?" | tee -a "$OUT/check.log"
 fi
 
 # ---------------------------------------------------------------- 6. inverse blocks
