@@ -124,6 +124,11 @@ def describe(case) -> str:
     )
 
 
+def table_head(title: str, columns) -> list:
+    """Markdown lines that open a section: its title and a table's head (a case column, then ``columns``)."""
+    return ["", title, "", "| case | " + " | ".join(columns) + " |", "|---" * (1 + len(columns)) + "|"]
+
+
 def page(results, layouts, device, args, argv):
     heads = [f"{w}×{h}" for w, h in layouts]
     lines = header_lines("Block layout of the operator and projection kernels", device, argv)[:-1]
@@ -131,13 +136,9 @@ def page(results, layouts, device, args, argv):
         f"float32, `lam` {LAM}, `eta` {ETA}, fixed settings (`tune=False`), the built-in scene (seed = set); "
         f"{args.rounds} rounds with the layouts in rotating order, medians. A layout W×R gives each work item "
         "R rows of W neighbouring pixels (`rsocl.model.operator.GPU_BLOCK`)."
-        + (" The device is read as one that is not a CPU (`--as-gpu`)." if args.as_gpu else ""),
-        "",
-        "## Times",
-        "",
-        "| case | " + " | ".join(heads) + " |",
-        "|---" * (1 + len(heads)) + "|",
+        + (" The device is read as one that is not a CPU (`--as-gpu`)." if args.as_gpu else "")
     ]
+    lines += table_head("## Times", heads)
     for case, (times, _) in results:
         sets, per_iteration = case[2], case[4]
         cells = []
@@ -145,13 +146,7 @@ def page(results, layouts, device, args, argv):
             sec = statistics.median(times[block])
             cells.append(f"{sets / sec:.1f} sets/s" if sets > 1 and not per_iteration else f"{sec * 1e3:.3f} ms")
         lines.append(f"| {describe(case)} | " + " | ".join(cells) + " |")
-    lines += [
-        "",
-        f"## Time over {heads[0]}'s (median and range of the per-round ratios)",
-        "",
-        "| case | " + " | ".join(heads[1:]) + " |",
-        "|---" * len(heads) + "|",
-    ]
+    lines += table_head(f"## Time over {heads[0]}'s (median and range of the per-round ratios)", heads[1:])
     for case, (times, _) in results:
         base = times[layouts[0]]
         cells = []
@@ -159,13 +154,7 @@ def page(results, layouts, device, args, argv):
             ratios = [a / b for a, b in zip(times[block], base)]
             cells.append(f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f})")
         lines.append(f"| {describe(case)} | " + " | ".join(cells) + " |")
-    lines += [
-        "",
-        f"## Same results: largest |datacube − {heads[0]}'s|",
-        "",
-        "| case | " + " | ".join(heads[1:]) + " |",
-        "|---" * len(heads) + "|",
-    ]
+    lines += table_head(f"## Same results: largest |datacube − {heads[0]}'s|", heads[1:])
     for case, (_, diffs) in results:
         lines.append(f"| {describe(case)} | " + " | ".join(f"{diffs[b]:.1e}" for b in layouts[1:]) + " |")
     return lines + [""]
