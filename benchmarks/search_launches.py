@@ -12,16 +12,18 @@ every kernel launch (``enqueue_nd_range_kernel``), copy and fill of:
   folds as one batch, the candidates one after the other);
 
 on the paths a GPU takes (the device read as one that is not a CPU, as ``benchmarks/launches.py``'s
-``gpu`` path), and checks that both searches choose the same values. Wall times are printed too, but
-on a CPU device batches do not pay (its kernels' work, not their launches, bounds it): there the
-launch counts are the measurement.
+``gpu`` path), and checks that both searches choose the same values. Then ``--rounds`` rounds time the
+three calls again in rotating order: the median wall time of each, and each tuned call's time over the
+fixed run's of its round (median and range). On a CPU device batches do not pay (its kernels' work, not
+their launches, bounds it): there the launch counts are the measurement.
 
-    python benchmarks/search_launches.py [--sizes 50 128] [--device SPEC] [--out docs/search_launches.md]
+    python benchmarks/search_launches.py [--sizes 50 128] [--rounds 3] [--device SPEC] [--out docs/search_launches.md]
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -45,33 +47,51 @@ def _timed(fn):
     return result, seconds, dict(counts)
 
 
-def measure(m: int, device) -> dict:
-    """Counts and times of the three runs at ``m``×``m`` on the GPU path."""
+def _alone(call):
+    """``call()`` with the search's candidates one per batch (``search_batch.CANDIDATES = 1``)."""
+    saved = search_batch.CANDIDATES
+    search_batch.CANDIDATES = 1
+    try:
+        return call()
+    finally:
+        search_batch.CANDIDATES = saved
+
+
+def measure(m: int, device, rounds: int = 3) -> dict:
+    """Counts of the three runs at ``m``×``m`` on the GPU path (one call each), then ``rounds`` rounds of
+    the three in rotating order: ``out[key]`` the median seconds, ``out[key + "_rounds"]`` each round's."""
     rig, g = case(m)
     out = {}
     with path("gpu"):
         rsocl.reconstruct(g, rig, iterations=3, device=device)  # builds
-        tuned, out["tuned"], out["tuned_counts"] = _timed(lambda: rsocl.reconstruct(g, rig, device=device))
-        saved = search_batch.CANDIDATES
-        search_batch.CANDIDATES = 1
-        try:
-            alone, out["alone"], out["alone_counts"] = _timed(lambda: rsocl.reconstruct(g, rig, device=device))
-        finally:
-            search_batch.CANDIDATES = saved
+        tuned, _, out["tuned_counts"] = _timed(lambda: rsocl.reconstruct(g, rig, device=device))
+        alone, _, out["alone_counts"] = _alone(lambda: _timed(lambda: rsocl.reconstruct(g, rig, device=device)))
         chosen = tuned.params["tuning"]["chosen"]
         options = {k: v for k, v in chosen.items() if k != "lam"}
-        _, out["fixed"], out["fixed_counts"] = _timed(
-            lambda: rsocl.reconstruct(
-                g,
-                rig,
-                iterations=tuned.params["iterations"],
-                tune=False,
-                x0="interp3d",
-                lam=chosen["lam"],
-                regularizer_options=options,
-                device=device,
-            )
+        fixed_kw = dict(
+            iterations=tuned.params["iterations"],
+            tune=False,
+            x0="interp3d",
+            lam=chosen["lam"],
+            regularizer_options=options,
+            device=device,
         )
+        _, _, out["fixed_counts"] = _timed(lambda: rsocl.reconstruct(g, rig, **fixed_kw))
+        calls = {
+            "fixed": lambda: rsocl.reconstruct(g, rig, **fixed_kw),
+            "tuned": lambda: rsocl.reconstruct(g, rig, device=device),
+            "alone": lambda: _alone(lambda: rsocl.reconstruct(g, rig, device=device)),
+        }
+        keys = list(calls)
+        for key in keys:
+            out[f"{key}_rounds"] = []
+        for r in range(rounds):
+            for key in keys[r % 3 :] + keys[: r % 3]:
+                start = time.perf_counter()
+                calls[key]()
+                out[f"{key}_rounds"].append(time.perf_counter() - start)
+    for key in keys:
+        out[key] = statistics.median(out[f"{key}_rounds"])
     out.update(
         m=m,
         T=rig.T,
@@ -92,9 +112,11 @@ def rows(r) -> list:
         ("alone", "tuned, one candidate per batch"),
     ):
         c = r[f"{key}_counts"]
+        ratios = [a / b for a, b in zip(r[f"{key}_rounds"], r["fixed_rounds"])]
         line.append(
             f"| {r['m']}×{r['m']} | {label} | {launches[key]} | {c['enqueue_copy']} | {c['enqueue_fill_buffer']} | "
-            f"{launches[key] / launches['fixed']:.2f} | {r[key]:.3f} |"
+            f"{launches[key] / launches['fixed']:.2f} | {r[key]:.3f} | "
+            f"{statistics.median(ratios):.2f} ({min(ratios):.2f}-{max(ratios):.2f}) |"
         )
     return line
 
@@ -102,11 +124,12 @@ def rows(r) -> list:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[50, 128], help="ROI sides m (m × m), pixels")
+    parser.add_argument("--rounds", type=int, default=3, help="timed rounds of the three calls (>= 1)")
     parser.add_argument("--device", default=None)
     parser.add_argument("--out", type=Path, default=DOCS / "search_launches.md", help="the Markdown page to write")
     args = parser.parse_args(argv)
-    if min(args.sizes) < 8:
-        raise SystemExit("--sizes must be >= 8")
+    if min(args.sizes) < 8 or args.rounds < 1:
+        raise SystemExit("--sizes must be >= 8 and --rounds >= 1")
     device = get_device(args.device)
     page = header_lines(
         "The self-tuned default's launches against a fixed run", device, None if argv is None else [__file__, *argv]
@@ -117,14 +140,15 @@ def main(argv=None):
         "on the paths a GPU takes (the device read as one that is not a CPU). Counts of one call each; "
         "`launches / fixed`: the call's kernel launches over the fixed run's, about its time over the fixed "
         "run's where launches bound a run (a small set on a GPU). Seconds: this device's wall time of the call "
-        "(kernel builds excluded).",
+        f"(kernel builds excluded), the median of {args.rounds} rounds of the three calls in rotating order; "
+        "`time / fixed`: the call's time over the fixed run's in the same round (median and range).",
         "",
-        "| ROI | run | kernel launches | copies | fills | launches / fixed | seconds |",
-        "|---|---|---|---|---|---|---|",
+        "| ROI | run | kernel launches | copies | fills | launches / fixed | seconds | time / fixed |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     notes = []
     for m in args.sizes:
-        r = measure(m, device)
+        r = measure(m, device, args.rounds)
         page += rows(r)
         print("\n".join(page[-3:]), file=sys.stderr, flush=True)
         notes.append(
