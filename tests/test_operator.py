@@ -177,8 +177,16 @@ def test_tiles_and_cut_windows_match_zero_padded_reference(shape, mask, dtype, d
     assert _rel(op.adjoint(g), ref.adjoint(rig, g)[cut]) < tol
 
 
-@pytest.mark.parametrize("block", [(1, 1), (2, 1), (1, 3), (4, 2), (8, 4)])
-@pytest.mark.parametrize("shape", [(13, 13), (3, 7), (8, 21)])
+# the default, one pixel per work item, on the frames of the tile test above (13x13: blocks cut by both
+# edges, 3x7: smaller than a block, 8x21: cut by the right edge); other layouts (vectors, several rows)
+# once each, marked slow, so Oclgrind's run (-m 'not slow') checks the default alone
+LAYOUTS = [((1, 1), (13, 13)), ((1, 1), (3, 7)), ((1, 1), (8, 21))] + [
+    pytest.param(block, shape, marks=pytest.mark.slow)
+    for block, shape in [((2, 1), (13, 13)), ((1, 3), (8, 21)), ((4, 2), (13, 13)), ((8, 4), (3, 7))]
+]
+
+
+@pytest.mark.parametrize(("block", "shape"), LAYOUTS)
 def test_gpu_block_layouts_match_the_reference(block, shape, dtype, device, rng, monkeypatch):
     """On a device that is not a CPU the block kernels take ``GPU_BLOCK`` pixels x rows per work item
     (one pixel by default); every layout, whole blocks and blocks cut by the edges, equals H, Hᵀ and
