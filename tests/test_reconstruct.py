@@ -217,3 +217,30 @@ def test_pipelined_residuals_equal_the_waited_ones(problem):
     np.testing.assert_array_equal(fast.history["residual"], waited.history["residual"])
     np.testing.assert_array_equal(fast.datacube, waited.datacube)
     assert np.all(np.diff(fast.history["time"]) >= 0)
+
+
+@pytest.mark.parametrize(
+    "sequence",
+    [
+        [0.5, 0.4, 0.45, 300.0, 0.3, 600.0],  # growth beyond GROWTH times max(smallest, 1) at 600
+        [0.5, float("nan")],
+        [float("nan")],
+        [float("inf"), 0.2],
+        [2.0, 1.5, 1600.0],
+    ],
+)
+def test_growth_check_of_one_set_equals_that_of_a_batch(sequence):
+    """The divergence check books one set's residual in plain Python: every flag and every smallest-so-far
+    equals the array path's on a batch of one set."""
+    import types
+
+    from rsocl.solver.iterate import _History
+
+    staged = types.SimpleNamespace(truth=None)
+    settings = types.SimpleNamespace(callback=None, tol=None, projection="exact")
+    one, batch = _History(None, staged, settings, 1, None), _History(None, staged, settings, 1, None)
+    for value in sequence:
+        flag = one._grown(float(value))
+        flags = batch._grown(np.array([value]))
+        assert bool(flag) == bool(flags[0]), value
+        assert np.array_equal(np.atleast_1d(one.lowest), batch.lowest, equal_nan=True), value

@@ -47,8 +47,17 @@ class _History:
             self.values["psnr"] = []
         self.start = time.perf_counter()
 
-    def _grown(self, residual) -> np.ndarray:
-        """Where ``residual`` (one per set) is not finite or beyond :data:`GROWTH` times the smallest so far."""
+    def _grown(self, residual):
+        """Where ``residual`` (one per set) is not finite or beyond :data:`GROWTH` times the smallest so far:
+        a bool for one set's float (in plain Python: it runs every iteration), else a bool array."""
+        if isinstance(residual, float):
+            finite, lowest = math.isfinite(residual), self.lowest
+            if lowest is None:
+                self.lowest = residual if finite else math.inf
+                return not finite
+            if residual < lowest:  # as np.fmin: a NaN leaves the smallest as it is
+                self.lowest = residual
+            return not finite or residual > GROWTH * max(lowest, 1.0)
         residual = np.asarray(residual, dtype=np.float64)
         bad = ~np.isfinite(residual)
         if self.lowest is not None:
@@ -153,13 +162,14 @@ class _History:
     def record(self, it, residual) -> bool:
         """Book iteration ``it``'s residual (one per set for a batch); True when the run should stop after it."""
         bad = self._grown(residual)
-        if bad.any():
+        if bad is True or (bad is not False and bad.any()):
             raise self._diverged(it, residual, bad)
         values, settings = self.values, self.settings
         values["residual"].append(residual)
         self.check_stall()
         elapsed = time.perf_counter() - self.start
-        values["time"].append(np.full(np.shape(residual), elapsed) if np.ndim(residual) else elapsed)
+        one = isinstance(residual, float) or not np.ndim(residual)
+        values["time"].append(elapsed if one else np.full(np.shape(residual), elapsed))
         if self.staged.truth is not None:
             values["psnr"].append(self._psnr())
         if self.bar is not None:
