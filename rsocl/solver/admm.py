@@ -120,8 +120,6 @@ class ADMM:
         scratch = self._scratch_bytes()
         self.folds_residual = scratch <= dev.local_mem_bytes // 2
         self._scratch = cl.LocalMemory(scratch if self.folds_residual else self.residuals.acc.itemsize)
-        #: the projection's global offsets: index slot + 1 (slot -1: no residual) holds (0, 0, slot + 1)
-        self._slot_offsets = [(0, 0, k) for k in range(RESIDUAL_SLOTS + 1)]
         self.iteration = 0
         self._denoiser: Callable[[], Any] | None = None  # the regularizer's bound call, made at the first step
         self._bind_kernels()
@@ -218,7 +216,7 @@ class ADMM:
                 self._dual.enqueue(queue, gsize, lsize, offset)
         folded = residual_slot if residual_slot is not None and self.folds_residual else -1
         self._project.set_arg(11, np.int32(self.fused))  # set only when it changes
-        self._project.enqueue(queue, *self.blocks, self._slot_offsets[folded + 1])  # the slot: kernels/admm.cl
+        self._project.enqueue(queue, *self.blocks, (0, 0, folded + 1))  # the slot is the offset: kernels/admm.cl
         if not self.fused:
             for gsize, lsize, offset in self.elements:
                 self._difference.enqueue(queue, gsize, lsize, offset)

@@ -162,7 +162,7 @@ class _History:
     def record(self, it, residual) -> bool:
         """Book iteration ``it``'s residual (one per set for a batch); True when the run should stop after it."""
         bad = self._grown(residual)
-        if bad is True or (bad is not False and bad.any()):
+        if bad.any() if isinstance(bad, np.ndarray) else bad:
             raise self._diverged(it, residual, bad)
         values, settings = self.values, self.settings
         values["residual"].append(residual)
