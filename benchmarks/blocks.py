@@ -33,6 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from launches import path  # noqa: E402
 from paper_config import paper_rig  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 
@@ -55,18 +56,17 @@ def layout(text: str) -> tuple[int, int]:
 
 @contextmanager
 def gpu_block(block, as_gpu: bool):
-    """Run the block with ``GPU_BLOCK = block`` (and the device read as a GPU where ``as_gpu``)."""
-    from rsocl.device.context import Device
+    """Run the block with ``GPU_BLOCK = block`` (and the device read as a GPU where ``as_gpu``: launches.py's
+    ``gpu`` path, with the rest of a GPU's choices)."""
     from rsocl.model import operator
 
-    saved = operator.GPU_BLOCK, Device.is_cpu
+    saved = operator.GPU_BLOCK
     operator.GPU_BLOCK = block
-    if as_gpu:
-        Device.is_cpu = property(lambda self: False)
     try:
-        yield
+        with path("gpu" if as_gpu else "device"):
+            yield
     finally:
-        operator.GPU_BLOCK, Device.is_cpu = saved
+        operator.GPU_BLOCK = saved
 
 
 def case_list(args):
