@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rsocl.device import pool
 from rsocl.device.context import device_for_queue
 from rsocl.device.launch import batch_launches, voxel_launches
 from rsocl.device.program import c_type
@@ -190,7 +191,6 @@ class TV(Regularizer):
     def _steps(self, queue, weights, dtype):
         """The per-set ``(tau, tau / weight, temporal weight)`` of ``tv.cl`` on the device (``tau`` and
         ``tau / weight`` 0 for weight 0)."""
-        import pyopencl.array as cla
 
         w = np.asarray(weights, dtype=np.float64)
         wt = self.temporal_weights(len(w))
@@ -202,7 +202,7 @@ class TV(Regularizer):
             on = w > 0
             tau = float(self.step) / (2.0 * (2.0 + wt * wt))
             steps = np.stack([np.where(on, tau, 0.0), np.where(on, tau / np.where(on, w, 1.0), 0.0), wt], axis=1)
-            cache[key] = cla.to_device(queue, steps.astype(dtype).ravel(), async_=True)
+            cache[key] = pool.to_device(queue, steps.astype(dtype).ravel())
         return cache[key]
 
     def _program(self, x, name):
@@ -248,15 +248,14 @@ class TV(Regularizer):
 
     def _buffers(self, x, copies):
         """The dual p (``copies`` of it) and xnext, once per shape, dtype and queue."""
-        import pyopencl.array as cla
 
         cache = self.__dict__.setdefault("_dual", {})
         key = (x.shape, x.dtype.str, self.planes, copies, x.queue.int_ptr)
         if key not in cache:
             cache.clear()
             cache[key] = (
-                [cla.empty(x.queue, (self.planes,) + x.shape, x.dtype) for _ in range(copies)],
-                cla.to_device(x.queue, edge_weights(x.shape[-1], x.dtype), async_=True),
+                [pool.empty(x.queue, (self.planes,) + x.shape, x.dtype) for _ in range(copies)],
+                pool.to_device(x.queue, edge_weights(x.shape[-1], x.dtype)),
             )
         return cache[key]
 

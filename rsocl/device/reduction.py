@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from rsocl.device import pool
 from rsocl.device.context import device_for_queue
 from rsocl.device.program import c_type
 
@@ -62,7 +63,7 @@ def sum_sq_diff_async(a, b=None, weights=None, sets=None) -> PendingSum:
     prog = dev.program(["reduce.cl"], REAL=c_type(a.dtype), ACC=c_type(acc))
     local = 1 << (dev.group_limit(prog.sum_sq_diff, cap=LOCAL_SIZE).bit_length() - 1)  # a power of two
     groups = max(1, min(max(1, MAX_GROUPS // count), -(-per_set // local)))
-    partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, count * groups * acc.itemsize)
+    partials = pool.buffer(a.queue, count * groups * acc.itemsize)
     prog.sum_sq_diff(
         a.queue,
         (groups * local, count),

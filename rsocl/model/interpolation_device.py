@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rsocl.device import pool
 from rsocl.device.launch import batch_launches
 from rsocl.device.program import c_type
 from rsocl.model.interpolation import samples
@@ -39,7 +40,6 @@ def interp3d_device(op, g, valid=None, solved=None, *, out=None):
     pyopencl.array.Array
         ``(len(solved), m, n)``, or ``(B, len(solved), m, n)`` for a batch.
     """
-    import pyopencl.array as cla
 
     rig, queue, dtype = op.rig, op.queue, np.dtype(op.dtype)
     g = np.asarray(g, dtype=np.float64)
@@ -70,13 +70,13 @@ def interp3d_device(op, g, valid=None, solved=None, *, out=None):
             inverse[b, : K - 1] = np.where(np.isfinite(span) & (span > 0), 1.0 / span, 0.0)
     want = (B, length) + shape
     if out is None:
-        out = cla.empty(queue, want[1:] if one else want, dtype)
+        out = pool.empty(queue, want[1:] if one else want, dtype)
     elif out.dtype != dtype or out.size != int(np.prod(want)):
         raise ValueError(
             f"out must hold {want[1:] if one else want} values of {dtype.name}, got {out.shape} {out.dtype}"
         )
     up = [
-        cla.to_device(queue, np.ascontiguousarray(a, dtype=t), async_=True)
+        pool.to_device(queue, np.asarray(a, dtype=t))
         for a, t in ((times, dtype), (values, dtype), (inverse, dtype), (count, np.int32), (fallback, dtype))
     ]
     prog = op.device.program(["interp.cl"], REAL=c_type(dtype), NCH=K)

@@ -14,6 +14,7 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike, DTypeLike
+from rsocl.device import pool
 from rsocl.device.context import Device, get_device
 from rsocl.device.kernel import Kernel
 from rsocl.device.launch import block_grid, element_launches
@@ -100,7 +101,6 @@ class RollingShutterOperator:
     def __init__(
         self, rig: Rig, device: str | Device | None = None, dtype: DTypeLike = "float32", subframes: slice | None = None
     ) -> None:
-        import pyopencl.array as cla
 
         if not isinstance(rig, Rig):
             raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
@@ -121,10 +121,10 @@ class RollingShutterOperator:
             f"a datacube of T={self.T} x {m} x {n} in {self.dtype.name}", self.T * m * n * itemsize, dtype=self.dtype
         )
         win = rig.windows
-        self.first = cla.to_device(self.queue, np.ascontiguousarray(win.index - start, dtype=np.int32), async_=True)
-        self.frac = cla.to_device(self.queue, win.fraction.astype(self.dtype), async_=True)
-        self.length = cla.to_device(self.queue, win.length.astype(self.dtype), async_=True)
-        self.gain = cla.to_device(self.queue, win.gain.astype(self.dtype), async_=True)
+        self.first = pool.to_device(self.queue, (win.index - start).astype(np.int32))
+        self.frac = pool.to_device(self.queue, win.fraction.astype(self.dtype))
+        self.length = pool.to_device(self.queue, win.length.astype(self.dtype))
+        self.gain = pool.to_device(self.queue, win.gain.astype(self.dtype))
         #: pixels per row of a work item's block of the forward, adjoint and ADMM projection kernels, and
         #: rows per block (:func:`block_shape`)
         self.vector_width, self.block_rows = block_shape(self.device, self.dtype)
@@ -164,13 +164,12 @@ class RollingShutterOperator:
             if x.dtype != self.dtype:
                 raise ValueError(f"{name} must have dtype {self.dtype.name} on the device, got {x.dtype}")
             return x, True
-        return cla.to_device(self.queue, np.ascontiguousarray(x, dtype=self.dtype)), False
+        return pool.to_device(self.queue, np.asarray(x, dtype=self.dtype), wait=True), False
 
     def empty(self, shape: tuple[int, ...]) -> cla.Array:
         """An uninitialised device array of this operator's dtype."""
-        import pyopencl.array as cla
 
-        return cla.empty(self.queue, shape, self.dtype)
+        return pool.empty(self.queue, shape, self.dtype)
 
     @property
     def tile_defines(self) -> dict[str, int]:

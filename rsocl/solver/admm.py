@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.device import pool
 from rsocl.device.launch import batch_launches, element_launches
 from rsocl.device.program import c_type
 from rsocl.model.operator import RollingShutterOperator
@@ -78,7 +79,6 @@ class ADMM:
         self, op: RollingShutterOperator, g, regularizer, *, lam, eta, projection="exact", x0=None, valid=None
     ):
         import pyopencl as cl
-        import pyopencl.array as cla
 
         self.op, self.g, self.regularizer, self.projection = op, g, regularizer, projection
         self.batched = g.ndim == 4
@@ -90,15 +90,15 @@ class ADMM:
         shape = batch + op.domain_shape
         self.valid = None
         if valid is not None and not np.all(valid):
-            self.valid = cla.to_device(queue, np.ascontiguousarray(valid, dtype=op.dtype), async_=True)
+            self.valid = pool.to_device(queue, np.asarray(valid, dtype=op.dtype))
         self.own_inverse, self.inverse = inverse_blocks(op, projection, self.etas, valid, self.sets, self.valid)
-        self.eta_device = cla.to_device(queue, self.etas.astype(op.dtype), async_=True)
-        self.dual_on = cla.to_device(queue, (self.etas > 0).astype(np.int32), async_=True)
-        self.theta = cla.zeros(queue, shape, op.dtype) if x0 is None else x0.copy()
-        self.b = cla.zeros(queue, shape, op.dtype)
-        self.f = self.theta.copy()
-        self.u = cla.empty(queue, shape, op.dtype)
-        self.hx = cla.empty(queue, batch + op.range_shape, op.dtype)
+        self.eta_device = pool.to_device(queue, self.etas.astype(op.dtype))
+        self.dual_on = pool.to_device(queue, (self.etas > 0).astype(np.int32))
+        self.theta = pool.zeros(queue, shape, op.dtype) if x0 is None else pool.copy(x0)
+        self.b = pool.zeros(queue, shape, op.dtype)
+        self.f = pool.copy(self.theta)
+        self.u = pool.empty(queue, shape, op.dtype)
+        self.hx = pool.empty(queue, batch + op.range_shape, op.dtype)
         self.program = op.device.program(
             ["residual.cl", "admm.cl"],
             REAL=c_type(op.dtype),

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rsocl.device import pool
 from rsocl.device.reduction import sum_sq_diff
 from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import ADMM
@@ -63,7 +64,7 @@ def make_fold(op, g_device, g, block, fit, scored) -> Fold:
             "; fix lam and the regularizer's options or pass tune=False"
         )
     x0 = interp3d_device(op, g, fit, _solved(rig, op))
-    weights = cla.to_device(op.queue, np.ascontiguousarray(scored, dtype=op.dtype))
+    weights = pool.to_device(op.queue, np.asarray(scored, dtype=op.dtype))
     start_prediction = cla.empty_like(g_device)
     op.forward_into(x0, start_prediction)
     return Fold(fit, x0, weights, start_prediction)

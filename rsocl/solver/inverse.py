@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rsocl.device import pool
 from rsocl.device.launch import element_launches
 from rsocl.device.program import c_type
 
@@ -109,7 +110,6 @@ def inverse_blocks(op, projection: str, etas, valid, sets: int, valid_device=Non
         Compute the exact blocks on the device (True) or the host (False); None: the device where
         :func:`inverts_on_device`.
     """
-    import pyopencl.array as cla
 
     valid = None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool).reshape((-1,) + op.range_shape)
     own = own_inverses(projection, etas, valid, sets)
@@ -125,7 +125,7 @@ def inverse_blocks(op, projection: str, etas, valid, sets: int, valid_device=Non
     if valid is None:
         valid_device = None
     elif valid_device is None:
-        valid_device = cla.to_device(op.queue, np.ascontiguousarray(valid, dtype=op.dtype), async_=True)
+        valid_device = pool.to_device(op.queue, np.asarray(valid, dtype=op.dtype))
     if valid_device is not None and not own:
         valid_device = valid_device.reshape((-1, op.K) + op.rig.shape)[0]  # every set's is set 0's
     blocks = device_block_inverse(
@@ -135,9 +135,8 @@ def inverse_blocks(op, projection: str, etas, valid, sets: int, valid_device=Non
 
 
 def _upload(op, blocks):
-    import pyopencl.array as cla
 
-    return cla.to_device(op.queue, np.ascontiguousarray(blocks, dtype=op.dtype), async_=True)
+    return pool.to_device(op.queue, np.asarray(blocks, dtype=op.dtype))
 
 
 def _host_blocks(op, etas, valid, own, count):
@@ -180,7 +179,6 @@ def device_block_inverse(device, queue, gram, etas, rcond: float, valid=None):
     ValueError
         When the shapes do not match, ``K`` is beyond :data:`DEVICE_CHANNELS` or the device lacks fp64.
     """
-    import pyopencl.array as cla
 
     K, mn = int(gram.shape[0]), int(np.prod(gram.shape[2:]))
     if gram.ndim != 4 or gram.shape[1] != K:
@@ -196,8 +194,8 @@ def device_block_inverse(device, queue, gram, etas, rcond: float, valid=None):
         raise ValueError(f"valid must be (K, m, n) or ({count}, K, m, n), got shape {valid.shape}")
     program = device.program(["inverse.cl"], REAL=c_type(gram.dtype), NCH=K, INV_REAL="double")
     kernel = program.block_inverse
-    out = cla.empty(queue, (count, K, K) + gram.shape[2:], gram.dtype)
-    etas_device = cla.to_device(queue, etas, async_=True)
+    out = pool.empty(queue, (count, K, K) + gram.shape[2:], gram.dtype)
+    etas_device = pool.to_device(queue, etas)
     stride = K if valid is not None and valid.ndim == 4 else 0  # planes of mn from one set's valid to the next
     for gsize, lsize, offset in element_launches(count * mn, device.group_limit(kernel, cap=64)):
         kernel(

@@ -18,6 +18,7 @@ from rsocl.analysis.metrics import default_data_range
 from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike
 from rsocl.common.memory import check_host_memory
+from rsocl.device import pool
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.held import HeldSumSquares
@@ -299,7 +300,6 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     (:func:`~rsocl.solver.memory.memory_bytes`) includes a start cube per set when the problem has
     an ``x0`` or ``start`` says one will be made after staging (the self-tuned run's ``interp3d`` start).
     """
-    import pyopencl.array as cla
 
     check_representable(problem, dtype)
     rig = problem.rig
@@ -326,7 +326,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     )
 
     def upload(array):
-        return cla.to_device(op.queue, np.ascontiguousarray(array, dtype=op.dtype), async_=True)
+        return pool.to_device(op.queue, np.asarray(array, dtype=op.dtype))
 
     cut = (Ellipsis, solved, slice(None), slice(None))
     staged = Staged(op, solved, upload(problem.g), None if problem.x0 is None else upload(problem.x0[cut]))

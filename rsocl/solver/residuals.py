@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 
+from rsocl.device import pool
 from rsocl.device.program import c_type
 from rsocl.device.reduction import PendingSum, sum_sq_diff_async
 
@@ -74,7 +75,7 @@ class DeviceResiduals:
         self.grid = op.block_grid(channels, kernels=(kernel, *kernels))
         gsize, lsize = self.grid
         self.per_slot = int(np.prod([size // local for size, local in zip(gsize, lsize)]))
-        self.partials = cl.Buffer(dev.context, cl.mem_flags.READ_WRITE, self.slots * self.per_slot * self.acc.itemsize)
+        self.partials = pool.buffer(op.queue, self.slots * self.per_slot * self.acc.itemsize)
         self.local = cl.LocalMemory(int(lsize[0] * lsize[1]) * self.acc.itemsize)
         self._g_norm2 = sum_sq_diff_async(g, weights=valid, sets=sets)  # waited for at the first read
         self.kernel = kernel  # this object's own: its arguments are set here once

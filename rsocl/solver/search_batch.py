@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rsocl.device import pool
 from rsocl.device.reduction import sum_sq_diff
 from rsocl.solver.admm import ADMM
 
@@ -89,9 +90,8 @@ class BatchedFolds:
     def _stack(self, op, arrays):
         """One device array of the ``arrays`` (device arrays of one shape) end to end."""
         import pyopencl as cl
-        import pyopencl.array as cla
 
-        out = cla.empty(op.queue, (len(arrays),) + arrays[0].shape, arrays[0].dtype)
+        out = pool.empty(op.queue, (len(arrays),) + arrays[0].shape, arrays[0].dtype)
         for i, a in enumerate(arrays):
             cl.enqueue_copy(op.queue, out.data, a.data, dst_offset=i * a.nbytes, byte_count=a.nbytes)
         return out
