@@ -9,14 +9,14 @@
 #   5. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), then
 #      benchmarks/launch_cost.py (a launch's host time by arguments and grid, into check.log), capped;
-#   6. benchmarks/inverse.py where the tree has it (the inverse blocks on the device against the host), capped;
+#   6. benchmarks/call_cost.py where the tree has it (a small call with device buffers pooled or made each call), capped;
 #   7. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped;
 #   8. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under cProfile.
 # Eight files go to $OUT (the device tool's folder that comes back, at most 8 files; ./out/gpu elsewhere): check.log
-# (every step but the tests), tests.log, blocks.md, peer.md, launches.md, inverse.md, search_launches.md, profile.txt.
+# (every step but the tests), tests.log, blocks.md, peer.md, launches.md, call_cost.md, search_launches.md, profile.txt.
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), INVERSE_CAP (30), SEARCH_CAP (30),
+# Knobs: TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (30),
 # PROFILE_CAP (20), BLOCKS_CAP (80), COST_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
@@ -28,7 +28,7 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} INVERSE_CAP=${INVERSE_CAP:-30}
+TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
 SEARCH_CAP=${SEARCH_CAP:-30} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
 PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --tv-one-launch 2 --variant-cases paper size64}
@@ -114,12 +114,12 @@ if [ -f benchmarks/launch_cost.py ]; then
     echo "launch_cost exit status $?" | tee -a "$OUT/check.log"
 fi
 
-# ---------------------------------------------------------------- 6. inverse blocks
-if [ -f benchmarks/inverse.py ]; then
-    stamp "benchmarks/inverse.py (cap ${INVERSE_CAP} s)" | tee -a "$OUT/check.log"
-    timeout -k 5 "$INVERSE_CAP" "$PYTHON" -P benchmarks/inverse.py --device "$DEVICE" --sizes 50 128 256 --rounds 3 --calls 5 \
-        --out "$OUT/inverse.md" >> "$OUT/check.log" 2>&1
-    echo "inverse exit status $?" | tee -a "$OUT/check.log"
+# ---------------------------------------------------------------- 6. a small call's cost: buffers pooled or made
+if [ -f benchmarks/call_cost.py ]; then
+    stamp "benchmarks/call_cost.py (cap ${CALL_CAP} s)" | tee -a "$OUT/check.log"
+    timeout -k 5 "$CALL_CAP" "$PYTHON" -P benchmarks/call_cost.py --device "$DEVICE" --sizes 8 50 --rounds 3 --calls 5 \
+        --out "$OUT/call_cost.md" >> "$OUT/check.log" 2>&1
+    echo "call_cost exit status $?" | tee -a "$OUT/check.log"
 fi
 
 # ---------------------------------------------------------------- 7. the self-tuned default against a fixed run
