@@ -52,6 +52,27 @@ def test_held_buffers_stay_within_the_cap(queue):
     assert own.held_bytes == 0
 
 
+def test_a_device_short_of_memory_gets_the_held_buffers_back_first(queue):
+    import pyopencl as cl
+
+    own = pool.BufferPool(queue, largest=10_000)
+    a = own(8192)
+    del a
+    assert own.held_bytes == 8192
+    made = own._immediate
+    calls = []
+
+    def short_once(nbytes):
+        calls.append(own.held_bytes)
+        if len(calls) == 1:
+            raise cl.MemoryError("clCreateBuffer", cl.status_code.MEM_OBJECT_ALLOCATION_FAILURE, "short")
+        return made(nbytes)
+
+    own._immediate = short_once
+    big = own(20_000)
+    assert calls == [8192, 0] and big.size == 20_000
+
+
 @pytest.mark.parametrize("nbytes", [0, -8])
 def test_bad_sizes_are_refused(queue, nbytes):
     with pytest.raises(ValueError, match="nbytes must be > 0"):
