@@ -2,9 +2,9 @@
 
 A reconstruction makes a few dozen device arrays (the snapshots, the operator's geometry, the
 ADMM's and the regularizer's arrays, the inverse blocks, scratch for reductions) and frees them when
-it returns. Where creating and releasing an OpenCL buffer costs a driver allocation (tens of µs on
-a GPU, and a release may wait for the device), a stream of small calls, a live camera's, spends
-that on every call. rsocl's arrays therefore come from :class:`BufferPool`: a
+it returns. Where creating and releasing an OpenCL buffer is a device allocation and release (a GPU
+driver's; a release may wait for the device), a stream of small calls, a live camera's, pays for
+them on every call. rsocl's arrays therefore come from :class:`BufferPool`: a
 :class:`pyopencl.tools.MemoryPool` that keeps freed buffers and hands them out again for requests of
 their size class.
 
