@@ -59,7 +59,7 @@ def test_a_device_short_of_memory_gets_the_held_buffers_back_first(queue):
     a = own(8192)
     del a
     assert own.held_bytes == 8192
-    made = own._immediate
+    made = own._plain
     calls = []
 
     def short_once(nbytes):
@@ -68,7 +68,7 @@ def test_a_device_short_of_memory_gets_the_held_buffers_back_first(queue):
             raise cl.MemoryError("clCreateBuffer", cl.status_code.MEM_OBJECT_ALLOCATION_FAILURE, "short")
         return made(nbytes)
 
-    own._immediate = short_once
+    own._plain = short_once
     big = own(20_000)
     assert calls == [8192, 0] and big.size == 20_000
 

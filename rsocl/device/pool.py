@@ -10,7 +10,7 @@ their size class.
 
 The pool holds at most :data:`HELD_BYTES` (or :data:`HELD_SHARE` of the device's memory, the smaller)
 of freed buffers; a buffer above :data:`LARGEST_BYTES` is never pooled: its call is long, and its
-memory goes back to the device when it is freed. Where the device cannot allocate a buffer, the
+memory goes back to the device when it is freed. Where the device refuses such a buffer, the
 held ones are given back and the allocation is tried once more (pyopencl's pool does so for its
 own). :func:`release` gives the held buffers back (to make room for another program on the
 device). Set :data:`LARGEST_BYTES` to 0 to pool nothing.
@@ -92,8 +92,8 @@ class BufferPool:
         if held is None:
             held = min(HELD_BYTES, int(HELD_SHARE * int(queue.device.global_mem_size)))
         self.held = int(held)
-        self._immediate = cl_tools.ImmediateAllocator(queue)  # allocates now: a shortage shows here
-        self._pool = cl_tools.MemoryPool(self._immediate, SIZE_BITS)
+        # the pool's own buffers are allocated when made, so that it sees a shortage and frees what it holds
+        self._pool = cl_tools.MemoryPool(cl_tools.ImmediateAllocator(queue), SIZE_BITS)
         self._cl = cl
         self.made = 0  # buffers made by the device (pooled ones made once, and every unpooled one)
 
@@ -111,13 +111,13 @@ class BufferPool:
         nbytes = int(nbytes)
         if nbytes <= 0:
             raise ValueError(f"nbytes must be > 0, got {nbytes}")
-        if nbytes > self.largest:  # made outside the pool: where the device is short, the held buffers go first
+        if nbytes > self.largest:  # made outside the pool, as pyopencl makes a buffer
             self.made += 1
             try:
-                return self._immediate(nbytes)
-            except self._cl.MemoryError:
+                return self._plain(nbytes)
+            except self._cl.MemoryError:  # the device refused it: the held buffers go back first
                 self._pool.free_held()
-                return self._immediate(nbytes)
+                return self._plain(nbytes)
         if self.held_bytes + nbytes > self.held:  # a new buffer may follow: keep what is held within the cap
             self._pool.free_held()
         before = self._pool.managed_bytes
@@ -125,6 +125,9 @@ class BufferPool:
         if self._pool.managed_bytes > before:
             self.made += 1
         return out
+
+    def _plain(self, nbytes: int):
+        return self._cl.Buffer(self.queue.context, self._cl.mem_flags.READ_WRITE, nbytes)
 
     def release(self):
         """Give every held (freed) buffer back to the device."""
