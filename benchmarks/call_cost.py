@@ -4,7 +4,8 @@ call, in one run.
 A live camera calls ``rsocl.reconstruct`` once per set of snapshots, on a small frame. Beside the
 ADMM's iterations a call stages the snapshots and the operator's geometry, makes the ADMM's and the
 regularizer's arrays, the inverse blocks and the interpolation start, and frees them all on return.
-rsocl takes these buffers from a pool (:mod:`rsocl.device.pool`); ``made each call`` sets
+rsocl takes these buffers from a pool (:mod:`rsocl.device.pool`) on a device that is not a CPU
+(``pooled`` sets ``rsocl.device.pool.ON_CPU``, so that a CPU device pools too); ``made each call`` sets
 ``rsocl.device.pool.LARGEST_BYTES = 0``, so that every buffer is created and released by the driver,
 as a plain :class:`pyopencl.array.Array` is.
 
@@ -52,14 +53,15 @@ ITERATIONS = (1, 200)
 
 @contextmanager
 def variant(name: str):
-    """Run the block with device buffers had as :data:`VARIANTS` ``name`` says."""
-    saved = pool.LARGEST_BYTES
+    """Run the block with device buffers had as :data:`VARIANTS` ``name`` says (a CPU device pools too)."""
+    saved = pool.LARGEST_BYTES, pool.ON_CPU
     largest = VARIANTS[name]
-    pool.LARGEST_BYTES = saved if largest is None else largest
+    pool.LARGEST_BYTES = saved[0] if largest is None else largest
+    pool.ON_CPU = True
     try:
         yield
     finally:
-        pool.LARGEST_BYTES = saved
+        pool.LARGEST_BYTES, pool.ON_CPU = saved
 
 
 def buffer_us(device, nbytes: int, count: int, rounds: int) -> dict:
@@ -200,9 +202,10 @@ def main(argv=None):
     body = [
         *header_lines(title, device, None if argv is None else [__file__, *argv]),
         f"Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), the built-in scene, float32, fixed "
-        f"settings from the interpolation, on {where}. `pooled`: rsocl's default, buffers up to "
-        f"{pool.LARGEST_BYTES // 2**20} MiB reused from `rsocl.device.pool`; `made each call`: every buffer created "
-        "and released by the driver in each call.",
+        f"settings from the interpolation, on {where}. `pooled`: rsocl's default on a device that is not a CPU "
+        f"(here with `rsocl.device.pool.ON_CPU` set), buffers up to {pool.LARGEST_BYTES // 2**20} MiB reused from "
+        "`rsocl.device.pool`; `made each call`: every buffer created and released by the driver in each call, "
+        "rsocl's default on a CPU device.",
         "",
         *buffer_lines(buffers, nbytes, 500),
         *lines(results, args.rounds, args.calls),

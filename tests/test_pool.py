@@ -98,10 +98,29 @@ def _run(rig, g, **kw):
 
 @pytest.fixture
 def made_each_call(monkeypatch):
+    monkeypatch.setattr(pool, "ON_CPU", True)  # the CPU device of the tests pools as a GPU does
+
     def use(flag):
         monkeypatch.setattr(pool, "LARGEST_BYTES", 0 if flag else 64 * 2**20)
 
     return use
+
+
+@pytest.mark.parametrize("as_gpu", [False, True])
+def test_a_cpu_device_makes_its_buffers_and_other_devices_pool_them(monkeypatch, as_gpu):
+    from rsocl.device.context import Device
+
+    if as_gpu:
+        monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    rig, g = _case()
+    own = pool.pool_for(get_device().queue)
+    own.release()  # what earlier tests left
+    _run(rig, g)
+    before = own.made
+    _run(rig, g)
+    assert (own.made == before) == (as_gpu or not get_device().is_cpu)
+    if not as_gpu and get_device().is_cpu:
+        assert own.made - before > 10 and own.held_bytes == 0
 
 
 def test_a_warm_call_makes_no_buffer_and_gives_the_same_datacube(made_each_call):

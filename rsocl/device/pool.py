@@ -4,9 +4,9 @@ A reconstruction makes a few dozen device arrays (the snapshots, the operator's 
 ADMM's and the regularizer's arrays, the inverse blocks, scratch for reductions) and frees them when
 it returns. Where creating and releasing an OpenCL buffer is a device allocation and release (a GPU
 driver's; a release may wait for the device), a stream of small calls, a live camera's, pays for
-them on every call. rsocl's arrays therefore come from :class:`BufferPool`: a
-:class:`pyopencl.tools.MemoryPool` that keeps freed buffers and hands them out again for requests of
-their size class.
+them on every call. On such devices (not a CPU, unless :data:`ON_CPU`) rsocl's arrays therefore come
+from :class:`BufferPool`: a :class:`pyopencl.tools.MemoryPool` that keeps freed buffers and hands
+them out again for requests of their size class.
 
 The pool holds at most :data:`HELD_BYTES` (or :data:`HELD_SHARE` of the device's memory, the smaller)
 of freed buffers; a buffer above :data:`LARGEST_BYTES` is never pooled: its call is long, and its
@@ -36,6 +36,7 @@ __all__ = [
     "LARGEST_BYTES",
     "HELD_BYTES",
     "HELD_SHARE",
+    "ON_CPU",
     "pool_for",
     "release",
     "empty",
@@ -48,6 +49,9 @@ __all__ = [
 #: Largest buffer the pool hands out, bytes; larger ones are made and released each time. 0: no pooling.
 LARGEST_BYTES = 64 * 2**20
 #: Most bytes of freed buffers the pool keeps, and the share of the device's global memory (the smaller wins).
+#: Whether a CPU device pools too. There a buffer's creation is a host allocation, and a call takes the
+#: same time with or without the pool (``docs/call_cost.md``), which would only hold memory.
+ON_CPU = False
 HELD_BYTES = 512 * 2**20
 HELD_SHARE = 1 / 8
 #: Significant bits of a size class of :class:`pyopencl.tools.MemoryPool`: every size up to 2**26 bytes
@@ -89,6 +93,7 @@ class BufferPool:
         import pyopencl.tools as cl_tools
 
         self.queue, self._largest = queue, largest
+        self.enabled = True  # False: every buffer made and released as pyopencl would (pool_for's choice)
         if held is None:
             held = min(HELD_BYTES, int(HELD_SHARE * int(queue.device.global_mem_size)))
         self.held = int(held)
@@ -100,6 +105,8 @@ class BufferPool:
     @property
     def largest(self) -> int:
         """Largest pooled buffer, bytes (sizes above 2**:data:`SIZE_BITS` would be rounded up: never pooled)."""
+        if not self.enabled:
+            return 0
         return min(LARGEST_BYTES if self._largest is None else int(self._largest), 2**SIZE_BITS)
 
     @property
@@ -135,11 +142,13 @@ class BufferPool:
 
 
 def pool_for(queue) -> BufferPool:
-    """The :class:`BufferPool` of ``queue``'s rsocl device (made at the first call)."""
+    """The :class:`BufferPool` of ``queue``'s rsocl device (made at the first call): one that pools on a
+    device that is not a CPU, and on a CPU device with :data:`ON_CPU` (else it makes every buffer)."""
     device = device_for_queue(queue)
     pool = device.__dict__.get("_buffer_pool")
     if pool is None:
         pool = device.__dict__["_buffer_pool"] = BufferPool(device.queue)
+    pool.enabled = ON_CPU or not device.is_cpu
     return pool
 
 
