@@ -34,17 +34,13 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from launches import path  # noqa: E402
+from launches import case, path  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
 
 import rsocl  # noqa: E402
 from rsocl.device import pool  # noqa: E402
 from rsocl.device.context import get_device  # noqa: E402
-from rsocl.model import reference as ref  # noqa: E402
-from rsocl.model.scenes import builtin_scene  # noqa: E402
 
-#: The paper's array: exposure and row readout time, seconds.
-T_E, T_R = 0.18e-3, 35e-6
 #: The two ways device buffers are had: the pool's largest pooled buffer in each (None: the default).
 VARIANTS = {"pooled": None, "made each call": 0}
 #: Iterations of the two calls timed.
@@ -91,12 +87,6 @@ def buffer_us(device, nbytes: int, count: int, rounds: int) -> dict:
                 out[name].append((time.perf_counter() - t0) / count * 1e6)
     own.release()
     return out
-
-
-def case(m: int):
-    """``(rig, g)``: the paper array on an ``m`` x ``m`` ROI and its snapshots of the built-in scene."""
-    rig = rsocl.Rig.paper_array(4, (m, m), T_E, T_R)
-    return rig, ref.forward(rig, builtin_scene(rig.shape, rig.T)).astype(np.float32)
 
 
 def one_call(rig, g, iterations: int, device):

@@ -8,7 +8,8 @@
 #   4. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
 #   5. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), then
-#      benchmarks/launch_cost.py (a launch's host time by arguments and grid, into check.log), capped;
+#      benchmarks/launch_cost.py (a launch's host time by arguments and grid) and benchmarks/kernel_times.py (an
+#      iteration's device time kernel by kernel, busy against span), both into check.log, capped;
 #   6. benchmarks/call_cost.py where the tree has it (a small call with device buffers pooled or made each call), capped;
 #   7. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped;
 #   8. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under cProfile.
@@ -17,7 +18,7 @@
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
 # Knobs: TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (30),
-# PROFILE_CAP (20), BLOCKS_CAP (80), COST_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
+# PROFILE_CAP (20), BLOCKS_CAP (80), COST_CAP (20), KTIME_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -30,6 +31,7 @@ SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
 TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
 SEARCH_CAP=${SEARCH_CAP:-30} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
+KTIME_CAP=${KTIME_CAP:-20}
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
 PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --tv-one-launch 2 --variant-cases paper size64}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
@@ -112,6 +114,12 @@ if [ -f benchmarks/launch_cost.py ]; then
     stamp "benchmarks/launch_cost.py (cap ${COST_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$COST_CAP" "$PYTHON" -P benchmarks/launch_cost.py --device "$DEVICE" --rounds 5 >> "$OUT/check.log" 2>&1
     echo "launch_cost exit status $?" | tee -a "$OUT/check.log"
+fi
+if [ -f benchmarks/kernel_times.py ]; then
+    stamp "benchmarks/kernel_times.py (cap ${KTIME_CAP} s)" | tee -a "$OUT/check.log"
+    timeout -k 5 "$KTIME_CAP" "$PYTHON" -P benchmarks/kernel_times.py --device "$DEVICE" --sizes 8 50 128 256 \
+        --iterations 40 >> "$OUT/check.log" 2>&1
+    echo "kernel_times exit status $?" | tee -a "$OUT/check.log"
 fi
 
 # ---------------------------------------------------------------- 6. a small call's cost: buffers pooled or made

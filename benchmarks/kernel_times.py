@@ -1,0 +1,154 @@
+"""Where an ADMM iteration's device time goes, kernel by kernel, beside its wall time, in one run.
+
+A small reconstruction on a GPU is bound either by the host (the device waits between launches) or
+by a kernel that runs longer than a launch takes to enqueue. This benchmark runs fixed-setting
+reconstructions (``tune=False``, ``x0="interp3d"``, the built-in scene on the paper array) on a
+queue with OpenCL profiling, keeps the event of every kernel enqueued through
+:class:`rsocl.device.kernel.Kernel` during the last ``--iterations`` iterations of the run, and
+reports per kernel: launches per iteration and device µs per launch (``CL_PROFILING_COMMAND_START``
+to ``END``, median); per iteration: the device's busy time (the kernels' sum), the span from the
+first kernel's start to the last one's end, and the device's idle time between them (span less
+busy). Busy close to span: the device bounds the loop; idle close to span: the host does.
+
+    python benchmarks/kernel_times.py [--device SPEC] [--sizes 8 50 128] [--iterations 40] [--as-gpu]
+        [--out docs/kernel_times.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from launches import case, path  # noqa: E402
+from provenance import DOCS, header_lines, write_page  # noqa: E402
+
+import rsocl  # noqa: E402
+from rsocl.device import kernel as kernel_module  # noqa: E402
+from rsocl.device.context import Device, get_device  # noqa: E402
+
+#: Iterations run before the recorded ones (kernel builds, the first iterations' own launches).
+SKIP = 4
+
+
+def profiling_device(device) -> Device:
+    """``device`` with a queue of its own that records kernel times (``CL_QUEUE_PROFILING_ENABLE``)."""
+    import pyopencl as cl
+
+    from rsocl.device import context
+
+    queue = cl.CommandQueue(device.context, device.device, properties=cl.command_queue_properties.PROFILING_ENABLE)
+    found = Device(device.context, queue, device.device, dict(device.limits))
+    context._BY_QUEUE[queue.int_ptr] = found
+    return found
+
+
+def record(rig, g, device, iterations: int) -> list:
+    """``[(kernel name, event), ...]`` of the kernels enqueued during the last ``iterations`` iterations of
+    a run of ``SKIP + iterations`` iterations (the run's last launch, its residual, aside)."""
+    log: list = []
+    enqueue, call = kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__
+
+    def hooked_enqueue(self, queue, gsize, lsize, global_offset=None):
+        event = enqueue(self, queue, gsize, lsize, global_offset)
+        log.append((self.kernel.function_name, event))
+        return event
+
+    def hooked_call(self, queue, gsize, lsize, *args, global_offset=None, wait_for=None):
+        event = call(self, queue, gsize, lsize, *args, global_offset=global_offset, wait_for=wait_for)
+        log.append((self.kernel.function_name, event))
+        return event
+
+    kw = dict(tune=False, x0="interp3d", device=device)
+    kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__ = hooked_enqueue, hooked_call
+    try:
+        rsocl.reconstruct(g, rig, iterations=SKIP, **kw)
+        before = len(log)
+        rsocl.reconstruct(g, rig, iterations=SKIP + iterations, **kw)
+        after = len(log)
+        rsocl.reconstruct(g, rig, iterations=SKIP, **kw)
+        short = len(log) - after  # a call of SKIP iterations: its set-up, SKIP iterations and the last residual
+    finally:
+        kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__ = enqueue, call
+    run = log[before:after]
+    per_iteration = (len(run) - short) // iterations
+    setup = len(run) - per_iteration * (SKIP + iterations) - 1  # the call's launches before its first iteration
+    return run[setup + per_iteration * SKIP : setup + per_iteration * (SKIP + iterations)]
+
+
+def summarise(events: list, iterations: int) -> dict:
+    """Per kernel ``(launches per iteration, median µs)`` and per iteration busy, span and idle µs."""
+    times = defaultdict(list)
+    starts, ends = [], []
+    for name, event in events:
+        start, end = event.profile.start, event.profile.end
+        times[name].append((end - start) / 1e3)
+        starts.append(start)
+        ends.append(end)
+    busy = sum(sum(v) for v in times.values()) / iterations
+    span = (max(ends) - min(starts)) / 1e3 / iterations
+    kernels = {name: (len(v) / iterations, statistics.median(v)) for name, v in times.items()}
+    return {"kernels": kernels, "busy": busy, "span": span, "idle": span - busy}
+
+
+def lines(m: int, T: int, s: dict) -> list:
+    """Markdown rows of one ROI."""
+    out = []
+    total = sum(count * us for count, us in s["kernels"].values())
+    for name, (count, us) in sorted(s["kernels"].items(), key=lambda kv: -kv[1][0] * kv[1][1]):
+        out.append(f"| {m}×{m} | {T} | `{name}` | {count:g} | {us:.1f} | {100 * count * us / total:.0f} % |")
+    out.append(
+        f"| {m}×{m} | {T} | **an iteration** | {sum(c for c, _ in s['kernels'].values()):g} | busy {s['busy']:.1f}, "
+        f"span {s['span']:.1f}, idle {s['idle']:.1f} | busy / span {s['busy'] / s['span']:.2f} |"
+    )
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--device", default=None, help="OpenCL device spec (default: rsocl's choice)")
+    p.add_argument("--sizes", type=int, nargs="+", default=[8, 50, 128], help="ROI sides m (m × m), pixels")
+    p.add_argument("--iterations", type=int, default=40, help="iterations recorded per ROI (>= 1)")
+    p.add_argument("--as-gpu", action="store_true", help="read the device as a GPU (its choices run on a CPU)")
+    p.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'kernel_times.md'})")
+    args = p.parse_args(argv)
+    if args.iterations < 1:
+        p.error(f"--iterations must be >= 1, got {args.iterations}")
+    if any(m < 2 for m in args.sizes):
+        p.error(f"--sizes must be >= 2 pixels each, got {args.sizes}")
+    device = profiling_device(get_device(args.device))
+    rows = []
+    with path("gpu" if args.as_gpu else "device"):
+        for m in args.sizes:
+            rig, g = case(m)
+            rows += lines(m, rig.T, summarise(record(rig, g, device, args.iterations), args.iterations))
+    where = "the device read as a GPU (its choices run by this CPU)" if args.as_gpu else "the device's own choices"
+    page = header_lines(
+        "An ADMM iteration's device time, kernel by kernel", device, None if argv is None else [__file__, *argv]
+    )
+    page += [
+        f"Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), the built-in scene, float32, fixed "
+        f"settings from the interpolation, on {where}; a queue with profiling; the {args.iterations} iterations "
+        f"after the first {SKIP} of one run. Device µs per launch: the median of the kernel's launches "
+        "(`CL_PROFILING_COMMAND_START` to `END`). An iteration: busy, the kernels' device time; span, the first "
+        "kernel's start to the last one's end; idle, span less busy (µs per iteration). Busy / span near 1: "
+        "the device bounds the loop; near 0: the host does.",
+        "",
+        "| ROI | T | kernel | launches per iteration | device µs per launch | share of busy |",
+        "|---|---|---|---|---|---|",
+        *rows,
+        "",
+    ]
+    print("\n".join(page))
+    if args.out is not None:
+        write_page(args.out, page)
+    return rows
+
+
+if __name__ == "__main__":
+    main()

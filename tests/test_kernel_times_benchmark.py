@@ -1,0 +1,38 @@
+"""``benchmarks/kernel_times.py``: every kernel of an iteration with its device time, on a tiny frame."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import kernel_times  # noqa: E402
+
+
+def _rows(text):
+    return [[c.strip() for c in line.strip("|").split("|")] for line in text.splitlines() if line.startswith("| 6×6")]
+
+
+@pytest.mark.parametrize("as_gpu", [False, True])
+def test_page_names_each_kernel_and_sums_an_iteration(tmp_path, as_gpu):
+    out = tmp_path / "kernel_times.md"
+    kernel_times.main(["--sizes", "6", "--iterations", "3", "--out", str(out)] + (["--as-gpu"] if as_gpu else []))
+    rows = _rows(out.read_text())
+    kernels, total = rows[:-1], rows[-1]
+    names = {row[2].strip("`") for row in kernels}
+    assert "admm_project" in names and "tv_dual_first" in names
+    launches = sum(float(row[3]) for row in kernels)
+    assert float(total[3]) == launches
+    if as_gpu:  # the GPU path's iteration: the projection, the TV's first dual step, 8 tv_step, the last primal
+        assert launches == 11 and names == {"admm_project", "tv_dual_first", "tv_step", "tv_primal_update"}
+    busy, span = (float(part.split()[1]) for part in total[4].split(",")[:2])
+    assert 0 < busy <= span * 1.001
+    assert sum(float(row[5].rstrip(" %")) for row in kernels) == pytest.approx(100, abs=len(kernels))
+
+
+@pytest.mark.parametrize("args", [["--iterations", "0"], ["--sizes", "1"]])
+def test_bad_counts_are_refused(args, capsys):
+    with pytest.raises(SystemExit):
+        kernel_times.main(args)
+    assert "must be >=" in capsys.readouterr().err
