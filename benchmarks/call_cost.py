@@ -34,8 +34,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from launches import case, path  # noqa: E402
-from provenance import DOCS, header_lines, write_page  # noqa: E402
+from launches import case, path, small_calls  # noqa: E402
+from provenance import DOCS, emit, header_lines  # noqa: E402
 
 import rsocl  # noqa: E402
 from rsocl.device import pool  # noqa: E402
@@ -187,12 +187,10 @@ def main(argv=None):
         for m in args.sizes:  # kernel builds before any timing
             one_call(*case(m), 2, device)
         results = {m: measure(m, device, args.rounds, args.calls) for m in args.sizes}
-    where = "the device read as a GPU (its choices run by this CPU)" if args.as_gpu else "the device's own choices"
     title = "A small call's cost beside its iterations: device buffers pooled or made each call"
     body = [
         *header_lines(title, device, None if argv is None else [__file__, *argv]),
-        f"Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), the built-in scene, float32, fixed "
-        f"settings from the interpolation, on {where}. `pooled`: rsocl's default on a device that is not a CPU "
+        f"{small_calls(args.as_gpu)}. `pooled`: rsocl's default on a device that is not a CPU "
         f"(here with `rsocl.device.pool.ON_CPU` set), buffers up to {pool.LARGEST_BYTES // 2**20} MiB reused from "
         "`rsocl.device.pool`; `made each call`: every buffer created and released by the driver in each call, "
         "rsocl's default on a CPU device.",
@@ -200,9 +198,7 @@ def main(argv=None):
         *buffer_lines(buffers, nbytes, 500),
         *lines(results, args.rounds, args.calls),
     ]
-    print("\n".join(body))
-    if args.out is not None:
-        write_page(args.out, body)
+    emit(body, args.out)
     return results
 
 

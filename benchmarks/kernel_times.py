@@ -25,8 +25,8 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from launches import case, path  # noqa: E402
-from provenance import DOCS, header_lines, write_page  # noqa: E402
+from launches import case, path, small_calls  # noqa: E402
+from provenance import DOCS, emit, header_lines  # noqa: E402
 
 import rsocl  # noqa: E402
 from rsocl.device import kernel as kernel_module  # noqa: E402
@@ -127,13 +127,11 @@ def main(argv=None):
         for m in args.sizes:
             rig, g = case(m)
             rows += lines(m, rig.T, summarise(record(rig, g, device, args.iterations), args.iterations))
-    where = "the device read as a GPU (its choices run by this CPU)" if args.as_gpu else "the device's own choices"
     page = header_lines(
         "An ADMM iteration's device time, kernel by kernel", device, None if argv is None else [__file__, *argv]
     )
     page += [
-        f"Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), the built-in scene, float32, fixed "
-        f"settings from the interpolation, on {where}; a queue with profiling; the {args.iterations} iterations "
+        f"{small_calls(args.as_gpu)}; a queue with profiling; the {args.iterations} iterations "
         f"after the first {SKIP} of one run. Device µs per launch: the median of the kernel's launches "
         "(`CL_PROFILING_COMMAND_START` to `END`). An iteration: busy, the kernels' device time; span, the first "
         "kernel's start to the last one's end; idle, span less busy (µs per iteration). Busy / span near 1: "
@@ -144,9 +142,7 @@ def main(argv=None):
         *rows,
         "",
     ]
-    print("\n".join(page))
-    if args.out is not None:
-        write_page(args.out, page)
+    emit(page, args.out)
     return rows
 
 

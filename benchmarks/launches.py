@@ -102,6 +102,16 @@ def trivial_launch_us(device, launches: int = 2000) -> float:
     return (time.perf_counter() - t0) / launches * 1e6
 
 
+def small_calls(as_gpu: bool) -> str:
+    """The sentence a page of small fixed-setting calls on :func:`case`'s frames opens with, naming the path
+    (``as_gpu``: launches.py's ``gpu`` path, a GPU's choices run by this device)."""
+    where = "the device read as a GPU (its choices run by this CPU)" if as_gpu else "the device's own choices"
+    return (
+        "Paper array (4 cameras at 0/90/180/270°, t_e = 0.18 ms, t_r = 35 µs), the built-in scene, float32, "
+        f"fixed settings from the interpolation, on {where}"
+    )
+
+
 def case(m: int):
     """The paper's 4-camera array on an ``m × m`` crop of the built-in scene: ``(rig, snapshots)``."""
     rig = rsocl.Rig.paper_array(4, (m, m), T_E, T_R)

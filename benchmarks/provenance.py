@@ -138,3 +138,10 @@ def write_page(path, lines) -> Path:
         tmp.write_text("\n".join(lines).rstrip("\n") + "\n", encoding="utf-8")
     print(f"written to {path}", file=sys.stderr)
     return path
+
+
+def emit(lines, out=None):
+    """Print the page ``lines`` and write it to ``out`` (atomically) when given."""
+    print("\n".join(lines))
+    if out is not None:
+        write_page(out, lines)
