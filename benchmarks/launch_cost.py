@@ -11,7 +11,10 @@ enqueues each (a finish around each round):
   (m × m × T of the paper array);
 - ``9 arguments, 4 ints set per launch``: the previous, with its 4 ints set before every enqueue
   (what pyopencl's ``kernel(queue, grid, local, *args)`` does);
-- ``9 arguments, global offset``: the third with a global offset along the last dimension.
+- ``9 arguments, global offset``: the third with a global offset along the last dimension;
+- ``..., no event (ctypes)``: the first and the third enqueued by ``clEnqueueNDRangeKernel`` itself through
+  :mod:`ctypes` (pyopencl's own OpenCL library, sizes prepared once), with no event asked for: what
+  pyopencl's call adds (its argument conversion, the event it always makes and releases).
 
     python benchmarks/launch_cost.py [--device SPEC] [--rounds 5] [--launches 2000] [--shape 50]
         [--out docs/launch_cost.md]
@@ -49,7 +52,37 @@ VARIANTS = (
     "9 arguments, tv_step's grid",
     "9 arguments, 4 ints set per launch",
     "9 arguments, global offset",
+    "one buffer, 1 item, no event (ctypes)",
+    "9 arguments, tv_step's grid, no event (ctypes)",
 )
+
+
+def bare_enqueue():
+    """``clEnqueueNDRangeKernel`` of the OpenCL library pyopencl loads, through :mod:`ctypes` (its argument
+    types set), or None where that library is not found."""
+    import ctypes
+    import ctypes.util
+    import glob
+    import os
+
+    import pyopencl as cl
+
+    found = sorted(glob.glob(os.path.join(os.path.dirname(cl.__file__), ".libs", "libOpenCL*")))
+    name = found[0] if found else ctypes.util.find_library("OpenCL")
+    if not name:
+        return None
+    fn = ctypes.CDLL(name).clEnqueueNDRangeKernel
+    pointer = ctypes.c_void_p
+    fn.argtypes = [pointer, pointer, ctypes.c_uint32, pointer, pointer, pointer, ctypes.c_uint32, pointer, pointer]
+    fn.restype = ctypes.c_int32
+    return fn
+
+
+def ctypes_sizes(*sizes) -> list:
+    """Each of ``sizes`` (tuples of ints) as a ctypes array of ``size_t``."""
+    import ctypes
+
+    return [(ctypes.c_size_t * len(size))(*size) for size in sizes]
 
 
 def launchers(device, m: int):
@@ -86,6 +119,17 @@ def launchers(device, m: int):
             k.set_arg(i, v)
         enqueue(queue, k, gsize, lsize)
 
+    bare, sizes = bare_enqueue(), ctypes_sizes((1,), gsize, lsize or ())
+    qp, onep, ninep = queue.int_ptr, one.int_ptr, kernels[VARIANTS[2]].int_ptr
+
+    def bare_one():
+        if bare(qp, onep, 1, None, sizes[0], None, 0, None, None):
+            raise RuntimeError("clEnqueueNDRangeKernel failed")
+
+    def bare_grid():
+        if bare(qp, ninep, len(gsize), None, sizes[1], sizes[2] if lsize else None, 0, None, None):
+            raise RuntimeError("clEnqueueNDRangeKernel failed")
+
     return (
         {
             VARIANTS[0]: lambda: enqueue(queue, one, (1,), None),
@@ -93,6 +137,7 @@ def launchers(device, m: int):
             VARIANTS[2]: lambda: enqueue(queue, kernels[VARIANTS[2]], gsize, lsize),
             VARIANTS[3]: set_ints_and_enqueue,
             VARIANTS[4]: lambda: enqueue(queue, kernels[VARIANTS[4]], gsize, lsize, global_work_offset=(0, 0, 3)),
+            **({} if bare is None else {VARIANTS[5]: bare_one, VARIANTS[6]: bare_grid}),
         },
         (gsize, lsize),
         buf,
@@ -107,9 +152,9 @@ def measure(device, rounds: int, launches: int, m: int):
         for _ in range(50):
             call()
     queue.finish()
-    times = {name: [] for name in VARIANTS}
+    times: dict = {name: [] for name in calls}
     for r in range(rounds):
-        order = VARIANTS if r % 2 == 0 else VARIANTS[::-1]
+        order = list(calls) if r % 2 == 0 else list(calls)[::-1]
         for name in order:
             call = calls[name]
             queue.finish()
@@ -133,6 +178,9 @@ def lines(times, grid, m: int, launches: int) -> list:
         "|---|---|---|",
     ]
     for name in VARIANTS:
+        if name not in times:
+            out.append(f"| {name} | not measured: no OpenCL library found through ctypes | |")
+            continue
         ratios = [a / b for a, b in zip(times[name], base)]
         out.append(
             f"| {name} | {statistics.median(times[name]):.2f} ({', '.join(f'{t:.2f}' for t in times[name])}) | "
