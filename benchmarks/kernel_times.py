@@ -4,11 +4,11 @@ A small reconstruction on a GPU is bound either by the host (the device waits be
 by a kernel that runs longer than a launch takes to enqueue. This benchmark runs fixed-setting
 reconstructions (``tune=False``, ``x0="interp3d"``, the built-in scene on the paper array) on a
 queue with OpenCL profiling, keeps the event of every kernel enqueued through
-:class:`rsocl.device.kernel.Kernel` during the last ``--iterations`` iterations of the run, and
-reports per kernel: launches per iteration and device µs per launch (``CL_PROFILING_COMMAND_START``
-to ``END``, median); per iteration: the device's busy time (the kernels' sum), the span from the
-first kernel's start to the last one's end, and the device's idle time between them (span less
-busy). Busy close to span: the device bounds the loop; idle close to span: the host does.
+:class:`rsocl.device.kernel.Kernel` by ``--iterations`` ADMM steps of the run (from one step's start
+to the next one's), and reports per kernel: launches per iteration and device µs per launch
+(``CL_PROFILING_COMMAND_START`` to ``END``, median); per iteration: the device's busy time (the
+kernels' sum), the span from the first kernel's start to the last one's end, and the device's idle
+time between them (span less busy). Busy close to span: the device bounds the loop; idle close to span: the host does.
 
     python benchmarks/kernel_times.py [--device SPEC] [--sizes 8 50 128] [--iterations 40] [--as-gpu]
         [--out docs/kernel_times.md]
@@ -49,10 +49,13 @@ def profiling_device(device) -> Device:
 
 
 def record(rig, g, device, iterations: int) -> list:
-    """``[(kernel name, event), ...]`` of the kernels enqueued during the last ``iterations`` iterations of
-    a run of ``SKIP + iterations`` iterations (the run's last launch, its residual, aside)."""
+    """``[(kernel name, event), ...]`` of the kernels enqueued by ADMM steps ``SKIP`` to ``SKIP + iterations - 1``
+    of a run of ``SKIP + iterations + 1`` iterations (each step's start marked in the log)."""
+    from rsocl.solver.admm import ADMM
+
     log: list = []
-    enqueue, call = kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__
+    marks: list = []
+    enqueue, call, step = kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__, ADMM.step
 
     def hooked_enqueue(self, queue, gsize, lsize, global_offset=None):
         event = enqueue(self, queue, gsize, lsize, global_offset)
@@ -64,21 +67,16 @@ def record(rig, g, device, iterations: int) -> list:
         log.append((self.kernel.function_name, event))
         return event
 
-    kw = dict(tune=False, x0="interp3d", device=device)
-    kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__ = hooked_enqueue, hooked_call
+    def hooked_step(self, *args, **kwargs):
+        marks.append(len(log))
+        return step(self, *args, **kwargs)
+
+    kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__, ADMM.step = hooked_enqueue, hooked_call, hooked_step
     try:
-        rsocl.reconstruct(g, rig, iterations=SKIP, **kw)
-        before = len(log)
-        rsocl.reconstruct(g, rig, iterations=SKIP + iterations, **kw)
-        after = len(log)
-        rsocl.reconstruct(g, rig, iterations=SKIP, **kw)
-        short = len(log) - after  # a call of SKIP iterations: its set-up, SKIP iterations and the last residual
+        rsocl.reconstruct(g, rig, iterations=SKIP + iterations + 1, tune=False, x0="interp3d", device=device)
     finally:
-        kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__ = enqueue, call
-    run = log[before:after]
-    per_iteration = (len(run) - short) // iterations
-    setup = len(run) - per_iteration * (SKIP + iterations) - 1  # the call's launches before its first iteration
-    return run[setup + per_iteration * SKIP : setup + per_iteration * (SKIP + iterations)]
+        kernel_module.Kernel.enqueue, kernel_module.Kernel.__call__, ADMM.step = enqueue, call, step
+    return log[marks[SKIP] : marks[SKIP + iterations]]
 
 
 def summarise(events: list, iterations: int) -> dict:

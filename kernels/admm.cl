@@ -20,6 +20,9 @@
 #ifndef PROJECTION_EXACT
 #define PROJECTION_EXACT 1
 #endif
+#ifndef DEFER_PRIMAL
+#define DEFER_PRIMAL 0
+#endif
 
 /* admm_dual: global size (per-set voxels, sets) on an exact grid (rsocl.device.launch.batch_launches),
  * so no bounds test (it costs masked stores on PoCL). dual[set] = 1 where that set's eta > 0;
@@ -120,6 +123,37 @@ static inline void project_block(__global real *f, __global const real *g, __glo
     if (difference) column_difference(f, b, u, T, mn, n, p0, TILE_R, TILE_W);
 }
 
+#if DEFER_PRIMAL
+/* The plain TV's last primal step and the ADMM's dual update of the iteration before, for the pixels
+ * of the block at (x0, y0) of set `set` (of `sets`): what tv_primal_update (tv.cl, in this program)
+ * computes at these voxels, from the denoiser's input u and its dual p (tv.cl's layout): theta = u +
+ * d(p), then b = theta - u and f = theta + b where dual[set], else f = theta. Each work item reads u
+ * and writes theta, b and f at its own pixels only; p is read-only here. */
+static void deferred_primal(__global const real *u_all, __global const real *p, __global const real *steps,
+                            __global const int *dual, __global real *theta_all, __global real *b_all,
+                            __global real *f_all, int T, size_t m, size_t n, size_t set, size_t sets,
+                            size_t x0, size_t y0)
+{
+    size_t mn = m * n, N = sets * (size_t)T * mn;
+    real wt = steps[3 * set + 2];
+    int on = dual[set];
+    for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
+        for (size_t x = x0; x < x0 + TILE_W && x < n; ++x)
+            for (int s = 0; s < T; ++s) {
+                size_t i = ((set * (size_t)T + (size_t)s) * m + y) * n + x;
+                real u = u_all[i], th = primal_at(u_all, p, wt, N, mn, n, i, (int)y, s);
+                theta_all[i] = th;
+                if (on) {
+                    real bn = th - u;
+                    b_all[i] = bn;
+                    f_all[i] = th + bn;
+                } else {
+                    f_all[i] = th;
+                }
+            }
+}
+#endif
+
 /* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R), sets): one work item per block of
  * TILE_R x TILE_W pixels of one set (common.cl). eta[set]; the inverse of set s starts at
  * s * own_inverse * (its size per set). The residual slot is the global offset along the sets,
@@ -127,15 +161,22 @@ static inline void project_block(__global real *f, __global const real *g, __glo
  * iteration to the next. With slot >= 0 the launch first adds the residual of the estimate theta
  * (weights w, which may be 0) into that slot of the partials, as residual_partials (residual.cl)
  * on the same blocks and work groups would (scratch: NCH x the group's items): the residual of the
- * previous iteration's estimate, without a launch of its own. */
+ * previous iteration's estimate, without a launch of its own. Compiled with DEFER_PRIMAL (and tv.cl),
+ * it takes four more arguments, and with deferred = 1 first makes the denoiser's last primal step and
+ * the dual update of the iteration before at its pixels (deferred_primal): the TV's last launch. */
 __kernel void admm_project(__global real *f_all, __global const real *g_all,
                            __global const int *first, __global const real *frac,
                            __global const real *len, __global const real *gain,
                            __global const real *inverse_all, __global const real *etas, int own_inverse,
-                           __global const real *b_all, __global real *u_all, int difference,
-                           __global const real *theta_all, __global const real *w_all,
+                           __global real *b_all, __global real *u_all, int difference,
+                           __global real *theta_all, __global const real *w_all,
                            __global acc_t *partials, __local acc_t *scratch,
-                           int T, int L, int m_, int n_)
+                           int T, int L, int m_, int n_
+#if DEFER_PRIMAL
+                           , __global const real *p_last, __global const real *tv_steps,
+                           __global const int *dual_on, int deferred
+#endif
+                           )
 {
     int slot = (int)get_global_offset(2) - 1;
     size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2) - get_global_offset(2);
@@ -145,6 +186,11 @@ __kernel void admm_project(__global real *f_all, __global const real *g_all,
     acc_t sums[NCH];
     for (int k = 0; k < NCH; ++k) sums[k] = (acc_t)0;
     if (x0 < n && y0 < m) {
+#if DEFER_PRIMAL
+        if (deferred)
+            deferred_primal(u_all, p_last, tv_steps, dual_on, theta_all, b_all, f_all, T, m, n, set,
+                            get_global_size(2), x0, y0);
+#endif
         if (slot >= 0) {
             __global const real *w = w_all ? w_all + set * (size_t)NCH * mn : 0;
             for (int k = 0; k < NCH; ++k)

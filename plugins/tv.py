@@ -216,6 +216,15 @@ class TV(Regularizer):
         fused = device_fused(device) if self.fused < 0 else self.fused
         return fused > 0 or not device.is_cpu
 
+    def deferred_primal_on(self, device) -> dict | None:
+        """:meth:`Regularizer.deferred_primal_on <rsocl.solver.regularizer.Regularizer.deferred_primal_on>`:
+        ``{"TEMPORAL": 0 or 1}`` on a device that is not a CPU, on the plain path with 2 iterations or more
+        (its last launch, ``tv_primal_update``, goes to the ADMM's projection: one launch less per iteration)."""
+        fused = device_fused(device) if self.fused < 0 else self.fused
+        if device.is_cpu or fused > 0 or self.iterations < 2:
+            return None
+        return {"TEMPORAL": int(self.temporal_weight > 0)}
+
     def fused_plan(self, x):
         """The :class:`~rsocl_plugins.tv_fused.FusedPlan` for device array ``x`` (None: the plain path)."""
         import pyopencl as cl
@@ -280,10 +289,10 @@ class TV(Regularizer):
         if "theta" in arrays and arrays["theta"].base_data.int_ptr == u.base_data.int_ptr:
             raise ValueError("out must be another buffer than x (every TV iteration reads x)")
 
-    def bind(self, x, weight, out, dual=None):
+    def bind(self, x, weight, out, dual=None, defer=False):
         """:meth:`Regularizer.bind <rsocl.solver.regularizer.Regularizer.bind>`: on the plain path, the
         arguments checked and the launches bound once (:mod:`rsocl_plugins.tv_plain`); a call then only
-        enqueues them."""
+        enqueues them, without the last one with ``defer`` and ``dual`` (:meth:`deferred_primal_on`)."""
         weights, out = self._checked(x, weight, out)
         self._check_like(x, theta=out, **({} if dual is None else {"b": dual[0], "f": dual[1]}))
         plain = self.iterations > 1 and (self.fused == 0 or self.fused_plan(x) is None)
@@ -292,7 +301,7 @@ class TV(Regularizer):
         sets = x.shape[0] if x.ndim == 4 else 1
         steps = self._steps(x.queue, np.broadcast_to(weights, (sets,)), x.dtype)
         prog, grids, arrays, one = self._plain_parts(x, steps, out, dual)
-        return tv_plain.Bound(x.queue, prog, grids, arrays, self.iterations, one)
+        return tv_plain.Bound(x.queue, prog, grids, arrays, self.iterations, one, defer=defer)
 
     def _run(self, x, weight, out, dual):
         self._check_like(x, theta=out)

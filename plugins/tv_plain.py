@@ -31,7 +31,7 @@ import numpy as np
 if TYPE_CHECKING:
     import pyopencl.array as cla
 
-__all__ = ["Arrays", "Bound", "sequence", "enqueue"]
+__all__ = ["Arrays", "Bound", "sequence", "enqueue", "final_dual"]
 
 
 @dataclass(frozen=True)
@@ -90,7 +90,7 @@ def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: int, owne
                 src, dst = (pa, pb) if k % 2 == 0 else (pb, pa)
                 ping_pong[name, k % 2] = bound(name, x.data, src.data, dst.data, xnext, steps, *sizes)
             launches += ping_pong[name, k % 2]
-        last = arrays.p[len(kinds) % 2]
+        last = final_dual(arrays, iterations, one_launch)
     else:
         primal = bound("tv_primal", x.data, p0.data, out.data, steps, *sizes)
         dual = bound("tv_dual", out.data, p0.data, xnext, steps, *sizes)
@@ -105,6 +105,15 @@ def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: int, owne
     return launches
 
 
+def final_dual(arrays: Arrays, iterations: int, one_launch: int):
+    """The copy of ``p`` in ``arrays`` that holds the dual after :func:`sequence`'s launches (its last primal
+    step reads it)."""
+    if not one_launch:
+        return arrays.p[0]
+    doubles = (iterations - 2) // 2 if one_launch == 2 else 0
+    return arrays.p[(iterations - 2 - doubles) % 2]
+
+
 def enqueue(queue, launches) -> None:
     """Enqueue the launches of :func:`sequence` on ``queue``, in order."""
     for kernel, gsize, lsize, offset in launches:
@@ -114,11 +123,26 @@ def enqueue(queue, launches) -> None:
 class Bound:
     """A plain TV run bound to its arrays (the arguments of :func:`sequence`, ``owner`` aside): calling it
     enqueues the launches, made with kernel objects of its own, on ``queue``. It holds the arrays, so
-    none of them, the dual copies included, is released while it lives."""
+    none of them, the dual copies included, is released while it lives.
 
-    def __init__(self, queue, prog, grids, arrays: Arrays, iterations: int, one_launch: int):
+    With ``defer`` (and the ADMM's dual update folded in, ``arrays.dual``), a call leaves out the last
+    launch (``tv_primal_update``: the output and the dual update from the final dual): the caller's next
+    launch makes it (the ADMM's projection, ``kernels/admm.cl``), reading :attr:`deferred`, or
+    :meth:`finish` enqueues it. Without, :attr:`deferred` is None."""
+
+    def __init__(self, queue, prog, grids, arrays: Arrays, iterations: int, one_launch: int, defer: bool = False):
         self.queue, self.arrays = queue, arrays
         self.launches = sequence(prog, grids, arrays, iterations, one_launch, owner=self)
+        self.last: list = []
+        #: ``(p, steps)``: the final dual (``tv.cl``'s layout) and the per-set steps, for the deferred step.
+        self.deferred = None
+        if defer and arrays.dual is not None:
+            self.launches, self.last = self.launches[: -len(grids)], self.launches[-len(grids) :]
+            self.deferred = (final_dual(arrays, iterations, one_launch), arrays.steps)
 
     def __call__(self) -> None:
         enqueue(self.queue, self.launches)
+
+    def finish(self) -> None:
+        """Enqueue the deferred last launch (nothing without :attr:`deferred`)."""
+        enqueue(self.queue, self.last)

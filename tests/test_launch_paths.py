@@ -114,14 +114,15 @@ def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
     assert _launches_per_iteration(rig, g, device) == 21
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
     # other devices, plain TV (GPU_FUSED) in one launch per Chambolle iteration (GPU_ONE_LAUNCH): the
-    # projection with u = f - b and the residual, the TV whose last launch makes the dual update (1 + 8 + 1)
-    assert GPU_FUSED == 0 and GPU_ONE_LAUNCH == 1 and _launches_per_iteration(rig, g, device) == 11
-    # the same TV in one launch per two iterations (1 + 4 + 1)
+    # projection with u = f - b and the residual, which first makes the TV's last primal step and the
+    # dual update of the iteration before, and the TV without that last launch (1 + 1 + 8)
+    assert GPU_FUSED == 0 and GPU_ONE_LAUNCH == 1 and _launches_per_iteration(rig, g, device) == 10
+    # the same TV in one launch per two iterations (1 + 1 + 4)
     monkeypatch.setattr(tv_module, "GPU_ONE_LAUNCH", 2)
-    assert _launches_per_iteration(rig, g, device) == 7
-    # the same TV in two launches per iteration (1 + 8 + 8 + 1)
+    assert _launches_per_iteration(rig, g, device) == 6
+    # the same TV in two launches per iteration (1 + 1 + 8 + 8)
     monkeypatch.setattr(tv_module, "GPU_ONE_LAUNCH", 0)
-    assert _launches_per_iteration(rig, g, device) == 19
+    assert _launches_per_iteration(rig, g, device) == 18
     # the fused TV: the projection, the fused TV
     monkeypatch.setattr(tv_module, "GPU_FUSED", LEAN)
     plan = TV().fused_plan(_cube(device, rig))

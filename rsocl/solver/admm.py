@@ -6,14 +6,15 @@ One iteration is the data step in three launches (``admm_dual``: dual update and
 regularizer that fuses the dual update (the TV) takes the first and last of them into its own and the
 projection's launches. The residual of the history is one more launch (:mod:`rsocl.solver.residuals`),
 or, in a run that reads the residuals a group at a time, the next iteration's projection computes it
-(``step(residual_slot=...)``).
+(``step(residual_slot=...)``). A regularizer that defers its last launch (the TV on a GPU:
+:meth:`~rsocl.solver.regularizer.Regularizer.deferred_primal_on`) leaves it to the next iteration's
+projection, which makes it at its pixels first; ``theta`` read between iterations makes it then.
 A batch of sets runs every launch once for all of them. Nothing crosses to the host but
 the few partial sums of the history.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -31,6 +32,9 @@ __all__ = ["ADMM", "RESIDUAL_SLOTS"]
 #: Iterations whose residuals the device holds before the host reads them in one copy, in a run that
 #: does not look at each residual (:meth:`ADMM.residual_into`, :meth:`ADMM.read_residuals`).
 RESIDUAL_SLOTS = 8
+#: Index of ``admm_project``'s ``deferred`` flag (built with ``DEFER_PRIMAL``; the final dual, the steps and
+#: the dual flags before it): ``kernels/admm.cl``.
+PROJECT_DEFERRED = 23
 
 
 def _per_set(name, value, sets):
@@ -94,25 +98,29 @@ class ADMM:
         self.own_inverse, self.inverse = inverse_blocks(op, projection, self.etas, valid, self.sets, self.valid)
         self.eta_device = pool.to_device(queue, self.etas.astype(op.dtype))
         self.dual_on = pool.to_device(queue, (self.etas > 0).astype(np.int32))
-        self.theta = pool.zeros(queue, shape, op.dtype) if x0 is None else pool.copy(x0)
+        self._pending = False  # the denoiser's last launch left to the next projection (deferred)
+        self._theta = pool.zeros(queue, shape, op.dtype) if x0 is None else pool.copy(x0)
         self.b = pool.zeros(queue, shape, op.dtype)
-        self.f = pool.copy(self.theta)
+        self.f = pool.copy(self._theta)
         self.u = pool.empty(queue, shape, op.dtype)
         self.hx = pool.empty(queue, batch + op.range_shape, op.dtype)
+        self.fused = bool(regularizer.fuses_dual_on(op.device))
+        self._defines = regularizer.deferred_primal_on(op.device) if self.fused else None
+        deferred = {} if self._defines is None else {"DEFER_PRIMAL": 1, **self._defines}
         self.program = op.device.program(
-            ["residual.cl", "admm.cl"],
+            ["residual.cl"] + (["tv.cl"] if deferred else []) + ["admm.cl"],
             REAL=c_type(op.dtype),
             ACC=c_type(op.device.acc_dtype),
             MASK_BINARY=int(op.rig.mask == "binary"),
             NCH=op.K,
             PROJECTION_EXACT=int(projection == "exact"),
             **op.tile_defines,
+            **deferred,
         )
         self.per_set = int(np.prod(op.domain_shape))
         dev, prog = op.device, self.program  # exact grids: no bounds tests
         self.voxels = batch_launches(self.per_set, self.sets, dev.group_limit(prog.admm_dual, cap=64))
         self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
-        self.fused = bool(regularizer.fuses_dual_on(op.device))
         self.residuals = DeviceResiduals(
             op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS, kernels=(prog.admm_project,)
         )
@@ -121,7 +129,7 @@ class ADMM:
         self.folds_residual = scratch <= dev.local_mem_bytes // 2
         self._scratch = cl.LocalMemory(scratch if self.folds_residual else self.residuals.acc.itemsize)
         self.iteration = 0
-        self._denoiser: Callable[[], Any] | None = None  # the regularizer's bound call, made at the first step
+        self._denoiser: Any = None  # the regularizer's bound call, made at the first step
         self._bind_kernels()
         cl.enqueue_barrier(queue)
 
@@ -139,7 +147,7 @@ class ADMM:
         op, prog = self.op, self.program
         self._dual = prog.lease("admm_dual", self)
         self._dual.set_args(
-            self.theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0), np.int32(self.per_set)
+            self._theta.data, self.b.data, self.f.data, self.dual_on.data, np.int32(0), np.int32(self.per_set)
         )
         self._project = prog.lease("admm_project", self)
         self._project.set_args(
@@ -152,16 +160,31 @@ class ADMM:
             self.b.data,
             self.u.data,
             np.int32(self.fused),
-            self.theta.data,
+            self._theta.data,
             None if self.valid is None else self.valid.data,
             self.residuals.partials,
             self._scratch,
             np.int32(op.T),
             np.int32(op.L),
             *op._shape_args(),
+            *(() if self._defines is None else (None, None, self.dual_on.data, np.int32(0))),
         )
         self._difference = prog.lease("admm_difference", self)
         self._difference.set_args(self.f.data, self.b.data, self.u.data)
+
+    @property
+    def theta(self):
+        """The estimate (a device array): where the denoiser's last launch waits for the next projection,
+        it is enqueued now (:meth:`settle`)."""
+        self.settle()
+        return self._theta
+
+    def settle(self):
+        """Enqueue the denoiser's deferred last launch, if one waits: ``theta``, ``b`` and ``f`` as a
+        denoiser that does not defer leaves them."""
+        if self._pending:
+            self._denoiser.finish()
+            self._pending = False
 
     @property
     def g_norm2(self):
@@ -190,9 +213,15 @@ class ADMM:
 
         self.regularizer = regularizer
         self.fused = bool(regularizer.fuses_dual_on(self.op.device))
+        if self._defines is not None and (
+            not self.fused or regularizer.deferred_primal_on(self.op.device) != self._defines
+        ):
+            self._defines = None  # this program's projection does not fit the new regularizer's last step
+            self._project.set_arg(PROJECT_DEFERRED, np.int32(0))
         self.lams = _per_set("lam", lam, self.sets)
         self.weights = _denoiser_weights(self.lams, self.etas)
-        for dest in (self.theta, self.f):
+        self._pending = False  # theta, b and f are written here
+        for dest in (self._theta, self.f):
             cl.enqueue_copy(self.op.queue, dest.data, x0.data)
         cl.enqueue_fill_buffer(self.op.queue, self.b.data, np.zeros(1, self.op.dtype), 0, self.b.nbytes)
         self.iteration = 0
@@ -216,15 +245,36 @@ class ADMM:
                 self._dual.enqueue(queue, gsize, lsize, offset)
         folded = residual_slot if residual_slot is not None and self.folds_residual else -1
         self._project.set_arg(11, np.int32(self.fused))  # set only when it changes
+        if self._defines is not None:  # the projection makes the denoiser's deferred last launch first
+            self._project.set_arg(PROJECT_DEFERRED, np.int32(self._pending))
         self._project.enqueue(queue, *self.blocks, (0, 0, folded + 1))  # the slot is the offset: kernels/admm.cl
+        self._pending = False
         if not self.fused:
             for gsize, lsize, offset in self.elements:
                 self._difference.enqueue(queue, gsize, lsize, offset)
         if self._denoiser is None:  # theta = denoise(u), with the dual update when fused: bound once
-            dual = (self.b, self.f, self.dual_on) if self.fused else None
-            self._denoiser = self.regularizer.bind(self.u, self.weight, self.theta, dual)
+            self._bind_denoiser()
         self._denoiser()
+        self._pending = self._defines is not None
         self.iteration += 1
+
+    def _bind_denoiser(self):
+        if not self.fused:
+            self._denoiser = self.regularizer.bind(self.u, self.weight, self._theta, None)
+            return
+        dual = (self.b, self.f, self.dual_on)
+        if self._defines is None:
+            self._denoiser = self.regularizer.bind(self.u, self.weight, self._theta, dual)
+            return
+        self._denoiser = self.regularizer.bind(self.u, self.weight, self._theta, dual, defer=True)
+        deferred = getattr(self._denoiser, "deferred", None)
+        if deferred is None:  # the regularizer made its last launch after all
+            self._defines = None
+            self._project.set_arg(PROJECT_DEFERRED, np.int32(0))
+            return
+        p_last, steps = deferred
+        self._project.set_arg(PROJECT_DEFERRED - 3, p_last.data)
+        self._project.set_arg(PROJECT_DEFERRED - 2, steps.data)
 
     def blend_towards(self, x0, alpha: float):
         """``theta = x0 + alpha (theta - x0)`` (enqueued): the estimate moved back towards the start ``x0``

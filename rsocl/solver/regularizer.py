@@ -160,6 +160,17 @@ class Regularizer:
         (default: :attr:`fuses_dual`; a regularizer may keep separate passes where they are faster)."""
         return bool(self.fuses_dual)
 
+    def deferred_primal_on(self, device) -> dict | None:
+        """The program definitions under which a call bound with ``bind(..., dual, defer=True)`` on
+        ``device`` leaves its last launch to the ADMM's projection, or None (default) where it does not.
+
+        Such a call ends before its output: its last step (``theta = u + d(p)`` and the dual update, as
+        ``tv_primal_update`` of ``kernels/tv.cl``, from the final dual ``p`` in that file's layout) is
+        made by the next projection (``kernels/admm.cl``, built with ``tv.cl`` and these definitions),
+        and the bound call's ``deferred`` holds ``(p, steps)`` and its ``finish()`` enqueues the step
+        where the output is read first. rsocl's TV does so on its plain path on a GPU."""
+        return None
+
     def workspace_bytes(self, shape: tuple[int, ...], dtype: DTypeLike, device=None) -> int:
         """Device memory (bytes) the denoiser allocates for an input of ``shape`` and ``dtype`` on
         ``device`` (an rsocl Device; None: any, for a regularizer whose workspace does not depend on it)."""
