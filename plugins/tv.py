@@ -25,7 +25,7 @@ STEP = 0.9
 FUSED = -1
 
 #: ``fused`` of the device's choice on a device that is not a CPU. The plain path, whose folded passes
-#: (the ADMM's dual update in the TV's last launch, ``u = f - b`` in the projection) are already fewer
+#: (the ADMM's dual update in the TV's last primal step, that step and ``u = f - b`` in the projection) are fewer
 #: launches: whole reconstructions on an NVIDIA GPU ran slower with the fused TV at every batch size
 #: (docs/gpu/tv_fused.md). ``benchmarks/launches.py`` measures both paths on a device.
 GPU_FUSED = 0

@@ -14,7 +14,8 @@ Three ways through the same arithmetic (``one_launch``):
 All start with ``tv_dual_first`` (the first iteration from ``p = 0``) and end with the primal of the last
 ``p`` (``tv_primal``, or ``tv_primal_update`` when the ADMM's dual update is folded in). A run of
 ``iterations`` Chambolle iterations is ``2 iterations - 2`` launches with 0, ``iterations`` with 1 and
-``2 + ceil((iterations - 2) / 2)`` with 2, for each launch grid of :func:`rsocl_plugins.tv.launches`.
+``2 + ceil((iterations - 2) / 2)`` with 2, for each launch grid of :func:`rsocl_plugins.tv.launches`; a
+:class:`Bound` call that defers its last launch to the ADMM's projection makes one less.
 
 :func:`sequence` sets every kernel argument and returns the launches; :class:`Bound` keeps them with
 their arrays for a caller that runs the denoiser many times on the same arrays.
