@@ -18,7 +18,8 @@ device: a kernel with one work item and one buffer argument, enqueued in a loop.
 
 Five paths are measured (``--paths``, :data:`PATHS`): ``device``, what the device chooses; ``gpu``, what
 rsocl chooses on a device that is not a CPU (the dual update and ``u = f - b`` folded into the TV's and the
-projection's launches, the plain TV in one launch per Chambolle iteration); ``gpu-two``, that with the
+projection's launches, the TV's last primal step made by the next projection, the plain TV in one launch per
+Chambolle iteration); ``gpu-two``, that with the
 plain TV in two launches per iteration; ``gpu-pairs``, that with one launch per two iterations;
 ``lean``, that with the TV's fused path. On a CPU device the last four run by reading the device as a
 GPU for the run.
@@ -290,13 +291,15 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     - ``u = f - b``: ``admm_project`` + ``admm_difference`` against ``admm_project`` writing u itself;
     - the ADMM's dual update: ``tv_primal`` + ``admm_dual`` against ``tv_primal_update``;
     - one Chambolle iteration: ``tv_primal`` + ``tv_dual`` against ``tv_step`` (two copies of p);
-    - two Chambolle iterations: two ``tv_step`` against one ``tv_step2``.
+    - two Chambolle iterations: two ``tv_step`` against one ``tv_step2``;
+    - on a device where the projection makes the TV's last primal step (``Regularizer.deferred_primal_on``):
+      ``tv_primal_update`` + ``admm_project`` (with the residual) against ``admm_project`` making it first.
     """
     import pyopencl.array as cla
 
     from rsocl.device.reduction import sum_sq_diff_async
     from rsocl.model.operator import RollingShutterOperator
-    from rsocl.solver.admm import ADMM
+    from rsocl.solver.admm import ADMM, PROJECT_DEFERRED
     from rsocl_plugins.tv import TV
     from rsocl_plugins.tv import launches as tv_launches
 
@@ -399,6 +402,23 @@ def passes(m: int, device, rounds: int, reps: int = 100):
         ("two Chambolle iterations: tv_step + tv_step | tv_step2", two_steps, step_pair),
     ]
 
+    def project_deferred(on):  # the projection with the residual, making the TV's last primal step first or not
+        s._project.set_arg(PROJECT_DEFERRED, np.int32(on))
+        project(1, 0)
+
+    def primal_update_then_project():
+        primal_update()
+        project_deferred(0)
+
+    if s._defines is not None:  # the solver's projection takes the TV's final dual and steps (bound at its step)
+        pairs.append(
+            (
+                "last primal step in the projection: tv_primal_update + admm_project | admm_project making it",
+                primal_update_then_project,
+                lambda: project_deferred(1),
+            )
+        )
+
     def timed(fn):
         q.finish()
         t0 = time.perf_counter()
@@ -497,6 +517,7 @@ def page(floor, trivial, rows, device, args, passes_rows=None, replays=None) -> 
         "",
         "Paths: `device` is the device's own choice. `gpu` is what rsocl chooses on a device that is not a",
         "CPU: the ADMM's dual update and u = f - b folded into the TV's and the projection's launches, the",
+        "TV's last primal step made by the next projection, the",
         "plain TV in one launch per Chambolle iteration (`tv_step` on two copies of the dual); `gpu-two` is",
         "that with the plain TV in two launches per iteration (`tv_primal`, `tv_dual`); `gpu-pairs` that with",
         "one launch per two iterations (`tv_step2`, each work item also stepping the dual of the twelve voxels",
