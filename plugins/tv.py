@@ -191,7 +191,6 @@ class TV(Regularizer):
     def _steps(self, queue, weights, dtype):
         """The per-set ``(tau, tau / weight, temporal weight)`` of ``tv.cl`` on the device (``tau`` and
         ``tau / weight`` 0 for weight 0)."""
-
         w = np.asarray(weights, dtype=np.float64)
         wt = self.temporal_weights(len(w))
         cache = self.__dict__.setdefault("_step_cache", {})
@@ -257,7 +256,6 @@ class TV(Regularizer):
 
     def _buffers(self, x, copies):
         """The dual p (``copies`` of it) and xnext, once per shape, dtype and queue."""
-
         cache = self.__dict__.setdefault("_dual", {})
         key = (x.shape, x.dtype.str, self.planes, copies, x.queue.int_ptr)
         if key not in cache:

@@ -40,7 +40,6 @@ def interp3d_device(op, g, valid=None, solved=None, *, out=None):
     pyopencl.array.Array
         ``(len(solved), m, n)``, or ``(B, len(solved), m, n)`` for a batch.
     """
-
     rig, queue, dtype = op.rig, op.queue, np.dtype(op.dtype)
     g = np.asarray(g, dtype=np.float64)
     one = g.ndim == 3

@@ -101,7 +101,6 @@ class RollingShutterOperator:
     def __init__(
         self, rig: Rig, device: str | Device | None = None, dtype: DTypeLike = "float32", subframes: slice | None = None
     ) -> None:
-
         if not isinstance(rig, Rig):
             raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
         self.rig = rig
@@ -168,7 +167,6 @@ class RollingShutterOperator:
 
     def empty(self, shape: tuple[int, ...]) -> cla.Array:
         """An uninitialised device array of this operator's dtype."""
-
         return pool.empty(self.queue, shape, self.dtype)
 
     @property

@@ -110,7 +110,6 @@ def inverse_blocks(op, projection: str, etas, valid, sets: int, valid_device=Non
         Compute the exact blocks on the device (True) or the host (False); None: the device where
         :func:`inverts_on_device`.
     """
-
     valid = None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool).reshape((-1,) + op.range_shape)
     own = own_inverses(projection, etas, valid, sets)
     count = sets if own else 1
@@ -135,7 +134,6 @@ def inverse_blocks(op, projection: str, etas, valid, sets: int, valid_device=Non
 
 
 def _upload(op, blocks):
-
     return pool.to_device(op.queue, np.asarray(blocks, dtype=op.dtype))
 
 
@@ -179,7 +177,6 @@ def device_block_inverse(device, queue, gram, etas, rcond: float, valid=None):
     ValueError
         When the shapes do not match, ``K`` is beyond :data:`DEVICE_CHANNELS` or the device lacks fp64.
     """
-
     K, mn = int(gram.shape[0]), int(np.prod(gram.shape[2:]))
     if gram.ndim != 4 or gram.shape[1] != K:
         raise ValueError(f"gram must be (K, K, m, n), got shape {gram.shape}")

@@ -300,7 +300,6 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     (:func:`~rsocl.solver.memory.memory_bytes`) includes a start cube per set when the problem has
     an ``x0`` or ``start`` says one will be made after staging (the self-tuned run's ``interp3d`` start).
     """
-
     check_representable(problem, dtype)
     rig = problem.rig
     solved = rig.sampled_range()
