@@ -30,22 +30,19 @@ from provenance import DOCS, emit, header_lines  # noqa: E402
 
 import rsocl  # noqa: E402
 from rsocl.device import kernel as kernel_module  # noqa: E402
-from rsocl.device.context import Device, get_device  # noqa: E402
+from rsocl.device.context import Device, device_for_queue, get_device  # noqa: E402
 
 #: Iterations run before the recorded ones (kernel builds, the first iterations' own launches).
 SKIP = 4
 
 
 def profiling_device(device) -> Device:
-    """``device`` with a queue of its own that records kernel times (``CL_QUEUE_PROFILING_ENABLE``)."""
+    """``device`` with a queue of its own that records kernel times (``CL_QUEUE_PROFILING_ENABLE``), as rsocl
+    wraps a queue made outside it (:func:`rsocl.device.context.device_for_queue`)."""
     import pyopencl as cl
 
-    from rsocl.device import context
-
     queue = cl.CommandQueue(device.context, device.device, properties=cl.command_queue_properties.PROFILING_ENABLE)
-    found = Device(device.context, queue, device.device, dict(device.limits))
-    context._BY_QUEUE[queue.int_ptr] = found
-    return found
+    return device_for_queue(queue)
 
 
 def record(rig, g, device, iterations: int) -> list:
