@@ -292,6 +292,7 @@ def passes(m: int, device, rounds: int, reps: int = 100):
     - the ADMM's dual update: ``tv_primal`` + ``admm_dual`` against ``tv_primal_update``;
     - one Chambolle iteration: ``tv_primal`` + ``tv_dual`` against ``tv_step`` (two copies of p);
     - two Chambolle iterations: two ``tv_step`` against one ``tv_step2``;
+    - the first two Chambolle iterations (from ``p = 0``): ``tv_dual_first`` + ``tv_step`` against ``tv_first2``;
     - on a device where the projection makes the TV's last primal step (``Regularizer.deferred_primal_on``):
       ``tv_primal_update`` + ``admm_project`` (with the residual) against ``admm_project`` making it first.
     """
@@ -377,6 +378,15 @@ def passes(m: int, device, rounds: int, reps: int = 100):
         for gs, ls, off in grids:
             tv_prog.tv_step2(q, gs, ls, s.u.data, p.data, p2.data, xnext.data, steps.data, *sizes, global_offset=off)
 
+    def first_then_step():
+        for gs, ls, off in grids:
+            tv_prog.tv_dual_first(q, gs, ls, s.u.data, p.data, xnext.data, steps.data, *sizes, global_offset=off)
+        one_step()
+
+    def first_two():
+        for gs, ls, off in grids:
+            tv_prog.tv_first2(q, gs, ls, s.u.data, p2.data, xnext.data, steps.data, *sizes, global_offset=off)
+
     def forward_then_sum():
         op.forward_into(s.theta, s.hx)
         sum_sq_diff_async(s.g, s.hx)
@@ -400,6 +410,7 @@ def passes(m: int, device, rounds: int, reps: int = 100):
         ("dual update: tv_primal + admm_dual | tv_primal_update", primal_then_dual, primal_update),
         ("Chambolle iteration: tv_primal + tv_dual | tv_step", primal_dual, one_step),
         ("two Chambolle iterations: tv_step + tv_step | tv_step2", two_steps, step_pair),
+        ("first two Chambolle iterations: tv_dual_first + tv_step | tv_first2", first_then_step, first_two),
     ]
 
     def project_deferred(on):  # the projection with the residual, making the TV's last primal step first or not

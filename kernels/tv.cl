@@ -194,59 +194,96 @@ __kernel void tv_step(__global const real *img, __global const real *p_in, __glo
 #endif
 }
 
-/* Two whole Chambolle iterations per launch, from one copy of p into another: each work item steps
- * the dual at its voxel and at the twelve around it that the second iteration's primals read (STEP_AT,
- * each from the first copy; at an edge the neighbour is clamped to a voxel of the set and its value
- * discarded by a select, so every work item does the same work), then the second step at its voxel.
- * The same arithmetic as two tv_step launches (values equal; a zero's sign may differ). About 13 times
+/* FIRST_AT(q, X, Y, ST, S): q (a dual3) = the first dual step from p = 0 at voxel (X, Y) of sub-frame S
+ * of its set (ST = set * T + S): tv_dual_first's arithmetic at that voxel, where the primal is the input
+ * img itself. It reads the caller's img, xnext, tau, tow, wt, T, m, n, sets, mn and nn. */
+#define FIRST_AT(q, X, Y, ST, S)                                                                          \
+    do {                                                                                                  \
+        int fx_ = (X), fy_ = (Y), fst_ = (ST), fs_ = (S);                                                 \
+        size_t fi_ = ((size_t)fst_ * m + fy_) * nn + fx_;                                                  \
+        real fo_ = img[fi_];                                                                              \
+        real fgy_ = img[fy_ < m - 1 ? fi_ + nn : fi_] - fo_;                                              \
+        real fright_ = (fy_ < m - 1 || fst_ < sets * T - 1) ? img[fi_ + 1] : img[fx_ < n - 1 ? fi_ + 1 : fi_]; \
+        real fgx_ = (fright_ - fo_) * xnext[fx_];                                                         \
+        real fgt_ = TEMPORAL ? wt * (img[fs_ < T - 1 ? fi_ + mn : fi_] - fo_) : (real)0;                   \
+        real fnorm2_ = fgy_ * fgy_ + fgx_ * fgx_;                                                         \
+        fnorm2_ += fgt_ * fgt_;                                                                           \
+        real fscale_ = (real)1 / ((real)1 + vector_friendly_sqrt(fnorm2_) * tow);                         \
+        (q).y = ((real)0 - tau * fgy_) * fscale_;                                                         \
+        (q).x = ((real)0 - tau * fgx_) * fscale_;                                                         \
+        (q).t = TEMPORAL ? ((real)0 - tau * fgt_) * fscale_ : (real)0;                                    \
+    } while (0)
+
+/* TWO_STEPS(FIRST): the body of a launch that makes two whole Chambolle iterations: FIRST (STEP_AT, or
+ * FIRST_AT from p = 0) at this work item's voxel and at the twelve around it that the second
+ * iteration's primals read (at an edge the neighbour is clamped to a voxel of the set and its value
+ * discarded by a select, so every work item does the same work), then the second step at its voxel,
+ * written to p_out. Declares the work item's indices itself; reads the kernel's arguments. */
+#if TEMPORAL
+#define TWO_STEPS_T(FIRST)                                                                                \
+    int sp = s > 0 ? s - 1 : s, sn = s < T - 1 ? s + 1 : s; /* and at the next one along t (f) */         \
+    dual3 ct, ut, rt, f, fy, fx;                                                                          \
+    FIRST(ct, x, y, st + sp - s, sp);                                                                     \
+    FIRST(ut, x, yn, st + sp - s, sp);                                                                    \
+    FIRST(rt, xn, y, st + sp - s, sp);                                                                    \
+    FIRST(f, x, y, st + sn - s, sn);                                                                      \
+    FIRST(fy, x, yp, st + sn - s, sn);                                                                    \
+    FIRST(fx, xp, y, st + sn - s, sn);
+#define TWO_STEPS_GT                                                                                      \
+    real gt = s < T - 1 ? wt * (primal_of(img, i + mn, f, fy.y, x > 0 ? fx.x : zero, c.t, wt, y, s + 1) - o) : zero; \
+    norm2 += gt * gt;
+#define TWO_STEPS_PT p_out[2 * N + i] = (c.t - tau * gt) * scale;
+#else
+#define TWO_STEPS_T(FIRST) dual3 ct = c, ut = c, rt = c; /* not read in 2-D */
+#define TWO_STEPS_GT
+#define TWO_STEPS_PT
+#endif
+#define TWO_STEPS(FIRST)                                                                                  \
+    int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);                                \
+    int set = st / T, s = st - set * T;                                                                   \
+    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n, nn = (size_t)n;                              \
+    size_t i = ((size_t)st * m + y) * n + x;                                                              \
+    real tau = steps[3 * set], tow = steps[3 * set + 1], wt = steps[3 * set + 2], zero = (real)0;         \
+    int yp = y > 0 ? y - 1 : y, yn = y < m - 1 ? y + 1 : y; /* clamped neighbours */                      \
+    int xp = x > 0 ? x - 1 : x, xn = x < n - 1 ? x + 1 : x;                                               \
+    /* the first step at this voxel (c), at the next ones along y (u) and x (r), and at the previous      \
+     * ones each of these reads (suffix: along which axis) */                                             \
+    dual3 c, cy, cx, u, ux, r, ry;                                                                        \
+    FIRST(c, x, y, st, s);                                                                                \
+    FIRST(cy, x, yp, st, s);                                                                              \
+    FIRST(cx, xp, y, st, s);                                                                              \
+    FIRST(u, x, yn, st, s);                                                                               \
+    FIRST(ux, xp, yn, st, s);                                                                             \
+    FIRST(r, xn, y, st, s);                                                                               \
+    FIRST(ry, xn, yp, st, s);                                                                             \
+    TWO_STEPS_T(FIRST)                                                                                    \
+    /* the primals of the stepped dual at this voxel and at its next ones (at x = 0 the p[1] of the row   \
+     * before, which primal_at reads, is 0: passed as zero) */                                            \
+    real o = primal_of(img, i, c, cy.y, x > 0 ? cx.x : zero, ct.t, wt, y, s);                             \
+    real gy = y < m - 1 ? primal_of(img, i + nn, u, c.y, x > 0 ? ux.x : zero, ut.t, wt, y + 1, s) - o : zero; \
+    real gx = x < n - 1 ? (primal_of(img, i + 1, r, ry.y, c.x, rt.t, wt, y, s) - o) * xnext[x] : zero;    \
+    real norm2 = gy * gy + gx * gx;                                                                       \
+    TWO_STEPS_GT                                                                                          \
+    real scale = (real)1 / ((real)1 + vector_friendly_sqrt(norm2) * tow);                                 \
+    p_out[i] = (c.y - tau * gy) * scale;                                                                  \
+    p_out[N + i] = (c.x - tau * gx) * scale;                                                              \
+    TWO_STEPS_PT
+
+/* Two whole Chambolle iterations per launch, from one copy of p into another (TWO_STEPS(STEP_AT)). The
+ * same arithmetic as two tv_step launches (values equal; a zero's sign may differ). About 13 times
  * tv_step's arithmetic for half its launches: for devices where a launch costs more than that.
  * global size (n, m, B*T) */
 __kernel void tv_step2(__global const real *img, __global const real *p_in, __global real *p_out,
                        __global const real *xnext, __global const real *steps, int T, int m, int n, int sets)
 {
-    int x = get_global_id(0), y = get_global_id(1), st = get_global_id(2);
-    int set = st / T, s = st - set * T;
-    size_t N = (size_t)sets * T * m * n, mn = (size_t)m * n, nn = (size_t)n;
-    size_t i = ((size_t)st * m + y) * n + x;
-    real tau = steps[3 * set], tow = steps[3 * set + 1], wt = steps[3 * set + 2], zero = (real)0;
-    int yp = y > 0 ? y - 1 : y, yn = y < m - 1 ? y + 1 : y;   /* clamped neighbours */
-    int xp = x > 0 ? x - 1 : x, xn = x < n - 1 ? x + 1 : x;
-    /* the first step at this voxel (c), at the next ones along y (u) and x (r), and at the previous
-     * ones each of these reads (suffix: along which axis) */
-    dual3 c, cy, cx, u, ux, r, ry;
-    STEP_AT(c, x, y, st, s);
-    STEP_AT(cy, x, yp, st, s);
-    STEP_AT(cx, xp, y, st, s);
-    STEP_AT(u, x, yn, st, s);
-    STEP_AT(ux, xp, yn, st, s);
-    STEP_AT(r, xn, y, st, s);
-    STEP_AT(ry, xn, yp, st, s);
-#if TEMPORAL
-    int sp = s > 0 ? s - 1 : s, sn = s < T - 1 ? s + 1 : s;  /* and at the next one along t (f) */
-    dual3 ct, ut, rt, f, fy, fx;
-    STEP_AT(ct, x, y, st + sp - s, sp);
-    STEP_AT(ut, x, yn, st + sp - s, sp);
-    STEP_AT(rt, xn, y, st + sp - s, sp);
-    STEP_AT(f, x, y, st + sn - s, sn);
-    STEP_AT(fy, x, yp, st + sn - s, sn);
-    STEP_AT(fx, xp, y, st + sn - s, sn);
-#else
-    dual3 ct = c, ut = c, rt = c;                           /* not read in 2-D */
-#endif
-    /* the primals of the stepped dual at this voxel and at its next ones (at x = 0 the p[1] of the row
-     * before, which primal_at reads, is 0: passed as zero) */
-    real o = primal_of(img, i, c, cy.y, x > 0 ? cx.x : zero, ct.t, wt, y, s);
-    real gy = y < m - 1 ? primal_of(img, i + nn, u, c.y, x > 0 ? ux.x : zero, ut.t, wt, y + 1, s) - o : zero;
-    real gx = x < n - 1 ? (primal_of(img, i + 1, r, ry.y, c.x, rt.t, wt, y, s) - o) * xnext[x] : zero;
-    real norm2 = gy * gy + gx * gx;
-#if TEMPORAL
-    real gt = s < T - 1 ? wt * (primal_of(img, i + mn, f, fy.y, x > 0 ? fx.x : zero, c.t, wt, y, s + 1) - o) : zero;
-    norm2 += gt * gt;
-#endif
-    real scale = (real)1 / ((real)1 + vector_friendly_sqrt(norm2) * tow);
-    p_out[i] = (c.y - tau * gy) * scale;
-    p_out[N + i] = (c.x - tau * gx) * scale;
-#if TEMPORAL
-    p_out[2 * N + i] = (c.t - tau * gt) * scale;
-#endif
+    TWO_STEPS(STEP_AT)
+}
+
+/* The first two Chambolle iterations from p = 0 in one launch (TWO_STEPS(FIRST_AT)): what tv_dual_first
+ * and then tv_step compute (values equal; a zero's sign may differ), reading only img and writing only
+ * p_out: the bytes of tv_dual_first, one launch less.  global size (n, m, B*T) */
+__kernel void tv_first2(__global const real *img, __global real *p_out, __global const real *xnext,
+                        __global const real *steps, int T, int m, int n, int sets)
+{
+    TWO_STEPS(FIRST_AT)
 }

@@ -40,6 +40,12 @@ ONE_LAUNCH = -1
 #: against it: docs/regularizer_defaults.md.
 GPU_ONE_LAUNCH = 1
 
+#: On a device that is not a CPU, the plain path's first two Chambolle iterations in one launch
+#: (``tv_first2``, :mod:`rsocl_plugins.tv_plain`) where it takes one launch per iteration or per two: a launch
+#: less per call, and only the first iteration's bytes. On a CPU device its thirteen dual steps per voxel
+#: cost more than the launch it saves. ``benchmarks/launches.py`` times both on a device (docs/launches.md).
+GPU_FIRST_TWO = True
+
 
 def device_one_launch(device) -> int:
     """``one_launch`` that the default (:data:`ONE_LAUNCH`) stands for on ``device`` (an rsocl Device): 0 on a
@@ -61,7 +67,7 @@ def edge_weights(n: int, dtype) -> np.ndarray:
 def launches(prog, device, T: int, m: int, n: int):
     """Exact launch grids of the TV kernels of ``prog`` (no bounds test in them), in work groups
     of whole rows up to :data:`GROUP`, capped by what ``device`` (an rsocl Device) and the kernels allow."""
-    kernels = (prog.tv_primal, prog.tv_dual, prog.tv_dual_first, prog.tv_primal_update, prog.tv_step)
+    kernels = (prog.tv_primal, prog.tv_dual, prog.tv_dual_first, prog.tv_primal_update, prog.tv_step, prog.tv_first2)
     group = device.group_limit(*kernels, cap=GROUP)
     return voxel_launches(T, m, n, group=group, max_x=device.max_work_item_sizes[0])
 
@@ -298,8 +304,8 @@ class TV(Regularizer):
             return super().bind(x, weight, out, dual)
         sets = x.shape[0] if x.ndim == 4 else 1
         steps = self._steps(x.queue, np.broadcast_to(weights, (sets,)), x.dtype)
-        prog, grids, arrays, one = self._plain_parts(x, steps, out, dual)
-        return tv_plain.Bound(x.queue, prog, grids, arrays, self.iterations, one, defer=defer)
+        prog, grids, arrays, plan = self._plain_parts(x, steps, out, dual)
+        return tv_plain.Bound(x.queue, prog, grids, arrays, self.iterations, defer=defer, **plan)
 
     def _run(self, x, weight, out, dual):
         self._check_like(x, theta=out)
@@ -339,8 +345,9 @@ class TV(Regularizer):
         return int(device_one_launch(device) if self.one_launch < 0 else self.one_launch)
 
     def _plain_parts(self, x, steps, out, dual):
-        """``(prog, grids, arrays, one_launch)``: the arguments of
-        :func:`rsocl_plugins.tv_plain.sequence` (and :class:`~rsocl_plugins.tv_plain.Bound`) but ``iterations``."""
+        """``(prog, grids, arrays, plan)``: the arguments of :func:`rsocl_plugins.tv_plain.sequence` (and
+        :class:`~rsocl_plugins.tv_plain.Bound`) but ``iterations``, ``plan`` its keywords ``one_launch`` and
+        ``first2`` (:data:`GPU_FIRST_TWO` on a device that is not a CPU)."""
         dev = device_for_queue(x.queue)
         one = self.one_launch_on(dev)
         prog = self._program(x, "tv.cl")
@@ -351,7 +358,7 @@ class TV(Regularizer):
             grids[key] = launches(prog, dev, (x.shape[0] if x.ndim == 4 else 1) * x.shape[-3], *x.shape[-2:])
         p, xnext = self._buffers(x, 2 if one else 1)
         arrays = tv_plain.Arrays(x, out, steps, tuple(p), xnext, None if dual is None else tuple(dual))
-        return prog, grids[key], arrays, one
+        return prog, grids[key], arrays, {"one_launch": one, "first2": GPU_FIRST_TWO and not dev.is_cpu}
 
     def _run_plain(self, x, steps, out, dual=None):
         import pyopencl as cl
@@ -359,8 +366,8 @@ class TV(Regularizer):
         if self.iterations == 1:  # out = x + d(0)
             cl.enqueue_copy(x.queue, out.data, x.data)
             return out
-        prog, grids, arrays, one = self._plain_parts(x, steps, out, dual)
-        tv_plain.enqueue(x.queue, tv_plain.sequence(prog, grids, arrays, self.iterations, one))
+        prog, grids, arrays, plan = self._plain_parts(x, steps, out, dual)
+        tv_plain.enqueue(x.queue, tv_plain.sequence(prog, grids, arrays, self.iterations, **plan))
         return out
 
     def _no_dual(self, queue):

@@ -11,11 +11,15 @@ Three ways through the same arithmetic (``one_launch``):
   the dual of the twelve voxels around it that the second iteration reads (an odd count of steps ends
   with one ``tv_step``). Half the launches of 1 for about 13 times its arithmetic.
 
-All start with ``tv_dual_first`` (the first iteration from ``p = 0``) and end with the primal of the last
-``p`` (``tv_primal``, or ``tv_primal_update`` when the ADMM's dual update is folded in). A run of
-``iterations`` Chambolle iterations is ``2 iterations - 2`` launches with 0, ``iterations`` with 1 and
-``2 + ceil((iterations - 2) / 2)`` with 2, for each launch grid of :func:`rsocl_plugins.tv.launches`; a
-:class:`Bound` call that defers its last launch to the ADMM's projection makes one less.
+All start from ``p = 0``: the first iteration is ``tv_dual_first``, or with ``first2`` (and 1 or 2, and
+at least 3 iterations) the first two are one launch (``tv_first2``, reading only the input: the bytes
+of ``tv_dual_first``, each work item stepping the dual of the twelve voxels around it from ``p = 0``
+itself). All end with the primal of the last ``p`` (``tv_primal``, or ``tv_primal_update`` when the
+ADMM's dual update is folded in). A run of ``iterations`` Chambolle iterations is ``2 iterations - 2``
+launches with 0, ``iterations`` with 1 and ``2 + ceil((iterations - 2) / 2)`` with 2; with ``first2``
+and at least 3 iterations, ``iterations - 1`` with 1 and ``2 + ceil((iterations - 3) / 2)`` with 2; for
+each launch grid of :func:`rsocl_plugins.tv.launches`. A :class:`Bound` call that defers its last
+launch to the ADMM's projection makes one less.
 
 :func:`sequence` sets every kernel argument and returns the launches; :class:`Bound` keeps them with
 their arrays for a caller that runs the denoiser many times on the same arrays.
@@ -32,7 +36,7 @@ import numpy as np
 if TYPE_CHECKING:
     import pyopencl.array as cla
 
-__all__ = ["Arrays", "Bound", "sequence", "enqueue", "final_dual"]
+__all__ = ["Arrays", "Bound", "sequence", "enqueue", "final_dual", "first_two"]
 
 
 @dataclass(frozen=True)
@@ -50,9 +54,10 @@ class Arrays:
     dual: tuple | None = None
 
 
-def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: int, owner=None) -> list:
+def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: int, owner=None, first2=False) -> list:
     """The launches ``(kernel, global, local, offset)`` of one plain TV run of ``iterations`` (>= 2)
-    Chambolle iterations on ``arrays``, every argument set; ``one_launch`` 0, 1 or 2 (module docstring).
+    Chambolle iterations on ``arrays``, every argument set; ``one_launch`` 0, 1 or 2 and ``first2``: the
+    module docstring.
 
     With an ``owner`` the kernel objects are its own while it lives (``prog.lease``): enqueuing the list
     again runs the denoiser again on the arrays' current contents (:class:`Bound`). Without one they are
@@ -80,18 +85,20 @@ def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: int, owne
 
     p0 = arrays.p[0]
     steps, xnext = arrays.steps.data, arrays.xnext.data
-    launches = bound("tv_dual_first", x.data, p0.data, xnext, steps, *sizes)
+    if first_two(iterations, one_launch, first2):
+        launches = bound("tv_first2", x.data, p0.data, xnext, steps, *sizes)
+    else:
+        launches = bound("tv_dual_first", x.data, p0.data, xnext, steps, *sizes)
     if one_launch:
         pa, pb = arrays.p
-        doubles = (iterations - 2) // 2 if one_launch == 2 else 0
-        kinds = ["tv_step2"] * doubles + ["tv_step"] * (iterations - 2 - 2 * doubles)
+        kinds = _steps(iterations, one_launch, first2)
         ping_pong = {}  # (kernel, direction): its launches, bound once
         for k, name in enumerate(kinds):
             if (name, k % 2) not in ping_pong:
                 src, dst = (pa, pb) if k % 2 == 0 else (pb, pa)
                 ping_pong[name, k % 2] = bound(name, x.data, src.data, dst.data, xnext, steps, *sizes)
             launches += ping_pong[name, k % 2]
-        last = final_dual(arrays, iterations, one_launch)
+        last = final_dual(arrays, iterations, one_launch, first2)
     else:
         primal = bound("tv_primal", x.data, p0.data, out.data, steps, *sizes)
         dual = bound("tv_dual", out.data, p0.data, xnext, steps, *sizes)
@@ -106,13 +113,25 @@ def sequence(prog, grids, arrays: Arrays, iterations: int, one_launch: int, owne
     return launches
 
 
-def final_dual(arrays: Arrays, iterations: int, one_launch: int):
+def first_two(iterations: int, one_launch: int, first2: bool) -> bool:
+    """Whether :func:`sequence` makes the first two Chambolle iterations in one launch (``tv_first2``)."""
+    return bool(first2) and bool(one_launch) and iterations >= 3
+
+
+def _steps(iterations: int, one_launch: int, first2: bool) -> list:
+    """The kernels (``tv_step2``, ``tv_step``) that step the dual after the first launch, ping-pong
+    between the two copies of ``p`` from the first."""
+    left = iterations - (3 if first_two(iterations, one_launch, first2) else 2)
+    doubles = left // 2 if one_launch == 2 else 0
+    return ["tv_step2"] * doubles + ["tv_step"] * (left - 2 * doubles)
+
+
+def final_dual(arrays: Arrays, iterations: int, one_launch: int, first2: bool = False):
     """The copy of ``p`` in ``arrays`` that holds the dual after :func:`sequence`'s launches (its last primal
     step reads it)."""
     if not one_launch:
         return arrays.p[0]
-    doubles = (iterations - 2) // 2 if one_launch == 2 else 0
-    return arrays.p[(iterations - 2 - doubles) % 2]
+    return arrays.p[len(_steps(iterations, one_launch, first2)) % 2]
 
 
 def enqueue(queue, launches) -> None:
@@ -131,15 +150,15 @@ class Bound:
     launch makes it (the ADMM's projection, ``kernels/admm.cl``), reading :attr:`deferred`, or
     :meth:`finish` enqueues it. Without, :attr:`deferred` is None."""
 
-    def __init__(self, queue, prog, grids, arrays: Arrays, iterations: int, one_launch: int, defer: bool = False):
+    def __init__(self, queue, prog, grids, arrays: Arrays, iterations: int, one_launch: int, defer=False, first2=False):
         self.queue, self.arrays = queue, arrays
-        self.launches = sequence(prog, grids, arrays, iterations, one_launch, owner=self)
+        self.launches = sequence(prog, grids, arrays, iterations, one_launch, owner=self, first2=first2)
         self.last: list = []
         #: ``(p, steps)``: the final dual (``tv.cl``'s layout) and the per-set steps, for the deferred step.
         self.deferred = None
         if defer and arrays.dual is not None:
             self.launches, self.last = self.launches[: -len(grids)], self.launches[-len(grids) :]
-            self.deferred = (final_dual(arrays, iterations, one_launch), arrays.steps)
+            self.deferred = (final_dual(arrays, iterations, one_launch, first2), arrays.steps)
 
     def __call__(self) -> None:
         enqueue(self.queue, self.launches)

@@ -115,9 +115,10 @@ def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
     # other devices, plain TV (GPU_FUSED) in one launch per Chambolle iteration (GPU_ONE_LAUNCH): the
     # projection with u = f - b and the residual, which first makes the TV's last primal step and the
-    # dual update of the iteration before, and the TV without that last launch (1 + 1 + 8)
-    assert GPU_FUSED == 0 and GPU_ONE_LAUNCH == 1 and _launches_per_iteration(rig, g, device) == 10
-    # the same TV in one launch per two iterations (1 + 1 + 4)
+    # dual update of the iteration before, and the TV without that last launch: its first two iterations
+    # in one launch (tv_first2), then one tv_step per iteration (1 + 1 + 7)
+    assert GPU_FUSED == 0 and GPU_ONE_LAUNCH == 1 and _launches_per_iteration(rig, g, device) == 9
+    # the same TV in one launch per two iterations (1 + tv_first2 + 3 tv_step2 + 1 tv_step)
     monkeypatch.setattr(tv_module, "GPU_ONE_LAUNCH", 2)
     assert _launches_per_iteration(rig, g, device) == 6
     # the same TV in two launches per iteration (1 + 1 + 8 + 8)

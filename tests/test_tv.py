@@ -127,8 +127,8 @@ def test_a_plain_sequence_names_its_launch_mode_and_dual_copies(device):
 
     tv = TV(iterations=4, one_launch=2)
     x = cla.zeros(device.queue, (3, 4, 5), np.float32)
-    prog, grids, arrays, one = tv._plain_parts(x, tv._steps(device.queue, [0.2], x.dtype), cla.empty_like(x), None)
-    assert one == 2 and len(arrays.p) == 2
+    prog, grids, arrays, plan = tv._plain_parts(x, tv._steps(device.queue, [0.2], x.dtype), cla.empty_like(x), None)
+    assert plan["one_launch"] == 2 and len(arrays.p) == 2
     with pytest.raises(ValueError, match="one_launch must be 0, 1 or 2, got 3"):
         tv_plain.sequence(prog, grids, arrays, 4, 3)
     with pytest.raises(ValueError, match="one_launch=0 takes 1 dual copies, got 2"):
@@ -150,6 +150,43 @@ def test_two_iterations_per_launch_equal_one_per_launch(device, dtype, rng, shap
     one = TV(iterations=iterations, temporal_weight=temporal_weight, one_launch=1).denoise(x, weights).get()
     pairs = TV(iterations=iterations, temporal_weight=temporal_weight, one_launch=2).denoise(x, weights).get()
     np.testing.assert_array_equal(pairs, one)
+
+
+@pytest.mark.parametrize("shape", [(3, 6, 7, 9), (2, 1, 9, 6), (2, 5, 1, 8), (2, 4, 6, 1), (1, 3, 5, 67)])
+@pytest.mark.parametrize("temporal_weight", [2.5, 0.0])
+@pytest.mark.parametrize("one_launch", [1, 2])
+@pytest.mark.parametrize("iterations", [3, 4, 7])
+def test_the_first_two_iterations_in_one_launch_equal_two_launches(
+    device, dtype, rng, monkeypatch, shape, temporal_weight, one_launch, iterations
+):
+    # tv_first2 steps the dual of the voxels around its own from p = 0 itself: what tv_dual_first and
+    # then tv_step compute, so the same values, on a batch with per-set weights (one of them 0)
+    import pyopencl.array as cla
+
+    from rsocl.device.context import Device
+    from rsocl_plugins import tv as tv_module
+
+    x = cla.to_device(device.queue, rng.random(shape).astype(dtype))
+    weights = np.array([0.3, 0.0, 1.5])[: shape[0]]
+    tv = TV(iterations=iterations, temporal_weight=temporal_weight, one_launch=one_launch)
+    assert _first_launch(tv, x, weights) == ("tv_dual_first", {1: iterations, 2: 2 + (iterations - 1) // 2}[one_launch])
+    separate = tv.denoise(x, weights).get()
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))  # GPU_FIRST_TWO
+    assert _first_launch(tv, x, weights) == ("tv_first2", {1: iterations - 1, 2: 2 + (iterations - 2) // 2}[one_launch])
+    np.testing.assert_array_equal(tv.denoise(x, weights).get(), separate)
+    monkeypatch.setattr(tv_module, "GPU_FIRST_TWO", False)
+    assert _first_launch(tv, x, weights)[0] == "tv_dual_first"
+
+
+def _first_launch(tv, x, weights):
+    """The name of the first kernel of ``tv``'s plain sequence on ``x`` and the count of its launches."""
+    import pyopencl.array as cla
+
+    from rsocl_plugins import tv_plain
+
+    prog, grids, arrays, plan = tv._plain_parts(x, tv._steps(x.queue, weights, x.dtype), cla.empty_like(x), None)
+    names = [k.function_name for k, *_ in tv_plain.sequence(prog, grids, arrays, tv.iterations, **plan)]
+    return names[0], len(names) // len(grids)
 
 
 @pytest.mark.parametrize("one_launch", [0, 1, 2])
