@@ -33,7 +33,7 @@ TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} 
 SEARCH_CAP=${SEARCH_CAP:-30} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
 KTIME_CAP=${KTIME_CAP:-20}
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
-PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --tv-one-launch 2 --variant-cases paper size64}
+PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --variant-cases paper batch64 size64 size256}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
 T0=$(date +%s)
 stamp() { echo "=== [$(( $(date +%s) - T0 )) s] $*"; }

@@ -125,19 +125,40 @@ class Compiled:
 RUNNERS = {"eager": Eager, "graph": Graph, "compile": Compiled}
 #: Name prefix of an rsocl run with the TV's ``one_launch`` option set (``--tv-one-launch``).
 VARIANT = "rsocl one_launch="
+#: Name of the rsocl run with the TV's first two iterations in two launches (``--no-first-two``:
+#: ``rsocl_plugins.tv.GPU_FIRST_TWO`` off).
+NO_FIRST_TWO = "rsocl first2=off"
+
+
+def is_variant(impl) -> bool:
+    """Whether ``impl`` names one of rsocl's runs beside its defaults."""
+    return impl.startswith(VARIANT) or impl == NO_FIRST_TWO
 
 
 def variant_names(args, name):
-    """rsocl's runs beside its defaults in case ``name``: one per ``--tv-one-launch`` value, in the cases of
-    ``--variant-cases``."""
+    """rsocl's runs beside its defaults in case ``name``: one per ``--tv-one-launch`` value, and
+    :data:`NO_FIRST_TWO` with ``--no-first-two``, in the cases of ``--variant-cases``."""
     if "all" not in args.variant_cases and name not in args.variant_cases:
         return []
-    return [f"{VARIANT}{n}" for n in dict.fromkeys(args.tv_one_launch)]
+    return [f"{VARIANT}{n}" for n in dict.fromkeys(args.tv_one_launch)] + ([NO_FIRST_TWO] if args.no_first_two else [])
 
 
 def variant_options(impl):
     """``regularizer_options`` of rsocl run ``impl`` (None: the defaults)."""
     return {"one_launch": int(impl[len(VARIANT) :])} if impl.startswith(VARIANT) else None
+
+
+@contextlib.contextmanager
+def variant_context(impl):
+    """Module settings of rsocl run ``impl`` while it runs: ``GPU_FIRST_TWO`` off for :data:`NO_FIRST_TWO`."""
+    import rsocl_plugins.tv as tv_module
+
+    saved = tv_module.GPU_FIRST_TWO
+    tv_module.GPU_FIRST_TWO = saved and impl != NO_FIRST_TWO
+    try:
+        yield
+    finally:
+        tv_module.GPU_FIRST_TWO = saved
 
 
 def cases(args):
@@ -185,14 +206,16 @@ def measure_case(case, args, device, torch_device, tv):
     opts = dict(lam=LAM, eta=ETA, tune=False, device=device)
 
     def run_rsocl(impl="rsocl"):
-        t0 = time.perf_counter()
-        res = rsocl.reconstruct(g, rig, iterations=iterations, regularizer_options=variant_options(impl), **opts)
-        seconds = time.perf_counter() - t0
+        with variant_context(impl):
+            t0 = time.perf_counter()
+            res = rsocl.reconstruct(g, rig, iterations=iterations, regularizer_options=variant_options(impl), **opts)
+            seconds = time.perf_counter() - t0
         return res.datacube, (float(np.max(res.history["time"][-1])) / iterations if per_iteration else seconds)
 
     variants = variant_names(args, name)
     for impl in ["rsocl", *variants]:  # kernel builds
-        rsocl.reconstruct(g, rig, iterations=2, regularizer_options=variant_options(impl), **opts)
+        with variant_context(impl):
+            rsocl.reconstruct(g, rig, iterations=2, regularizer_options=variant_options(impl), **opts)
     record = {"seconds": {impl: [] for impl in ["rsocl", *variants]}, "x": {}, "first": {}, "errors": {}}
     runners, peer = {}, None
     modes = modes_for(name, args, torch_device)
@@ -283,7 +306,7 @@ def ratio_cell(numerator, denominator):
 def tables(done, modes):
     """Markdown lines: times, ratios (rsocl time / peer time; an rsocl variant's time / rsocl's) and the
     equality check."""
-    variants = list(dict.fromkeys(i for _, rec in done for i in rec["seconds"] if i.startswith(VARIANT)))
+    variants = list(dict.fromkeys(i for _, rec in done for i in rec["seconds"] if is_variant(i)))
     others = variants + list(modes)
     heads = [LABELS.get(m, m) for m in others]
     lines = ["## Times (median of the rounds)", "", row(["case", "rsocl"] + heads), row(["---"] * (2 + len(heads)))]
@@ -394,7 +417,15 @@ def main(argv=None):
         help="rsocl runs beside its defaults with the TV's one_launch option at these values (0, 1, 2)",
     )
     parser.add_argument(
-        "--variant-cases", nargs="+", default=["all"], help="cases of the --tv-one-launch runs ('all': every case)"
+        "--no-first-two",
+        action="store_true",
+        help="an rsocl run beside its defaults with the TV's first two iterations in two launches (GPU_FIRST_TWO off)",
+    )
+    parser.add_argument(
+        "--variant-cases",
+        nargs="+",
+        default=["all"],
+        help="cases of the --tv-one-launch and --no-first-two runs ('all': every case)",
     )
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'gpu' / 'peer.md'})")

@@ -1,5 +1,5 @@
-"""``benchmarks/peer.py``'s rsocl runs beside its defaults (``--tv-one-launch``): their columns, their ratio
-to rsocl's defaults and their equality check, with or without torch."""
+"""``benchmarks/peer.py``'s rsocl runs beside its defaults (``--tv-one-launch``, ``--no-first-two``): their
+columns, their ratio to rsocl's defaults and their equality check, with or without torch."""
 
 import sys
 from pathlib import Path
@@ -30,6 +30,35 @@ def test_one_launch_variant_has_its_column_ratio_and_check(tmp_path):
     assert len(same) == 1
     delta, largest = same[0].split("|")[3].split(" dB, ")
     assert abs(float(delta)) < 1e-4 and float(largest) < 1e-5  # the same iterations, TV launched differently
+
+
+def test_no_first_two_variant_runs_the_tv_first_iteration_on_its_own(tmp_path, monkeypatch):
+    import rsocl_plugins.tv as tv_module
+    from rsocl.device.context import Device
+
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))  # where GPU_FIRST_TWO applies
+    seen = []
+    real = tv_module.TV._plain_parts
+
+    def spy(self, *args):
+        parts = real(self, *args)
+        seen.append(parts[3]["first2"])
+        return parts
+
+    monkeypatch.setattr(tv_module.TV, "_plain_parts", spy)
+    with peer.variant_context(peer.NO_FIRST_TWO):
+        assert tv_module.GPU_FIRST_TWO is False
+    with peer.variant_context("rsocl"):
+        assert tv_module.GPU_FIRST_TWO is True
+    assert tv_module.GPU_FIRST_TWO is True and peer.is_variant(peer.NO_FIRST_TWO) and not peer.is_variant("rsocl")
+    out = tmp_path / "peer.md"
+    peer.main([*ARGS, "--no-first-two", "--out", str(out)])
+    assert True in seen and False in seen
+    lines = out.read_text().splitlines()
+    assert any(line.startswith("| case | rsocl first2=off / rsocl") for line in lines)
+    same = [line for line in lines if line.startswith("| one set 8×8") and " dB, " in line]
+    delta, largest = same[0].split("|")[3].split(" dB, ")
+    assert abs(float(delta)) < 1e-4 and float(largest) < 1e-5
 
 
 def test_variant_cases_leave_other_cases_without_the_variant(tmp_path):
