@@ -153,3 +153,24 @@ def test_which_regularizers_combine_for_a_batch():
     assert TV.for_sets([TV(temporal_weight=0.0), TV(temporal_weight=3.0)]) is None  # 2-D and 3-D
     assert TV.for_sets([one, DCT()]) is None
     assert DCT.for_sets([DCT(), DCT()]) is not None
+
+
+@pytest.mark.parametrize("blocks", [1, 3])
+def test_stacks_repeat_their_block_and_grow_from_a_smaller_stack(device, blocks):
+    # the batch's stacks: count copies of a block of arrays end to end, made by doubling, or grown from
+    # the stack of an earlier, smaller batch; a stack of another shape is not grown from
+    from types import SimpleNamespace
+
+    op = SimpleNamespace(queue=device.queue)
+    host = np.random.default_rng(blocks).random((blocks, 3, 5)).astype(np.float32)
+    block = [cla.to_device(device.queue, a) for a in host]
+    last = None
+    for count in (1, 2, 3, 4, 7, 8, 9):
+        fresh = BatchedFolds._repeat(op, block, count)
+        np.testing.assert_array_equal(fresh.get(), np.tile(host, (count, 1, 1)))
+        grown = BatchedFolds._repeat(op, block, count, last)
+        np.testing.assert_array_equal(grown.get(), np.tile(host, (count, 1, 1)))
+        last = grown
+    np.testing.assert_array_equal(BatchedFolds._repeat(op, block, 2, last).get(), np.tile(host, (2, 1, 1)))
+    other = cla.zeros(device.queue, (2, 3, 4), np.float32)
+    np.testing.assert_array_equal(BatchedFolds._repeat(op, block, 2, other).get(), np.tile(host, (2, 1, 1)))

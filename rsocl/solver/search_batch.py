@@ -71,7 +71,8 @@ class BatchedFolds:
 
     The batch (its stacked snapshots, warm starts, weights and predictions, and one
     :class:`~rsocl.solver.admm.ADMM` of one set per candidate and fold) is made for the first batch of
-    its size and restarted for the next ones.
+    its size and restarted for the next ones; a batch of another size grows its stacks from the last
+    one's. A runner serves one search: the same snapshots and folds in every call.
 
     Parameters
     ----------
@@ -86,14 +87,29 @@ class BatchedFolds:
 
     def __init__(self, capacity: int | None = None):
         self.solver, self.candidates, self.capacity = None, 0, capacity
+        self.g = self.x0 = self.weights = self.predictions = None
 
-    def _stack(self, op, arrays):
-        """One device array of the ``arrays`` (device arrays of one shape) end to end."""
+    @staticmethod
+    def _repeat(op, block, count, old=None):
+        """One device array of ``count`` copies of ``block`` (device arrays of one shape) end to end: the
+        block's arrays copied in once, or ``old`` (this function's result for fewer copies) copied whole,
+        then the filled part copied after itself until full: ``len(block) + log2(count)`` copies or so,
+        not ``count x len(block)``."""
         import pyopencl as cl
 
-        out = pool.empty(op.queue, (len(arrays),) + arrays[0].shape, arrays[0].dtype)
-        for i, a in enumerate(arrays):
-            cl.enqueue_copy(op.queue, out.data, a.data, dst_offset=i * a.nbytes, byte_count=a.nbytes)
+        size, total = block[0].nbytes, count * len(block)
+        out = pool.empty(op.queue, (total,) + block[0].shape, block[0].dtype)
+        if old is not None and old.shape[1:] == block[0].shape and old.shape[0] <= total:
+            cl.enqueue_copy(op.queue, out.data, old.data, byte_count=old.nbytes)
+            filled = old.shape[0]
+        else:
+            for i, a in enumerate(block):
+                cl.enqueue_copy(op.queue, out.data, a.data, dst_offset=i * size, byte_count=size)
+            filled = len(block)
+        while filled < total:  # whole blocks: filled and total are multiples of len(block)
+            step = min(filled, total - filled)
+            cl.enqueue_copy(op.queue, out.data, out.data, dst_offset=filled * size, byte_count=step * size)
+            filled += step
         return out
 
     def __call__(self, op, g_device, folds, reg, lam, *, eta, projection, iterations):
@@ -129,11 +145,13 @@ class BatchedFolds:
     def _run(self, op, g_device, folds, reg, lams, eta, projection, iterations):
         count, F = len(lams), len(folds)
         if self.solver is None or self.candidates != count:
-            self.solver = self.g = self.x0 = self.weights = self.predictions = None  # freed before the new batch
-            self.g = self._stack(op, [g_device] * (count * F))
-            self.x0 = self._stack(op, [fold.x0 for fold in folds] * count)
-            self.weights = self._stack(op, [fold.weights for fold in folds] * count)
-            self.predictions = self._stack(op, [fold.start_prediction for fold in folds] * count)
+            self.solver = None  # freed before the new batch; the stacks grow from the last batch's
+            stacks = (self.g, self.x0, self.weights, self.predictions)
+            blocks = [[g_device]] + [[getattr(f, key) for f in folds] for key in ("x0", "weights", "start_prediction")]
+            self.g, self.x0, self.weights, self.predictions = (
+                self._repeat(op, block, count * F // len(block), old) for block, old in zip(blocks, stacks)
+            )
+            stacks = None
             valid = np.stack([np.asarray(fold.fit, bool) for fold in folds] * count)
             per_set = np.repeat(np.asarray(lams, np.float64), F)
             self.solver = ADMM(op, self.g, reg, lam=per_set, eta=eta, projection=projection, x0=self.x0, valid=valid)
