@@ -11,7 +11,8 @@
  * from p = 0, is one kernel (tv_dual_first). Or one kernel per iteration (tv_step) from one
  * copy of p into another, each work item computing the primal of its voxel and of the three
  * next ones itself; or one per two iterations (tv_step2), each work item also stepping the dual
- * of the voxels around it. Needs common.cl. */
+ * of the voxels around it; with these two, the first two iterations from p = 0 may be one kernel
+ * (tv_first2). Needs common.cl. */
 #ifndef TEMPORAL
 #define TEMPORAL 1
 #endif
