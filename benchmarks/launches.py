@@ -63,11 +63,15 @@ TRIVIAL = "__kernel void trivial(__global float *x) { x[get_global_id(0)] += 1.0
 
 @contextmanager
 def counting():
-    """Count the enqueues of :data:`COUNTED` while the block runs; yields a dict ``{name: count}``."""
+    """Count the enqueues of :data:`COUNTED` while the block runs; yields a dict ``{name: count}``. Kernel
+    launches made by ``pyopencl.array`` arithmetic (its generated invokers call ``pyopencl._cl`` directly)
+    count too."""
     import pyopencl as cl
+    import pyopencl._cl as _cl
 
     counts = dict.fromkeys(COUNTED, 0)
     saved = {name: getattr(cl, name) for name in COUNTED}
+    raw = _cl.enqueue_nd_range_kernel
 
     def wrap(name, fn):
         def counted(*args, **kwargs):
@@ -78,11 +82,13 @@ def counting():
 
     for name, fn in saved.items():
         setattr(cl, name, wrap(name, fn))
+    _cl.enqueue_nd_range_kernel = wrap("enqueue_nd_range_kernel", raw)
     try:
         yield counts
     finally:
         for name, fn in saved.items():
             setattr(cl, name, fn)
+        _cl.enqueue_nd_range_kernel = raw
 
 
 def trivial_launch_us(device, launches: int = 2000) -> float:

@@ -10,6 +10,7 @@
  *                                             [slot >= 0 (global offset): first the residual of theta]
  *   admm_difference (one work item per voxel) u = f - b     (input of the denoiser)
  *   admm_blend      (one work item per voxel) theta = x0 + alpha (theta - x0)  (after the last iteration)
+ *   admm_pull       (one work item per voxel) theta += w (x0 - theta), w per set and pixel  (the static fix)
  *
  * A batch of sets lies end to end (theta, b, f, u: [B][T][m][n]; g: [B][K][m][n]); every kernel
  * takes the whole batch in one launch, the set as the last grid dimension. Per set: eta, and
@@ -220,4 +221,14 @@ __kernel void admm_blend(__global real *theta, __global const real *x0, real alp
     size_t i = get_global_id(0);
     real start = x0[i];
     theta[i] = start + alpha * (theta[i] - start);
+}
+
+/* The estimate pulled towards the start x0 pixel by pixel (rsocl.solver.static): theta += w (x0 - theta),
+ * w per set and pixel, [B][m][n]; mn pixels per sub-frame, per_set voxels per set. */
+__kernel void admm_pull(__global real *theta, __global const real *x0, __global const real *w, long per_set, long mn)
+{
+    size_t i = get_global_id(0);
+    real weight = w[(i / (size_t)per_set) * (size_t)mn + i % (size_t)mn];
+    real now = theta[i];
+    theta[i] = now + weight * (x0[i] - now);
 }

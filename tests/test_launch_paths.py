@@ -2,7 +2,7 @@
 launches per Chambolle iteration) and the ones of other devices (the dual update and u = f - b folded
 into the TV's and the projection's launches; the plain TV in one launch per iteration, or the fused
 TV), run here by making the device read as a GPU. Against the NumPy reference ADMM; the launch counts
-per iteration of each."""
+per iteration of each, and that a self-tuned call launches no ``pyopencl.array`` arithmetic."""
 
 from contextlib import contextmanager
 
@@ -152,3 +152,30 @@ def test_memory_counts_the_dual_buffers_of_the_devices_choice(device, monkeypatc
     assert TV().workspace_bytes(shape, np.float32, device=device) == TV(fused=3).workspace_bytes(shape, np.float32)
     assert TV(fused=0).workspace_bytes(shape, np.float32, device=device) == one_launch
     assert TV(fused=0, one_launch=0).workspace_bytes(shape, np.float32, device=device) == plain
+
+
+@pytest.mark.parametrize("cpu", [True, False])
+def test_a_self_tuned_call_launches_only_rsocl_kernels(problem, device, monkeypatch, cpu):
+    """Every launch of a self-tuned call (search, run, static fix, blend) goes through rsocl's kernels, none
+    through ``pyopencl.array`` arithmetic or its generated invokers (temporaries, launches no count sees)."""
+    import pyopencl as cl
+    import pyopencl._cl as _cl
+
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: cpu))
+    rig = problem[0]
+    image = np.random.default_rng(12).random(rig.shape)
+    g = ref.forward(rig, np.repeat(image[None], rig.T, axis=0))  # a still scene: the static fix runs
+    original, counts = cl.enqueue_nd_range_kernel, {"rsocl": 0, "other": 0}
+
+    def counted(name):
+        def enqueue(*args, **kwargs):
+            counts[name] += 1
+            return original(*args, **kwargs)
+
+        return enqueue
+
+    monkeypatch.setattr(cl, "enqueue_nd_range_kernel", counted("rsocl"))
+    monkeypatch.setattr(_cl, "enqueue_nd_range_kernel", counted("other"))
+    result = rsocl.reconstruct(g, rig, iterations=12, device=device)
+    assert counts["rsocl"] > 12 and counts["other"] == 0
+    assert result.params["tuning"] is not None and result.params["static_pixels"] > 0
