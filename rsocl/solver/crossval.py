@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.device.reduction import sum_sq_diff
+from rsocl.device.reduction import sum_sq_diff_async
 from rsocl.solver.folds import make_fold, run_folds
 from rsocl.solver.holdout import default_patterns, fold_masks
 
@@ -237,11 +237,15 @@ def tune_parameters(
     for (block, _), (fit, scored) in zip(patterns, fold_masks(rig.shape, rig.n_channels, usable, patterns)):
         folds.append(make_fold(op, g_device, g, block, fit, scored))
         held_out += int(scored.sum())
-    scale = sum(sum_sq_diff(g_device, weights=fold.weights) for fold in folds)
-    start_err = sum(
-        sum_sq_diff(g_device, fold.start_prediction, weights=fold.weights)  # |g - H x0|^2
+    # held-out sums of |g|^2 and |g - H x0|^2, enqueued now and read when the first candidate is scored,
+    # so the host enqueues the first round meanwhile; added in fold order
+    pending = [
+        (
+            sum_sq_diff_async(g_device, weights=fold.weights),
+            sum_sq_diff_async(g_device, fold.start_prediction, weights=fold.weights),
+        )
         for fold in folds
-    )
+    ]
     tunable = space.tunable
     current = {
         "lam": lams[len(lams) // 2],
@@ -292,11 +296,12 @@ def tune_parameters(
                 projection=projection,
                 iterations=iterations,
             )
+        scale = sum(p[0].result() for p in pending)  # PendingSum reads once
         value = float(math.sqrt(err / scale)) if scale > 0 else float(math.sqrt(err))
         if not math.isfinite(value):
             value = math.inf
         scores[key] = value
-        blends[key] = _blend(start_err, moved, err)
+        blends[key] = _blend(sum(p[1].result() for p in pending), moved, err)
         candidates.append({**preset, **point, "score": value, "blend": blends[key]})
         if bar is not None:
             bar.update(1)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rsocl.device import pool
-from rsocl.device.reduction import sum_sq_diff
+from rsocl.device.reduction import sum_sq_diff_async
 from rsocl.model.interpolation_device import interp3d_device
 from rsocl.solver.admm import ADMM
 
@@ -46,8 +46,12 @@ def run_folds(op, g_device, folds, reg, lam, *, eta, projection, iterations):
         for _ in range(iterations):
             solver.step()
         op.forward_into(solver.theta, solver.hx)
-        err += sum_sq_diff(g_device, solver.hx, weights=fold.weights)
-        moved += sum_sq_diff(solver.hx, fold.start_prediction, weights=fold.weights)
+        pending = (  # both enqueued before the host waits
+            sum_sq_diff_async(g_device, solver.hx, weights=fold.weights),
+            sum_sq_diff_async(solver.hx, fold.start_prediction, weights=fold.weights),
+        )
+        err += pending[0].result()
+        moved += pending[1].result()
     return err, moved
 
 

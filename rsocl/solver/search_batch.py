@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from rsocl.device import pool
-from rsocl.device.reduction import sum_sq_diff
+from rsocl.device.reduction import sum_sq_diff_async
 from rsocl.solver.admm import ADMM
 
 __all__ = ["BatchedFolds", "batches_pay", "batch_bytes", "candidate_capacity", "CANDIDATES", "CANDIDATE_VOXELS"]
@@ -163,8 +163,11 @@ class BatchedFolds:
             solver.step()
         op.forward_into(solver.theta, solver.hx)
         sets = count * F
-        errs = sum_sq_diff(self.g, solver.hx, weights=self.weights, sets=sets).tolist()
-        moved = sum_sq_diff(solver.hx, self.predictions, weights=self.weights, sets=sets).tolist()
+        pending = (  # both enqueued before the host waits: one wait for the batch
+            sum_sq_diff_async(self.g, solver.hx, weights=self.weights, sets=sets),
+            sum_sq_diff_async(solver.hx, self.predictions, weights=self.weights, sets=sets),
+        )
+        errs, moved = (p.result().tolist() for p in pending)
         out = []
         for c in range(count):
             err_sum = moved_sum = 0.0
