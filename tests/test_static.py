@@ -50,7 +50,7 @@ def test_the_static_fix_pulls_static_pixels_towards_the_start(device, dtype, rng
     np.testing.assert_array_equal(solver.theta.get()[kept], theta[kept])
 
 
-def test_the_static_fix_needs_a_start_of_the_estimates_shape(device, rng):
+def test_the_pull_needs_a_start_and_weights_of_the_estimates_shape(device, rng):
     import pyopencl.array as cla
 
     from rsocl.solver.admm import ADMM
@@ -61,5 +61,7 @@ def test_the_static_fix_needs_a_start_of_the_estimates_shape(device, rng):
     op = RollingShutterOperator(rig, device=device)
     solver = ADMM(op, cla.to_device(op.queue, g.astype(op.dtype)), TV(iterations=2), lam=0.1, eta=0.2)
     start = cla.to_device(op.queue, np.zeros((rig.T - 1,) + rig.shape, op.dtype))
-    with pytest.raises(ValueError, match="start must match theta"):
+    with pytest.raises(ValueError, match="x0 must match theta"):
         static_fix(solver, start, g, 0.5)
+    with pytest.raises(ValueError, match=r"weights must be \(1, 9, 12\), got \(9, 12\)"):
+        solver.pull_towards(cla.to_device(op.queue, np.zeros((rig.T,) + rig.shape, op.dtype)), np.zeros(rig.shape))

@@ -279,14 +279,28 @@ class ADMM:
     def blend_towards(self, x0, alpha: float):
         """``theta = x0 + alpha (theta - x0)`` (enqueued): the estimate moved back towards the start ``x0``
         (a device array of ``theta``'s shape), ``alpha`` in [0, 1] (1: unchanged)."""
+        alpha = self.theta.dtype.type(check.in_range("blend", alpha, 0.0, 1.0))
+        self._per_voxel(self.program.admm_blend, x0, alpha)
+
+    def pull_towards(self, x0, weights: np.ndarray):
+        """``theta += w (x0 - theta)`` (enqueued), ``w`` per set and pixel: ``weights`` ``(sets, m, n)``, each
+        in [0, 1] (0: unchanged); ``x0`` a device array of ``theta``'s shape."""
+        weights = np.ascontiguousarray(weights, dtype=self.theta.dtype)
+        if weights.shape != (self.sets,) + self.op.domain_shape[1:]:
+            raise ValueError(f"weights must be {(self.sets,) + self.op.domain_shape[1:]}, got {weights.shape}")
+        w = pool.to_device(self.op.queue, weights)
+        self._per_voxel(self.program.admm_pull, x0, w.data, np.int64(self.per_set), np.int64(weights[0].size))
+
+    def _per_voxel(self, kernel, x0, *args):
+        """Launch ``kernel(theta, x0, *args)`` with one work item per voxel of the batch."""
         if x0.shape != self.theta.shape or x0.dtype != self.theta.dtype:
             raise ValueError(
                 f"x0 must match theta ({self.theta.shape}, {self.theta.dtype}), got {x0.shape}, {x0.dtype}"
             )
-        alpha = self.theta.dtype.type(check.in_range("blend", alpha, 0.0, 1.0))
-        dev, kernel = self.op.device, self.program.admm_blend
-        for gsize, lsize, offset in element_launches(self.sets * self.per_set, dev.group_limit(kernel, cap=64)):
-            kernel(self.op.queue, gsize, lsize, self.theta.data, x0.data, alpha, global_offset=offset)
+        for gsize, lsize, offset in element_launches(
+            self.sets * self.per_set, self.op.device.group_limit(kernel, cap=64)
+        ):
+            kernel(self.op.queue, gsize, lsize, self.theta.data, x0.data, *args, global_offset=offset)
 
     def residual(self):
         """Relative data residual ``‖g - H theta‖ / ‖g‖`` over the valid snapshot pixels (one per set

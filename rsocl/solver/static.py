@@ -72,36 +72,9 @@ def static_fix(solver, start, g: np.ndarray, weight: float):
     weight : float
         In [0, 1]; 0 leaves the estimate as it is.
     """
-    theta = solver.theta
     g = np.asarray(g)
     masks = np.stack([static_mask(one) for one in g]) if g.ndim == 4 else static_mask(g)[None]
     counts = [int(m.sum()) for m in masks]
     if weight > 0 and any(counts):
-        _pull(solver, start, (weight * masks).astype(theta.dtype))
+        solver.pull_towards(start, weight * masks)
     return counts if g.ndim == 4 else counts[0]
-
-
-def _pull(solver, start, per_pixel: np.ndarray):
-    """``theta += w (start - theta)`` on ``solver``'s device, ``w`` = ``per_pixel`` ``(sets, m, n)`` of each
-    voxel's set and pixel (one launch per :func:`~rsocl.device.launch.element_launches` range)."""
-    from rsocl.device import pool
-    from rsocl.device.launch import element_launches
-
-    theta, op = solver.theta, solver.op
-    if start.shape != theta.shape or start.dtype != theta.dtype:
-        raise ValueError(f"start must match theta ({theta.shape}, {theta.dtype}), got {start.shape}, {start.dtype}")
-    w = pool.to_device(op.queue, np.ascontiguousarray(per_pixel))
-    kernel = solver.program.admm_pull
-    mn = int(np.prod(per_pixel.shape[1:]))
-    for gsize, lsize, offset in element_launches(theta.size, op.device.group_limit(kernel, cap=64)):
-        kernel(
-            op.queue,
-            gsize,
-            lsize,
-            theta.data,
-            start.data,
-            w.data,
-            np.int64(solver.per_set),
-            np.int64(mn),
-            global_offset=offset,
-        )
