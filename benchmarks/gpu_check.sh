@@ -11,13 +11,13 @@
 #      benchmarks/launch_cost.py (a launch's host time by arguments and grid) and benchmarks/kernel_times.py (an
 #      iteration's device time kernel by kernel, busy against span), both into check.log, capped;
 #   6. benchmarks/call_cost.py where the tree has it (a small call with device buffers pooled or made each call), capped;
-#   7. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run), capped;
+#   7. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run, two scenes), capped;
 #   8. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under cProfile.
 # Eight files go to $OUT (the device tool's folder that comes back, at most 8 files; ./out/gpu elsewhere): check.log
 # (every step but the tests), tests.log, blocks.md, peer.md, launches.md, call_cost.md, search_launches.md, profile.txt.
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (30),
+# Knobs: TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (45),
 # PROFILE_CAP (20), BLOCKS_CAP (80), COST_CAP (20), KTIME_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
@@ -30,7 +30,7 @@ PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
 TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
-SEARCH_CAP=${SEARCH_CAP:-30} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
+SEARCH_CAP=${SEARCH_CAP:-45} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
 KTIME_CAP=${KTIME_CAP:-20}
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
 PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --variant-cases paper batch64 size64 size256}
