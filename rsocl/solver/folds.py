@@ -35,8 +35,9 @@ class Fold:
 def run_folds(op, g_device, folds, reg, lam, *, eta, projection, iterations):
     """``(err, moved)``: one candidate (regularizer ``reg``, ``lam``) run ``iterations`` ADMM steps on each
     fold in turn, its held-out sums of squares ``‖g - H theta‖²`` and ``‖H theta - H x0‖²`` added over the
-    folds in order. Each fold keeps its solver and restarts it for the next candidate."""
-    err = moved = 0.0
+    folds in order (read once every fold is enqueued). Each fold keeps its solver and restarts it for the
+    next candidate."""
+    pending = []  # each fold's sums, read after every fold is enqueued; added in fold order
     for fold in folds:
         if fold.solver is None:
             fold.solver = ADMM(op, g_device, reg, lam=lam, eta=eta, projection=projection, x0=fold.x0, valid=fold.fit)
@@ -46,12 +47,16 @@ def run_folds(op, g_device, folds, reg, lam, *, eta, projection, iterations):
         for _ in range(iterations):
             solver.step()
         op.forward_into(solver.theta, solver.hx)
-        pending = (  # both enqueued before the host waits
-            sum_sq_diff_async(g_device, solver.hx, weights=fold.weights),
-            sum_sq_diff_async(solver.hx, fold.start_prediction, weights=fold.weights),
+        pending.append(
+            (
+                sum_sq_diff_async(g_device, solver.hx, weights=fold.weights),
+                sum_sq_diff_async(solver.hx, fold.start_prediction, weights=fold.weights),
+            )
         )
-        err += pending[0].result()
-        moved += pending[1].result()
+    err = moved = 0.0
+    for fold_err, fold_moved in pending:
+        err += fold_err.result()
+        moved += fold_moved.result()
     return err, moved
 
 
