@@ -12,6 +12,7 @@ import rsocl
 from rsocl.analysis.metrics import psnr
 from rsocl.cli.main import main
 from rsocl.common import memory
+from rsocl.model import reference as ref
 from rsocl.model.curvature import default_scale
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.scenes import builtin_scene
@@ -198,6 +199,22 @@ def test_a_run_that_never_moved_is_an_error_naming_eta_lam_and_the_range():
         rsocl.reconstruct(g, rig, eta=1e30, lam=0.1, tune=False)
     with pytest.raises(FloatingPointError, match=r"never moved in set\(s\) \[1\]"):  # per set of a batch
         rsocl.reconstruct(np.stack([g, g]), rig, eta=[0.2, 1e30], lam=0.1, tune=False, iterations=4)
+
+
+@pytest.mark.parametrize("eta", [0.0, None])
+def test_a_run_at_its_fixed_point_from_the_first_iteration_is_a_result(eta):
+    """One camera and one sub-frame: the data fix the estimate, GAP (eta = 0) lands on the same point every
+    iteration and its residual stays put; that is not the stall of an eta far above psi."""
+    rig = rsocl.Rig.paper_array(1, (1, 7), t_e=1e-6, t_r=3e-5)
+    assert rig.T == 1
+    g = ref.forward(rig, np.random.default_rng(0).random((rig.T,) + rig.shape))
+    result = rsocl.reconstruct(g, rig, tune=False, iterations=12, eta=eta, lam=0.1)
+    res = np.asarray(result.history["residual"])
+    assert np.all(np.isfinite(result.datacube)) and len(res) == 12 and res[-1] > 0
+    if eta == 0.0:
+        np.testing.assert_allclose(res, res[0], rtol=1e-6)  # still from the first iteration on: a fixed point
+    with pytest.raises(FloatingPointError, match=r"ADMM never moved: .* eta = 1e\+30"):  # far above psi: refused
+        rsocl.reconstruct(g, rig, tune=False, iterations=12, eta=1e30, lam=0.1)
 
 
 def test_a_run_from_the_interpolation_that_never_moved_is_an_error():

@@ -26,7 +26,9 @@ __all__ = ["run_iterations", "collect"]
 #: residual of a zero estimate, if that is larger) has diverged, though still finite.
 GROWTH = 1e3
 #: A run whose residual, over its first this many iterations (or all of a shorter run of at least 2),
-#: stays within :data:`STALL_TOL` of its first value (which is above 0) never moved: it raises.
+#: stays within :data:`STALL_TOL` of its first value (which is above 0) with an ``eta`` above 4 times the
+#: data term's largest curvature ``psi`` never moved: it raises. With a smaller ``eta`` (GAP's 0 among
+#: them) the data step moves the estimate, and a residual that stays put is a fixed point: a result.
 STALL_ITERATIONS = 10
 #: Relative change of the residual under which a run counts as not moving.
 STALL_TOL = 1e-6
@@ -98,13 +100,17 @@ class _History:
 
     def check_stall(self, final=False):
         """Raise ``FloatingPointError`` when the residual (per set) has not moved by :data:`STALL_TOL` from
-        its first value over :data:`STALL_ITERATIONS` records (``final``: over a shorter whole run of >= 2)."""
+        its first value over :data:`STALL_ITERATIONS` records (``final``: over a shorter whole run of >= 2)
+        and that set's ``eta`` is above 4 ``psi`` (:data:`STALL_ITERATIONS`)."""
         count = len(self.values["residual"])
         if count != STALL_ITERATIONS and not (final and 2 <= count < STALL_ITERATIONS):
             return
         res = np.asarray(self.values["residual"], dtype=np.float64)
         first = res[0]
-        still = np.all(np.abs(res - first) <= STALL_TOL * first, axis=0) & (first > 0)
+        psi = float(np.max(self.staged.op.psi))
+        # the fault named below: eta far above the curvature; with a smaller eta a still residual is a fixed point
+        stiff = np.asarray(self.solver.eta, dtype=np.float64) > 4 * psi
+        still = np.all(np.abs(res - first) <= STALL_TOL * first, axis=0) & (first > 0) & stiff
         if not np.any(still):
             return
         where = f" in set(s) {np.flatnonzero(still).tolist()}" if np.ndim(first) else ""
@@ -112,7 +118,6 @@ class _History:
         def shown(values):
             return ", ".join(f"{float(v):.6g}" for v in np.atleast_1d(values))
 
-        psi = float(np.max(self.staged.op.psi))
         low = f"from about psi/2 = {psi / 2:.3g} " if self.settings.projection == "paper" else ""
         raise FloatingPointError(
             f"ADMM never moved{where}: the residual stayed at [{shown(np.atleast_1d(first)[np.atleast_1d(still)])}] "
