@@ -30,6 +30,18 @@ CASES = [
     Bad("simulate-cameras-zero", ["--cameras"], argv=["simulate", "builtin", "--cameras", "0", "--out", "{tmp}/s.h5"]),
     Bad("reconstruct-missing-capture", ["nothing.h5"], argv=["reconstruct", "{tmp}/nothing.h5", "--out", "{tmp}/r.h5"]),
     Bad("api-iterations-zero", ["iterations"], api=_reconstruct(iterations=0)),
+    Bad("api-iterations-a-slip", ["iterations", "<= 1000000", "1000000000000"], api=_reconstruct(iterations=10**12)),
+    Bad("api-tiled-iterations-a-slip", ["iterations", "<= 1000000"], api=_tiled(iterations=10**7)),
+    Bad(
+        "cli-iterations-a-slip",
+        ["--iterations", "[1, 1000000]", "'1e12'"],
+        argv=["demo", "--iterations", "1e12", "--out", "{tmp}/d"],
+    ),
+    Bad(
+        "cli-plan-iterations-a-slip",
+        ["--iterations", "<= 1000000"],
+        argv=["plan", "--iterations", "2000000"],
+    ),
     Bad("api-lam-negative", ["lam"], api=_reconstruct(lam=-1.0)),
     Bad("api-tv-fused-below-the-device-choice", ["fused", "-1"], api=_reconstruct(regularizer_options={"fused": -2})),
     Bad("api-tv-one-launch-above-two", ["one_launch", "2"], api=_reconstruct(regularizer_options={"one_launch": 3})),

@@ -54,7 +54,7 @@ def test_plan_command(capsys):
         (["--sets", "0"], r"--sets must be an integer >= 1, got 0"),
         (["--memory-mib", "-5"], r"--memory-mib must be > 0 MiB, got -5.0"),
         (["--memory-mib", "nan"], r"--memory-mib must be finite"),
-        (["--iterations", "-3"], r"--iterations must be an integer >= 1, got -3"),
+        (["--iterations", "-3"], r"--iterations must be an integer >= 1 and <= 1000000, got -3"),
         (["--blur", "0"], r"--blur must be > 0 pixels, got 0.0"),
     ],
 )

@@ -62,7 +62,7 @@ def default_point(args):
     from rsocl.bench.run import canonical_device
     from rsocl.cli.options import check_datacube_memory, check_rig_memory
     from rsocl.common import validation as check
-    from rsocl.solver.problem import DEFAULTS
+    from rsocl.solver.problem import DEFAULTS, MAX_ITERATIONS
 
     scene = args.scene
     if scene != "builtin":
@@ -75,7 +75,7 @@ def default_point(args):
     for option, value, maximum in (
         ("--cameras", args.cameras, 8),
         ("--shape", args.shape, None),
-        ("--iterations", args.iterations, None),
+        ("--iterations", args.iterations, MAX_ITERATIONS),
         ("--tv-iterations", args.tv_iterations, None),
     ):
         if value is not None:

@@ -268,15 +268,17 @@ def check_solver_args(args) -> None:
 
 
 def iterations_arg(text: str):
-    """``--iterations``: a positive integer or ``auto``."""
+    """``--iterations``: an integer in [1, :data:`~rsocl.solver.problem.MAX_ITERATIONS`] or ``auto``."""
+    from rsocl.solver.problem import MAX_ITERATIONS
+
     if text.strip() == "auto":
         return "auto"
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a positive integer or 'auto', got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer or 'auto', got {text!r}")
+        value = 0
+    if not 1 <= value <= MAX_ITERATIONS:
+        raise argparse.ArgumentTypeError(f"must be an integer in [1, {MAX_ITERATIONS}] or 'auto', got {text!r}")
     return value
 
 

@@ -63,8 +63,9 @@ def cmd_plan(args) -> int:
     """
     from rsocl.common import validation as check
     from rsocl.solver.plan import format_plan, plan
+    from rsocl.solver.problem import MAX_ITERATIONS
 
-    check.positive_int("--iterations", args.iterations)
+    check.positive_int("--iterations", args.iterations, MAX_ITERATIONS)
     check.positive("--blur", args.blur, "pixels")
     regularizer = regularizer_from(args)
     rig = rig_from(args)

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULTS",
     "PAPER_ETA",
+    "MAX_ITERATIONS",
     "Problem",
     "Settings",
     "Staged",
@@ -51,6 +52,9 @@ DEFAULTS: dict = {"iterations": 200, "lam": 0.1, "eta": 0.2, "tv_iterations": 10
 #: the paper's configuration (scaled like the others): about the data term's curvature ``psi`` there
 #: (5.02), below which the diagonal step diverges (measured in ``docs/paper_projection.md``).
 PAPER_ETA = 5.0
+#: Most ADMM iterations a run takes: runs converge within hundreds, and a larger count is a slip
+#: (``10**12`` would run for ever, its search first) that is refused before anything runs.
+MAX_ITERATIONS = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -248,7 +252,9 @@ def check_settings(
     if callback is not None and not callable(callback):
         raise ValueError(f"callback must be callable, got {callback!r}")
     return Settings(
-        iterations=check.positive_int("iterations", DEFAULTS["iterations"] if iterations is None else iterations),
+        iterations=check.positive_int(
+            "iterations", DEFAULTS["iterations"] if iterations is None else iterations, MAX_ITERATIONS
+        ),
         lam=None if lam is None else per_set_value("lam", lam),
         eta=None if eta is None else per_set_value("eta", eta),
         tv_iterations=None if tv_iterations is None else check.positive_int("tv_iterations", tv_iterations),

@@ -73,8 +73,9 @@ def reconstruct(
     regularizer : str or Regularizer
         Registry name (``"tv"``) or an instance; ``regularizer_options``: options of a named one.
     iterations : int or "auto"
-        ADMM iterations (default: the ``quality`` rung's); ``"auto"``: until the residual settles, with a
-        cap (:func:`rsocl.solver.ladder.auto_stop`; the count that ran is ``Result.params["iterations_run"]``).
+        ADMM iterations, 1 to :data:`rsocl.solver.problem.MAX_ITERATIONS` (default: the ``quality`` rung's);
+        ``"auto"``: until the residual settles, with a cap (:func:`rsocl.solver.ladder.auto_stop`; the count
+        that ran is ``Result.params["iterations_run"]``).
         ``tv_iterations``: inner denoiser iterations (default: :data:`rsocl.solver.problem.DEFAULTS`).
     lam, eta : float
         Regularization strength and ADMM penalty, >= 0 (default: the regularizer's
