@@ -273,10 +273,7 @@ def iterations_arg(text: str):
 
     if text.strip() == "auto":
         return "auto"
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
+    value = int(text) if text.strip().lstrip("+-").isdecimal() else 0
     if not 1 <= value <= MAX_ITERATIONS:
         raise argparse.ArgumentTypeError(f"must be an integer in [1, {MAX_ITERATIONS}] or 'auto', got {text!r}")
     return value
