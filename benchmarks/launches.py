@@ -47,11 +47,11 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from provenance import DOCS, header_lines, write_page  # noqa: E402
+from quality_scenes import make_scene  # noqa: E402
 
 import rsocl  # noqa: E402
 from rsocl.device.context import get_device  # noqa: E402
 from rsocl.model import reference as ref  # noqa: E402
-from rsocl.model.scenes import builtin_scene  # noqa: E402
 
 #: The paper's array: exposure and row readout time, seconds.
 T_E, T_R = 0.18e-3, 35e-6
@@ -119,11 +119,11 @@ def small_calls(as_gpu: bool) -> str:
     )
 
 
-def case(m: int):
-    """The paper's 4-camera array on an ``m × m`` crop of the built-in scene: ``(rig, snapshots)``."""
+def case(m: int, scene: str = "builtin"):
+    """The paper's 4-camera array on an ``m × m`` grid of ``scene`` (``benchmarks/quality_scenes.py``; the
+    built-in scene by default): ``(rig, snapshots)``."""
     rig = rsocl.Rig.paper_array(4, (m, m), T_E, T_R)
-    truth = builtin_scene(rig.shape, rig.T)
-    return rig, ref.forward(rig, truth).astype(np.float32)
+    return rig, ref.forward(rig, make_scene(scene, rig.shape, rig.T)).astype(np.float32)
 
 
 #: ``fused`` of the lean path: as many Chambolle iterations per launch as the TV's tile plan allows.

@@ -39,25 +39,17 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import numpy as np  # noqa: E402
-from launches import T_E, T_R, counting, path  # noqa: E402
+from launches import case, counting, path  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality_scenes import available, make_scene  # noqa: E402
+from quality_scenes import available  # noqa: E402
 
 import rsocl  # noqa: E402
 from rsocl.device.context import get_device  # noqa: E402
-from rsocl.model import reference as ref  # noqa: E402
 from rsocl.solver import search_batch  # noqa: E402
 
 #: Scenes of :func:`quality_scenes.make_scene` measured by default: the search's second round of 5 and of 8
 #: candidates on the paper array at 50×50.
 SCENES = ("builtin", "builtin-slow")
-
-
-def case(m: int, scene: str = "builtin"):
-    """The paper's 4-camera array on an ``m × m`` grid of ``scene``: ``(rig, snapshots)``."""
-    rig = rsocl.Rig.paper_array(4, (m, m), T_E, T_R)
-    return rig, ref.forward(rig, make_scene(scene, rig.shape, rig.T)).astype(np.float32)
 
 
 @contextmanager
