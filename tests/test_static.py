@@ -22,18 +22,29 @@ def _snapshots(rig, rng, sets):
     return np.stack(out) if sets else out[0]
 
 
-@pytest.mark.parametrize("sets", [None, 2])
-@pytest.mark.parametrize("weight", [0.0, 0.4, 1.0])
-def test_the_static_fix_pulls_static_pixels_towards_the_start(device, dtype, rng, sets, weight):
+def _solver(device, g, dtype="float32"):
+    """An ADMM on snapshots ``g`` of :func:`_rig`, and its operator."""
     import pyopencl.array as cla
 
     from rsocl.solver.admm import ADMM
     from rsocl_plugins.tv import TV
 
-    rig = rsocl.Rig.paper_array(4, (9, 12), t_e=1e-4, t_r=3e-5)
+    op = RollingShutterOperator(_rig(), device=device, dtype=dtype)
+    return ADMM(op, cla.to_device(op.queue, g.astype(op.dtype)), TV(iterations=2), lam=0.1, eta=0.2), op
+
+
+def _rig():
+    return rsocl.Rig.paper_array(4, (9, 12), t_e=1e-4, t_r=3e-5)
+
+
+@pytest.mark.parametrize("sets", [None, 2])
+@pytest.mark.parametrize("weight", [0.0, 0.4, 1.0])
+def test_the_static_fix_pulls_static_pixels_towards_the_start(device, dtype, rng, sets, weight):
+    import pyopencl.array as cla
+
+    rig = _rig()
     g = _snapshots(rig, rng, sets)
-    op = RollingShutterOperator(rig, device=device, dtype=dtype)
-    solver = ADMM(op, cla.to_device(op.queue, g.astype(op.dtype)), TV(iterations=2), lam=0.1, eta=0.2)
+    solver, op = _solver(device, g, dtype)
     theta = rng.random(solver.theta.shape).astype(op.dtype)
     start = rng.random(solver.theta.shape).astype(op.dtype)
     solver.theta.set(theta)
@@ -53,13 +64,9 @@ def test_the_static_fix_pulls_static_pixels_towards_the_start(device, dtype, rng
 def test_the_pull_needs_a_start_and_weights_of_the_estimates_shape(device, rng):
     import pyopencl.array as cla
 
-    from rsocl.solver.admm import ADMM
-    from rsocl_plugins.tv import TV
-
-    rig = rsocl.Rig.paper_array(4, (9, 12), t_e=1e-4, t_r=3e-5)
+    rig = _rig()
     g = _snapshots(rig, rng, None)
-    op = RollingShutterOperator(rig, device=device)
-    solver = ADMM(op, cla.to_device(op.queue, g.astype(op.dtype)), TV(iterations=2), lam=0.1, eta=0.2)
+    solver, op = _solver(device, g)
     start = cla.to_device(op.queue, np.zeros((rig.T - 1,) + rig.shape, op.dtype))
     with pytest.raises(ValueError, match="x0 must match theta"):
         static_fix(solver, start, g, 0.5)
