@@ -169,12 +169,14 @@ def test_the_first_two_iterations_in_one_launch_equal_two_launches(
     x = cla.to_device(device.queue, rng.random(shape).astype(dtype))
     weights = np.array([0.3, 0.0, 1.5])[: shape[0]]
     tv = TV(iterations=iterations, temporal_weight=temporal_weight, one_launch=one_launch)
+    monkeypatch.setattr(tv_module, "GPU_FIRST_TWO", False)  # on any device
     assert _first_launch(tv, x, weights) == ("tv_dual_first", {1: iterations, 2: 2 + (iterations - 1) // 2}[one_launch])
     separate = tv.denoise(x, weights).get()
-    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))  # GPU_FIRST_TWO
+    monkeypatch.setattr(tv_module, "GPU_FIRST_TWO", True)
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
     assert _first_launch(tv, x, weights) == ("tv_first2", {1: iterations - 1, 2: 2 + (iterations - 2) // 2}[one_launch])
     np.testing.assert_array_equal(tv.denoise(x, weights).get(), separate)
-    monkeypatch.setattr(tv_module, "GPU_FIRST_TWO", False)
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: True))  # a CPU keeps the two launches
     assert _first_launch(tv, x, weights)[0] == "tv_dual_first"
 
 
