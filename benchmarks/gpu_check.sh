@@ -4,21 +4,25 @@
 #   1. install pyopencl and the rest from the carried wheels (.whl/, made by benchmarks/gpu_wheels.sh)
 #      and rsocl from this tree into /tmp/site; point pyopencl's ICD loader at NVIDIA's OpenCL;
 #   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped;
-#   3. benchmarks/blocks.py where the tree has it (the operator kernels' block layout, GPU_BLOCK), capped;
+#   3. benchmarks/blocks.py (the operator kernels' block layout, GPU_BLOCK), capped: only where STEPS names it;
 #   4. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
 #   5. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), then
 #      benchmarks/launch_cost.py (a launch's host time by arguments and grid) and benchmarks/kernel_times.py (an
 #      iteration's device time kernel by kernel, busy against span), both into check.log, capped;
 #   6. benchmarks/call_cost.py where the tree has it (a small call with device buffers pooled or made each call), capped;
-#   7. benchmarks/search_launches.py where the tree has it (the self-tuned default against a fixed run, two scenes), capped;
-#   8. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under cProfile.
+#   7. benchmarks/search_launches.py (the self-tuned default against a fixed run, two scenes), then
+#      benchmarks/tuned_phases.py (where the self-tuned call's time goes, phase by phase), capped;
+#   8. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under
+#      cProfile; then a self-tuned call's host work at 50×50 under cProfile.
 # Eight files go to $OUT (the device tool's folder that comes back, at most 8 files; ./out/gpu elsewhere): check.log
-# (every step but the tests), tests.log, blocks.md, peer.md, launches.md, call_cost.md, search_launches.md, profile.txt.
+# (every step but the tests), tests.log, peer.md, launches.md, call_cost.md, search_launches.md, tuned_phases.md,
+# profile.txt (blocks.md too where STEPS names blocks: then name at most seven of the others' steps).
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (45),
-# PROFILE_CAP (20), BLOCKS_CAP (80), COST_CAP (20), KTIME_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
+# Knobs: STEPS (tests peer launches call search phases profile; blocks may be added) the steps run after the install;
+# TEST_ARGS (none: the whole suite) pytest's arguments; TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (45), PHASES_CAP (40),
+# PROFILE_CAP (30), BLOCKS_CAP (80), COST_CAP (20), KTIME_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -30,8 +34,10 @@ PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
 TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
-SEARCH_CAP=${SEARCH_CAP:-45} PROFILE_CAP=${PROFILE_CAP:-20} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
-KTIME_CAP=${KTIME_CAP:-20}
+SEARCH_CAP=${SEARCH_CAP:-45} PROFILE_CAP=${PROFILE_CAP:-30} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
+KTIME_CAP=${KTIME_CAP:-20} PHASES_CAP=${PHASES_CAP:-40}
+STEPS=" ${STEPS:-tests peer launches call search phases profile} "
+want() { [[ "$STEPS" == *" $1 "* ]]; }
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
 PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --variant-cases paper batch64 size64 size256}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
@@ -76,16 +82,19 @@ export PYTHONPATH="$SITE" RSOCL_DEVICE="$DEVICE" PYTHONSAFEPATH=1
 nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>&1 | tee -a "$OUT/check.log"
 
 # ---------------------------------------------------------------- 2. the test suite on the GPU
+if want tests; then
 stamp "tests (cap ${TEST_CAP} s)" | tee "$OUT/tests.log"
 flags=()
 "$PYTHON" -c "import xdist" 2>/dev/null && flags+=(-n "${TEST_WORKERS:-12}")              # pytest-xdist and pytest-timeout: in the image
 "$PYTHON" -c "import pytest_timeout" 2>/dev/null && flags+=(--timeout 120)
-timeout -k 10 "$TEST_CAP" "$PYTHON" -P -m pytest -q -p no:cacheprovider "${flags[@]}" -rfEs 2>&1 \
+# shellcheck disable=SC2086
+timeout -k 10 "$TEST_CAP" "$PYTHON" -P -m pytest -q -p no:cacheprovider "${flags[@]}" -rfEs ${TEST_ARGS:-} 2>&1 \
     | tee -a "$OUT/tests.log" | tail -n 60
 echo "tests exit status ${PIPESTATUS[0]} (124: stopped at the cap)" | tee -a "$OUT/tests.log"
+fi
 
 # ---------------------------------------------------------------- 3. the block layout of the operator kernels
-if [ -f benchmarks/blocks.py ]; then
+if want blocks; then
     stamp "benchmarks/blocks.py (cap ${BLOCKS_CAP} s)" | tee -a "$OUT/check.log"
     # shellcheck disable=SC2086
     timeout -k 5 "$BLOCKS_CAP" "$PYTHON" -P benchmarks/blocks.py --device "$DEVICE" $BLOCKS_ARGS --out "$OUT/blocks.md" \
@@ -94,28 +103,28 @@ if [ -f benchmarks/blocks.py ]; then
 fi
 
 # ---------------------------------------------------------------- 4. the PyTorch peer
+if want peer; then
 stamp "benchmarks/peer.py $PEER_ARGS (cap ${PEER_CAP} s)" | tee -a "$OUT/check.log"
 # shellcheck disable=SC2086
 timeout -k 10 "$PEER_CAP" "$PYTHON" -P benchmarks/peer.py --device "$DEVICE" --out "$OUT/peer.md" $PEER_ARGS 2>&1 \
     | tee -a "$OUT/check.log" | grep -v '^|' | tail -n 40
 echo "peer exit status ${PIPESTATUS[0]} (124: stopped at the cap; the page holds the cases done)" | tee -a "$OUT/check.log"
+fi
 
 # ---------------------------------------------------------------- 5. launches per iteration
-if [ -f benchmarks/launches.py ]; then
+if want launches; then
     stamp "benchmarks/launches.py (cap ${LAUNCH_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$LAUNCH_CAP" "$PYTHON" -P benchmarks/launches.py --device "$DEVICE" --rounds 3 --paths device gpu-two gpu-pairs lean \
         --out "$OUT/launches.md" \
         >> "$OUT/check.log" 2>&1
     echo "launches exit status $?" | tee -a "$OUT/check.log"
-else
-    stamp "benchmarks/launches.py is not in this tree: skipped"
 fi
-if [ -f benchmarks/launch_cost.py ]; then
+if want launches; then
     stamp "benchmarks/launch_cost.py (cap ${COST_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$COST_CAP" "$PYTHON" -P benchmarks/launch_cost.py --device "$DEVICE" --rounds 5 >> "$OUT/check.log" 2>&1
     echo "launch_cost exit status $?" | tee -a "$OUT/check.log"
 fi
-if [ -f benchmarks/kernel_times.py ]; then
+if want launches; then
     stamp "benchmarks/kernel_times.py (cap ${KTIME_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$KTIME_CAP" "$PYTHON" -P benchmarks/kernel_times.py --device "$DEVICE" --sizes 8 50 128 256 \
         --iterations 40 >> "$OUT/check.log" 2>&1
@@ -123,7 +132,7 @@ if [ -f benchmarks/kernel_times.py ]; then
 fi
 
 # ---------------------------------------------------------------- 6. a small call's cost: buffers pooled or made
-if [ -f benchmarks/call_cost.py ]; then
+if want call; then
     stamp "benchmarks/call_cost.py (cap ${CALL_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$CALL_CAP" "$PYTHON" -P benchmarks/call_cost.py --device "$DEVICE" --sizes 8 50 --rounds 3 --calls 5 \
         --out "$OUT/call_cost.md" >> "$OUT/check.log" 2>&1
@@ -131,14 +140,21 @@ if [ -f benchmarks/call_cost.py ]; then
 fi
 
 # ---------------------------------------------------------------- 7. the self-tuned default against a fixed run
-if [ -f benchmarks/search_launches.py ]; then
+if want search; then
     stamp "benchmarks/search_launches.py (cap ${SEARCH_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$SEARCH_CAP" "$PYTHON" -P benchmarks/search_launches.py --device "$DEVICE" --sizes 50 128 \
         --out "$OUT/search_launches.md" >> "$OUT/check.log" 2>&1
     echo "search_launches exit status $?" | tee -a "$OUT/check.log"
 fi
+if want phases; then
+    stamp "benchmarks/tuned_phases.py (cap ${PHASES_CAP} s)" | tee -a "$OUT/check.log"
+    timeout -k 5 "$PHASES_CAP" "$PYTHON" -P benchmarks/tuned_phases.py --device "$DEVICE" --size 50 --rounds 5 \
+        --out "$OUT/tuned_phases.md" >> "$OUT/check.log" 2>&1
+    echo "tuned_phases exit status $?" | tee -a "$OUT/check.log"
+fi
 
 # ---------------------------------------------------------------- 8. one paper set's host work, profiled
+if want profile; then
 stamp "profile of one paper set (cap ${PROFILE_CAP} s)" | tee -a "$OUT/check.log"
 timeout -k 5 "$PROFILE_CAP" "$PYTHON" -P - > "$OUT/profile.txt" 2>&1 <<'PY'
 import cProfile, pstats, statistics, sys, time
@@ -169,9 +185,21 @@ for _ in range(20):
     rsocl.reconstruct(g, rig, iterations=1, **opts)
 prof.disable()
 pstats.Stats(prof).sort_stats("cumulative").print_stats(45)
+print("=== 5 self-tuned calls at 50×50 (the built-in scene, the default rung)")
+from launches import case
+rig, g = case(50)
+for _ in range(2):
+    rsocl.reconstruct(g, rig)
+prof = cProfile.Profile(); prof.enable()
+for _ in range(5):
+    rsocl.reconstruct(g, rig)
+prof.disable()
+for key in ("tottime", "cumulative"):
+    pstats.Stats(prof).sort_stats(key).print_stats(40)
 PY
 echo "profile exit status $?" | tee -a "$OUT/check.log"
 head -n 2 "$OUT/profile.txt"
+fi
 
 stamp "done; the peer's page:"
 cat "$OUT/peer.md" 2>/dev/null | sed -n '/^## Times/,$p'
