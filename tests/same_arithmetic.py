@@ -14,14 +14,15 @@ import pyopencl as cl
 ULPS = 16
 
 
-def assert_same_arithmetic(actual, desired, device):
+def assert_same_arithmetic(actual, desired, device, precision=None):
     """Assert ``actual`` equals ``desired``: bit for bit where ``device`` is a CPU, else within
-    :data:`ULPS` units in the last place of the largest ``|desired|``. The device's own type decides,
-    whatever a test patched ``Device.is_cpu`` to."""
+    :data:`ULPS` units in the last place of the largest ``|desired|``, in ``precision``, the dtype the
+    values were computed in (None: ``desired``'s; a float32 run's residuals come as float64). The
+    device's own type decides, whatever a test patched ``Device.is_cpu`` to."""
     actual, desired = np.asarray(actual), np.asarray(desired)
     if device.device.type & cl.device_type.CPU:
         np.testing.assert_array_equal(actual, desired)
         return
     assert actual.shape == desired.shape and actual.dtype == desired.dtype, (actual.shape, desired.shape)
-    step = ULPS * np.finfo(desired.dtype).eps * float(np.max(np.abs(desired), initial=0.0))
+    step = ULPS * np.finfo(precision or desired.dtype).eps * float(np.max(np.abs(desired), initial=0.0))
     np.testing.assert_allclose(actual, desired, rtol=0, atol=step)
