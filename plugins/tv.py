@@ -41,10 +41,16 @@ ONE_LAUNCH = -1
 GPU_ONE_LAUNCH = 1
 
 #: On a device that is not a CPU, the plain path's first two Chambolle iterations in one launch
-#: (``tv_first2``, :mod:`rsocl_plugins.tv_plain`) where it takes one launch per iteration or per two: a launch
-#: less per call, and only the first iteration's bytes. On a CPU device its thirteen dual steps per voxel
-#: cost more than the launch it saves. ``benchmarks/launches.py`` times both on a device (docs/launches.md).
+#: (``tv_first2``, :mod:`rsocl_plugins.tv_plain`) where it takes one launch per iteration or per two, on
+#: batches of at most :data:`GPU_FIRST_TWO_VOXELS` voxels: a launch less per call, and only the first
+#: iteration's bytes. Its thirteen dual steps per voxel cost more device time than the launch it saves on
+#: a CPU device and on larger batches. ``benchmarks/launches.py`` and ``benchmarks/peer.py`` time both
+#: (docs/gpu.md).
 GPU_FIRST_TWO = True
+
+#: The most voxels (sets × sub-frames × rows × columns) of a batch whose TV takes ``tv_first2`` under
+#: :data:`GPU_FIRST_TWO`: where a GPU's loop is still bound by its launches (measurements: docs/gpu.md).
+GPU_FIRST_TWO_VOXELS = 1 << 19
 
 
 def device_one_launch(device) -> int:
@@ -347,7 +353,8 @@ class TV(Regularizer):
     def _plain_parts(self, x, steps, out, dual):
         """``(prog, grids, arrays, plan)``: the arguments of :func:`rsocl_plugins.tv_plain.sequence` (and
         :class:`~rsocl_plugins.tv_plain.Bound`) but ``iterations``, ``plan`` its keywords ``one_launch`` and
-        ``first2`` (:data:`GPU_FIRST_TWO` on a device that is not a CPU)."""
+        ``first2`` (:data:`GPU_FIRST_TWO` on a device that is not a CPU, for ``x`` of at most
+        :data:`GPU_FIRST_TWO_VOXELS` voxels)."""
         dev = device_for_queue(x.queue)
         one = self.one_launch_on(dev)
         prog = self._program(x, "tv.cl")
@@ -358,7 +365,8 @@ class TV(Regularizer):
             grids[key] = launches(prog, dev, (x.shape[0] if x.ndim == 4 else 1) * x.shape[-3], *x.shape[-2:])
         p, xnext = self._buffers(x, 2 if one else 1)
         arrays = tv_plain.Arrays(x, out, steps, tuple(p), xnext, None if dual is None else tuple(dual))
-        return prog, grids[key], arrays, {"one_launch": one, "first2": GPU_FIRST_TWO and not dev.is_cpu}
+        first2 = GPU_FIRST_TWO and not dev.is_cpu and x.size <= GPU_FIRST_TWO_VOXELS
+        return prog, grids[key], arrays, {"one_launch": one, "first2": first2}
 
     def _run_plain(self, x, steps, out, dual=None):
         import pyopencl as cl

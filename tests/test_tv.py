@@ -180,6 +180,23 @@ def test_the_first_two_iterations_in_one_launch_equal_two_launches(
     assert _first_launch(tv, x, weights)[0] == "tv_dual_first"
 
 
+def test_the_first_two_iterations_take_one_launch_on_batches_up_to_a_size(device, monkeypatch):
+    # GPU_FIRST_TWO_VOXELS: tv_first2 where a GPU's loop is bound by its launches, two launches on larger batches
+    import pyopencl.array as cla
+
+    from rsocl.device.context import Device
+    from rsocl_plugins import tv as tv_module
+
+    assert tv_module.GPU_FIRST_TWO_VOXELS >= 2 * 55 * 50 * 50  # two paper sets (T = 55, 50×50) take it
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    x = cla.zeros(device.queue, (2, 3, 5, 7), np.float32)
+    tv = TV(iterations=4)
+    monkeypatch.setattr(tv_module, "GPU_FIRST_TWO_VOXELS", x.size)
+    assert _first_launch(tv, x, [0.2, 0.3])[0] == "tv_first2"
+    monkeypatch.setattr(tv_module, "GPU_FIRST_TWO_VOXELS", x.size - 1)
+    assert _first_launch(tv, x, [0.2, 0.3]) == ("tv_dual_first", 4)
+
+
 def _first_launch(tv, x, weights):
     """The name of the first kernel of ``tv``'s plain sequence on ``x`` and the count of its launches."""
     import pyopencl.array as cla
