@@ -39,7 +39,7 @@ KTIME_CAP=${KTIME_CAP:-20} PHASES_CAP=${PHASES_CAP:-40}
 STEPS=" ${STEPS:-tests peer launches call search phases profile} "
 want() { [[ "$STEPS" == *" $1 "* ]]; }
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
-PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --variant-cases paper batch64 size64 size256}
+PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --variant-cases paper size64}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
 T0=$(date +%s)
 stamp() { echo "=== [$(( $(date +%s) - T0 )) s] $*"; }
