@@ -38,6 +38,11 @@ CASES = [
         argv=["demo", "--iterations", "1e12", "--out", "{tmp}/d"],
     ),
     Bad(
+        "cli-iterations-two-signs",
+        ["--iterations", "[1, 1000000]", "'+-5'"],
+        argv=["demo", "--iterations", "+-5", "--out", "{tmp}/d"],
+    ),
+    Bad(
         "cli-plan-iterations-a-slip",
         ["--iterations", "<= 1000000"],
         argv=["plan", "--iterations", "2000000"],

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 
 from rsocl.common.memory import check_host_memory, host_memory_bytes
 from rsocl.model.plausible import RIG_BYTES_PER_PIXEL, check_rig_memory
@@ -273,7 +274,7 @@ def iterations_arg(text: str):
 
     if text.strip() == "auto":
         return "auto"
-    value = int(text) if text.strip().lstrip("+-").isdecimal() else 0
+    value = int(text) if re.fullmatch(r"\s*\+?\d+\s*", text) else 0
     if not 1 <= value <= MAX_ITERATIONS:
         raise argparse.ArgumentTypeError(f"must be an integer in [1, {MAX_ITERATIONS}] or 'auto', got {text!r}")
     return value
