@@ -44,20 +44,20 @@ from quality_scenes import available  # noqa: E402
 import rsocl  # noqa: E402
 from rsocl.device.context import get_device  # noqa: E402
 
-#: (module, attribute, phase) of each function timed as a phase; ``search: rest`` is the search's own time.
+#: (module, attribute, phase) of each function timed as a phase, in the page's order; ``search: rest`` is the
+#: search's own time (``pipeline.tune`` less the folds and batches inside it).
 PHASES = (
     ("rsocl.solver.reconstruct", "prepare", "prepare"),
-    ("rsocl.solver.pipeline", "tune", "search: rest"),
     ("rsocl.solver.crossval", "make_fold", "search: folds"),
     ("rsocl.solver.search_batch", "BatchedFolds._run", "search: batch"),
+    ("rsocl.solver.pipeline", "tune", "search: rest"),
     ("rsocl.solver.pipeline", "interpolation_start", "interpolation"),
     ("rsocl.solver.pipeline", "ADMM", "run: set-up"),
     ("rsocl.solver.pipeline", "run_iterations", "run: iterations"),
     ("rsocl.solver.pipeline", "static_fix", "run: static fix"),
     ("rsocl.solver.pipeline", "collect", "run: collect"),
 )
-ORDER = [label for *_, label in PHASES[:1]] + [label for *_, label in PHASES[2:4]] + ["search: rest"]
-ORDER += [label for *_, label in PHASES[4:]] + ["other"]
+ORDER = [label for *_, label in PHASES] + ["other"]
 
 
 class Recorder:
@@ -90,10 +90,13 @@ class Recorder:
 
 @contextmanager
 def recording(queue):
-    """Patch :data:`PHASES`, ``ADMM.step`` and the kernel enqueue to record into a :class:`Recorder`."""
+    """Patch :data:`PHASES`, ``ADMM.step`` and the kernel enqueue to record into a :class:`Recorder`. Kernel
+    launches made by ``pyopencl.array`` arithmetic (through ``pyopencl._cl``) count too, as in
+    ``launches.counting``."""
     import importlib
 
     import pyopencl as cl
+    import pyopencl._cl as _cl
 
     from rsocl.solver.admm import ADMM
 
@@ -103,9 +106,9 @@ def recording(queue):
         *outer, name = attribute.split(".")
         for part in outer:
             owner = getattr(owner, part)
-        saved.append((owner, name, owner.__dict__[name] if isinstance(owner, type) else getattr(owner, name)))
+        saved.append((owner, name, getattr(owner, name)))
         setattr(owner, name, rec.timed(label, getattr(owner, name)))
-    step, enqueue = ADMM.step, cl.enqueue_nd_range_kernel
+    step, enqueue = ADMM.step, cl.enqueue_nd_range_kernel  # pyopencl's and _cl's: one function
 
     def timed_step(self, *args, **kwargs):
         start = time.perf_counter()
@@ -118,13 +121,13 @@ def recording(queue):
         rec.launches[rec.stack[-1]] += 1
         return enqueue(*args, **kwargs)
 
-    ADMM.step, cl.enqueue_nd_range_kernel = timed_step, counted
+    ADMM.step, cl.enqueue_nd_range_kernel, _cl.enqueue_nd_range_kernel = timed_step, counted, counted
     start = time.perf_counter()
     try:
         yield rec
     finally:
         rec.seconds["other"] += time.perf_counter() - start - rec.inner[0]
-        ADMM.step, cl.enqueue_nd_range_kernel = step, enqueue
+        ADMM.step, cl.enqueue_nd_range_kernel, _cl.enqueue_nd_range_kernel = step, enqueue, enqueue
         for owner, name, value in reversed(saved):
             setattr(owner, name, value)
 
