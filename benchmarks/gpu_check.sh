@@ -118,13 +118,9 @@ if want launches; then
         --out "$OUT/launches.md" \
         >> "$OUT/check.log" 2>&1
     echo "launches exit status $?" | tee -a "$OUT/check.log"
-fi
-if want launches; then
     stamp "benchmarks/launch_cost.py (cap ${COST_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$COST_CAP" "$PYTHON" -P benchmarks/launch_cost.py --device "$DEVICE" --rounds 5 >> "$OUT/check.log" 2>&1
     echo "launch_cost exit status $?" | tee -a "$OUT/check.log"
-fi
-if want launches; then
     stamp "benchmarks/kernel_times.py (cap ${KTIME_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$KTIME_CAP" "$PYTHON" -P benchmarks/kernel_times.py --device "$DEVICE" --sizes 8 50 128 256 \
         --iterations 40 >> "$OUT/check.log" 2>&1
