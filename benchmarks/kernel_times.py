@@ -9,8 +9,10 @@ to the next one's), and reports per kernel: launches per iteration and device µ
 (``CL_PROFILING_COMMAND_START`` to ``END``, median); per iteration: the device's busy time (the
 kernels' sum), the span from the first kernel's start to the last one's end, and the device's idle
 time between them (span less busy). Busy close to span: the device bounds the loop; idle close to span: the host does.
+``--sets`` also runs batches of that many copies of the snapshots in one call, as the self-tuned search's
+batches of candidates run (rows ``50×50, 5 sets``).
 
-    python benchmarks/kernel_times.py [--device SPEC] [--sizes 8 50 128] [--iterations 40] [--as-gpu]
+    python benchmarks/kernel_times.py [--device SPEC] [--sizes 8 50 128] [--sets 1 5] [--iterations 40] [--as-gpu]
         [--out docs/kernel_times.md]
 """
 
@@ -21,6 +23,8 @@ import statistics
 import sys
 from collections import defaultdict
 from pathlib import Path
+
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -91,14 +95,15 @@ def summarise(events: list, iterations: int) -> dict:
     return {"kernels": kernels, "busy": busy, "span": span, "idle": span - busy}
 
 
-def lines(m: int, T: int, s: dict) -> list:
-    """Markdown rows of one ROI."""
+def lines(m: int, sets: int, T: int, s: dict) -> list:
+    """Markdown rows of one ROI and batch of ``sets`` sets."""
     out = []
+    roi = f"{m}×{m}" if sets == 1 else f"{m}×{m}, {sets} sets"
     total = sum(count * us for count, us in s["kernels"].values())
     for name, (count, us) in sorted(s["kernels"].items(), key=lambda kv: -kv[1][0] * kv[1][1]):
-        out.append(f"| {m}×{m} | {T} | `{name}` | {count:g} | {us:.1f} | {100 * count * us / total:.0f} % |")
+        out.append(f"| {roi} | {T} | `{name}` | {count:g} | {us:.1f} | {100 * count * us / total:.0f} % |")
     out.append(
-        f"| {m}×{m} | {T} | **an iteration** | {sum(c for c, _ in s['kernels'].values()):g} | busy {s['busy']:.1f}, "
+        f"| {roi} | {T} | **an iteration** | {sum(c for c, _ in s['kernels'].values()):g} | busy {s['busy']:.1f}, "
         f"span {s['span']:.1f}, idle {s['idle']:.1f} | busy / span {s['busy'] / s['span']:.2f} |"
     )
     return out
@@ -108,6 +113,7 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--device", default=None, help="OpenCL device spec (default: rsocl's choice)")
     p.add_argument("--sizes", type=int, nargs="+", default=[8, 50, 128], help="ROI sides m (m × m), pixels")
+    p.add_argument("--sets", type=int, nargs="+", default=[1], help="sets per call: batches of copies (>= 1)")
     p.add_argument("--iterations", type=int, default=40, help="iterations recorded per ROI (>= 1)")
     p.add_argument("--as-gpu", action="store_true", help="read the device as a GPU (its choices run on a CPU)")
     p.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'kernel_times.md'})")
@@ -116,12 +122,16 @@ def main(argv=None):
         p.error(f"--iterations must be >= 1, got {args.iterations}")
     if any(m < 2 for m in args.sizes):
         p.error(f"--sizes must be >= 2 pixels each, got {args.sizes}")
+    if any(b < 1 for b in args.sets):
+        p.error(f"--sets must be >= 1 each, got {args.sets}")
     device = profiling_device(get_device(args.device))
     rows = []
     with path("gpu" if args.as_gpu else "device"):
         for m in args.sizes:
             rig, g = case(m)
-            rows += lines(m, rig.T, summarise(record(rig, g, device, args.iterations), args.iterations))
+            for sets in args.sets:
+                batch = g if sets == 1 else np.stack([g] * sets)
+                rows += lines(m, sets, rig.T, summarise(record(rig, batch, device, args.iterations), args.iterations))
     page = header_lines(
         "An ADMM iteration's device time, kernel by kernel", device, None if argv is None else [__file__, *argv]
     )
@@ -130,7 +140,8 @@ def main(argv=None):
         f"after the first {SKIP} of one run. Device µs per launch: the median of the kernel's launches "
         "(`CL_PROFILING_COMMAND_START` to `END`). An iteration: busy, the kernels' device time; span, the first "
         "kernel's start to the last one's end; idle, span less busy (µs per iteration). Busy / span near 1: "
-        "the device bounds the loop; near 0: the host does.",
+        "the device bounds the loop; near 0: the host does."
+        + (" Rows `m×m, B sets`: B copies of the snapshots in one call, one batch." if max(args.sets) > 1 else ""),
         "",
         "| ROI | T | kernel | launches per iteration | device µs per launch | share of busy |",
         "|---|---|---|---|---|---|",

@@ -32,7 +32,20 @@ def test_page_names_each_kernel_and_sums_an_iteration(device, tmp_path, as_gpu):
     assert sum(float(row[5].rstrip(" %")) for row in kernels) == pytest.approx(100, abs=len(kernels))
 
 
-@pytest.mark.parametrize("args", [["--iterations", "0"], ["--sizes", "1"]])
+def test_a_batch_takes_the_same_launches_per_iteration_as_one_set(tmp_path):
+    out = tmp_path / "kernel_times.md"
+    kernel_times.main(["--sizes", "6", "--sets", "1", "3", "--iterations", "2", "--as-gpu", "--out", str(out)])
+    text = out.read_text()
+    assert "B copies of the snapshots" in text
+    rows = _rows(text)
+    one = [row for row in rows if row[0] == "6×6"]
+    batch = [row for row in rows if row[0] == "6×6, 3 sets"]
+    assert one and batch and len(one) + len(batch) == len(rows)
+    # the batch runs every kernel once for all its sets
+    assert {row[2]: row[3] for row in batch} == {row[2]: row[3] for row in one}
+
+
+@pytest.mark.parametrize("args", [["--iterations", "0"], ["--sizes", "1"], ["--sets", "0"]])
 def test_bad_counts_are_refused(args, capsys):
     with pytest.raises(SystemExit):
         kernel_times.main(args)
