@@ -19,7 +19,7 @@ def test_page_has_every_phase_and_sums_the_call(tmp_path):
     out = tmp_path / "tuned_phases.md"
     tuned_phases.main(["--size", "12", "--rounds", "1", "--scenes", "builtin", "--out", str(out)])
     rows = _rows(out.read_text())
-    phases, waited, free = rows[:-2], rows[-2], rows[-1]
+    phases, waited, bound, free = rows[:-3], rows[-3], rows[-2], rows[-1]
     assert [row[2] for row in phases] == tuned_phases.ORDER
     by = {row[2]: row for row in phases}
     # the search's phases belong to the tuned call alone; each batch is a GPU-path batch of 50 iterations
@@ -31,6 +31,13 @@ def test_page_has_every_phase_and_sums_the_call(tmp_path):
         parts = [float(row[col]) for row in phases if row[col] != "–"]
         assert sum(parts) == pytest.approx(float(total.strip("*")), rel=0.02, abs=0.05)
     assert "(×" in free[7]
+    # the bound: the tuned call with the batches' time replaced by their host time in step
+    tuned_total, batch = float(waited[7].strip("*")), by["search: batch"]
+    expected = tuned_total - float(batch[7]) + float(batch[9])
+    value, ratio = bound[7].split(" (×")
+    assert float(value.strip("*")) == pytest.approx(expected, rel=0.02, abs=0.05)
+    assert float(ratio.rstrip(")")) == pytest.approx(float(value.strip("*")) / float(waited[4].strip("*")), rel=0.02)
+    assert float(value.strip("*")) < tuned_total
 
 
 @pytest.mark.parametrize("args", [["--size", "4"], ["--rounds", "0"]])
