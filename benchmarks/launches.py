@@ -324,7 +324,7 @@ def passes(m: int, device, rounds: int, reps: int = 100):
 
     def project(difference, slot=-1):  # the solver's own projection, with u = f - b and the residual or not
         s._project.set_arg(11, np.int32(difference))
-        s._project.enqueue(q, *s.blocks, (0, 0, slot + 1))  # the residual's slot is the offset along the sets
+        s._project.enqueue(q, *s.project_grid, (0, 0, slot + 1))  # the residual's slot is the offset along the sets
 
     def project_then_difference():
         project(0)

@@ -17,9 +17,15 @@
  * whether the dual is updated (eta > 0); the inverse blocks are shared, or one per set.
  * Voxel-parallel passes keep neighbouring work items on neighbouring addresses, which
  * CPU vectorisers need (a per-pixel loop over the whole column is slower: docs/implementation_notes.md).
+ * The host may define PROJECT_LANES (default 1): admm_project's work items per block, which share the
+ * loops over a block's whole column (the deferred primal step and u = f - b) and leave the window loops
+ * to the first; every voxel's arithmetic is the same for any number of lanes.
  */
 #ifndef PROJECTION_EXACT
 #define PROJECTION_EXACT 1
+#endif
+#ifndef PROJECT_LANES
+#define PROJECT_LANES 1
 #endif
 #ifndef DEFER_PRIMAL
 #define DEFER_PRIMAL 0
@@ -62,11 +68,12 @@ inline void project_pixel(__global real *f, __global const real *g,
     }
 }
 
-/* u = f - b over sub-frames 0 .. T-1 of TILE_R rows of `width` pixels from p0 (row length n). */
+/* u = f - b over sub-frames lane, lane + PROJECT_LANES, ... < T of `rows` rows of `width` pixels from p0
+ * (row length n). */
 inline void column_difference(__global const real *f, __global const real *b, __global real *u,
-                              int T, size_t mn, size_t n, size_t p0, size_t rows, size_t width)
+                              int T, size_t mn, size_t n, size_t p0, size_t rows, size_t width, int lane)
 {
-    for (int s = 0; s < T; ++s)
+    for (int s = lane; s < T; s += PROJECT_LANES)
         for (size_t r = 0; r < rows; ++r) {
             size_t i = (size_t)s * mn + p0 + r * n;
             if (width == TILE_W) {
@@ -77,24 +84,27 @@ inline void column_difference(__global const real *f, __global const real *b, __
         }
 }
 
+/* u = f - b over the whole column of the block at (x0, y0) (the part inside the ROI for a block cut by
+ * its edge), the sub-frames of lane `lane`: the admm_difference pass, while the block is in cache. */
+static inline void block_difference(__global const real *f, __global const real *b, __global real *u, int T,
+                                    size_t m, size_t n, size_t x0, size_t y0, int lane)
+{
+    size_t rows = m - y0 < TILE_R ? m - y0 : TILE_R, width = n - x0 < TILE_W ? n - x0 : TILE_W;
+    column_difference(f, b, u, T, m * n, n, y0 * n + x0, rows, width, lane);
+}
+
 /* The projection of the block of TILE_R x TILE_W pixels at (x0, y0) inside the ROI of one set (f, g,
- * inverse, b, u: that set's); a block cut by the ROI's edge takes project_pixel. With difference = 1
- * it then writes u = f - b over the block's whole column (the admm_difference pass, while the block
- * is in cache). */
+ * inverse: that set's); a block cut by the ROI's edge takes project_pixel. */
 static inline void project_block(__global real *f, __global const real *g, __global const int *first,
                                  __global const real *frac, __global const real *len, __global const real *gain,
-                                 __global const real *inverse, real eta, __global const real *b, __global real *u,
-                                 int difference, int T, int L, size_t m, size_t n, size_t x0, size_t y0)
+                                 __global const real *inverse, real eta, int T, int L, size_t m, size_t n,
+                                 size_t x0, size_t y0)
 {
     size_t mn = m * n;
     if (x0 + TILE_W > n || y0 + TILE_R > m) {
         for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
             for (size_t x = x0; x < x0 + TILE_W && x < n; ++x)
                 project_pixel(f, g, first, frac, len, gain, inverse, eta, T, L, mn, y * n + x);
-        if (difference) {
-            size_t rows = m - y0 < TILE_R ? m - y0 : TILE_R, width = n - x0 < TILE_W ? n - x0 : TILE_W;
-            column_difference(f, b, u, T, mn, n, y0 * n + x0, rows, width);
-        }
         return;
     }
     size_t p0 = y0 * n + x0;
@@ -121,26 +131,25 @@ static inline void project_block(__global real *f, __global const real *g, __glo
         }
         block_scatter(f, first, frac, len[k], q0, T, L, mn, n, p0, scale);
     }
-    if (difference) column_difference(f, b, u, T, mn, n, p0, TILE_R, TILE_W);
 }
 
 #if DEFER_PRIMAL
 /* The plain TV's last primal step and the ADMM's dual update of the iteration before, for the pixels
- * of the block at (x0, y0) of set `set` (of `sets`): what tv_primal_update (tv.cl, in this program)
+ * of the block at (x0, y0) of set `set` (of `sets`), the sub-frames of lane `lane`: what tv_primal_update (tv.cl, in this program)
  * computes at these voxels, from the denoiser's input u and its dual p (tv.cl's layout): theta = u +
  * d(p), then b = theta - u and f = theta + b where dual[set], else f = theta. Each work item reads u
  * and writes theta, b and f at its own pixels only; p is read-only here. */
 static void deferred_primal(__global const real *u_all, __global const real *p, __global const real *steps,
                             __global const int *dual, __global real *theta_all, __global real *b_all,
                             __global real *f_all, int T, size_t m, size_t n, size_t set, size_t sets,
-                            size_t x0, size_t y0)
+                            size_t x0, size_t y0, int lane)
 {
     size_t mn = m * n, N = sets * (size_t)T * mn;
     real wt = steps[3 * set + 2];
     int on = dual[set];
     for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
         for (size_t x = x0; x < x0 + TILE_W && x < n; ++x)
-            for (int s = 0; s < T; ++s) {
+            for (int s = lane; s < T; s += PROJECT_LANES) {
                 size_t i = ((set * (size_t)T + (size_t)s) * m + y) * n + x;
                 real u = u_all[i], th = primal_at(u_all, p, wt, N, mn, n, i, (int)y, s);
                 theta_all[i] = th;
@@ -155,16 +164,20 @@ static void deferred_primal(__global const real *u_all, __global const real *p, 
 }
 #endif
 
-/* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R), sets): one work item per block of
- * TILE_R x TILE_W pixels of one set (common.cl). eta[set]; the inverse of set s starts at
- * s * own_inverse * (its size per set). The residual slot is the global offset along the sets,
- * less one: the host enqueues with offset (0, 0, slot + 1), so no argument changes from one
- * iteration to the next. With slot >= 0 the launch first adds the residual of the estimate theta
- * (weights w, which may be 0) into that slot of the partials, as residual_partials (residual.cl)
- * on the same blocks and work groups would (scratch: NCH x the group's items): the residual of the
- * previous iteration's estimate, without a launch of its own. Compiled with DEFER_PRIMAL (and tv.cl),
- * it takes four more arguments, and with deferred = 1 first makes the denoiser's last primal step and
- * the dual update of the iteration before at its pixels (deferred_primal): the TV's last launch. */
+/* global size (>= ceil(n / TILE_W), >= ceil(m / TILE_R) x PROJECT_LANES, sets), local size (LX,
+ * LY x PROJECT_LANES, 1): one work item per block of TILE_R x TILE_W pixels of one set (common.cl) and
+ * lane; lane l of a group holds its rows l*LY .. (l+1)*LY - 1 along dimension 1, on the blocks of lane 0.
+ * eta[set]; the inverse of set s starts at s * own_inverse * (its size per set). The residual slot is
+ * the global offset along the sets, less one: the host enqueues with offset (0, 0, slot + 1), so no
+ * argument changes from one iteration to the next. With slot >= 0 the launch first adds the residual
+ * of the estimate theta (weights w, which may be 0) into that slot of the partials, as
+ * residual_partials (residual.cl) on the same blocks and work groups (LX x LY) would (scratch: NCH x
+ * LX x LY): the residual of the previous iteration's estimate, without a launch of its own. Compiled
+ * with DEFER_PRIMAL (and tv.cl), it takes four more arguments, and with deferred = 1 first makes the
+ * denoiser's last primal step and the dual update of the iteration before at its pixels
+ * (deferred_primal): the TV's last launch. Where a block's lanes share a loop (PROJECT_LANES > 1), a
+ * barrier orders the passes over its column: the lanes' deferred step before the first lane's window
+ * loops, those before the lanes' u = f - b. */
 __kernel void admm_project(__global real *f_all, __global const real *g_all,
                            __global const int *first, __global const real *frac,
                            __global const real *len, __global const real *gain,
@@ -180,18 +193,24 @@ __kernel void admm_project(__global real *f_all, __global const real *g_all,
                            )
 {
     int slot = (int)get_global_offset(2) - 1;
+    size_t rows = get_local_size(1) / PROJECT_LANES, lane = get_local_id(1) / rows;
     size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2) - get_global_offset(2);
-    size_t x0 = get_global_id(0) * (size_t)TILE_W, y0 = get_global_id(1) * (size_t)TILE_R;
+    size_t x0 = get_global_id(0) * (size_t)TILE_W;
+    size_t y0 = (get_group_id(1) * rows + get_local_id(1) - lane * rows) * (size_t)TILE_R;
     size_t cube = (size_t)T * mn;
+    int inside = x0 < n && y0 < m;
     __global const real *g = g_all + set * (size_t)NCH * mn;
     acc_t sums[NCH];
     for (int k = 0; k < NCH; ++k) sums[k] = (acc_t)0;
-    if (x0 < n && y0 < m) {
 #if DEFER_PRIMAL
-        if (deferred)
-            deferred_primal(u_all, p_last, tv_steps, dual_on, theta_all, b_all, f_all, T, m, n, set,
-                            get_global_size(2), x0, y0);
+    if (inside && deferred)
+        deferred_primal(u_all, p_last, tv_steps, dual_on, theta_all, b_all, f_all, T, m, n, set,
+                        get_global_size(2), x0, y0, (int)lane);
 #endif
+#if PROJECT_LANES > 1
+    barrier(CLK_GLOBAL_MEM_FENCE);
+#endif
+    if (inside && lane == 0) {
         if (slot >= 0) {
             __global const real *w = w_all ? w_all + set * (size_t)NCH * mn : 0;
             for (int k = 0; k < NCH; ++k)
@@ -203,10 +222,14 @@ __kernel void admm_project(__global real *f_all, __global const real *g_all,
 #else
         __global const real *inverse = inverse_all + set * (size_t)own_inverse * NCH * mn;
 #endif
-        project_block(f_all + set * cube, g, first, frac, len, gain, inverse, etas[set], b_all + set * cube,
-                      u_all + set * cube, difference, T, L, m, n, x0, y0);
+        project_block(f_all + set * cube, g, first, frac, len, gain, inverse, etas[set], T, L, m, n, x0, y0);
     }
-    group_partials(sums, NCH, set * NCH, get_global_size(2) * NCH, slot, scratch, partials);
+#if PROJECT_LANES > 1
+    barrier(CLK_GLOBAL_MEM_FENCE);
+#endif
+    if (inside && difference)
+        block_difference(f_all + set * cube, b_all + set * cube, u_all + set * cube, T, m, n, x0, y0, (int)lane);
+    group_partials(sums, NCH, set * NCH, get_global_size(2) * NCH, slot, rows, scratch, partials);
 }
 
 __kernel void admm_difference(__global const real *f, __global const real *b, __global real *u)

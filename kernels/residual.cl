@@ -48,15 +48,16 @@ static inline acc_t block_residual(__global const real *f, __global const real *
 }
 
 /* The work group adds its items' sums of `count` channels (channel c0 + c's in sums[c]) in local
- * memory (scratch: count x the group's items) in item order, and writes one partial per channel
+ * memory (scratch: count x the summed items) in item order, and writes one partial per channel
  * (layout above; `channels` is the launch's total); where slot < 0 it touches neither scratch nor
- * partials. Every item of the group must call it: its barrier is not in a branch (a barrier in a
- * branch, though every item takes it, crashes PoCL 3.0). */
-static inline void group_partials(const acc_t *sums, int count, size_t c0, size_t channels, int slot,
+ * partials. The summed items are the group's first `rows` rows along dimension 1 (the others' sums
+ * are not read: admm_project's lanes). Every item of the group must call it: its barrier is not in a
+ * branch (a barrier in a branch, though every item takes it, crashes PoCL 3.0). */
+static inline void group_partials(const acc_t *sums, int count, size_t c0, size_t channels, int slot, size_t rows,
                                   __local acc_t *scratch, __global acc_t *partials)
 {
-    size_t lx = get_local_size(0), items = lx * get_local_size(1), lid = get_local_id(1) * lx + get_local_id(0);
-    if (slot >= 0)
+    size_t lx = get_local_size(0), items = lx * rows, lid = get_local_id(1) * lx + get_local_id(0);
+    if (slot >= 0 && lid < items)
         for (int c = 0; c < count; ++c) scratch[(size_t)c * items + lid] = sums[c];
     barrier(CLK_LOCAL_MEM_FENCE);
     if (lid == 0 && slot >= 0) {
@@ -87,5 +88,5 @@ __kernel void residual_partials(__global const real *f_all, __global const real 
         sum[0] = block_residual(f_all + set * (size_t)T * mn, g_all + set * (size_t)K * mn,
                                 w_all ? w_all + set * (size_t)K * mn : 0, first, frac, len[k], gain[k], k, T, L,
                                 m, n, x0, y0);
-    group_partials(sum, 1, kk, get_global_size(2), slot, scratch, partials);
+    group_partials(sum, 1, kk, get_global_size(2), slot, get_local_size(1), scratch, partials);
 }

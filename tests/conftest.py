@@ -1,4 +1,4 @@
-"""Shared fixtures: the OpenCL device under test and the shared data folder.
+"""Shared fixtures: the OpenCL device under test (and read as one that is not a CPU), the shared data folder.
 
 The device is rsocl's default choice (``RSOCL_DEVICE`` / ``PYOPENCL_CTX`` respected),
 so CI can run the same tests on PoCL and under Oclgrind. ``RSOCL_TEST_SMALL=1``
@@ -37,6 +37,32 @@ def dtype(request, device):
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)
+
+
+@pytest.fixture()
+def not_cpu(monkeypatch, device):
+    """The test device, read as a device that is not a CPU (the GPU defaults apply to it)."""
+    from rsocl.device.context import Device
+
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
+    assert not device.is_cpu
+    return device
+
+
+@pytest.fixture()
+def admm_lanes(monkeypatch):
+    """The projection lanes (``ADMM.lanes``) of every :class:`rsocl.solver.admm.ADMM` made in the test, in order."""
+    from rsocl.solver.admm import ADMM
+
+    made = []
+    init = ADMM.__init__
+
+    def recording(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        made.append(self.lanes)
+
+    monkeypatch.setattr(ADMM, "__init__", recording)
+    return made
 
 
 def shared_video(name):

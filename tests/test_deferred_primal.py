@@ -9,15 +9,9 @@ from same_arithmetic import assert_same_arithmetic
 
 import rsocl
 import rsocl_plugins.tv as tv_module
-from rsocl.device.context import Device
 from rsocl.model import reference as ref
 from rsocl.solver.admm import ADMM
 from rsocl_plugins.tv import TV
-
-
-@pytest.fixture()
-def not_cpu(monkeypatch):
-    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
 
 
 @pytest.fixture(scope="module")

@@ -19,14 +19,6 @@ from rsocl_plugins.tv import GPU_FUSED, GPU_ONE_LAUNCH, STEP, TV, device_fused, 
 LEAN = 16
 
 
-@pytest.fixture()
-def not_cpu(monkeypatch, device):
-    """The test device, read as a device that is not a CPU (the GPU defaults apply to it)."""
-    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))
-    assert not device.is_cpu
-    return device
-
-
 @pytest.fixture(scope="module")
 def problem():
     rig = rsocl.Rig.paper_array(4, (10, 9), t_e=1e-4, t_r=3e-5)

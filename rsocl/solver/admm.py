@@ -27,7 +27,7 @@ from rsocl.model.operator import RollingShutterOperator
 from rsocl.solver.inverse import inverse_blocks
 from rsocl.solver.residuals import DeviceResiduals
 
-__all__ = ["ADMM", "RESIDUAL_SLOTS"]
+__all__ = ["ADMM", "RESIDUAL_SLOTS", "GPU_PROJECT_LANES", "lanes_that_fit"]
 
 #: Iterations whose residuals the device holds before the host reads them in one copy, in a run that
 #: does not look at each residual (:meth:`ADMM.residual_into`, :meth:`ADMM.read_residuals`).
@@ -35,6 +35,20 @@ RESIDUAL_SLOTS = 8
 #: Index of ``admm_project``'s ``deferred`` flag (built with ``DEFER_PRIMAL``; the final dual, the steps and
 #: the dual flags before it): ``kernels/admm.cl``.
 PROJECT_DEFERRED = 23
+#: Work items per block of the projection (``PROJECT_LANES``, ``kernels/admm.cl``) on a device that is not a
+#: CPU, where the regularizer fuses the dual update: they share the passes over a block's whole column (the
+#: deferred primal step, ``u = f - b``); fewer where the work group would not fit. A power of two. 1 (one work
+#: item per block, as on a CPU) until a GPU run shows more pays: docs/gpu.md.
+GPU_PROJECT_LANES = 1
+
+
+def lanes_that_fit(lanes: int, local: tuple, group_limit: int, max_items_1: int) -> int:
+    """The largest power of two up to ``lanes`` whose work groups of ``local`` blocks (``(LX, LY, 1)``) times the
+    lanes stay within ``group_limit`` work items and ``max_items_1`` along dimension 1 (at least 1)."""
+    fit = 1
+    while 2 * fit <= lanes and local[0] * local[1] * 2 * fit <= group_limit and local[1] * 2 * fit <= max_items_1:
+        fit *= 2
+    return fit
 
 
 def _per_set(name, value, sets):
@@ -106,25 +120,29 @@ class ADMM:
         self.hx = pool.empty(queue, batch + op.range_shape, op.dtype)
         self.fused = bool(regularizer.fuses_dual_on(op.device))
         self._defines = regularizer.deferred_primal_on(op.device) if self.fused else None
-        deferred = {} if self._defines is None else {"DEFER_PRIMAL": 1, **self._defines}
-        self.program = op.device.program(
-            ["residual.cl"] + (["tv.cl"] if deferred else []) + ["admm.cl"],
-            REAL=c_type(op.dtype),
-            ACC=c_type(op.device.acc_dtype),
-            MASK_BINARY=int(op.rig.mask == "binary"),
-            NCH=op.K,
-            PROJECTION_EXACT=int(projection == "exact"),
-            **op.tile_defines,
-            **deferred,
-        )
+        self.lanes = GPU_PROJECT_LANES if self.fused and not op.device.is_cpu else 1
+        while True:  # once more with fewer lanes where the projection's work groups would not fit
+            self.program = self._build(projection)
+            self.residuals = DeviceResiduals(
+                op,
+                g,
+                self.valid,
+                self.sets if self.batched else None,
+                RESIDUAL_SLOTS,
+                kernels=(self.program.admm_project,),
+            )
+            self.blocks = op.block_grid(self.sets, kernels=(self.program.admm_project, self.residuals.kernel))
+            limit = op.device.group_limit(self.program.admm_project)
+            fit = lanes_that_fit(self.lanes, self.blocks[1], limit, op.device.max_work_item_sizes[1])
+            if fit == self.lanes:
+                break
+            self.lanes = fit
+        (gx, gy, sets), (lx, ly, _) = self.blocks
+        self.project_grid = ((gx, gy * self.lanes, sets), (lx, ly * self.lanes, 1))
         self.per_set = int(np.prod(op.domain_shape))
         dev, prog = op.device, self.program  # exact grids: no bounds tests
         self.voxels = batch_launches(self.per_set, self.sets, dev.group_limit(prog.admm_dual, cap=64))
         self.elements = element_launches(self.sets * self.per_set, dev.group_limit(prog.admm_difference, cap=64))
-        self.residuals = DeviceResiduals(
-            op, g, self.valid, self.sets if self.batched else None, RESIDUAL_SLOTS, kernels=(prog.admm_project,)
-        )
-        self.blocks = op.block_grid(self.sets, kernels=(prog.admm_project, self.residuals.kernel))
         scratch = self._scratch_bytes()
         self.folds_residual = scratch <= dev.local_mem_bytes // 2
         self._scratch = cl.LocalMemory(scratch if self.folds_residual else self.residuals.acc.itemsize)
@@ -132,6 +150,23 @@ class ADMM:
         self._denoiser: Any = None  # the regularizer's bound call, made at the first step
         self._bind_kernels()
         cl.enqueue_barrier(queue)
+
+    def _build(self, projection):
+        """The ADMM's program on this operator's device: the residual, the TV's primal step where the projection
+        makes the denoiser's deferred last launch, and admm.cl with ``self.lanes`` lanes per block."""
+        op = self.op
+        deferred = {} if self._defines is None else {"DEFER_PRIMAL": 1, **self._defines}
+        return op.device.program(
+            ["residual.cl"] + (["tv.cl"] if deferred else []) + ["admm.cl"],
+            REAL=c_type(op.dtype),
+            ACC=c_type(op.device.acc_dtype),
+            MASK_BINARY=int(op.rig.mask == "binary"),
+            NCH=op.K,
+            PROJECTION_EXACT=int(projection == "exact"),
+            PROJECT_LANES=self.lanes,
+            **op.tile_defines,
+            **deferred,
+        )
 
     def _scratch_bytes(self) -> int:
         """Local memory of a projection that adds the residual: one sum per channel and work item."""
@@ -247,7 +282,7 @@ class ADMM:
         self._project.set_arg(11, np.int32(self.fused))  # set only when it changes
         if self._defines is not None:  # the projection makes the denoiser's deferred last launch first
             self._project.set_arg(PROJECT_DEFERRED, np.int32(self._pending))
-        self._project.enqueue(queue, *self.blocks, (0, 0, folded + 1))  # the slot is the offset: kernels/admm.cl
+        self._project.enqueue(queue, *self.project_grid, (0, 0, folded + 1))  # the slot is the offset: kernels/admm.cl
         self._pending = False
         if not self.fused:
             for gsize, lsize, offset in self.elements:
