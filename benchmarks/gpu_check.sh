@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # One prepared check on a lent NVIDIA GPU machine (H100 or H200, no network, PyTorch with CUDA
-# preinstalled as python3), in one command of at most the sum of the caps (550 s) and the install:
+# preinstalled as python3), in one command of at most the sum of the caps (570 s) and the install:
 #   1. install pyopencl and the rest from the carried wheels (.whl/, made by benchmarks/gpu_wheels.sh)
 #      and rsocl from this tree into /tmp/site; point pyopencl's ICD loader at NVIDIA's OpenCL;
 #   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped;
@@ -9,8 +9,8 @@
 #   5. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), then
 #      benchmarks/launch_cost.py (a launch's host time by arguments and grid) and benchmarks/kernel_times.py (an
-#      iteration's device time kernel by kernel, busy against span; then batches of 5, 9 and 64 sets at 50×50, as the
-#      search's), all into check.log, capped;
+#      iteration's device time kernel by kernel, busy against span; then at 50×50 one set and batches of 5, 9 and 64
+#      sets, as the search's, with 1, 4 and 8 projection lanes), all into check.log, capped;
 #   6. benchmarks/call_cost.py where the tree has it (a small call with device buffers pooled or made each call), capped;
 #   7. benchmarks/search_launches.py (the self-tuned default against a fixed run, two scenes, 50 to 256 pixels), then
 #      benchmarks/tuned_phases.py (where the self-tuned call's time goes, phase by phase), capped;
@@ -23,7 +23,7 @@
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
 # Knobs: STEPS (tests peer launches call search phases profile; blocks may be added) the steps run after the install;
 # TEST_ARGS (none: the whole suite) pytest's arguments; TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (70), PHASES_CAP (40),
-# PROFILE_CAP (30), BLOCKS_CAP (80), COST_CAP (20), KTIME_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
+# PROFILE_CAP (30), BLOCKS_CAP (80), COST_CAP (20), KTIME_CAP (20), LANES_CAP (40) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -36,11 +36,11 @@ SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
 TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
 SEARCH_CAP=${SEARCH_CAP:-70} PROFILE_CAP=${PROFILE_CAP:-30} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
-KTIME_CAP=${KTIME_CAP:-20} PHASES_CAP=${PHASES_CAP:-40}
+KTIME_CAP=${KTIME_CAP:-20} PHASES_CAP=${PHASES_CAP:-40} LANES_CAP=${LANES_CAP:-40}
 STEPS=" ${STEPS:-tests peer launches call search phases profile} "
 want() { [[ "$STEPS" == *" $1 "* ]]; }
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
-PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --variant-cases paper size64}
+PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --project-lanes 4 8 --variant-cases paper batch64 size64 size128}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
 T0=$(date +%s)
 stamp() { echo "=== [$(( $(date +%s) - T0 )) s] $*"; }
@@ -126,10 +126,11 @@ if want launches; then
     timeout -k 5 "$KTIME_CAP" "$PYTHON" -P benchmarks/kernel_times.py --device "$DEVICE" --sizes 8 50 128 256 \
         --iterations 40 >> "$OUT/check.log" 2>&1
     echo "kernel_times exit status $?" | tee -a "$OUT/check.log"
-    stamp "benchmarks/kernel_times.py, batches as the search's (cap ${KTIME_CAP} s)" | tee -a "$OUT/check.log"
-    timeout -k 5 "$KTIME_CAP" "$PYTHON" -P benchmarks/kernel_times.py --device "$DEVICE" --sizes 50 --sets 5 9 64 \
-        --iterations 20 >> "$OUT/check.log" 2>&1
-    echo "kernel_times (batches) exit status $?" | tee -a "$OUT/check.log"
+    stamp "benchmarks/kernel_times.py at 50×50: one set and batches as the search's, 1, 4 and 8 projection lanes (cap ${LANES_CAP} s)" \
+        | tee -a "$OUT/check.log"
+    timeout -k 5 "$LANES_CAP" bash -c 'for lanes in 1 4 8; do "$0" -P benchmarks/kernel_times.py --device "$1" --sizes 50 \
+        --sets 1 5 9 64 --lanes "$lanes" --iterations 20; done' "$PYTHON" "$DEVICE" >> "$OUT/check.log" 2>&1
+    echo "kernel_times (lanes) exit status $?" | tee -a "$OUT/check.log"
 fi
 
 # ---------------------------------------------------------------- 6. a small call's cost: buffers pooled or made

@@ -10,10 +10,11 @@ to the next one's), and reports per kernel: launches per iteration and device µ
 kernels' sum), the span from the first kernel's start to the last one's end, and the device's idle
 time between them (span less busy). Busy close to span: the device bounds the loop; idle close to span: the host does.
 ``--sets`` also runs batches of that many copies of the snapshots in one call, as the self-tuned search's
-batches of candidates run (rows ``50×50, 5 sets``).
+batches of candidates run (rows ``50×50, 5 sets``); ``--lanes`` sets the projection's lanes on a device that is
+not a CPU (``rsocl.solver.admm.GPU_PROJECT_LANES``).
 
-    python benchmarks/kernel_times.py [--device SPEC] [--sizes 8 50 128] [--sets 1 5] [--iterations 40] [--as-gpu]
-        [--out docs/kernel_times.md]
+    python benchmarks/kernel_times.py [--device SPEC] [--sizes 8 50 128] [--sets 1 5] [--lanes 4] [--iterations 40]
+        [--as-gpu] [--out docs/kernel_times.md]
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from launches import case, path, small_calls  # noqa: E402
 from provenance import DOCS, emit, header_lines  # noqa: E402
 
 import rsocl  # noqa: E402
+import rsocl.solver.admm as admm_module  # noqa: E402
 from rsocl.device import kernel as kernel_module  # noqa: E402
 from rsocl.device.context import Device, device_for_queue, get_device  # noqa: E402
 
@@ -114,6 +116,7 @@ def main(argv=None):
     p.add_argument("--device", default=None, help="OpenCL device spec (default: rsocl's choice)")
     p.add_argument("--sizes", type=int, nargs="+", default=[8, 50, 128], help="ROI sides m (m × m), pixels")
     p.add_argument("--sets", type=int, nargs="+", default=[1], help="sets per call: batches of copies (>= 1)")
+    p.add_argument("--lanes", type=int, default=None, help="projection lanes (GPU_PROJECT_LANES; default: rsocl's)")
     p.add_argument("--iterations", type=int, default=40, help="iterations recorded per ROI (>= 1)")
     p.add_argument("--as-gpu", action="store_true", help="read the device as a GPU (its choices run on a CPU)")
     p.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'kernel_times.md'})")
@@ -124,14 +127,22 @@ def main(argv=None):
         p.error(f"--sizes must be >= 2 pixels each, got {args.sizes}")
     if any(b < 1 for b in args.sets):
         p.error(f"--sets must be >= 1 each, got {args.sets}")
+    if args.lanes is not None and (args.lanes < 1 or args.lanes & (args.lanes - 1)):
+        p.error(f"--lanes must be >= 1 and a power of two, got {args.lanes}")
     device = profiling_device(get_device(args.device))
     rows = []
-    with path("gpu" if args.as_gpu else "device"):
-        for m in args.sizes:
-            rig, g = case(m)
-            for sets in args.sets:
-                batch = g if sets == 1 else np.stack([g] * sets)
-                rows += lines(m, sets, rig.T, summarise(record(rig, batch, device, args.iterations), args.iterations))
+    lanes, saved = admm_module.GPU_PROJECT_LANES if args.lanes is None else args.lanes, admm_module.GPU_PROJECT_LANES
+    admm_module.GPU_PROJECT_LANES = lanes
+    try:
+        with path("gpu" if args.as_gpu else "device"):
+            for m in args.sizes:
+                rig, g = case(m)
+                for sets in args.sets:
+                    batch = g if sets == 1 else np.stack([g] * sets)
+                    events = record(rig, batch, device, args.iterations)
+                    rows += lines(m, sets, rig.T, summarise(events, args.iterations))
+    finally:
+        admm_module.GPU_PROJECT_LANES = saved
     page = header_lines(
         "An ADMM iteration's device time, kernel by kernel", device, None if argv is None else [__file__, *argv]
     )
@@ -141,7 +152,8 @@ def main(argv=None):
         "(`CL_PROFILING_COMMAND_START` to `END`). An iteration: busy, the kernels' device time; span, the first "
         "kernel's start to the last one's end; idle, span less busy (µs per iteration). Busy / span near 1: "
         "the device bounds the loop; near 0: the host does."
-        + (" Rows `m×m, B sets`: B copies of the snapshots in one call, one batch." if max(args.sets) > 1 else ""),
+        + (" Rows `m×m, B sets`: B copies of the snapshots in one call, one batch." if max(args.sets) > 1 else "")
+        + f" Projection lanes where the device is not a CPU: {lanes}.",
         "",
         "| ROI | T | kernel | launches per iteration | device µs per launch | share of busy |",
         "|---|---|---|---|---|---|",

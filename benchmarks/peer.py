@@ -128,19 +128,27 @@ VARIANT = "rsocl one_launch="
 #: Name of the rsocl run with the TV's first two iterations in two launches (``--no-first-two``:
 #: ``rsocl_plugins.tv.GPU_FIRST_TWO`` off).
 NO_FIRST_TWO = "rsocl first2=off"
+#: Name prefix of an rsocl run with that many projection lanes (``--project-lanes``:
+#: ``rsocl.solver.admm.GPU_PROJECT_LANES``).
+LANES = "rsocl lanes="
 
 
 def is_variant(impl) -> bool:
     """Whether ``impl`` names one of rsocl's runs beside its defaults."""
-    return impl.startswith(VARIANT) or impl == NO_FIRST_TWO
+    return impl.startswith((VARIANT, LANES)) or impl == NO_FIRST_TWO
 
 
 def variant_names(args, name):
-    """rsocl's runs beside its defaults in case ``name``: one per ``--tv-one-launch`` value, and
-    :data:`NO_FIRST_TWO` with ``--no-first-two``, in the cases of ``--variant-cases``."""
+    """rsocl's runs beside its defaults in case ``name``: one per ``--tv-one-launch`` value,
+    :data:`NO_FIRST_TWO` with ``--no-first-two`` and one per ``--project-lanes`` value, in the cases of
+    ``--variant-cases``."""
     if "all" not in args.variant_cases and name not in args.variant_cases:
         return []
-    return [f"{VARIANT}{n}" for n in dict.fromkeys(args.tv_one_launch)] + ([NO_FIRST_TWO] if args.no_first_two else [])
+    return (
+        [f"{VARIANT}{n}" for n in dict.fromkeys(args.tv_one_launch)]
+        + ([NO_FIRST_TWO] if args.no_first_two else [])
+        + [f"{LANES}{n}" for n in dict.fromkeys(args.project_lanes)]
+    )
 
 
 def variant_options(impl):
@@ -150,15 +158,19 @@ def variant_options(impl):
 
 @contextlib.contextmanager
 def variant_context(impl):
-    """Module settings of rsocl run ``impl`` while it runs: ``GPU_FIRST_TWO`` off for :data:`NO_FIRST_TWO`."""
+    """Module settings of rsocl run ``impl`` while it runs: ``GPU_FIRST_TWO`` off for :data:`NO_FIRST_TWO`,
+    ``GPU_PROJECT_LANES`` set for a :data:`LANES` run."""
+    import rsocl.solver.admm as admm_module
     import rsocl_plugins.tv as tv_module
 
-    saved = tv_module.GPU_FIRST_TWO
+    saved, lanes = tv_module.GPU_FIRST_TWO, admm_module.GPU_PROJECT_LANES
     tv_module.GPU_FIRST_TWO = saved and impl != NO_FIRST_TWO
+    if impl.startswith(LANES):
+        admm_module.GPU_PROJECT_LANES = int(impl[len(LANES) :])
     try:
         yield
     finally:
-        tv_module.GPU_FIRST_TWO = saved
+        tv_module.GPU_FIRST_TWO, admm_module.GPU_PROJECT_LANES = saved, lanes
 
 
 def cases(args):
@@ -422,10 +434,17 @@ def main(argv=None):
         help="an rsocl run beside its defaults with the TV's first two iterations in two launches (GPU_FIRST_TWO off)",
     )
     parser.add_argument(
+        "--project-lanes",
+        type=int,
+        nargs="*",
+        default=[],
+        help="rsocl runs beside its defaults with this many projection lanes (GPU_PROJECT_LANES: 1, 2, 4, 8, ...)",
+    )
+    parser.add_argument(
         "--variant-cases",
         nargs="+",
         default=["all"],
-        help="cases of the --tv-one-launch and --no-first-two runs ('all': every case)",
+        help="cases of the --tv-one-launch, --no-first-two and --project-lanes runs ('all': every case)",
     )
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'gpu' / 'peer.md'})")
@@ -434,6 +453,8 @@ def main(argv=None):
         raise SystemExit("--iterations, --size-iterations, --rounds, --batches and --sizes must be >= 1")
     if any(n not in (0, 1, 2) for n in args.tv_one_launch):
         raise SystemExit(f"--tv-one-launch: values 0, 1 or 2, got {args.tv_one_launch}")
+    if any(n < 1 or n & (n - 1) for n in args.project_lanes):
+        raise SystemExit(f"--project-lanes: powers of two (1, 2, 4, ...), got {args.project_lanes}")
     argv = None if argv is None else [__file__, *argv]
     device = rsocl.device.get_device(args.device)
     torch_device = None

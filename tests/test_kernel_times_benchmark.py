@@ -45,7 +45,16 @@ def test_a_batch_takes_the_same_launches_per_iteration_as_one_set(tmp_path):
     assert {row[2]: row[3] for row in batch} == {row[2]: row[3] for row in one}
 
 
-@pytest.mark.parametrize("args", [["--iterations", "0"], ["--sizes", "1"], ["--sets", "0"]])
+def test_lanes_are_set_for_the_run_and_restored(tmp_path, monkeypatch, admm_lanes):
+    import rsocl.solver.admm as admm_module
+
+    out = tmp_path / "kernel_times.md"
+    kernel_times.main(["--sizes", "6", "--lanes", "4", "--iterations", "2", "--as-gpu", "--out", str(out)])
+    assert admm_lanes == [4] and admm_module.GPU_PROJECT_LANES == 1
+    assert "Projection lanes where the device is not a CPU: 4." in out.read_text()
+
+
+@pytest.mark.parametrize("args", [["--iterations", "0"], ["--sizes", "1"], ["--sets", "0"], ["--lanes", "3"]])
 def test_bad_counts_are_refused(args, capsys):
     with pytest.raises(SystemExit):
         kernel_times.main(args)

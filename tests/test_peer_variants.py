@@ -1,4 +1,5 @@
-"""``benchmarks/peer.py``'s rsocl runs beside its defaults (``--tv-one-launch``, ``--no-first-two``): their
+"""``benchmarks/peer.py``'s rsocl runs beside its defaults (``--tv-one-launch``, ``--no-first-two``,
+``--project-lanes``): their
 columns, their ratio to rsocl's defaults and their equality check, with or without torch."""
 
 import sys
@@ -59,6 +60,30 @@ def test_no_first_two_variant_runs_the_tv_first_iteration_on_its_own(tmp_path, m
     same = [line for line in lines if line.startswith("| one set 8×8") and " dB, " in line]
     delta, largest = same[0].split("|")[3].split(" dB, ")
     assert abs(float(delta)) < 1e-4 and float(largest) < 1e-5
+
+
+def test_project_lanes_variant_runs_its_lanes_and_checks_equality(tmp_path, monkeypatch, admm_lanes):
+    import rsocl.solver.admm as admm_module
+    from rsocl.device.context import Device
+
+    monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))  # where GPU_PROJECT_LANES applies
+    with peer.variant_context("rsocl lanes=4"):
+        assert admm_module.GPU_PROJECT_LANES == 4
+    assert admm_module.GPU_PROJECT_LANES == 1 and peer.is_variant("rsocl lanes=4")
+    out = tmp_path / "peer.md"
+    peer.main([*ARGS, "--project-lanes", "4", "--out", str(out)])
+    assert 4 in admm_lanes and 1 in admm_lanes
+    lines = out.read_text().splitlines()
+    assert any(line.startswith("| case | rsocl lanes=4 / rsocl") for line in lines)
+    same = [line for line in lines if line.startswith("| one set 8×8") and " dB, " in line]
+    delta, largest = same[0].split("|")[3].split(" dB, ")
+    assert abs(float(delta)) < 1e-4 and float(largest) < 1e-5
+
+
+@pytest.mark.parametrize("value", ["3", "0"])
+def test_bad_project_lanes_value_names_the_option(value):
+    with pytest.raises(SystemExit, match="--project-lanes: powers of two"):
+        peer.main([*ARGS, "--project-lanes", value])
 
 
 def test_variant_cases_leave_other_cases_without_the_variant(tmp_path):
