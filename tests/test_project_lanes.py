@@ -84,3 +84,15 @@ def test_lanes_shrink_to_the_devices_work_group_limit(device, not_cpu, problem, 
 )
 def test_lanes_that_fit(lanes, local, limit, max_1, expected):
     assert lanes_that_fit(lanes, local, limit, max_1) == expected
+
+
+def test_a_self_tuned_call_makes_one_lanes_choices_and_datacube(device, not_cpu, problem, monkeypatch, admm_lanes):
+    rig, g = problem
+    monkeypatch.setattr(admm_module, "GPU_PROJECT_LANES", 1)
+    one = rsocl.reconstruct(g, rig, iterations=8)  # the search's batches restart their solvers per round
+    monkeypatch.setattr(admm_module, "GPU_PROJECT_LANES", 4)
+    many = rsocl.reconstruct(g, rig, iterations=8)
+    half = len(admm_lanes) // 2  # each call: the search's batch solvers and the final run's
+    assert half >= 2 and admm_lanes == [1] * half + [4] * half
+    assert many.params["tuning"]["chosen"] == one.params["tuning"]["chosen"]
+    assert_same_arithmetic(many.datacube, one.datacube, device)
