@@ -135,10 +135,11 @@ static inline void project_block(__global real *f, __global const real *g, __glo
 
 #if DEFER_PRIMAL
 /* The plain TV's last primal step and the ADMM's dual update of the iteration before, for the pixels
- * of the block at (x0, y0) of set `set` (of `sets`), the sub-frames of lane `lane`: what tv_primal_update (tv.cl, in this program)
- * computes at these voxels, from the denoiser's input u and its dual p (tv.cl's layout): theta = u +
- * d(p), then b = theta - u and f = theta + b where dual[set], else f = theta. Each work item reads u
- * and writes theta, b and f at its own pixels only; p is read-only here. */
+ * of the block at (x0, y0) of set `set` (of `sets`) at the sub-frames of lane `lane`: what
+ * tv_primal_update (tv.cl, in this program) computes at these voxels, from the denoiser's input u and
+ * its dual p (tv.cl's layout): theta = u + d(p), then b = theta - u and f = theta + b where dual[set],
+ * else f = theta. Each work item reads u and writes theta, b and f at its own voxels only; p is
+ * read-only here. */
 static void deferred_primal(__global const real *u_all, __global const real *p, __global const real *steps,
                             __global const int *dual, __global real *theta_all, __global real *b_all,
                             __global real *f_all, int T, size_t m, size_t n, size_t set, size_t sets,
@@ -196,7 +197,7 @@ __kernel void admm_project(__global real *f_all, __global const real *g_all,
     size_t rows = get_local_size(1) / PROJECT_LANES, lane = get_local_id(1) / rows;
     size_t m = (size_t)m_, n = (size_t)n_, mn = m * n, set = get_global_id(2) - get_global_offset(2);
     size_t x0 = get_global_id(0) * (size_t)TILE_W;
-    size_t y0 = (get_group_id(1) * rows + get_local_id(1) - lane * rows) * (size_t)TILE_R;
+    size_t y0 = (get_group_id(1) * rows + get_local_id(1) % rows) * (size_t)TILE_R;
     size_t cube = (size_t)T * mn;
     int inside = x0 < n && y0 < m;
     __global const real *g = g_all + set * (size_t)NCH * mn;
