@@ -131,7 +131,8 @@ def main(argv=None):
         p.error(f"--lanes must be >= 1 and a power of two, got {args.lanes}")
     device = profiling_device(get_device(args.device))
     rows = []
-    lanes, saved = admm_module.GPU_PROJECT_LANES if args.lanes is None else args.lanes, admm_module.GPU_PROJECT_LANES
+    saved = admm_module.GPU_PROJECT_LANES
+    lanes = saved if args.lanes is None else args.lanes
     admm_module.GPU_PROJECT_LANES = lanes
     try:
         with path("gpu" if args.as_gpu else "device"):
