@@ -8,6 +8,9 @@ and writes it with :func:`write_page` (atomically: a failed run never leaves hal
     CPU model, logical cores (and how many this process may use), load average at start,
     OpenCL platform / device / driver, Python, NumPy, pyopencl and rsocl versions,
     and the command line that produced the page.
+
+A setting of rsocl that a run changes through the environment (:data:`LANES_ENV`, applied when this
+module is imported: :func:`apply_settings`) is listed in the header too.
 """
 
 from __future__ import annotations
@@ -27,7 +30,42 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Where the benchmarks write their pages.
 DOCS = ROOT / "docs"
 
-__all__ = ["ROOT", "DOCS", "git_revision", "cpu_model", "header_lines", "usable_cores", "write_page"]
+__all__ = [
+    "ROOT",
+    "DOCS",
+    "LANES_ENV",
+    "SETTINGS",
+    "apply_settings",
+    "git_revision",
+    "cpu_model",
+    "header_lines",
+    "usable_cores",
+    "write_page",
+]
+
+#: The environment variable that sets ``rsocl.solver.admm.GPU_PROJECT_LANES`` (a power of two) for every
+#: benchmark of a run (``benchmarks/gpu_check.sh`` sets it from ``benchmarks/lanes_choice.py``'s choice).
+LANES_ENV = "RSOCL_BENCH_PROJECT_LANES"
+
+
+def apply_settings() -> list:
+    """Set what the environment asks for (:data:`LANES_ENV`) and return the header's lines that say so.
+
+    Raises
+    ------
+    ValueError
+        :data:`LANES_ENV` is set to something other than a power of two (1, 2, 4, ...).
+    """
+    text = os.environ.get(LANES_ENV, "").strip()
+    if not text:
+        return []
+    if not text.isdigit() or int(text) < 1 or int(text) & (int(text) - 1):
+        raise ValueError(f"{LANES_ENV} must be a power of two (1, 2, 4, ...), got {text!r}")
+    import rsocl.solver.admm as admm_module
+
+    code = admm_module.GPU_PROJECT_LANES
+    admm_module.GPU_PROJECT_LANES = int(text)
+    return [f"- projection lanes on a device that is not a CPU: {int(text)} (set by {LANES_ENV}; rsocl's: {code})"]
 
 
 def git_revision(root: Path = ROOT) -> str:
@@ -123,7 +161,7 @@ def header_lines(title: str, device=None, argv=None) -> list:
         f"- Python {platform.python_version()}, NumPy {np.__version__}, pyopencl {cl.VERSION_TEXT}, "
         f"rsocl {rsocl.__version__}"
     )
-    return lines + [""]
+    return lines + SETTINGS + [""]
 
 
 def write_page(path, lines) -> Path:
@@ -145,3 +183,7 @@ def emit(lines, out=None):
     print("\n".join(lines))
     if out is not None:
         write_page(out, lines)
+
+
+#: The header's lines of the settings :func:`apply_settings` made when this module was imported.
+SETTINGS = apply_settings()
