@@ -3,27 +3,33 @@
 # preinstalled as python3), in one command of at most the sum of the caps (570 s) and the install:
 #   1. install pyopencl and the rest from the carried wheels (.whl/, made by benchmarks/gpu_wheels.sh)
 #      and rsocl from this tree into /tmp/site; point pyopencl's ICD loader at NVIDIA's OpenCL;
-#   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped;
-#   3. benchmarks/blocks.py (the operator kernels' block layout, GPU_BLOCK), capped: only where STEPS names it;
-#   4. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile), capped;
-#   5. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
+#   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped, with rsocl's own settings;
+#   3. benchmarks/lanes_choice.py (the projection's 1, 2, 4 and 8 lanes at 50×50, one set and batches as the
+#      search's, and at 128 and 256 pixels), capped; its choice is exported as RSOCL_BENCH_PROJECT_LANES, which
+#      every later benchmark applies and names in its page's header (benchmarks/provenance.py);
+#   4. benchmarks/blocks.py (the operator kernels' block layout, GPU_BLOCK), capped: only where STEPS names it;
+#   5. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile; in four cases also one lane
+#      beside the chosen count, or 4 and 8 lanes where one was chosen), capped;
+#   6. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), then
 #      benchmarks/launch_cost.py (a launch's host time by arguments and grid) and benchmarks/kernel_times.py (an
-#      iteration's device time kernel by kernel, busy against span; then at 50×50 one set and batches of 5, 9 and 64
-#      sets, as the search's, with 1, 4 and 8 projection lanes), all into check.log, capped;
-#   6. benchmarks/call_cost.py where the tree has it (a small call with device buffers pooled or made each call), capped;
-#   7. benchmarks/search_launches.py (the self-tuned default against a fixed run, two scenes, 50 to 256 pixels), then
+#      iteration's device time kernel by kernel, busy against span), all into check.log, capped;
+#   7. benchmarks/call_cost.py where the tree has it (a small call with device buffers pooled or made each call), capped;
+#   8. benchmarks/search_launches.py (the self-tuned default against a fixed run, two scenes, 50 to 256 pixels), then
 #      benchmarks/tuned_phases.py (where the self-tuned call's time goes, phase by phase), capped;
-#   8. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under
+#   9. one set of the paper configuration: call and loop times at 1 and 200 iterations, and its host work under
 #      cProfile; then a self-tuned call's host work at 50×50 under cProfile.
 # Eight files go to $OUT (the device tool's folder that comes back, at most 8 files; ./out/gpu elsewhere): check.log
-# (every step but the tests), tests.log, peer.md, launches.md, call_cost.md, search_launches.md, tuned_phases.md,
-# profile.txt (blocks.md too where STEPS names blocks: then name at most seven of the others' steps).
+# (every step but the tests, the lanes page included), tests.log, peer.md, launches.md, call_cost.md,
+# search_launches.md, tuned_phases.md, profile.txt (blocks.md too where STEPS names blocks: then name at most seven
+# of the others' steps).
 # Run from the device tool (benchmarks/README.md), with the commit named, e.g.:
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
-# Knobs: STEPS (tests peer launches call search phases profile; blocks may be added) the steps run after the install;
-# TEST_ARGS (none: the whole suite) pytest's arguments; TEST_WORKERS (12), TEST_CAP (70), PEER_CAP (210), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (70), PHASES_CAP (40),
-# PROFILE_CAP (30), BLOCKS_CAP (80), COST_CAP (20), KTIME_CAP (20), LANES_CAP (40) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
+# Knobs: STEPS (tests lanes peer launches call search phases profile; blocks may be added) the steps run after the
+# install; TEST_ARGS (none: the whole suite) pytest's arguments; TEST_WORKERS (12), TEST_CAP (70), LANES_CAP (50),
+# PEER_CAP (200), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (70), PHASES_CAP (40), PROFILE_CAP (30), BLOCKS_CAP (80),
+# COST_CAP (20), KTIME_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
+# RSOCL_BENCH_PROJECT_LANES, set before the run, stands for the lanes step's choice;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
 set -uo pipefail
 
@@ -34,13 +40,12 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-210} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
+TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-200} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
 SEARCH_CAP=${SEARCH_CAP:-70} PROFILE_CAP=${PROFILE_CAP:-30} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
-KTIME_CAP=${KTIME_CAP:-20} PHASES_CAP=${PHASES_CAP:-40} LANES_CAP=${LANES_CAP:-40}
-STEPS=" ${STEPS:-tests peer launches call search phases profile} "
+KTIME_CAP=${KTIME_CAP:-20} PHASES_CAP=${PHASES_CAP:-40} LANES_CAP=${LANES_CAP:-50}
+STEPS=" ${STEPS:-tests lanes peer launches call search phases profile} "
 want() { [[ "$STEPS" == *" $1 "* ]]; }
 BLOCKS_ARGS=${BLOCKS_ARGS:---rounds 3 --cases paper batch64 size128 size256 size512}
-PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --project-lanes 4 8 --variant-cases paper batch64 size64 size128}
 export PYTHONUNBUFFERED=1 POCL_CACHE_DIR=/tmp/pocl-cache
 T0=$(date +%s)
 stamp() { echo "=== [$(( $(date +%s) - T0 )) s] $*"; }
@@ -89,12 +94,29 @@ flags=()
 "$PYTHON" -c "import xdist" 2>/dev/null && flags+=(-n "${TEST_WORKERS:-12}")              # pytest-xdist and pytest-timeout: in the image
 "$PYTHON" -c "import pytest_timeout" 2>/dev/null && flags+=(--timeout 120)
 # shellcheck disable=SC2086
-timeout -k 10 "$TEST_CAP" "$PYTHON" -P -m pytest -q -p no:cacheprovider "${flags[@]}" -rfEs ${TEST_ARGS:-} 2>&1 \
+timeout -k 10 "$TEST_CAP" env -u RSOCL_BENCH_PROJECT_LANES "$PYTHON" -P -m pytest -q -p no:cacheprovider "${flags[@]}" -rfEs ${TEST_ARGS:-} 2>&1 \
     | tee -a "$OUT/tests.log" | tail -n 60
 echo "tests exit status ${PIPESTATUS[0]} (124: stopped at the cap)" | tee -a "$OUT/tests.log"
 fi
 
-# ---------------------------------------------------------------- 3. the block layout of the operator kernels
+# ---------------------------------------------------------------- 3. the projection's lanes, chosen by their device time
+if want lanes; then
+    stamp "benchmarks/lanes_choice.py (cap ${LANES_CAP} s)" | tee -a "$OUT/check.log"
+    rm -f /tmp/lanes_choice.txt
+    timeout -k 5 "$LANES_CAP" "$PYTHON" -P benchmarks/lanes_choice.py --device "$DEVICE" --choice /tmp/lanes_choice.txt \
+        >> "$OUT/check.log" 2>&1
+    echo "lanes_choice exit status $?" | tee -a "$OUT/check.log"
+    if [ -s /tmp/lanes_choice.txt ]; then
+        export RSOCL_BENCH_PROJECT_LANES=$(cat /tmp/lanes_choice.txt)
+        echo "the benchmarks below run with RSOCL_BENCH_PROJECT_LANES=$RSOCL_BENCH_PROJECT_LANES" | tee -a "$OUT/check.log"
+    fi
+fi
+# the peer's lanes variants: 4 and 8 beside one lane, or one lane beside the chosen count
+others="4 8"
+[ "${RSOCL_BENCH_PROJECT_LANES:-1}" = 1 ] || others=1
+PEER_ARGS=${PEER_ARGS:---rounds 2 --cases paper batch64 size64 size128 size256 size512 batch256 --no-first-two --project-lanes $others --variant-cases paper batch64 size64 size128}
+
+# ---------------------------------------------------------------- 4. the block layout of the operator kernels
 if want blocks; then
     stamp "benchmarks/blocks.py (cap ${BLOCKS_CAP} s)" | tee -a "$OUT/check.log"
     # shellcheck disable=SC2086
@@ -103,7 +125,7 @@ if want blocks; then
     echo "blocks exit status $?" | tee -a "$OUT/check.log"
 fi
 
-# ---------------------------------------------------------------- 4. the PyTorch peer
+# ---------------------------------------------------------------- 5. the PyTorch peer
 if want peer; then
 stamp "benchmarks/peer.py $PEER_ARGS (cap ${PEER_CAP} s)" | tee -a "$OUT/check.log"
 # shellcheck disable=SC2086
@@ -112,7 +134,7 @@ timeout -k 10 "$PEER_CAP" "$PYTHON" -P benchmarks/peer.py --device "$DEVICE" --o
 echo "peer exit status ${PIPESTATUS[0]} (124: stopped at the cap; the page holds the cases done)" | tee -a "$OUT/check.log"
 fi
 
-# ---------------------------------------------------------------- 5. launches per iteration
+# ---------------------------------------------------------------- 6. launches per iteration
 if want launches; then
     stamp "benchmarks/launches.py (cap ${LAUNCH_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$LAUNCH_CAP" "$PYTHON" -P benchmarks/launches.py --device "$DEVICE" --rounds 3 --paths device gpu-two gpu-pairs lean \
@@ -126,14 +148,9 @@ if want launches; then
     timeout -k 5 "$KTIME_CAP" "$PYTHON" -P benchmarks/kernel_times.py --device "$DEVICE" --sizes 8 50 128 256 \
         --iterations 40 >> "$OUT/check.log" 2>&1
     echo "kernel_times exit status $?" | tee -a "$OUT/check.log"
-    stamp "benchmarks/kernel_times.py at 50×50: one set and batches as the search's, 1, 4 and 8 projection lanes (cap ${LANES_CAP} s)" \
-        | tee -a "$OUT/check.log"
-    timeout -k 5 "$LANES_CAP" bash -c 'for lanes in 1 4 8; do "$0" -P benchmarks/kernel_times.py --device "$1" --sizes 50 \
-        --sets 1 5 9 64 --lanes "$lanes" --iterations 20; done' "$PYTHON" "$DEVICE" >> "$OUT/check.log" 2>&1
-    echo "kernel_times (lanes) exit status $?" | tee -a "$OUT/check.log"
 fi
 
-# ---------------------------------------------------------------- 6. a small call's cost: buffers pooled or made
+# ---------------------------------------------------------------- 7. a small call's cost: buffers pooled or made
 if want call; then
     stamp "benchmarks/call_cost.py (cap ${CALL_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$CALL_CAP" "$PYTHON" -P benchmarks/call_cost.py --device "$DEVICE" --sizes 8 50 --rounds 3 --calls 5 \
@@ -141,7 +158,7 @@ if want call; then
     echo "call_cost exit status $?" | tee -a "$OUT/check.log"
 fi
 
-# ---------------------------------------------------------------- 7. the self-tuned default against a fixed run
+# ---------------------------------------------------------------- 8. the self-tuned default against a fixed run
 if want search; then
     stamp "benchmarks/search_launches.py (cap ${SEARCH_CAP} s)" | tee -a "$OUT/check.log"
     timeout -k 5 "$SEARCH_CAP" "$PYTHON" -P benchmarks/search_launches.py --device "$DEVICE" --sizes 50 128 256 \
@@ -155,7 +172,7 @@ if want phases; then
     echo "tuned_phases exit status $?" | tee -a "$OUT/check.log"
 fi
 
-# ---------------------------------------------------------------- 8. one paper set's host work, profiled
+# ---------------------------------------------------------------- 9. one paper set's host work, profiled
 if want profile; then
 stamp "profile of one paper set (cap ${PROFILE_CAP} s)" | tee -a "$OUT/check.log"
 timeout -k 5 "$PROFILE_CAP" "$PYTHON" -P - > "$OUT/profile.txt" 2>&1 <<'PY'
