@@ -88,12 +88,20 @@ def choose(busy: dict, tolerance: float = TOLERANCE, min_gain: float = MIN_GAIN)
 
 
 def time_case(m: int, sets: int, lanes_list: list, device, iterations: int, rounds: int) -> tuple:
-    """``(T, {lanes: median busy µs per iteration})`` of ``m×m`` in batches of ``sets``, rounds rotating the
-    order of ``lanes_list``."""
+    """``(T, {lanes: median busy µs per iteration}, {lanes: lanes the solver used})`` of ``m×m`` in batches of
+    ``sets``, rounds rotating the order of ``lanes_list``; a solver uses fewer lanes where its work groups would
+    not fit (:func:`rsocl.solver.admm.lanes_that_fit`)."""
     rig, g = case(m)
     batch = g if sets == 1 else np.stack([g] * sets)
     samples: dict = {lanes: [] for lanes in lanes_list}
-    saved = admm_module.GPU_PROJECT_LANES
+    used: dict = {}
+    saved, init = admm_module.GPU_PROJECT_LANES, admm_module.ADMM.__init__
+
+    def recording(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        used[admm_module.GPU_PROJECT_LANES] = self.lanes
+
+    admm_module.ADMM.__init__ = recording
     try:
         for r in range(rounds):
             shift = r % len(lanes_list)
@@ -101,8 +109,8 @@ def time_case(m: int, sets: int, lanes_list: list, device, iterations: int, roun
                 admm_module.GPU_PROJECT_LANES = lanes
                 samples[lanes].append(summarise(record(rig, batch, device, iterations), iterations)["busy"])
     finally:
-        admm_module.GPU_PROJECT_LANES = saved
-    return rig.T, {lanes: statistics.median(v) for lanes, v in samples.items()}
+        admm_module.GPU_PROJECT_LANES, admm_module.ADMM.__init__ = saved, init
+    return rig.T, {lanes: statistics.median(v) for lanes, v in samples.items()}, used
 
 
 def main(argv=None):
@@ -125,10 +133,13 @@ def main(argv=None):
     busy, rows = {}, []
     with path("gpu" if args.as_gpu else "device"):
         for m, sets in args.cases:
-            T, times = time_case(m, sets, lanes_list, device, args.iterations, args.rounds)
+            T, times, used = time_case(m, sets, lanes_list, device, args.iterations, args.rounds)
             label = f"{m}×{m}" + ("" if sets == 1 else f", {sets} sets")
             busy[label] = times
-            cells = " | ".join(f"{times[n]:.1f} ({times[n] / times[1]:.2f})" for n in lanes_list)
+            cells = " | ".join(
+                f"{times[n]:.1f} ({times[n] / times[1]:.2f})" + ("" if used[n] == n else f" [{used[n]} fit]")
+                for n in lanes_list
+            )
             rows.append(f"| {label} | {T} | {cells} |")
             print(rows[-1], flush=True)
     chosen, scores = choose(busy)
@@ -137,7 +148,8 @@ def main(argv=None):
     page += [
         f"{small_calls(args.as_gpu)}; a queue with profiling; the {args.iterations} iterations after the first "
         f"{SKIP} of a run; the device's busy time per ADMM iteration (µs, the kernels' sum), the median of "
-        f"{args.rounds} rounds in rotated order, and in brackets over one lane's.",
+        f"{args.rounds} rounds in rotated order, and in brackets over one lane's; `[k fit]`: the solver took k lanes, "
+        "the most whose work groups fit the device.",
         "",
         "| case | T | " + " | ".join(f"{n} lane{'s' if n > 1 else ''}" for n in lanes_list) + " |",
         "|---|---|" + "---|" * len(lanes_list),

@@ -106,3 +106,16 @@ def test_without_the_environment_nothing_is_set(monkeypatch):
     monkeypatch.setattr(admm_module, "GPU_PROJECT_LANES", 1)
     monkeypatch.delenv(provenance.LANES_ENV, raising=False)
     assert provenance.apply_settings() == [] and admm_module.GPU_PROJECT_LANES == 1
+
+
+def test_a_count_the_work_groups_cannot_hold_is_shown_with_the_lanes_taken(tmp_path, monkeypatch):
+    import rsocl.solver.admm as admm_module
+
+    monkeypatch.setattr(admm_module, "lanes_that_fit", lambda lanes, *limits: min(lanes, 2))
+    out = tmp_path / "lanes.md"
+    lanes_choice.main(
+        ["--as-gpu", "--cases", "6x1", "--lanes", "1", "4", "--iterations", "1", "--rounds", "1"] + ["--out", str(out)]
+    )
+    row = next(line for line in out.read_text().splitlines() if line.startswith("| 6×6"))
+    one, four = (cell.strip() for cell in row.split("|")[3:5])
+    assert "fit" not in one and four.endswith("[2 fit]")
