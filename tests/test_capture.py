@@ -121,12 +121,13 @@ def test_camera_failure_keeps_what_was_captured(tmp_path):
     np.testing.assert_array_equal(capture.snapshots, raw.snapshot_sets[0])
 
     # failure in the first set: raw frames and the failure are kept, but there are no snapshots yet
+    first = tmp_path / "first.h5"
     with pytest.raises(CaptureFailed, match="in set 0"):
-        capture_sets(_rigfile(configs=[{}, {"fail_after": 1}, {}, {}]), out, sets=2)
-    raw = load_raw(out)
+        capture_sets(_rigfile(configs=[{}, {"fail_after": 1}, {}, {}]), first, sets=2)
+    raw = load_raw(first)
     assert [f.shape[0] for f in raw.frames] == [1, 0, 0, 0] and raw.failure["camera"] == 1
     with pytest.raises(ValueError, match="snapshots"):
-        load_capture(out)
+        load_capture(first)
 
 
 def test_open_and_registration_failures(tmp_path):

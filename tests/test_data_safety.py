@@ -119,6 +119,54 @@ def test_per_set_outputs_are_written_when_they_collide_with_nothing(three_sets, 
     assert sorted(p.name for p in tmp_path.glob("r-set*.h5")) == ["r-set000.h5", "r-set001.h5", "r-set002.h5"]
 
 
+def test_a_capture_from_cameras_is_never_replaced_by_a_simulation_or_another_capture(three_sets, tmp_path, capsys):
+    out = tmp_path / "take1.h5"
+    shutil.copy(three_sets, out)
+    before = _md5(out)
+    assert main(["simulate", "builtin", "--out", str(out), "--shape", "16", "16", "--quiet"]) == 2
+    [line] = _error_lines(capsys.readouterr().err)
+    assert line == (
+        f"rsocl simulate: error: --out {str(out)!r} holds 12 frame(s) from cameras (rsocl capture); a capture "
+        "from cameras is never replaced: it is kept, move it or choose another --out"
+    )
+    with pytest.raises(ValueError, match=r"^out .* holds 12 frame\(s\) from cameras"):
+        capture_sets(_rig_file(tmp_path), out, sets=1)
+    assert _md5(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig16.toml", "take1.h5"]  # no partial, no temporary
+
+
+def test_a_simulated_capture_may_be_replaced(tmp_path, capsys):
+    out = tmp_path / "sim.h5"
+    for seed in (0, 1):
+        argv = ["simulate", "builtin", "--out", str(out), "--shape", "12", "12", "--quiet"]
+        assert main([*argv, "--noise", "gaussian", "--sigma", "0.1", "--seed", str(seed)]) == 0
+        assert load_capture(out).meta["seed"] == seed
+    assert capture_sets(_rig_file(tmp_path, (12, 12)), out, sets=1) == out  # rsocl capture over a simulation
+    assert load_capture(out).meta["status"] == "complete"
+
+
+def test_camera_frames_counts_only_frames_from_cameras(three_sets, tmp_path, monkeypatch):
+    import rsocl.files.hdf5 as hdf5_module
+    from rsocl.files.hdf5 import camera_frames, refuse_camera_capture
+
+    sim = tmp_path / "sim.h5"
+    save_capture(sim, np.zeros((4,) + SHAPE), Rig.paper_array(4, SHAPE, t_e=180e-6, t_r=35e-6))
+    (tmp_path / "text.h5").write_text("not HDF5")
+    for path in (tmp_path / "absent.h5", tmp_path, tmp_path / "text.h5", sim):
+        assert camera_frames(path) is None
+        refuse_camera_capture(path)  # nothing to keep
+    assert camera_frames(three_sets) == 12  # 4 cameras x 3 sets
+
+    def unreadable(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied")
+
+    monkeypatch.setattr(hdf5_module, "open", unreadable, raising=False)
+    with pytest.raises(PermissionError):
+        camera_frames(sim)
+    with pytest.raises(ValueError, match=r"--out .* cannot be read to tell .* \(Permission denied\); it is kept"):
+        refuse_camera_capture(sim)
+
+
 # ---------------------------------------------------------------------- 2. a partial capture is never truncated
 def _complete_sets(path) -> int:
     """``sets_complete`` of a capture file another process is writing, read past its lock (0 while

@@ -11,7 +11,7 @@ def add_parser(subparsers):
     """Add ``simulate`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser("simulate", help="scene file -> capture file (HDF5)")
     p.add_argument("scene", help="'builtin' or a video: .npz (key 'video'), multi-page .tif, .gif")
-    p.add_argument("--out", required=True, help="capture file to write (.h5)")
+    p.add_argument("--out", required=True, help="capture file to write (.h5); never one that holds frames from cameras")
     add_rig_args(p)
     p.add_argument(
         "--frames",
@@ -138,11 +138,12 @@ def scene_datacube(args, rig):
 def cmd_simulate(args) -> int:
     """Simulate the snapshots of ``args.scene`` and write them, the rig and the truth to ``--out``; returns 0."""
     from rsocl.files.atomic import output_path
-    from rsocl.files.hdf5 import save_capture
+    from rsocl.files.hdf5 import refuse_camera_capture, save_capture
     from rsocl.model.simulate import simulate
 
     check_noise_args(args)
     output_path(args.out, "--out", inputs=(("scene", None if args.scene == "builtin" else args.scene),))
+    refuse_camera_capture(args.out, "--out")
     rig = multi_frame_rig(args, rig_from(args))
     check_datacube_memory(rig)
     truth = scene_datacube(args, rig)

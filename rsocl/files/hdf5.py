@@ -50,6 +50,8 @@ __all__ = [
     "load_capture_rig",
     "load_snapshot_sets",
     "snapshot_set_count",
+    "camera_frames",
+    "refuse_camera_capture",
     "save_reconstruction",
     "load_reconstruction",
     "FORMAT_VERSION",
@@ -243,3 +245,68 @@ def load_snapshot_sets(path) -> np.ndarray | None:
     if sets.ndim != 4 or sets.shape[0] < 1 or not np.all(np.isfinite(sets)):
         raise ValueError(f"{source}: dataset 'snapshot_sets' must be finite (S >= 1, K, m, n), got {sets.shape}")
     return sets
+
+
+def camera_frames(path) -> int | None:
+    """How many frames from cameras an existing file holds: the ``raw/`` datasets of a capture of
+    ``rsocl capture`` (:mod:`rsocl.hardware.capture_file`), however many of its sets are complete.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Any path.
+
+    Returns
+    -------
+    int or None
+        The frames (> 0); None where ``path`` holds none: absent, a folder, not HDF5, or a file
+        without camera frames (a simulated capture, a reconstruction).
+
+    Raises
+    ------
+    OSError
+        ``path`` is a file that cannot be read (permissions, another process's lock).
+
+    Examples
+    --------
+    >>> camera_frames("no-such-file.h5") is None
+    True
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    with open(path, "rb"):  # an unreadable file is an OSError here, not "not HDF5"
+        pass
+    if not h5py.is_hdf5(path):
+        return None
+    with h5py.File(path, "r") as h5:
+        raw = h5.get("raw")
+        datasets = raw.values() if isinstance(raw, h5py.Group) else ()
+        frames = sum(int(d.shape[0]) for d in datasets if isinstance(d, h5py.Dataset) and d.ndim)
+    return frames or None
+
+
+def refuse_camera_capture(path, name: str = "--out") -> None:
+    """Refuse, naming ``name``, to write ``path`` where it holds frames from cameras (:func:`camera_frames`)
+    or cannot be read to tell: a capture from cameras is never replaced by another file. Nothing is written.
+
+    Raises
+    ------
+    ValueError
+        ``path`` holds camera frames, or cannot be read; the message names it and says it is kept.
+    """
+    try:
+        frames = camera_frames(path)
+    except OSError as exc:
+        why = exc.strerror or " ".join(str(exc).split())
+        raise ValueError(
+            f"{name} {str(path)!r} cannot be read to tell whether it holds frames from cameras ({why}); "
+            f"it is kept: choose another {name}"
+        ) from None
+    if frames:
+        raise ValueError(
+            f"{name} {str(path)!r} holds {frames} frame(s) from cameras (rsocl capture); a capture from cameras "
+            f"is never replaced: it is kept, move it or choose another {name}"
+        )

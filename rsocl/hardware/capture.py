@@ -24,8 +24,10 @@ loss, ``kill -9``); it is a readable capture file up to the last flush. It is
 never truncated nor appended to: a capture to the same ``<out>`` is refused
 (:func:`~rsocl.hardware.capture_file.check_partial`, naming the file and its complete sets) until the
 user renames it (to keep it as a capture) or removes it; so is a capture
-whose ``<out>.partial`` another process is writing. An existing ``<out>`` is
-replaced only at the end of the run. The file's layout and its reader,
+whose ``<out>.partial`` another process is writing, and one whose ``<out>``
+holds frames from cameras, an earlier capture
+(:func:`~rsocl.files.hdf5.refuse_camera_capture`). Another existing ``<out>``
+(a simulated capture, say) is replaced only at the end of the run. The file's layout and its reader,
 :func:`~rsocl.hardware.capture_file.load_raw`, are in :mod:`rsocl.hardware.capture_file`.
 
 Registration and units
@@ -49,6 +51,7 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.files.atomic import output_path
+from rsocl.files.hdf5 import refuse_camera_capture
 from rsocl.files.rigfile import RigFile, load_rigfile
 from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, check_partial, publish, readable
 
@@ -144,7 +147,8 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         A camera (or the registration of its frame) failed: ``out_path`` holds
         everything captured before and the failure (camera, set, error).
     ValueError, FileNotFoundError
-        Bad arguments, rig file, unknown backend or camera config; nothing is written.
+        Bad arguments, rig file, unknown backend or camera config, or an ``out_path`` that holds frames
+        from cameras (an earlier capture); nothing is written.
     KeyboardInterrupt
         Re-raised after the file is closed with status ``"interrupted"``.
     """
@@ -167,6 +171,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
     out = output_path(out_path, "out", inputs=reads)
     partial = output_path(out.with_name(out.name + PARTIAL_SUFFIX), "out", inputs=reads)
     check_partial(partial)
+    refuse_camera_capture(out, "out")
 
     backends = rigfile.backends()
     labels = [_label(i, b, c) for i, (b, c) in enumerate(backends)]
