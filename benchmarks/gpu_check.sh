@@ -5,8 +5,9 @@
 #      and rsocl from this tree into /tmp/site; point pyopencl's ICD loader at NVIDIA's OpenCL;
 #   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped, with rsocl's own settings;
 #   3. benchmarks/lanes_choice.py (the projection's 1, 2, 4 and 8 lanes at 50×50, one set and batches as the
-#      search's, and at 128 and 256 pixels), capped; its choice is exported as RSOCL_BENCH_PROJECT_LANES, which
-#      every later benchmark applies and names in its page's header (benchmarks/provenance.py);
+#      search's, and at 128 and 256 pixels; no case starts after 3/5 of the cap), capped; its choice is exported
+#      as RSOCL_BENCH_PROJECT_LANES, which every later benchmark applies and names in its page's header
+#      (benchmarks/provenance.py);
 #   4. benchmarks/blocks.py (the operator kernels' block layout, GPU_BLOCK), capped: only where STEPS names it;
 #   5. benchmarks/peer.py (rsocl against PyTorch eager, CUDA graph and torch.compile; in four cases also one lane
 #      beside the chosen count, or 4 and 8 lanes where one was chosen), capped;
@@ -103,8 +104,9 @@ fi
 if want lanes; then
     stamp "benchmarks/lanes_choice.py (cap ${LANES_CAP} s)" | tee -a "$OUT/check.log"
     rm -f /tmp/lanes_choice.txt
-    timeout -k 5 "$LANES_CAP" "$PYTHON" -P benchmarks/lanes_choice.py --device "$DEVICE" --choice /tmp/lanes_choice.txt \
-        >> "$OUT/check.log" 2>&1
+    # no case starts after three fifths of the cap: the last one has the rest to finish, and the choice is made
+    timeout -k 5 "$LANES_CAP" "$PYTHON" -P benchmarks/lanes_choice.py --device "$DEVICE" --budget $((LANES_CAP * 3 / 5)) \
+        --choice /tmp/lanes_choice.txt >> "$OUT/check.log" 2>&1
     echo "lanes_choice exit status $?" | tee -a "$OUT/check.log"
     if [ -s /tmp/lanes_choice.txt ]; then
         export RSOCL_BENCH_PROJECT_LANES=$(cat /tmp/lanes_choice.txt)

@@ -14,11 +14,14 @@ The choice (:func:`choose`): among the lane counts that make no case busier than
 :data:`TOLERANCE`, the one whose busy time over one lane's has the smallest geometric mean over the cases,
 where that mean is below ``1 - MIN_GAIN``; else one lane. Busy time, not wall time, because lanes change no
 launch: where the host bounds a loop (one small set) they cannot change its wall time, and where the device
-does, its busy time is the loop's. ``--choice FILE`` writes the chosen count (``benchmarks/gpu_check.sh``
-runs the later benchmarks with it through ``RSOCL_BENCH_PROJECT_LANES``, :mod:`provenance`).
+does, its busy time is the loop's. With ``--budget``, no case but the first starts after that many seconds:
+the choice is made on the cases timed, and the page names the others. ``--choice FILE`` writes the chosen
+count (``benchmarks/gpu_check.sh`` runs the later benchmarks with it through ``RSOCL_BENCH_PROJECT_LANES``,
+:mod:`provenance`).
 
-    python benchmarks/lanes_choice.py [--device SPEC] [--cases 50x1 50x5 50x9 50x64 128x1 256x1]
-        [--lanes 1 2 4 8] [--iterations 10] [--rounds 2] [--as-gpu] [--choice FILE] [--out docs/lanes_choice.md]
+    python benchmarks/lanes_choice.py [--device SPEC] [--cases 50x1 256x1 50x5 128x1 50x64 50x9]
+        [--lanes 1 2 4 8] [--iterations 10] [--rounds 2] [--budget SECONDS] [--as-gpu] [--choice FILE]
+        [--out docs/lanes_choice.md]
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import argparse
 import math
 import statistics
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -45,9 +49,10 @@ from rsocl.device.context import get_device  # noqa: E402
 TOLERANCE = 0.03
 #: The least a chosen lane count must lower the geometric mean of the cases' busy times over one lane's.
 MIN_GAIN = 0.03
-#: The cases by default: the paper set, batches of the sizes the self-tuned search runs and one of 64 sets,
-#: and single sets of larger frames, where the device bounds the loop.
-CASES = ("50x1", "50x5", "50x9", "50x64", "128x1", "256x1")
+#: The cases by default, the most telling first (``--budget`` may leave the last ones out): the paper set, a
+#: frame where the device bounds the loop, a batch of the self-tuned search's size, 128×128, 64 sets per call,
+#: and the search's larger batches.
+CASES = ("50x1", "256x1", "50x5", "128x1", "50x64", "50x9")
 
 
 def parse_case(text: str) -> tuple:
@@ -120,21 +125,28 @@ def main(argv=None):
     p.add_argument("--lanes", type=int, nargs="+", default=[1, 2, 4, 8], help="lane counts (powers of two, with 1)")
     p.add_argument("--iterations", type=int, default=10, help="iterations recorded per run (>= 1)")
     p.add_argument("--rounds", type=int, default=2, help="rounds of every lane count per case (>= 1)")
+    p.add_argument("--budget", type=float, default=None, help="seconds after which no case but the first starts (> 0)")
     p.add_argument("--as-gpu", action="store_true", help="read the device as a GPU (its choices run on a CPU)")
     p.add_argument("--choice", type=Path, default=None, help="write the chosen lane count to this file")
     p.add_argument("--out", type=Path, default=None, help=f"write the page here (e.g. {DOCS / 'lanes_choice.md'})")
     args = p.parse_args(argv)
     if args.iterations < 1 or args.rounds < 1:
         p.error(f"--iterations and --rounds must be >= 1, got {args.iterations} and {args.rounds}")
+    if args.budget is not None and not args.budget > 0:
+        p.error(f"--budget must be > 0 seconds, got {args.budget}")
     if 1 not in args.lanes or any(n < 1 or n & (n - 1) for n in args.lanes):
         p.error(f"--lanes must be powers of two (1, 2, 4, ...) and hold 1, the baseline, got {args.lanes}")
     lanes_list = list(dict.fromkeys(args.lanes))
     device = profiling_device(get_device(args.device))
-    busy, rows = {}, []
+    busy, rows, left = {}, [], []
+    start = time.perf_counter()
     with path("gpu" if args.as_gpu else "device"):
         for m, sets in args.cases:
-            T, times, used = time_case(m, sets, lanes_list, device, args.iterations, args.rounds)
             label = f"{m}×{m}" + ("" if sets == 1 else f", {sets} sets")
+            if busy and args.budget is not None and time.perf_counter() - start > args.budget:
+                left.append(label)
+                continue
+            T, times, used = time_case(m, sets, lanes_list, device, args.iterations, args.rounds)
             busy[label] = times
             cells = " | ".join(
                 f"{times[n]:.1f} ({times[n] / times[1]:.2f})" + ("" if used[n] == n else f" [{used[n]} fit]")
@@ -159,7 +171,8 @@ def main(argv=None):
         + " |",
         "",
         f"Chosen: **{chosen}** (the smallest geometric mean below {1 - MIN_GAIN:g} among the counts that raise no "
-        f"case above {1 + TOLERANCE:g}× one lane's; else 1).",
+        f"case above {1 + TOLERANCE:g}× one lane's; else 1)"
+        + (f"; not timed, past the budget of {args.budget:g} s: {'; '.join(left)}." if left else "."),
         "",
     ]
     emit(page, args.out)

@@ -70,12 +70,14 @@ def test_the_page_times_every_count_and_the_choice_file_holds_its_choice(tmp_pat
 
 
 @pytest.mark.parametrize(
-    "args", [["--lanes", "2", "4"], ["--lanes", "1", "3"], ["--iterations", "0"], ["--cases", "1x1"], ["--cases", "50"]]
+    "args",
+    [["--lanes", "2", "4"], ["--lanes", "1", "3"], ["--iterations", "0"], ["--cases", "1x1"], ["--cases", "50"]]
+    + [["--budget", "0"]],
 )
 def test_bad_arguments_are_refused(args, capsys):
     with pytest.raises(SystemExit):
         lanes_choice.main(args)
-    assert re.search(r"--lanes|--iterations|a case", capsys.readouterr().err)
+    assert re.search(r"--lanes|--iterations|a case|--budget", capsys.readouterr().err)
 
 
 def test_the_environment_sets_the_lanes_and_the_header_says_so(monkeypatch):
@@ -119,3 +121,14 @@ def test_a_count_the_work_groups_cannot_hold_is_shown_with_the_lanes_taken(tmp_p
     row = next(line for line in out.read_text().splitlines() if line.startswith("| 6×6"))
     one, four = (cell.strip() for cell in row.split("|")[3:5])
     assert "fit" not in one and four.endswith("[2 fit]")
+
+
+def test_cases_past_the_budget_are_named_and_left_out_of_the_choice(tmp_path):
+    out = tmp_path / "lanes.md"
+    argv = ["--as-gpu", "--cases", "6x1", "6x2", "4x1", "--lanes", "1", "2", "--iterations", "1", "--rounds", "1"]
+    lanes_choice.main([*argv, "--budget", "1e-9", "--out", str(out)])
+    text = out.read_text()
+    assert [
+        line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| 6×6") or line.startswith("| 4×4")
+    ] == ["6×6"]
+    assert "not timed, past the budget of 1e-09 s: 6×6, 2 sets; 4×4." in text
