@@ -474,3 +474,41 @@ def test_calibrate_refuses_an_output_that_is_an_input_before_any_work(calibratio
     with pytest.raises(ValueError, match=r"--png .*markers.npz' is the --frames it reads"):
         _calibrate(["--rig", folder / "rig.toml", "--frames", folder / "markers.npz", "--png", folder / "markers.npz"])
     assert (folder / "flats.npz").read_bytes() == flats
+
+
+def test_calibrate_keeps_the_rig_file_it_replaces(calibration_files, capsys):
+    import re
+
+    from rsocl.cli.main import main
+    from rsocl.files.rigfile import load_rigfile
+
+    folder, *_ = calibration_files
+    rig = folder / "rig.toml"
+    before = rig.read_bytes()
+    for _ in range(2):  # twice within a second: the second copy takes another name
+        assert main(["calibrate", "--rig", str(rig), "--flat", str(folder / "flats.npz")]) == 0
+    kept = sorted(folder.glob("rig.before-calibration-*.toml"))
+    assert len(kept) == 2 and all(
+        re.fullmatch(r"rig\.before-calibration-\d{8}T\d{6}Z(-1)?\.toml", p.name) for p in kept
+    )
+    [original] = [p for p in kept if p.read_bytes() == before]  # the file before any calibration, byte for byte
+    assert load_rigfile(original).cameras[1].get("gain", 1.0) == 1.0
+    assert load_rigfile(rig).cameras[1]["gain"] == pytest.approx(0.9, rel=0.01)  # the flat field's
+    out = capsys.readouterr().out
+    assert out.count("the rig file it replaced is kept as") == 2
+    assert (
+        main(["calibrate", "--rig", str(rig), "--flat", str(folder / "flats.npz"), "--out", str(folder / "new.toml")])
+        == 0
+    )
+    assert len(list(folder.glob("*.before-calibration-*"))) == 2  # a new file replaces nothing
+
+
+def test_keep_copy_names_and_refusals(tmp_path):
+    from rsocl.files.atomic import keep_copy
+
+    assert keep_copy(tmp_path / "absent.toml", "before") is None
+    (tmp_path / "a.toml").write_text("x")
+    copies = [keep_copy(tmp_path / "a.toml", "before") for _ in range(3)]
+    assert len(set(copies)) == 3 and all(c.read_text() == "x" and c.parent == tmp_path for c in copies)
+    with pytest.raises(ValueError, match="tag must be"):
+        keep_copy(tmp_path / "a.toml", "../x")

@@ -23,10 +23,12 @@ import re
 import shutil
 import socket
 import tempfile
+import time
 from pathlib import Path
 
 __all__ = [
     "atomic_path",
+    "keep_copy",
     "output_path",
     "output_folder",
     "default_mode",
@@ -272,3 +274,44 @@ def atomic_path(path):
             raise OutputError(path, exc, existed) from exc
         raise
     fsync_directory(directory)
+
+
+def keep_copy(path, tag: str) -> Path | None:
+    """Copy the file ``path`` beside it, before a command replaces it: ``<stem>.<tag>-<UTC time><suffix>``,
+    a name no file has (``-1``, ``-2``, ... added where needed), written atomically (:func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file about to be replaced.
+    tag : str
+        Why it is kept, in the copy's name (letters, digits, ``-`` and ``_``).
+
+    Returns
+    -------
+    pathlib.Path or None
+        The copy; None where ``path`` is no file (nothing to keep).
+
+    Raises
+    ------
+    OutputError
+        The copy could not be written (nothing was made; ``path`` is unchanged).
+
+    Examples
+    --------
+    >>> keep_copy("rig.toml", "before-calibration")      # doctest: +SKIP
+    PosixPath('rig.before-calibration-20261127T094500Z.toml')
+    """
+    path = Path(path)
+    if not re.fullmatch(r"[A-Za-z0-9_-]+", tag):
+        raise ValueError(f"tag must be letters, digits, '-' or '_', got {tag!r}")
+    if not path.is_file():
+        return None
+    stem = f"{path.stem}.{tag}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}"
+    copy, n = path.with_name(stem + path.suffix), 0
+    while copy.exists() or copy.is_symlink():
+        n += 1
+        copy = path.with_name(f"{stem}-{n}{path.suffix}")
+    with atomic_path(copy) as tmp:
+        shutil.copy2(path, tmp)
+    return copy
