@@ -167,6 +167,65 @@ def test_camera_frames_counts_only_frames_from_cameras(three_sets, tmp_path, mon
         refuse_camera_capture(sim)
 
 
+def test_a_second_reconstruction_to_one_name_keeps_the_earlier_result(three_sets, tmp_path, capsys):
+    from rsocl.files.hdf5 import load_reconstruction
+
+    capture = tmp_path / "c.h5"
+    shutil.copy(three_sets, capture)
+    out = tmp_path / "r.h5"
+    argv = ["reconstruct", str(capture), "--out", str(out), "--first-set-only", "--fast"]
+    assert main([*argv, "--iterations", "2"]) == 0
+    first = out.read_bytes()
+    capsys.readouterr()
+    assert main([*argv, "--iterations", "3"]) == 0
+    [kept] = tmp_path.glob("r.earlier-*.h5")
+    assert kept.read_bytes() == first and len(load_reconstruction(kept).history["residual"]) == 2
+    assert len(load_reconstruction(out).history["residual"]) == 3
+    assert capsys.readouterr().out.rstrip().endswith(f"(the earlier file there is kept as {kept})")
+
+
+def test_the_earlier_per_set_results_are_kept_too(three_sets, tmp_path, capsys):
+    capture = tmp_path / "c.h5"
+    shutil.copy(three_sets, capture)
+    argv = ["reconstruct", str(capture), "--out", str(tmp_path / "r.h5"), "--fast", "--iterations", "2"]
+    assert main(argv) == 0 and main(argv) == 0
+    kept = sorted(p.name for p in tmp_path.glob("r-set*.earlier-*.h5"))
+    assert [name.split(".")[0] for name in kept] == ["r-set000", "r-set001", "r-set002"]
+    assert "(the 3 earlier files there are kept as <name>.earlier-<UTC time>.h5: " in capsys.readouterr().out
+
+
+def test_an_earlier_file_keeps_its_bytes_by_a_link_or_a_copy(tmp_path, monkeypatch):
+    from rsocl.files.atomic import atomic_path, keeping
+
+    path = tmp_path / "r.h5"
+    path.write_bytes(b"earlier")
+    inode = path.stat().st_ino
+    with keeping(path, "earlier") as kept:
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(b"new")
+    assert kept.read_bytes() == b"earlier" and path.read_bytes() == b"new"
+    assert kept.stat().st_ino == inode  # a hard link: no byte copied
+
+    def no_links(*args, **kwargs):
+        raise OSError(errno.EPERM, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_links)
+    with keeping(path, "earlier") as copy:
+        path.write_bytes(b"newer")
+    assert copy.read_bytes() == b"new" and copy != kept and copy.stat().st_ino != path.stat().st_ino
+    with pytest.raises(RuntimeError), keeping(path, "earlier") as gone:  # a failed write: no second name left
+        raise RuntimeError
+    assert not gone.exists() and path.read_bytes() == b"newer"
+
+
+def test_kept_note_words():
+    from rsocl.cli.outputs import kept_note
+
+    assert kept_note([None, None]) == ""
+    assert kept_note(["a.earlier-1.h5"]) == " (the earlier file there is kept as a.earlier-1.h5)"
+    assert kept_note(["a.earlier-1.h5", None, "b.earlier-1.h5"]).startswith(" (the 2 earlier files there are kept")
+
+
 # ---------------------------------------------------------------------- 2. a partial capture is never truncated
 def _complete_sets(path) -> int:
     """``sets_complete`` of a capture file another process is writing, read past its lock (0 while

@@ -291,7 +291,7 @@ def cmd_calibrate(args) -> int:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
     if args.flicker_hz is not None and args.flicker is None:
         raise ValueError("--flicker-hz needs --flicker (frames of the flickering light)")
-    from rsocl.files.atomic import keep_copy, output_path
+    from rsocl.files.atomic import keeping, output_path
 
     reads = (("--frames", args.frames), ("--flicker", args.flicker), ("--flat", args.flat))
     out = output_path(Path(args.out) if args.out else Path(args.rig), "--out", inputs=reads)  # before any work
@@ -314,8 +314,8 @@ def cmd_calibrate(args) -> int:
     if overlay is not None:
         frames, detected, reprojected, outlines, titles = overlay
         written.append(marker_overlay_png(png, frames, detected, reprojected, outlines=outlines, titles=titles))
-    kept = keep_copy(out, "before-calibration")  # the rig file it replaces, --rig or another
-    written.insert(0, save_rigfile(out, calibrated))
+    with keeping(out, "before-calibration") as kept:  # the rig file it replaces, --rig or another
+        written.insert(0, save_rigfile(out, calibrated))
     rig = calibrated.rig()
     note = "" if kept is None else f" (the rig file it replaced is kept as {kept})"
     say(args, f"rig: {rig!r}\nwrote " + ", ".join(str(p) for p in written) + note)

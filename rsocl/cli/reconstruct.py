@@ -15,6 +15,7 @@ from rsocl.cli.options import (
     solver_options,
     tuning_plot_files,
 )
+from rsocl.cli.outputs import kept_note, save_result
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
 __all__ = ["add_parser", "cmd_reconstruct", "set_path", "check_set_outputs"]
@@ -28,7 +29,8 @@ def add_parser(subparsers):
         "--out",
         required=True,
         help="reconstruction file to write (.h5; a capture of several sets writes one per set, "
-        "OUT with '-setNNN' before the suffix), or a Zarr store (.zarr)",
+        "OUT with '-setNNN' before the suffix; a file already there is kept as STEM.earlier-<UTC time>.h5), "
+        "or a Zarr store (.zarr)",
     )
     p.add_argument("--gif", default=None, help="GIF to write (default: next to an .h5 --out; of set 0)")
     p.add_argument(
@@ -110,7 +112,6 @@ def cmd_reconstruct(args) -> int:
     from rsocl.analysis.visual import comparison_gif
     from rsocl.files.atomic import OutputError
     from rsocl.files.hdf5 import load_capture, load_snapshot_sets
-    from rsocl.files.hdf5_reconstruction import save_reconstruction
 
     if args.batch is not None and args.batch < 1:  # before anything runs, whatever the capture holds
         raise ValueError(f"--batch must be >= 1 (sets per batch), got {args.batch}")
@@ -128,21 +129,23 @@ def cmd_reconstruct(args) -> int:
     if sets is None or sets.shape[0] == 1:
         result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
         print(quality_line(result, truth))
-        save_reconstruction(
-            out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth
-        )
+        kept = save_result(out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth)
         comparison_gif(gif, truth, result.datacube)
-        say(args, "wrote " + ", ".join(str(p) for p in [out, gif, *tuning_plot_files(args, result.params, gif)]))
+        files = [out, gif, *tuning_plot_files(args, result.params, gif)]
+        say(args, "wrote " + ", ".join(str(p) for p in files) + kept_note([kept]))
         return 0
     batch = _reconstruct_sets(args, sets, capture.rig)
     say(args, f"{sets.shape[0]} sets in batches of {batch.params['batch']}")
+    earlier = []
     for i in range(batch.batch):
         one = batch.set(i)
         known = truth if i == 0 else None  # the capture's truth is set 0's datacube
         print(f"set {i}: " + quality_line(one, known))
         try:
-            save_reconstruction(
-                set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history, truth=known
+            earlier.append(
+                save_result(
+                    set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history, truth=known
+                )
             )
         except OutputError as exc:  # a full disk: say which sets are on it
             if i:
@@ -150,7 +153,8 @@ def cmd_reconstruct(args) -> int:
             raise
     comparison_gif(gif, truth, batch.set(0).datacube)
     plots = tuning_plot_files(args, batch.set(0).params, gif)
-    say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, " + ", ".join(map(str, [gif, *plots])))
+    pictures = ", ".join(map(str, [gif, *plots]))
+    say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, {pictures}" + kept_note(earlier))
     return 0
 
 

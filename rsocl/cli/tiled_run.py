@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rsocl.cli.outputs import kept_note, save_result
+
 __all__ = ["is_zarr", "zarr_gif", "run_tiles", "run_stream"]
 
 
@@ -85,16 +87,15 @@ def run_tiles(args, capture):
         plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
         say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
         return 0
-    from rsocl.files.hdf5 import save_reconstruction
-
     history = {
         "tile_seconds": np.array([p.seconds for p in result.pieces]),
         "tile_residual": np.array([p.residual for p in result.pieces]),
     }
-    save_reconstruction(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
+    kept = save_result(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     comparison_gif(gif, truth, result.datacube)
-    say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, result.params, gif)])))
+    files = [args.out, gif, *tuning_plot_files(args, result.params, gif)]
+    say(args, "wrote " + ", ".join(map(str, files)) + kept_note([kept]))
     return 0
 
 
@@ -103,7 +104,7 @@ def run_stream(args):
     the exit code."""
     from rsocl.analysis.visual import comparison_gif
     from rsocl.cli.options import say, solver_options, truth_quality, tuning_plot_files
-    from rsocl.files.hdf5 import load_capture, save_reconstruction
+    from rsocl.files.hdf5 import load_capture
     from rsocl.scale.stream import default_overlap, reconstruct_stream
 
     loaded = load_capture(args.capture, set_index=0)
@@ -127,8 +128,10 @@ def run_stream(args):
     params = dict(
         stream.results[0].params, window=args.window, overlap=overlap, windows=[list(w) for w in stream.windows]
     )
-    save_reconstruction(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
+    kept = save_result(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     comparison_gif(gif, truth, stream.datacube)
-    say(args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, params, gif)])))
+    say(
+        args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, params, gif)])) + kept_note([kept])
+    )
     return 0

@@ -29,6 +29,7 @@ from pathlib import Path
 __all__ = [
     "atomic_path",
     "keep_copy",
+    "keeping",
     "output_path",
     "output_folder",
     "default_mode",
@@ -277,25 +278,27 @@ def atomic_path(path):
 
 
 def keep_copy(path, tag: str) -> Path | None:
-    """Copy the file ``path`` beside it, before a command replaces it: ``<stem>.<tag>-<UTC time><suffix>``,
-    a name no file has (``-1``, ``-2``, ... added where needed), written atomically (:func:`atomic_path`).
+    """Give the file ``path`` a second name beside it, before a command replaces it:
+    ``<stem>.<tag>-<UTC time><suffix>``, a name no file has (``-1``, ``-2``, ... added where needed). A hard
+    link where the file system makes one (no bytes copied; replacing ``path`` leaves the link the earlier
+    file), else a copy written atomically (:func:`atomic_path`).
 
     Parameters
     ----------
     path : str or os.PathLike
         The file about to be replaced.
     tag : str
-        Why it is kept, in the copy's name (letters, digits, ``-`` and ``_``).
+        Why it is kept, in the second name (letters, digits, ``-`` and ``_``).
 
     Returns
     -------
     pathlib.Path or None
-        The copy; None where ``path`` is no file (nothing to keep).
+        The second name; None where ``path`` is no file (nothing to keep).
 
     Raises
     ------
     OutputError
-        The copy could not be written (nothing was made; ``path`` is unchanged).
+        Neither a link nor a copy could be made (nothing was made; ``path`` is unchanged).
 
     Examples
     --------
@@ -312,6 +315,30 @@ def keep_copy(path, tag: str) -> Path | None:
     while copy.exists() or copy.is_symlink():
         n += 1
         copy = path.with_name(f"{stem}-{n}{path.suffix}")
-    with atomic_path(copy) as tmp:
-        shutil.copy2(path, tmp)
+    try:
+        os.link(path, copy)
+    except OSError:  # no hard links here (or another race): a copy
+        with atomic_path(copy) as tmp:
+            shutil.copy2(path, tmp)
     return copy
+
+
+@contextlib.contextmanager
+def keeping(path, tag: str):
+    """Context manager for a block that replaces the file ``path``: the earlier file keeps a second name
+    (:func:`keep_copy`, yielded; None where there was no file), which is removed again if the block fails
+    (``path`` is then the earlier file, as an :func:`atomic_path` write leaves it).
+
+    Examples
+    --------
+    >>> with keeping("rec.h5", "earlier") as kept:       # doctest: +SKIP
+    ...     save_reconstruction("rec.h5", cube, rig)
+    """
+    kept = keep_copy(path, tag)
+    try:
+        yield kept
+    except BaseException:
+        if kept is not None:
+            with contextlib.suppress(OSError):
+                kept.unlink()
+        raise

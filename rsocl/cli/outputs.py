@@ -1,0 +1,49 @@
+"""Reconstruction files written by the command line: an earlier file at an output path is kept beside it.
+
+``rsocl reconstruct`` (one set, every set of a capture, tiles, a stream) writes each HDF5 result with
+:func:`save_result`: a file already at the path keeps a second name, ``<stem>.earlier-<UTC time>.h5``
+(:func:`rsocl.files.atomic.keeping`: a hard link, or a copy), so running a command again never loses an
+earlier result; a write that fails leaves the earlier file where it was, with no second name.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ["EARLIER", "save_result", "kept_note"]
+
+#: The tag in the name an earlier file at an output path keeps.
+EARLIER = "earlier"
+
+
+def save_result(path, datacube, rig, **kwargs) -> Path | None:
+    """Write the reconstruction file ``path`` (:func:`rsocl.files.hdf5.save_reconstruction`, with its keyword
+    arguments), keeping a file already there as ``<stem>.earlier-<UTC time><suffix>``.
+
+    Returns
+    -------
+    pathlib.Path or None
+        The earlier file's new name; None where ``path`` held no file.
+
+    Raises
+    ------
+    rsocl.files.atomic.OutputError
+        The write failed: ``path`` is unchanged and has no second name.
+    """
+    from rsocl.files.atomic import keeping
+    from rsocl.files.hdf5_reconstruction import save_reconstruction
+
+    with keeping(path, EARLIER) as kept:
+        save_reconstruction(path, datacube, rig, **kwargs)
+    return kept
+
+
+def kept_note(kept) -> str:
+    """The words a command's last line adds for the earlier files ``kept`` (paths or None): empty where
+    none was kept."""
+    kept = [Path(k) for k in kept if k is not None]
+    if not kept:
+        return ""
+    if len(kept) == 1:
+        return f" (the earlier file there is kept as {kept[0]})"
+    return f" (the {len(kept)} earlier files there are kept as <name>.{EARLIER}-<UTC time>.h5: {kept[0]} ..)"
