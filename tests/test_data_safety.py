@@ -592,3 +592,15 @@ def test_a_full_disk_part_way_through_the_sets_says_which_are_written(three_sets
     assert rc == 1 and line.startswith(f"rsocl reconstruct: error: cannot write {str(tmp_path / 'r-set002.h5')!r}")
     assert line.endswith(f"no file was made; sets 0 to 1 are written ({tmp_path / 'r-set000.h5'} ..)")
     assert sorted(p.name for p in tmp_path.glob("r-set*")) == ["r-set000.h5", "r-set001.h5"]
+    capsys.readouterr()
+    assert (
+        main(["reconstruct", str(tmp_path / "c.h5"), "--out", str(tmp_path / "r.h5"), *"--fast --iterations 2".split()])
+        == 1
+    )
+    [line] = _error_lines(capsys.readouterr().err)  # again: sets 0 and 1 replaced, their earlier files kept
+    kept = sorted(tmp_path.glob("r-set*.earlier-*.h5"))
+    assert [p.name.split(".")[0] for p in kept] == ["r-set000", "r-set001"]
+    assert line.endswith(
+        f"sets 0 to 1 are written ({tmp_path / 'r-set000.h5'} ..), the 2 earlier files there are kept as "
+        f"<name>.earlier-<UTC time>.h5: {kept[0]} .."
+    )

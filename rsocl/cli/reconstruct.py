@@ -150,6 +150,7 @@ def cmd_reconstruct(args) -> int:
         except OutputError as exc:  # a full disk: say which sets are on it
             if i:
                 exc.strerror = f"{exc.strerror}; sets 0 to {i - 1} are written ({set_path(out, 0)} ..)"
+                exc.strerror += kept_note(earlier).replace(" (", ", ", 1).rstrip(")")
             raise
     comparison_gif(gif, truth, batch.set(0).datacube)
     plots = tuning_plot_files(args, batch.set(0).params, gif)
