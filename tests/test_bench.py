@@ -238,6 +238,19 @@ def test_writers_produce_csv_markdown_and_pngs(tmp_path, tiny_result):
         assert image.ndim == 3 and image.shape[0] > 100 and image.std() > 0
 
 
+def test_a_second_write_keeps_the_earlier_tables(tmp_path, tiny_result):
+    write_outputs(tiny_result, tmp_path)
+    before = {name: (tmp_path / name).read_bytes() for name in ("bench.csv", "iterations.csv", "bench.md")}
+    kept = []
+    files = write_outputs(tiny_result, tmp_path, kept)
+    assert sorted(f.name for f in files) == sorted(FILES)
+    assert sorted(p.name.split(".earlier-")[0] for p in kept) == ["bench", "bench", "iterations"]
+    assert {p.suffix for p in kept} == {".csv", ".md"}
+    for path in kept:  # each the earlier table, byte for byte
+        assert path.read_bytes() == before[path.name.split(".earlier-")[0] + path.suffix]
+    assert len(list(tmp_path.iterdir())) == len(FILES) + 3  # the pictures are drawn anew
+
+
 def test_writers_without_sweeps_still_write_every_file(tmp_path):
     result = run_bench(BenchPoint(shape=10, iterations=2), ["dtype=float32"], baseline=False, progress=False)
     files = write_outputs(result, tmp_path)

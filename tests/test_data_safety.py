@@ -191,7 +191,7 @@ def test_the_earlier_per_set_results_are_kept_too(three_sets, tmp_path, capsys):
     assert main(argv) == 0 and main(argv) == 0
     kept = sorted(p.name for p in tmp_path.glob("r-set*.earlier-*.h5"))
     assert [name.split(".")[0] for name in kept] == ["r-set000", "r-set001", "r-set002"]
-    assert "(the 3 earlier files there are kept as <name>.earlier-<UTC time>.h5: " in capsys.readouterr().out
+    assert "(the 3 earlier files there are kept as <stem>.earlier-<UTC time><suffix>: " in capsys.readouterr().out
 
 
 def test_an_earlier_file_keeps_its_bytes_by_a_link_or_a_copy(tmp_path, monkeypatch):
@@ -602,5 +602,5 @@ def test_a_full_disk_part_way_through_the_sets_says_which_are_written(three_sets
     assert [p.name.split(".")[0] for p in kept] == ["r-set000", "r-set001"]
     assert line.endswith(
         f"sets 0 to 1 are written ({tmp_path / 'r-set000.h5'} ..), the 2 earlier files there are kept as "
-        f"<name>.earlier-<UTC time>.h5: {kept[0]} .."
+        f"<stem>.earlier-<UTC time><suffix>: {kept[0]} .."
     )

@@ -24,7 +24,7 @@ from rsocl.bench.analysis import (
     picks,
 )
 from rsocl.bench.point import US, BenchResult, _scene_name
-from rsocl.files.atomic import atomic_path
+from rsocl.files.atomic import EARLIER, atomic_path, keeping
 
 __all__ = ["COLUMNS", "write_csv", "write_iterations_csv", "tradeoff_lines", "markdown", "write_outputs"]
 
@@ -267,17 +267,35 @@ def markdown(result: BenchResult) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_outputs(result: BenchResult, out) -> list:
-    """Write ``bench.csv``, ``iterations.csv``, ``bench.md``, ``pareto.png``, ``cameras.png``, ``iterations.png``."""
+def _write_text(path: Path, text: str) -> Path:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return path
+
+
+def write_outputs(result: BenchResult, out, kept: list | None = None) -> list:
+    """Write ``bench.csv``, ``iterations.csv``, ``bench.md``, ``pareto.png``, ``cameras.png``, ``iterations.png``
+    into the folder ``out``; returns their paths.
+
+    The tables an earlier run left there keep a second name, ``<stem>.earlier-<UTC time><suffix>``
+    (:func:`rsocl.files.atomic.keeping`), appended to ``kept`` where given; the pictures are drawn anew.
+    """
     from rsocl.bench import plots as bench_plots
 
     out = Path(os.fspath(out))
     out.mkdir(parents=True, exist_ok=True)
-    files = [write_csv(out / "bench.csv", result.rows), write_iterations_csv(out / "iterations.csv", result.history())]
     md = out / "bench.md"
-    with atomic_path(md) as tmp:
-        tmp.write_text(markdown(result), encoding="utf-8")
-    files.append(md)
+    tables = (
+        (out / "bench.csv", lambda path: write_csv(path, result.rows)),
+        (out / "iterations.csv", lambda path: write_iterations_csv(path, result.history())),
+        (md, lambda path: _write_text(path, markdown(result))),
+    )
+    files = []
+    for path, write in tables:
+        with keeping(path, EARLIER) as earlier:
+            files.append(write(path))
+        if kept is not None and earlier is not None:
+            kept.append(earlier)
     d = result.default
     comparable = [r for r in result.rows if _comparable(r, d)]
     recs = _reconstructions(result)

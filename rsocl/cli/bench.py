@@ -131,6 +131,7 @@ def cmd_bench(args) -> int:
     """
     from rsocl.bench.report import _num
     from rsocl.bench.run import markdown, parse_sweep, picks, run_bench, write_outputs
+    from rsocl.cli.outputs import kept_note
     from rsocl.files.atomic import output_folder
 
     output_folder(args.out, "--out")
@@ -143,13 +144,16 @@ def cmd_bench(args) -> int:
         for note in result.notes:
             print(f"  {note}", file=sys.stderr)
         return 1
-    files = write_outputs(result, args.out)
+    kept: list = []
+    files = write_outputs(result, args.out, kept)
     if not args.quiet:
         print(markdown(result))
-        print("wrote " + ", ".join(str(f) for f in files))
+        print("wrote " + ", ".join(str(f) for f in files) + kept_note(kept))
     else:
         speed, quality = picks(result)
-        text = f"{len(result.rows)} points in {result.seconds:.0f} s; wrote {Path(args.out) / 'bench.md'}"
+        text = (
+            f"{len(result.rows)} points in {result.seconds:.0f} s; wrote {Path(args.out) / 'bench.md'}{kept_note(kept)}"
+        )
         if quality is not None:
             text += (
                 f"; quality: {quality['label']} {_num(quality['psnr'], '.2f')} dB; "

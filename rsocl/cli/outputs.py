@@ -1,4 +1,4 @@
-"""Reconstruction files written by the command line: an earlier file at an output path is kept beside it.
+"""Results written by the command line: an earlier file at an output path is kept beside it.
 
 ``rsocl reconstruct`` (one set, every set of a capture, tiles, a stream) writes each HDF5 result with
 :func:`save_result`: a file already at the path keeps a second name, ``<stem>.earlier-<UTC time>.h5``
@@ -10,10 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["EARLIER", "save_result", "kept_note"]
-
-#: The tag in the name an earlier file at an output path keeps.
-EARLIER = "earlier"
+__all__ = ["save_result", "kept_note"]
 
 
 def save_result(path, datacube, rig, **kwargs) -> Path | None:
@@ -30,7 +27,7 @@ def save_result(path, datacube, rig, **kwargs) -> Path | None:
     rsocl.files.atomic.OutputError
         The write failed: ``path`` is unchanged and has no second name.
     """
-    from rsocl.files.atomic import keeping
+    from rsocl.files.atomic import EARLIER, keeping
     from rsocl.files.hdf5_reconstruction import save_reconstruction
 
     with keeping(path, EARLIER) as kept:
@@ -41,9 +38,11 @@ def save_result(path, datacube, rig, **kwargs) -> Path | None:
 def kept_note(kept) -> str:
     """The words a command's last line adds for the earlier files ``kept`` (paths or None): empty where
     none was kept."""
+    from rsocl.files.atomic import EARLIER
+
     kept = [Path(k) for k in kept if k is not None]
     if not kept:
         return ""
     if len(kept) == 1:
         return f" (the earlier file there is kept as {kept[0]})"
-    return f" (the {len(kept)} earlier files there are kept as <name>.{EARLIER}-<UTC time>.h5: {kept[0]} ..)"
+    return f" (the {len(kept)} earlier files there are kept as <stem>.{EARLIER}-<UTC time><suffix>: {kept[0]} ..)"

@@ -28,6 +28,7 @@ from pathlib import Path
 
 __all__ = [
     "atomic_path",
+    "EARLIER",
     "keep_copy",
     "keeping",
     "output_path",
@@ -41,6 +42,8 @@ __all__ = [
     "process_running",
 ]
 
+#: The tag of the name an earlier result keeps when a command writes another at its path (:func:`keeping`).
+EARLIER = "earlier"
 #: The rest of an :func:`atomic_path` temporary's name after its owner tag: :func:`tempfile.mkstemp`'s
 #: eight random characters and the suffix.
 TMP_TAIL = r"[a-z0-9_]{8}\.tmp"
