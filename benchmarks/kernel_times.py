@@ -51,10 +51,14 @@ def profiling_device(device) -> Device:
     return device_for_queue(queue)
 
 
-def record(rig, g, device, iterations: int) -> list:
+def record(rig, g, device, iterations: int, sets: int = 1) -> list:
     """``[(kernel name, event), ...]`` of the kernels enqueued by ADMM steps ``SKIP`` to ``SKIP + iterations - 1``
-    of a run of ``SKIP + iterations + 1`` iterations (each step's start marked in the log)."""
+    of a run of ``SKIP + iterations + 1`` iterations (each step's start marked in the log), on ``sets`` copies of
+    the snapshots ``g`` in one batch (one set: ``g`` itself)."""
     from rsocl.solver.admm import ADMM
+
+    if sets > 1:
+        g = np.stack([g] * sets)
 
     log: list = []
     marks: list = []
@@ -139,8 +143,7 @@ def main(argv=None):
             for m in args.sizes:
                 rig, g = case(m)
                 for sets in args.sets:
-                    batch = g if sets == 1 else np.stack([g] * sets)
-                    events = record(rig, batch, device, args.iterations)
+                    events = record(rig, g, device, args.iterations, sets)
                     rows += lines(m, sets, rig.T, summarise(events, args.iterations))
     finally:
         admm_module.GPU_PROJECT_LANES = saved

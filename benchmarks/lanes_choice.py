@@ -33,8 +33,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
@@ -97,7 +95,6 @@ def time_case(m: int, sets: int, lanes_list: list, device, iterations: int, roun
     ``sets``, rounds rotating the order of ``lanes_list``; a solver uses fewer lanes where its work groups would
     not fit (:func:`rsocl.solver.admm.lanes_that_fit`)."""
     rig, g = case(m)
-    batch = g if sets == 1 else np.stack([g] * sets)
     samples: dict = {lanes: [] for lanes in lanes_list}
     used: dict = {}
     saved, init = admm_module.GPU_PROJECT_LANES, admm_module.ADMM.__init__
@@ -112,7 +109,7 @@ def time_case(m: int, sets: int, lanes_list: list, device, iterations: int, roun
             shift = r % len(lanes_list)
             for lanes in lanes_list[shift:] + lanes_list[:shift]:
                 admm_module.GPU_PROJECT_LANES = lanes
-                samples[lanes].append(summarise(record(rig, batch, device, iterations), iterations)["busy"])
+                samples[lanes].append(summarise(record(rig, g, device, iterations, sets), iterations)["busy"])
     finally:
         admm_module.GPU_PROJECT_LANES, admm_module.ADMM.__init__ = saved, init
     return rig.T, {lanes: statistics.median(v) for lanes, v in samples.items()}, used
