@@ -291,6 +291,7 @@ def cmd_calibrate(args) -> int:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
     if args.flicker_hz is not None and args.flicker is None:
         raise ValueError("--flicker-hz needs --flicker (frames of the flickering light)")
+    from rsocl.cli.outputs import kept_note
     from rsocl.files.atomic import keeping, output_path
 
     reads = (("--frames", args.frames), ("--flicker", args.flicker), ("--flat", args.flat))
@@ -317,6 +318,5 @@ def cmd_calibrate(args) -> int:
     with keeping(out, "before-calibration") as kept:  # the rig file it replaces, --rig or another
         written.insert(0, save_rigfile(out, calibrated))
     rig = calibrated.rig()
-    note = "" if kept is None else f" (the rig file it replaced is kept as {kept})"
-    say(args, f"rig: {rig!r}\nwrote " + ", ".join(str(p) for p in written) + note)
+    say(args, f"rig: {rig!r}\nwrote " + ", ".join(str(p) for p in written) + kept_note([kept]))
     return 0
