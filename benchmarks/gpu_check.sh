@@ -223,4 +223,4 @@ head -n 2 "$OUT/profile.txt"
 fi
 
 stamp "done; the peer's page:"
-cat "$OUT/peer.md" 2>/dev/null | sed -n '/^## Times/,$p'
+if [ -f "$OUT/peer.md" ]; then sed -n '/^## Times/,$p' "$OUT/peer.md"; else echo "(no peer.md: the peer step did not run)"; fi

@@ -146,7 +146,7 @@ def main(argv=None):
             T, times, used = time_case(m, sets, lanes_list, device, args.iterations, args.rounds)
             busy[label] = times
             cells = " | ".join(
-                f"{times[n]:.1f} ({times[n] / times[1]:.2f})" + ("" if used[n] == n else f" [{used[n]} fit]")
+                f"{times[n]:.1f} ({times[n] / times[1]:.2f})" + ("" if used[n] == n else f" [{used[n]} taken]")
                 for n in lanes_list
             )
             rows.append(f"| {label} | {T} | {cells} |")
@@ -157,8 +157,9 @@ def main(argv=None):
     page += [
         f"{small_calls(args.as_gpu)}; a queue with profiling; the {args.iterations} iterations after the first "
         f"{SKIP} of a run; the device's busy time per ADMM iteration (µs, the kernels' sum), the median of "
-        f"{args.rounds} rounds in rotated order, and in brackets over one lane's; `[k fit]`: the solver took k lanes, "
-        "the most whose work groups fit the device.",
+        f"{args.rounds} rounds in rotated order, and in brackets over one lane's; `[k taken]`: the solver took k lanes "
+        "(one on a CPU device, or where the regularizer does not fuse the dual update; fewer where the work groups "
+        "would not fit).",
         "",
         "| case | T | " + " | ".join(f"{n} lane{'s' if n > 1 else ''}" for n in lanes_list) + " |",
         "|---|---|" + "---|" * len(lanes_list),

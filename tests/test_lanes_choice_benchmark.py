@@ -120,7 +120,7 @@ def test_a_count_the_work_groups_cannot_hold_is_shown_with_the_lanes_taken(tmp_p
     )
     row = next(line for line in out.read_text().splitlines() if line.startswith("| 6×6"))
     one, four = (cell.strip() for cell in row.split("|")[3:5])
-    assert "fit" not in one and four.endswith("[2 fit]")
+    assert "taken" not in one and four.endswith("[2 taken]")
 
 
 def test_cases_past_the_budget_are_named_and_left_out_of_the_choice(tmp_path):
@@ -132,3 +132,11 @@ def test_cases_past_the_budget_are_named_and_left_out_of_the_choice(tmp_path):
         line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| 6×6") or line.startswith("| 4×4")
     ] == ["6×6"]
     assert "not timed, past the budget of 1e-09 s: 6×6, 2 sets; 4×4." in text
+
+
+def test_a_cpu_device_takes_one_lane_and_the_page_says_so(device, tmp_path):
+    out = tmp_path / "lanes.md"
+    lanes_choice.main(["--cases", "6x1", "--lanes", "1", "2", "--iterations", "1", "--rounds", "1", "--out", str(out)])
+    row = next(line for line in out.read_text().splitlines() if line.startswith("| 6×6"))
+    two = row.split("|")[4].strip()
+    assert two.endswith("[1 taken]") == device.is_cpu  # the device's own choices: one lane on a CPU
