@@ -31,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from launches import case, path, small_calls  # noqa: E402
-from provenance import DOCS, emit, header_lines  # noqa: E402
+from provenance import DOCS, emit, header_lines, power_of_two  # noqa: E402
 
 import rsocl  # noqa: E402
 import rsocl.solver.admm as admm_module  # noqa: E402
@@ -131,7 +131,7 @@ def main(argv=None):
         p.error(f"--sizes must be >= 2 pixels each, got {args.sizes}")
     if any(b < 1 for b in args.sets):
         p.error(f"--sets must be >= 1 each, got {args.sets}")
-    if args.lanes is not None and (args.lanes < 1 or args.lanes & (args.lanes - 1)):
+    if args.lanes is not None and not power_of_two(args.lanes):
         p.error(f"--lanes must be >= 1 and a power of two, got {args.lanes}")
     device = profiling_device(get_device(args.device))
     rows = []

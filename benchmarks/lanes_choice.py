@@ -38,7 +38,7 @@ sys.path.insert(0, str(HERE))
 
 from kernel_times import SKIP, profiling_device, record, summarise  # noqa: E402
 from launches import case, path, small_calls  # noqa: E402
-from provenance import DOCS, emit, header_lines, write_page  # noqa: E402
+from provenance import DOCS, emit, header_lines, power_of_two, write_page  # noqa: E402
 
 import rsocl.solver.admm as admm_module  # noqa: E402
 from rsocl.device.context import get_device  # noqa: E402
@@ -131,7 +131,7 @@ def main(argv=None):
         p.error(f"--iterations and --rounds must be >= 1, got {args.iterations} and {args.rounds}")
     if args.budget is not None and not args.budget > 0:
         p.error(f"--budget must be > 0 seconds, got {args.budget}")
-    if 1 not in args.lanes or any(n < 1 or n & (n - 1) for n in args.lanes):
+    if 1 not in args.lanes or not all(map(power_of_two, args.lanes)):
         p.error(f"--lanes must be powers of two (1, 2, 4, ...) and hold 1, the baseline, got {args.lanes}")
     lanes_list = list(dict.fromkeys(args.lanes))
     device = profiling_device(get_device(args.device))

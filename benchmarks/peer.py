@@ -46,7 +46,7 @@ from rsocl_plugins.tv import TV
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from numpy_admm_tv import psnr  # noqa: E402
 from paper_config import paper_rig  # noqa: E402
-from provenance import DOCS, header_lines, write_page  # noqa: E402
+from provenance import DOCS, header_lines, power_of_two, write_page  # noqa: E402
 
 try:
     import torch
@@ -453,7 +453,7 @@ def main(argv=None):
         raise SystemExit("--iterations, --size-iterations, --rounds, --batches and --sizes must be >= 1")
     if any(n not in (0, 1, 2) for n in args.tv_one_launch):
         raise SystemExit(f"--tv-one-launch: values 0, 1 or 2, got {args.tv_one_launch}")
-    if any(n < 1 or n & (n - 1) for n in args.project_lanes):
+    if not all(map(power_of_two, args.project_lanes)):
         raise SystemExit(f"--project-lanes: powers of two (1, 2, 4, ...), got {args.project_lanes}")
     argv = None if argv is None else [__file__, *argv]
     device = rsocl.device.get_device(args.device)

@@ -36,6 +36,7 @@ __all__ = [
     "LANES_ENV",
     "SETTINGS",
     "apply_settings",
+    "power_of_two",
     "git_revision",
     "cpu_model",
     "header_lines",
@@ -46,6 +47,11 @@ __all__ = [
 #: The environment variable that sets ``rsocl.solver.admm.GPU_PROJECT_LANES`` (a power of two) for every
 #: benchmark of a run (``benchmarks/gpu_check.sh`` sets it from ``benchmarks/lanes_choice.py``'s choice).
 LANES_ENV = "RSOCL_BENCH_PROJECT_LANES"
+
+
+def power_of_two(n: int) -> bool:
+    """Whether ``n`` is 1, 2, 4, 8, ...: a count of projection lanes (``rsocl.solver.admm.GPU_PROJECT_LANES``)."""
+    return n >= 1 and not n & (n - 1)
 
 
 def apply_settings() -> list:
@@ -59,7 +65,7 @@ def apply_settings() -> list:
     text = os.environ.get(LANES_ENV, "").strip()
     if not text:
         return []
-    if not text.isdigit() or int(text) < 1 or int(text) & (int(text) - 1):
+    if not text.isdigit() or not power_of_two(int(text)):
         raise ValueError(f"{LANES_ENV} must be a power of two (1, 2, 4, ...), got {text!r}")
     import rsocl.solver.admm as admm_module
 
