@@ -48,6 +48,7 @@ def test_a_batch_takes_the_same_launches_per_iteration_as_one_set(tmp_path):
 def test_lanes_are_set_for_the_run_and_restored(tmp_path, monkeypatch, admm_lanes):
     import rsocl.solver.admm as admm_module
 
+    monkeypatch.setattr(admm_module, "GPU_PROJECT_LANES", 1)
     out = tmp_path / "kernel_times.md"
     kernel_times.main(["--sizes", "6", "--lanes", "4", "--iterations", "2", "--as-gpu", "--out", str(out)])
     assert admm_lanes == [4] and admm_module.GPU_PROJECT_LANES == 1

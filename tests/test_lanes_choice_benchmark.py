@@ -50,9 +50,10 @@ def test_the_baseline_is_required():
         lanes_choice.choose({"a": {2: 1.0, 4: 2.0}})
 
 
-def test_the_page_times_every_count_and_the_choice_file_holds_its_choice(tmp_path, admm_lanes):
+def test_the_page_times_every_count_and_the_choice_file_holds_its_choice(tmp_path, monkeypatch, admm_lanes):
     import rsocl.solver.admm as admm_module
 
+    monkeypatch.setattr(admm_module, "GPU_PROJECT_LANES", 1)  # restored to it after the run
     out, choice = tmp_path / "lanes.md", tmp_path / "choice.txt"
     chosen = lanes_choice.main(
         ["--as-gpu", "--cases", "6x1", "6x2", "--lanes", "1", "2", "--iterations", "2", "--rounds", "2"]

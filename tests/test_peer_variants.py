@@ -67,6 +67,7 @@ def test_project_lanes_variant_runs_its_lanes_and_checks_equality(tmp_path, monk
     from rsocl.device.context import Device
 
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: False))  # where GPU_PROJECT_LANES applies
+    monkeypatch.setattr(admm_module, "GPU_PROJECT_LANES", 1)  # rsocl's defaults at one lane, the variant at 4
     with peer.variant_context("rsocl lanes=4"):
         assert admm_module.GPU_PROJECT_LANES == 4
     assert admm_module.GPU_PROJECT_LANES == 1 and peer.is_variant("rsocl lanes=4")

@@ -37,9 +37,9 @@ RESIDUAL_SLOTS = 8
 PROJECT_DEFERRED = 23
 #: Work items per block of the projection (``PROJECT_LANES``, ``kernels/admm.cl``) on a device that is not a
 #: CPU, where the regularizer fuses the dual update: they share the passes over a block's whole column (the
-#: deferred primal step, ``u = f - b``); fewer where the work group would not fit. A power of two. 1 (one work
-#: item per block, as on a CPU) until a GPU run shows more pays: docs/gpu.md.
-GPU_PROJECT_LANES = 1
+#: deferred primal step, ``u = f - b``); fewer where the work group would not fit. A power of two; the
+#: count ``benchmarks/lanes_choice.py`` chose on a GPU: docs/gpu.md.
+GPU_PROJECT_LANES = 4
 
 
 def lanes_that_fit(lanes: int, local: tuple, group_limit: int, max_items_1: int) -> int:
