@@ -4,6 +4,7 @@
 #   1. install pyopencl and the rest from the carried wheels (.whl/, made by benchmarks/gpu_wheels.sh)
 #      and rsocl from this tree into /tmp/site; point pyopencl's ICD loader at NVIDIA's OpenCL;
 #   2. the test suite on NVIDIA's OpenCL (RSOCL_DEVICE=nvidia), pytest-xdist, capped, with rsocl's own settings;
+#      any of its processes still running after it (an xdist worker past the cap) is killed;
 #   3. benchmarks/lanes_choice.py (the projection's 1, 2, 4 and 8 lanes at 50×50, one set and batches as the
 #      search's, and at 128 and 256 pixels; no case starts after 3/5 of the cap), capped; its choice is exported
 #      as RSOCL_BENCH_PROJECT_LANES, which every later benchmark applies and names in its page's header
@@ -94,10 +95,19 @@ stamp "tests (cap ${TEST_CAP} s)" | tee "$OUT/tests.log"
 flags=()
 "$PYTHON" -c "import xdist" 2>/dev/null && flags+=(-n "${TEST_WORKERS:-12}")              # pytest-xdist and pytest-timeout: in the image
 "$PYTHON" -c "import pytest_timeout" 2>/dev/null && flags+=(--timeout 120)
+# the tests' processes carry a mark in their environment: any left running past the cap (an xdist worker that
+# did not stop) is killed, so that it takes no host or device time from the benchmarks after it
+mark="RSOCL_GPU_CHECK_TESTS=$$"
 # shellcheck disable=SC2086
-timeout -k 10 "$TEST_CAP" env -u RSOCL_BENCH_PROJECT_LANES "$PYTHON" -P -m pytest -q -p no:cacheprovider "${flags[@]}" -rfEs ${TEST_ARGS:-} 2>&1 \
-    | tee -a "$OUT/tests.log" | tail -n 60
+timeout -k 10 "$TEST_CAP" env -u RSOCL_BENCH_PROJECT_LANES "$mark" "$PYTHON" -P -m pytest -q -p no:cacheprovider \
+    "${flags[@]}" -rfEs ${TEST_ARGS:-} 2>&1 | tee -a "$OUT/tests.log" | tail -n 60
 echo "tests exit status ${PIPESTATUS[0]} (124: stopped at the cap)" | tee -a "$OUT/tests.log"
+left=$(grep -lsxz -- "$mark" /proc/[0-9]*/environ | cut -d/ -f3 | tr '\n' ' ')
+if [ -n "$left" ]; then
+    # shellcheck disable=SC2086
+    kill -KILL $left 2>/dev/null
+    echo "killed the processes the tests left running: $left" | tee -a "$OUT/tests.log" "$OUT/check.log"
+fi
 fi
 
 # ---------------------------------------------------------------- 3. the projection's lanes, chosen by their device time
