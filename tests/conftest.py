@@ -49,9 +49,8 @@ def not_cpu(monkeypatch, device):
     return device
 
 
-@pytest.fixture()
-def admm_lanes(monkeypatch):
-    """The projection lanes (``ADMM.lanes``) of every :class:`rsocl.solver.admm.ADMM` made in the test, in order."""
+def _recording_admm(monkeypatch, what):
+    """A list that gets ``what(admm)`` of every :class:`rsocl.solver.admm.ADMM` made from now on, in order."""
     from rsocl.solver.admm import ADMM
 
     made = []
@@ -59,10 +58,22 @@ def admm_lanes(monkeypatch):
 
     def recording(self, *args, **kwargs):
         init(self, *args, **kwargs)
-        made.append(self.lanes)
+        made.append(what(self))
 
     monkeypatch.setattr(ADMM, "__init__", recording)
     return made
+
+
+@pytest.fixture()
+def admm_lanes(monkeypatch):
+    """The projection lanes (``ADMM.lanes``) of every :class:`rsocl.solver.admm.ADMM` made in the test, in order."""
+    return _recording_admm(monkeypatch, lambda admm: admm.lanes)
+
+
+@pytest.fixture()
+def admm_made(monkeypatch):
+    """Every :class:`rsocl.solver.admm.ADMM` made in the test, in order."""
+    return _recording_admm(monkeypatch, lambda admm: admm)
 
 
 def shared_video(name):

@@ -28,20 +28,6 @@ def _run(rig, g, monkeypatch, lanes, **kw):
     return rsocl.reconstruct(g, rig, **kw)
 
 
-@pytest.fixture()
-def admm_made(monkeypatch):
-    """Every :class:`rsocl.solver.admm.ADMM` made in the test, in order."""
-    made = []
-    init = admm_module.ADMM.__init__
-
-    def recording(self, *args, **kwargs):
-        init(self, *args, **kwargs)
-        made.append(self)
-
-    monkeypatch.setattr(admm_module.ADMM, "__init__", recording)
-    return made
-
-
 @pytest.mark.parametrize("lanes", [2, 4, 8])
 @pytest.mark.parametrize("block", [(1, 1), (8, 4)], ids=["pixel", "8x4-blocks"])
 def test_lanes_give_the_datacube_and_residuals_of_one_lane(
