@@ -15,7 +15,8 @@
 #   6. benchmarks/launches.py where the tree has it (the device's path, the plain TV in two launches per
 #      iteration and in one per two iterations, the fused TV: what GPU_ONE_LAUNCH and GPU_FUSED rest on), then
 #      benchmarks/launch_cost.py (a launch's host time by arguments and grid) and benchmarks/kernel_times.py (an
-#      iteration's device time kernel by kernel, busy against span), all into check.log, capped;
+#      iteration's device time kernel by kernel, busy against span; then at 50×50 on the search's batches of 4, 5
+#      and 9 sets), all into check.log, capped;
 #   7. benchmarks/call_cost.py where the tree has it (a small call with device buffers pooled or made each call), capped;
 #   8. benchmarks/search_launches.py (the self-tuned default against a fixed run, two scenes, 50 to 256 pixels), then
 #      benchmarks/tuned_phases.py (where the self-tuned call's time goes, phase by phase), capped;
@@ -29,7 +30,7 @@
 #     RSOCL_GIT_COMMIT=abc1234 bash benchmarks/gpu_check.sh          # carry: [".whl"]
 # Knobs: STEPS (tests lanes peer launches call search phases profile; blocks may be added) the steps run after the
 # install; TEST_ARGS (none: the whole suite) pytest's arguments; TEST_WORKERS (12), TEST_CAP (70), LANES_CAP (50),
-# PEER_CAP (200), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (70), PHASES_CAP (40), PROFILE_CAP (30), BLOCKS_CAP (80),
+# PEER_CAP (180), LAUNCH_CAP (40), CALL_CAP (30), SEARCH_CAP (70), PHASES_CAP (40), PROFILE_CAP (30), BLOCKS_CAP (80),
 # COST_CAP (20), KTIME_CAP (20) in seconds; PEER_ARGS and BLOCKS_ARGS replace those scripts' arguments;
 # RSOCL_BENCH_PROJECT_LANES, set before the run, stands for the lanes step's choice;
 # DEVICE (nvidia): rsocl's device spec (another spec skips the NVIDIA ICD step: a dry run on a CPU).
@@ -42,7 +43,7 @@ mkdir -p "$OUT"
 PYTHON=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site} BUILD=${BUILD:-/tmp/build-tools}
 DEVICE=${DEVICE:-nvidia}
-TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-200} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
+TEST_CAP=${TEST_CAP:-70} PEER_CAP=${PEER_CAP:-180} LAUNCH_CAP=${LAUNCH_CAP:-40} CALL_CAP=${CALL_CAP:-30}
 SEARCH_CAP=${SEARCH_CAP:-70} PROFILE_CAP=${PROFILE_CAP:-30} BLOCKS_CAP=${BLOCKS_CAP:-80} COST_CAP=${COST_CAP:-20}
 KTIME_CAP=${KTIME_CAP:-20} PHASES_CAP=${PHASES_CAP:-40} LANES_CAP=${LANES_CAP:-50}
 STEPS=" ${STEPS:-tests lanes peer launches call search phases profile} "
@@ -160,6 +161,11 @@ if want launches; then
     timeout -k 5 "$KTIME_CAP" "$PYTHON" -P benchmarks/kernel_times.py --device "$DEVICE" --sizes 8 50 128 256 \
         --iterations 40 >> "$OUT/check.log" 2>&1
     echo "kernel_times exit status $?" | tee -a "$OUT/check.log"
+    # the self-tuned search's batches at 50×50 (4 to 9 sets), kernel by kernel: where its device time goes
+    stamp "benchmarks/kernel_times.py, batches (cap ${KTIME_CAP} s)" | tee -a "$OUT/check.log"
+    timeout -k 5 "$KTIME_CAP" "$PYTHON" -P benchmarks/kernel_times.py --device "$DEVICE" --sizes 50 --sets 4 5 9 \
+        --iterations 40 >> "$OUT/check.log" 2>&1
+    echo "kernel_times (batches) exit status $?" | tee -a "$OUT/check.log"
 fi
 
 # ---------------------------------------------------------------- 7. a small call's cost: buffers pooled or made
