@@ -1,4 +1,5 @@
-"""The static fix (rsocl.solver.static) on the device against its formula in NumPy."""
+"""The static fix (rsocl.solver.static) and the blend with the start (ADMM.blend_towards) on the device against
+their formulas in NumPy."""
 
 import numpy as np
 import pytest
@@ -72,3 +73,26 @@ def test_the_pull_needs_a_start_and_weights_of_the_estimates_shape(device, rng):
         static_fix(solver, start, g, 0.5)
     with pytest.raises(ValueError, match=r"weights must be \(1, 9, 12\), got \(9, 12\)"):
         solver.pull_towards(cla.to_device(op.queue, np.zeros((rig.T,) + rig.shape, op.dtype)), np.zeros(rig.shape))
+
+
+@pytest.mark.parametrize("sets", [None, 2])
+@pytest.mark.parametrize("alpha", [0.0, 0.35, 1.0])
+def test_the_blend_moves_every_voxel_towards_the_start(device, dtype, rng, sets, alpha):
+    import pyopencl.array as cla
+
+    solver, op = _solver(device, _snapshots(_rig(), rng, sets), dtype)
+    theta = rng.random(solver.theta.shape).astype(op.dtype)
+    start = rng.random(solver.theta.shape).astype(op.dtype)
+    solver.theta.set(theta)
+    solver.blend_towards(cla.to_device(op.queue, start), alpha)
+    want = start + op.dtype.type(alpha) * (theta - start)
+    np.testing.assert_allclose(solver.theta.get(), want, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("alpha", [-0.1, 1.5])
+def test_a_blend_outside_0_to_1_is_refused(device, rng, alpha):
+    import pyopencl.array as cla
+
+    solver, op = _solver(device, _snapshots(_rig(), rng, None))
+    with pytest.raises(ValueError, match="blend"):
+        solver.blend_towards(cla.to_device(op.queue, np.zeros(solver.theta.shape, op.dtype)), alpha)
