@@ -94,5 +94,5 @@ def test_a_blend_outside_0_to_1_is_refused(device, rng, alpha):
     import pyopencl.array as cla
 
     solver, op = _solver(device, _snapshots(_rig(), rng, None))
-    with pytest.raises(ValueError, match="blend"):
+    with pytest.raises(ValueError, match=rf"blend must be in \[0.0, 1.0\], got {alpha}"):
         solver.blend_towards(cla.to_device(op.queue, np.zeros(solver.theta.shape, op.dtype)), alpha)
