@@ -53,7 +53,7 @@ inline void project_pixel(__global real *f, __global const real *g,
     real r[NCH];
     for (int k = 0; k < NCH; ++k) {
         size_t q = (size_t)k * mn + p;
-        r[k] = g[q] - gain[k] * window_dot(f, first[q], frac[q], len[k], T, L, mn, p);
+        r[k] = g[q] - gain[k] * window_dot(f, first[q], frac[q], WINDOW_LENGTH(len, k), T, L, mn, p);
     }
     for (int k = 0; k < NCH; ++k) {
         size_t q = (size_t)k * mn + p;
@@ -64,7 +64,7 @@ inline void project_pixel(__global real *f, __global const real *g,
         real d = eta + inverse[q];          /* inverse holds psi here */
         real z = d > (real)0 ? r[k] / d : (real)0;
 #endif
-        window_scatter(f, first[q], frac[q], len[k], T, L, mn, p, gain[k] * z);
+        window_scatter(f, first[q], frac[q], WINDOW_LENGTH(len, k), T, L, mn, p, gain[k] * z);
     }
 }
 
@@ -112,7 +112,7 @@ static inline void project_block(__global real *f, __global const real *g, __glo
     for (int k = 0; k < NCH; ++k) {
         size_t q0 = (size_t)k * mn + p0;
         realw hv[TILE_R];
-        block_dot(f, first, frac, len[k], q0, T, L, mn, n, p0, hv);
+        block_dot(f, first, frac, WINDOW_LENGTH(len, k), q0, T, L, mn, n, p0, hv);
         for (int r = 0; r < TILE_R; ++r) res[k][r] = load_w(g + q0 + (size_t)r * n) - gain[k] * hv[r];
     }
     for (int k = 0; k < NCH; ++k) {
@@ -129,7 +129,7 @@ static inline void project_block(__global real *f, __global const real *g, __glo
 #endif
             scale[r] = gain[k] * z;
         }
-        block_scatter(f, first, frac, len[k], q0, T, L, mn, n, p0, scale);
+        block_scatter(f, first, frac, WINDOW_LENGTH(len, k), q0, T, L, mn, n, p0, scale);
     }
 }
 
@@ -215,7 +215,7 @@ __kernel void admm_project(__global real *f_all, __global const real *g_all,
         if (slot >= 0) {
             __global const real *w = w_all ? w_all + set * (size_t)NCH * mn : 0;
             for (int k = 0; k < NCH; ++k)
-                sums[k] = block_residual(theta_all + set * cube, g, w, first, frac, len[k], gain[k], (size_t)k, T,
+                sums[k] = block_residual(theta_all + set * cube, g, w, first, frac, WINDOW_LENGTH(len, k), gain[k], (size_t)k, T,
                                          L, m, n, x0, y0);
         }
 #if PROJECTION_EXACT

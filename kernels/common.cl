@@ -19,19 +19,32 @@
 typedef REAL real;
 typedef ACC acc_t;
 
-/* Weight of sub-frame j (counted from the window's first sub-frame, floor(start/dt))
- * for an exposure that starts `frac` sub-frames after that sub-frame's start and
- * lasts `len` sub-frames. All quantities are small numbers, so fp32 is accurate. */
-inline real shutter_weight(int j, real frac, real len)
+#if REAL_IS_DOUBLE
+typedef double2 real2;
+#else
+typedef float2 real2;
+#endif
+
+/* The window length of channel k from the operator's len buffer, (len[K][2]: whole sub-frames, then
+ * the rest in [0, 1); rsocl.model.windows.kernel_windows). */
+#define WINDOW_LENGTH(len, k) ((real2)((len)[2 * (k)], (len)[2 * (k) + 1]))
+
+/* Weight of sub-frame j (counted from the window's first sub-frame, floor(start/dt)) for an exposure
+ * that starts `frac` sub-frames after that sub-frame's start and lasts len.x + len.y sub-frames
+ * (WINDOW_LENGTH). The end is taken relative to j as (len.x - j) + (frac + len.y): near the end both
+ * terms are small, so a window of thousands of sub-frames keeps its last weight in fp32. Binary mask:
+ * j in [frac, frac + len], with the frac that rsocl.model.windows.kernel_windows gives (the host's
+ * first and last sub-frame, whatever the rounding). */
+inline real shutter_weight(int j, real frac, real2 len)
 {
-#if MASK_BINARY
     real jj = (real)j;
-    return (jj >= frac && jj <= frac + len) ? (real)1 : (real)0;
+#if MASK_BINARY
+    return (jj >= frac && jj - len.x <= frac + len.y) ? (real)1 : (real)0;
 #else
     /* plain comparisons: fmin/fmax are library calls that PoCL does not vectorise */
-    real jj = (real)j, end = frac + len;
-    real lo = jj > frac ? jj : frac;
-    real hi = jj + (real)1 < end ? jj + (real)1 : end;
+    real lo = frac - jj > (real)0 ? frac - jj : (real)0;
+    real to_end = (len.x - jj) + (frac + len.y);
+    real hi = to_end < (real)1 ? to_end : (real)1;
     return hi > lo ? hi - lo : (real)0;
 #endif
 }
@@ -39,7 +52,7 @@ inline real shutter_weight(int j, real frac, real len)
 /* sum_s w(s) f[s, p] over one channel's window: the forward model of one pixel.
  * Branch-free (clamped index, zero weight outside [0, T)) so CPU compilers keep
  * neighbouring work items in SIMD lanes. */
-inline real window_dot(__global const real *f, int first, real frac, real len,
+inline real window_dot(__global const real *f, int first, real frac, real2 len,
                        int T, int L, size_t mn, size_t p)
 {
     real acc = (real)0;
@@ -53,7 +66,7 @@ inline real window_dot(__global const real *f, int first, real frac, real len,
 }
 
 /* f[s, p] += scale * w(s) over one channel's window: the adjoint of one pixel. */
-inline void window_scatter(__global real *f, int first, real frac, real len,
+inline void window_scatter(__global real *f, int first, real frac, real2 len,
                            int T, int L, size_t mn, size_t p, real scale)
 {
     for (int j = 0; j < L; ++j) {
@@ -139,16 +152,18 @@ inline void tile_span(__global const int *first, size_t q0, int T, int L, int *l
 }
 
 /* shutter_weight for TILE_W lanes at window positions j. It is 0 outside [0, L) with no
- * extra test: 0 <= frac < 1 and frac + len < L = ceil(max len) + 1. */
-inline realw shutter_weight_v(realw j, realw frac, realw len)
+ * extra test: 0 <= frac <= 1, len.y < 1 and the end offset len.x + frac + len.y < L = ceil(max len) + 1
+ * (rsocl.model.windows.kernel_windows). */
+inline realw shutter_weight_v(realw j, realw frac, real2 len)
 {
     realw zero = (realw)(real)0;
 #if MASK_BINARY
-    return ((j >= frac) & (j <= frac + len)) ? (realw)(real)1 : zero;
+    return ((j >= frac) & (j - len.x <= frac + len.y)) ? (realw)(real)1 : zero;
 #else
-    realw end = frac + len, j1 = j + (real)1;
-    realw lo = j > frac ? j : frac;
-    realw hi = j1 < end ? j1 : end;
+    realw one = (realw)(real)1, lo = frac - j;
+    lo = lo > zero ? lo : zero;
+    realw to_end = ((realw)len.x - j) + (frac + len.y);
+    realw hi = to_end < one ? to_end : one;
     return hi > lo ? hi - lo : zero;
 #endif
 }
@@ -184,7 +199,7 @@ inline void block_geometry(__global const int *first, __global const real *frac,
 /* acc[r] = sum_s w(s) f[s, p0 + r*n + i] over each lane's window: the forward of a block
  * (geometry of the channel at q0). */
 inline void block_dot(__global const real *f, __global const int *first, __global const real *frac,
-                      real len, size_t q0, int T, int L, size_t mn, size_t n, size_t p0, realw *acc)
+                      real2 len, size_t q0, int T, int L, size_t mn, size_t n, size_t p0, realw *acc)
 {
     int los[TILE_R], his[TILE_R], lo, hi;
     realw start[TILE_R], fr[TILE_R];
@@ -194,13 +209,13 @@ inline void block_dot(__global const real *f, __global const int *first, __globa
         __global const real *fs = f + (size_t)s * mn + p0;
         for (int r = 0; r < TILE_R; ++r)
             if (s >= los[r] && s < his[r])
-                acc[r] += shutter_weight_v((realw)(real)s - start[r], fr[r], (realw)len) * load_w(fs + (size_t)r * n);
+                acc[r] += shutter_weight_v((realw)(real)s - start[r], fr[r], len) * load_w(fs + (size_t)r * n);
     }
 }
 
 /* f[s, p0 + r*n + i] += scale[r].si * w(s) over each lane's window: the adjoint of a block. */
 inline void block_scatter(__global real *f, __global const int *first, __global const real *frac,
-                          real len, size_t q0, int T, int L, size_t mn, size_t n, size_t p0, const realw *scale)
+                          real2 len, size_t q0, int T, int L, size_t mn, size_t n, size_t p0, const realw *scale)
 {
     int los[TILE_R], his[TILE_R], lo, hi;
     realw start[TILE_R], fr[TILE_R];
@@ -210,7 +225,7 @@ inline void block_scatter(__global real *f, __global const int *first, __global 
         for (int r = 0; r < TILE_R; ++r)
             if (s >= los[r] && s < his[r]) {
                 __global real *dst = fs + (size_t)r * n;
-                store_w(load_w(dst) + scale[r] * shutter_weight_v((realw)(real)s - start[r], fr[r], (realw)len), dst);
+                store_w(load_w(dst) + scale[r] * shutter_weight_v((realw)(real)s - start[r], fr[r], len), dst);
             }
     }
 }

@@ -1,7 +1,7 @@
 /* The row-timed shutter operator H (forward), its adjoint, and the diagonal and
  * per-pixel blocks of H Hᵀ. Layouts: f[T][m][n], g[K][m][n] (a batch: f[B][T][m][n], g[B][K][m][n]),
- * first/frac[K][m][n],
- * len[K], gain[K]. Each work item handles one pixel (psi, gram) or one block of TILE_R x TILE_W
+ * first/frac[K][m][n], len[K][2] (whole sub-frames, then the rest: WINDOW_LENGTH), gain[K]. Each
+ * work item handles one pixel (psi, gram) or one block of TILE_R x TILE_W
  * pixels (forward, adjoint; see common.cl) and loops over the exposure window only: cost
  * ~ K*m*n*L, never K*T*m*n. `first` counts from the first sub-frame solved for, so it may
  * be negative; T is the number of sub-frames solved for. Needs common.cl. */
@@ -24,14 +24,14 @@ __kernel void forward(__global const real *f_all, __global real *g_all,
     if (x0 + TILE_W <= n && y0 + TILE_R <= m) {
         size_t p0 = y0 * n + x0, q0 = k * mn + p0;
         realw acc[TILE_R];
-        block_dot(f, first, frac, len[k], q0, T, L, mn, n, p0, acc);
+        block_dot(f, first, frac, WINDOW_LENGTH(len, k), q0, T, L, mn, n, p0, acc);
         for (int r = 0; r < TILE_R; ++r) store_w(gain[k] * acc[r], g + q0 + (size_t)r * n);
         return;
     }
     for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
         for (size_t x = x0; x < x0 + TILE_W && x < n; ++x) {
             size_t p = y * n + x, q = k * mn + p;
-            g[q] = gain[k] * window_dot(f, first[q], frac[q], len[k], T, L, mn, p);
+            g[q] = gain[k] * window_dot(f, first[q], frac[q], WINDOW_LENGTH(len, k), T, L, mn, p);
         }
 }
 
@@ -63,7 +63,7 @@ __kernel void adjoint_scatter(__global const real *g_all, __global real *f_all,
             size_t q0 = (size_t)k * mn + p0;
             realw scale[TILE_R];
             for (int r = 0; r < TILE_R; ++r) scale[r] = gain[k] * load_w(g + q0 + (size_t)r * n);
-            block_scatter(f, first, frac, len[k], q0, T, L, mn, n, p0, scale);
+            block_scatter(f, first, frac, WINDOW_LENGTH(len, k), q0, T, L, mn, n, p0, scale);
         }
         return;
     }
@@ -72,7 +72,7 @@ __kernel void adjoint_scatter(__global const real *g_all, __global real *f_all,
             size_t p = y * n + x;
             for (int k = 0; k < K; ++k) {
                 size_t q = (size_t)k * mn + p;
-                window_scatter(f, first[q], frac[q], len[k], T, L, mn, p, gain[k] * g[q]);
+                window_scatter(f, first[q], frac[q], WINDOW_LENGTH(len, k), T, L, mn, p, gain[k] * g[q]);
             }
         }
 }
@@ -89,7 +89,7 @@ __kernel void psi(__global real *out, __global const int *first, __global const 
     for (int j = 0; j < L; ++j) {
         if (first[q] + j >= T) break;
         if (first[q] + j < 0) continue;
-        real w = shutter_weight(j, frac[q], len[k]);
+        real w = shutter_weight(j, frac[q], WINDOW_LENGTH(len, k));
         acc += w * w;
     }
     out[q] = gain[k] * gain[k] * acc;
@@ -114,7 +114,7 @@ __kernel void gram(__global real *out, __global const int *first, __global const
                 if (s < 0) continue;
                 int jl = s - first[ql];
                 if (jl < 0 || jl >= L) continue;
-                acc += shutter_weight(j, frac[qk], len[k]) * shutter_weight(jl, frac[ql], len[l]);
+                acc += shutter_weight(j, frac[qk], WINDOW_LENGTH(len, k)) * shutter_weight(jl, frac[ql], WINDOW_LENGTH(len, l));
             }
             acc *= gain[k] * gain[l];
             out[((size_t)k * K + l) * mn + p] = acc;

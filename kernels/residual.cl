@@ -16,7 +16,7 @@
  * part inside the ROI for a block cut by its edge), the difference taken from H f rounded to real,
  * as the forward kernel stores it. f, g, w: one set's estimate, snapshots and weights (w may be 0). */
 static inline acc_t block_residual(__global const real *f, __global const real *g, __global const real *w,
-                                   __global const int *first, __global const real *frac, real len, real gain,
+                                   __global const int *first, __global const real *frac, real2 len, real gain,
                                    size_t k, int T, int L, size_t m, size_t n, size_t x0, size_t y0)
 {
     size_t mn = m * n;
@@ -86,7 +86,7 @@ __kernel void residual_partials(__global const real *f_all, __global const real 
     acc_t sum[1] = {(acc_t)0};
     if (x0 < n && y0 < m)
         sum[0] = block_residual(f_all + set * (size_t)T * mn, g_all + set * (size_t)K * mn,
-                                w_all ? w_all + set * (size_t)K * mn : 0, first, frac, len[k], gain[k], k, T, L,
+                                w_all ? w_all + set * (size_t)K * mn : 0, first, frac, WINDOW_LENGTH(len, k), gain[k], k, T, L,
                                 m, n, x0, y0);
     group_partials(sum, 1, kk, get_global_size(2), slot, get_local_size(1), scratch, partials);
 }

@@ -53,7 +53,7 @@ def test_single_point_row():
     assert row["_history"]["psnr"][-1] == pytest.approx(row["psnr"], abs=1e-3)  # same truth, same window
     # memory: the buffers rsocl allocates, by hand for TV (3 planes of workspace and xnext)
     K, (m, n), T = 4, rig.shape, rig.T
-    by_hand = 4 * K * m * n + 4 * K * m * n + 2 * K * 4 + 4 * K * m * n  # geometry + snapshots
+    by_hand = 4 * K * m * n + 4 * K * m * n + 3 * K * 4 + 4 * K * m * n  # geometry (length: whole, rest) + snapshots
     by_hand += 4 * (4 * T * m * n) + 2 * 4 * K * m * n + 4 * K * K * m * n  # theta b f u, H theta, inverse
     by_hand += 16  # per-set eta and dual switch
     from rsocl.device import get_device

@@ -3,8 +3,10 @@
 import numpy as np
 import pytest
 
+import rsocl
 from rsocl import Camera, Rig, RollingShutterOperator
 from rsocl.model import reference as ref
+from rsocl.model.windows import kernel_windows, weighted_bounds
 from rsocl.testing import dottest
 
 TOL = {"float32": 1e-5, "float64": 1e-12}
@@ -46,6 +48,21 @@ def _rigs():
             (5, 6),
         ),
     )
+    # exposures that end exactly on a sub-frame start (dt = 3 t_r): the binary rule counts that sub-frame
+    for t_e in (1.0, 40.0):
+        yield (
+            f"binary-ends-on-starts-te{t_e:g}tr",
+            Rig(
+                [
+                    Camera(a, t_e=t_e * 3.5e-5, t_r=3.5e-5, gain=g, t_a=ta * 3.5e-5)
+                    for a, g, ta in [(0, 1.0, 0.0), (30, 0.5, 3.3), (137, 2.0, 1.1), (45, 1.7, 0.0)]
+                ],
+                (11, 9),
+                dt=3 * 3.5e-5,
+                mask="binary",
+            ),
+        )
+    yield "binary-dt-7.3tr", Rig.paper_array(4, (11, 9), t_e=3 * 3.5e-5, t_r=3.5e-5, dt=7.3 * 3.5e-5, mask="binary")
     yield "one-row", Rig.paper_array(4, (1, 9), t_e=1e-4, t_r=3e-5)
     yield "one-column", Rig.paper_array(4, (9, 1), t_e=1e-4, t_r=3e-5)
     yield "one-pixel", Rig.paper_array(2, (1, 1), t_e=1e-4, t_r=3e-5)
@@ -96,6 +113,41 @@ def test_binary_rule_is_the_papers():
     for y in range(3):
         expected[y : y + 3, y] = 1
     np.testing.assert_array_equal(w, expected)
+
+
+@pytest.mark.parametrize("length", [2000.3, 20000.3])
+@pytest.mark.parametrize("mask", ["exact", "binary"])
+def test_a_long_exposure_keeps_its_last_weight(length, mask, dtype, device):
+    # H^T of a unit snapshot is the pixel's weights: the last one, 0.3 of a sub-frame, to float32's rounding
+    rig = Rig([Camera(0, t_e=length * 1e-5, t_r=1e-5)], (2, 1), mask=mask)
+    op = RollingShutterOperator(rig, device=device, dtype=dtype)
+    g = np.zeros((1, 2, 1))
+    g[0, 1, 0] = 1.0
+    np.testing.assert_allclose(op.adjoint(g), ref.adjoint(rig, g), rtol=0, atol=TOL[dtype])
+
+
+@pytest.mark.parametrize("dtype_name", ["float32", "float64"])
+def test_kernel_windows_give_the_hosts_binary_bounds(dtype_name):
+    # the kernels' binary test, in their real type, on windows whose ends fall on sub-frame starts
+    real = np.dtype(dtype_name).type
+    for dt_rows, te_rows in [(3, 1), (3, 40), (7.3, 3), (1, 5.5), (2.5, 0.4), (1, 1)]:
+        offsets = [(0, 0), (90, 1.1), (200, 3.3)]
+        cameras = [Camera(a, t_e=te_rows * 3.5e-5, t_r=3.5e-5, t_a=ta * 3.5e-5) for a, ta in offsets]
+        rig = Rig(cameras, (7, 6), dt=dt_rows * 3.5e-5, mask="binary")
+        win = rig.windows
+        frac, length = kernel_windows(win, "binary", dtype_name)
+        first, last = weighted_bounds(win, "binary")
+        j = np.arange(rig.window_length + 1, dtype=np.float64)[:, None, None, None]
+        taken = (real(j) >= frac) & (real(j) - length[:, 0, None, None] <= frac + length[:, 1, None, None])
+        expected = (win.index + j >= first) & (win.index + j <= last)
+        np.testing.assert_array_equal(taken, expected, err_msg=f"dt = {dt_rows} t_r, t_e = {te_rows} t_r")
+
+
+def test_binary_ties_keep_interpolation_exact_on_a_constant_scene(device):
+    # simulate (the device's H) and interp3d (the host's Eq. 4) must see the same windows
+    rig = RIGS["binary-ends-on-starts-te1tr"]
+    g = rsocl.simulate(np.full((rig.T,) + rig.shape, 0.7), rig, device=device)
+    np.testing.assert_allclose(rsocl.interp3d(g, rig), 0.7, atol=1e-9)
 
 
 def test_device_arrays_stay_on_device(device, rng):

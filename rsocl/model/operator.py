@@ -20,6 +20,7 @@ from rsocl.device.kernel import Kernel
 from rsocl.device.launch import block_grid, element_launches
 from rsocl.device.program import c_type
 from rsocl.model.rig import Rig
+from rsocl.model.windows import kernel_windows
 
 if TYPE_CHECKING:
     import pyopencl.array as cla
@@ -48,10 +49,11 @@ def block_shape(device, dtype) -> tuple[int, int]:
 
 def geometry_bytes(K: int, pixels: int, dtype) -> int:
     """Device bytes of an operator's geometry for ``K`` channels of ``pixels`` pixels each: the
-    exposure-start index (int32) and fraction per channel and pixel, the window length and gain per
-    channel (:class:`RollingShutterOperator`'s ``first``, ``frac``, ``length``, ``gain``)."""
+    exposure-start index (int32) and fraction per channel and pixel, the window length (whole
+    sub-frames and the rest) and gain per channel (:class:`RollingShutterOperator`'s ``first``,
+    ``frac``, ``length``, ``gain``; :func:`~rsocl.model.windows.kernel_windows`)."""
     itemsize = np.dtype(dtype).itemsize
-    return int(K) * int(pixels) * (4 + itemsize) + 2 * int(K) * itemsize
+    return int(K) * int(pixels) * (4 + itemsize) + 3 * int(K) * itemsize
 
 
 class RollingShutterOperator:
@@ -109,6 +111,8 @@ class RollingShutterOperator:
         self.queue = self.device.queue
         m, n = rig.shape
         subframes = slice(0, rig.T) if subframes is None else subframes
+        if not isinstance(subframes, slice):
+            raise ValueError(f"subframes must be a slice of range({rig.T}) or None, got {subframes!r}")
         start, stop, step = subframes.indices(rig.T)
         if step != 1 or stop <= start:
             raise ValueError(f"subframes must be a non-empty slice of range({rig.T}) with step 1, got {subframes}")
@@ -121,8 +125,9 @@ class RollingShutterOperator:
         )
         win = rig.windows
         self.first = pool.to_device(self.queue, (win.index - start).astype(np.int32))
-        self.frac = pool.to_device(self.queue, win.fraction.astype(self.dtype))
-        self.length = pool.to_device(self.queue, win.length.astype(self.dtype))
+        frac, length = kernel_windows(win, rig.mask, self.dtype)
+        self.frac = pool.to_device(self.queue, frac)
+        self.length = pool.to_device(self.queue, length)
         self.gain = pool.to_device(self.queue, win.gain.astype(self.dtype))
         #: pixels per row of a work item's block of the forward, adjoint and ADMM projection kernels, and
         #: rows per block (:func:`block_shape`)
