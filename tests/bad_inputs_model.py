@@ -26,6 +26,12 @@ def _reconstruct(**kw):
     return run
 
 
+def _batch_result():
+    rig = _small()
+    g = rsocl.RollingShutterOperator(rig).forward(np.full((2, rig.T) + rig.shape, 0.5))
+    return rsocl.reconstruct(g, rig, tune=False, iterations=2)
+
+
 def _capture(tmp, shape=None, row_map_shape=None):
     """``tmp/cap.h5``: a capture of a 2-camera 8x8 rig whose stored rig claims ``shape`` or whose stored row
     map claims ``row_map_shape`` (written sparse: the file stays small)."""
@@ -181,4 +187,19 @@ CASES = [
     Bad("api-lam-nan", ["lam"], api=_reconstruct(lam=float("nan"))),
     Bad("api-projection-unknown", ["projection", "exact", "paper"], api=_reconstruct(projection="diagonal")),
     Bad("api-saturation-negative", ["saturation", "> 0"], api=_reconstruct(saturation=-1.0)),
+    # the small public helpers name their parameter too
+    Bad("row-map-camera-out-of-range", ["camera", "[0, 3]"], api=lambda tmp: _small().row_map(9)),
+    Bad("row-map-roi-outside-the-grid", ["roi", "8x8"], api=lambda tmp: _small().row_map(0, (6, 6, 5, 5))),
+    Bad("simulate-without-a-rig", ["rig", "rsocl.Rig"], api=lambda tmp: rsocl.simulate(np.zeros((13, 8, 8)), None)),
+    Bad(
+        "operator-subframes-not-a-slice",
+        ["subframes", "slice"],
+        api=lambda tmp: rsocl.RollingShutterOperator(_small(), subframes=3),
+    ),
+    Bad(
+        "ragged-row-map",
+        ["row_map", "rectangular"],
+        api=lambda tmp: rsocl.Camera(t_e=T_E, t_r=T_R, row_map=[[0.0, 1.0], [2.0]]),
+    ),
+    Bad("result-set-not-an-integer", ["index", "integer"], api=lambda tmp: _batch_result().set(1.5)),
 ]

@@ -53,6 +53,25 @@ def test_each_set_equals_its_single_set_reconstruction(sets, dtype, projection):
         assert alone.batch is None and alone.params["lam"] == lam[i] and alone.datacube.shape == one.datacube.shape
 
 
+def test_each_set_of_a_batch_stops_at_its_own_tol(sets):
+    # every set stops where it would alone: its estimate kept from that iteration, NaN records after it
+    rig, truth, g = sets
+    lam, eta = [0.05, 0.1, 0.02], [0.3, 0.0, 0.5]
+    kw = dict(iterations=60, tol=1e-2, tv_iterations=4, tune=False)
+    batch = rsocl.reconstruct(g, rig, lam=lam, eta=eta, truth=truth, **kw)
+    runs = []
+    for i in range(3):
+        one = rsocl.reconstruct(g[i], rig, lam=lam[i], eta=eta[i], truth=truth[i], **kw)
+        alone = batch.set(i)
+        runs.append(one.params["iterations_run"])
+        assert alone.params["iterations_run"] == runs[-1] < kw["iterations"]
+        np.testing.assert_allclose(alone.datacube, one.datacube, atol=_tol("float32") * np.abs(one.datacube).max())
+        np.testing.assert_allclose(alone.history["residual"], one.history["residual"], rtol=1e-5)
+        np.testing.assert_allclose(alone.history["psnr"], one.history["psnr"], atol=1e-4)
+        assert np.isnan(batch.history["residual"][runs[-1] :, i]).all()
+    assert len(set(runs)) > 1 and batch.params["iterations_run"] == max(runs)
+
+
 def test_batch_matches_the_numpy_reference(sets, dtype):
     rig, truth, g = sets
     kw = dict(iterations=5, lam=0.05, eta=0.3, tv_iterations=3)

@@ -16,6 +16,7 @@ from rsocl.model import reference as ref
 from rsocl.model.curvature import default_scale
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.scenes import builtin_scene
+from rsocl.model.simulate import full_scale
 
 
 @pytest.fixture
@@ -231,6 +232,20 @@ def test_a_moving_run_and_all_zero_snapshots_are_not_stalls():
     assert not zero.datacube.any()
 
 
+def test_a_run_whose_eta_keeps_it_far_from_the_data_is_warned(recwarn):
+    # eta 2000 psi: the residual moves a few per cent, not the 1e-6 of a stall, and the cube stays near 0
+    rig, truth, g = _demo()
+    psi = float(np.max(RollingShutterOperator(rig).psi))
+    with pytest.warns(RuntimeWarning, match=r"^ADMM ended far from the data: the residual is \[0\.9\d*\] after 20 "):
+        rsocl.reconstruct(g, rig, eta=2000 * psi, lam=0.1, tune=False, iterations=20)
+    with pytest.warns(RuntimeWarning, match=r"far from the data in set\(s\) \[1\]"):
+        rsocl.reconstruct(np.stack([g, g]), rig, eta=[0.2, 2000 * psi], lam=0.1, tune=False, iterations=20)
+    recwarn.clear()
+    rsocl.reconstruct(g, rig, eta=2000 * psi, lam=0.1, tune=False, iterations=20, x0=truth)  # a start that fits
+    rsocl.reconstruct(g, rig, tune=False, iterations=20)
+    assert not [w for w in recwarn if "far from the data" in str(w.message)]
+
+
 def test_the_cli_reports_a_run_that_never_moved_in_one_line(tmp_path, capsys):
     assert (
         main(["demo", "--fast", "--eta", "1e30", "--shape", "16", "16", "--quiet", "--out", str(tmp_path / "d")]) == 2
@@ -262,6 +277,18 @@ def test_snapshots_within_their_full_scale_or_saturated_warn_nothing(recwarn):
     g[2, :4] = 1e6  # saturated pixels are left out of the data term
     rsocl.reconstruct(g, rig, tune=False, iterations=3, saturation=1e5)
     assert not [w for w in recwarn if "full scale" in str(w.message)]
+
+
+@pytest.mark.parametrize("mask", ["exact", "binary"])
+def test_a_white_scene_reaches_the_full_scale_and_is_not_clipped(mask):
+    # binary: the paper array's exposures hold 6 sub-frame starts, above t_e/dt = 5.14
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=180e-6, t_r=35e-6, mask=mask)
+    white = np.ones((rig.T,) + rig.shape)
+    g = rsocl.simulate(white, rig)
+    assert full_scale(rig) == pytest.approx(g.max(), rel=1e-12)
+    assert full_scale(rig) == pytest.approx(6.0 if mask == "binary" else 180 / 35, rel=1e-12)
+    grey = rsocl.simulate(0.9 * white, rig, bit_depth=12)
+    np.testing.assert_allclose(grey, 0.9 * g, atol=full_scale(rig) / 4095)
 
 
 # ---------------------------------------------------------------------- the paper's projection (item 9)

@@ -133,7 +133,10 @@ def real_dtype(name: str, dtype) -> np.dtype:
 
 def finite_array(name: str, array) -> np.ndarray:
     """A real array with no NaN or inf; returned as a NumPy array (no copy when possible)."""
-    array = np.asarray(array)
+    try:
+        array = np.asarray(array)
+    except ValueError as exc:  # a ragged nesting of lists
+        raise ValueError(f"{name} must be a rectangular array of numbers: {exc}") from None
     if array.dtype.kind not in "biuf":
         raise ValueError(f"{name} must be a real-valued array, got dtype {array.dtype}")
     if array.dtype.kind == "f" and not np.all(np.isfinite(array)):

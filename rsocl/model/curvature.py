@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["binary_span", "psi_values", "psi_mean", "REFERENCE_PSI", "default_scale"]
+from rsocl.model.windows import weighted_bounds
+
+__all__ = ["binary_span", "psi_values", "psi_mean", "full_scales", "REFERENCE_PSI", "default_scale"]
 
 
 def binary_span(rig):
@@ -49,6 +51,18 @@ def psi_values(rig) -> np.ndarray:
 def psi_mean(rig) -> float:
     """The mean of :func:`psi_values` over snapshot pixels (dimensionless, sub-frames)."""
     return float(np.mean(psi_values(rig)))
+
+
+def full_scales(rig) -> np.ndarray:
+    """Each channel's full scale, ``(K,)`` float64: its snapshot of a white (1.0) scene, ``gain · Σ_s w_s``,
+    at its brightest pixel. ``exact`` mask: ``gain · t_e/dt``; ``binary``: ``gain`` times the most
+    sub-frame starts one of its exposures holds (6 for the paper's ``t_e/dt = 5.14``, docs/model.md)."""
+    win = rig.windows
+    if rig.mask != "binary":
+        return win.gain * win.length
+    first, last = weighted_bounds(win, "binary")
+    starts = np.maximum(last - first + 1.0, 0.0).reshape(len(win.gain), -1).max(axis=1)
+    return win.gain * starts
 
 
 def _reference() -> float:

@@ -13,6 +13,7 @@ camera-major.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Sequence
 from functools import cached_property
 
@@ -189,12 +190,25 @@ class Rig:
 
     def row_map(self, camera: int, roi: tuple[int, int, int, int] | None = None) -> np.ndarray:
         """Row map ``r(y, x)`` of camera ``camera``, rows: a copy of the whole ``(m, n)`` map, or with
-        ``roi = (y, x, height, width)`` (pixels, inside the grid) of that block only."""
-        rows = self._rows[camera]
+        ``roi = (y, x, height, width)`` (pixels, inside the grid) of that block only.
+
+        Raises ``ValueError`` naming ``camera`` outside ``0 .. cameras - 1``, or ``roi`` outside the grid."""
+        count = len(self.cameras)
+        if isinstance(camera, bool) or not isinstance(camera, numbers.Integral) or not 0 <= camera < count:
+            raise ValueError(f"camera must be an integer in [0, {count - 1}], got {camera!r}")
+        rows = self._rows[int(camera)]
         if roi is not None:
-            y, x, h, w = roi
+            y, x, h, w = self._checked_roi(roi)
             rows = rows[y : y + h, x : x + w]
         return rows.copy()
+
+    def _checked_roi(self, roi) -> tuple[int, int, int, int]:
+        """``roi = (y, x, height, width)`` as ints, inside the grid; ValueError naming ``roi`` otherwise."""
+        y, x, h, w = (int(v) for v in roi)
+        m, n = self.shape
+        if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
+            raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
+        return y, x, h, w
 
     @property
     def windows(self) -> ExposureWindows:
@@ -321,10 +335,7 @@ class Rig:
         Each camera's row map is cut from the whole one (not re-zeroed), so the exposure start
         times are those of the whole sensor readout.
         """
-        y, x, h, w = (int(v) for v in roi)
-        m, n = self.shape
-        if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
-            raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
+        y, x, h, w = self._checked_roi(roi)
         cams = [
             Camera(**{**cam.to_dict(), "row_map": self.row_map(c, (y, x, h, w))}) for c, cam in enumerate(self.cameras)
         ]

@@ -1,9 +1,10 @@
 """Simulated snapshots: the forward model plus an optional sensor model.
 
 Intensities follow docs/model.md: a scene in [0, 1] per sub-frame gives snapshots in
-``[0, gain * t_e/dt]``. The sensor's full scale is that maximum (the largest over
-channels), so ``bit_depth`` quantises ``[0, full_scale]`` into ``2**bit_depth``
-levels and values above it saturate.
+``[0, gain * t_e/dt]`` (the ``binary`` mask: ``gain`` times the sub-frame starts an exposure holds).
+The sensor's full scale is that maximum (the largest over channels,
+:func:`rsocl.model.curvature.full_scales`), so ``bit_depth`` quantises ``[0, full_scale]`` into
+``2**bit_depth`` levels and values above it saturate.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike, DTypeLike
 from rsocl.device.context import Device
+from rsocl.model.curvature import full_scales
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 
@@ -45,9 +47,9 @@ def check_seed(name: str, seed):
 
 
 def full_scale(rig: Rig) -> float:
-    """Snapshot value of a white (1.0) scene on the brightest channel: ``max gain * t_e/dt``."""
-    w = rig.windows
-    return float(np.max(w.gain * w.length))
+    """Snapshot value of a white (1.0) scene on the brightest channel: ``max gain * t_e/dt`` (the
+    ``binary`` mask: ``gain`` times the sub-frame starts an exposure holds; :func:`full_scales`)."""
+    return float(np.max(full_scales(rig)))
 
 
 def simulate(
@@ -108,6 +110,8 @@ def simulate(
     >>> g.shape, bool(0 <= g.min() and g.max() <= rsocl.model.simulate.full_scale(rig))
     ((4, 16, 16), True)
     """
+    if not isinstance(rig, Rig):
+        raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
     truth = check.finite_array("truth", truth)
     expected = (rig.T,) + rig.shape
     if truth.shape != expected:

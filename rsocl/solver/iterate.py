@@ -4,7 +4,9 @@
 history, drives the progress bar, the callback and the ``tol`` stop, raises on divergence and warns
 when the run ends unstable though bounded; :func:`collect` reads the
 estimate back with what the run's ``params`` record about the data. For a batch of sets every
-record is one value per set, and ``tol`` stops the batch when every set has met it.
+record is one value per set, and each set stops on its own under ``tol`` or ``iterations="auto"``: its
+estimate is kept from the iteration at which it met the criterion, its later records are NaN, and the
+batch runs until every set has stopped, so each set's result is its single-set run's.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 
 from rsocl.device.reduction import sum_sq_diff
 from rsocl.solver.held import hold
-from rsocl.solver.ladder import auto_stop
+from rsocl.solver.ladder import auto_settled
 
 __all__ = ["run_iterations", "collect"]
 
@@ -35,6 +37,13 @@ STALL_TOL = 1e-6
 #: A run that ends with a residual above 1 (its estimate explains the snapshots worse than zeros do)
 #: and this many times the smallest residual it had is unstable though bounded: it gets a warning.
 END_GROWTH = 10.0
+#: A run with an ``eta`` above this many times the data term's largest curvature ``psi`` that ends with a
+#: residual above :data:`FAR_RESIDUAL` moved too little to fit the data (the data step moves the estimate
+#: by about ``psi / eta`` per iteration): it gets a warning. A run from a start that already fits the
+#: snapshots ends below it, however little it moved.
+FAR_ETA = 100.0
+#: See :data:`FAR_ETA`: half of the snapshots' norm left unexplained.
+FAR_RESIDUAL = 0.5
 
 
 class _History:
@@ -45,6 +54,8 @@ class _History:
         self.total_size = total_size
         self.values = {"residual": [], "time": []}
         self.lowest = None
+        self.stopped = None  # per set of a batch: the iteration at which it stopped (-1: running)
+        self.kept: dict = {}  # a stopped set's estimate (host copy) at that iteration
         if staged.truth is not None:
             self.values["psnr"] = []
         self.start = time.perf_counter()
@@ -83,7 +94,7 @@ class _History:
         the run stayed finite and below :data:`GROWTH` but ended far from the data."""
         if not self.values["residual"]:
             return
-        last = np.atleast_1d(np.asarray(self.values["residual"][-1], dtype=np.float64))
+        last = self._last()
         lowest = np.atleast_1d(np.asarray(self.lowest, dtype=np.float64))
         bad = (last > 1.0) & (last > END_GROWTH * lowest)
         if not bad.any():
@@ -97,6 +108,34 @@ class _History:
             RuntimeWarning,
             stacklevel=4,
         )
+
+    def check_far(self):
+        """Warn when a set's ``eta`` is above :data:`FAR_ETA` times ``psi`` and its last residual is above
+        :data:`FAR_RESIDUAL`: the run stayed far from the data because its data step barely moved."""
+        if not self.values["residual"]:
+            return
+        psi = float(np.max(self.staged.op.psi))
+        eta = np.atleast_1d(np.asarray(self.solver.eta, dtype=np.float64))
+        last = self._last()
+        far = (eta > FAR_ETA * psi) & (last > FAR_RESIDUAL)
+        if not far.any():
+            return
+        where = f" in set(s) {np.flatnonzero(far).tolist()}" if np.ndim(self.values["residual"][-1]) else ""
+        warnings.warn(
+            f"ADMM ended far from the data{where}: the residual is {np.round(last[far], 4).tolist()} after "
+            f"{len(self.values['residual'])} iterations with eta = {np.round(eta[far], 6).tolist()}, over "
+            f"{FAR_ETA:g} times the data term's curvature (psi up to {psi:.3g}): each iteration moves the "
+            f"estimate by about psi/eta; choose eta up to about 4 psi = {4 * psi:.3g} (leave eta and lam out "
+            "for the defaults)",
+            RuntimeWarning,
+            stacklevel=4,
+        )
+
+    def _last(self) -> np.ndarray:
+        """Each set's last booked residual (one value for one set), float64."""
+        if self.stopped is not None:
+            return np.array([self.values["residual"][row][i] for i, row in enumerate(self.stopped)], dtype=np.float64)
+        return np.atleast_1d(np.asarray(self.values["residual"][-1], dtype=np.float64))
 
     def check_stall(self, final=False):
         """Raise ``FloatingPointError`` when the residual (per set) has not moved by :data:`STALL_TOL` from
@@ -159,14 +198,27 @@ class _History:
         self.rebook()
 
     def rebook(self):
-        """Book the estimate as it is now as the last record (its residual, and PSNR with a truth)."""
-        self.values["residual"][-1] = self.solver.residual()
-        if self.staged.truth is not None:
-            self.values["psnr"][-1] = self._psnr()
+        """Book the estimate as it is now as the last record (its residual, and PSNR with a truth); for a
+        batch whose sets stopped at different iterations, each set's own last record."""
+        for key, value in (("residual", self.solver.residual), ("psnr", self._psnr)):
+            if key not in self.values:
+                continue
+            if self.stopped is None:
+                self.values[key][-1] = value()
+                continue
+            now = np.asarray(value(), dtype=np.float64)
+            for i, row in enumerate(self.stopped):
+                booked = np.array(self.values[key][row], dtype=np.float64)
+                booked[i] = now[i]
+                self.values[key][row] = booked
 
     def record(self, it, residual) -> bool:
         """Book iteration ``it``'s residual (one per set for a batch); True when the run should stop after it."""
+        if self.stopped is not None:  # the sets that stopped before are not booked (NaN) nor checked
+            residual = np.where(self.stopped >= 0, np.nan, residual)
         bad = self._grown(residual)
+        if self.stopped is not None:
+            bad = bad & (self.stopped < 0)
         if bad.any() if isinstance(bad, np.ndarray) else bad:
             raise self._diverged(it, residual, bad)
         values, settings = self.values, self.settings
@@ -176,21 +228,41 @@ class _History:
         one = isinstance(residual, float) or not np.ndim(residual)
         values["time"].append(elapsed if one else np.full(np.shape(residual), elapsed))
         if self.staged.truth is not None:
-            values["psnr"].append(self._psnr())
+            psnr = self._psnr()
+            values["psnr"].append(psnr if self.stopped is None else np.where(self.stopped >= 0, np.nan, psnr))
         if self.bar is not None:
             self.bar.update(1)
-            extra = {"psnr": f"{np.min(values['psnr'][-1]):.2f}"} if "psnr" in values else {}
-            self.bar.set_postfix(residual=f"{np.max(residual):.3g}", **extra)
+            extra = {"psnr": f"{np.nanmin(values['psnr'][-1]):.2f}"} if "psnr" in values else {}
+            self.bar.set_postfix(residual=f"{np.nanmax(residual):.3g}", **extra)
         if settings.callback is not None and settings.callback(it, residual, self.solver.theta):
             return True
-        if self.auto and auto_stop(values["residual"]):
-            return True
+        if settings.tol is None and not self.auto:
+            return False
+        met = auto_settled(values["residual"]) if self.auto else False
         if settings.tol is not None and it > 0:
-            prev = np.asarray(values["residual"][-2])
-            change = np.abs(prev - residual)
-            if np.all(change <= settings.tol * np.maximum(residual, np.finfo(float).tiny)):
-                return True
-        return False
+            change = np.abs(np.asarray(values["residual"][-2]) - residual)
+            met = met | (change <= settings.tol * np.maximum(residual, np.finfo(float).tiny))
+        return bool(met) if np.ndim(met) == 0 else self._stop_sets(it, met)
+
+    def _stop_sets(self, it, met) -> bool:
+        """Keep the estimates of the sets of a batch that met the stop criterion at iteration ``it`` for the
+        first time (:meth:`restore` puts them back); True when every set has stopped."""
+        if self.stopped is None:
+            self.stopped = np.full(np.shape(met), -1)
+        new = np.flatnonzero(met & (self.stopped < 0))
+        if new.size and not np.all((self.stopped >= 0) | met):  # others run on: keep these estimates
+            theta = self.solver.theta
+            for i in new:
+                self.kept[int(i)] = theta[int(i)].get()
+        self.stopped[new] = it
+        return bool(np.all(self.stopped >= 0))
+
+    def restore(self):
+        """Put back the kept estimates of the sets of a batch that stopped before the last ones."""
+        theta = self.solver.theta if self.kept else None
+        for i, kept in self.kept.items():
+            theta[i].set(kept)
+        self.kept = {}
 
 
 def run_iterations(solver, staged, settings, *, progress=False, blend=None, auto=False, fix=None) -> dict:
@@ -235,8 +307,10 @@ def run_iterations(solver, staged, settings, *, progress=False, blend=None, auto
                 solver.step()
                 if history.record(it, solver.residual_async().result()):
                     break
+        history.restore()
         history.check_stall(final=True)
         history.check_end()
+        history.check_far()
         if blend is not None and blend < 1 and history.values["residual"]:
             history.blend(blend)
         if fix is not None and history.values["residual"] and fix(solver):

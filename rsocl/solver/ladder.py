@@ -37,6 +37,7 @@ __all__ = [
     "check_iterations",
     "rung",
     "auto_stop",
+    "auto_settled",
 ]
 
 
@@ -188,7 +189,8 @@ def check_iterations(iterations, quality: str) -> tuple:
 def auto_stop(residuals) -> bool:
     """Whether an ``iterations="auto"`` run stops after the last of ``residuals`` (one per iteration, a
     number or one per set): at least :data:`AUTO_MIN` iterations ran and every set's residual changed
-    by less than :data:`AUTO_TOL` of itself over the last :data:`AUTO_WINDOW` iterations.
+    by less than :data:`AUTO_TOL` of itself over the last :data:`AUTO_WINDOW` iterations
+    (:func:`auto_settled`).
 
     Examples
     --------
@@ -197,8 +199,18 @@ def auto_stop(residuals) -> bool:
     """
     import numpy as np
 
+    return bool(np.all(auto_settled(residuals)))
+
+
+def auto_settled(residuals):
+    """Per set (a bool array for residuals of a batch, else a bool): whether that set's residual has
+    settled as :func:`auto_stop` asks, after the last of ``residuals``."""
+    import numpy as np
+
     if len(residuals) < max(AUTO_MIN, AUTO_WINDOW + 1):
-        return False
+        shape = np.shape(residuals[-1]) if len(residuals) else ()
+        return np.zeros(shape, bool) if shape else False
     last = np.asarray(residuals[-1], dtype=np.float64)
     before = np.asarray(residuals[-1 - AUTO_WINDOW], dtype=np.float64)
-    return bool(np.all(np.abs(before - last) < AUTO_TOL * np.maximum(np.abs(last), np.finfo(float).tiny)))
+    settled = np.abs(before - last) < AUTO_TOL * np.maximum(np.abs(last), np.finfo(float).tiny)
+    return settled if last.ndim else bool(settled)

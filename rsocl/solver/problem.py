@@ -19,6 +19,7 @@ from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike
 from rsocl.common.memory import check_host_memory
 from rsocl.device import pool
+from rsocl.model.curvature import full_scales
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 from rsocl.solver.held import HeldSumSquares
@@ -164,10 +165,9 @@ OFF_SCALE = 10.0
 
 def warn_off_scale(g, rig, valid=None) -> None:
     """Warn (``UserWarning``, one line) when some snapshot channel of ``g`` (``(K, m, n)`` or a batch) peaks
-    above :data:`OFF_SCALE` times its full scale ``gain * t_e / dt`` (over the ``valid`` pixels: those
-    below the saturation), naming the highest such camera."""
-    win = rig.windows
-    full = win.gain * win.length
+    above :data:`OFF_SCALE` times its full scale ``gain * t_e / dt`` (:func:`~rsocl.model.curvature.full_scales`;
+    over the ``valid`` pixels: those below the saturation), naming the highest such camera."""
+    full = full_scales(rig)
     values = np.abs(g) if valid is None else np.where(valid, np.abs(g), 0.0)
     peak = np.max(values.reshape((-1, rig.n_channels, g.shape[-2] * g.shape[-1])), axis=(0, 2))
     ratio = peak / full
@@ -177,7 +177,7 @@ def warn_off_scale(g, rig, valid=None) -> None:
         which = f"camera {camera}" + (f" (frame {frame})" if rig.cameras[camera].frames > 1 else "")
         warnings.warn(
             f"g: snapshots of {which} reach {peak[k]:.4g}, {ratio[k]:.3g} times its full scale "
-            f"{full[k]:.4g} (gain x t_e/dt, a white scene): rsocl works on data in [0, 1] per sub-frame; "
+            f"{full[k]:.4g} (a white scene): rsocl works on data in [0, 1] per sub-frame; "
             "scale that camera's snapshots (or its gain)",
             UserWarning,
             stacklevel=3,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,7 +24,8 @@ class Result:
         Per iteration: ``residual`` (``‖g - H theta‖/‖g‖``), ``time`` (seconds since
         the start, wall clock, when the host has that iteration's residual: the device
         has finished it), and ``psnr`` (dB, when a ground truth was given). For a batch
-        each is ``(iterations, B)``: one column per set.
+        each is ``(iterations, B)``: one column per set, NaN after the iteration at which a
+        set stopped (``tol``, ``iterations="auto"``) while others ran on.
     rig : Rig
     params : dict
         Everything needed to repeat the run (for a batch: ``lam``, ``eta`` and
@@ -62,17 +64,26 @@ class Result:
         return self.datacube[..., self.rig.kept_subframes(), :, :]
 
     def set(self, index: int) -> Result:
-        """Set ``index`` of a batch as a single-set :class:`Result` (its column of the history)."""
+        """Set ``index`` of a batch as a single-set :class:`Result`: its column of the history up to its
+        own last iteration, and its ``iterations_run``."""
         if self.batch is None:
             raise ValueError("set() needs a batch result (datacube (B, T, m, n)); this one holds one set")
-        if not -self.batch <= int(index) < self.batch:
-            raise ValueError(f"index must be in [0, {self.batch - 1}] for a batch of {self.batch} sets, got {index}")
+        if isinstance(index, bool) or not isinstance(index, numbers.Integral) or not -self.batch <= index < self.batch:
+            raise ValueError(
+                f"index must be an integer in [0, {self.batch - 1}] for a batch of {self.batch} sets, got {index!r}"
+            )
         params = dict(self.params)
         params.pop("sets", None)
         for key in ("lam", "eta", "saturated_pixels"):
             if isinstance(params.get(key), list):
                 params[key] = params[key][index]
         history = {key: np.asarray(values)[:, index] for key, values in self.history.items()}
+        ran = len(history["residual"])  # less the records after the set stopped (NaN: tol, "auto", other batches)
+        while ran > 0 and np.isnan(history["residual"][ran - 1]):
+            ran -= 1
+        if ran < len(history["residual"]):
+            history = {key: values[:ran] for key, values in history.items()}
+            params["iterations_run"] = ran
         return Result(self.datacube[index], history, self.rig, params)
 
     def sets(self) -> list:
