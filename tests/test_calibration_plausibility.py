@@ -131,3 +131,16 @@ def test_leave_one_out_finds_the_misplaced_marker():
     registration = cal.register_camera(None, five, sensor_points=sensor)
     assert registration.rms_error < 3.0 / 2  # the fit spreads the error: rms hides it
     assert f"leave-one-out largest {loo.max():.3f} px" in fit_summary(registration)
+
+
+def test_a_centre_marker_among_four_corners_is_a_fit_with_markers_left_unchecked():
+    # left out with a corner, the centre's others hold three on a diagonal: that marker cannot be checked,
+    # and the calibration still fits (five markers determine the homography)
+    corners = np.array([[2.0, 2.0], [13.0, 2.0], [13.0, 13.0], [2.0, 13.0]])
+    five = np.vstack([corners, [[7.5, 7.5]]])
+    sensor = cal.project_points(camera_homography(0), five)
+    loo = leave_one_out_errors(five, sensor)
+    assert np.isnan(loo[:4]).all() and loo[4] < 1e-6
+    registration = cal.register_camera(None, five, sensor_points=sensor)
+    summary = fit_summary(registration)
+    assert "leave-one-out largest 0.000 px (markers [0, 1, 2, 3] not checked" in summary, summary

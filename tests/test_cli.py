@@ -761,3 +761,60 @@ def test_inner_iterations_given_twice_must_agree_in_python(device):
         ).params["regularizer_options"]["iterations"]
         == 5
     )
+
+
+def test_a_gif_that_cannot_be_written_says_the_reconstruction_is(tmp_path, capsys, monkeypatch):
+    # a full disk after the result: one line naming the GIF, its failure and the written (and kept) result
+    import errno
+
+    import rsocl.analysis.visual as visual
+    from rsocl.files.atomic import OutputError
+
+    def full(path, *args, **kwargs):
+        raise OutputError(path, OSError(errno.ENOSPC, "No space left on device"), existed=False)
+
+    cap, rec = tmp_path / "cap.h5", tmp_path / "rec.h5"
+    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "12", "12", "--quiet"]) == 0
+    quick = ["--fixed", "--iterations", "2", "--quiet"]
+    assert main(["reconstruct", str(cap), "--out", str(rec), *quick]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(visual, "comparison_gif", full)
+    assert main(["reconstruct", str(cap), "--out", str(rec), *quick]) != 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot write" in err and "rec.gif" in err and "No space left" in err, err
+    assert f"{rec} written, the earlier" in err and load_reconstruction(rec).datacube.shape[1:] == (12, 12), err
+
+
+def test_an_interrupt_while_writing_sets_says_which_are_written_and_which_are_older(tmp_path, capsys, monkeypatch):
+    import h5py
+
+    import rsocl.cli.reconstruct as command
+    from rsocl.files.hdf5 import save_capture
+    from rsocl.model import reference as ref
+
+    rig = rsocl.Rig.paper_array(2, (9, 7), t_e=1e-4, t_r=3e-5)
+    rng = np.random.default_rng(5)
+    sets = np.stack([ref.forward(rig, rng.random((rig.T,) + rig.shape)) for _ in range(4)])
+    cap, rec = tmp_path / "sets.h5", tmp_path / "rec.h5"
+    save_capture(cap, sets[0], rig)
+    with h5py.File(cap, "a") as h5:
+        h5.create_dataset("snapshot_sets", data=sets)
+    run = ["reconstruct", str(cap), "--out", str(rec), "--iterations", "2", "--fixed", "--quiet"]
+    assert main(run) == 0  # an earlier run's four set files
+    saved = command.save_result
+    calls = []
+
+    def interrupted_at_the_third(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return saved(*args, **kwargs)
+
+    monkeypatch.setattr(command, "save_result", interrupted_at_the_third)
+    capsys.readouterr()
+    assert main([*run, "--lam", "0.3"]) == 130
+    err = capsys.readouterr().err
+    assert err == (
+        f"rsocl reconstruct: interrupted: sets 0 to 1 written ({tmp_path / 'rec-set000.h5'} ..); 2 of the files "
+        f"of sets 2 to 3 are an earlier run's ({tmp_path / 'rec-set002.h5'} ..)\n"
+    )

@@ -125,3 +125,24 @@ def test_datacube_montage(tmp_path, cubes):
     with pytest.raises(ValueError, match="every"):
         datacube_montage(tmp_path / "bad.png", estimate, every=0)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["alone.png", "both.png", "wrap.png"]
+
+
+def test_a_gif_that_cannot_be_written_fails_once_and_leaves_nothing(tmp_path, cubes, monkeypatch):
+    # a full disk: one OSError from the write, no second failure when the encoder is collected, no file
+    import errno
+    import gc
+    import pathlib
+    import sys
+
+    truth, estimate = cubes
+
+    def full(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    unraisable = []
+    monkeypatch.setattr(pathlib.Path, "write_bytes", full)
+    monkeypatch.setattr(sys, "unraisablehook", unraisable.append)
+    with pytest.raises(OSError, match="No space left"):
+        comparison_gif(tmp_path / "rec.gif", truth, estimate)
+    gc.collect()
+    assert unraisable == [] and list(tmp_path.iterdir()) == []

@@ -203,8 +203,11 @@ def comparison_gif(path, truth, estimate, *, fps=10, scale=4) -> Path:
 
     path = Path(os.fspath(path))
     duration = 1000.0 / fps
+    # encoded in memory first: a write that fails (a full disk) then fails once, in the write below, and
+    # not again when the encoder is collected with frames still buffered
+    data = iio.imwrite("<bytes>", np.stack(frames), extension=".gif", is_batch=True, duration=duration, loop=0)
     with atomic_path(path) as tmp:
-        iio.imwrite(tmp, np.stack(frames), extension=".gif", is_batch=True, duration=duration, loop=0)
+        Path(tmp).write_bytes(data)
     return path
 
 

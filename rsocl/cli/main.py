@@ -81,8 +81,9 @@ def main(argv=None) -> int:
     except OSError as exc:
         print(f"rsocl {args.command}: error: {fault_line(exc)}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print(f"rsocl {args.command}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # a command may say what it kept (the interrupt's message)
+        kept = f": {exc}" if str(exc) else ""
+        print(f"rsocl {args.command}: interrupted{kept}", file=sys.stderr)
         return 130
 
 

@@ -4,6 +4,7 @@ Zarr store (:mod:`rsocl.cli.tiling`)."""
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 from rsocl.cli.options import (
@@ -110,7 +111,6 @@ def cmd_reconstruct(args) -> int:
     or another capture); tiles (and sets) run on Dask when asked or needed.
     """
     from rsocl.analysis.visual import comparison_gif
-    from rsocl.files.atomic import OutputError
     from rsocl.files.hdf5 import load_capture, load_snapshot_sets
 
     if args.batch is not None and args.batch < 1:  # before anything runs, whatever the capture holds
@@ -127,36 +127,80 @@ def cmd_reconstruct(args) -> int:
     out = Path(args.out)
     gif = Path(args.gif) if args.gif else out.with_suffix(".gif")
     if sets is None or sets.shape[0] == 1:
-        result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
+        with _interrupted(f"nothing written, {out} unchanged" if out.exists() else "nothing written"):
+            result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
         print(quality_line(result, truth))
         kept = save_result(out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth)
-        comparison_gif(gif, truth, result.datacube)
+        with _written(out, [kept]):
+            comparison_gif(gif, truth, result.datacube)
         files = [out, gif, *tuning_plot_files(args, result.params, gif)]
         say(args, "wrote " + ", ".join(str(p) for p in files) + kept_note([kept]))
         return 0
-    batch = _reconstruct_sets(args, sets, capture.rig)
+    with _interrupted("nothing written, the files already there are unchanged"):
+        batch = _reconstruct_sets(args, sets, capture.rig)
     say(args, f"{sets.shape[0]} sets in batches of {batch.params['batch']}")
-    earlier = []
+    earlier: list = []
+    with _interrupted(lambda: _sets_written(out, len(earlier), batch.batch)):
+        _write_sets(args, batch, capture.rig, truth, out, earlier)
+    with _written(f"{set_path(out, 0)} .. {set_path(out, batch.batch - 1)}", earlier):
+        comparison_gif(gif, truth, batch.set(0).datacube)
+    plots = tuning_plot_files(args, batch.set(0).params, gif)
+    pictures = ", ".join(map(str, [gif, *plots]))
+    say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, {pictures}" + kept_note(earlier))
+    return 0
+
+
+def _write_sets(args, batch, rig, truth, out, earlier):
+    """Write each set's reconstruction file, printing its quality line; ``earlier`` collects the kept files."""
+    from rsocl.files.atomic import OutputError
+
     for i in range(batch.batch):
         one = batch.set(i)
         known = truth if i == 0 else None  # the capture's truth is set 0's datacube
         print(f"set {i}: " + quality_line(one, known))
         try:
             earlier.append(
-                save_result(
-                    set_path(out, i), one.datacube, capture.rig, params=one.params, history=one.history, truth=known
-                )
+                save_result(set_path(out, i), one.datacube, rig, params=one.params, history=one.history, truth=known)
             )
         except OutputError as exc:  # a full disk: say which sets are on it
             if i:
                 exc.strerror = f"{exc.strerror}; sets 0 to {i - 1} are written ({set_path(out, 0)} ..)"
                 exc.strerror += kept_note(earlier).replace(" (", ", ", 1).rstrip(")")
             raise
-    comparison_gif(gif, truth, batch.set(0).datacube)
-    plots = tuning_plot_files(args, batch.set(0).params, gif)
-    pictures = ", ".join(map(str, [gif, *plots]))
-    say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, {pictures}" + kept_note(earlier))
-    return 0
+
+
+def _sets_written(out, written: int, sets: int) -> str:
+    """What an interrupted write of ``sets`` set files kept, ``written`` of them done: one clause."""
+    rest = [set_path(out, i) for i in range(written, sets)]
+    older = [p for p in rest if p.exists()]
+    done = f"sets 0 to {written - 1} written ({set_path(out, 0)} ..)" if written else "no set written"
+    if not older:
+        return done
+    return f"{done}; {len(older)} of the files of sets {written} to {sets - 1} are an earlier run's ({older[0]} ..)"
+
+
+@contextlib.contextmanager
+def _interrupted(kept):
+    """Around a step of the command: an interrupt (Ctrl-C) is re-raised with ``kept`` (a string, or a
+    callable giving it then) as its message, which the command's last line prints."""
+    try:
+        yield
+    except KeyboardInterrupt as exc:
+        if str(exc):
+            raise
+        raise KeyboardInterrupt(kept() if callable(kept) else kept) from None
+
+
+@contextlib.contextmanager
+def _written(results, kept):
+    """Around a picture's write after the results: a failed write (a full disk) says the results are written."""
+    from rsocl.files.atomic import OutputError
+
+    try:
+        yield
+    except OutputError as exc:
+        exc.strerror = f"{exc.strerror}; {results} written" + kept_note(kept).replace(" (", ", ", 1).rstrip(")")
+        raise
 
 
 def _reconstruct_sets(args, sets, rig):

@@ -123,7 +123,9 @@ def check_rotation(H, shape, nominal, *, key="angle", limit=MAX_TURN) -> float:
 def leave_one_out_errors(reference_points, sensor_points):
     """Each marker's distance, sensor pixels, from where the homography of the *other* markers puts it.
 
-    ``(N,)`` float64 for ``N >= 5`` markers; None for 4 (the others are too few to fit).
+    ``(N,)`` float64 for ``N >= 5`` markers, NaN for a marker whose others cannot fit one (three of
+    four on a line: the centre of a square's corners, left out with a corner); None for 4 (the others
+    are too few to fit).
     """
     from rsocl.hardware.calibration.homography import estimate_homography, project_points
 
@@ -134,7 +136,11 @@ def leave_one_out_errors(reference_points, sensor_points):
     out = np.empty(len(ref))
     for k in range(len(ref)):
         keep = np.arange(len(ref)) != k
-        H = estimate_homography(ref[keep], sensor[keep])
+        try:
+            H = estimate_homography(ref[keep], sensor[keep])
+        except ValueError:  # the others are degenerate: this marker cannot be checked
+            out[k] = np.nan
+            continue
         out[k] = float(np.hypot(*(project_points(H, ref[k : k + 1])[0] - sensor[k])))
     return out
 
@@ -153,7 +159,14 @@ def fit_summary(registration) -> str:
             f"{N} markers fit a homography exactly, so they cannot check it (no rms); 5 or more markers "
             "give a leave-one-out check"
         )
+    unchecked = np.flatnonzero(np.isnan(loo)).tolist()
+    if len(unchecked) == N:
+        return (
+            f"{N} markers: rms reprojection {registration.rms_error:.3f} px; no leave-one-out check (the "
+            "others of every marker have three on a line)"
+        )
+    note = f" (markers {unchecked} not checked: their others have three on a line)" if unchecked else ""
     return (
         f"{N} markers: rms reprojection {registration.rms_error:.3f} px, leave-one-out largest "
-        f"{float(loo.max()):.3f} px"
+        f"{float(np.nanmax(loo)):.3f} px{note}"
     )
