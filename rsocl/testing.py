@@ -18,6 +18,7 @@ Every failed property raises an ``AssertionError`` that says which one.
 from __future__ import annotations
 
 import contextlib
+import numbers
 
 import numpy as np
 
@@ -118,31 +119,49 @@ def dottest(op, domain_shape=None, range_shape=None, *, rtol=None, seed=0, raise
     return passed
 
 
+#: pyopencl's functions through which every ``enqueue_copy`` to host memory goes (looked up on
+#: ``pyopencl._cl`` when ``enqueue_copy`` runs, so a reference to ``enqueue_copy`` bound before the
+#: check is caught too)
+_READS = ("_enqueue_read_buffer", "_enqueue_read_buffer_rect", "_enqueue_read_image")
+#: the functions that map device memory into host memory, patched in ``pyopencl`` and ``pyopencl._cl``
+_MAPS = ("enqueue_map_buffer", "enqueue_map_image")
+
+
 @contextlib.contextmanager
 def no_host_transfers():
-    """Inside this block, reading a device array back to the host raises ``AssertionError``.
+    """Inside this block, reading device data back to the host raises ``AssertionError``.
 
-    Catches ``pyopencl.array.Array.get`` and ``pyopencl.enqueue_copy`` into a
-    NumPy array: the ways a regularizer could round-trip through the host.
+    Catches ``pyopencl.array.Array.get``, every ``pyopencl.enqueue_copy`` into host memory
+    (however ``enqueue_copy`` was imported: the read functions of ``pyopencl._cl`` it calls are
+    patched) and ``enqueue_map_buffer`` / ``enqueue_map_image`` called through ``pyopencl`` or
+    ``pyopencl._cl`` (and so ``Array.map_to_host``): the ways a regularizer could round-trip through
+    the host. Not caught: a reference to a map function bound before the block, and copies
+    between shared virtual memory allocations.
     """
     import pyopencl as cl
+    import pyopencl._cl as _cl
     import pyopencl.array as cla
-
-    original_get, original_copy = cla.Array.get, cl.enqueue_copy
 
     def get(self, *args, **kwargs):
         raise AssertionError("the regularizer read a device array back to the host (Array.get)")
 
-    def enqueue_copy(queue, dest, src, *args, **kwargs):
-        if isinstance(dest, np.ndarray):
-            raise AssertionError("the regularizer copied device data to the host (enqueue_copy)")
-        return original_copy(queue, dest, src, *args, **kwargs)
+    def refuse(what):
+        def refused(*args, **kwargs):
+            raise AssertionError(f"the regularizer copied device data to the host ({what})")
 
-    cla.Array.get, cl.enqueue_copy = get, enqueue_copy
+        return refused
+
+    patches = [(cla.Array, "get", get)]
+    patches += [(_cl, name, refuse("enqueue_copy")) for name in _READS if hasattr(_cl, name)]
+    patches += [(module, name, refuse(name)) for module in (cl, _cl) for name in _MAPS if hasattr(module, name)]
+    originals = [(owner, name, owner.__dict__[name]) for owner, name, _ in patches]
     try:
+        for owner, name, replacement in patches:
+            setattr(owner, name, replacement)
         yield
     finally:
-        cla.Array.get, cl.enqueue_copy = original_get, original_copy
+        for owner, name, original in originals:
+            setattr(owner, name, original)
 
 
 def _instance(regularizer, options):
@@ -215,6 +234,9 @@ def check_regularizer(
     assert isinstance(reg.name, str) and reg.name and reg.name != "base", "the regularizer needs a name"
     for key, opt in type(reg).options.items():
         assert isinstance(opt, Option), f"option {key!r} must be declared as rsocl.solver.regularizer.Option"
+        assert isinstance(opt.default, (bool, np.bool_, numbers.Real, str)), (
+            f"option {key!r}: the default must be a bool, int, float or str, got {opt.default!r}"
+        )
     dev = get_device(device)
     rng = np.random.default_rng(seed)
     checked = []

@@ -137,3 +137,12 @@ def test_the_configured_regularizer_is_counted_by_plan_and_by_the_tiling_decisio
     capture = Namespace(rig=rig)
     assert not tiling._wants_tiles(args, capture)
     assert tiling._wants_tiles(Namespace(**{**vars(args), "reg_opt": ["fused=2"]}), capture)
+
+
+@pytest.mark.parametrize("sets, flag", [(3, True), (1, False)])
+def test_plan_run_it_command_includes_sets_when_there_are_several(capsys, sets, flag):
+    argv = ["plan", "--shape", "40", "24", "--tile", "7", "5", "--halo", "30", "--no-measure", "--sets", str(sets)]
+    assert main(argv) == 0
+    run_it = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("run it:"))
+    assert run_it.startswith("run it: rsocl reconstruct CAPTURE --out rec.zarr --tile 7 5")
+    assert run_it.endswith(" --sets") is flag

@@ -8,7 +8,9 @@ import textwrap
 from pathlib import Path
 
 import numpy as np
+import pyopencl as cl
 import pytest
+from pyopencl import enqueue_copy as bound_enqueue_copy  # bound before any check patches pyopencl
 
 import rsocl
 from rsocl.common import registry as plugins
@@ -79,6 +81,116 @@ def test_conformance_check_catches_a_bad_regularizer(device):
 
     with pytest.raises(AssertionError, match="host"):
         check_regularizer(Doubling, device=device)
+
+
+def _host_copy(x, h):
+    bound_enqueue_copy(x.queue, h, x.data)
+
+
+def _host_copy_rect(x, h):
+    cl.enqueue_copy(x.queue, h, x.data, buffer_origin=(0, 0), host_origin=(0, 0), region=(x.nbytes, 1))
+
+
+def _host_map(x, h):
+    mapped, _ = cl.enqueue_map_buffer(x.queue, x.data, cl.map_flags.READ, 0, x.shape, x.dtype)
+    h[...] = mapped
+    del mapped
+
+
+def _host_map_to_host(x, h):
+    h[...] = x.map_to_host()
+
+
+@pytest.mark.parametrize(
+    "read, how",
+    [
+        (_host_copy, "enqueue_copy"),
+        (_host_copy_rect, "enqueue_copy"),
+        (_host_map, "enqueue_map_buffer"),
+        (_host_map_to_host, "enqueue_map_buffer"),
+    ],
+)
+def test_conformance_check_catches_every_read_back_to_the_host(device, read, how):
+    import pyopencl._cl as _cl
+    import pyopencl.array as cla
+
+    from rsocl.solver.regularizer import Option, Regularizer
+
+    class ThroughHost(Regularizer):
+        name = "throughhost"
+        options = {"center": Option(0.0)}
+
+        def _denoise(self, x, weight, out):
+            h = np.empty(x.shape, x.dtype)
+            read(x, h)
+            out.set(((h + weight * self.center) / (1 + weight)).astype(x.dtype))
+            return out
+
+    before = {name: getattr(_cl, name) for name in ("_enqueue_read_buffer", "enqueue_map_buffer")}
+    with pytest.raises(AssertionError, match=re.escape(f"copied device data to the host ({how})")):
+        check_regularizer(ThroughHost, device=device)
+    assert {name: getattr(_cl, name) for name in before} == before  # the patches are undone
+    assert cl.enqueue_map_buffer is _cl.enqueue_map_buffer
+    x = cla.to_device(device.queue, np.arange(4.0, dtype=np.float32).reshape(1, 1, 4))
+    h = np.zeros((1, 1, 4), np.float32)
+    read(x, h)
+    assert h.ravel().tolist() == [0, 1, 2, 3] and x.get().shape == (1, 1, 4)
+
+
+@pytest.mark.parametrize("value", [float("inf"), "inf", "1e400", -float("inf"), 10**400, "nan"])
+def test_an_integer_option_given_a_non_finite_value_is_a_value_error_naming_it_and_its_range(value):
+    tv = plugins.load("rsocl.regularizers", "tv")
+    with pytest.raises(ValueError, match=r"option iterations must be .*an integer in \[1, 100000\], got "):
+        tv(iterations=value)
+    with pytest.raises(ValueError, match=r"option fused must be .*in \["):
+        tv(fused=value)
+
+
+def test_an_integer_option_given_inf_on_the_command_line_is_a_one_line_error(tmp_path, capsys):
+    from rsocl.cli.main import main
+
+    cap = tmp_path / "cap.h5"
+    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "8", "8", "--cameras", "2", "--quiet"]) == 0
+    for opt in ("iterations=inf", "fused=1e400"):
+        assert main(["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5"), "--reg-opt", opt]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and f"option {opt.split('=')[0]} must be finite" in err, err
+    assert not (tmp_path / "rec.h5").exists()
+
+
+@pytest.mark.parametrize("default", [None, (1, 2), [0.5], {"a": 1}, b"x", 1j])
+def test_an_option_whose_default_is_not_bool_int_float_or_str_fails_the_check_and_refuses_values(default):
+    # a plugin declaring one still loads (its runs without the option work); the conformance check fails
+    # on it and a value given for it is a ValueError naming the option, not a TypeError
+    from rsocl.solver.regularizer import Option, Regularizer
+
+    class Seeded(Regularizer):
+        name = "seeded"
+        options = {"seed": Option(default)}
+
+    with pytest.raises(AssertionError, match=r"option 'seed': the default must be a bool, int, float or str"):
+        check_regularizer(Seeded)
+    with pytest.raises(ValueError, match="option seed"):
+        Seeded(seed="3")
+
+
+@pytest.mark.parametrize(
+    "default, value, match",
+    [
+        (True, "maybe", r"option flag must be a boolean, got 'maybe'"),
+        (True, np.array([1, 0]), r"option flag must be a boolean"),
+        (3, "x", r"option flag must be an integer in \[-inf, inf\], got 'x'"),
+        (3, [1, 2], r"option flag must be an integer in \[-inf, inf\]"),
+        (0.5, None, r"option flag must be a number in \[-inf, inf\], got None"),
+    ],
+)
+def test_option_conversion_failures_are_value_errors_naming_the_option(default, value, match):
+    from rsocl.solver.regularizer import Option
+
+    with pytest.raises(ValueError, match=match):
+        Option(default).convert("flag", value)
+    assert Option(np.int64(3)).convert("flag", "7") == 7 and Option(np.float32(0.5)).convert("flag", 2) == 2.0
+    assert Option("a").convert("flag", 3) == "3" and Option(3).convert("flag", 10**20) == 10**20
 
 
 def test_unknown_name_lists_the_available_ones():

@@ -259,3 +259,40 @@ def test_a_tiled_run_with_a_truth_says_psnr_and_ssim_and_writes_the_gif(capture,
         == 2
     )
     assert "--gif must name a .gif file" in capsys.readouterr().err and not (tmp_path / "bad.zarr").exists()
+
+
+def test_a_failing_tile_says_what_was_kept_hdf5_nothing_zarr_the_solved_tiles(capture, tmp_path, capsys, monkeypatch):
+    from rsocl.scale import runner as runner_module
+
+    path, _, _ = capture
+    solve = runner_module.solve_tile
+
+    def corner_fails(job, *args):
+        if job.tile.index == (0, 0):
+            raise RuntimeError("out of device memory")
+        return solve(job, *args)
+
+    monkeypatch.setattr(runner_module, "solve_tile", corner_fails)
+    argv = ["reconstruct", str(path), "--tile", "10", "13", "--halo", "3", "--iterations", "3", "--fixed"]
+    argv += ["--retries", "0", "--quiet", "--no-truth", "--first-set-only"]
+    h5 = tmp_path / "rec.h5"
+    assert main(argv + ["--out", str(h5)]) == 1
+    err = capsys.readouterr().err
+    first, *rest = err.strip().splitlines()
+    assert first == (
+        f"rsocl reconstruct: error: 1 task(s) failed, 3 solved and discarded; nothing was written to {h5} (an "
+        f"HDF5 --out is written once every task is solved; a Zarr --out, e.g. rec.zarr, keeps solved tiles and "
+        f"a re-run redoes only the failed ones):"
+    ), err
+    assert len(rest) == 1 and rest[0].startswith("  tile (0, 0) ") and "RuntimeError: out of device memory" in rest[0]
+    assert " kept" not in err and sorted(p.name for p in tmp_path.iterdir()) == ["cap.h5"]
+    store = tmp_path / "rec.zarr"
+    assert main(argv + ["--out", str(store)]) == 1
+    first = capsys.readouterr().err.splitlines()[0]
+    assert (
+        first
+        == f"rsocl reconstruct: error: 1 task(s) failed, 3 kept in {store} (run again to redo only the failed ones):"
+    )
+    monkeypatch.undo()
+    assert main(argv + ["--out", str(store)]) == 0  # the failed tile alone
+    assert capsys.readouterr().out.startswith("1 tile task(s) in ") and rsocl.scale.store.load_store(store).complete

@@ -139,3 +139,33 @@ def test_a_stream_with_gaps_between_frames_fills_every_subframe_from_the_nearest
     for s in gaps:
         a, b = stream.spans[stream.owner[s]]
         np.testing.assert_array_equal(stream.datacube[s], stream.datacube[min(max(s, a), b - 1)])
+
+
+def test_a_stream_whose_window_fails_ends_in_one_error_naming_the_window(tmp_path, capsys, monkeypatch):
+    from rsocl.cli.main import main
+    from rsocl.files.hdf5 import save_capture
+    from rsocl.scale import runner as runner_module
+
+    rig = _rig(frames=3, shape=(16, 16))
+    save_capture(tmp_path / "cap.h5", rsocl.RollingShutterOperator(rig).forward(builtin_scene(rig.shape, rig.T)), rig)
+    solve, calls = runner_module.solve_tile, []
+
+    def second_window_fails(job, *args):
+        calls.append(job)
+        if len(calls) > 1:
+            raise FloatingPointError("ADMM diverged")
+        return solve(job, *args)
+
+    monkeypatch.setattr(runner_module, "solve_tile", second_window_fails)
+    out = tmp_path / "stream.h5"
+    argv = ["reconstruct", str(tmp_path / "cap.h5"), "--out", str(out), "--window", "1", "--iterations", "3"]
+    assert main(argv + ["--fixed", "--retries", "0", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    first, *rest = err.strip().splitlines()
+    assert first == (
+        f"rsocl reconstruct: error: window 2/3 (frames 1..1) failed: 1 task(s) failed, 0 solved and discarded, "
+        f"with the 1 window(s) done before it; nothing was written to {out} (a stream's --out is written once "
+        f"every window is solved):"
+    ), err
+    assert len(rest) == 1 and rest[0].startswith("  tile (0, 0) ") and "FloatingPointError: ADMM diverged" in rest[0]
+    assert "Traceback" not in err and not out.exists()

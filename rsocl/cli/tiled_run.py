@@ -36,6 +36,23 @@ def _retries(args) -> int:
     return RETRIES if args.retries is None else args.retries
 
 
+def _error(text: str) -> int:
+    """Print ``text`` as ``rsocl reconstruct``'s error; the exit code of a run whose tasks failed (1)."""
+    print(f"rsocl reconstruct: error: {text}", file=sys.stderr, flush=True)
+    return 1
+
+
+def _discarded(exc, out, what: str, why: str) -> str:
+    """The error of a run into an HDF5 ``out`` whose tasks failed (``exc``, a TilesFailed): what was
+    solved and discarded (``what`` adds to it), that nothing was written and ``why``, then the
+    failures, one line each."""
+    solved = len(exc.result.pieces) + exc.result.skipped
+    return (
+        f"{len(exc.result.failures)} task(s) failed, {solved} solved and discarded{what}; nothing was written "
+        f"to {out} ({why}):\n  " + "\n  ".join(exc.lines)
+    )
+
+
 def run_tiles(args, capture):
     """Reconstruct ``capture`` (a :class:`rsocl.scale.inputs.CaptureSets`) in tiles of ``--tile``, or of
     the tile :func:`rsocl.scale.proposal.propose_tiling` proposes for the device, into ``--out`` (an
@@ -70,8 +87,11 @@ def run_tiles(args, capture):
             **solver_options(args),
         )
     except TilesFailed as exc:
-        print(f"rsocl reconstruct: error: {exc}", file=sys.stderr, flush=True)
-        return 1
+        if zarr_out:
+            return _error(str(exc))
+        store = Path(args.out).with_suffix(".zarr").name
+        why = f"an HDF5 --out is written once every task is solved; a Zarr --out, e.g. {store}, keeps solved tiles"
+        return _error(_discarded(exc, args.out, "", why + " and a re-run redoes only the failed ones"))
     ran = len(result.pieces)
     kept = f", {result.skipped} already in the store" if result.skipped else ""
     text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
@@ -99,6 +119,18 @@ def run_tiles(args, capture):
     return 0
 
 
+def _window(rig, failed, args) -> tuple:
+    """``(label, before)`` of the window of the stream of ``rig`` whose rig is ``failed``: ``window W/N
+    (frames k0..k1-1)`` and the number of windows done before it (None where none matches)."""
+    from rsocl.scale.stream import frame_windows
+
+    windows = frame_windows(rig.cameras[0].frames, args.window, args.overlap)
+    for w, (k0, k1) in enumerate(windows):
+        if rig.frames_window(k0, k1) == failed:
+            return f"window {w + 1}/{len(windows)} (frames {k0}..{k1 - 1})", w
+    return f"a window of {args.window} frame(s)", None
+
+
 def run_stream(args):
     """``--window``: set 0 of the capture as a stream of overlapping frame windows, into an HDF5 file;
     the exit code."""
@@ -106,19 +138,26 @@ def run_stream(args):
     from rsocl.cli.options import say, solver_options, truth_quality, tuning_plot_files
     from rsocl.files.hdf5 import load_capture
     from rsocl.scale.stream import default_overlap, reconstruct_stream
+    from rsocl.scale.tiled import TilesFailed
 
     loaded = load_capture(args.capture, set_index=0)
-    stream = reconstruct_stream(
-        loaded.snapshots,
-        loaded.rig,
-        window=args.window,
-        overlap=args.overlap,
-        tile=args.tile,
-        halo=args.halo,
-        scheduler=args.scheduler,
-        retries=_retries(args),
-        **solver_options(args),
-    )
+    try:
+        stream = reconstruct_stream(
+            loaded.snapshots,
+            loaded.rig,
+            window=args.window,
+            overlap=args.overlap,
+            tile=args.tile,
+            halo=args.halo,
+            scheduler=args.scheduler,
+            retries=_retries(args),
+            **solver_options(args),
+        )
+    except TilesFailed as exc:
+        label, before = _window(loaded.rig, exc.result.rig, args)
+        done = f", with the {before} window(s) done before it" if before else ""
+        why = "a stream's --out is written once every window is solved"
+        return _error(f"{label} failed: " + _discarded(exc, args.out, done, why))
     truth = None if args.no_truth else loaded.truth
     text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
     if truth is not None:

@@ -204,5 +204,6 @@ def format_tiling(t: Tiling) -> str:
     lines.append(
         f"run it: rsocl reconstruct CAPTURE --out rec.zarr --tile {t.tile[0]} {t.tile[1]}"
         + (f" --halo {t.halo}" if t.halo != check_halo(None, t.rig.shape) else "")
+        + (" --sets" if t.sets > 1 else "")
     )
     return "\n".join(lines)

@@ -14,7 +14,11 @@ Layout (a Zarr v3 group)
   "reconstruction"``, ``format_version``, ``rig`` (JSON; row maps referenced as
   ``{"dataset": "rig_row_maps/<camera>"}``), ``params`` (JSON), and the readable copies ``T``,
   ``T_se``, ``dt``, ``mask``, ``n_cameras``, ``n_channels``, ``shape``; plus ``tiling`` (JSON:
-  tile, halo, grid, sets) and ``input_digest`` (SHA-256 of the snapshots).
+  tile, halo, grid, sets) and ``input_digest`` (SHA-256 of the snapshots), and ``store_id``, a
+  random token written when the store is built: the tasks of a run carry it (:func:`store_id`)
+  and write only into the store that has it, so a store removed and built again at the same path
+  (by another run of the same process or of a long-lived cluster) is never written through
+  arrays opened on the old one.
 
 A task writes its tile's chunks of ``datacube`` (the sub-frames the capture samples; chunks
 outside them are never written and read as 0), then the tile's chunk of ``tiles`` (each chunk
@@ -51,6 +55,7 @@ __all__ = [
     "check_store_path",
     "StoreSpec",
     "prepare_store",
+    "store_id",
     "write_piece",
     "load_store",
     "StoredReconstruction",
@@ -207,7 +212,7 @@ def _create(zarr, path: Path, spec: StoreSpec) -> bool:
         for index, camera in enumerate(spec.rig.cameras):
             if camera.row_map is not None:
                 group.create_array(f"{_ROW_MAPS}/{index}", data=spec.rig.row_map(index))
-        group.attrs.put(spec.attributes())
+        group.attrs.put({**spec.attributes(), "store_id": secrets.token_hex(16)})
         for folder, _, files in os.walk(tmp):
             for file in files:
                 fsync_file(Path(folder) / file)
@@ -230,23 +235,54 @@ def _remove_leftovers(path: Path) -> None:
     remove_stale(path.parent if str(path.parent) else Path("."), _partial_prefix(path), r"[0-9a-f]{8}")
 
 
+def store_id(path) -> str | None:
+    """The ``store_id`` of the store at ``path`` (None for a store written before stores had one)."""
+    zarr = require_zarr()
+    return zarr.open_group(str(path), mode="r").attrs.get("store_id")
+
+
+#: the arrays of the store last written by this process: ``(path, store_id)`` -> (datacube, tiles)
 _OPEN: dict = {}
 
 
-def _arrays(path: str):
-    if path not in _OPEN:
-        zarr = require_zarr()
+def _arrays(path: str, identity: str | None):
+    """The ``datacube`` and ``tiles`` arrays of the store at ``path`` whose ``store_id`` is ``identity``.
+
+    The store's ``store_id`` is read on every call (one small file); its arrays are kept per process
+    by path and identity, so a store built again at ``path`` is opened afresh, and a store without
+    an identity (``identity`` None) is opened on every call. Raises ValueError when the store at
+    ``path`` is not the one with ``identity`` (it was removed or replaced).
+    """
+    zarr = require_zarr()
+    try:
         group = zarr.open_group(path, mode="r+")
-        _OPEN.clear()
-        _OPEN[path] = (group["datacube"], group["tiles"])
-    return _OPEN[path]
+        found = group.attrs.get("store_id")
+    except FileNotFoundError:
+        group = found = None
+    if group is None or found != identity:
+        raise ValueError(
+            f"out: the Zarr store {path!r} was removed or replaced by another one while this run wrote it; "
+            f"run again to resume into the store now there"
+        )
+    key = (path, identity)
+    arrays = _OPEN.get(key)
+    if arrays is None:
+        arrays = (group["datacube"], group["tiles"])
+        if identity is not None:
+            _OPEN.clear()
+            _OPEN[key] = arrays
+    return arrays
 
 
-def write_piece(path: str, tile, piece, span: tuple) -> None:
+def write_piece(path: str, tile, piece, span: tuple, identity: str | None = None) -> None:
     """Write a solved tile's core over every sub-frame (:func:`expand`: its first and last modelled
     sub-frames held before and after them; ``span``, the capture's sampled sub-frames, checks the
-    piece), then mark it done (run by the task itself)."""
-    datacube, marks = _arrays(path)
+    piece), then mark it done (run by the task itself).
+
+    ``identity`` is the ``store_id`` of the store the run prepared (:func:`store_id`); ValueError
+    when the store at ``path`` is another one.
+    """
+    datacube, marks = _arrays(path, identity)
     prefix = () if piece.set_index is None else (piece.set_index,)
     T = datacube.shape[len(prefix)]
     rows, cols = tile.core_slices

@@ -72,14 +72,28 @@ class TiledResult:
 
 
 class TilesFailed(RuntimeError):
-    """Some tasks failed on every attempt; ``result`` holds the others (and ``failures``)."""
+    """Some tasks failed on every attempt; ``result`` holds the others (and ``failures``).
+
+    The message says where the solved tasks are: in the store (``out``), where a re-run redoes only
+    the failed ones, or only in ``result`` (in memory, nothing written); then one line per failure.
+    """
 
     def __init__(self, result: TiledResult):
         self.result = result
-        kept = len(result.pieces) + result.skipped
-        where = f" in {result.store} (run again to redo only the failed ones)" if result.store else ""
-        lines = [str(f) for f in result.failures]
-        super().__init__(f"{len(lines)} task(s) failed, {kept} kept{where}:\n  " + "\n  ".join(lines))
+        solved = len(result.pieces) + result.skipped
+        if result.store:
+            kept = f"{solved} kept in {result.store} (run again to redo only the failed ones)"
+        else:
+            kept = (
+                f"{solved} solved, held in memory in this exception's result only (nothing written; with "
+                f"out= a Zarr store the solved tiles are kept there and a re-run redoes only the failed ones)"
+            )
+        super().__init__(f"{len(result.failures)} task(s) failed, {kept}:\n  " + "\n  ".join(self.lines))
+
+    @property
+    def lines(self) -> list:
+        """One line per failed task: its tile (and set), attempts and cause."""
+        return [str(f) for f in self.result.failures]
 
 
 def _source(snapshots, rig):
@@ -302,14 +316,16 @@ def reconstruct_tiled(
             }
         )
         done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)
+        identity = None
         if store is not None:
-            from rsocl.scale.store import StoreSpec, prepare_store
+            from rsocl.scale.store import StoreSpec, prepare_store, store_id
 
             spec = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, settings.dtype, params, digest)
             done = prepare_store(store, spec)
+            identity = store_id(store)
         sets = [None] if source.n_sets is None else list(range(source.n_sets))
         jobs = [
-            Job(s, t, source.block(s, t), (span.start, span.stop), None if store is None else str(store))
+            Job(s, t, source.block(s, t), (span.start, span.stop), None if store is None else str(store), identity)
             for s in sets
             for t in grid
             if not done[(s or 0,) + t.index]

@@ -119,7 +119,9 @@ class Job:
 
     ``source`` is the tile's block of snapshots ``(K, h, w)`` or a :class:`FileBlock`;
     ``span`` the sub-frames the whole capture samples, ``(first, stop)``; ``store`` the Zarr
-    store the task writes its chunks to (None: the block is returned).
+    store the task writes its chunks to (None: the block is returned) and ``store_id`` that
+    store's identity (:func:`rsocl.scale.store.store_id`: the task writes only into the store
+    that has it).
     """
 
     set_index: int | None
@@ -127,6 +129,7 @@ class Job:
     source: object
     span: tuple
     store: str | None = None
+    store_id: str | None = None
 
     @property
     def label(self) -> str:
@@ -284,6 +287,6 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     if job.store is not None:
         from rsocl.scale.store import write_piece
 
-        write_piece(job.store, job.tile, piece, job.span)
+        write_piece(job.store, job.tile, piece, job.span, job.store_id)
         piece.block = None
     return piece

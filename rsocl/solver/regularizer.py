@@ -12,6 +12,7 @@ takes the whole batch in that hook (in one launch per pass), the others get one 
 from __future__ import annotations
 
 import functools
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -26,9 +27,27 @@ if TYPE_CHECKING:
 __all__ = ["Option", "Regularizer"]
 
 
+def _kind(default: object) -> type | None:
+    """The type an option with ``default`` converts its values to: bool, int, float or str (None: none)."""
+    if isinstance(default, (bool, np.bool_)):
+        return bool
+    if isinstance(default, numbers.Integral):
+        return int
+    if isinstance(default, numbers.Real):
+        return float
+    if isinstance(default, str):
+        return str
+    return None
+
+
 @dataclass(frozen=True)
 class Option:
-    """One option of a regularizer: default value, unit and meaning."""
+    """One option of a regularizer: default value, unit and meaning.
+
+    The default's type (bool, int, float or str) is the type every value given for the option is
+    converted to (:meth:`convert`); a value given for an option with another default (None) is
+    refused with a ValueError naming it, and :func:`rsocl.testing.check_regularizer` fails on one.
+    """
 
     default: object
     unit: str = ""
@@ -37,28 +56,50 @@ class Option:
     maximum: float | None = None
 
     def convert(self, name: str, value: Any) -> Any:
-        kind: type = type(self.default)
+        """``value`` converted to the default's type and range-checked; ValueError naming ``name``."""
+        kind = _kind(self.default)
         if kind is bool:
             if isinstance(value, str):
                 if value.lower() not in ("1", "0", "true", "false", "yes", "no"):
                     raise ValueError(f"option {name} must be a boolean, got {value!r}")
                 value = value.lower() in ("1", "true", "yes")
-            return bool(value)
-        if kind in (int, float):
             try:
-                number = kind(float(value)) if kind is int else float(value)
+                return bool(value)
             except (TypeError, ValueError):
-                raise ValueError(f"option {name} must be a number, got {value!r}") from None
-            if kind is int and float(value) != number:
+                raise ValueError(f"option {name} must be a boolean, got {value!r}") from None
+        if kind in (int, float):
+            return self._number(name, value, kind)
+        if kind is str:
+            try:
+                return str(value)
+            except Exception:
+                raise ValueError(f"option {name} must be a string, got a {type(value).__name__}") from None
+        raise ValueError(
+            f"option {name} has a default of type {type(self.default).__name__}; an Option's default must be "
+            f"a bool, int, float or str"
+        )
+
+    def _number(self, name: str, value: Any, kind: type) -> int | float:
+        """``value`` as a finite ``kind`` (int or float) in ``[minimum, maximum]``; ValueError naming ``name``."""
+        low = -np.inf if self.minimum is None else self.minimum
+        high = np.inf if self.maximum is None else self.maximum
+        what = f"{'an integer' if kind is int else 'a number'} in [{low}, {high}]"
+        try:
+            number = float(value)
+        except OverflowError:  # an int too large for a float
+            raise ValueError(f"option {name} must be {what}, got {value!r}") from None
+        except (TypeError, ValueError):
+            raise ValueError(f"option {name} must be {what}, got {value!r}") from None
+        if not np.isfinite(number):
+            raise ValueError(f"option {name} must be finite, {what}, got {value!r}")
+        if kind is int:
+            if not number.is_integer():
                 raise ValueError(f"option {name} must be an integer, got {value!r}")
-            if not np.isfinite(number):
-                raise ValueError(f"option {name} must be finite, got {value!r}")
-            low = -np.inf if self.minimum is None else self.minimum
-            high = np.inf if self.maximum is None else self.maximum
-            if not low <= number <= high:
-                raise ValueError(f"option {name} must be in [{low}, {high}], got {value!r}")
-            return number
-        return kind(value)
+            exact = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+            number = int(value) if exact else int(number)
+        if not low <= number <= high:
+            raise ValueError(f"option {name} must be in [{low}, {high}], got {value!r}")
+        return number
 
 
 class Regularizer:
