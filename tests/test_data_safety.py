@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 import time
+import types
 import warnings
 
 import h5py
@@ -499,7 +500,8 @@ def test_a_tiled_runs_error_goes_to_stderr(three_sets, tmp_path, capsys, monkeyp
 
     class Failed(tiled.TilesFailed):
         def __init__(self):
-            RuntimeError.__init__(self, "1 task(s) failed, 3 kept")
+            self.result = types.SimpleNamespace(pieces=[1, 2], skipped=1, failures=["tile (0, 0): boom"], store=None)
+            RuntimeError.__init__(self, "1 task(s) failed, 3 solved")
 
     def fail(*args, **kwargs):
         raise Failed()
@@ -524,7 +526,9 @@ def test_a_tiled_runs_error_goes_to_stderr(three_sets, tmp_path, capsys, monkeyp
     )
     captured = capsys.readouterr()
     assert rc == 1 and "error" not in captured.out
-    assert "rsocl reconstruct: error: 1 task(s) failed, 3 kept" in captured.err
+    said = f"rsocl reconstruct: error: 1 task(s) failed, 3 solved and discarded; nothing was written to {tmp_path}"
+    assert said in captured.err
+    assert captured.err.endswith("\n  tile (0, 0): boom\n") and not (tmp_path / "r.h5").exists()
 
 
 @POSIX

@@ -15,7 +15,8 @@ needed:
 * ``--flat``: flat-field frames -> each camera's ``gain`` relative to camera 0.
 
 Nothing is written unless every requested measurement succeeds; the rig file
-(and the PNG) are replaced atomically.
+(and the PNG) are replaced atomically. An ``--out`` or ``--png`` that is an HDF5 file (a capture, a
+reconstruction) is refused before any work, and ``--png`` must end in ``.png``.
 
 The layouts of the frame files (``.npz``, ``.npy``, a folder of images) are in
 :mod:`rsocl.cli.calibrate_frames`.
@@ -48,7 +49,7 @@ def add_parser(subparsers):
         "--out",
         default=None,
         help="write the updated rig file here instead (default: --rig); the file it replaces is kept beside it "
-        "as <stem>.before-calibration-<UTC time>.toml",
+        "as <stem>.before-calibration-<UTC time>.toml; never an HDF5 file (a capture, a reconstruction)",
     )
     g = p.add_argument_group("registration (marker target)")
     g.add_argument(
@@ -86,7 +87,10 @@ def add_parser(subparsers):
     g.add_argument("--polarity", choices=["bright", "dark"], default="bright", help="bright or dark dots")
     g.add_argument("--threshold", type=float, default=None, help="dot/background threshold (default: automatic)")
     g.add_argument(
-        "--png", default=None, help="overlay picture to write (default: <rig stem>-calibration.png next to the output)"
+        "--png",
+        default=None,
+        help="overlay picture to write, a .png (default: <rig stem>-calibration.png next to the output); never an "
+        "HDF5 file (a capture, a reconstruction)",
     )
     g = p.add_argument_group("row time (flickering light)")
     g.add_argument(
@@ -291,11 +295,12 @@ def cmd_calibrate(args) -> int:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
     if args.flicker_hz is not None and args.flicker is None:
         raise ValueError("--flicker-hz needs --flicker (frames of the flickering light)")
-    from rsocl.cli.outputs import kept_note
+    from rsocl.cli.outputs import HDF5_FILES, kept_note, refuse_kinds
     from rsocl.files.atomic import keeping, output_path
 
     reads = (("--frames", args.frames), ("--flicker", args.flicker), ("--flat", args.flat))
     out = output_path(Path(args.out) if args.out else Path(args.rig), "--out", inputs=reads)  # before any work
+    named = [("--out" if args.out else "--rig", out)]  # a rig file (TOML) never replaces a capture or result
     png = None
     if args.frames is not None:
         png = output_path(
@@ -303,6 +308,10 @@ def cmd_calibrate(args) -> int:
             "--png",
             inputs=reads + (("--rig", args.rig), ("--out", out)),
         )
+        named.append(("--png", png))
+    if args.png is not None and Path(args.png).suffix.lower() != ".png":
+        raise ValueError(f"--png must name a .png file (the overlay is written as a PNG), got {args.png!r}")
+    refuse_kinds(named, HDF5_FILES)
     rigfile = load_rig_file(args.rig)
     updates: list[dict] = [{} for _ in rigfile.cameras]
     overlay = _register(args, rigfile, updates) if args.frames is not None else None

@@ -19,7 +19,12 @@ def add_parser(subparsers):
         "(naming its complete sets) until it is renamed or removed.",
     )
     p.add_argument("--rig", required=True, help="TOML rig file (seconds, degrees)")
-    p.add_argument("--out", required=True, help="capture file to write (.h5); never one that holds frames from cameras")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="capture file to write (.h5); never one that holds frames from cameras; a file there other than a "
+        "simulated capture is kept as STEM.earlier-<UTC time>.h5",
+    )
     p.add_argument("--sets", type=int, default=1, help="number of synchronized sets (default 1)")
     p.add_argument("--timeout", type=float, default=2.0, help="seconds to wait for each frame (default 2)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (drawn on a terminal only), only errors")

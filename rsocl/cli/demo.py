@@ -14,7 +14,7 @@ from rsocl.cli.options import (
     tuning_plot_files,
 )
 
-__all__ = ["add_parser", "cmd_demo"]
+__all__ = ["add_parser", "cmd_demo", "FILES"]
 
 
 def add_parser(subparsers):
@@ -23,21 +23,34 @@ def add_parser(subparsers):
     add_rig_args(p)
     add_solver_args(p)
     add_device_args(p)
-    p.add_argument("--out", default="rsocl-demo", help="output folder (default ./rsocl-demo)")
+    p.add_argument(
+        "--out",
+        default="rsocl-demo",
+        help="output folder (default ./rsocl-demo); an earlier demo.h5 there is kept as demo.earlier-<UTC time>.h5, "
+        "a capture at one of the names written is refused",
+    )
     p.set_defaults(func=cmd_demo)
     return p
 
 
+#: The files ``rsocl demo`` writes into ``--out`` (``demo-tuning.png`` after a parameter search).
+FILES = ("demo.h5", "demo.gif", "snapshots.png", "subframes.png", "demo-tuning.png")
+
+
 def cmd_demo(args) -> int:
     """Write ``demo.h5``, ``demo.gif``, ``snapshots.png``, ``subframes.png`` and (unless ``--fixed``)
-    ``demo-tuning.png``, the parameter search, to ``--out``; returns 0."""
+    ``demo-tuning.png``, the parameter search, to ``--out``; returns 0.
+
+    A capture at one of these names is refused before any work; an earlier ``demo.h5`` is kept as
+    ``demo.earlier-<UTC time>.h5`` (:func:`rsocl.cli.outputs.save_result`)."""
     from rsocl.analysis.visual import comparison_gif, datacube_montage, snapshot_montage
+    from rsocl.cli.outputs import kept_note, refuse_kinds, save_result
     from rsocl.files.atomic import output_folder
-    from rsocl.files.hdf5 import save_reconstruction
     from rsocl.model.operator import RollingShutterOperator
     from rsocl.model.scenes import builtin_scene
 
     out = output_folder(args.out, "--out")
+    refuse_kinds(("--out", out / name) for name in FILES)
     rig = rig_from(args)
     check_datacube_memory(rig)
     out.mkdir(parents=True, exist_ok=True)
@@ -51,14 +64,13 @@ def cmd_demo(args) -> int:
     )
     result = run_reconstruction(args, g, rig, truth)
     print(quality_line(result, truth))
+    kept = save_result(out / "demo.h5", result.datacube, rig, params=result.params, history=result.history, truth=truth)
     files = [
-        save_reconstruction(
-            out / "demo.h5", result.datacube, rig, params=result.params, history=result.history, truth=truth
-        ),
+        out / "demo.h5",
         comparison_gif(out / "demo.gif", truth, result.datacube),
         snapshot_montage(out / "snapshots.png", g, rig=rig),
         datacube_montage(out / "subframes.png", result.datacube, truth=truth),
     ]
     files += tuning_plot_files(args, result.params, out / "demo.gif")  # demo-tuning.png, after a search
-    say(args, "wrote " + ", ".join(str(f) for f in files))
+    say(args, "wrote " + ", ".join(str(f) for f in files) + kept_note([kept]))
     return 0

@@ -3,14 +3,20 @@
 ``rsocl reconstruct`` (one set, every set of a capture, tiles, a stream) writes each HDF5 result with
 :func:`save_result`: a file already at the path keeps a second name, ``<stem>.earlier-<UTC time>.h5``
 (:func:`rsocl.files.atomic.keeping`: a hard link, or a copy), so running a command again never loses an
-earlier result; a write that fails leaves the earlier file where it was, with no second name.
+earlier result; a write that fails leaves the earlier file where it was, with no second name. An output that
+must never replace a file of some kinds (a capture) is refused first, before any work (:func:`refuse_kinds`).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["save_result", "kept_note"]
+__all__ = ["save_result", "kept_note", "refuse_kinds", "CAPTURES", "HDF5_FILES"]
+
+#: The kinds of :func:`rsocl.files.hdf5.file_kind` no derived output replaces: captures, from cameras or simulated.
+CAPTURES = ("camera capture", "capture")
+#: Every HDF5 file: what a file of another format (a rig file, a picture) never replaces.
+HDF5_FILES = CAPTURES + ("reconstruction", "HDF5")
 
 
 def save_result(path, datacube, rig, **kwargs) -> Path | None:
@@ -46,3 +52,32 @@ def kept_note(kept) -> str:
     if len(kept) == 1:
         return f" (the earlier file there is kept as {kept[0]})"
     return f" (the {len(kept)} earlier files there are kept as <stem>.{EARLIER}-<UTC time><suffix>: {kept[0]} ..)"
+
+
+def refuse_kinds(named, kinds=CAPTURES) -> None:
+    """Refuse, before any work, an output that would replace a file of one of ``kinds``
+    (:func:`rsocl.files.hdf5.file_kind`), naming its option; nothing is written.
+
+    Parameters
+    ----------
+    named : iterable of (str, path)
+        The option (or words) that names each output, and its path.
+    kinds : tuple of str
+        The kinds of file the outputs never replace (:data:`CAPTURES`, :data:`HDF5_FILES`).
+
+    Raises
+    ------
+    ValueError
+        An output path holds such a file, or frames from cameras, or cannot be read to tell.
+    """
+    from rsocl.files.hdf5 import file_kind, refuse_camera_capture
+
+    for name, path in named:
+        refuse_camera_capture(path, name)  # frames from cameras (counted), or a file that cannot be read
+        kind = file_kind(path)
+        if kind in kinds:
+            what = "an HDF5 file" if kind == "HDF5" else f"a {kind} file"
+            raise ValueError(
+                f"{name} {str(path)!r} is {what}; it is never replaced by this output: it is kept, move it or "
+                f"choose another {name}"
+            )

@@ -11,7 +11,12 @@ def add_parser(subparsers):
     """Add ``simulate`` to the ``rsocl`` sub-parsers; returns its parser."""
     p = subparsers.add_parser("simulate", help="scene file -> capture file (HDF5)")
     p.add_argument("scene", help="'builtin' or a video: .npz (key 'video'), multi-page .tif, .gif")
-    p.add_argument("--out", required=True, help="capture file to write (.h5); never one that holds frames from cameras")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="capture file to write (.h5); never one that holds frames from cameras; a file there other than a "
+        "simulated capture is kept as STEM.earlier-<UTC time>.h5",
+    )
     add_rig_args(p)
     p.add_argument(
         "--frames",
@@ -136,9 +141,14 @@ def scene_datacube(args, rig):
 
 
 def cmd_simulate(args) -> int:
-    """Simulate the snapshots of ``args.scene`` and write them, the rig and the truth to ``--out``; returns 0."""
+    """Simulate the snapshots of ``args.scene`` and write them, the rig and the truth to ``--out``; returns 0.
+
+    A capture from cameras at ``--out`` is refused first; a file there other than a simulated capture (a
+    reconstruction, say) is kept as ``<stem>.earlier-<UTC time><suffix>``.
+    """
+    from rsocl.cli.outputs import kept_note
     from rsocl.files.atomic import output_path
-    from rsocl.files.hdf5 import refuse_camera_capture, save_capture
+    from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture, save_capture
     from rsocl.model.simulate import simulate
 
     check_noise_args(args)
@@ -165,7 +175,9 @@ def cmd_simulate(args) -> int:
         "bit_depth": args.bit_depth,
         "seed": args.seed,
     }
-    path = save_capture(args.out, g, rig, truth=truth, attrs=meta)
+    with keeping_unless_simulated(args.out) as kept:
+        path = save_capture(args.out, g, rig, truth=truth, attrs=meta)
     frames = f" ({rig.C} cameras x {rig.cameras[0].frames} frames)" if rig.cameras[0].frames > 1 else ""
-    say(args, f"wrote {path}: {rig.n_channels} snapshots{frames} of {rig.shape[0]}x{rig.shape[1]}, T = {rig.T}")
+    size = f"{rig.shape[0]}x{rig.shape[1]}, T = {rig.T}"
+    say(args, f"wrote {path}: {rig.n_channels} snapshots{frames} of {size}" + kept_note([kept]))
     return 0

@@ -12,12 +12,15 @@ version, the rig).
 
 Dataset ``snapshots`` ``[K, m, n]``, optional ``truth`` ``[T, m, n]``, attribute ``meta`` (JSON
 object); a capture of several sets (``rsocl capture --sets S``) adds ``snapshot_sets``
-``[S, K, m, n]``.
+``[S, K, m, n]``. Of a file with the attribute ``sets_complete`` (``rsocl capture``'s, updated after each
+set) only that many sets are read: a set never completed (set 0's ``snapshots``, ``truth``) is not data.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +32,7 @@ from rsocl.files.hdf5_header import (
     FORMAT_VERSION,
     check_cube,
     check_rig,
+    complete_set_count,
     dumps_json,
     json_attr,
     new_file,
@@ -50,8 +54,11 @@ __all__ = [
     "load_capture_rig",
     "load_snapshot_sets",
     "snapshot_set_count",
+    "complete_set_count",
     "camera_frames",
+    "file_kind",
     "refuse_camera_capture",
+    "keeping_unless_simulated",
     "save_reconstruction",
     "load_reconstruction",
     "FORMAT_VERSION",
@@ -188,12 +195,10 @@ def load_capture(path: PathLike, set_index: int | None = None) -> Capture:
         set_index = _set_index(set_index)
     with open_checked(path, "capture") as h5:
         rig = read_rig(h5, source)
-        count = int(h5["snapshot_sets"].shape[0]) if "snapshot_sets" in h5 else 1
+        count = complete_set_count(h5, source)
         if set_index is not None and set_index >= count:
             raise ValueError(f"set_index must be in [0, {count - 1}] ({source} holds {count} set(s)), got {set_index}")
         if set_index is None and count > 1:
-            import warnings
-
             warnings.warn(
                 f"{source} holds {count} sets; load_capture reads set 0 (set_index=0 says so, "
                 f"set_index=k reads set k, load_snapshot_sets reads every set)",
@@ -207,7 +212,18 @@ def load_capture(path: PathLike, set_index: int | None = None) -> Capture:
         else:
             snapshots = read_array(h5, "snapshots", source, (rig.n_channels,) + rig.shape)
             truth = optional_array(h5, "truth", source, rig.shape)
-        return Capture(snapshots=snapshots, rig=rig, truth=truth, meta=json_attr(h5, "meta", source))
+        return Capture(snapshots=snapshots, rig=rig, truth=truth, meta=_meta(h5, source))
+
+
+def _meta(h5, source: str) -> dict:
+    """The ``meta`` attribute of the open capture ``h5``; ``{}`` with a one-line warning where HDF5 cannot read
+    it (a capture cut off by a full disk): no snapshot depends on it."""
+    try:
+        return json_attr(h5, "meta", source)
+    except OSError as exc:  # the attribute's data is damaged; missing or not JSON: the ValueError of json_attr
+        why = exc.strerror or " ".join(str(exc).split())
+        warnings.warn(f"{source}: attribute 'meta' cannot be read ({why}); read without it", stacklevel=3)
+    return {}
 
 
 def _set_index(value) -> int:
@@ -227,21 +243,23 @@ def load_capture_rig(path) -> Rig:
 
 
 def snapshot_set_count(path) -> int:
-    """How many sets a capture holds (the length of ``snapshot_sets``; 1 without it), reading no data."""
+    """How many complete sets a capture holds (:func:`complete_set_count`), reading no data."""
     with open_checked(path, "capture") as h5:
-        return int(h5["snapshot_sets"].shape[0]) if "snapshot_sets" in h5 else 1
+        return complete_set_count(h5, str(path))
 
 
 def load_snapshot_sets(path) -> np.ndarray | None:
     """Every registered set ``(S, K, m, n)`` of a multi-set capture (dataset ``snapshot_sets``), or None.
 
-    Captures of ``rsocl capture`` hold one set per trigger; :func:`load_capture` reads one of them.
+    Captures of ``rsocl capture`` hold one set per trigger; :func:`load_capture` reads one of them. Only the
+    complete sets are read (:func:`complete_set_count`).
     """
     source = str(path)
     with open_checked(path, "capture") as h5:
+        count = complete_set_count(h5, source)
         if "snapshot_sets" not in h5:
             return None
-        sets = h5["snapshot_sets"][()]
+        sets = h5["snapshot_sets"][:count]
     if sets.ndim != 4 or sets.shape[0] < 1 or not np.all(np.isfinite(sets)):
         raise ValueError(f"{source}: dataset 'snapshot_sets' must be finite (S >= 1, K, m, n), got {sets.shape}")
     return sets
@@ -310,3 +328,39 @@ def refuse_camera_capture(path, name: str = "--out") -> None:
             f"{name} {str(path)!r} holds {frames} frame(s) from cameras (rsocl capture); a capture from cameras "
             f"is never replaced: it is kept, move it or choose another {name}"
         )
+
+
+def file_kind(path) -> str | None:
+    """What the file at ``path`` is, for a command about to write there: None (no file, or a folder),
+    ``"camera capture"`` (frames from cameras, :func:`camera_frames`), ``"capture"`` (a capture without them:
+    a simulated one), ``"reconstruction"``, ``"HDF5"`` (another HDF5 file) or ``"file"`` (anything else);
+    an ``OSError`` where the file cannot be read."""
+    import h5py
+
+    if camera_frames(path):
+        return "camera capture"
+    path = Path(path)
+    if not path.is_file():
+        return None
+    if not h5py.is_hdf5(path):
+        return "file"
+    with h5py.File(path, "r") as h5:
+        kind = h5.attrs.get("rsocl_file")
+    kind = kind.decode() if isinstance(kind, bytes) else kind
+    return kind if kind in ("capture", "reconstruction") else "HDF5"
+
+
+@contextlib.contextmanager
+def keeping_unless_simulated(path):
+    """Context manager for a block that writes a capture to ``path``: a file there other than a simulated
+    capture (a reconstruction, any other file; :func:`file_kind`) keeps a second name,
+    ``<stem>.earlier-<UTC time><suffix>`` (:func:`rsocl.files.atomic.keeping`), yielded (None where nothing
+    was kept), which is removed again if the block fails. A simulated capture is replaced."""
+    from rsocl.files.atomic import EARLIER, keeping
+
+    try:
+        replaceable = file_kind(path) in (None, "capture")
+    except OSError:  # it cannot be read to tell: kept
+        replaceable = False
+    with contextlib.nullcontext() if replaceable else keeping(path, EARLIER) as kept:
+        yield kept

@@ -13,7 +13,8 @@ Root attributes (format version 1):
 :func:`write_header` writes them, :func:`open_checked` opens a file and checks its kind and
 version, :func:`read_rig` reads the rig back; JSON attributes go through :func:`dumps_json`.
 :func:`new_file` creates a file whose failed close (a full disk) is an ``OSError``. The checks the
-writers and readers of both kinds share: :func:`check_rig`, :func:`check_cube`, :func:`optional_array`.
+writers and readers of both kinds share: :func:`check_rig`, :func:`check_cube`, :func:`optional_array`;
+the sets of a capture its readers may read: :func:`complete_set_count`.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import json
 import numbers
 import os
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +49,7 @@ __all__ = [
     "optional_array",
     "check_rig",
     "check_cube",
+    "complete_set_count",
     "new_file",
     "close_error",
 ]
@@ -187,6 +190,40 @@ def real_dataset(h5, name: str, source: str, tail=None):
             f"{source}: dataset {name!r} has shape {item.shape}, the rig needs (..., {', '.join(map(str, tail))})"
         )
     return item
+
+
+def complete_set_count(h5, source: str) -> int:
+    """How many sets of the open capture ``h5`` (named ``source``) are complete: ``sets_complete`` where
+    ``rsocl capture`` wrote it (rows of ``snapshot_sets`` past it, never completed, are warned about), else the
+    rows of ``snapshot_sets`` (1 without it).
+
+    Raises
+    ------
+    ValueError
+        No set is complete: the message names the file, its ``capture_status`` and failure.
+    """
+    rows = int(h5["snapshot_sets"].shape[0]) if "snapshot_sets" in h5 else 1
+    if "sets_complete" not in h5.attrs:
+        return rows
+    complete = min(int(h5.attrs["sets_complete"]), rows)
+    status = str_attr(h5, "capture_status", source) if "capture_status" in h5.attrs else "unknown"
+    if complete < 1:
+        try:  # rsocl capture's failure: {"camera", "set", "phase", "type", "error"}
+            found = json_attr(h5, "failure", source)
+            failure = f": {found['phase']} failed: {found['type']}: {found['error']}"
+        except (ValueError, KeyError, TypeError, OSError):  # none, not rsocl capture's, or damaged
+            failure = ""
+        raise ValueError(
+            f"{source}: no set of this capture is complete (capture_status {status!r}{failure}); "
+            "it holds no snapshots to read"
+        )
+    if rows > complete:
+        warnings.warn(
+            f"{source}: {complete} of the {rows} sets in 'snapshot_sets' are complete (capture_status "
+            f"{status!r}); the {rows - complete} incomplete set(s) are not read",
+            stacklevel=1,  # here, so that the loaders of one command say it once
+        )
+    return complete
 
 
 # ---------------------------------------------------------------------- header

@@ -26,8 +26,10 @@ never truncated nor appended to: a capture to the same ``<out>`` is refused
 user renames it (to keep it as a capture) or removes it; so is a capture
 whose ``<out>.partial`` another process is writing, and one whose ``<out>``
 holds frames from cameras, an earlier capture
-(:func:`~rsocl.files.hdf5.refuse_camera_capture`). Another existing ``<out>``
-(a simulated capture, say) is replaced only at the end of the run. The file's layout and its reader,
+(:func:`~rsocl.files.hdf5.refuse_camera_capture`). A simulated capture at ``<out>`` is replaced only
+at the end of the run; any other file there (a reconstruction, say) then keeps a second name,
+``<stem>.earlier-<UTC time><suffix>`` (:func:`~rsocl.files.hdf5.keeping_unless_simulated`), which a
+warning names (or the error of a failed run). The file's layout and its reader,
 :func:`~rsocl.hardware.capture_file.load_raw`, are in :mod:`rsocl.hardware.capture_file`.
 
 Registration and units
@@ -45,13 +47,14 @@ must then equal the rig's). Integer frames are converted to model units as
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.files.atomic import output_path
-from rsocl.files.hdf5 import refuse_camera_capture
+from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture
 from rsocl.files.rigfile import RigFile, load_rigfile
 from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, check_partial, publish, readable
 
@@ -151,6 +154,11 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         from cameras (an earlier capture); nothing is written.
     KeyboardInterrupt
         Re-raised after the file is closed with status ``"interrupted"``.
+
+    Warns
+    -----
+    UserWarning
+        A file at ``out_path`` other than a simulated capture was kept as ``<stem>.earlier-<UTC time><suffix>``.
     """
     from rsocl.common.registry import load
 
@@ -217,7 +225,11 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         if interrupted is not None:
             raise interrupted from error
         raise error
-    publish(partial, out)
+    with keeping_unless_simulated(out) as kept:  # a file there that is not a simulated capture keeps a name
+        publish(partial, out)
+    note = "" if kept is None else f"; the earlier file there is kept as {kept}"
+    if kept is not None and (failure is None or interrupted is not None):  # a failure's error line says it
+        warnings.warn(f"{out}: the earlier file there is kept as {kept}", stacklevel=2)
     if interrupted is not None:
         raise interrupted
     if failure is not None:
@@ -225,7 +237,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         when = "before the first set" if failure["set"] is None else f"in set {failure['set']}"
         raise CaptureFailed(
             f"{who}{failure['phase']} failed {when}: {failure['type']}: {failure['error']} "
-            f"({writer.sets_complete} complete set(s) and the failure are in {out})",
+            f"({writer.sets_complete} complete set(s) and the failure are in {out}{note})",
             path=out,
             camera=failure["camera"],
             set_index=failure["set"],

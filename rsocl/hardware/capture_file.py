@@ -253,12 +253,15 @@ class CaptureWriter:
         ds = self.h5["snapshot_sets"]
         ds.resize(set_index + 1, axis=0)
         ds[set_index] = stack
-        if set_index == 0:
-            self.h5.create_dataset("snapshots", data=stack)
+        if set_index == 0:  # under temporary names until all are written whole; then the count says so
             truth = self._truth(cameras)
-            if truth is not None:
-                self.h5.create_dataset("truth", data=truth)
+            names = ["snapshots"] + (["truth"] if truth is not None else [])
+            for name, data in zip(names, (stack, truth)):
+                self.h5.create_dataset(f"{name}.writing", data=data)
+            for name in names:
+                self.h5.move(f"{name}.writing", name)
             self.meta["truth"] = truth is not None
+        self.h5.flush()
         self.sets_complete = set_index + 1
         self.h5.attrs["sets_complete"] = self.sets_complete
         self.meta["sets_complete"] = self.sets_complete
@@ -339,7 +342,7 @@ class RawCapture:
     frame_meta : list of list of dict
         Per camera and frame: the backend's metadata (plus pixel format and bit depth).
     snapshot_sets : ndarray, shape (S, K, m, n), or None
-        The complete sets, registered, model units.
+        The complete sets (the first ``sets_complete`` rows), registered, model units.
     status : str
         ``"complete"``, ``"failed"``, ``"interrupted"`` (or ``"running"`` in a ``.partial`` file).
     sets_complete : int
@@ -381,14 +384,15 @@ def load_raw(path) -> RawCapture:
                 metas.append([])
         failure = json.loads(str_attr(h5, "failure", str(path))) if "failure" in h5.attrs else None
         status = str_attr(h5, "capture_status", str(path)) if "capture_status" in h5.attrs else "unknown"
+        complete = h5.attrs.get("sets_complete")  # rows of snapshot_sets past it: a set never completed
         return RawCapture(
             frames=frames,
             sets=sets,
             timestamps=stamps,
             frame_meta=metas,
-            snapshot_sets=h5["snapshot_sets"][()] if "snapshot_sets" in h5 else None,
+            snapshot_sets=h5["snapshot_sets"][:complete] if "snapshot_sets" in h5 else None,
             status=status,
-            sets_complete=int(h5.attrs.get("sets_complete", 0)),
+            sets_complete=int(complete or 0),
             failure=failure,
             meta=json.loads(str_attr(h5, "meta", str(path))),
         )

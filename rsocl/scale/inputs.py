@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.files.hdf5_header import open_checked, read_rig, real_dataset
+from rsocl.files.hdf5_header import complete_set_count, open_checked, read_rig, real_dataset
 from rsocl.model.interpolation import samples
 from rsocl.model.rig import Rig
 from rsocl.scale.work import FileBlock
@@ -83,6 +83,7 @@ class CaptureSets:
         with open_checked(path, "capture", name) as h5:
             self.path = Path(h5.filename)
             self.rig = read_rig(h5, f"{name}: {str(self.path)!r}")
+            complete = complete_set_count(h5, f"{name}: {str(self.path)!r}")  # refuses a capture with none
             self.dataset = "snapshot_sets" if all_sets else "snapshots"
             if self.dataset not in h5:
                 hint = " (it holds one set: leave out --sets)" if all_sets else ""
@@ -91,7 +92,7 @@ class CaptureSets:
                 h5, self.dataset, f"{name}: {str(self.path)!r}", (self.rig.n_channels,) + self.rig.shape
             ).shape
             self.has_truth = "truth" in h5
-        self.n_sets = shape[0] if all_sets else None
+        self.n_sets = min(shape[0], complete) if all_sets else None  # the complete sets only
 
     def where(self, set_index) -> str:
         """The snapshots of set ``set_index`` (None: dataset ``snapshots``) as an error message names them."""
