@@ -177,6 +177,25 @@ def test_interrupt_is_recorded_and_re_raised(tmp_path, monkeypatch):
     assert raw.status == "interrupted" and raw.failure["type"] == "KeyboardInterrupt" and raw.sets_complete == 1
 
 
+def test_an_interrupted_capture_says_in_one_line_what_the_file_holds(tmp_path, monkeypatch, capsys):
+    from rsocl.cli.main import main
+
+    real_read = SimulatedCamera._read
+
+    def read(self, timeout):
+        if self.index == 1 and self._reads == 2:
+            raise KeyboardInterrupt
+        return real_read(self, timeout)
+
+    monkeypatch.setattr(SimulatedCamera, "_read", read)
+    rig_path, out = tmp_path / "rig.toml", tmp_path / "c.h5"
+    save_rigfile(rig_path, _rigfile())
+    assert main(["capture", "--rig", str(rig_path), "--out", str(out), "--sets", "5", "--quiet"]) == 130
+    err = capsys.readouterr().err
+    assert err == f"rsocl capture: interrupted: {out} holds the 2 complete set(s) (capture_status 'interrupted')\n"
+    assert load_raw(out).sets_complete == 2
+
+
 def test_cmd_capture(tmp_path, capsys):
     rig_path = tmp_path / "rig.toml"
     save_rigfile(rig_path, _rigfile())

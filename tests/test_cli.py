@@ -818,3 +818,24 @@ def test_an_interrupt_while_writing_sets_says_which_are_written_and_which_are_ol
         f"rsocl reconstruct: interrupted: sets 0 to 1 written ({tmp_path / 'rec-set000.h5'} ..); 2 of the files "
         f"of sets 2 to 3 are an earlier run's ({tmp_path / 'rec-set002.h5'} ..)\n"
     )
+
+
+def test_sigterm_ends_a_command_as_ctrl_c_does_saying_what_was_kept(tmp_path, capsys, monkeypatch):
+    import os
+    import signal
+
+    import rsocl.cli.reconstruct as command
+
+    cap, rec = tmp_path / "cap.h5", tmp_path / "rec.h5"
+    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "12", "12", "--quiet"]) == 0
+    before = signal.getsignal(signal.SIGTERM)
+
+    def terminated(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        raise AssertionError("SIGTERM did not end the command")
+
+    monkeypatch.setattr(command, "run_reconstruction", terminated)
+    capsys.readouterr()
+    assert main(["reconstruct", str(cap), "--out", str(rec), "--fixed", "--quiet"]) == 143
+    assert capsys.readouterr().err == "rsocl reconstruct: terminated: nothing written\n" and not rec.exists()
+    assert signal.getsignal(signal.SIGTERM) is before  # main put the handler back

@@ -296,3 +296,35 @@ def test_a_failing_tile_says_what_was_kept_hdf5_nothing_zarr_the_solved_tiles(ca
     monkeypatch.undo()
     assert main(argv + ["--out", str(store)]) == 0  # the failed tile alone
     assert capsys.readouterr().out.startswith("1 tile task(s) in ") and rsocl.scale.store.load_store(store).complete
+
+
+def test_an_interrupted_tiled_run_says_how_many_tiles_the_store_kept(capture, tmp_path, capsys, monkeypatch):
+    # Ctrl-C during the third of four tiles: the store keeps two, the line says so, and a re-run finishes
+    from rsocl.scale import runner as runner_module
+
+    path, _, _ = capture
+    solve, calls = runner_module.solve_tile, []
+
+    def interrupted_at_the_third(job, *args):
+        calls.append(job.tile.index)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return solve(job, *args)
+
+    monkeypatch.setattr(runner_module, "solve_tile", interrupted_at_the_third)
+    argv = ["reconstruct", str(path), "--tile", "10", "13", "--halo", "3", "--iterations", "3", "--fixed"]
+    argv += ["--retries", "0", "--quiet", "--no-truth", "--first-set-only"]
+    store, h5 = tmp_path / "rec.zarr", tmp_path / "rec.h5"
+    assert main(argv + ["--out", str(store)]) == 130
+    assert capsys.readouterr().err == (
+        f"rsocl reconstruct: interrupted: 2 of 4 tile task(s) kept in {store}; the same command again redoes "
+        "only the others\n"
+    )
+    monkeypatch.setattr(runner_module, "solve_tile", solve)
+    assert main(argv + ["--out", str(store)]) == 0
+    calls.clear()
+    monkeypatch.setattr(runner_module, "solve_tile", interrupted_at_the_third)
+    assert main(argv + ["--out", str(h5)]) == 130
+    assert capsys.readouterr().err.endswith(
+        f"interrupted: nothing written to {h5} (an HDF5 --out is written once every task is solved)\n"
+    )

@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import warnings
 
 from rsocl.cli import bench, calibrate, capture, demo, devices, info, plan, plugins, reconstruct, simulate
@@ -54,11 +56,15 @@ def main(argv=None) -> int:
     0: done; 1: the command reports a failure of its own (no OpenCL device, a camera failed, the host
     memory ran out part way: sizes that cannot fit are refused first, with 2), or the system refused a
     file (disk full, permission, a lock another process holds: one line, :func:`fault_line`); 2: bad
-    arguments or input (the message names them); 130: interrupted.
+    arguments or input (the message names them); 130: interrupted (Ctrl-C); 143: terminated (SIGTERM, which
+    ends the command as Ctrl-C does, in the main thread). An interrupted command's line says what it kept.
     """
     from rsocl.device.context import NoOpenCLError
 
     args = build_parser().parse_args(argv)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _warning_line(args.command)
@@ -83,8 +89,21 @@ def main(argv=None) -> int:
         return 1
     except KeyboardInterrupt as exc:  # a command may say what it kept (the interrupt's message)
         kept = f": {exc}" if str(exc) else ""
-        print(f"rsocl {args.command}: interrupted{kept}", file=sys.stderr)
-        return 130
+        how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
+        print(f"rsocl {args.command}: {how}{kept}", file=sys.stderr)
+        return code
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command runs (:func:`main` installs the handler), so that the command ends
+    as on Ctrl-C: closing its files and saying in one line what was kept (exit status 143)."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
 
 
 def fault_line(exc: OSError) -> str:

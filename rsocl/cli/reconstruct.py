@@ -188,7 +188,7 @@ def _interrupted(kept):
     except KeyboardInterrupt as exc:
         if str(exc):
             raise
-        raise KeyboardInterrupt(kept() if callable(kept) else kept) from None
+        raise type(exc)(kept() if callable(kept) else kept) from None
 
 
 @contextlib.contextmanager

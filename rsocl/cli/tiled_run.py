@@ -86,6 +86,8 @@ def run_tiles(args, capture):
             retries=_retries(args),
             **solver_options(args),
         )
+    except KeyboardInterrupt as exc:  # Ctrl-C: the store keeps the tiles done; an HDF5 --out is not written
+        raise type(exc)(str(exc) or _interrupted_tiles(args.out, zarr_out)) from None
     except TilesFailed as exc:
         if zarr_out:
             return _error(str(exc))
@@ -117,6 +119,18 @@ def run_tiles(args, capture):
     files = [args.out, gif, *tuning_plot_files(args, result.params, gif)]
     say(args, "wrote " + ", ".join(map(str, files)) + kept_note([kept]))
     return 0
+
+
+def _interrupted_tiles(out, zarr_out: bool) -> str:
+    """What an interrupted tiled run into ``out`` kept: one clause."""
+    if not zarr_out:
+        return f"nothing written to {out} (an HDF5 --out is written once every task is solved)"
+    from rsocl.scale.store import tiles_done
+
+    counts = tiles_done(out)
+    if counts is None:
+        return f"no store made at {out}"
+    return f"{counts[0]} of {counts[1]} tile task(s) kept in {out}; the same command again redoes only the others"
 
 
 def _window(rig, failed, args) -> tuple:

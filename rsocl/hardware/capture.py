@@ -222,14 +222,20 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
             phase="write",
             sets_complete=writer.sets_complete,
         )
+        if isinstance(interrupted, KeyboardInterrupt):  # Ctrl-C (or SIGTERM): the line says what was kept
+            raise type(interrupted)(str(error)) from None
         if interrupted is not None:
             raise interrupted from error
         raise error
     with keeping_unless_simulated(out) as kept:  # a file there that is not a simulated capture keeps a name
         publish(partial, out)
     note = "" if kept is None else f"; the earlier file there is kept as {kept}"
-    if kept is not None and (failure is None or interrupted is not None):  # a failure's error line says it
+    if kept is not None and failure is None:  # a failure's error line says it, an interrupt's too
         warnings.warn(f"{out}: the earlier file there is kept as {kept}", stacklevel=2)
+    if isinstance(interrupted, KeyboardInterrupt):
+        raise type(interrupted)(
+            f"{out} holds the {writer.sets_complete} complete set(s) (capture_status 'interrupted'){note}"
+        ) from None
     if interrupted is not None:
         raise interrupted
     if failure is not None:

@@ -56,6 +56,7 @@ __all__ = [
     "StoreSpec",
     "prepare_store",
     "store_id",
+    "tiles_done",
     "write_piece",
     "load_store",
     "StoredReconstruction",
@@ -187,6 +188,17 @@ def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> np.ndarray:
             f"{', '.join(differ)}); remove it or choose another path"
         )
     return np.asarray(group["tiles"][..., 0]) > 0
+
+
+def tiles_done(path) -> tuple[int, int] | None:
+    """``(done, total)``: the tile tasks the store at ``path`` marks complete, and all of them; None where
+    there is no store (a run stopped before it was built)."""
+    zarr = require_zarr()
+    try:
+        marks = np.asarray(zarr.open_group(str(path), mode="r")["tiles"][..., 0]) > 0
+    except (FileNotFoundError, KeyError):
+        return None
+    return int(marks.sum()), int(marks.size)
 
 
 def _partial_prefix(path: Path) -> str:
