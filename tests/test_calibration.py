@@ -476,6 +476,25 @@ def test_calibrate_refuses_an_output_that_is_an_input_before_any_work(calibratio
     assert (folder / "flats.npz").read_bytes() == flats
 
 
+@pytest.mark.parametrize(
+    "given, match",
+    [
+        (["--flat", "flats.npz", "--polarity", "dark", "--png", "o.png"], r"^--polarity, --png need --frames "),
+        (["--flat", "flats.npz", "--tolerance", "0.5"], r"^--tolerance needs --flicker \(frames of the flickering"),
+        (["--flat", "flats.npz", "--force"], r"^--force needs --flicker "),
+        (["--frames", "markers.npz", "--dark", "5"], r"^--dark needs --flat \(flat-field frames\)"),
+        (["--flat", "flats.npz", "--flicker-hz", "100"], r"^--flicker-hz needs --flicker "),
+    ],
+)
+def test_an_option_of_a_measurement_not_asked_for_is_refused_not_ignored(calibration_files, monkeypatch, given, match):
+    import rsocl.cli.calibrate as calibrate_cli
+
+    folder, *_ = calibration_files
+    monkeypatch.setattr(calibrate_cli, "_gains", lambda *a: pytest.fail("calibrated before checking the options"))
+    with pytest.raises(ValueError, match=match):
+        _calibrate(["--rig", folder / "rig.toml", *[folder / v if v.endswith(".npz") else v for v in given]])
+
+
 def test_calibrate_keeps_the_rig_file_it_replaces(calibration_files, capsys):
     import re
 

@@ -116,8 +116,38 @@ def add_parser(subparsers):
     g.add_argument("--flat", default=None, help="flat-field frame(s) per camera, same exposure for all")
     g.add_argument("--dark", type=float, default=0.0, help="dark level subtracted from flat fields (default 0)")
     p.add_argument("--quiet", action="store_true", help="print only errors")
-    p.set_defaults(func=cmd_calibrate)
+    needed = {_dest(o): p.get_default(_dest(o)) for options in NEEDS.values() for o in options}
+    p.set_defaults(func=cmd_calibrate, option_defaults=needed)
     return p
+
+
+#: The options that act only with a measurement's input, by that input: given without it, they are
+#: refused rather than ignored (an option at its default value is not counted as given).
+NEEDS = {
+    "--frames": ("--markers-ref", "--identify", "--mirrored", "--polarity", "--threshold", "--png"),
+    "--flicker": ("--flicker-hz", "--tolerance", "--force"),
+    "--flat": ("--dark",),
+}
+
+
+def check_needs(args, parser_defaults: dict) -> None:
+    """Refuse options that act only with a measurement whose input (:data:`NEEDS`) is not given, naming
+    them and the input; ``parser_defaults`` maps each option's destination to its default."""
+    for needed, options in NEEDS.items():
+        if getattr(args, needed.lstrip("-").replace("-", "_")) is not None:
+            continue
+        given = [o for o in options if getattr(args, _dest(o)) != parser_defaults.get(_dest(o))]
+        if given:
+            what = {"--frames": "frames of the marker target", "--flicker": "frames of the flickering light"}
+            one = len(given) == 1
+            raise ValueError(
+                f"{', '.join(given)} {'needs' if one else 'need'} {needed} ({what.get(needed, 'flat-field frames')}); "
+                f"without it {'it does' if one else 'they do'} nothing"
+            )
+
+
+def _dest(option: str) -> str:
+    return option.lstrip("-").replace("-", "_")
 
 
 # ---------------------------------------------------------------------- command
@@ -293,8 +323,7 @@ def cmd_calibrate(args) -> int:
 
     if args.frames is None and args.flicker is None and args.flat is None:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
-    if args.flicker_hz is not None and args.flicker is None:
-        raise ValueError("--flicker-hz needs --flicker (frames of the flickering light)")
+    check_needs(args, args.option_defaults)
     from rsocl.cli.outputs import HDF5_FILES, kept_note, refuse_kinds
     from rsocl.files.atomic import keeping, output_path
 
