@@ -282,7 +282,7 @@ CASES = [
     ),
     Bad(
         "capture-out-is-the-rig-file",
-        ["out", "rig file"],
+        ["--out", "is the --rig it reads"],
         argv=["capture", "--rig", "{tmp}/rig.toml", "--out", "{tmp}/rig.toml", "--quiet"],
         setup=_rigfile,
     ),

@@ -303,3 +303,21 @@ def test_a_rig_file_shape_beyond_the_host_memory_is_refused_before_the_rig_is_bu
         assert "at least 372.5 GiB of host memory, more than this machine's 1.0 GiB" in err
         assert len(err.strip().splitlines()) == 1
     assert [p.name for p in tmp_path.iterdir()] == ["rig.toml"]
+
+
+@pytest.mark.parametrize(
+    "extra, said",
+    [
+        (["--sets", "0"], "--sets must be an integer >= 1, got 0"),
+        (["--timeout", "0"], "--timeout must be > 0 seconds, got 0.0"),
+    ],
+)
+def test_capture_options_are_named_as_typed(tmp_path, capsys, extra, said):
+    from rsocl.cli.main import main
+
+    rig_path = tmp_path / "rig.toml"
+    save_rigfile(rig_path, _rigfile())
+    assert main(["capture", "--rig", str(rig_path), "--out", str(tmp_path / "c.h5"), *extra]) == 2
+    assert capsys.readouterr().err == f"rsocl capture: error: {said}\n" and not (tmp_path / "c.h5").exists()
+    assert main(["capture", "--rig", str(rig_path), "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.startswith("rsocl capture: error: --out must name a file")

@@ -328,3 +328,12 @@ def test_an_interrupted_tiled_run_says_how_many_tiles_the_store_kept(capture, tm
     assert capsys.readouterr().err.endswith(
         f"interrupted: nothing written to {h5} (an HDF5 --out is written once every task is solved)\n"
     )
+
+
+def test_the_gif_beside_a_store_is_named_as_the_outs_when_no_gif_was_given(capture, tmp_path, capsys):
+    path, _, _ = capture
+    (tmp_path / "rec.gif").mkdir()  # where the GIF beside rec.zarr would go
+    argv = ["reconstruct", str(path), "--out", str(tmp_path / "rec.zarr"), "--tile", "10", "13", "--first-set-only"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rsocl reconstruct: error: --out's NAME.gif must name a file") and "--gif" not in err, err

@@ -38,9 +38,14 @@ def cmd_capture(args) -> int:
     Bad arguments or rig files raise ValueError / FileNotFoundError (the CLI's exit status 2).
     """
     from rsocl.cli.options import load_rig_file, progress_bar
+    from rsocl.common import validation as check
+    from rsocl.files.atomic import output_path
     from rsocl.hardware.capture import CaptureFailed, capture_sets
 
     quiet = bool(getattr(args, "quiet", False))
+    check.positive_int("--sets", args.sets)  # named as typed, before the rig file is read (capture_sets checks again)
+    check.positive("--timeout", args.timeout, "seconds")
+    output_path(args.out, "--out", inputs=(("--rig", args.rig),))
     rigfile = load_rig_file(args.rig)  # a shape beyond the host's memory: refused here
     try:
         path = capture_sets(rigfile, args.out, sets=args.sets, timeout=args.timeout, progress=progress_bar(args))

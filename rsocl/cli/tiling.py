@@ -120,7 +120,8 @@ def check_outputs(args) -> None:
 
         require_zarr("--out")
         check_store_path(args.out, "--out")
-        _gif_suffix(output_path(zarr_gif(args), "--gif", inputs=reads), args)
+        gif_name = "--gif" if args.gif else "--out's NAME.gif"  # the GIF beside the store, unless --gif names one
+        _gif_suffix(output_path(zarr_gif(args), gif_name, inputs=reads), args)
         if tuned:
             output_path(tuning_plot_path(Path(args.out).with_suffix(".gif")), "--out's NAME-tuning.png", inputs=reads)
         return

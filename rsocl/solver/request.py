@@ -89,7 +89,7 @@ def make_regularizer(
                     f"{options['iterations']!r} disagree; give the inner iterations once"
                 )
             return made
-        options["iterations"] = tv_iterations
+        options["iterations"] = cls.options["iterations"].convert("tv_iterations", tv_iterations)  # named so
     return cls(**options)
 
 
