@@ -36,6 +36,20 @@ def _capture(name, sets=1, nan_set=None):
     return make
 
 
+def _nan_snapshot(name):
+    """``setup``: a capture ``name`` of one set whose dataset ``snapshots`` holds a NaN."""
+
+    def make(tmp):
+        import h5py
+
+        path = _capture(name)(tmp)
+        with h5py.File(path, "r+") as h5:
+            h5["snapshots"][0, 0, 0] = np.nan
+        return path
+
+    return make
+
+
 def _both(*setups):
     def make(tmp):
         for setup in setups:
@@ -205,6 +219,12 @@ CASES = [
         ["snapshot_sets", "finite"],
         argv=["reconstruct", "{tmp}/c.h5", "--out", "{tmp}/r.h5", *FAST],
         setup=_capture("c.h5", 3, nan_set=1),
+    ),
+    Bad(
+        "reconstruct-capture-snapshots-with-nan",
+        ["c.h5", "dataset 'snapshots'", "1 NaN", "finite"],
+        argv=["reconstruct", "{tmp}/c.h5", "--out", "{tmp}/r.h5", *FAST],
+        setup=_nan_snapshot("c.h5"),
     ),
     # ------------------------------------------------------------------ multi-set selection
     Bad(

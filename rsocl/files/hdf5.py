@@ -211,6 +211,9 @@ def load_capture(path: PathLike, set_index: int | None = None) -> Capture:
             truth = None  # the stored truth is set 0's datacube
         else:
             snapshots = read_array(h5, "snapshots", source, (rig.n_channels,) + rig.shape)
+            if not np.all(np.isfinite(snapshots)):
+                bad = int(np.count_nonzero(~np.isfinite(snapshots)))
+                raise ValueError(f"{source}: dataset 'snapshots' holds {bad} NaN or inf value(s); all must be finite")
             truth = optional_array(h5, "truth", source, rig.shape)
         return Capture(snapshots=snapshots, rig=rig, truth=truth, meta=_meta(h5, source))
 
