@@ -45,7 +45,7 @@ def add_parser(subparsers):
         type=int,
         default=None,
         help="sets of a capture of several sets, reconstructed in one piece, run together in one batch "
-        "(default: as many as fit the device, up to 32)",
+        "(default: as many as fit the device: up to 32 on a CPU, up to 2**24 voxels on a GPU)",
     )
     add_solver_args(p)
     add_device_args(p)
