@@ -31,7 +31,10 @@ by default (:mod:`rsocl_plugins.simulated_sensor`).
 ``Frame.meta`` carries ``set`` (set index), ``frame_id``, ``t_a`` (the offset
 actually used), ``full_scale`` (model value of the largest integer level, so
 ``image / (2**bit_depth - 1) * full_scale`` converts back to model units),
-``exposure`` and ``registered = True`` (frames are on the reference grid).
+``exposure`` and ``registered = True`` (frames are on the reference grid: the simulated sensor *is*
+the reference grid, whatever the camera's ``angle``, ``row_map`` or homography). A ROI
+(:meth:`~rsocl.hardware.backend.CameraBackend.set_roi`) cuts a window out of that grid; its frames carry
+``roi = [x, y, width, height]`` (pixels), which the capture uses to put them back in place (0 outside).
 ``fail_after = N`` makes the ``N``-th :meth:`read` raise
 :class:`~rsocl.hardware.backend.CameraDisconnected` (and every later call, as a camera
 that went away). The simulated camera never waits: :meth:`read` with no
@@ -235,8 +238,10 @@ class SimulatedCamera(SimulatedConfig, CameraBackend):
             "t_a": t_a,
             "full_scale": self.full_scale,
             "exposure": self.t_e,
-            "registered": self._roi is None or self._roi == (0, 0) + self.shape[::-1],
+            "registered": True,  # rendered on the reference grid, whatever the camera's geometry
         }
+        if self._roi is not None and self._roi != (0, 0) + self.shape[::-1]:
+            meta["roi"] = list(self._roi)  # where the frame lies on the reference grid
         return Frame(
             image=np.ascontiguousarray(image),
             timestamp=set_index * self.scene_frames * self.dt + t_a,

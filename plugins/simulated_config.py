@@ -2,7 +2,8 @@
 
 Config keys (seconds, degrees)
 ------------------------------
-``scene`` (``"builtin"``), ``scene_seed`` (0), ``scene_frames`` (default: this
+``scene`` (``"builtin"``, or a video file that must exist; a rig file resolves a relative path against its
+folder), ``scene_seed`` (0), ``scene_frames`` (default: this
 camera's own ``T``), ``scene_sets`` (1, videos only), ``shape`` ``[m, n]`` of the
 reference ROI = the simulated sensor (required unless ``row_map`` or an array
 scene gives it), ``angle`` (0) or ``row_map`` (``(m, n)`` rows), ``t_e``, ``t_r``
@@ -110,6 +111,11 @@ class SimulatedConfig:
                 raise ValueError(f"{k('scene')} array must be (frames, m, n), got shape {self.scene_array.shape}")
         elif not isinstance(scene, (str, os.PathLike)):
             raise ValueError(f"{k('scene')} must be 'builtin', a video path or a (frames, m, n) array, got {scene!r}")
+        elif scene != "builtin" and not os.path.isfile(scene):
+            raise ValueError(
+                f"{k('scene')}: video file {os.fspath(scene)!r} does not exist (in a rig file, a relative path "
+                "is relative to the rig file's folder)"
+            )
         self.scene = scene if self.scene_array is None else "array"
 
         shape = cfg.get("shape")

@@ -481,7 +481,10 @@ def test_calibrate_refuses_an_output_that_is_an_input_before_any_work(calibratio
     [
         (["--flat", "flats.npz", "--polarity", "dark", "--png", "o.png"], r"^--polarity, --png need --frames "),
         (["--flat", "flats.npz", "--tolerance", "0.5"], r"^--tolerance needs --flicker \(frames of the flickering"),
-        (["--flat", "flats.npz", "--force"], r"^--force needs --flicker "),
+        (
+            ["--flat", "flats.npz", "--force"],
+            r"^--force needs --frames or --flicker \(frames of the marker target or ",
+        ),
         (["--frames", "markers.npz", "--dark", "5"], r"^--dark needs --flat \(flat-field frames\)"),
         (["--flat", "flats.npz", "--flicker-hz", "100"], r"^--flicker-hz needs --flicker "),
     ],

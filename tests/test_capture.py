@@ -130,15 +130,26 @@ def test_camera_failure_keeps_what_was_captured(tmp_path):
         load_capture(first)
 
 
-def test_open_and_registration_failures(tmp_path):
+def test_open_and_registration_failures(tmp_path, monkeypatch):
     out = tmp_path / "c.h5"
+    (tmp_path / "bad.npz").write_text("not a video", encoding="utf-8")  # there, but no video: fails at open
     with pytest.raises(CaptureFailed, match="open failed before the first set") as info:
-        capture_sets(_rigfile(configs=[{}, {}, {}, {"scene": str(tmp_path / "missing.npz")}]), out)
+        capture_sets(_rigfile(configs=[{}, {}, {}, {"scene": str(tmp_path / "bad.npz")}]), out)
     assert (info.value.camera, info.value.set_index) == (3, None)
     assert load_raw(out).failure["phase"] == "open"
-    # a cropped sensor ROI without a homography cannot be registered: the raw frame is still kept
-    with pytest.raises(CaptureFailed, match="register failed in set 0.*no homography"):
-        capture_sets(_rigfile(c1={"roi": [2, 3, 12, 10]}), out)
+    # a frame that cannot be registered (NaN values): the raw frame is still kept
+    read = SimulatedCamera._read
+
+    def nan_in_camera_1(camera, timeout):
+        frame = read(camera, timeout)
+        if camera.index == 1:
+            frame.image[0, 0] = np.nan
+        return frame
+
+    with monkeypatch.context() as patch:
+        patch.setattr(SimulatedCamera, "_read", nan_in_camera_1)
+        with pytest.raises(CaptureFailed, match="register failed in set 0.*NaN"):
+            capture_sets(_rigfile(c1={"roi": [2, 3, 12, 10]}), out)
     raw = load_raw(out)
     assert raw.frames[1].shape == (1, 10, 12) and raw.failure["phase"] == "register"
     # errors in the arguments or the rig write nothing

@@ -104,7 +104,8 @@ def test_camera_contract():
         cam.set_trigger("software")
         cam.start()
         cropped = cam.capture()
-        assert cropped.image.shape == (4, 5) and cropped.meta["registered"] is False
+        assert cropped.image.shape == (4, 5) and cropped.meta["registered"] is True  # a window on the grid
+        assert cropped.meta["roi"] == [2, 3, 5, 4]
         with pytest.raises(CameraError, match="exceeds"):
             cam.stop()
             cam.set_roi(8, 0, 5, 4)

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.cli.calibrate_frames import load_frames, one_frame, parse_points, per_camera
+from rsocl.cli.calibrate_frames import NEEDS, _dest, check_needs, load_frames, one_frame, parse_points, per_camera
 from rsocl.cli.options import load_rig_file, say
 
 __all__ = ["add_parser", "cmd_calibrate", "load_frames", "parse_points"]
@@ -62,8 +62,8 @@ def add_parser(subparsers):
         nargs="+",
         default=None,
         metavar="X,Y",
-        help="marker positions on the reference grid, pixels (x = column, y = row); default: the "
-        "markers found in camera 0's frame, which must then have the rig's shape. With "
+        help="marker positions on the reference grid, pixels (x = column, y = row); default: every "
+        "dot found in camera 0's frame, which must then have the rig's shape. With "
         "--identify largest, list the large marker first. Negative values: "
         "--markers-ref='-3,5 60,5 ...'",
     )
@@ -82,7 +82,9 @@ def add_parser(subparsers):
         default=[],
         metavar="C",
         help="cameras (indices) that see the target in a mirror, e.g. through a beam splitter: their "
-        "homography mirrors the image (any other camera's may not)",
+        "homography mirrors the image (any other camera's may not). With --identify position a mirrored "
+        "camera's marker order starts from its rig file angle, the direction in which it sees the "
+        "reference x axis; --identify largest needs no angle",
     )
     g.add_argument("--polarity", choices=["bright", "dark"], default="bright", help="bright or dark dots")
     g.add_argument("--threshold", type=float, default=None, help="dot/background threshold (default: automatic)")
@@ -111,43 +113,30 @@ def add_parser(subparsers):
         default=0.01,
         help="largest accepted relative difference from the rig file's t_r (default 0.01)",
     )
-    g.add_argument("--force", action="store_true", help="write a measured t_r even when it fails the check")
+    g.add_argument(
+        "--force",
+        action="store_true",
+        help="write the measured values even when they fail a check: a t_r beyond --tolerance, a homography "
+        "whose markers fit with an rms error above 1 px (five or more markers); never a pairing no camera has",
+    )
     g = p.add_argument_group("photometric gain (flat field)")
-    g.add_argument("--flat", default=None, help="flat-field frame(s) per camera, same exposure for all")
-    g.add_argument("--dark", type=float, default=0.0, help="dark level subtracted from flat fields (default 0)")
+    g.add_argument(
+        "--flat",
+        default=None,
+        help="flat-field frame(s) per camera in one unit for all (raw levels of one bit depth), same exposure; "
+        "or an rsocl capture file (.h5) of the flat field, whose frames are normalised per camera",
+    )
+    g.add_argument(
+        "--dark",
+        type=float,
+        default=0.0,
+        help="dark level subtracted from flat fields, in their units (a capture file's: a fraction of full "
+        "scale) (default 0)",
+    )
     p.add_argument("--quiet", action="store_true", help="print only errors")
     needed = {_dest(o): p.get_default(_dest(o)) for options in NEEDS.values() for o in options}
     p.set_defaults(func=cmd_calibrate, option_defaults=needed)
     return p
-
-
-#: The options that act only with a measurement's input, by that input: given without it, they are
-#: refused rather than ignored (an option at its default value is not counted as given).
-NEEDS = {
-    "--frames": ("--markers-ref", "--identify", "--mirrored", "--polarity", "--threshold", "--png"),
-    "--flicker": ("--flicker-hz", "--tolerance", "--force"),
-    "--flat": ("--dark",),
-}
-
-
-def check_needs(args, parser_defaults: dict) -> None:
-    """Refuse options that act only with a measurement whose input (:data:`NEEDS`) is not given, naming
-    them and the input; ``parser_defaults`` maps each option's destination to its default."""
-    for needed, options in NEEDS.items():
-        if getattr(args, needed.lstrip("-").replace("-", "_")) is not None:
-            continue
-        given = [o for o in options if getattr(args, _dest(o)) != parser_defaults.get(_dest(o))]
-        if given:
-            what = {"--frames": "frames of the marker target", "--flicker": "frames of the flickering light"}
-            one = len(given) == 1
-            raise ValueError(
-                f"{', '.join(given)} {'needs' if one else 'need'} {needed} ({what.get(needed, 'flat-field frames')}); "
-                f"without it {'it does' if one else 'they do'} nothing"
-            )
-
-
-def _dest(option: str) -> str:
-    return option.lstrip("-").replace("-", "_")
 
 
 # ---------------------------------------------------------------------- command
@@ -179,7 +168,13 @@ def _origin(camera: dict):
 def _register(args, rigfile, updates):
     """Registration of every camera; returns the overlay inputs."""
     from rsocl.hardware.calibration import detect_markers, homography_angle, reference_outline, register_camera
-    from rsocl.hardware.calibration.plausibility import check_registration, check_rotation, fit_summary
+    from rsocl.hardware.calibration.plausibility import (
+        check_fit,
+        check_registration,
+        check_rotation,
+        fit_refusal,
+        fit_summary,
+    )
 
     C = len(rigfile.cameras)
     bad = [c for c in args.mirrored if not 0 <= c < C]
@@ -200,11 +195,14 @@ def _register(args, rigfile, updates):
                 f"without --markers-ref, camera 0's frame is the reference grid and must have the "
                 f"rig's shape {tuple(rigfile.shape)}, got {frames[0].shape}"
             )
-        n = given.shape[1] if given is not None else 4
-        reference_points = (
-            given[0] if given is not None else detect_markers(frames[0], n, reference=reference, **options)
+        reference_points = (  # every dot camera 0 shows
+            given[0] if given is not None else detect_markers(frames[0], None, reference=reference, **options)
         )
-        say(args, "reference markers (camera 0): " + " ".join(f"{x:.2f},{y:.2f}" for x, y in reference_points))
+        say(
+            args,
+            f"reference markers (camera 0, {len(reference_points)} dots): "
+            + " ".join(f"{x:.2f},{y:.2f}" for x, y in reference_points),
+        )
     if len(reference_points) < 4:
         raise ValueError(f"a homography needs at least 4 markers, got {len(reference_points)}")
     detected, reprojected, outlines, titles = [], [], [], []
@@ -226,13 +224,26 @@ def _register(args, rigfile, updates):
             check_registration(
                 registration.reference_points, registration.sensor_points, H, rigfile.shape, mirrored=c in args.mirrored
             )
+            rms = check_fit(registration)
+            if rms is not None:
+                why = fit_refusal(
+                    registration, rms, rigfile.shape, camera=c, key=_nominal_key(camera), mirrored=c in args.mirrored
+                )
+                if not args.force:
+                    raise ValueError(f"{why}; --force writes it anyway")
+                say(args, f"camera {c}: {why}; written as --force asks")
             measured = (
                 homography_angle(H, rigfile.shape)
                 if not _has_nominal(camera)
                 else check_rotation(H, rigfile.shape, angle, key=f"camera[{c}].{_nominal_key(camera)}")
             )
         except ValueError as exc:
-            raise ValueError(f"camera {c}: {exc}") from None
+            hint = None
+            if given is None and "--force" not in str(exc):  # detected markers refused: does another order fit?
+                hint = _detected_hint(
+                    frames[c], reference_points, reference, angle, origin, options, c, rigfile, c in args.mirrored
+                )
+            raise ValueError(f"camera {c}: {exc}{hint or ''}") from None
         rows = registration.row_map(rigfile.shape)
         updates[c]["homography"] = H
         detected.append(registration.sensor_points - origin)
@@ -247,6 +258,22 @@ def _register(args, rigfile, updates):
             f"{angle:g}°), sensor rows 0..{rows.max():.2f} over the ROI",
         )
     return frames, detected, reprojected, outlines, titles
+
+
+def _detected_hint(frame, reference_points, reference, angle, origin, options, c, rigfile, mirrored):
+    """:func:`~rsocl.hardware.calibration.plausibility.pairing_hint` for camera ``c``'s detected markers."""
+    from rsocl.hardware.calibration import detect_markers, order_markers
+    from rsocl.hardware.calibration.plausibility import pairing_hint
+
+    try:
+        sensor = detect_markers(
+            frame, len(reference_points), reference=reference, angle=angle, mirrored=mirrored, **options
+        )
+        ordered = order_markers(reference_points, first=0 if reference == "largest" else None)
+        key = _nominal_key(rigfile.cameras[c])
+        return pairing_hint(ordered, sensor + origin, rigfile.shape, camera=c, key=key, mirrored=mirrored)
+    except ValueError:  # detection itself failed: the error says why
+        return None
 
 
 def _row_times(args, rigfile, updates):
@@ -276,11 +303,11 @@ def _row_times(args, rigfile, updates):
 
 
 def _gains(args, rigfile, updates):
+    from rsocl.cli.calibrate_frames import load_flats
     from rsocl.hardware.calibration import flat_field_gain
 
-    frames, _ = load_frames(args.flat, "--flat")
-    frames = per_camera(frames, len(rigfile.cameras), "--flat")
-    gains = flat_field_gain(frames, dark=args.dark)
+    frames, darks = load_flats(args.flat, rigfile, args.dark)
+    gains = flat_field_gain(frames, dark=darks)
     for c, gain in enumerate(gains):
         updates[c]["gain"] = float(gain)
     say(args, "gains relative to camera 0: " + ", ".join(f"{g:.4f}" for g in gains))
@@ -324,6 +351,14 @@ def cmd_calibrate(args) -> int:
     if args.frames is None and args.flicker is None and args.flat is None:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
     check_needs(args, args.option_defaults)
+    from rsocl.common import validation as check
+
+    if args.flicker is not None and args.flicker_hz is not None:  # as typed, before any frame is read
+        check.positive("--flicker-hz", args.flicker_hz, "Hz")
+    check.non_negative("--tolerance", args.tolerance)
+    check.finite("--dark", args.dark)
+    if args.threshold is not None:
+        check.finite("--threshold", args.threshold)
     from rsocl.cli.outputs import HDF5_FILES, kept_note, refuse_kinds
     from rsocl.files.atomic import keeping, output_path
 

@@ -13,7 +13,10 @@ File layouts (``FRAMES`` for ``--frames``, ``--flicker`` and ``--flat``):
   in name order.
 
 Frames are raw sensor images after the camera's ROI (``roi = [x, y, w, h]``
-in the rig file gives their offset on the sensor).
+in the rig file gives their offset on the sensor). ``--flat`` also takes an ``rsocl capture`` file
+(``.h5``): its raw frames are converted to one unit for every camera (:func:`load_flats`); the
+frames of other files must be in one unit for all cameras (raw levels of cameras of one bit depth, or
+``DN / (2**bit_depth - 1)``), and raw levels of cameras of different bit depths are refused.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["load_frames", "one_frame", "parse_points", "per_camera"]
+__all__ = ["NEEDS", "check_needs", "load_frames", "load_flats", "one_frame", "parse_points", "per_camera"]
 
 _IMAGE_SUFFIXES = (".npy", ".png", ".tif", ".tiff")
 
@@ -143,3 +146,112 @@ def per_camera(frames, C, what):
     if len(frames) != C:
         raise ValueError(f"{what}: the rig file has {C} cameras but {len(frames)} frame(s) were given")
     return frames
+
+
+#: The options that act only with a measurement's input, by that input: given without it, they are
+#: refused rather than ignored (an option at its default value is not counted as given).
+NEEDS = {
+    "--frames": ("--markers-ref", "--identify", "--mirrored", "--polarity", "--threshold", "--png", "--force"),
+    "--flicker": ("--flicker-hz", "--tolerance", "--force"),
+    "--flat": ("--dark",),
+}
+
+
+def check_needs(args, parser_defaults: dict) -> None:
+    """Refuse options that act only with a measurement whose input (:data:`NEEDS`) is not given, naming
+    them and the input; ``parser_defaults`` maps each option's destination to its default. An option that
+    acts with several inputs (``--force``) is refused when none of them is given."""
+    inputs_of: dict = {}
+    for needed, options in NEEDS.items():
+        for option in options:
+            inputs_of.setdefault(option, []).append(needed)
+    present = {needed for needed in NEEDS if getattr(args, _dest(needed)) is not None}
+    what = {"--frames": "frames of the marker target", "--flicker": "frames of the flickering light"}
+    for options in NEEDS.values():
+        given = [
+            o
+            for o in options
+            if getattr(args, _dest(o)) != parser_defaults.get(_dest(o)) and not present & set(inputs_of[o])
+        ]
+        if given:
+            inputs = inputs_of[given[0]]
+            given = [o for o in given if inputs_of[o] == inputs]
+            one = len(given) == 1
+            raise ValueError(
+                f"{', '.join(given)} {'needs' if one else 'need'} {' or '.join(inputs)} "
+                f"({' or '.join(what.get(i, 'flat-field frames') for i in inputs)}); "
+                f"without {'it' if len(inputs) == 1 else 'them'} {'it does' if one else 'they do'} nothing"
+            )
+
+
+def _dest(option: str) -> str:
+    return option.lstrip("-").replace("-", "_")
+
+
+#: Bits per pixel of the pixel formats a rig file names (a float format has none).
+_FORMAT_BITS = {"Mono8": 8, "Mono10": 10, "Mono12": 12, "Mono14": 14, "Mono16": 16, "GREY": 8, "Y16": 16, "YUYV": 8}
+
+
+def _bit_depth(camera: dict):
+    """The bit depth camera table ``camera`` delivers, as the rig file tells it (None: unknown or float)."""
+    bits = _FORMAT_BITS.get(camera.get("pixel_format") or camera["config"].get("pixel_format"))
+    sensor = camera["config"].get("sensor") if camera["backend"] == "simulated" else None
+    if isinstance(sensor, dict) and sensor.get("bit_depth") is not None:
+        bits = int(sensor["bit_depth"])
+    return bits
+
+
+def load_flats(path, rigfile, dark: float):
+    """Flat-field frames of every camera in one unit, and the dark level in it, for ``--flat``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An ``rsocl capture`` file (``.h5``) or a file or folder of :func:`load_frames`.
+    rigfile : RigFile
+        The rig being calibrated (its cameras, their pixel formats).
+    dark : float
+        ``--dark``: in the frames' units; for a capture file, a fraction of full scale.
+
+    Returns
+    -------
+    (frames, darks) : (list of ndarray, ndarray of float64)
+        Per camera. A capture file's raw frames are converted as the capture converts them
+        (``raw / (2**bit_depth - 1) * full_scale``, model units) and divided by the camera's
+        ``t_e / dt``, so their levels are ``gain * light`` whatever the bit depth and exposure.
+        Other frames are taken as they are: they must be in one unit for every camera.
+
+    Raises
+    ------
+    ValueError
+        Integer levels (raw DN) from cameras the rig file gives different bit depths: gains from them
+        would be off by ``2**`` the difference.
+    """
+    C = len(rigfile.cameras)
+    if Path(os.fspath(path)).suffix.lower() not in (".h5", ".hdf5"):
+        frames = per_camera(load_frames(path, "--flat")[0], C, "--flat")
+        bits = [_bit_depth(camera) for camera in rigfile.cameras]
+        if len({b for b in bits if b is not None}) > 1 and all(np.array_equal(f, np.round(f)) for f in frames):
+            depths = ", ".join(f"camera {c}: {b}" for c, b in enumerate(bits) if b is not None)
+            raise ValueError(
+                f"--flat: the cameras deliver different bit depths ({depths}) and the frames hold raw levels, "
+                "which would put 2**(the difference) into the gains; give the rsocl capture file (.h5) of the "
+                "flat field, or frames in one unit for all cameras (DN / (2**bit_depth - 1))"
+            )
+        return frames, np.full(C, dark)
+    from rsocl.files.hdf5 import load_capture_rig
+    from rsocl.hardware.capture_raw import load_raw
+
+    raw, rig = load_raw(path), load_capture_rig(path)
+    frames = per_camera([f for f in raw.frames if f.size], C, "--flat")
+    out, darks = [], []
+    for c, (frame, metas) in enumerate(zip(frames, raw.frame_meta)):
+        exposure = rig.cameras[c].t_e / rig.dt
+        full_scale = float(metas[0].get("full_scale") or exposure)
+        if frame.dtype.kind in "biu":
+            value = frame.astype(np.float64) * (full_scale / (2 ** int(metas[0]["bit_depth"]) - 1))
+        else:
+            value = frame.astype(np.float64)
+        out.append(value / exposure)
+        darks.append(dark * full_scale / exposure)
+    return out, np.asarray(darks)

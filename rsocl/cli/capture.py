@@ -40,12 +40,16 @@ def cmd_capture(args) -> int:
     from rsocl.cli.options import load_rig_file, progress_bar
     from rsocl.common import validation as check
     from rsocl.files.atomic import output_path
+    from rsocl.files.hdf5 import refuse_camera_capture
     from rsocl.hardware.capture import CaptureFailed, capture_sets
+    from rsocl.hardware.capture_file import PARTIAL_SUFFIX, check_partial
 
     quiet = bool(getattr(args, "quiet", False))
     check.positive_int("--sets", args.sets)  # named as typed, before the rig file is read (capture_sets checks again)
     check.positive("--timeout", args.timeout, "seconds")
-    output_path(args.out, "--out", inputs=(("--rig", args.rig),))
+    out = output_path(args.out, "--out", inputs=(("--rig", args.rig),))
+    check_partial(out.with_name(out.name + PARTIAL_SUFFIX), "--out")  # as typed (capture_sets checks again)
+    refuse_camera_capture(out, "--out")
     rigfile = load_rig_file(args.rig)  # a shape beyond the host's memory: refused here
     try:
         path = capture_sets(rigfile, args.out, sets=args.sets, timeout=args.timeout, progress=progress_bar(args))

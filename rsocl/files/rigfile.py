@@ -121,12 +121,21 @@ class RigFile:
         H = self.cameras[index].get("homography")
         return None if H is None else np.asarray(H, dtype=np.float64)
 
+    def scene_path(self, index: int):
+        """The video file a ``simulated`` camera ``index`` shows (``config.scene``), resolved against the rig
+        file's folder when it is relative (as ``row_map_file`` is); None for ``"builtin"`` or no scene."""
+        scene = self.cameras[index]["config"].get("scene")
+        if self.cameras[index]["backend"] != "simulated" or not _is_video_path(scene):
+            return None
+        return resolve_path(scene, self.path.parent if self.path is not None else None)
+
     def backends(self) -> list:
         """``[(backend name, config dict)]``, one per camera, in camera order.
 
         ``config`` is a copy of the camera's ``[camera.config]`` table (plus
-        ``address``). A ``simulated`` camera is a model of the rig itself, so its
-        config also receives, where it does not set them, the model keys
+        ``address``). A ``simulated`` camera is a model of the rig itself: a relative ``scene`` path is
+        resolved against the rig file's folder (:meth:`scene_path`), and its config also receives, where
+        it does not set them, the model keys
         :data:`SIMULATED_MODEL_KEYS`: ``shape``, ``dt``, ``mask``, ``t_e``,
         ``t_r``, ``t_a``, ``gain``, ``angle`` or ``row_map``, ``scene_frames``
         (the rig's ``T``, so every camera sees the same datacube) and ``index``.
@@ -136,6 +145,8 @@ class RigFile:
         for i, cam in enumerate(self.cameras):
             config = dict(cam["config"])
             if cam["backend"] == "simulated":
+                if _is_video_path(config.get("scene")):
+                    config["scene"] = os.fspath(self.scene_path(i))
                 model = {
                     "shape": list(self.shape),
                     "dt": rig.dt,
@@ -272,7 +283,7 @@ def save_rigfile(path, rigfile: RigFile) -> Path:
         if table.get("frames") == 1:
             del table["frames"]
         if cam["config"]:
-            table["config"] = cam["config"]
+            table["config"] = _config_for(rigfile, i, folder)
         tables.append(table)
     rig: dict = {"shape": list(rigfile.shape)}
     if rigfile.dt is not None:
@@ -286,6 +297,25 @@ def save_rigfile(path, rigfile: RigFile) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return path
+
+
+def _is_video_path(scene) -> bool:
+    return isinstance(scene, (str, os.PathLike)) and os.fspath(scene) != "builtin"
+
+
+def _config_for(rigfile: RigFile, index: int, folder: Path) -> dict:
+    """Camera ``index``'s config as written to a rig file in ``folder``: a relative simulated ``scene`` path
+    rewritten relative to ``folder``, so that it names the same file."""
+    config = dict(rigfile.cameras[index]["config"])
+    scene = config.get("scene")
+    source = rigfile.scene_path(index)
+    if source is not None and isinstance(scene, (str, os.PathLike)) and not Path(scene).is_absolute():
+        source = source.resolve()
+        try:
+            config["scene"] = Path(os.path.relpath(source, folder.resolve())).as_posix()
+        except ValueError:  # another drive (Windows)
+            config["scene"] = str(source)
+    return config
 
 
 _HEADER = "# rsocl rig file. Units: seconds (dt, t_e, t_r, t_a, t_d), degrees (angle), pixels (shape, roi).\n\n"

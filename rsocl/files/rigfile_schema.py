@@ -159,6 +159,7 @@ def check_camera(i, cam, shape, base_dir):
             array = np.asarray(H, dtype=np.float64)
         except (TypeError, ValueError):
             raise ValueError(f"{_where(i, 'homography')} must be a 3x3 list of numbers, got {H!r}") from None
+        _check_invertible(i, array)
         try:
             row_map_from_homography(array, shape)
         except ValueError as exc:
@@ -203,6 +204,19 @@ def check_camera(i, cam, shape, base_dir):
     except ValueError as exc:
         raise ValueError(f"camera[{i}]: {exc}") from None
     return out
+
+
+def _check_invertible(i, H):
+    """Refuse a singular 3x3 homography (it maps the plane onto a line), naming ``camera[i].homography``;
+    the calibration's test. Other shapes and NaN are left to the row map's own check."""
+    if H.shape != (3, 3) or not np.all(np.isfinite(H)):
+        return
+    det = float(np.linalg.det(H))
+    if abs(det) < 1e-12 * max(1.0, float(np.abs(H).max())) ** 3:
+        raise ValueError(
+            f"{_where(i, 'homography')} is singular (determinant {det:.3g}): it maps the reference grid onto "
+            "a line; a camera's homography must be invertible (rsocl calibrate measures it)"
+        )
 
 
 def _check_config_keys(i, config, backend):

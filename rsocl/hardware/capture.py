@@ -35,7 +35,9 @@ warning names (or the error of a failed run). The file's layout and its reader,
 Registration and units
 ----------------------
 Frames from the ``simulated`` backend (``frame.meta["registered"]``) are on the
-reference grid already. Other frames are warped onto it with the camera's
+reference grid already (a simulated sensor *is* the reference grid); one of a partial ROI,
+``frame.meta["roi"] = [x, y, width, height]`` on that grid, is put back in its place, 0 outside.
+Other frames are warped onto it with the camera's
 ``homography`` from the rig file (:func:`rsocl.hardware.calibration.warp_to_reference`,
 bilinear, 0 outside the sensor; the ROI origin is subtracted) or, without one, taken as registered (their shape
 must then equal the rig's). Integer frames are converted to model units as
@@ -46,6 +48,7 @@ must then equal the rig's). Integer frames are converted to model units as
 
 from __future__ import annotations
 
+import json
 import os
 import warnings
 from pathlib import Path
@@ -101,7 +104,10 @@ def _register(rigfile: RigFile, rig, index: int, frame) -> np.ndarray:
     else:
         value = image.astype(np.float64)
     H = rigfile.homography(index)
-    if H is not None and not frame.meta.get("registered", False):
+    registered = frame.meta.get("registered", False)
+    if registered and frame.meta.get("roi") is not None and value.shape != rig.shape:
+        value = _in_grid(value, frame.meta["roi"], rig.shape, index)
+    if H is not None and not registered:
         from rsocl.hardware.calibration import warp_to_reference
 
         origin = tuple(cam["roi"][:2]) if cam.get("roi") else (0, 0)
@@ -116,10 +122,26 @@ def _register(rigfile: RigFile, rig, index: int, frame) -> np.ndarray:
     return value
 
 
+def _in_grid(value, roi, shape, index) -> np.ndarray:
+    """A frame already on the reference grid but cut to ``roi`` (``[x, y, width, height]``, pixels) put back
+    in its place on a grid of ``shape`` ``(m, n)``, 0 outside."""
+    x, y, width, height = (int(v) for v in roi)
+    if value.shape != (height, width) or x < 0 or y < 0 or x + width > shape[1] or y + height > shape[0]:
+        raise ValueError(
+            f"camera {index}: a registered frame of shape {value.shape} with roi [x, y, width, height] = "
+            f"{[x, y, width, height]} does not fit the rig's shape {shape}"
+        )
+    grid = np.zeros(shape)
+    grid[y : y + height, x : x + width] = value
+    return grid
+
+
 # ---------------------------------------------------------------------- capture
-def _label(index, backend, config):
+def _label(index, backend, config, name=None):
+    """How messages name camera ``index``: ``camera 1 "north" (aravis 192.168.10.21)``."""
     address = config.get("address")
-    return f"camera {index} ({backend}{' ' + str(address) if address is not None else ''})"
+    called = "" if name is None else f" {json.dumps(name)}"
+    return f"camera {index}{called} ({backend}{' ' + str(address) if address is not None else ''})"
 
 
 def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path:
@@ -176,13 +198,15 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         for cam in rigfile.cameras
         if isinstance(cam.get("row_map_file"), (str, os.PathLike))
     ]
+    reads += [(f"camera[{i}].config.scene", rigfile.scene_path(i)) for i in range(len(rigfile.cameras))]
+    reads = [(what, path) for what, path in reads if path is not None]
     out = output_path(out_path, "out", inputs=reads)
     partial = output_path(out.with_name(out.name + PARTIAL_SUFFIX), "out", inputs=reads)
     check_partial(partial)
     refuse_camera_capture(out, "out")
 
     backends = rigfile.backends()
-    labels = [_label(i, b, c) for i, (b, c) in enumerate(backends)]
+    labels = [_label(i, b, c, cam.get("name")) for i, ((b, c), cam) in enumerate(zip(backends, rigfile.cameras))]
     cameras = [load("rsocl.cameras", b)(c, name=label) for (b, c), label in zip(backends, labels)]
 
     writer = CaptureWriter(partial, rig, rigfile, labels, sets, timeout)

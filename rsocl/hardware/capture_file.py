@@ -1,7 +1,8 @@
 """The file :func:`rsocl.hardware.capture.capture_sets` writes: raw frames as they arrive, registered sets.
 
 :class:`CaptureWriter` writes it (to ``<out>.partial``, flushed after every frame);
-:func:`publish` renames it to ``<out>``; :func:`load_raw` reads the raw side back.
+:func:`publish` renames it to ``<out>``; :func:`load_raw` (from :mod:`rsocl.hardware.capture_raw`) reads the
+raw side back.
 
 Layout
 ------
@@ -13,9 +14,11 @@ rig with each camera's exposure as its device applied it, attribute ``meta``), r
   in model units (written when set 0 is complete);
 - ``snapshot_sets`` ``(S, K, m, n)`` float64: every complete set, registered;
 - ``truth`` ``(T, m, n)``: the datacube of set 0, when every camera can tell it
-  (the ``simulated`` backend's ``scene_truth``);
+  (the ``simulated`` backend's ``scene_truth``) and all tell the same one (else a warning says why
+  there is none);
 - ``raw/<i>`` ``(N_i, h, w)``: camera ``i``'s frames as delivered (its dtype),
-  attributes ``backend``, ``name``, ``pixel_format``, ``bit_depth``,
+  attributes ``backend``, ``name`` (the label messages use), ``camera_name`` (the rig file's
+  ``name``, when it gives one), ``pixel_format``, ``bit_depth``,
   ``exposure`` (s, as the camera reports it), ``roi`` and ``config`` (JSON);
 - ``raw_meta/<i>/set``, ``.../timestamp`` (s), ``.../meta`` (JSON of the
   frame's metadata): one entry per raw frame;
@@ -23,7 +26,8 @@ rig with each camera's exposure as its device applied it, attribute ``meta``), r
   ``"failed"``, ``"interrupted"``), ``sets_complete`` and, after a failure,
   ``failure`` (JSON ``{"camera", "set", "phase", "type", "error"}``; ``set`` is
   null for failures while opening or configuring). The same status, failure and
-  per-camera settings are in ``meta``.
+  per-camera settings are in ``meta`` (``meta["cameras"][i]``: ``backend``, ``name`` the label,
+  ``camera_name`` the rig file's ``name`` or null, and the settings applied).
 """
 
 from __future__ import annotations
@@ -33,12 +37,12 @@ import json
 import os
 import time
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from rsocl.files.rigfile import RigFile
+from rsocl.hardware.capture_raw import RawCapture, load_raw
 
 __all__ = ["CaptureWriter", "check_partial", "readable", "publish", "RawCapture", "load_raw", "PARTIAL_SUFFIX"]
 
@@ -137,7 +141,10 @@ class CaptureWriter:
             "started": _now(),
             "finished": None,
             "warnings": [],
-            "cameras": [{"backend": b, "name": label} for (b, _), label in zip(rigfile.backends(), labels)],
+            "cameras": [
+                {"backend": cam["backend"], "name": label, "camera_name": cam.get("name")}
+                for cam, label in zip(rigfile.cameras, labels)
+            ],
             "units": "snapshots in model units (a scene in [0, 1] gives [0, gain*t_e/dt])",
         }
         self.h5.attrs["capture_status"] = "running"
@@ -206,6 +213,8 @@ class CaptureWriter:
             )
             ds.attrs["backend"] = camera.backend
             ds.attrs["name"] = camera.name
+            if self.meta["cameras"][index].get("camera_name") is not None:
+                ds.attrs["camera_name"] = self.meta["cameras"][index]["camera_name"]
             ds.attrs["pixel_format"] = str(frame.pixel_format)
             ds.attrs["bit_depth"] = int(frame.bit_depth)
             ds.attrs["config"] = _json(camera.config)
@@ -272,10 +281,18 @@ class CaptureWriter:
         if not all(callable(getattr(cam, "scene_truth", None)) for cam in cameras):
             return None
         try:
-            truth = np.asarray(cameras[0].scene_truth(0), dtype=np.float64)
+            truths = [np.asarray(cam.scene_truth(0), dtype=np.float64) for cam in cameras]
         except Exception as exc:  # the truth is a bonus, never a reason to fail a capture
             self.warn(f"no ground truth: {type(exc).__name__}: {exc}")
             return None
+        truth = truths[0]
+        for i, other in enumerate(truths[1:], start=1):
+            if other.shape != truth.shape or not np.array_equal(other, truth):
+                self.warn(
+                    f"no ground truth: camera {i} sees another scene than camera 0 (their [camera.config] "
+                    "scene, scene_seed or scene_sets differ), so no one datacube is the truth of this capture"
+                )
+                return None
         if truth.ndim == 3 and truth.shape[0] > self.rig.T:  # the scene outlasts the exposures: its first T
             truth = truth[: self.rig.T]
         if truth.shape != (self.rig.T,) + self.rig.shape:
@@ -326,73 +343,3 @@ def publish(partial: Path, out: Path) -> None:
     fsync_file(partial)
     os.replace(partial, out)
     fsync_directory(out.parent if str(out.parent) else Path("."))
-
-
-# ---------------------------------------------------------------------- reading
-@dataclass(frozen=True)
-class RawCapture:
-    """The raw side of a file written by :func:`capture_sets`.
-
-    Attributes
-    ----------
-    frames : list of ndarray
-        Per camera, ``(N_i, h, w)`` frames as delivered (``N_i`` may differ after a failure).
-    sets, timestamps : list of ndarray
-        Per camera and frame: set index, timestamp (s).
-    frame_meta : list of list of dict
-        Per camera and frame: the backend's metadata (plus pixel format and bit depth).
-    snapshot_sets : ndarray, shape (S, K, m, n), or None
-        The complete sets (the first ``sets_complete`` rows), registered, model units.
-    status : str
-        ``"complete"``, ``"failed"``, ``"interrupted"`` (or ``"running"`` in a ``.partial`` file).
-    sets_complete : int
-    failure : dict or None
-        ``camera``, ``set``, ``phase``, ``type``, ``error``.
-    meta : dict
-        The capture's ``meta`` attribute.
-    """
-
-    frames: list
-    sets: list
-    timestamps: list
-    frame_meta: list
-    snapshot_sets: np.ndarray | None
-    status: str
-    sets_complete: int
-    failure: dict | None
-    meta: dict
-
-
-def load_raw(path) -> RawCapture:
-    """Read the raw frames, their metadata and the capture status of a capture file (or its ``.partial``)."""
-    from rsocl.files.hdf5_header import open_checked, str_attr
-
-    with open_checked(path, "capture") as h5:
-        n_cameras = int(h5.attrs["n_cameras"])
-        frames, sets, stamps, metas = [], [], [], []
-        for i in range(n_cameras):
-            if f"raw/{i}" in h5:
-                frames.append(h5[f"raw/{i}"][()])
-                group = h5[f"raw_meta/{i}"]
-                sets.append(group["set"][()])
-                stamps.append(group["timestamp"][()])
-                metas.append([json.loads(s.decode() if isinstance(s, bytes) else s) for s in group["meta"][()]])
-            else:
-                frames.append(np.zeros((0, 0, 0)))
-                sets.append(np.zeros(0, dtype=np.int64))
-                stamps.append(np.zeros(0))
-                metas.append([])
-        failure = json.loads(str_attr(h5, "failure", str(path))) if "failure" in h5.attrs else None
-        status = str_attr(h5, "capture_status", str(path)) if "capture_status" in h5.attrs else "unknown"
-        complete = h5.attrs.get("sets_complete")  # rows of snapshot_sets past it: a set never completed
-        return RawCapture(
-            frames=frames,
-            sets=sets,
-            timestamps=stamps,
-            frame_meta=metas,
-            snapshot_sets=h5["snapshot_sets"][:complete] if "snapshot_sets" in h5 else None,
-            status=status,
-            sets_complete=int(complete or 0),
-            failure=failure,
-            meta=json.loads(str_attr(h5, "meta", str(path))),
-        )

@@ -26,8 +26,8 @@ LARGEST_MARGIN = 1.2
 def _marker_order(points: np.ndarray, first, angle, mirrored) -> np.ndarray:
     centre = points.mean(axis=0)
     theta = np.arctan2(points[:, 1] - centre[1], points[:, 0] - centre[0])
-    if first is None:
-        start = _TOP_LEFT + math.radians(check.finite("angle", angle))
+    if first is None:  # a mirror turns the reference's y axis the other way: its top-left lies at -_TOP_LEFT
+        start = (-_TOP_LEFT if mirrored else _TOP_LEFT) + math.radians(check.finite("angle", angle))
         first = int(np.argmin(np.abs(np.angle(np.exp(1j * (theta - start))))))
     elif isinstance(first, bool) or not isinstance(first, (int, np.integer)) or not 0 <= first < len(points):
         raise ValueError(f"first must be an index in [0, {len(points) - 1}], got {first!r}")
@@ -54,12 +54,14 @@ def order_markers(points, *, first=None, angle=0.0, mirrored=False) -> np.ndarra
         (``Camera.angle`` of ``docs/model.md``). It turns the "top-left" start, so
         that a camera rotated by ``angle`` lists the same physical markers in
         the same order as the reference. Ignored when ``first`` is given.
+        For a mirrored camera, ``angle`` is the direction in which it sees
+        the reference x axis (:func:`~rsocl.hardware.calibration.homography_angle`
+        of its homography): the start is then where a mirror puts the
+        reference's top-left.
     mirrored : bool
         The camera sees the target mirrored (e.g. through a beam splitter):
-        count counter-clockwise instead of clockwise. The geometric start
-        (``angle``) assumes an unmirrored view, so give ``first`` (e.g.
-        ``reference="largest"`` in :func:`detect_markers`) for mirrored
-        cameras.
+        count counter-clockwise instead of clockwise, from the mirrored
+        start.
 
     Returns
     -------
@@ -100,8 +102,9 @@ def detect_markers(
     ----------
     image : array_like, shape (rows, columns)
         One camera frame of the target (any real dtype).
-    n : int
-        Number of markers (>= 4 for a homography).
+    n : int or None
+        Number of markers (>= 4 for a homography); None: every blob found
+        (the markers of a reference frame, however many the target has).
     polarity : {"bright", "dark"}
         Bright dots on a darker background, or dark dots on a brighter one.
     threshold : float, optional
@@ -161,7 +164,7 @@ def detect_markers(
     from skimage.measure import label, regionprops
 
     image = _image("image", image)
-    n = check.positive_int("n", n)
+    n = None if n is None else check.positive_int("n", n)
     polarity = check.choice("polarity", polarity, {"bright", "dark"})
     smooth = check.non_negative("smooth", smooth, "pixels")
     min_area = check.positive_int("min_area", min_area)
@@ -178,11 +181,13 @@ def detect_markers(
         level = level if polarity == "bright" else -level
     labels = label(smoothed > level, connectivity=2)
     regions = [r for r in regionprops(labels) if r.area >= min_area]
-    if len(regions) < n:
+    if n is None:
+        n = len(regions)
+    if len(regions) < max(n, 1):
         raise ValueError(
-            f"found {len(regions)} marker blob(s) of >= {min_area} pixels, need {n}; threshold "
+            f"found {len(regions)} marker blob(s) of >= {min_area} pixels, need {max(n, 1)}; threshold "
             f"{level if polarity == 'bright' else -level:.6g} ({polarity} dots). Check the "
-            f"polarity, or pass threshold="
+            f"polarity, or give a threshold (--threshold on the command line)"
         )
     regions.sort(key=lambda r: r.area, reverse=True)
     chosen = regions[:n]

@@ -14,7 +14,12 @@ no camera viewing a flat target changes:
   factors across the grid, or one direction is stretched far more than the other.
 
 With five or more markers the fit is over-determined, and the leave-one-out error (each marker
-predicted by the homography of the others) measures it honestly.
+predicted by the homography of the others) measures it honestly. Its size depends on how far the
+others extrapolate to the marker left out (four markers fitted exactly amplify their detection errors
+many times), so the fit is judged by its rms reprojection error instead (:func:`check_fit`): detected
+markers are placed to a small fraction of a pixel (docs/implementation_notes.md), a wrong pairing is
+off by pixels. :func:`pairing_alternatives` then says which other pairing fits (a mirror image, an
+order that starts at another marker).
 """
 
 from __future__ import annotations
@@ -34,7 +39,16 @@ __all__ = [
     "check_rotation",
     "leave_one_out_errors",
     "fit_summary",
+    "MAX_RMS",
+    "check_fit",
+    "pairing_alternatives",
+    "fit_refusal",
+    "pairing_hint",
 ]
+
+#: Largest rms reprojection error, sensor pixels, of a fit of five or more markers: several times what
+#: the centroids of :func:`~rsocl.hardware.calibration.detect_markers` allow, well below a wrong pairing's.
+MAX_RMS = 1.0
 
 #: Largest ratio of the local scale (sensor pixels per reference pixel) between two corners of the grid.
 MAX_SCALE_RATIO = 3.0
@@ -169,4 +183,114 @@ def fit_summary(registration) -> str:
     return (
         f"{N} markers: rms reprojection {registration.rms_error:.3f} px, leave-one-out largest "
         f"{float(np.nanmax(loo)):.3f} px{note}"
+    )
+
+
+def check_fit(registration, *, limit=MAX_RMS):
+    """The rms reprojection error of a registration of five or more markers when it exceeds ``limit``.
+
+    Parameters
+    ----------
+    registration : CameraRegistration
+        The fit (:func:`~rsocl.hardware.calibration.register_camera`).
+    limit : float
+        Largest rms reprojection error, sensor pixels (default :data:`MAX_RMS`).
+
+    Returns
+    -------
+    float or None
+        The rms error (sensor pixels) of a fit above ``limit``; None for a fit within it, and for four
+        markers (they fit exactly and cannot check it).
+    """
+    if len(registration.reference_points) < 5:
+        return None
+    rms = registration.rms_error
+    return rms if rms > limit else None
+
+
+def pairing_alternatives(reference_points, sensor_points):
+    """The other pairings of markers ordered around their centre, best fit first.
+
+    The markers of :func:`~rsocl.hardware.calibration.detect_markers` come in a cyclic order; a wrong
+    start (a turn) or a wrong sense (a mirror) pairs them wrongly. This fits every start in both senses.
+
+    Parameters
+    ----------
+    reference_points, sensor_points : array_like, shape (N, 2)
+        The markers as paired, ``(x, y)`` pixels, N >= 5.
+
+    Returns
+    -------
+    list of (float, bool, int, ndarray)
+        ``(rms, reversed, start, H)``: the rms reprojection error (sensor pixels) of the homography
+        ``H`` fitted to ``sensor_points[order]``, whether ``order`` turns the other way
+        (``[start, start - 1, ...]``) or the same way (``[start, start + 1, ...]``), sorted by rms;
+        the pairing as given (``start`` 0, same way) is left out.
+    """
+    from rsocl.hardware.calibration.homography import estimate_homography, reprojection_error
+
+    ref = _points("reference_points", reference_points, minimum=5)
+    sensor = _points("sensor_points", sensor_points, minimum=5)
+    N = len(ref)
+    out = []
+    for turned in (False, True):
+        for start in range(N):
+            if not turned and start == 0:
+                continue
+            order = (start - np.arange(N)) % N if turned else (start + np.arange(N)) % N
+            try:
+                H = estimate_homography(ref, sensor[order])
+                rms = float(np.sqrt(np.mean(reprojection_error(H, ref, sensor[order]) ** 2)))
+            except ValueError:  # a degenerate pairing: no homography
+                continue
+            out.append((rms, turned, start, H))
+    return sorted(out, key=lambda item: item[0])
+
+
+def fit_refusal(registration, rms, shape, *, camera, key="angle", mirrored=False, limit=MAX_RMS) -> str:
+    """One line on a fit whose rms error ``rms`` (sensor pixels) exceeds ``limit``, naming the pairing that
+    fits instead (:func:`pairing_hint`) and the options of ``rsocl calibrate`` that give it.
+
+    ``camera`` is the camera's index, ``key`` the rig file key that states its rotation (``angle`` or
+    ``homography``), ``mirrored`` whether ``--mirrored`` names it, ``shape`` the reference grid ``(m, n)``.
+    """
+    text = (
+        f"the markers fit a homography with rms reprojection {rms:.3f} px, more than {limit:g} px (detected "
+        "markers are placed to a fraction of a pixel): they are paired wrongly, or the target is not flat"
+    )
+    hint = pairing_hint(
+        registration.reference_points, registration.sensor_points, shape, camera=camera, key=key, mirrored=mirrored
+    )
+    return text + (hint or "; check the markers' order (--markers-ref, the 'markers' array, --identify)")
+
+
+def pairing_hint(reference_points, sensor_points, shape, *, camera, key="angle", mirrored=False, limit=MAX_RMS):
+    """``"; they fit a mirror image (...): give --mirrored C ..."``: the pairing of five or more markers in
+    cyclic order that fits within ``limit`` (sensor pixels) instead, and the options that give it; None
+    when none does (arguments as :func:`fit_refusal`'s)."""
+    from rsocl.hardware.calibration.homography import estimate_homography, homography_angle, reprojection_error
+
+    if len(reference_points) < 5:
+        return None
+    alternatives = pairing_alternatives(reference_points, sensor_points)
+    try:
+        H0 = estimate_homography(reference_points, sensor_points)
+        given = float(np.sqrt(np.mean(reprojection_error(H0, reference_points, sensor_points) ** 2)))
+    except ValueError:  # the pairing as given fits no homography
+        given = float("inf")
+    if not alternatives or alternatives[0][0] > min(limit, given / 2):
+        return None
+    best, turned, _, H = alternatives[0]
+    angle = homography_angle(H, shape)
+    fits = f"rms {best:.3f} px, rotation {angle:.0f}°"
+    if turned and not mirrored:
+        return (
+            f"; they fit a mirror image ({fits}): camera {camera} sees the target mirrored: give --mirrored "
+            f"{camera}, with camera[{camera}].angle = {angle:.0f} (it starts the markers' order) or --identify largest"
+        )
+    if turned:
+        return f"; they fit unmirrored ({fits}): camera {camera} sees no mirror; leave it out of --mirrored"
+    return (
+        f"; they fit in an order that starts at another marker ({fits}): the rig file's camera[{camera}].{key} "
+        f"starts the order; give camera[{camera}].angle = {angle:.0f}, or --identify largest"
     )
