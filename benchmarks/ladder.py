@@ -32,7 +32,7 @@ from rsocl.solver.ladder import QUALITIES, RUNGS
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality import CASES  # noqa: E402
+from quality import CASES, SIZES, check_sizes  # noqa: E402
 from quality_scenes import available, case_data  # noqa: E402
 
 #: The runs of a case, in the table's order: (label, keyword arguments of rsocl.reconstruct).
@@ -113,15 +113,40 @@ def pareto_plot(path, results) -> None:
     fig.savefig(path, dpi=90)
 
 
+def selected(args) -> list:
+    """The cases of :data:`quality.CASES` that ``--sizes`` and ``--scenes`` pick."""
+    return [
+        (scene, size, noise)
+        for scene, size, noise in CASES
+        if size in args.sizes and (args.scenes is None or scene in args.scenes)
+    ]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="grid sides to run, pixels")
+    parser.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=list(SIZES),
+        help="grid sides to run, pixels: 64 and/or 128 (the cases')",
+    )
     parser.add_argument("--scenes", nargs="+", default=None, help="scenes of quality.CASES to run (default: all)")
     parser.add_argument("--device", default=None)
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-ladder-cache.json")
     parser.add_argument("--out", type=Path, default=DOCS / "quality_ladder.md", help="the Markdown page to write")
     parser.add_argument("--plot", type=Path, default=None, help="a PNG of the Pareto front")
     args = parser.parse_args(argv)
+    check_sizes(parser, args.sizes)
+    scenes = sorted({scene for scene, _, _ in CASES})
+    unknown = sorted(set(args.scenes or ()) - set(scenes))
+    if unknown:
+        parser.error(f"--scenes: no case has {', '.join(unknown)}; the cases' scenes are {', '.join(scenes)}")
+    if not selected(args):
+        parser.error(
+            f"--sizes {' '.join(map(str, args.sizes))} and --scenes {' '.join(args.scenes)} select no case; "
+            f"the cases: {', '.join(f'{scene} at {size}' for scene, size, _ in CASES if scene in args.scenes)}"
+        )
     cache = Cache(args.cache)
     op = rsocl.RollingShutterOperator(rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6), device=args.device)
     page = header_lines("The quality ladder", op.device, None if argv is None else [__file__, *argv])
@@ -138,9 +163,7 @@ def main(argv=None):
     ]
     print("\n".join(page), flush=True)
     results, skipped = [], []
-    for scene, size, noise in CASES:
-        if size not in args.sizes or (args.scenes is not None and scene not in args.scenes):
-            continue
+    for scene, size, noise in selected(args):
         if not available(scene):
             skipped.append(scene)
             continue

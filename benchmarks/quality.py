@@ -63,6 +63,19 @@ CASES = (
     + [("builtin", 128, "none"), ("runner40@1", 128, "none"), ("builtin", 128, "poisson")]
 )
 
+#: The grid sides the cases have, pixels.
+SIZES = tuple(sorted({size for _, size, _ in CASES}))
+
+
+def check_sizes(parser, sizes):
+    """Refuse (``parser.error``, naming ``--sizes``) sizes that no case of :data:`CASES` has."""
+    unknown = sorted(set(sizes) - set(SIZES))
+    if unknown:
+        parser.error(
+            f"--sizes: no case has {', '.join(map(str, unknown))} pixels; the cases' sizes are "
+            f"{' and '.join(map(str, SIZES))}"
+        )
+
 
 def run_case(scene, size, noise, args, cache):
     """The results of one case (a dict), computed or from the cache."""
@@ -126,14 +139,21 @@ def row(scene, size, noise, r):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128], help="grid sides to run, pixels")
+    parser.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=list(SIZES),
+        help="grid sides to run, pixels: 64 and/or 128 (the cases')",
+    )
     parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--device", default=None)
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-quality-cache.json")
     parser.add_argument("--out", type=Path, default=DOCS / "quality.md", help="the Markdown page to write")
     args = parser.parse_args(argv)
-    if args.iterations < 10 or any(s < 16 for s in args.sizes):
-        raise SystemExit("--iterations must be >= 10 and --sizes >= 16")
+    if args.iterations < 10:
+        parser.error(f"--iterations must be >= 10, got {args.iterations}")
+    check_sizes(parser, args.sizes)
     cache = Cache(args.cache)
     op = rsocl.RollingShutterOperator(rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6), device=args.device)
     page = header_lines("Self-tuned reconstruction quality", op.device, None if argv is None else [__file__, *argv])

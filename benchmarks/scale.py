@@ -5,12 +5,14 @@ date, commit and command that measured them, and docs/scale.md is written from a
 
 * ``seams``: the paper's 4-camera array at 256x256 (t_e = 180 µs, t_r = 35 µs), reconstructed
   whole and in 128x128 tiles with a halo of 16: PSNR of each against the truth, their largest
-  and mean difference, and docs/scale_seams.png (the middle sub-frame, both reconstructions and
-  their difference with the tile borders drawn).
+  and mean difference, and a picture (``--picture``; default ``scale_seams.png`` beside ``--results``,
+  docs/scale_seams.png for the default results): the middle sub-frame, both reconstructions and
+  their difference with the tile borders drawn.
 * ``sensor``: the paper camera's whole 1024x1280 sensor, 4 cameras, t_r = 26 µs, t_e = 180 µs,
   dt = t_r (T = 1286 sub-frames). The capture (an analytic scene, simulated row block by row
   block) is written to an HDF5 file, then ``rsocl reconstruct CAPTURE --out rec.zarr --tile 128
-  128`` runs in this process on Dask's local scheduler; wall time and this process's peak RSS
+  128`` (``--sensor-shape``: another sensor, tiles of at most 128 pixels a side) runs in this process
+  on Dask's local scheduler; wall time and this process's peak RSS
   (which includes the OpenCL device's buffers on a CPU device) are reported, and the PSNR of a
   central 256x256 crop over the kept sub-frames. Run it alone (``--parts sensor``) so that the
   peak RSS is the reconstruction's.
@@ -45,6 +47,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import DOCS, git_revision, header_lines, write_page  # noqa: E402
 
 RESULTS = DOCS / "scale.json"
+#: The sensor part's tile side, pixels (a smaller ``--sensor-shape`` side: that side).
+SENSOR_TILE = 128
+#: The smallest ``--sensor-shape`` side, pixels.
+MIN_SENSOR_SIDE = 16
 
 
 # ---------------------------------------------------------------------- scenes
@@ -115,11 +121,18 @@ def part_seams(args):
         untiled_seconds=untiled_s,
         tiled_seconds=tiled_result.seconds,
     )
-    _seam_picture(truth, untiled, tiled, tile_grid(rig.shape, (128, 128), 16), (kept.start + kept.stop) // 2)
+    picture = picture_path(args)
+    _seam_picture(truth, untiled, tiled, tile_grid(rig.shape, (128, 128), 16), (kept.start + kept.stop) // 2, picture)
+    print(f"seam picture written to {picture}", flush=True)
     return out
 
 
-def _seam_picture(truth, untiled, tiled, grid, s):
+def picture_path(args) -> Path:
+    """Where the seams part draws its picture: ``--picture``, else ``scale_seams.png`` beside ``--results``."""
+    return Path(args.picture) if args.picture else Path(args.results).with_name("scale_seams.png")
+
+
+def _seam_picture(truth, untiled, tiled, grid, s, path):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -143,7 +156,7 @@ def _seam_picture(truth, untiled, tiled, grid, s):
     for ax in axes:
         ax.set_axis_off()
     fig.tight_layout()
-    with atomic_path(DOCS / "scale_seams.png") as tmp:
+    with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=80)
     plt.close(fig)
 
@@ -154,6 +167,7 @@ def part_sensor(args):
     from rsocl.scale.store import load_store
 
     rig = rsocl.Rig.paper_array(4, tuple(args.sensor_shape), t_e=180e-6, t_r=26e-6)
+    tile = [str(min(SENSOR_TILE, side)) for side in rig.shape]
     work = Path(args.workdir or tempfile.mkdtemp(prefix="rsocl-sensor-"))
     capture, store = work / "sensor.h5", work / "sensor.zarr"
     began = time.perf_counter()
@@ -165,8 +179,7 @@ def part_sensor(args):
         "--out",
         str(store),
         "--tile",
-        "128",
-        "128",
+        *tile,
         "--iterations",
         str(args.sensor_iterations),
     ]
@@ -350,15 +363,40 @@ def main(argv=None):
     parser.add_argument("--sensor-iterations", type=int, default=20, help="whole-sensor part (default 20)")
     parser.add_argument("--sets", type=int, default=16, help="sets of the cluster part (default 16)")
     parser.add_argument("--rounds", type=int, default=2, help="alternating rounds of the cluster part (default 2)")
-    parser.add_argument("--sensor-shape", type=int, nargs=2, default=[1024, 1280], help="(default 1024 1280)")
+    parser.add_argument(
+        "--sensor-shape",
+        type=int,
+        nargs=2,
+        default=[1024, 1280],
+        metavar=("ROWS", "COLUMNS"),
+        help=f"the sensor part's grid, each side >= {MIN_SENSOR_SIDE}; tiles of at most {SENSOR_TILE} pixels "
+        "a side (default 1024 1280)",
+    )
     parser.add_argument(
         "--results",
         default=str(RESULTS),
         help="JSON file the parts' numbers are kept in (default docs/scale.json, which also writes docs/scale.md)",
     )
+    parser.add_argument(
+        "--picture",
+        default=None,
+        help="the seams part's PNG (default: scale_seams.png beside --results; docs/scale_seams.png by default)",
+    )
     parser.add_argument("--merge", nargs="*", default=[], help="results files of other runs to add first")
     parser.add_argument("--workdir", default=None, help="where the sensor's capture and store go (default: a temp dir)")
     args = parser.parse_args(argv)
+    if min(args.sensor_shape) < MIN_SENSOR_SIDE:
+        parser.error(
+            f"--sensor-shape: each side must be >= {MIN_SENSOR_SIDE} pixels, "
+            f"got {' '.join(map(str, args.sensor_shape))}"
+        )
+    for name in ("iterations", "sensor_iterations", "sets", "rounds"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+    checked = [(Path(args.results), "--results")] + [(picture_path(args), "--picture")] * ("seams" in args.parts)
+    for path, option in checked:
+        if not path.parent.is_dir():
+            parser.error(f"{option}: no folder {path.parent}")
     argv = sys.argv if argv is None else [sys.argv[0]] + list(argv)
     results_path = Path(args.results)
     for name in args.parts:

@@ -7,7 +7,7 @@ sweep around the defaults, so the defaults in rsocl.solver.problem.DEFAULTS can 
 PSNR in dB with peak 1 (videos scaled to [0, 1]). Prints a Markdown table and writes it to
 docs/solver_settings.md (``--out``) with the machine, commit and date it was measured on.
 
-    python benchmarks/solver_settings.py [--size 64] [--iterations 300] [--quick] [--out docs/quality.md]
+    python benchmarks/solver_settings.py [--size 64] [--iterations 300] [--quick] [--out docs/solver_settings.md]
 """
 
 from __future__ import annotations
