@@ -385,3 +385,13 @@ def test_a_gap_set_in_a_batch_gets_the_default_lam_it_gets_alone():
     assert batch.params["lam"] == pytest.approx([one.params["lam"] for one in alone])
     for i, one in enumerate(alone):
         np.testing.assert_allclose(batch.datacube[i], one.datacube, atol=1e-12)
+
+
+def test_a_set_that_never_moves_is_refused_in_a_batch_as_alone(sets):
+    # under tol it stops at its second iteration; its own two records decide, as in its single-set run
+    rig, _, g = sets
+    kw = dict(iterations=30, tol=1e-2, tv_iterations=4, tune=False, lam=0.1)
+    with pytest.raises(FloatingPointError, match=r"^ADMM never moved: .* over 2 iterations"):
+        rsocl.reconstruct(g[1], rig, eta=1e30, **kw)
+    with pytest.raises(FloatingPointError, match=r"^ADMM never moved in set\(s\) \[1\]: .* over 2 iterations"):
+        rsocl.reconstruct(g[:2], rig, eta=[0.2, 1e30], **kw)

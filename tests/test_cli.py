@@ -839,3 +839,18 @@ def test_sigterm_ends_a_command_as_ctrl_c_does_saying_what_was_kept(tmp_path, ca
     assert main(["reconstruct", str(cap), "--out", str(rec), "--fixed", "--quiet"]) == 143
     assert capsys.readouterr().err == "rsocl reconstruct: terminated: nothing written\n" and not rec.exists()
     assert signal.getsignal(signal.SIGTERM) is before  # main put the handler back
+
+
+def test_an_interrupt_while_drawing_the_pictures_says_the_result_is_written(tmp_path, capsys, monkeypatch):
+    import rsocl.analysis.visual as visual
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    cap, rec = tmp_path / "cap.h5", tmp_path / "rec.h5"
+    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "12", "12", "--quiet"]) == 0
+    monkeypatch.setattr(visual, "comparison_gif", interrupted)
+    capsys.readouterr()
+    assert main(["reconstruct", str(cap), "--out", str(rec), "--fixed", "--iterations", "2", "--quiet"]) == 130
+    assert capsys.readouterr().err == f"rsocl reconstruct: interrupted: {rec} written; the pictures are not all drawn\n"
+    assert rec.exists()

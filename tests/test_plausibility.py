@@ -363,3 +363,13 @@ def test_an_npz_video_claiming_ten_billion_elements_is_refused_naming_the_file_a
         r"header claims \(10,000,000,000 elements\)",
     ):
         load_video(tmp_path / "video.npz")
+
+
+def test_the_far_eta_warning_counts_each_sets_own_iterations():
+    rig, _, g = _demo()
+    psi = float(np.max(RollingShutterOperator(rig).psi))
+    with pytest.warns(RuntimeWarning, match=r"far from the data in set\(s\) \[1\]: .* after \d iterations "):
+        batch = rsocl.reconstruct(
+            np.stack([g, g]), rig, eta=[0.2, 2000 * psi], lam=0.1, tune=False, iterations=30, tol=1e-2
+        )
+    assert batch.set(1).params["iterations_run"] < batch.params["iterations_run"]

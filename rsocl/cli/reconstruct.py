@@ -133,7 +133,7 @@ def cmd_reconstruct(args) -> int:
         kept = save_result(out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth)
         with _written(out, [kept]):
             comparison_gif(gif, truth, result.datacube)
-        files = [out, gif, *tuning_plot_files(args, result.params, gif)]
+            files = [out, gif, *tuning_plot_files(args, result.params, gif)]
         say(args, "wrote " + ", ".join(str(p) for p in files) + kept_note([kept]))
         return 0
     with _interrupted("nothing written, the files already there are unchanged"):
@@ -144,7 +144,7 @@ def cmd_reconstruct(args) -> int:
         _write_sets(args, batch, capture.rig, truth, out, earlier)
     with _written(f"{set_path(out, 0)} .. {set_path(out, batch.batch - 1)}", earlier):
         comparison_gif(gif, truth, batch.set(0).datacube)
-    plots = tuning_plot_files(args, batch.set(0).params, gif)
+        plots = tuning_plot_files(args, batch.set(0).params, gif)
     pictures = ", ".join(map(str, [gif, *plots]))
     say(args, f"wrote {set_path(out, 0)} .. {set_path(out, batch.batch - 1)}, {pictures}" + kept_note(earlier))
     return 0
@@ -193,14 +193,20 @@ def _interrupted(kept):
 
 @contextlib.contextmanager
 def _written(results, kept):
-    """Around a picture's write after the results: a failed write (a full disk) says the results are written."""
+    """Around the pictures' writes after the results: a failed write (a full disk) or an interrupt says the
+    results are written."""
     from rsocl.files.atomic import OutputError
 
+    written = f"{results} written" + kept_note(kept).replace(" (", ", ", 1).rstrip(")")
     try:
         yield
     except OutputError as exc:
-        exc.strerror = f"{exc.strerror}; {results} written" + kept_note(kept).replace(" (", ", ", 1).rstrip(")")
+        exc.strerror = f"{exc.strerror}; {written}"
         raise
+    except KeyboardInterrupt as exc:
+        if str(exc):
+            raise
+        raise type(exc)(f"{written}; the pictures are not all drawn") from None
 
 
 def _reconstruct_sets(args, sets, rig):

@@ -123,13 +123,21 @@ class _History:
         where = f" in set(s) {np.flatnonzero(far).tolist()}" if np.ndim(self.values["residual"][-1]) else ""
         warnings.warn(
             f"ADMM ended far from the data{where}: the residual is {np.round(last[far], 4).tolist()} after "
-            f"{len(self.values['residual'])} iterations with eta = {np.round(eta[far], 6).tolist()}, over "
+            f"{self._ran(far)} iterations with eta = {np.round(eta[far], 6).tolist()}, over "
             f"{FAR_ETA:g} times the data term's curvature (psi up to {psi:.3g}): each iteration moves the "
             f"estimate by about psi/eta; choose eta up to about 4 psi = {4 * psi:.3g} (leave eta and lam out "
             "for the defaults)",
             RuntimeWarning,
             stacklevel=4,
         )
+
+    def _ran(self, which) -> str:
+        """The iterations the sets ``which`` (a bool per set) ran, each to its own stop: ``"12"`` or ``"[2, 26]"``."""
+        ran = np.full(np.shape(which), len(self.values["residual"]))
+        if self.stopped is not None:
+            ran = np.where(self.stopped >= 0, self.stopped + 1, ran)
+        ran = np.atleast_1d(ran)[np.atleast_1d(which)].tolist()
+        return str(ran[0]) if len(set(ran)) == 1 else str(ran)
 
     def _last(self) -> np.ndarray:
         """Each set's last booked residual (one value for one set), float64."""
@@ -149,9 +157,14 @@ class _History:
         psi = float(np.max(self.staged.op.psi))
         # the fault named below: eta far above the curvature; with a smaller eta a still residual is a fixed point
         stiff = np.asarray(self.solver.eta, dtype=np.float64) > 4 * psi
-        still = np.all(np.abs(res - first) <= STALL_TOL * first, axis=0) & (first > 0) & stiff
+        # a set of a batch that stopped (tol, auto) has NaN records after its stop: its own records decide,
+        # as they would in its single-set run (which checks a shorter whole run of >= 2 at its end)
+        booked = ~np.isnan(res)
+        moved = booked & (np.abs(res - first) > STALL_TOL * first)
+        still = ~np.any(moved, axis=0) & (np.sum(booked, axis=0) >= 2) & (first > 0) & stiff
         if not np.any(still):
             return
+        count = int(np.max(np.atleast_1d(np.sum(booked, axis=0))[np.atleast_1d(still)]))
         where = f" in set(s) {np.flatnonzero(still).tolist()}" if np.ndim(first) else ""
 
         def shown(values):

@@ -7,7 +7,7 @@ result (:func:`~rsocl.solver.request.make_request`, then :mod:`rsocl.solver.pipe
 one run: every kernel launch serves the whole batch, each set is solved as if alone (the same
 result to float rounding) and the datacube is ``(B, T, m, n)`` (:class:`~rsocl.solver.result.Result`). ``lam`` and
 ``eta`` are one number or one per set; ``x0`` and ``truth`` one ``(T, m, n)`` cube for every set
-or ``(B, T, m, n)``; the callback's residual and ``tol`` act per set.
+or ``(B, T, m, n)``; the callback's residual and ``tol`` act per set (each set stops at its own iteration).
 :func:`rsocl.solver.sets.reconstruct_sets` sizes batches to the device.
 
 **Self-tuning** (``tune=True``, the default). ``lam`` and the regularizer's tunable options that
@@ -88,7 +88,9 @@ def reconstruct(
     device, dtype, progress
         OpenCL device spec, ``"float32"``/``"float64"``, and a progress bar (tqdm).
     callback : callable or None
-        ``callback(iteration, residual, theta)`` after each iteration; True stops the run.
+        ``callback(iteration, residual, theta)`` after each iteration; True stops the run. For a batch
+        ``residual`` holds one value per set, NaN for a set that has stopped (``tol``, ``"auto"``); that
+        set's slice of ``theta`` runs on until the batch stops and is then put back to its stop.
     x0 : array_like, "interp3d" or None
         Start ``(T, m, n)``; ``"interp3d"``: the interpolation of the snapshots in time
         (:func:`rsocl.model.interpolation.interp3d`, computed on the device); None (default): zeros,
