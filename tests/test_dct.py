@@ -149,6 +149,15 @@ def test_weight_zero_is_identity(device, dtype, rng, mode):
     np.testing.assert_array_equal(got, x.astype(dtype))
 
 
+@pytest.mark.parametrize("weight, block", [(0.0, 4), (0.3, 1)])
+def test_an_identity_in_place_leaves_x_as_it_is(device, dtype, rng, weight, block):
+    # weight 0 (the base class) and blocks of one coefficient (DCT's own): out=x is no overlapping copy
+    x = rng.random((5, 9, 7))
+    xd = _dev(device, x, dtype)
+    assert DCT(block=block).denoise(xd, weight, out=xd) is xd
+    np.testing.assert_array_equal(xd.get(), x.astype(dtype))
+
+
 @pytest.mark.parametrize("block", [0, 4])
 @pytest.mark.parametrize("mode", ["3d", "2d"])
 def test_non_expansive(device, dtype, rng, block, mode):

@@ -26,6 +26,24 @@ def test_unknown_spec_lists_devices():
         devmod.get_device(3.5)
 
 
+def test_a_pyopencl_ctx_that_matches_nothing_is_one_line_listing_the_devices(monkeypatch, capsys):
+    from rsocl.cli.main import main
+
+    monkeypatch.delenv("RSOCL_DEVICE", raising=False)
+    monkeypatch.setenv("PYOPENCL_CTX", "no-such-platform")
+    devmod._device_for.cache_clear()
+    try:
+        with pytest.raises(
+            ValueError, match=r"^PYOPENCL_CTX='no-such-platform' matches no OpenCL device .*available: 0:0"
+        ):
+            devmod.get_device(None)
+        assert main(["devices"]) == 2  # the list still printed, then the one line
+        captured = capsys.readouterr()
+        assert " 0:0 " in captured.out and captured.err.startswith("rsocl devices: error: PYOPENCL_CTX=")
+    finally:
+        devmod._device_for.cache_clear()
+
+
 def test_no_platform_says_how_to_install(monkeypatch):
     monkeypatch.setattr(devmod, "list_devices", lambda: [])
     with pytest.raises(devmod.NoOpenCLError, match=r'pip install "rsocl\[pocl\]"'):

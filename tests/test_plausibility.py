@@ -373,3 +373,12 @@ def test_the_far_eta_warning_counts_each_sets_own_iterations():
             np.stack([g, g]), rig, eta=[0.2, 2000 * psi], lam=0.1, tune=False, iterations=30, tol=1e-2
         )
     assert batch.set(1).params["iterations_run"] < batch.params["iterations_run"]
+
+
+def test_simulate_asks_for_fp64_only_where_the_device_has_it(device):
+    rig = rsocl.Rig.paper_array(4, (8, 8), t_e=180e-6, t_r=35e-6)
+    truth = builtin_scene(rig.shape, rig.T)
+    no_fp64 = device.limited(fp64=False)
+    np.testing.assert_allclose(rsocl.simulate(truth, rig, device=no_fp64), ref.forward(rig, truth), rtol=1e-6)
+    with pytest.raises(ValueError, match="needs cl_khr_fp64"):
+        rsocl.simulate(truth, rig, device=no_fp64, dtype="float64")

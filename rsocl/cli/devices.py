@@ -22,7 +22,10 @@ def cmd_devices(args) -> int:
         return 1
     import pyopencl as cl
 
-    default = get_device(None).device
+    try:
+        default, why = get_device(None).device, None
+    except ValueError as exc:  # RSOCL_DEVICE or PYOPENCL_CTX names none of them: the list still helps choose
+        default, why = None, str(exc)
     for pi, di, platform, dev in found:
         mark = "*" if dev == default else " "
         fp64 = "fp64" if "cl_khr_fp64" in dev.extensions else "no fp64"
@@ -32,5 +35,7 @@ def cmd_devices(args) -> int:
             f"[{cl.device_type.to_string(dev.type)}, {dev.max_compute_units} units, "  # type: ignore[operator]
             f"{dev.global_mem_size / 2**30:.1f} GiB, max buffer {dev.max_mem_alloc_size / 2**30:.1f} GiB, {fp64}]"
         )
+    if why is not None:
+        raise ValueError(why)
     print("* = default choice")
     return 0

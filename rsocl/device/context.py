@@ -274,7 +274,14 @@ def _yes_or_no(name: str, value) -> bool:
 def _device_for(spec: str | None) -> Device:
     cl = _cl()
     if spec is None and os.environ.get("PYOPENCL_CTX") and not os.environ.get("RSOCL_DEVICE"):
-        ctx = cl.create_some_context(interactive=False)
+        try:
+            ctx = cl.create_some_context(interactive=False)
+        except (cl.Error, RuntimeError, ValueError) as exc:  # pyopencl's words for a PYOPENCL_CTX that matches nothing
+            listing = "; ".join(f"{pi}:{di} {p.name} / {d.name}" for pi, di, p, d in list_devices())
+            raise ValueError(
+                f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r} matches no OpenCL device ({' '.join(str(exc).split())}); "
+                f"available: {listing} (RSOCL_DEVICE or --device choose one too)"
+            ) from None
         dev = ctx.devices[0]
     else:
         dev = _pick(spec if spec is not None else os.environ.get("RSOCL_DEVICE") or None)

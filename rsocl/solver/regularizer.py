@@ -102,6 +102,11 @@ class Option:
         return number
 
 
+def _same_memory(a, b) -> bool:
+    """Whether device arrays ``a`` and ``b`` start at the same place of the same buffer."""
+    return (getattr(a.base_data, "int_ptr", None), a.offset) == (getattr(b.base_data, "int_ptr", None), b.offset)
+
+
 class Regularizer:
     """Base class of rsocl regularizers.
 
@@ -228,9 +233,10 @@ class Regularizer:
         import pyopencl as cl
 
         weights, out = self._checked(x, weight, out)
-        if not np.any(weights):
-            # the ignore: pyopencl's stub types an Array's queue and data as optional; an allocated array has both
-            cl.enqueue_copy(x.queue, out.data, x.data)  # type: ignore[arg-type]
+        if not np.any(weights):  # the identity: a copy, none where out is x
+            if not _same_memory(out, x):
+                # the ignore: pyopencl's stub types an Array's queue and data as optional; an allocated array has both
+                cl.enqueue_copy(x.queue, out.data, x.data)  # type: ignore[arg-type]
             return out
         try:
             if x.ndim == 3:
