@@ -50,7 +50,12 @@ def test_a_store_built_again_at_the_same_path_is_written_through_its_own_arrays(
 def test_a_task_refuses_to_write_into_a_store_other_than_the_one_its_run_prepared(tmp_path, monkeypatch):
     rig, g = _problem()
     out = tmp_path / "rec.zarr"
-    monkeypatch.setattr(store_module, "store_id", lambda path: "0" * 32)  # as if replaced after preparing
+    prepare = store_module.prepare_store
+
+    def replaced_after_preparing(path, spec, name="out"):
+        return prepare(path, spec, name)[0], "0" * 32  # the id of a store other than the one at path
+
+    monkeypatch.setattr(store_module, "prepare_store", replaced_after_preparing)
     with pytest.raises(TilesFailed) as info:
         reconstruct_tiled(g, rig, out=out, tile=(12, 12), halo=4, iterations=3, tune=False, retries=0)
     text = str(info.value)
@@ -73,3 +78,21 @@ def test_a_store_written_before_stores_had_an_identity_is_resumed(tmp_path):
     resumed = reconstruct_tiled(g, rig, out=out, **kwargs)
     assert [p.index for p in resumed.pieces] == [(1, 0)] and load_store(out).complete
     np.testing.assert_array_equal(np.asarray(resumed.datacube[...]), np.asarray(whole.datacube[...]))
+
+
+def test_prepare_store_gives_the_id_of_the_store_it_made_or_checked(tmp_path, monkeypatch):
+    # the id the tasks carry comes from the same step that made or checked the store, not a later read
+    rig, g = _problem()
+    out = tmp_path / "rec.zarr"
+    prepare, given = store_module.prepare_store, []
+
+    def spy(path, spec, name="out"):
+        result = prepare(path, spec, name)
+        given.append(result[1])
+        return result
+
+    monkeypatch.setattr(store_module, "prepare_store", spy)
+    kwargs = dict(tile=(12, 12), halo=4, iterations=3, tune=False)
+    reconstruct_tiled(g, rig, out=out, **kwargs)  # made
+    resumed = reconstruct_tiled(g, rig, out=out, **kwargs)  # checked: every tile already there
+    assert given == [store_id(out)] * 2 and given[0] is not None and resumed.skipped == 4

@@ -146,19 +146,22 @@ class StoreSpec:
         }
 
 
-def prepare_store(path, spec: StoreSpec, name="out") -> np.ndarray:
+def prepare_store(path, spec: StoreSpec, name="out") -> tuple[np.ndarray, str | None]:
     """Create the store at ``path``, or open the one there for the same reconstruction.
 
-    Returns the ``done`` marks, ``(S, ny, nx)`` bool (``S = 1`` for one set). Raises
-    ValueError naming ``name`` when ``path`` holds something else.
+    Returns the ``done`` marks, ``(S, ny, nx)`` bool (``S = 1`` for one set), and the ``store_id`` of
+    the store those marks and that check are of (None for a store written before stores had one), for
+    the run's tasks to carry (:func:`write_piece`). Raises ValueError naming ``name`` when ``path``
+    holds something else.
     """
     zarr = require_zarr(name)
     path = check_store_path(path, name)
     marks = (spec.sets or 1,) + tuple(spec.grid)
     if not _holds_files(path):
         _remove_leftovers(path)
-        if _create(zarr, path, spec):
-            return np.zeros(marks, dtype=bool)
+        identity = _create(zarr, path, spec)
+        if identity is not None:
+            return np.zeros(marks, dtype=bool), identity
     return _resume(zarr, path, spec, name)
 
 
@@ -166,8 +169,9 @@ def _holds_files(path: Path) -> bool:
     return path.is_dir() and any(path.iterdir())
 
 
-def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> np.ndarray:
-    """The ``done`` marks of the store at ``path``; ValueError naming ``name`` unless it is ``spec``'s."""
+def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> tuple[np.ndarray, str | None]:
+    """The ``done`` marks and ``store_id`` of the store at ``path``; ValueError naming ``name`` unless it is
+    ``spec``'s."""
     try:
         group = zarr.open_group(str(path), mode="r+")
     except Exception as exc:
@@ -187,7 +191,7 @@ def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> np.ndarray:
             f"{name}: {str(path)!r} holds another reconstruction (it differs in "
             f"{', '.join(differ)}); remove it or choose another path"
         )
-    return np.asarray(group["tiles"][..., 0]) > 0
+    return np.asarray(group["tiles"][..., 0]) > 0, found.get("store_id")
 
 
 def tiles_done(path) -> tuple[int, int] | None:
@@ -205,8 +209,9 @@ def _partial_prefix(path: Path) -> str:
     return f".{path.name}.partial-"
 
 
-def _create(zarr, path: Path, spec: StoreSpec) -> bool:
-    """Build the store beside ``path`` and rename it there; False when another process made one first."""
+def _create(zarr, path: Path, spec: StoreSpec) -> str | None:
+    """Build the store beside ``path`` and rename it there; its ``store_id``, or None when another process
+    made one first."""
     tmp = path.with_name(f"{owned_prefix(_partial_prefix(path))}{secrets.token_hex(4)}")
     os.mkdir(tmp)
     try:
@@ -224,7 +229,8 @@ def _create(zarr, path: Path, spec: StoreSpec) -> bool:
         for index, camera in enumerate(spec.rig.cameras):
             if camera.row_map is not None:
                 group.create_array(f"{_ROW_MAPS}/{index}", data=spec.rig.row_map(index))
-        group.attrs.put({**spec.attributes(), "store_id": secrets.token_hex(16)})
+        identity = secrets.token_hex(16)
+        group.attrs.put({**spec.attributes(), "store_id": identity})
         for folder, _, files in os.walk(tmp):
             for file in files:
                 fsync_file(Path(folder) / file)
@@ -234,12 +240,12 @@ def _create(zarr, path: Path, spec: StoreSpec) -> bool:
             if not _holds_files(path):
                 raise
             shutil.rmtree(tmp, ignore_errors=True)
-            return False
+            return None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     fsync_directory(path.parent)
-    return True
+    return identity
 
 
 def _remove_leftovers(path: Path) -> None:

@@ -318,11 +318,10 @@ def reconstruct_tiled(
         done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)
         identity = None
         if store is not None:
-            from rsocl.scale.store import StoreSpec, prepare_store, store_id
+            from rsocl.scale.store import StoreSpec, prepare_store
 
             spec = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, settings.dtype, params, digest)
-            done = prepare_store(store, spec)
-            identity = store_id(store)
+            done, identity = prepare_store(store, spec)  # the id of the store this run checked
         sets = [None] if source.n_sets is None else list(range(source.n_sets))
         jobs = [
             Job(s, t, source.block(s, t), (span.start, span.stop), None if store is None else str(store), identity)
