@@ -9,9 +9,10 @@ must never replace a file of some kinds (a capture) is refused first, before any
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
-__all__ = ["save_result", "kept_note", "refuse_kinds", "CAPTURES", "HDF5_FILES"]
+__all__ = ["save_result", "kept_note", "kept_clause", "interrupted", "refuse_kinds", "CAPTURES", "HDF5_FILES"]
 
 #: The kinds of :func:`rsocl.files.hdf5.file_kind` no derived output replaces: captures, from cameras or simulated.
 CAPTURES = ("camera capture", "capture")
@@ -52,6 +53,25 @@ def kept_note(kept) -> str:
     if len(kept) == 1:
         return f" (the earlier file there is kept as {kept[0]})"
     return f" (the {len(kept)} earlier files there are kept as <stem>.{EARLIER}-<UTC time><suffix>: {kept[0]} ..)"
+
+
+def kept_clause(kept) -> str:
+    """:func:`kept_note` as a clause that follows another in one line: ``", the earlier file there is kept
+    as ..."``; empty where none was kept."""
+    return kept_note(kept).replace(" (", ", ", 1).rstrip(")")
+
+
+@contextlib.contextmanager
+def interrupted(kept):
+    """Around a step of a command: an interrupt (Ctrl-C, or SIGTERM's :class:`rsocl.cli.main.Terminated`)
+    that says nothing yet is re-raised, of its own type, with ``kept`` (a string, or a callable giving it
+    then) as its message, which the command's last line prints."""
+    try:
+        yield
+    except KeyboardInterrupt as exc:
+        if str(exc):
+            raise
+        raise type(exc)(kept() if callable(kept) else kept) from None
 
 
 def refuse_kinds(named, kinds=CAPTURES) -> None:

@@ -16,7 +16,7 @@ from rsocl.cli.options import (
     solver_options,
     tuning_plot_files,
 )
-from rsocl.cli.outputs import kept_note, save_result
+from rsocl.cli.outputs import interrupted, kept_clause, kept_note, save_result
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
 __all__ = ["add_parser", "cmd_reconstruct", "set_path", "check_set_outputs"]
@@ -127,7 +127,7 @@ def cmd_reconstruct(args) -> int:
     out = Path(args.out)
     gif = Path(args.gif) if args.gif else out.with_suffix(".gif")
     if sets is None or sets.shape[0] == 1:
-        with _interrupted(f"nothing written, {out} unchanged" if out.exists() else "nothing written"):
+        with interrupted(f"nothing written, {out} unchanged" if out.exists() else "nothing written"):
             result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
         print(quality_line(result, truth))
         kept = save_result(out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth)
@@ -136,11 +136,11 @@ def cmd_reconstruct(args) -> int:
             files = [out, gif, *tuning_plot_files(args, result.params, gif)]
         say(args, "wrote " + ", ".join(str(p) for p in files) + kept_note([kept]))
         return 0
-    with _interrupted("nothing written, the files already there are unchanged"):
+    with interrupted("nothing written, the files already there are unchanged"):
         batch = _reconstruct_sets(args, sets, capture.rig)
     say(args, f"{sets.shape[0]} sets in batches of {batch.params['batch']}")
     earlier: list = []
-    with _interrupted(lambda: _sets_written(out, len(earlier), batch.batch)):
+    with interrupted(lambda: _sets_written(out, len(earlier), batch.batch)):
         _write_sets(args, batch, capture.rig, truth, out, earlier)
     with _written(f"{set_path(out, 0)} .. {set_path(out, batch.batch - 1)}", earlier):
         comparison_gif(gif, truth, batch.set(0).datacube)
@@ -165,7 +165,7 @@ def _write_sets(args, batch, rig, truth, out, earlier):
         except OutputError as exc:  # a full disk: say which sets are on it
             if i:
                 exc.strerror = f"{exc.strerror}; sets 0 to {i - 1} are written ({set_path(out, 0)} ..)"
-                exc.strerror += kept_note(earlier).replace(" (", ", ", 1).rstrip(")")
+                exc.strerror += kept_clause(earlier)
             raise
 
 
@@ -180,24 +180,12 @@ def _sets_written(out, written: int, sets: int) -> str:
 
 
 @contextlib.contextmanager
-def _interrupted(kept):
-    """Around a step of the command: an interrupt (Ctrl-C) is re-raised with ``kept`` (a string, or a
-    callable giving it then) as its message, which the command's last line prints."""
-    try:
-        yield
-    except KeyboardInterrupt as exc:
-        if str(exc):
-            raise
-        raise type(exc)(kept() if callable(kept) else kept) from None
-
-
-@contextlib.contextmanager
 def _written(results, kept):
     """Around the pictures' writes after the results: a failed write (a full disk) or an interrupt says the
     results are written."""
     from rsocl.files.atomic import OutputError
 
-    written = f"{results} written" + kept_note(kept).replace(" (", ", ", 1).rstrip(")")
+    written = f"{results} written" + kept_clause(kept)
     try:
         yield
     except OutputError as exc:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.cli.outputs import kept_note, save_result
+from rsocl.cli.outputs import interrupted, kept_note, save_result
 
 __all__ = ["is_zarr", "zarr_gif", "run_tiles", "run_stream"]
 
@@ -74,20 +74,19 @@ def run_tiles(args, capture):
         ).tile
         say(args, f"tiles of {tile[0]} x {tile[1]} pixels (proposed for this device; --tile H W to choose)")
     zarr_out = is_zarr(args.out)
-    try:
-        result = reconstruct_tiled(
-            capture,
-            capture.rig,
-            tile=tile,
-            halo=args.halo,
-            out=args.out if zarr_out else None,
-            scheduler=args.scheduler,
-            workers=args.workers,
-            retries=_retries(args),
-            **solver_options(args),
-        )
-    except KeyboardInterrupt as exc:  # Ctrl-C: the store keeps the tiles done; an HDF5 --out is not written
-        raise type(exc)(str(exc) or _interrupted_tiles(args.out, zarr_out)) from None
+    try:  # Ctrl-C: the store keeps the tiles done; an HDF5 --out is not written
+        with interrupted(lambda: _interrupted_tiles(args.out, zarr_out)):
+            result = reconstruct_tiled(
+                capture,
+                capture.rig,
+                tile=tile,
+                halo=args.halo,
+                out=args.out if zarr_out else None,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                retries=_retries(args),
+                **solver_options(args),
+            )
     except TilesFailed as exc:
         if zarr_out:
             return _error(str(exc))

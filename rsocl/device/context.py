@@ -93,8 +93,12 @@ def _pick(spec: str | None):
             text = f"{entry[2].name} {entry[2].vendor} {dev.name} {dev.vendor}".lower()
             if low in text or low in kinds:
                 return dev
-    listing = "; ".join(f"{pi}:{di} {p.name} / {d.name}" for pi, di, p, d in found)
-    raise ValueError(f"device {spec!r} matches no OpenCL device; available: {listing}")
+    raise ValueError(f"device {spec!r} matches no OpenCL device; available: {_listing(found)}")
+
+
+def _listing(found) -> str:
+    """The devices of :func:`list_devices` ``found`` as an error message lists them: ``P:D platform / device``."""
+    return "; ".join(f"{pi}:{di} {p.name} / {d.name}" for pi, di, p, d in found)
 
 
 @dataclass(eq=False)
@@ -277,10 +281,9 @@ def _device_for(spec: str | None) -> Device:
         try:
             ctx = cl.create_some_context(interactive=False)
         except (cl.Error, RuntimeError, ValueError) as exc:  # pyopencl's words for a PYOPENCL_CTX that matches nothing
-            listing = "; ".join(f"{pi}:{di} {p.name} / {d.name}" for pi, di, p, d in list_devices())
             raise ValueError(
                 f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r} matches no OpenCL device ({' '.join(str(exc).split())}); "
-                f"available: {listing} (RSOCL_DEVICE or --device choose one too)"
+                f"available: {_listing(list_devices())} (RSOCL_DEVICE or --device choose one too)"
             ) from None
         dev = ctx.devices[0]
     else:
