@@ -6,6 +6,7 @@ import numpy as np
 
 from rsocl.device.context import device_for_queue
 from rsocl.device.launch import voxel_grid
+from rsocl.device.pool import same_memory
 from rsocl.device.program import c_type
 from rsocl.solver.regularizer import Option, Regularizer
 
@@ -199,10 +200,7 @@ class DCT(Regularizer):
         bt, by, bx = self._blocks(x.shape)
         gsize, lsize = voxel_grid(T, m, n)
         if not passes:  # every coefficient is a DC coefficient: the identity (out may be x)
-            if (getattr(out.base_data, "int_ptr", None), out.offset) != (
-                getattr(x.base_data, "int_ptr", None),
-                x.offset,
-            ):
+            if not same_memory(out, x):
                 cl.enqueue_copy(x.queue, out.data, x.data)
             return out
         # 2P launches alternate work/out and the last one writes `out`: pass k (1-based) writes

@@ -44,6 +44,7 @@ __all__ = [
     "to_device",
     "buffer",
     "copy",
+    "same_memory",
 ]
 
 #: Largest buffer the pool hands out, bytes; larger ones are made and released each time. 0: no pooling.
@@ -194,3 +195,9 @@ def copy(array):
     if array.nbytes:
         cl.enqueue_copy(array.queue, out.data, array.data, byte_count=array.nbytes)
     return out
+
+
+def same_memory(a, b) -> bool:
+    """Whether device arrays ``a`` and ``b`` (pyopencl Arrays) start at the same place of the same buffer:
+    a copy of one onto the other would overlap."""
+    return (getattr(a.base_data, "int_ptr", None), a.offset) == (getattr(b.base_data, "int_ptr", None), b.offset)

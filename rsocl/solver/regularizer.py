@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from rsocl.common.hints import ArrayLike, DTypeLike, PerSet
+from rsocl.device import pool
 
 if TYPE_CHECKING:
     import pyopencl.array as cla
@@ -100,11 +101,6 @@ class Option:
         if not low <= number <= high:
             raise ValueError(f"option {name} must be in [{low}, {high}], got {value!r}")
         return number
-
-
-def _same_memory(a, b) -> bool:
-    """Whether device arrays ``a`` and ``b`` start at the same place of the same buffer."""
-    return (getattr(a.base_data, "int_ptr", None), a.offset) == (getattr(b.base_data, "int_ptr", None), b.offset)
 
 
 class Regularizer:
@@ -234,7 +230,7 @@ class Regularizer:
 
         weights, out = self._checked(x, weight, out)
         if not np.any(weights):  # the identity: a copy, none where out is x
-            if not _same_memory(out, x):
+            if not pool.same_memory(out, x):
                 # the ignore: pyopencl's stub types an Array's queue and data as optional; an allocated array has both
                 cl.enqueue_copy(x.queue, out.data, x.data)  # type: ignore[arg-type]
             return out
