@@ -32,7 +32,7 @@ from rsocl.solver.ladder import QUALITIES, RUNGS
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from case_cache import Cache  # noqa: E402
 from provenance import DOCS, header_lines, write_page  # noqa: E402
-from quality import CASES, SIZES, check_sizes  # noqa: E402
+from quality import CASES, add_sizes, check_sizes  # noqa: E402
 from quality_scenes import available, case_data  # noqa: E402
 
 #: The runs of a case, in the table's order: (label, keyword arguments of rsocl.reconstruct).
@@ -124,13 +124,7 @@ def selected(args) -> list:
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--sizes",
-        type=int,
-        nargs="+",
-        default=list(SIZES),
-        help="grid sides to run, pixels: 64 and/or 128 (the cases')",
-    )
+    add_sizes(parser)
     parser.add_argument("--scenes", nargs="+", default=None, help="scenes of quality.CASES to run (default: all)")
     parser.add_argument("--device", default=None)
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-ladder-cache.json")

@@ -67,6 +67,17 @@ CASES = (
 SIZES = tuple(sorted({size for _, size, _ in CASES}))
 
 
+def add_sizes(parser):
+    """The ``--sizes`` option: grid sides of :data:`CASES` to run (checked by :func:`check_sizes`)."""
+    parser.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=list(SIZES),
+        help="grid sides to run, pixels: 64 and/or 128 (the cases')",
+    )
+
+
 def check_sizes(parser, sizes):
     """Refuse (``parser.error``, naming ``--sizes``) sizes that no case of :data:`CASES` has."""
     unknown = sorted(set(sizes) - set(SIZES))
@@ -139,13 +150,7 @@ def row(scene, size, noise, r):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--sizes",
-        type=int,
-        nargs="+",
-        default=list(SIZES),
-        help="grid sides to run, pixels: 64 and/or 128 (the cases')",
-    )
+    add_sizes(parser)
     parser.add_argument("--iterations", type=int, default=200)
     parser.add_argument("--device", default=None)
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-quality-cache.json")
