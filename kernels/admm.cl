@@ -1,9 +1,11 @@
 /* The ADMM data step of docs/model.md. Needs common.cl and residual.cl; the host defines NCH
- * (channels), ACC and PROJECTION_EXACT 0|1.
+ * (channels), ACC, PROJECTION_EXACT 0|1 and SATURATED 0|1 (samples of residual weight 0 one-sided:
+ * one_sided_step).
  *
  *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [sets with eta > 0]
  *                                             f  = v = theta + b
  *   admm_project   (one work item per block   r = g - H v,  z = (eta I + M)^-1 r  (exact)
+ *                                             [SATURATED: samples with w = 0 one-sided, one_sided_step]
  *                   of TILE_R x TILE_W px)                   | r / (eta + psi)    (paper, Eq. 15)
  *                                             f += Hᵀ z     (window loops only)
  *                                             [difference = 1: then u = f - b over the block's column]
@@ -30,6 +32,9 @@
 #ifndef DEFER_PRIMAL
 #define DEFER_PRIMAL 0
 #endif
+#ifndef SATURATED
+#define SATURATED 0
+#endif
 
 /* admm_dual: global size (per-set voxels, sets) on an exact grid (rsocl.device.launch.batch_launches),
  * so no bounds test (it costs masked stores on PoCL). dual[set] = 1 where that set's eta > 0;
@@ -44,27 +49,126 @@ __kernel void admm_dual(__global const real *theta, __global real *b, __global r
     f[i] = th + bn;
 }
 
-/* The projection of one pixel p (scalar path: the last, partial tile). */
-inline void project_pixel(__global real *f, __global const real *g,
+#if SATURATED
+/* The one-sided data step of one pixel p (docs/model.md, saturated pixels): z, where f += Hᵀ z, from the
+ * residuals r = g - H v of its NCH samples; w[q] = 0 marks a saturated sample (its g a lower bound).
+ * Paper step: the clamp r = max(r, 0) on saturated samples, exact for a diagonal step. Exact step: the
+ * per-pixel minimiser of the two-sided terms, the one-sided ones and eta |f - v|^2, by an active set over
+ * the saturated samples with the blocks B = (eta I + M)^-1 alone: an inactive sample's pseudo-residual r'
+ * makes its z zero (B_DD r'_D = -B_DA r_A, Gaussian elimination with partial pivoting), z = B r', and
+ * (M z)_k = r'_k - eta z_k gives the checks: an active saturated sample needs z_k >= 0, an inactive one
+ * r'_k >= r_k. Rows left out of the blocks (B_kk = 0) take no part. At most 2 NCH + 2 rounds. */
+inline void one_sided_step(const real *r, __global const real *w, __global const real *inverse, real eta,
+                           size_t mn, size_t p, real *z)
+{
+#if PROJECTION_EXACT
+#define BLOCK(k, l) inverse[((size_t)(k) * NCH + (size_t)(l)) * mn + p]
+    int sat[NCH], act[NCH];
+    real rp[NCH];
+    for (int k = 0; k < NCH; ++k) {
+        sat[k] = w[(size_t)k * mn + p] == (real)0 && BLOCK(k, k) != (real)0;
+        act[k] = !sat[k] || r[k] > (real)0;
+    }
+    for (int round = 0; round < 2 * NCH + 2; ++round) {
+        int idx[NCH], nd = 0;
+        for (int k = 0; k < NCH; ++k) {
+            rp[k] = r[k];
+            if (!act[k]) idx[nd++] = k;
+        }
+        if (nd > 0) {
+            real a[NCH][NCH + 1];
+            for (int i = 0; i < nd; ++i) {
+                real s = (real)0;
+                for (int l = 0; l < NCH; ++l)
+                    if (act[l]) s += BLOCK(idx[i], l) * r[l];
+                for (int j = 0; j < nd; ++j) a[i][j] = BLOCK(idx[i], idx[j]);
+                a[i][nd] = -s;
+            }
+            for (int c = 0; c < nd; ++c) {      /* forward elimination, partial pivoting */
+                int piv = c;
+                for (int i = c + 1; i < nd; ++i)
+                    if (fabs(a[i][c]) > fabs(a[piv][c])) piv = i;
+                for (int j = 0; j <= nd; ++j) {
+                    real t = a[c][j];
+                    a[c][j] = a[piv][j];
+                    a[piv][j] = t;
+                }
+                if (a[c][c] == (real)0) continue;
+                for (int i = c + 1; i < nd; ++i) {
+                    real factor = a[i][c] / a[c][c];
+                    for (int j = c; j <= nd; ++j) a[i][j] -= factor * a[c][j];
+                }
+            }
+            for (int c = nd - 1; c >= 0; --c) { /* back substitution; a zero pivot leaves its unknown 0 */
+                real s = a[c][nd];
+                for (int j = c + 1; j < nd; ++j) s -= a[c][j] * a[j][nd];
+                a[c][nd] = a[c][c] != (real)0 ? s / a[c][c] : (real)0;
+            }
+            for (int i = 0; i < nd; ++i) rp[idx[i]] = a[i][nd];
+        }
+        for (int k = 0; k < NCH; ++k) {
+            real s = (real)0;
+            for (int l = 0; l < NCH; ++l) s += BLOCK(k, l) * rp[l];
+            z[k] = act[k] ? s : (real)0;
+        }
+        int changed = 0;
+        for (int k = 0; k < NCH; ++k) {
+            if (!sat[k]) continue;
+            if (act[k] && z[k] < (real)0) {
+                act[k] = 0;
+                changed = 1;
+            } else if (!act[k] && rp[k] < r[k]) {
+                act[k] = 1;
+                changed = 1;
+            }
+        }
+        if (!changed) break;
+    }
+#undef BLOCK
+#else
+    for (int k = 0; k < NCH; ++k) {
+        size_t q = (size_t)k * mn + p;
+        real d = eta + inverse[q];          /* inverse holds psi here */
+        real rk = w[q] == (real)0 ? fmax(r[k], (real)0) : r[k];
+        z[k] = d > (real)0 ? rk / d : (real)0;
+    }
+#endif
+}
+#endif
+
+/* The projection of one pixel p (scalar path: the last, partial tile; with SATURATED, every pixel of a
+ * block that holds a saturated sample). */
+inline void project_pixel(__global real *f, __global const real *g, __global const real *w,
                           __global const int *first, __global const real *frac,
                           __global const real *len, __global const real *gain,
                           __global const real *inverse, real eta, int T, int L, size_t mn, size_t p)
 {
-    real r[NCH];
+    real r[NCH], z[NCH];
     for (int k = 0; k < NCH; ++k) {
         size_t q = (size_t)k * mn + p;
         r[k] = g[q] - gain[k] * window_dot(f, first[q], frac[q], WINDOW_LENGTH(len, k), T, L, mn, p);
     }
+#if SATURATED
+    if (w) {
+        one_sided_step(r, w, inverse, eta, mn, p, z);
+    } else
+#endif
+    {
+        for (int k = 0; k < NCH; ++k) {
+            size_t q = (size_t)k * mn + p;
+#if PROJECTION_EXACT
+            real s = (real)0;
+            for (int l = 0; l < NCH; ++l) s += inverse[((size_t)k * NCH + l) * mn + p] * r[l];
+            z[k] = s;
+#else
+            real d = eta + inverse[q];          /* inverse holds psi here */
+            z[k] = d > (real)0 ? r[k] / d : (real)0;
+#endif
+        }
+    }
     for (int k = 0; k < NCH; ++k) {
         size_t q = (size_t)k * mn + p;
-#if PROJECTION_EXACT
-        real z = (real)0;
-        for (int l = 0; l < NCH; ++l) z += inverse[((size_t)k * NCH + l) * mn + p] * r[l];
-#else
-        real d = eta + inverse[q];          /* inverse holds psi here */
-        real z = d > (real)0 ? r[k] / d : (real)0;
-#endif
-        window_scatter(f, first[q], frac[q], WINDOW_LENGTH(len, k), T, L, mn, p, gain[k] * z);
+        window_scatter(f, first[q], frac[q], WINDOW_LENGTH(len, k), T, L, mn, p, gain[k] * z[k]);
     }
 }
 
@@ -95,19 +199,33 @@ static inline void block_difference(__global const real *f, __global const real 
 
 /* The projection of the block of TILE_R x TILE_W pixels at (x0, y0) inside the ROI of one set (f, g,
  * inverse: that set's); a block cut by the ROI's edge takes project_pixel. */
-static inline void project_block(__global real *f, __global const real *g, __global const int *first,
-                                 __global const real *frac, __global const real *len, __global const real *gain,
-                                 __global const real *inverse, real eta, int T, int L, size_t m, size_t n,
-                                 size_t x0, size_t y0)
+static inline void project_block(__global real *f, __global const real *g, __global const real *w,
+                                 __global const int *first, __global const real *frac, __global const real *len,
+                                 __global const real *gain, __global const real *inverse, real eta, int T, int L,
+                                 size_t m, size_t n, size_t x0, size_t y0)
 {
     size_t mn = m * n;
     if (x0 + TILE_W > n || y0 + TILE_R > m) {
         for (size_t y = y0; y < y0 + TILE_R && y < m; ++y)
             for (size_t x = x0; x < x0 + TILE_W && x < n; ++x)
-                project_pixel(f, g, first, frac, len, gain, inverse, eta, T, L, mn, y * n + x);
+                project_pixel(f, g, w, first, frac, len, gain, inverse, eta, T, L, mn, y * n + x);
         return;
     }
     size_t p0 = y0 * n + x0;
+#if SATURATED
+    if (w) {                           /* a block with a saturated sample: pixel by pixel, one-sided */
+        int any = 0;
+        for (int k = 0; k < NCH && !any; ++k)
+            for (int r = 0; r < TILE_R; ++r)
+                for (int x = 0; x < TILE_W; ++x) any |= w[(size_t)k * mn + p0 + (size_t)r * n + x] == (real)0;
+        if (any) {
+            for (int r = 0; r < TILE_R; ++r)
+                for (int x = 0; x < TILE_W; ++x)
+                    project_pixel(f, g, w, first, frac, len, gain, inverse, eta, T, L, mn, p0 + (size_t)r * n + x);
+            return;
+        }
+    }
+#endif
     realw res[NCH][TILE_R];            /* r = g - H v, per channel and row of the block */
     for (int k = 0; k < NCH; ++k) {
         size_t q0 = (size_t)k * mn + p0;
@@ -223,7 +341,8 @@ __kernel void admm_project(__global real *f_all, __global const real *g_all,
 #else
         __global const real *inverse = inverse_all + set * (size_t)own_inverse * NCH * mn;
 #endif
-        project_block(f_all + set * cube, g, first, frac, len, gain, inverse, etas[set], T, L, m, n, x0, y0);
+        __global const real *w_set = w_all ? w_all + set * (size_t)NCH * mn : 0;
+        project_block(f_all + set * cube, g, w_set, first, frac, len, gain, inverse, etas[set], T, L, m, n, x0, y0);
     }
 #if PROJECT_LANES > 1
     barrier(CLK_GLOBAL_MEM_FENCE);

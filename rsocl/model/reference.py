@@ -54,13 +54,16 @@ def gram(rig: Rig) -> np.ndarray:
     return np.einsum("ksyx,lsyx->yxkl", w, w)
 
 
-def project(rig: Rig, v, g, eta: float, projection: str = "exact") -> np.ndarray:
+def project(rig: Rig, v, g, eta: float, projection: str = "exact", saturated=None) -> np.ndarray:
     """The ADMM data step ``f = v + Hᵀ (eta I + H Hᵀ)⁻¹ (g - H v)`` (docs/model.md Eq. 12).
 
     ``projection="paper"`` uses the diagonal ``psi`` instead (Eq. 15). Singular
-    blocks (``eta = 0``) use the pseudo-inverse; nothing is divided by zero.
+    blocks (``eta = 0``) use the pseudo-inverse; nothing is divided by zero. ``saturated``
+    (bool, shape of ``g``): those samples enter one-sided (docs/model.md, saturated pixels).
     """
     r = np.asarray(g, dtype=np.float64) - forward(rig, v)
+    if saturated is not None and np.any(saturated):
+        return np.asarray(v, dtype=np.float64) + adjoint(rig, _one_sided(rig, r, eta, projection, saturated))
     if projection == "paper":
         d = eta + psi(rig)
         z = np.divide(r, d, out=np.zeros_like(r), where=d > 0)
@@ -69,6 +72,47 @@ def project(rig: Rig, v, g, eta: float, projection: str = "exact") -> np.ndarray
         block = gram(rig) + eta * np.eye(K)
         z = np.einsum("yxkl,lyx->kyx", np.linalg.pinv(block, hermitian=True), r)
     return np.asarray(v, dtype=np.float64) + adjoint(rig, z)
+
+
+def _one_sided(rig: Rig, r, eta: float, projection: str, saturated) -> np.ndarray:
+    """``z`` of the data step with the ``saturated`` samples one-sided (``f = v + Hᵀ z``), pixel by pixel:
+    the minimiser of ``½ Σ_two-sided (r - M z)² + ½ Σ_saturated max(r - M z, 0)² + ½ eta zᵀ M z`` found by
+    trying every set of active saturated samples (solved with ``M``'s sub-blocks, not the inverse blocks
+    the kernels use) until one meets the optimality conditions."""
+    from itertools import combinations
+
+    K = rig.n_channels
+    M = gram(rig)
+    d = psi(rig)
+    z = np.zeros_like(r)
+    for y, x in np.ndindex(rig.shape):
+        rp, sat = r[:, y, x], np.asarray(saturated[:, y, x], bool)
+        if projection == "paper":
+            rk = np.where(sat, np.maximum(rp, 0.0), rp)
+            den = eta + d[:, y, x]
+            z[:, y, x] = np.divide(rk, den, out=np.zeros(K), where=den > 0)
+            continue
+        m = M[y, x]
+        two = np.flatnonzero(~sat)
+        ones = np.flatnonzero(sat)
+        for count in range(len(ones), -1, -1):
+            for chosen in combinations(ones, count):
+                active = np.sort(np.concatenate([two, np.asarray(chosen, int)]))
+                zz = np.zeros(K)
+                if len(active):
+                    sub = m[np.ix_(active, active)] + eta * np.eye(len(active))
+                    zz[active] = np.linalg.pinv(sub, hermitian=True) @ rp[active]
+                # an active saturated sample's multiplier z_k >= 0 (its residual after the step is eta z_k);
+                # an inactive one's residual after the step <= 0 (its lower bound is met)
+                after = rp - m @ zz
+                tol = 1e-9 * max(1.0, np.abs(rp).max())
+                if all(zz[k] >= -tol for k in chosen) and all(after[k] <= tol for k in ones if k not in chosen):
+                    z[:, y, x] = zz
+                    break
+            else:
+                continue
+            break
+    return z
 
 
 def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float = 1.0, step: float = 1.0) -> np.ndarray:
@@ -114,18 +158,19 @@ def admm(
     projection: str = "exact",
     x0=None,
     step: float = 1.0,
+    saturated=None,
 ) -> np.ndarray:
     """The ADMM-TV of docs/model.md with the reference pieces above; returns ``theta``.
 
     ``eta = 0`` is GAP: the dual ``b`` stays zero and the TV weight is ``lam``. ``step``: the TV
-    step of :func:`tv_chambolle`.
+    step of :func:`tv_chambolle`. ``saturated``: the samples :func:`project` takes one-sided.
     """
     theta = np.zeros((rig.T,) + rig.shape) if x0 is None else np.asarray(x0, dtype=np.float64).copy()
     b = np.zeros_like(theta)
     weight = lam / eta if eta > 0 else lam
     for _ in range(iterations):
         v = theta + b
-        f = project(rig, v, g, eta, projection)
+        f = project(rig, v, g, eta, projection, saturated)
         theta = tv_chambolle(f - b, weight, tv_iterations, temporal_weight, step)
         if eta > 0:
             b = b - (f - theta)

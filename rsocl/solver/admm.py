@@ -66,6 +66,15 @@ def _denoiser_weights(lams, etas):
     return np.where(etas > 0, lams / np.where(etas > 0, etas, 1.0), lams)
 
 
+def _residual_weights(valid, saturated):
+    """The snapshot pixels the residual counts, and that the data step takes two-sided: ``valid`` (None:
+    all) less the ``saturated`` ones; ``valid`` itself where none is saturated."""
+    if saturated is None or not np.any(saturated):
+        return valid
+    unsaturated = ~np.asarray(saturated, dtype=bool)
+    return unsaturated if valid is None else valid & unsaturated
+
+
 class ADMM:
     """ADMM state on the device; :meth:`step` runs one iteration.
 
@@ -83,8 +92,12 @@ class ADMM:
     x0 : pyopencl.array.Array or None
         Initial ``theta`` (the state's shape); zeros when None.
     valid : ndarray of bool, shape of ``g``, or None
-        Snapshot pixels that enter the data term; the others (e.g. saturated ones)
-        are left out: their rows of ``H`` are dropped from the projection.
+        Snapshot pixels that enter the data term; the others (e.g. the held-out pixels of the
+        parameter search) are left out: their rows of ``H`` are dropped from the data step.
+    saturated : ndarray of bool, shape of ``g``, or None
+        Snapshot pixels clipped by the sensor, whose true value is at least the recorded one: they
+        enter the data step one-sided (the estimate is pulled up to them, never down;
+        ``docs/model.md``, saturated pixels), and the residual leaves them out.
 
     When the regularizer takes the dual update into its own launches on this device
     (``regularizer.fuses_dual_on(device)``: the TV on its fused path or on a GPU), the projection
@@ -94,7 +107,17 @@ class ADMM:
     """
 
     def __init__(
-        self, op: RollingShutterOperator, g, regularizer, *, lam, eta, projection="exact", x0=None, valid=None
+        self,
+        op: RollingShutterOperator,
+        g,
+        regularizer,
+        *,
+        lam,
+        eta,
+        projection="exact",
+        x0=None,
+        valid=None,
+        saturated=None,
     ):
         import pyopencl as cl
 
@@ -106,10 +129,12 @@ class ADMM:
         queue = op.queue
         batch = (self.sets,) if self.batched else ()
         shape = batch + op.domain_shape
-        self.valid = None
-        if valid is not None and not np.all(valid):
-            self.valid = pool.to_device(queue, np.asarray(valid, dtype=op.dtype))
-        self.own_inverse, self.inverse = inverse_blocks(op, projection, self.etas, valid, self.sets, self.valid)
+        valid = None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool)
+        rows = None if valid is None else pool.to_device(queue, valid.astype(op.dtype))
+        self.one_sided = saturated is not None and bool(np.any(saturated))
+        weights = _residual_weights(valid, saturated)
+        self.valid = rows if weights is valid else pool.to_device(queue, weights.astype(op.dtype))
+        self.own_inverse, self.inverse = inverse_blocks(op, projection, self.etas, valid, self.sets, rows)
         self.eta_device = pool.to_device(queue, self.etas.astype(op.dtype))
         self.dual_on = pool.to_device(queue, (self.etas > 0).astype(np.int32))
         self._pending = False  # the denoiser's last launch left to the next projection (deferred)
@@ -164,6 +189,7 @@ class ADMM:
             NCH=op.K,
             PROJECTION_EXACT=int(projection == "exact"),
             PROJECT_LANES=self.lanes,
+            SATURATED=int(self.one_sided),
             **op.tile_defines,
             **deferred,
         )
