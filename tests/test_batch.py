@@ -343,7 +343,8 @@ def test_the_memory_count_and_the_solver_agree_on_per_set_inverses(sets, monkeyp
     monkeypatch.setattr(admm, "inverse_blocks", allocate)
     rsocl.reconstruct(g, rig, iterations=2, projection=projection, tune=False, **kwargs)
     assert counted == allocated
-    assert allocated == [case == "saturation per set" or (case == "eta per set" and projection == "exact")]
+    # saturated pixels stay in the blocks (one-sided in the data step): saturation never makes them per set
+    assert allocated == [case == "eta per set" and projection == "exact"]
 
 
 def test_batch_size_on_a_gpu_goes_past_max_batch_up_to_its_voxels(sets, monkeypatch):

@@ -211,26 +211,26 @@ def test_a_failing_tile_is_retried_then_reported_and_the_others_are_kept(monkeyp
 
 
 @pytest.mark.parametrize("tune", [False, True])
-def test_a_tile_with_every_pixel_saturated_holds_the_start_the_untiled_run_keeps_there(tune):
+def test_a_tile_with_every_pixel_saturated_holds_the_interpolation_of_its_clipped_snapshots(tune):
     from rsocl.model.interpolation import interp3d
+    from rsocl.model.reference import forward
 
     rig = rsocl.Rig.paper_array(4, (48, 48), t_e=1.8e-4, t_r=3.5e-5)
     g, _ = _problem(rig)
     g = g.copy()
-    g[:, :20, :20] = 1e6  # tile (0, 0) with its halo: every pixel saturated, nothing to fit
+    g[:, :20, :20] = 1e6  # tile (0, 0) with its halo: every pixel saturated, only lower bounds to fit
     kwargs = dict(iterations=ITER, saturation=1e5, tune=tune)
     untiled = rsocl.reconstruct(g, rig, **kwargs).datacube
     result = reconstruct_tiled(g, rig, tile=(16, 16), halo=4, **kwargs)
     assert not result.failures and len(result.pieces) == 9
     held = next(p for p in result.pieces if p.index == (0, 0))
     assert held.iterations == 0 and held.residual == 0.0
-    core = result.datacube[:, :16, :16]
-    if tune:  # the interpolation's value at pixels with no valid sample: the untiled start there
-        start = interp3d(g, rig, valid=g < 1e5)[:, :16, :16]
-        np.testing.assert_allclose(core, start, rtol=1e-6)
-        assert np.abs(untiled[:, :8, :8] - start[:, :8, :8]).max() < 0.1
-    else:  # the zero start, which the untiled run barely leaves there
-        assert np.all(core == 0) and np.abs(untiled[:, :8, :8]).max() < 0.1
+    start = interp3d(g, rig)[:, :16, :16]  # the clipped values as they are: the untiled run's start there
+    np.testing.assert_allclose(result.datacube[:, :16, :16], start, rtol=1e-6)
+    if tune:  # the untiled run starts there and keeps it: its predictions already meet the lower bounds
+        np.testing.assert_allclose(untiled[:, :8, :8], start[:, :8, :8], rtol=1e-6)
+    else:  # from zeros, the untiled run is pulled up to the bounds, never down below them
+        assert np.all(forward(rig, untiled)[:, :8, :8] >= 0.999e6)
         grid = tile_grid(rig.shape, (16, 16), 4)
         result.pieces = [p for p in result.pieces if max(p.index) == 2]
         _assert_close_to_untiled(result, untiled, grid)  # the tiles whose halo keeps clear of it

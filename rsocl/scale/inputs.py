@@ -15,7 +15,6 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.files.hdf5_header import complete_set_count, open_checked, read_rig, real_dataset
-from rsocl.model.interpolation import samples
 from rsocl.model.rig import Rig
 from rsocl.scale.work import FileBlock
 
@@ -123,29 +122,17 @@ class CaptureSets:
             return h5["truth"][()]
 
 
-def _fill(g, rig: Rig, valid) -> float:
-    """The :func:`~rsocl.model.interpolation.interp3d` value of a pixel with no valid sample in the
-    set ``g``: the mean of the set's valid samples (0.0 when every pixel has one)."""
-    if valid.any(axis=0).all():
-        return 0.0
-    return float(samples(np.asarray(g, dtype=np.float64), rig, valid).fallback)
-
-
 def scan(source, saturation=None) -> tuple:
-    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count, fills)``.
+    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count)``.
 
-    ``fills`` holds one value per set: where a tile has no snapshot pixel below ``saturation``,
-    the value its sub-frames take (:func:`_fill`, the untiled interpolation's value at pixels
-    with no valid sample). A ValueError naming the set (:meth:`where`) when a set holds NaN or
-    inf, or when none of its pixels is below ``saturation`` (nothing to fit, as
-    :func:`rsocl.reconstruct` refuses it).
+    A ValueError naming the set (:meth:`where`) when a set holds NaN or inf, or when none of its
+    pixels is below ``saturation`` (nothing to fit, as :func:`rsocl.reconstruct` refuses it).
     """
-    digest, saturated, fills = hashlib.sha256(), 0, []
+    digest, saturated = hashlib.sha256(), 0
     for set_index, g in source.sets():
         check.finite_array(source.where(set_index), g)
         _digest_update(digest, g)
         if saturation is None:
-            fills.append(0.0)
             continue
         valid = g < saturation
         if not valid.any():
@@ -154,5 +141,4 @@ def scan(source, saturation=None) -> tuple:
                 f"{saturation!r}: nothing left to fit"
             )
         saturated += int(valid.size - np.count_nonzero(valid))
-        fills.append(_fill(g, source.rig, valid))
-    return digest.hexdigest(), saturated, tuple(fills)
+    return digest.hexdigest(), saturated

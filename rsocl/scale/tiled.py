@@ -132,14 +132,12 @@ def _check_device(device, engine):
         )
 
 
-def _settings(request: Request, tuning, saturation, fills):
+def _settings(request: Request, tuning, saturation):
     """Every task's :class:`TileSettings` and the run's ``params``
-    (:func:`~rsocl.solver.request.run_params`), with ``tuning``'s choice (None: as requested); ``fills``
-    the :func:`~rsocl.scale.inputs.scan` values: one number (one set) or one per set."""
+    (:func:`~rsocl.solver.request.run_params`), with ``tuning``'s choice (None: as requested)."""
     reg, settled = request.settled(tuning)
     options = {**request.given.options, **request.tuned_options(tuning)}
     start = "zeros" if tuning is None else "interp3d"
-    fill = 0.0 if start == "zeros" else fills
     blend = applied_blend(tuning) if request.blend is None else request.blend
     device = request.device
     assert settled.lam is not None and settled.eta is not None  # a Request's settings are settled
@@ -155,7 +153,6 @@ def _settings(request: Request, tuning, saturation, fills):
         saturation,
         device,
         start,
-        fill,
         blend,
         request.quality,
     )
@@ -218,8 +215,8 @@ def reconstruct_tiled(
         As :func:`rsocl.reconstruct`, for every tile; ``lam`` and ``eta`` may give one value per
         set (``S`` of them), every tile of a set running with that set's. A set with no pixel
         below ``saturation`` is refused (as untiled); a tile with none (its halo included) is not
-        solved and holds its start, as the untiled run does where no sample is valid
-        (:class:`~rsocl.scale.work.TileSettings` ``fill``).
+        solved and holds the ``interp3d`` interpolation of its clipped samples, the untiled
+        tuned run's start there (:func:`~rsocl.scale.work.solve_tile`).
     device : str, Device or None
         OpenCL device spec for every task; None lets each worker choose (:func:`worker_device`).
         A :class:`~rsocl.device.Device` serves tasks run in this process only (not with
@@ -304,9 +301,9 @@ def reconstruct_tiled(
     span = rig.sampled_range()
     with engine:  # a cluster is reached (or started) before the input is read
         began = time.perf_counter()
-        digest, saturated, fills = scan(source, saturation)
+        digest, saturated = scan(source, saturation)
         tuning = tune_tiles(source, grid, request, saturation)
-        settings, params = _settings(request, tuning, saturation, fills if source.n_sets else fills[0])
+        settings, params = _settings(request, tuning, saturation)
         params.update(
             {
                 "saturated_pixels": saturated,

@@ -92,7 +92,7 @@ def tune_tiles(source, grid: TileGrid, request: Request, saturation=None):
         The whole capture's request (its rig, settings settled for that rig, ``tune``); the search
         runs on this process's device (:func:`~rsocl.scale.work.worker_device` of its device).
     saturation : float or None
-        Snapshot value from which a pixel is left out, as :func:`rsocl.reconstruct`'s.
+        Snapshot value at and above which a pixel is clipped, as :func:`rsocl.reconstruct`'s.
 
     Returns
     -------

@@ -36,15 +36,10 @@ class TileSettings:
     be one value per set (a tuple), of which each set's tasks take their own (:meth:`for_set`). ``start``
     is each tile's first iterate: ``"zeros"``, or ``"interp3d"`` (the
     :func:`~rsocl.model.interpolation.interp3d` interpolation of the tile's own snapshots over
-    its rig, computed on the device; the start of a tuned :func:`rsocl.reconstruct`). ``fill``
-    (one value, or one per set) is what every voxel of a tile with no snapshot pixel below
-    ``saturation`` takes instead of a solve (nothing to fit): its first iterate, which the solver
-    would keep, as the untiled run keeps it at pixels with no valid sample (0.0 with the zero
-    start; with ``"interp3d"`` the interpolation's value there, the mean of the set's valid
-    samples, :func:`rsocl.scale.inputs.scan`). ``blend`` moves each tile's result back towards its
-    start (:func:`rsocl.reconstruct`'s ``blend``; 1: not at all), as the capture's search chose it.
-    ``quality`` names the rung (:mod:`rsocl.solver.ladder`) whose static-part fix a tile started from
-    the interpolation gets, as the untiled tuned run does.
+    its rig, computed on the device; the start of a tuned :func:`rsocl.reconstruct`). ``blend`` moves
+    each tile's result back towards its start (:func:`rsocl.reconstruct`'s ``blend``; 1: not at all), as
+    the capture's search chose it. ``quality`` names the rung (:mod:`rsocl.solver.ladder`) whose
+    static-part fix a tile started from the interpolation gets, as the untiled tuned run does.
     """
 
     regularizer: str
@@ -58,17 +53,16 @@ class TileSettings:
     saturation: float | None
     device: str | Device | None
     start: str = "zeros"
-    fill: float | tuple = 0.0
     blend: float = 1.0
     quality: str = "balanced"
 
     def for_set(self, set_index) -> TileSettings:
-        """The settings of set ``set_index``'s tasks: its own ``lam``, ``eta`` and ``fill`` where they are per set."""
+        """The settings of set ``set_index``'s tasks: its own ``lam`` and ``eta`` where they are per set."""
 
         def own(value):
             return value[set_index] if isinstance(value, tuple) else value
 
-        return replace(self, lam=own(self.lam), eta=own(self.eta), fill=own(self.fill))
+        return replace(self, lam=own(self.lam), eta=own(self.eta))
 
 
 @dataclass(frozen=True)
@@ -226,18 +220,23 @@ def _start(settings: TileSettings):
     return None if settings.start == "zeros" else "interp3d"
 
 
-def _unfitted(job: Job, solved: slice, settings: TileSettings, device) -> Piece:
-    """The piece of a tile with no snapshot pixel below saturation: ``settings.fill`` everywhere."""
+def _unfitted(job: Job, rig, g, solved: slice, settings: TileSettings, device) -> Piece:
+    """The piece of a tile with no snapshot pixel below saturation: the ``interp3d`` interpolation of its
+    clipped snapshots (each a lower bound of its pixel's value), over its core."""
+    from rsocl.model.interpolation import interp3d
+
     y0, y1, x0, x1 = job.tile.core
-    block = np.full((solved.stop - solved.start, y1 - y0, x1 - x0), settings.fill, dtype=settings.dtype)
+    oy, ox = job.tile.outer[0], job.tile.outer[2]
+    cube = interp3d(g, rig)[solved, y0 - oy : y1 - oy, x0 - ox : x1 - ox]
+    block = np.ascontiguousarray(cube, dtype=settings.dtype)
     return Piece(job.set_index, job.tile.index, solved.start, solved.stop, block, 0.0, 0, 0.0, device.name)
 
 
 def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     """Reconstruct ``job``'s tile with the capture's settings; write it to the store or return it.
 
-    A tile with no snapshot pixel below ``settings.saturation`` is not solved: it takes
-    ``settings.fill`` (:class:`TileSettings`), 0 iterations and residual 0.
+    A tile with no snapshot pixel below ``settings.saturation`` is not solved: it takes the interpolation
+    of its clipped snapshots, 0 iterations and residual 0.
     """
     from rsocl.solver.reconstruct import reconstruct
 
@@ -248,7 +247,7 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     x0 = _start(settings)
     device = worker_device(settings.device)
     if settings.saturation is not None and not np.any(g < settings.saturation):
-        piece = _unfitted(job, solved, settings, device)
+        piece = _unfitted(job, rig, g, solved, settings, device)
     else:
         with _lock_for(device):
             began = time.perf_counter()

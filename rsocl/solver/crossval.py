@@ -198,7 +198,8 @@ def tune_parameters(
     eta : float
     projection : {"exact", "paper"}
     valid : ndarray of bool or None
-        Snapshot pixels usable at all (saturated ones left out).
+        Snapshot pixels usable at all (None: all; :func:`rsocl.reconstruct` passes all, clipped ones as
+        recorded).
     iterations : int
         ADMM iterations per candidate and hold-out pattern.
     patterns : list of (int, int) or None

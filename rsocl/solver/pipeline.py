@@ -124,7 +124,7 @@ def run(prepared: Prepared, tuning: Tuning | None = None) -> Result:
         eta=settings.eta,
         projection=settings.projection,
         x0=staged.x0,
-        valid=problem.valid,
+        saturated=None if problem.valid is None else ~problem.valid,
     )
     blend = request.blend
     if blend is None:
@@ -178,8 +178,10 @@ def _plain(value):
 
 
 def interpolation_start(problem, staged):
-    """``interp3d`` of the snapshots over the solved sub-frames, on the device (one per set of a batch)."""
-    return interp3d_device(staged.op, problem.g, problem.valid, staged.solved)
+    """``interp3d`` of the snapshots over the solved sub-frames, on the device (one per set of a batch).
+    Saturated samples enter with their clipped value: a lower bound, nearer the truth than an interpolation
+    across them (``docs/saturation.md``)."""
+    return interp3d_device(staged.op, problem.g, None, staged.solved)
 
 
 def _choose_unset(prepared: Prepared, checked=False, search=None):
@@ -199,7 +201,7 @@ def _choose_unset(prepared: Prepared, checked=False, search=None):
     space = request.search_space()
     if space is None:
         return None
-    if not can_hold_out(rig.shape, rig.n_channels, problem.valid):
+    if not can_hold_out(rig.shape, rig.n_channels):
         warnings.warn(
             f"the snapshots of a {rig.n_channels}-camera rig on {rig.shape[0]}x"
             f"{rig.shape[1]} pixels leave no pixels to hold out for choosing the parameters: "
@@ -234,7 +236,7 @@ def _choose_unset(prepared: Prepared, checked=False, search=None):
         space,
         eta=first_value(settings.eta),
         projection=settings.projection,
-        valid=problem.valid,
+        valid=None,  # clipped samples as recorded: one-sided only in the run (docs/saturation.md)
         iterations=search.candidate_iterations(base, len(patterns)),
         patterns=patterns,
         progress=request.progress,

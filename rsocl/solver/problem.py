@@ -62,7 +62,9 @@ MAX_ITERATIONS = 1_000_000
 class Problem:
     """Checked host arrays: snapshots ``g`` ``(K, m, n)``, the rig, and the optional extras.
 
-    ``valid`` marks the snapshot pixels that enter the data term (None: all of them); ``x0`` and
+    ``valid`` marks the snapshot pixels below the saturation (None: all of them): the others enter
+    the run's data step one-sided (:class:`~rsocl.solver.admm.ADMM`'s ``saturated``) and are left out
+    of its residual; the warm start and the parameter search take them as recorded; ``x0`` and
     ``truth`` are ``(T, m, n)`` or None; ``interpolate``: the run starts from the ``interp3d``
     interpolation of the snapshots (the caller's ``x0="interp3d"``). A batch of ``batch`` sets has a
     leading axis of that length on ``g``, ``valid``, ``x0`` and ``truth`` (``batch`` is None for one set).
@@ -311,8 +313,7 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
     solved = rig.sampled_range()
     op = RollingShutterOperator(rig, device=device, dtype=dtype, subframes=solved)
     sets = problem.batch or 1
-    valid = problem.valid
-    own = own_inverses(settings.projection, settings.eta, valid, sets)
+    own = own_inverses(settings.projection, settings.eta, None, sets)  # saturated pixels stay in the blocks
     largest, need = memory_bytes(
         op,
         reg,

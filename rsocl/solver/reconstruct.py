@@ -100,7 +100,9 @@ def reconstruct(
     tol : float or None
         Stop when the residual's relative change between iterations is below ``tol``.
     saturation : float or None
-        Snapshot value (units of ``g``) from which a pixel is left out of the data term.
+        Snapshot value (units of ``g``) at and above which a pixel is clipped: its value is a lower
+        bound, which the data step meets one-sided (``docs/model.md``, saturated pixels; measured:
+        ``docs/saturation.md``).
     tune : bool or Tuning
         Choose ``lam`` and the tunable options (TV: ``temporal_weight``) the caller left unset
         from the snapshots alone (:func:`rsocl.solver.pipeline.tune`); a ``Tuning``: run with that

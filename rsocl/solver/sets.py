@@ -72,7 +72,7 @@ def batch_size(
     truth : bool
         Whether a ground truth goes with every set (one more datacube each).
     own_inverse : bool
-        Whether every set has its own projection blocks (per-set ``eta`` or saturated pixels).
+        Whether every set has its own projection blocks (per-set ``eta`` of the exact projection).
     start : bool
         Whether every set has a start cube beside its iterate (a given ``x0``, or the self-tuned
         run's ``interp3d`` start): one more datacube each, counted against the global memory; it
@@ -201,8 +201,9 @@ def reconstruct_sets(
         quality=quality,
     )  # the bar counts sets, not each batch's iterations
     if batch is None:
-        valid = None if saturation is None else g < check.positive("saturation", saturation, "(snapshot units)")
-        own = own_inverses(projection, 0.0 if eta is None else eta, valid, count)
+        if saturation is not None:
+            check.positive("saturation", saturation, "(snapshot units)")
+        own = own_inverses(projection, 0.0 if eta is None else eta, None, count)  # saturated pixels stay in the blocks
         batch = batch_size(
             rig,
             request.regularizer,
