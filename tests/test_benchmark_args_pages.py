@@ -14,6 +14,7 @@ sys.path.insert(0, str(BENCH))
 
 import ladder  # noqa: E402
 import quality  # noqa: E402
+import saturation  # noqa: E402
 import scale  # noqa: E402
 import solver_settings  # noqa: E402
 import tiled_tuning  # noqa: E402
@@ -149,3 +150,16 @@ def test_scale_sensor_below_the_tile_runs_in_a_tile_that_fits(tmp_path):
 def test_solver_settings_usage_points_out_at_its_own_page():
     usage = next(line for line in solver_settings.__doc__.splitlines() if "benchmarks/solver_settings.py" in line)
     assert "--out docs/solver_settings.md" in usage
+
+
+# ---------------------------------------------------------------------- saturation.py
+def test_saturation_writes_its_summary_and_every_case(tmp_path, monkeypatch):
+    monkeypatch.setattr(saturation, "scene_names", lambda: ["builtin"])  # the shared videos may be here or not
+    monkeypatch.setattr(saturation, "ITERATIONS", 20)
+    out = tmp_path / "saturation.md"
+    saturation.main(["--sizes", "12", "--seeds", "--levels", "80", "--out", str(out)])
+    page = out.read_text()
+    assert "| 80th percentile (on average 20 % of the samples clipped) | 2 |" in page
+    assert page.count("| paper 12x12 | builtin |") == 2  # noiseless and noisy
+    with pytest.raises(SystemExit):
+        saturation.main(["--levels", "100", "--out", str(out)])
