@@ -854,3 +854,17 @@ def test_an_interrupt_while_drawing_the_pictures_says_the_result_is_written(tmp_
     assert main(["reconstruct", str(cap), "--out", str(rec), "--fixed", "--iterations", "2", "--quiet"]) == 130
     assert capsys.readouterr().err == f"rsocl reconstruct: interrupted: {rec} written; the pictures are not all drawn\n"
     assert rec.exists()
+
+
+def test_saturation_is_checked_first_and_reaches_the_solver(tmp_path, capsys):
+    cap, out = tmp_path / "one.h5", tmp_path / "rec.h5"
+    _capture_with_truth(cap, "one")
+    assert main(["reconstruct", str(cap), "--out", str(out), "--saturation", "0", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rsocl reconstruct: error: --saturation must be > 0"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [cap.name]
+    g = load_capture(cap).snapshots
+    level = float(np.percentile(g, 80))
+    argv = ["reconstruct", str(cap), "--out", str(out), "--iterations", "3", "--fixed", "--quiet"]
+    assert main([*argv, "--saturation", repr(level)]) == 0
+    assert load_reconstruction(out).params["saturated_pixels"] == int((g >= level).sum()) > 0

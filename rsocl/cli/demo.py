@@ -7,12 +7,12 @@ from rsocl.cli.options import (
     add_rig_args,
     add_solver_args,
     check_datacube_memory,
-    quality_line,
     rig_from,
     run_reconstruction,
     say,
     tuning_plot_files,
 )
+from rsocl.cli.result_lines import quality_line
 
 __all__ = ["add_parser", "cmd_demo", "FILES"]
 

@@ -1,4 +1,5 @@
-"""Arguments and output shared by the ``rsocl`` subcommands: the rig, the OpenCL device, the solver."""
+"""Arguments shared by the ``rsocl`` subcommands: the rig, the OpenCL device, the solver (the lines they
+print about a result: :mod:`rsocl.cli.result_lines`)."""
 
 from __future__ import annotations
 
@@ -31,8 +32,6 @@ __all__ = [
     "tuning_plot_path",
     "tuning_plot_files",
     "run_reconstruction",
-    "truth_quality",
-    "quality_line",
 ]
 
 #: One microsecond, seconds (the command line gives times in µs).
@@ -213,6 +212,14 @@ def add_solver_args(p):
         metavar="KEY=VALUE",
         help="regularizer option, repeatable (iterations=N is --tv-iterations N: give one of them)",
     )
+    g.add_argument(
+        "--saturation",
+        type=float,
+        default=None,
+        metavar="LEVEL",
+        help="snapshot value (the capture's units) at and above which a pixel is clipped: a lower bound, "
+        "fitted one-sided (default: none; docs/saturation.md)",
+    )
     g.add_argument("--fast", action="store_true", help="--quality fast: the cheapest rung of the ladder")
     g.add_argument(
         "--fixed",
@@ -237,9 +244,9 @@ def check_solver_args(args) -> None:
     """Refuse solver options that contradict each other, before the command runs (``rsocl.cli.main``
     calls it): ``--reg-opt iterations=N`` with a different ``--tv-iterations M`` (one of them was
     silently ignored); a ``--reg-opt`` that is not ``KEY=VALUE``; an unknown ``--regularizer`` or an
-    option it refuses (name or range); ``--blend`` outside [0, 1], or below 1 with ``--fixed`` (a zero
-    start); ``--fast`` with another ``--quality``; ``--iterations auto`` on a rung that refuses it,
-    before anything is simulated, loaded or run."""
+    option it refuses (name or range); ``--saturation`` not above 0; ``--blend`` outside [0, 1], or
+    below 1 with ``--fixed`` (a zero start); ``--fast`` with another ``--quality``; ``--iterations
+    auto`` on a rung that refuses it, before anything is simulated, loaded or run."""
     from rsocl.common import validation as check
     from rsocl.solver.ladder import check_iterations
 
@@ -247,6 +254,8 @@ def check_solver_args(args) -> None:
     if args.fast and args.quality not in (None, "fast"):
         raise ValueError(f"--fast is --quality fast; it contradicts --quality {args.quality}: give one of them")
     check_iterations(args.iterations, quality_of(args))
+    if args.saturation is not None:
+        check.positive("--saturation", args.saturation, "(the capture's snapshot units)")
     if args.blend is not None:
         check.in_range("--blend", args.blend, 0.0, 1.0)
         if args.blend < 1 and args.fixed:
@@ -336,6 +345,7 @@ def solver_options(args) -> dict:
         "tune": not args.fixed,
         "quality": quality_of(args),
         "blend": args.blend,
+        "saturation": args.saturation,
         "progress": not args.quiet,
     }
 
@@ -375,26 +385,3 @@ def run_reconstruction(args, g, rig, truth=None):
     from rsocl.solver.reconstruct import reconstruct
 
     return reconstruct(g, rig, truth=truth, **solver_options(args))
-
-
-def truth_quality(datacube, truth) -> str:
-    """``PSNR .. dB, SSIM ..`` of ``datacube`` against the ground truth ``truth`` (both ``(T, m, n)``)."""
-    from rsocl.analysis.metrics import psnr, ssim
-
-    mean_ssim, _ = ssim(datacube, truth)
-    shown = f"{mean_ssim:.3f}" if math.isfinite(mean_ssim) else "n/a (frames under 3 pixels a side)"
-    return f"PSNR {psnr(datacube, truth):.2f} dB, SSIM {shown}"
-
-
-def quality_line(result, truth):
-    """``PSNR .. dB, SSIM .., N iterations in X s (search Y s of Z s total)`` (PSNR and SSIM only with a
-    truth: :func:`truth_quality`): X the iterations' wall time, Y the search's, Z the whole run's."""
-    import numpy as np
-
-    seconds = float(np.nanmax(result.history["time"][-1]))
-    total = result.seconds if result.seconds is not None else seconds
-    search = result.search_seconds or 0.0
-    text = f"{result.iterations} iterations in {seconds:.2f} s (search {search:.2f} s of {total:.2f} s total)"
-    if truth is not None:
-        text = f"{truth_quality(result.datacube, truth)}, " + text
-    return text

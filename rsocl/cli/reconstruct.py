@@ -10,13 +10,13 @@ from pathlib import Path
 from rsocl.cli.options import (
     add_device_args,
     add_solver_args,
-    quality_line,
     run_reconstruction,
     say,
     solver_options,
     tuning_plot_files,
 )
 from rsocl.cli.outputs import interrupted, kept_clause, kept_note, save_result
+from rsocl.cli.result_lines import quality_line
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
 __all__ = ["add_parser", "cmd_reconstruct", "set_path", "check_set_outputs"]

@@ -57,7 +57,8 @@ def run_tiles(args, capture):
     """Reconstruct ``capture`` (a :class:`rsocl.scale.inputs.CaptureSets`) in tiles of ``--tile``, or of
     the tile :func:`rsocl.scale.proposal.propose_tiling` proposes for the device, into ``--out`` (an
     HDF5 file, or a Zarr store of every set with ``--sets``); the exit code (1 when tiles failed)."""
-    from rsocl.cli.options import regularizer_from, say, solver_options, truth_quality, tuning_plot_files
+    from rsocl.cli.options import regularizer_from, say, solver_options, tuning_plot_files
+    from rsocl.cli.result_lines import truth_quality
     from rsocl.scale.proposal import propose_tiling
     from rsocl.scale.tiled import TilesFailed, reconstruct_tiled
 
@@ -148,7 +149,8 @@ def run_stream(args):
     """``--window``: set 0 of the capture as a stream of overlapping frame windows, into an HDF5 file;
     the exit code."""
     from rsocl.analysis.visual import comparison_gif
-    from rsocl.cli.options import say, solver_options, truth_quality, tuning_plot_files
+    from rsocl.cli.options import say, solver_options, tuning_plot_files
+    from rsocl.cli.result_lines import truth_quality
     from rsocl.files.hdf5 import load_capture
     from rsocl.scale.stream import default_overlap, reconstruct_stream
     from rsocl.scale.tiled import TilesFailed
