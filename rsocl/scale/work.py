@@ -225,10 +225,7 @@ def _unfitted(job: Job, rig, g, solved: slice, settings: TileSettings, device) -
     clipped snapshots (each a lower bound of its pixel's value), over its core."""
     from rsocl.model.interpolation import interp3d
 
-    y0, y1, x0, x1 = job.tile.core
-    oy, ox = job.tile.outer[0], job.tile.outer[2]
-    cube = interp3d(g, rig)[solved, y0 - oy : y1 - oy, x0 - ox : x1 - ox]
-    block = np.ascontiguousarray(cube, dtype=settings.dtype)
+    block = core_block(interp3d(g, rig), job.tile, solved).astype(settings.dtype, copy=False)
     return Piece(job.set_index, job.tile.index, solved.start, solved.stop, block, 0.0, 0, 0.0, device.name)
 
 
