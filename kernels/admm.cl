@@ -49,19 +49,19 @@ __kernel void admm_dual(__global const real *theta, __global real *b, __global r
     f[i] = th + bn;
 }
 
-#if SATURATED
-/* The one-sided data step of one pixel p (docs/model.md, saturated pixels): z, where f += Hᵀ z, from the
- * residuals r = g - H v of its NCH samples; w[q] = 0 marks a saturated sample (its g a lower bound).
- * Paper step: the clamp r = max(r, 0) on saturated samples, exact for a diagonal step. Exact step: the
- * per-pixel minimiser of the two-sided terms, the one-sided ones and eta |f - v|^2, by an active set over
- * the saturated samples with the blocks B = (eta I + M)^-1 alone: an inactive sample's pseudo-residual r'
- * makes its z zero (B_DD r'_D = -B_DA r_A, Gaussian elimination with partial pivoting), z = B r', and
- * (M z)_k = r'_k - eta z_k gives the checks: an active saturated sample needs z_k >= 0, an inactive one
- * r'_k >= r_k. Rows left out of the blocks (B_kk = 0) take no part. At most 2 NCH + 2 rounds. */
-inline void one_sided_step(const real *r, __global const real *w, __global const real *inverse, real eta,
-                           size_t mn, size_t p, real *z)
+#if SATURATED && PROJECTION_EXACT
+/* The one-sided exact data step of one pixel p (docs/model.md, saturated pixels): z, where f += Hᵀ z, from
+ * the residuals r = g - H v of its NCH samples; w[q] = 0 marks a saturated sample (its g a lower bound).
+ * The per-pixel minimiser of the two-sided terms, the one-sided ones and eta |f - v|^2, by an active set
+ * over the saturated samples with the blocks B = (eta I + M)^-1 alone: an inactive sample's
+ * pseudo-residual r' makes its z zero (B_DD r'_D = -B_DA r_A, Gaussian elimination with partial
+ * pivoting), z = B r', and (M z)_k = r'_k - eta z_k gives the checks: an active saturated sample needs
+ * z_k >= 0, an inactive one r'_k >= r_k. Rows left out of the blocks (B_kk = 0) take no part. At most
+ * 2 NCH + 2 rounds. (The paper's diagonal step needs none of this: its terms separate, and the clamp
+ * r = max(r, 0) of project_pixel is its exact one-sided step.) */
+inline void one_sided_step(const real *r, __global const real *w, __global const real *inverse, size_t mn,
+                           size_t p, real *z)
 {
-#if PROJECTION_EXACT
 #define BLOCK(k, l) inverse[((size_t)(k) * NCH + (size_t)(l)) * mn + p]
     int sat[NCH], act[NCH];
     real rp[NCH];
@@ -125,14 +125,6 @@ inline void one_sided_step(const real *r, __global const real *w, __global const
         if (!changed) break;
     }
 #undef BLOCK
-#else
-    for (int k = 0; k < NCH; ++k) {
-        size_t q = (size_t)k * mn + p;
-        real d = eta + inverse[q];          /* inverse holds psi here */
-        real rk = w[q] == (real)0 ? fmax(r[k], (real)0) : r[k];
-        z[k] = d > (real)0 ? rk / d : (real)0;
-    }
-#endif
 }
 #endif
 
@@ -147,10 +139,13 @@ inline void project_pixel(__global real *f, __global const real *g, __global con
     for (int k = 0; k < NCH; ++k) {
         size_t q = (size_t)k * mn + p;
         r[k] = g[q] - gain[k] * window_dot(f, first[q], frac[q], WINDOW_LENGTH(len, k), T, L, mn, p);
+#if SATURATED && !PROJECTION_EXACT
+        if (w && w[q] == (real)0) r[k] = fmax(r[k], (real)0);     /* one-sided: the diagonal step's clamp */
+#endif
     }
-#if SATURATED
+#if SATURATED && PROJECTION_EXACT
     if (w) {
-        one_sided_step(r, w, inverse, eta, mn, p, z);
+        one_sided_step(r, w, inverse, mn, p, z);
     } else
 #endif
     {

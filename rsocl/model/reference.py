@@ -62,11 +62,13 @@ def project(rig: Rig, v, g, eta: float, projection: str = "exact", saturated=Non
     (bool, shape of ``g``): those samples enter one-sided (docs/model.md, saturated pixels).
     """
     r = np.asarray(g, dtype=np.float64) - forward(rig, v)
-    if saturated is not None and np.any(saturated):
-        return np.asarray(v, dtype=np.float64) + adjoint(rig, _one_sided(rig, r, eta, projection, saturated))
     if projection == "paper":
+        if saturated is not None:  # the terms separate: the clamp is the exact one-sided step
+            r = np.where(saturated, np.maximum(r, 0.0), r)
         d = eta + psi(rig)
         z = np.divide(r, d, out=np.zeros_like(r), where=d > 0)
+    elif saturated is not None and np.any(saturated):
+        z = _one_sided(rig, r, eta, saturated)
     else:
         K = rig.n_channels
         block = gram(rig) + eta * np.eye(K)
@@ -74,8 +76,8 @@ def project(rig: Rig, v, g, eta: float, projection: str = "exact", saturated=Non
     return np.asarray(v, dtype=np.float64) + adjoint(rig, z)
 
 
-def _one_sided(rig: Rig, r, eta: float, projection: str, saturated) -> np.ndarray:
-    """``z`` of the data step with the ``saturated`` samples one-sided (``f = v + Hᵀ z``), pixel by pixel:
+def _one_sided(rig: Rig, r, eta: float, saturated) -> np.ndarray:
+    """``z`` of the exact data step with the ``saturated`` samples one-sided (``f = v + Hᵀ z``), pixel by pixel:
     the minimiser of ``½ Σ_two-sided (r - M z)² + ½ Σ_saturated max(r - M z, 0)² + ½ eta zᵀ M z`` found by
     trying every set of active saturated samples (solved with ``M``'s sub-blocks, not the inverse blocks
     the kernels use) until one meets the optimality conditions."""
@@ -83,15 +85,9 @@ def _one_sided(rig: Rig, r, eta: float, projection: str, saturated) -> np.ndarra
 
     K = rig.n_channels
     M = gram(rig)
-    d = psi(rig)
     z = np.zeros_like(r)
     for y, x in np.ndindex(rig.shape):
         rp, sat = r[:, y, x], np.asarray(saturated[:, y, x], bool)
-        if projection == "paper":
-            rk = np.where(sat, np.maximum(rp, 0.0), rp)
-            den = eta + d[:, y, x]
-            z[:, y, x] = np.divide(rk, den, out=np.zeros(K), where=den > 0)
-            continue
         m = M[y, x]
         two = np.flatnonzero(~sat)
         ones = np.flatnonzero(sat)
