@@ -75,7 +75,8 @@ def apply_settings() -> list:
 
 
 def git_revision(root: Path = ROOT) -> str:
-    """``git rev-parse --short HEAD`` of ``root``, with ``-dirty`` when tracked files are modified.
+    """``git rev-parse --short HEAD`` of ``root``, with ``-dirty`` when tracked files that a measurement can
+    depend on are modified: any but the pages (``docs/``, Markdown files), which the scripts write.
 
     For a copy of the tree sent to another machine, the environment variable ``RSOCL_GIT_COMMIT``
     names the commit the copy was made from, shown as ``"<commit> (copied tree)"``: it wins over
@@ -89,7 +90,7 @@ def git_revision(root: Path = ROOT) -> str:
             ["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True, check=True
         ).stdout.strip()
         dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", ".", ":(exclude)docs", ":(exclude)*.md"],
             cwd=root,
             capture_output=True,
             text=True,

@@ -1,6 +1,6 @@
 """Benchmarks' arguments: ``tiled_tuning.py``'s interface and page, the sizes and scenes ``quality.py`` and
 ``ladder.py`` have cases for, ``scale.py``'s sensor shape, tile and seam picture, ``solver_settings.py``'s
-usage line. Refusals come before anything runs and name the option."""
+usage line; the commit a page names (``provenance.py``). Refusals come before anything runs and name the option."""
 
 import json
 import subprocess
@@ -163,3 +163,26 @@ def test_saturation_writes_its_summary_and_every_case(tmp_path, monkeypatch):
     assert page.count("| paper 12x12 | builtin |") == 2  # noiseless and noisy
     with pytest.raises(SystemExit):
         saturation.main(["--levels", "100", "--out", str(out)])
+
+
+# ---------------------------------------------------------------------- provenance.py
+def test_git_revision_is_dirty_for_code_but_not_for_pages(tmp_path, monkeypatch):
+    """A page's header names the commit measured: edits to the pages the scripts write (docs/, Markdown) leave
+    it clean, an edit to anything else makes it ``-dirty``."""
+    from provenance import git_revision
+
+    monkeypatch.delenv("RSOCL_GIT_COMMIT", raising=False)
+    git = ["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run(git[:3] + ["init", "-q"], check=True)
+    for name in ("docs/page.md", "docs/plot.png", "README.md", "rsocl/code.py"):
+        (tmp_path / name).parent.mkdir(exist_ok=True)
+        (tmp_path / name).write_text("a\n")
+    subprocess.run(git + ["add", "."], check=True)
+    subprocess.run(git + ["commit", "-q", "-m", "c"], check=True)
+    head = subprocess.run(git + ["rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    for name in ("docs/page.md", "docs/plot.png", "README.md"):
+        (tmp_path / name).write_text("b\n")
+    (tmp_path / "untracked.py").write_text("b\n")
+    assert git_revision(tmp_path) == head
+    (tmp_path / "rsocl/code.py").write_text("b\n")
+    assert git_revision(tmp_path) == head + "-dirty"
