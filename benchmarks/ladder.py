@@ -6,17 +6,21 @@ For each case of :data:`quality.CASES` picked by ``--sizes`` and ``--scenes`` (s
 (``tune=False``: temporal weight 3, lam 0.1, zero start, the ``balanced`` rung's iterations) and
 ``rsocl.reconstruct(quality=...)`` for every rung of :mod:`rsocl.solver.ladder` at its own
 iterations, then ``balanced`` with ``iterations="auto"``. Per run: PSNR (dB, peak 1), mean SSIM,
-wall seconds, the search's seconds (``Result.search_seconds``) and the iterations that ran. Each
-case's runs are timed one after the other after a kernel build, so the time ratios of a case share
-the machine's load. Results are cached per run (``--cache``). Writes docs/quality_ladder.md
-(``--out``) with the provenance header, and ``--plot`` a Pareto plot (time against PSNR and SSIM).
+wall seconds, the search's seconds (``Result.search_seconds``) and the iterations that ran. After a
+kernel build, a case's runs are timed in ``--rounds`` rounds, the order reversed every other round
+(the machine's speed drifts): seconds are medians over the rounds, and a run's time against the
+fixed run's is the median (and range) of its ratios within a round. PSNR, SSIM and iterations are
+the first round's; every round must give the same PSNR. Results are cached per case and number of
+rounds (``--cache``). Writes docs/quality_ladder.md (``--out``) with the provenance header, and
+``--plot`` a Pareto plot (time against PSNR and SSIM).
 
-    python benchmarks/ladder.py [--sizes 64 128] [--scenes builtin] [--out docs/quality_ladder.md]
+    python benchmarks/ladder.py [--sizes 64 128] [--scenes builtin] [--rounds 3] [--out docs/quality_ladder.md]
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import sys
 import tempfile
 import time
@@ -57,8 +61,32 @@ def measure(g, rig, truth, device, **kwargs) -> dict:
     }
 
 
-def run_case(scene, size, noise, device, cache) -> dict:
-    """Every run of one case (a dict of label -> measures), computed or from the cache."""
+def timed_rounds(run, rounds: int) -> dict:
+    """Every run of :data:`RUNS` measured ``rounds`` times, the order reversed every other round (``run(label,
+    kwargs)`` -> :func:`measure`'s dict): per label, the first round's measures with ``seconds`` and ``search``
+    the medians over the rounds and ``ratio`` / ``ratio_range`` the median and range of ``seconds`` over the
+    fixed run's in the same round. Raises RuntimeError where a round's PSNR differs from the first's."""
+    per: dict = {label: [] for label, _ in RUNS}
+    for k in range(rounds):
+        for label, kwargs in RUNS if k % 2 == 0 else RUNS[::-1]:
+            per[label].append(run(label, kwargs))
+    out = {}
+    for label, ms in per.items():
+        if any(abs(m["psnr"] - ms[0]["psnr"]) > 1e-9 for m in ms):
+            raise RuntimeError(f"{label}: PSNR differs between rounds: {[m['psnr'] for m in ms]}")
+        ratios = [m["seconds"] / f["seconds"] for m, f in zip(ms, per["fixed"])]
+        out[label] = {
+            **ms[0],
+            "seconds": statistics.median(m["seconds"] for m in ms),
+            "search": statistics.median(m["search"] for m in ms),
+            "ratio": statistics.median(ratios),
+            "ratio_range": [min(ratios), max(ratios)],
+        }
+    return out
+
+
+def run_case(scene, size, noise, device, cache, rounds: int = 1) -> dict:
+    """Every run of one case (a dict of label -> measures, :func:`timed_rounds`), computed or from the cache."""
     rig = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6)
     truth, g = case_data(scene, rig, 1000.0 if noise == "poisson" else None)
     g = np.asarray(g, np.float32)
@@ -71,21 +99,23 @@ def run_case(scene, size, noise, device, cache) -> dict:
             lambda: {"psnr": float(psnr(ip, truth, data_range=1.0)), "ssim": float(ssim(ip, truth, data_range=1.0)[0])},
         )
     }
-    for label, kwargs in RUNS:
-        out[label] = cache.get(prefix + label, lambda kw=kwargs: measure(g, rig, truth, device, **kw))
-    return out
+    runs = cache.get(
+        prefix + f"runs x{rounds}",
+        lambda: timed_rounds(lambda label, kw: measure(g, rig, truth, device, **kw), rounds),
+    )
+    return {**out, **runs}
 
 
 def rows(scene, size, noise, r) -> list:
     """The Markdown rows of one case: one per run."""
-    base, fixed = r["interp3d"], r["fixed"]["seconds"]
+    base = r["interp3d"]
     lines = [f"| {scene} | {size} | {noise} | interp3d | {base['psnr']:.2f} | {base['ssim']:.3f} | | | | |"]
     for label, _ in RUNS:
         m = r[label]
         lines.append(
             f"| {scene} | {size} | {noise} | {label} | {m['psnr']:.2f} | {m['ssim']:.3f} | "
             f"{m['psnr'] - base['psnr']:+.2f} | {m['iterations']} | {m['seconds']:.2f} ({m['search']:.2f}) | "
-            f"{m['seconds'] / fixed:.2f}x |"
+            f"{m['ratio']:.2f}x ({m['ratio_range'][0]:.2f}-{m['ratio_range'][1]:.2f}) |"
         )
     return lines
 
@@ -130,8 +160,11 @@ def main(argv=None):
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-ladder-cache.json")
     parser.add_argument("--out", type=Path, default=DOCS / "quality_ladder.md", help="the Markdown page to write")
     parser.add_argument("--plot", type=Path, default=None, help="a PNG of the Pareto front")
+    parser.add_argument("--rounds", type=int, default=3, help="timed rounds of a case's runs (>= 1)")
     args = parser.parse_args(argv)
     check_sizes(parser, args.sizes)
+    if args.rounds < 1:
+        parser.error(f"--rounds must be >= 1, got {args.rounds}")
     scenes = sorted({scene for scene, _, _ in CASES})
     unknown = sorted(set(args.scenes or ()) - set(scenes))
     if unknown:
@@ -149,8 +182,10 @@ def main(argv=None):
         "mean SSIM. Runs: `interp3d` (no solver); `fixed` = `tune=False` (temporal weight 3, lam 0.1, zero "
         "start, 200 iterations); `fast`, `balanced`, `best` = `rsocl.reconstruct(quality=...)` at the "
         'rung\'s own iterations (rsocl/solver/ladder.py); `balanced, auto` with `iterations="auto"`. '
-        "Seconds: the whole call, the search's share in brackets; the ratio is to the fixed run of the same "
-        "case. Noise `poisson`: 1000 photo-electrons at full scale and 1 % read noise.",
+        f"Seconds: the whole call, the search's share in brackets, medians of {args.rounds} rounds whose order "
+        "reverses every other round; `/ fixed`: the median (and range) over the rounds of the call's time over "
+        "the fixed run's of the same case and round. Noise `poisson`: 1000 photo-electrons at full scale and "
+        "1 % read noise.",
         "",
         "| scene | size | noise | run | PSNR | SSIM | - interp3d dB | iterations | seconds (search) | / fixed |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -161,7 +196,7 @@ def main(argv=None):
         if not available(scene):
             skipped.append(scene)
             continue
-        r = run_case(scene, size, noise, args.device, cache)
+        r = run_case(scene, size, noise, args.device, cache, args.rounds)
         results.append(((scene, size, noise), r))
         for line in rows(scene, size, noise, r):
             page.append(line)
@@ -169,10 +204,20 @@ def main(argv=None):
     if skipped:
         page += ["", f"Skipped (no ../shared/data): {', '.join(sorted(set(skipped)))}."]
     if results:
-        page += ["", "Worst and mean PSNR of each rung against interp3d over these cases:", ""]
+        page += [
+            "",
+            "Worst and mean PSNR of each rung against interp3d over these cases, and the range of its cases' "
+            "median time over the fixed run's:",
+            "",
+        ]
         for label, _ in RUNS:
             diff = [r[label]["psnr"] - r["interp3d"]["psnr"] for _, r in results]
-            page.append(f"- {label}: worst {min(diff):+.2f} dB, mean {float(np.mean(diff)):+.2f} dB")
+            times = "; ".join(
+                f"time over the fixed run at {size}: {min(rs):.2f}-{max(rs):.2f}x"
+                for size in sorted({c[1] for c, _ in results})
+                for rs in [[r[label]["ratio"] for c, r in results if c[1] == size]]
+            )
+            page.append(f"- {label}: worst {min(diff):+.2f} dB, mean {float(np.mean(diff)):+.2f} dB; {times}")
     if args.plot is not None and results:
         pareto_plot(args.plot, results)
         page += ["", f"![time against PSNR and SSIM]({args.plot.name})"]

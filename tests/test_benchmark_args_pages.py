@@ -186,3 +186,26 @@ def test_git_revision_is_dirty_for_code_but_not_for_pages(tmp_path, monkeypatch)
     assert git_revision(tmp_path) == head
     (tmp_path / "rsocl/code.py").write_text("b\n")
     assert git_revision(tmp_path) == head + "-dirty"
+
+
+def test_ladder_times_its_runs_in_rounds_of_alternating_order():
+    """Seconds are medians over the rounds, the time over the fixed run's a median of ratios within a round,
+    the order reverses every other round, and a PSNR that moves between rounds is an error."""
+    order, slow = [], {"fixed": 2.0}
+
+    def run(label, kwargs):
+        order.append(label)
+        seconds = slow.get(label, 1.0) * (3.0 if len(order) <= len(ladder.RUNS) else 1.0)  # a slow first round
+        return {"psnr": 20.0, "ssim": 0.5, "seconds": seconds, "search": seconds / 2, "iterations": 200}
+
+    out = ladder.timed_rounds(run, 3)
+    labels = [label for label, _ in ladder.RUNS]
+    assert order == labels + labels[::-1] + labels
+    assert out["fixed"]["seconds"] == 2.0 and out["fast"]["seconds"] == 1.0 and out["fast"]["search"] == 0.5
+    assert out["fast"]["ratio"] == 0.5 and out["fast"]["ratio_range"] == [0.5, 0.5]
+    assert out["fixed"]["ratio"] == 1.0
+    psnrs = iter([20.0] * len(labels) + [20.5] * len(labels))
+    with pytest.raises(RuntimeError, match="PSNR differs between rounds"):
+        ladder.timed_rounds(
+            lambda label, kw: {"psnr": next(psnrs), "ssim": 0, "seconds": 1, "search": 0, "iterations": 1}, 2
+        )
