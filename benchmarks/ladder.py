@@ -14,7 +14,7 @@ the first round's; every round must give the same PSNR. Results are cached per c
 rounds (``--cache``). Writes docs/quality_ladder.md (``--out``) with the provenance header, and
 ``--plot`` a Pareto plot (time against PSNR and SSIM).
 
-    python benchmarks/ladder.py [--sizes 64 128] [--scenes builtin] [--rounds 3] [--out docs/quality_ladder.md]
+    python benchmarks/ladder.py [--sizes 64 128] [--scenes builtin] [--rounds 5] [--out docs/quality_ladder.md]
 """
 
 from __future__ import annotations
@@ -160,7 +160,7 @@ def main(argv=None):
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rsocl-ladder-cache.json")
     parser.add_argument("--out", type=Path, default=DOCS / "quality_ladder.md", help="the Markdown page to write")
     parser.add_argument("--plot", type=Path, default=None, help="a PNG of the Pareto front")
-    parser.add_argument("--rounds", type=int, default=3, help="timed rounds of a case's runs (>= 1)")
+    parser.add_argument("--rounds", type=int, default=5, help="timed rounds of a case's runs (>= 1)")
     args = parser.parse_args(argv)
     check_sizes(parser, args.sizes)
     if args.rounds < 1:
