@@ -337,3 +337,35 @@ def test_the_gif_beside_a_store_is_named_as_the_outs_when_no_gif_was_given(captu
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("rsocl reconstruct: error: --out's NAME.gif must name a file") and "--gif" not in err, err
+
+
+def test_a_zarr_run_without_truth_or_gif_leaves_the_stored_datacube_on_disk(capture, tmp_path, capsys, monkeypatch):
+    """The whole sensor's datacube is GiBs: with no truth to compare and no GIF to draw, the run must not read
+    the store back into memory once its tiles are done (it did, and peaked at twice the datacube)."""
+    import dataclasses
+
+    path, _, _ = capture
+    real, reads = tiled_module.reconstruct_tiled, []
+
+    class Untouchable:
+        def __init__(self, array):
+            self.shape, self.array = array.shape, array
+
+        def __array__(self, *args, **kwargs):
+            reads.append("whole")
+            return np.asarray(self.array)
+
+        def __getitem__(self, key):
+            reads.append(key)
+            return self.array[key]
+
+    def watched(*args, **kwargs):
+        result = real(*args, **kwargs)
+        return dataclasses.replace(result, datacube=Untouchable(result.datacube))
+
+    monkeypatch.setattr(tiled_module, "reconstruct_tiled", watched)
+    common = ["--tile", "10", "26", "--halo", "4", "--iterations", "3", "--fast"]
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "none.zarr"), "--no-truth", *common]) == 0
+    assert "2 tile task(s)" in capsys.readouterr().out and reads == []
+    assert main(["reconstruct", str(path), "--out", str(tmp_path / "rec.zarr"), *common]) == 0
+    assert "PSNR " in capsys.readouterr().out and reads == ["whole"]  # with the truth: read once, to compare

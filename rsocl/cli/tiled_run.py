@@ -98,7 +98,9 @@ def run_tiles(args, capture):
     kept = f", {result.skipped} already in the store" if result.skipped else ""
     text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
     truth = None if args.no_truth else capture.truth()  # set 0's
-    first = np.asarray(result.datacube[0] if args.sets else result.datacube)
+    # a Zarr store's datacube is read into memory only for what needs it: the truth's PSNR, the GIF
+    wanted = not zarr_out or truth is not None or args.gif
+    first = np.asarray(result.datacube[0] if args.sets else result.datacube) if wanted else None
     if truth is not None:
         text = ("set 0: " if args.sets else "") + f"{truth_quality(first, truth)}, " + text
     print(text, flush=True)
