@@ -85,7 +85,7 @@ def timed_rounds(run, rounds: int) -> dict:
     return out
 
 
-def run_case(scene, size, noise, device, cache, rounds: int = 1) -> dict:
+def run_case(scene, size, noise, device, cache, rounds: int) -> dict:
     """Every run of one case (a dict of label -> measures, :func:`timed_rounds`), computed or from the cache."""
     rig = rsocl.Rig.paper_array(4, (size, size), t_e=0.18e-3, t_r=35e-6)
     truth, g = case_data(scene, rig, 1000.0 if noise == "poisson" else None)
