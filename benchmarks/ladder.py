@@ -210,14 +210,15 @@ def main(argv=None):
             "median time over the fixed run's:",
             "",
         ]
+        sizes = sorted({size for (_, size, _), _ in results})
         for label, _ in RUNS:
             diff = [r[label]["psnr"] - r["interp3d"]["psnr"] for _, r in results]
-            times = "; ".join(
-                f"time over the fixed run at {size}: {min(rs):.2f}-{max(rs):.2f}x"
-                for size in sorted({c[1] for c, _ in results})
-                for rs in [[r[label]["ratio"] for c, r in results if c[1] == size]]
-            )
-            page.append(f"- {label}: worst {min(diff):+.2f} dB, mean {float(np.mean(diff)):+.2f} dB; {times}")
+            spans = []
+            for size in sizes:
+                ratios = [r[label]["ratio"] for (_, s, _), r in results if s == size]
+                spans.append(f"time over the fixed run at {size}: {min(ratios):.2f}-{max(ratios):.2f}x")
+            psnr_line = f"worst {min(diff):+.2f} dB, mean {float(np.mean(diff)):+.2f} dB"
+            page.append(f"- {label}: {psnr_line}; {'; '.join(spans)}")
     if args.plot is not None and results:
         pareto_plot(args.plot, results)
         page += ["", f"![time against PSNR and SSIM]({args.plot.name})"]

@@ -340,8 +340,8 @@ def test_the_gif_beside_a_store_is_named_as_the_outs_when_no_gif_was_given(captu
 
 
 def test_a_zarr_run_without_truth_or_gif_leaves_the_stored_datacube_on_disk(capture, tmp_path, capsys, monkeypatch):
-    """The whole sensor's datacube is GiBs: with no truth to compare and no GIF to draw, the run must not read
-    the store back into memory once its tiles are done (it did, and peaked at twice the datacube)."""
+    """The whole sensor's datacube is GiBs: with no truth to compare and no GIF to draw, the run does not read
+    the store back into memory once its tiles are done."""
     import dataclasses
 
     path, _, _ = capture

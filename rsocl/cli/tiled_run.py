@@ -98,16 +98,16 @@ def run_tiles(args, capture):
     kept = f", {result.skipped} already in the store" if result.skipped else ""
     text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
     truth = None if args.no_truth else capture.truth()  # set 0's
-    # a Zarr store's datacube is read into memory only for what needs it: the truth's PSNR, the GIF
-    wanted = not zarr_out or truth is not None or args.gif
-    first = np.asarray(result.datacube[0] if args.sets else result.datacube) if wanted else None
+    # set 0 in memory (from a Zarr store, GiBs) only for what reads it: the truth's PSNR, the store's GIF
+    compared = truth is not None or args.gif
+    first = np.asarray(result.datacube[0] if args.sets else result.datacube) if compared else None
     if truth is not None:
         text = ("set 0: " if args.sets else "") + f"{truth_quality(first, truth)}, " + text
     print(text, flush=True)
     from rsocl.analysis.visual import comparison_gif
 
     if zarr_out:
-        gif = [comparison_gif(zarr_gif(args), truth, first)] if truth is not None or args.gif else []
+        gif = [comparison_gif(zarr_gif(args), truth, first)] if compared else []
         plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
         say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
         return 0
