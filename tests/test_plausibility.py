@@ -232,6 +232,21 @@ def test_a_moving_run_and_all_zero_snapshots_are_not_stalls():
     assert not zero.datacube.any()
 
 
+def test_the_stall_and_far_checks_read_psi_only_for_a_run_they_may_flag(monkeypatch):
+    """psi is a launch and a read back: a run that moves and ends near the data (one set or a batch, run past
+    the stall check's 10 records) never makes it; a run that stood still does, to name it."""
+    made = []
+    psi_device = RollingShutterOperator.psi_device
+    monkeypatch.setattr(RollingShutterOperator, "psi_device", lambda self: made.append(1) or psi_device(self))
+    rig, _, g = _demo()
+    rsocl.reconstruct(g, rig, tune=False, iterations=20)
+    rsocl.reconstruct(np.stack([g, g]), rig, lam=[0.1, 0.2], tune=False, iterations=20)
+    assert made == []
+    with pytest.raises(FloatingPointError, match="ADMM never moved"):
+        rsocl.reconstruct(g, rig, eta=1e30, lam=0.1, tune=False)
+    assert made
+
+
 def test_a_run_whose_eta_keeps_it_far_from_the_data_is_warned(recwarn):
     # eta 2000 psi: the residual moves a few per cent, not the 1e-6 of a stall, and the cube stays near 0
     rig, truth, g = _demo()

@@ -114,9 +114,11 @@ class _History:
         :data:`FAR_RESIDUAL`: the run stayed far from the data because its data step barely moved."""
         if not self.values["residual"]:
             return
+        last = self._last()
+        if not np.any(last > FAR_RESIDUAL):  # psi (a launch and a read) only for a run that ended far
+            return
         psi = float(np.max(self.staged.op.psi))
         eta = np.atleast_1d(np.asarray(self.solver.eta, dtype=np.float64))
-        last = self._last()
         far = (eta > FAR_ETA * psi) & (last > FAR_RESIDUAL)
         if not far.any():
             return
@@ -154,14 +156,16 @@ class _History:
             return
         res = np.asarray(self.values["residual"], dtype=np.float64)
         first = res[0]
-        psi = float(np.max(self.staged.op.psi))
-        # the fault named below: eta far above the curvature; with a smaller eta a still residual is a fixed point
-        stiff = np.asarray(self.solver.eta, dtype=np.float64) > 4 * psi
         # a set of a batch that stopped (tol, auto) has NaN records after its stop: its own records decide,
         # as they would in its single-set run (which checks a shorter whole run of >= 2 at its end)
         booked = ~np.isnan(res)
         moved = booked & (np.abs(res - first) > STALL_TOL * first)
-        still = ~np.any(moved, axis=0) & (np.sum(booked, axis=0) >= 2) & (first > 0) & stiff
+        still = ~np.any(moved, axis=0) & (np.sum(booked, axis=0) >= 2) & (first > 0)
+        if not np.any(still):  # psi (a launch and a read) only for a residual that stood still
+            return
+        psi = float(np.max(self.staged.op.psi))
+        # the fault named below: eta far above the curvature; with a smaller eta a still residual is a fixed point
+        still &= np.asarray(self.solver.eta, dtype=np.float64) > 4 * psi
         if not np.any(still):
             return
         count = int(np.max(np.atleast_1d(np.sum(booked, axis=0))[np.atleast_1d(still)]))
