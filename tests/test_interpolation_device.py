@@ -73,6 +73,29 @@ def test_equal_sample_times_give_their_mean(device):
     np.testing.assert_allclose(out, 2.0 / length, rtol=1e-6)
 
 
+def test_every_sample_at_one_time_counts_with_equal_weight(device):
+    # three identical cameras: one time per pixel, whose value is the mean of all three samples
+    rig = Rig([Camera(0, 1.8e-4, 3.5e-5)] * 3, (4, 5))
+    g = np.stack([np.zeros(rig.shape), np.zeros(rig.shape), np.full(rig.shape, 3.0)])
+    op = rsocl.RollingShutterOperator(rig, device=device)
+    length = rig.windows.length[0]
+    np.testing.assert_allclose(interp3d(g, rig), 1.0 / length, rtol=1e-12)
+    np.testing.assert_allclose(interp3d_device(op, g).get(), 1.0 / length, rtol=1e-6)
+
+
+def test_groups_of_equal_times_interpolate_between_their_means(device):
+    # the paper array's diagonal pixels: cameras 0 and 90 read them at one time, 180 and 270 at another
+    rig = Rig.paper_array(4, (4, 4), t_e=0.18e-3, t_r=35e-6)
+    g = np.stack([np.full(rig.shape, v) for v in (1.0, 3.0, 5.0, 7.0)]) * rig.windows.length[:, None, None]
+    ref = interp3d(g, rig)[:, 0, 0]
+    times = np.sort(rsocl.model.interpolation.samples(g, rig).times[:, 0, 0])
+    centres = np.arange(rig.T) + 0.5
+    expected = np.interp(centres, times[:2], [2.0, 6.0])  # the means of 1, 3 and of 5, 7, and a line between
+    np.testing.assert_allclose(ref, expected, rtol=1e-12)
+    op = rsocl.RollingShutterOperator(rig, device=device)
+    np.testing.assert_allclose(interp3d_device(op, g).get()[:, 0, 0], expected, rtol=1e-5)
+
+
 def test_bad_arguments_are_refused(device):
     rig = Rig.paper_array(4, (6, 6), t_e=0.18e-3, t_r=35e-6)
     op = rsocl.RollingShutterOperator(rig, device=device)

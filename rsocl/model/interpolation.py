@@ -102,10 +102,11 @@ def _sampled(rig):
 class Samples:
     """Each pixel's samples in time, sorted: what :func:`interp3d` interpolates between.
 
-    ``times`` and ``values`` are ``(K, m, n)`` float64: per pixel, the centres of its samples'
-    windows (sub-frames, a sub-frame's centre at ``s + 1/2``) in ascending order, left-out samples
-    last at ``+inf``, and the samples' scene values (snapshot over gain and window length) in the
-    same order. ``count`` ``(m, n)``: the samples a pixel keeps; ``fallback``: the value of a pixel
+    ``times`` and ``values`` are ``(K, m, n)`` float64: per pixel, the distinct centres of its samples'
+    windows (sub-frames, a sub-frame's centre at ``s + 1/2``) in ascending order, the rest at
+    ``+inf``, and the scene values there (snapshot over gain and window length; the mean of the
+    samples that share a centre) in the same order. ``count`` ``(m, n)``: the distinct times a pixel
+    keeps; ``fallback``: the value of a pixel
     that keeps none (the mean of every kept sample); ``empty``: no sample is kept anywhere (the
     snapshots say nothing and the interpolation is zero).
     """
@@ -136,9 +137,28 @@ def samples(g, rig, valid=None) -> Samples:
         count = np.full(rig.shape, K)
     order = np.argsort(centre, axis=0, kind="stable")
     fallback = float(np.mean(scaled[valid])) if valid is not None and np.any(count == 0) else 0.0
-    return Samples(
-        np.take_along_axis(centre, order, axis=0), np.take_along_axis(scaled, order, axis=0), count, fallback
+    times, values, count = _merged(
+        np.take_along_axis(centre, order, axis=0), np.take_along_axis(scaled, order, axis=0), count
     )
+    return Samples(times, values, count, fallback)
+
+
+def _merged(times, values, count):
+    """Sorted ``times`` and ``values`` ``(K, m, n)`` of ``count`` kept samples per pixel, with the samples
+    of each pixel at one time merged into one at their mean: ``(times, values, count)`` of the distinct
+    times, first in each pixel, the rest at ``+inf`` with value 0."""
+    K = times.shape[0]
+    kept = np.arange(K)[:, None, None] < count[None]
+    group = np.cumsum(np.concatenate([np.ones_like(times[:1], bool), times[1:] != times[:-1]]), axis=0) - 1
+    sums, num = np.zeros_like(values), np.zeros_like(values)
+    first = np.full_like(times, np.inf)
+    for k in range(K):  # sample k adds to its time's group, a position at or before k
+        at = group[k][None]
+        np.put_along_axis(sums, at, np.take_along_axis(sums, at, 0) + np.where(kept[k], values[k], 0.0), 0)
+        np.put_along_axis(num, at, np.take_along_axis(num, at, 0) + kept[k], 0)
+        np.put_along_axis(first, at, np.where(kept[k], times[k], np.take_along_axis(first, at, 0)), 0)
+    merged = num > 0
+    return first, np.where(merged, sums / np.where(merged, num, 1.0), 0.0), merged.sum(axis=0)
 
 
 def _interpolated(g, rig, valid):
