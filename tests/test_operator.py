@@ -150,6 +150,23 @@ def test_binary_ties_keep_interpolation_exact_on_a_constant_scene(device):
     np.testing.assert_allclose(rsocl.interp3d(g, rig), 0.7, atol=1e-9)
 
 
+def test_late_exposure_starts_keep_their_offset_from_sub_frame_starts():
+    # a long capture with a trigger offset of 0.004 sub-frames: every start is t_a + k t_d, off every
+    # sub-frame boundary, and stays so to rounding (a tolerance relative to the time would move late ones)
+    from fractions import Fraction
+
+    t_r, t_d = 35e-6, 1 / 67
+    cam = Camera(0, t_e=180e-6, t_r=t_r, t_a=0.004 * t_r, frames=8000, t_d=t_d)
+    win = Rig([cam], (1, 1)).windows
+    start = (win.index + win.fraction)[:, 0, 0]
+    exact = np.array([float((Fraction(0.004 * t_r) + k * Fraction(t_d)) / Fraction(t_r)) for k in range(8000)])
+    np.testing.assert_allclose(start, exact, rtol=0, atol=1e-8)
+    # and a start that is a whole number of sub-frames up to rounding still lands on it
+    on = Rig([Camera(0, t_e=3 * t_r, t_r=t_r, t_a=0.000105)], (2, 2)).windows
+    np.testing.assert_array_equal(on.fraction, 0.0)
+    np.testing.assert_array_equal(on.index[0, :, 0], [3, 4])
+
+
 def test_device_arrays_stay_on_device(device, rng):
     import pyopencl.array as cla
 

@@ -21,7 +21,7 @@ __all__ = ["Camera", "SNAP"]
 #: Relative tolerance under which a time, in units of ``dt``, is snapped to the
 #: nearest integer, so that e.g. ``t_e = 3*t_r`` gives window edges exactly on
 #: sub-frame boundaries despite binary floating point.
-SNAP = 1e-9
+SNAP = 1e-12
 
 
 def _snap(values):
