@@ -202,7 +202,8 @@ class TV(Regularizer):
 
     def _steps(self, queue, weights, dtype):
         """The per-set ``(tau, tau / weight, temporal weight)`` of ``tv.cl`` on the device (``tau`` and
-        ``tau / weight`` 0 for weight 0)."""
+        ``tau / weight`` 0 for weight 0; ``tau / weight`` at most the largest finite value of ``dtype``, so
+        that a weight too small for it still gives ``0 · tau / weight = 0`` at a zero gradient)."""
         w = np.asarray(weights, dtype=np.float64)
         wt = self.temporal_weights(len(w))
         cache = self.__dict__.setdefault("_step_cache", {})
@@ -212,7 +213,9 @@ class TV(Regularizer):
                 cache.clear()
             on = w > 0
             tau = float(self.step) / (2.0 * (2.0 + wt * wt))
-            steps = np.stack([np.where(on, tau, 0.0), np.where(on, tau / np.where(on, w, 1.0), 0.0), wt], axis=1)
+            with np.errstate(over="ignore"):
+                ratio = np.minimum(tau / np.where(on, w, 1.0), float(np.finfo(dtype).max))
+            steps = np.stack([np.where(on, tau, 0.0), np.where(on, ratio, 0.0), wt], axis=1)
             cache[key] = pool.to_device(queue, steps.astype(dtype).ravel())
         return cache[key]
 

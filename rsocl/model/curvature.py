@@ -12,16 +12,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from rsocl.model.windows import weighted_bounds
+__all__ = ["binary_span", "psi_values", "psi_mean", "full_scales", "REFERENCE_PSI", "NO_WEIGHT", "default_scale"]
 
-__all__ = ["binary_span", "psi_values", "psi_mean", "full_scales", "REFERENCE_PSI", "default_scale"]
+#: The ValueError's message for a rig whose windows give no sub-frame a weight (:func:`default_scale`,
+#: :func:`rsocl.model.simulate.full_scale`).
+NO_WEIGHT = (
+    "the rig's exposure windows hold no sub-frame: every snapshot pixel has zero weight (check t_e, dt and the mask)"
+)
 
 
 def binary_span(rig):
     """First and last sub-frame a ``binary`` window holds (``w = 1`` for the ``s`` in ``0 .. T-1``
     with ``start <= s <= end``, docs/model.md), ``(K, m, n)`` float64 each; ``last < first`` where the
-    window holds no sub-frame start (``t_e < dt``). Unlike :meth:`Rig.sampled_window`, an empty
-    window stays empty (no clipping of ``first`` to a valid index)."""
+    window holds no sub-frame start (``t_e < dt``), whose ``first`` may be ``T``
+    (:meth:`Rig.sampled_window <rsocl.model.rig.Rig.sampled_window>`: integer indices in ``0 .. T-1``, and
+    ``last = first - 1`` for an empty window)."""
     win = rig.windows
     first = np.maximum(np.ceil(win.index + win.fraction), 0.0)
     last = np.minimum(np.floor(win.end), rig.T - 1.0)
@@ -60,7 +65,7 @@ def full_scales(rig) -> np.ndarray:
     win = rig.windows
     if rig.mask != "binary":
         return win.gain * win.length
-    first, last = weighted_bounds(win, "binary")
+    first, last = binary_span(rig)  # the sub-frame starts of 0 .. T-1 that a window holds
     starts = np.maximum(last - first + 1.0, 0.0).reshape(len(win.gain), -1).max(axis=1)
     return win.gain * starts
 
@@ -83,8 +88,5 @@ def default_scale(rig) -> float:
     """
     scale = psi_mean(rig) / REFERENCE_PSI
     if not scale > 0:
-        raise ValueError(
-            "the rig's exposure windows hold no sub-frame: every snapshot pixel has zero weight "
-            "(check t_e, dt and the mask)"
-        )
+        raise ValueError(NO_WEIGHT)
     return 1.0 if abs(scale - 1.0) < 1e-9 else scale

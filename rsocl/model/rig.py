@@ -38,6 +38,12 @@ PAPER_ANGLES = (0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 225.0, 315.0)
 MAX_T = 2**24
 
 
+def _nonempty_bounds(first, last, T: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`~rsocl.model.windows.weighted_bounds`' ``(first, last)`` cut to the sub-frames ``0 .. T-1``:
+    ``last < first`` where a window gives none of them a weight."""
+    return np.maximum(first, 0.0), np.minimum(last, T - 1.0)
+
+
 class Rig:
     """An array of rolling-shutter cameras sharing one reference ROI.
 
@@ -226,19 +232,21 @@ class Rig:
         Returns
         -------
         first, last : ndarray of int, shape (K, m, n)
-            Inclusive sub-frame indices (clipped to ``[0, T-1]``).
+            Inclusive sub-frame indices (``first`` in ``[0, T-1]``); ``last = first - 1`` (no sub-frame)
+            for a window with no weight, a ``binary`` one that holds no sub-frame start of ``0 .. T-1``.
         """
-        first, last = weighted_bounds(self._windows, self.mask)
-        first = np.clip(first, 0, self.T - 1).astype(np.int64)
-        last = np.clip(last, 0, self.T - 1).astype(np.int64)
-        return first, last
+        first, last = _nonempty_bounds(*weighted_bounds(self._windows, self.mask), self.T)
+        empty = last < first
+        first = np.minimum(first, self.T - 1)
+        last = np.where(empty, first - 1, last)
+        return first.astype(np.int64), last.astype(np.int64)
 
     @cached_property
     def _pixel_bounds(self) -> tuple:
-        """Per pixel, over the channels, ``(m, n)`` each: the first and the last sub-frame with a
-        non-zero weight (not clipped to ``[0, T-1]``) and the latest window end, sub-frames."""
+        """``(first, last, end)``: the first and the last sub-frame with a non-zero weight per channel and
+        pixel (``(K, m, n)``, not clipped to ``[0, T-1]``), and per pixel the latest window end, sub-frames."""
         first, last = weighted_bounds(self._windows, self.mask)
-        return first.min(axis=0), last.max(axis=0), self._windows.end.max(axis=0)
+        return first, last, self._windows.end.max(axis=0)
 
     def sampled_range(self, roi: tuple[int, int, int, int] | None = None) -> slice:
         """Sub-frames some camera samples at some pixel: ``slice(first, last + 1)``.
@@ -247,7 +255,8 @@ class Rig:
         nearest sub-frame it solved (:mod:`rsocl.solver.held`). With ``roi = (y, x, height, width)``
         (pixels, inside the grid): the sampled range of the rig cut to that block
         (:meth:`crop`, whose cameras keep every pixel's exposure times), without
-        building it.
+        building it. Windows with no weight (``binary`` ones that hold no sub-frame start) count for
+        nothing; where no window has any weight, the last sub-frame, so that the range is never empty.
         """
         first, last, end = self._pixel_bounds
         T = self.T
@@ -257,9 +266,13 @@ class Rig:
             if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
                 raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
             block = (slice(y, y + h), slice(x, x + w))
-            first, last, end = first[block], last[block], end[block]
+            first, last, end = first[(Ellipsis,) + block], last[(Ellipsis,) + block], end[block]
             T = int(math.ceil(float(_snap(end.max()))))
-        return slice(int(np.clip(first.min(), 0, T - 1)), int(np.clip(last.max(), 0, T - 1)) + 1)
+        first, last = _nonempty_bounds(first, last, T)
+        held = first <= last
+        if not held.any():  # no window holds a sub-frame: the last one, so that the range is never empty
+            return slice(T - 1, T)
+        return slice(int(first[held].min()), int(last[held].max()) + 1)
 
     @property
     def N_s(self) -> int:

@@ -16,11 +16,11 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike, DTypeLike
 from rsocl.device.context import Device, get_device
-from rsocl.model.curvature import full_scales
+from rsocl.model.curvature import NO_WEIGHT, full_scales
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 
-__all__ = ["simulate", "full_scale", "check_photons", "check_seed", "MAX_PHOTONS"]
+__all__ = ["simulate", "full_scale", "check_photons", "check_seed", "check_fits_dtype", "MAX_PHOTONS"]
 
 #: Most photo-electrons at full scale: NumPy's Poisson sampler draws means below about 9.2e18.
 MAX_PHOTONS = 1e18
@@ -46,10 +46,31 @@ def check_seed(name: str, seed):
     return int(seed)
 
 
+def check_fits_dtype(name: str, array, dtype) -> None:
+    """Raise a ValueError naming ``name`` when ``array`` (None: nothing to check) holds values beyond the
+    largest finite value of the real type ``dtype`` (float64 data above 3.4e38 run in float32 would turn
+    into inf)."""
+    dtype = check.real_dtype("dtype", dtype)
+    top = float(np.finfo(dtype).max)
+    peak = float(np.max(np.abs(array))) if array is not None and np.size(array) else 0.0
+    if peak > top:
+        raise ValueError(
+            f"{name} holds values up to {peak:.3g}, beyond {dtype.name}'s largest {top:.3g}; "
+            "scale the data (rsocl works on data in [0, 1] per sub-frame) or use dtype='float64'"
+        )
+
+
 def full_scale(rig: Rig) -> float:
     """Snapshot value of a white (1.0) scene on the brightest channel: ``max gain * t_e/dt`` (the
-    ``binary`` mask: ``gain`` times the sub-frame starts an exposure holds; :func:`full_scales`)."""
-    return float(np.max(full_scales(rig)))
+    ``binary`` mask: ``gain`` times the sub-frame starts an exposure holds; :func:`full_scales`).
+
+    Raises ValueError when it is 0: no window gives any sub-frame a weight (a ``binary`` rig whose
+    exposures, shorter than ``dt``, hold no sub-frame start).
+    """
+    scale = float(np.max(full_scales(rig)))
+    if not scale > 0:
+        raise ValueError(NO_WEIGHT)
+    return scale
 
 
 def simulate(
@@ -99,8 +120,9 @@ def simulate(
     Raises
     ------
     ValueError
-        If ``truth`` is not ``(T, m, n)`` and finite, a noise parameter is out of range (the
-        message names it), or ``noise="poisson"`` lacks ``photons`` or sees a negative scene.
+        If ``truth`` is not ``(T, m, n)`` and finite or holds values beyond ``dtype``'s largest, a noise
+        parameter is out of range (the message names it), ``noise="poisson"`` lacks ``photons`` or sees a
+        negative scene, or no window of the rig gives any sub-frame a weight (:func:`full_scale`).
 
     Examples
     --------
@@ -119,10 +141,11 @@ def simulate(
         raise ValueError(f"truth must have shape (T, m, n) = {expected} for this rig, got {truth.shape}")
     noise = check.choice("noise", noise, {"none", "gaussian", "poisson"})
     seed = check_seed("seed", seed)
+    scale = full_scale(rig)
     if dtype is None:
         dtype = "float64" if get_device(device).has_fp64 else "float32"
+    check_fits_dtype("truth", truth, dtype)
     g = RollingShutterOperator(rig, device=device, dtype=dtype).forward(truth).astype(np.float64)
-    scale = full_scale(rig)
     rng = np.random.default_rng(seed)
     if noise == "gaussian":
         sigma = check.non_negative("sigma", sigma, "(fraction of full scale)")

@@ -22,6 +22,7 @@ from rsocl.device import pool
 from rsocl.model.curvature import full_scales
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
+from rsocl.model.simulate import check_fits_dtype
 from rsocl.solver.held import HeldSumSquares
 from rsocl.solver.inverse import own_inverses
 from rsocl.solver.memory import memory_bytes
@@ -40,6 +41,7 @@ __all__ = [
     "match_batch",
     "check_problem",
     "check_settings",
+    "check_weight_ratio",
     "check_representable",
     "stage_on_device",
 ]
@@ -119,10 +121,32 @@ class Settings:
 
     def for_batch(self, batch) -> Settings:
         """These settings for a problem of ``batch`` sets (None: one set); per-set values are checked
-        against the count (a ValueError naming the parameter)."""
+        against the count, and ``lam / eta`` against overflow (:func:`check_weight_ratio`); a ValueError
+        naming the parameter."""
         for name in ("lam", "eta"):
             match_batch(name, getattr(self, name), batch)
+        if self.lam is not None and self.eta is not None:
+            check_weight_ratio(self.lam, self.eta)
         return self
+
+
+def check_weight_ratio(lam, eta) -> None:
+    """Raise a ValueError naming ``lam``, ``eta`` (and the set, for per-set values) and the range of ``eta``
+    where ``eta > 0`` and the denoiser's weight ``lam / eta`` overflows float64 (``eta`` below
+    ``lam / 1.8e308``); ``eta = 0`` (GAP) takes ``lam`` itself."""
+    lams, etas = np.broadcast_arrays(
+        np.atleast_1d(np.asarray(lam, np.float64)), np.atleast_1d(np.asarray(eta, np.float64))
+    )
+    with np.errstate(over="ignore"):
+        ratio = lams / np.where(etas > 0, etas, 1.0)
+    bad = np.nonzero((etas > 0) & ~np.isfinite(ratio))[0]
+    if bad.size:
+        i, top = int(bad[0]), float(np.finfo(np.float64).max)
+        where = f" of set {i}" if isinstance(lam, tuple) or isinstance(eta, tuple) else ""
+        raise ValueError(
+            f"lam / eta{where} overflows (lam = {float(lams[i])!r}, eta = {float(etas[i])!r}): "
+            f"eta must be 0 (GAP) or at least lam / {top:.3g} = {lams[i] / top:.3g} (or lam at most eta * {top:.3g})"
+        )
 
 
 def per_set_value(name: str, value):
@@ -287,16 +311,8 @@ class Staged:
 def check_representable(problem: Problem, dtype):
     """Raise a ValueError naming the array when ``g``, ``x0`` or ``truth`` holds values beyond the
     largest finite value of ``dtype`` (float64 data above 3.4e38 run in float32 would turn into inf)."""
-    dtype = check.real_dtype("dtype", dtype)
-    top = float(np.finfo(dtype).max)
     for name in ("g", "x0", "truth"):
-        array = getattr(problem, name)
-        peak = float(np.max(np.abs(array))) if array is not None and array.size else 0.0
-        if peak > top:
-            raise ValueError(
-                f"{name} holds values up to {peak:.3g}, beyond {dtype.name}'s largest {top:.3g}; "
-                "scale the data (rsocl works on data in [0, 1] per sub-frame) or use dtype='float64'"
-            )
+        check_fits_dtype(name, getattr(problem, name), dtype)
 
 
 def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32", start=False) -> Staged:
