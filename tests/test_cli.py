@@ -372,7 +372,7 @@ def _capture_with_truth(path, mode):
         ("one", []),
         ("sets", ["--batch", "2"]),
         ("tiles", ["--tile", "6", "10", "--halo", "2"]),
-        ("window", ["--window", "2", "--halo", "2"]),
+        ("window", ["--window", "2", "--tile", "6", "10", "--halo", "2"]),
     ],
 )
 def test_no_truth_keeps_the_truth_out_of_the_reconstruction(tmp_path, capsys, mode, extra):
@@ -666,8 +666,8 @@ def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
             "one",
             ["--halo", "2"],
             "--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a "
-            "Zarr --out or a capture too large for the device) or windows (--window); this capture "
-            "runs in one piece, where --halo would be ignored",
+            "Zarr --out or a capture too large for the device) or windows in tiles (--window with "
+            "--tile); this capture runs in one piece, where --halo would be ignored",
         ),
         (
             "one",
@@ -739,12 +739,10 @@ def test_options_that_contradict_each_other_on_a_capture_are_refused_before_any_
     # tiles into an HDF5 file, and a stream of windows, take set 0 too: said as well
     assert main(["reconstruct", str(sets), "--out", str(tmp_path / "f.h5"), "--tile", "8", "8", *run]) == 0
     assert "the capture holds 3 sets; a tiled run into an HDF5 file reconstructs set 0" in capsys.readouterr().err
-    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "g.h5"), "--window", "1", *run]) == 0
+    stream = ["--window", "1", "--tile", "8", "8", *run]  # windows in tiles (--halo applies)
+    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "g.h5"), *stream]) == 0
     assert "the capture holds 3 sets; --window reconstructs set 0" in capsys.readouterr().err
-    assert (
-        main(["reconstruct", str(sets), "--out", str(tmp_path / "h.h5"), "--window", "1", "--first-set-only", *run])
-        == 0
-    )
+    assert main(["reconstruct", str(sets), "--out", str(tmp_path / "h.h5"), "--first-set-only", *stream]) == 0
     assert "3 sets" not in capsys.readouterr().err
 
 

@@ -124,7 +124,8 @@ def run_tiles(args, capture):
 
 
 def _interrupted_tiles(out, zarr_out: bool) -> str:
-    """What an interrupted tiled run into ``out`` kept: one clause."""
+    """What an interrupted tiled run into ``out`` kept: one clause (an interrupt before the run checked the
+    store at ``out`` already says that nothing was computed: :func:`rsocl.scale.reconstruct_tiled`)."""
     if not zarr_out:
         return f"nothing written to {out} (an HDF5 --out is written once every task is solved)"
     from rsocl.scale.store import tiles_done

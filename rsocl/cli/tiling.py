@@ -47,8 +47,8 @@ def add_reconstruct_tiling_args(p):
         "--halo",
         type=int,
         default=None,
-        help=f"pixels added on every side of a tile, cropped off after, in a run in tiles or windows "
-        f"(default {DEFAULT_HALO}, or the grid's larger side where that is smaller)",
+        help=f"pixels added on every side of a tile, cropped off after, in a run in tiles (or windows in "
+        f"tiles) (default {DEFAULT_HALO}, or the grid's larger side where that is smaller)",
     )
     g.add_argument(
         "--sets",
@@ -116,10 +116,10 @@ def check_outputs(args) -> None:
     reads = (("capture", args.capture),)
     tuned = not getattr(args, "fast", False)  # the search's plot: NAME-tuning.png
     if is_zarr(args.out):
-        from rsocl.scale.store import check_store_path, require_zarr
+        from rsocl.scale.store import require_zarr
 
         require_zarr("--out")
-        check_store_path(args.out, "--out")
+        _check_store(args)
         gif_name = "--gif" if args.gif else "--out's NAME.gif"  # the GIF beside the store, unless --gif names one
         _gif_suffix(output_path(zarr_gif(args), gif_name, inputs=reads), args)
         if tuned:
@@ -134,6 +134,29 @@ def check_outputs(args) -> None:
     _gif_suffix(gif, args)
     if tuned:  # next to the GIF
         output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
+
+
+def _check_store(args) -> None:
+    """Refuse an existing ``--out`` that is not an rsocl store, or a store of another rig (row maps
+    included), dtype, sets or (with ``--tile``) tiling, naming ``--out``; the capture's rig is read only
+    where such a store exists."""
+    import numpy as np
+
+    from rsocl.scale.inputs import CaptureSets
+    from rsocl.scale.store import KNOWN_FIRST, StoreSpec, check_store, check_store_path
+    from rsocl.scale.tiles import TileGrid, check_halo, check_tile
+
+    path = check_store_path(args.out, "--out")
+    if not (path.is_dir() and any(path.iterdir())):
+        return
+    capture = CaptureSets(args.capture, all_sets=args.sets)
+    rig = capture.rig
+    tiled = args.tile is not None  # else the tile is proposed later, and compared then
+    tile = check_tile(args.tile, rig.shape, "--tile") if tiled else rig.shape
+    grid = TileGrid(rig.shape, tile, check_halo(args.halo, rig.shape, "--halo"))
+    spec = StoreSpec(rig, grid.tile, grid.halo, grid.grid, capture.n_sets, str(np.dtype(args.dtype)), {}, "")
+    keys = KNOWN_FIRST if tiled else tuple(k for k in KNOWN_FIRST if k != "tiling")
+    check_store(path, spec, "--out", keys)
 
 
 def _gif_suffix(gif, args) -> None:
@@ -184,11 +207,12 @@ def _check_applies(args, run: str) -> None:
             "Zarr --out or a capture too large for the device) or windows (--window), whose tiles run "
             "as tasks; this capture runs in one piece, where --retries would be ignored"
         )
-    if args.halo is not None and run == "whole":
+    if args.halo is not None and (run == "whole" or (run == "window" and args.tile is None)):
+        where = "this capture runs" if run == "whole" else "without --tile each window of --window runs"
         raise ValueError(
             "--halo applies to a run in tiles (--tile H W; also --sets, --workers, --scheduler, a Zarr "
-            "--out or a capture too large for the device) or windows (--window); this capture runs in "
-            "one piece, where --halo would be ignored"
+            "--out or a capture too large for the device) or windows in tiles (--window with --tile); "
+            f"{where} in one piece, where --halo would be ignored"
         )
     if args.batch is None:
         return

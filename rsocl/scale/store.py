@@ -13,8 +13,9 @@ Layout (a Zarr v3 group)
 - the attributes of an HDF5 reconstruction file (:mod:`rsocl.files.hdf5_reconstruction`): ``rsocl_file =
   "reconstruction"``, ``format_version``, ``rig`` (JSON; row maps referenced as
   ``{"dataset": "rig_row_maps/<camera>"}``), ``params`` (JSON), and the readable copies ``T``,
-  ``T_se``, ``dt``, ``mask``, ``n_cameras``, ``n_channels``, ``shape``; plus ``tiling`` (JSON:
-  tile, halo, grid, sets) and ``input_digest`` (SHA-256 of the snapshots), and ``store_id``, a
+  ``T_se``, ``dt``, ``mask``, ``n_cameras``, ``n_channels``, ``shape``; plus ``rig_digest`` (the
+  SHA-256 of the rig with its row maps, :func:`~rsocl.scale.tiles.rig_digest`), ``tiling``
+  (JSON: tile, halo, grid, sets) and ``input_digest`` (SHA-256 of the snapshots), and ``store_id``, a
   random token written when the store is built: the tasks of a run carry it (:func:`store_id`)
   and write only into the store that has it, so a store removed and built again at the same path
   (by another run of the same process or of a long-lived cluster) is never written through
@@ -24,8 +25,10 @@ A task writes its tile's chunks of ``datacube`` (the sub-frames the capture samp
 outside them are never written and read as 0), then the tile's chunk of ``tiles`` (each chunk
 file is written to a temporary name and renamed): a tile reads as done only once its data are
 complete. Running the same reconstruction on an existing store redoes only the tiles not
-done; a store of another reconstruction (different rig, settings, tiling or snapshots) is
-refused.
+done; a store of another reconstruction (different rig or row maps, settings, tiling or
+snapshots) is refused, and a path holding anything but a store of the same rig, tiling and dtype is
+refused before the input is read (:func:`check_store`). A store without ``rig_digest`` (an earlier
+format) is compared by the row maps it holds.
 
 A new store is built under a hidden sibling name, ``.NAME.partial-<host>-<pid>-<random>``, and
 renamed to ``NAME`` once its arrays and attributes are written, so the path holds either nothing
@@ -47,12 +50,13 @@ import numpy as np
 from rsocl.files.atomic import fsync_directory, fsync_file, owned_prefix, remove_stale
 from rsocl.files.hdf5_header import FORMAT_VERSION
 from rsocl.model.rig import Rig
-from rsocl.scale.tiles import expand
+from rsocl.scale.tiles import expand, rig_digest
 
 __all__ = [
     "CHUNK_BYTES",
     "require_zarr",
     "check_store_path",
+    "check_store",
     "StoreSpec",
     "prepare_store",
     "store_id",
@@ -68,7 +72,9 @@ _ROW_MAPS = "rig_row_maps"
 #: columns of the ``tiles`` array
 TILE_FIELDS = ("done", "start", "stop", "seconds", "iterations", "residual")
 #: attributes that must match for a store to be resumed
-_IDENTITY = ("rsocl_file", "rig", "tiling", "input_digest", "dtype")
+_IDENTITY = ("rsocl_file", "rig", "rig_digest", "tiling", "input_digest", "dtype")
+#: the part of it known before the input is read and the parameters are chosen (:func:`check_store`)
+KNOWN_FIRST = ("rsocl_file", "rig", "rig_digest", "tiling", "dtype")
 #: parameters that may differ in a resumed store: the device, and the tuning record (its timing;
 #: the values it chose are compared as ``lam`` and ``regularizer_options``)
 _NOT_COMPARED = ("device", "tuning")
@@ -132,6 +138,7 @@ class StoreSpec:
             "rsocl_file": "reconstruction",
             "format_version": FORMAT_VERSION,
             "rig": json.dumps(data, allow_nan=False),
+            "rig_digest": rig_digest(rig.to_dict()),
             "T": rig.T,
             "T_se": rig.T_se,
             "dt": rig.dt,
@@ -165,33 +172,76 @@ def prepare_store(path, spec: StoreSpec, name="out") -> tuple[np.ndarray, str | 
     return _resume(zarr, path, spec, name)
 
 
+def check_store(path, spec: StoreSpec, name="out", keys=KNOWN_FIRST) -> Path:
+    """``path`` checked as :func:`check_store_path` does; where it holds files, ValueError naming ``name``
+    unless they are an rsocl reconstruction store whose attributes ``keys`` (default: the rig with its
+    row maps, the tiling and the dtype, all known before the input is read) are ``spec``'s. Nothing is
+    written."""
+    zarr = require_zarr(name)
+    path = check_store_path(path, name)
+    if _holds_files(path):
+        _open_same(zarr, path, spec, name, keys, "r")
+    return path
+
+
 def _holds_files(path: Path) -> bool:
     return path.is_dir() and any(path.iterdir())
 
 
-def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> tuple[np.ndarray, str | None]:
-    """The ``done`` marks and ``store_id`` of the store at ``path``; ValueError naming ``name`` unless it is
-    ``spec``'s."""
+def _open_same(zarr, path: Path, spec: StoreSpec, name: str, keys: tuple, mode: str, params=False):
+    """The group of the store at ``path``, opened with ``mode``; ValueError naming ``name`` unless it is an
+    rsocl store whose attributes ``keys`` (and with ``params`` its parameters) are ``spec``'s."""
     try:
-        group = zarr.open_group(str(path), mode="r+")
+        group = zarr.open_group(str(path), mode=mode)
     except Exception as exc:
         raise ValueError(f"{name}: {str(path)!r} exists and is not a Zarr store ({exc})") from None
     found, attrs = dict(group.attrs), spec.attributes()
     if found.get("rsocl_file") != "reconstruction":
         raise ValueError(f"{name}: {str(path)!r} is not an rsocl reconstruction store; choose another path")
-    differ = [key for key in _IDENTITY if found.get(key) != attrs[key]]
-    old_params, new_params = json.loads(found.get("params", "{}")), json.loads(attrs["params"])
-    differ += [
-        f"params.{k}"
-        for k in sorted(set(old_params) | set(new_params))
-        if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)
-    ]
+    if "rig_digest" not in found and "rig" in found:  # an earlier format, without it: its row maps
+        found["rig_digest"] = _held_rig_digest(group, found["rig"])
+    differ = [key for key in keys if key != "rsocl_file" and found.get(key) != attrs[key]]
+    if "rig_digest" in differ:  # it covers the rig's description too: alone, it names the row maps
+        differ[differ.index("rig_digest")] = "" if "rig" in differ else "rig row maps"
+    differ = [key for key in differ if key]
+    if params:
+        old_params, new_params = json.loads(found.get("params", "{}")), json.loads(attrs["params"])
+        differ += [
+            f"params.{k}"
+            for k in sorted(set(old_params) | set(new_params))
+            if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)
+        ]
     if differ:
         raise ValueError(
             f"{name}: {str(path)!r} holds another reconstruction (it differs in "
             f"{', '.join(differ)}); remove it or choose another path"
         )
-    return np.asarray(group["tiles"][..., 0]) > 0, found.get("store_id")
+    return group
+
+
+def _held_rig(group, text: str) -> Rig:
+    """The rig of a store's ``rig`` attribute (``text``), its row maps read from the store's arrays."""
+    data = json.loads(text)
+    for camera in data["cameras"]:
+        ref = camera.get("row_map")
+        if isinstance(ref, dict):
+            camera["row_map"] = np.asarray(group[ref["dataset"]][...], dtype=np.float64)
+    return Rig.from_dict(data)
+
+
+def _held_rig_digest(group, text: str) -> str | None:
+    """The ``rig_digest`` of the rig a store holds (:func:`_held_rig`); None where it cannot be read."""
+    try:
+        return rig_digest(_held_rig(group, text).to_dict())
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> tuple[np.ndarray, str | None]:
+    """The ``done`` marks and ``store_id`` of the store at ``path``; ValueError naming ``name`` unless it is
+    ``spec``'s."""
+    group = _open_same(zarr, path, spec, name, _IDENTITY, "r+", params=True)
+    return np.asarray(group["tiles"][..., 0]) > 0, group.attrs.get("store_id")
 
 
 def tiles_done(path) -> tuple[int, int] | None:
@@ -338,14 +388,9 @@ def load_store(path) -> StoredReconstruction:
     attrs = dict(group.attrs)
     if attrs.get("rsocl_file") != "reconstruction":
         raise ValueError(f"path: {str(path)!r} is not an rsocl reconstruction store")
-    data = json.loads(attrs["rig"])
-    for camera in data["cameras"]:
-        ref = camera.get("row_map")
-        if isinstance(ref, dict):
-            camera["row_map"] = np.asarray(group[ref["dataset"]][...], dtype=np.float64)
     return StoredReconstruction(
         group["datacube"],
-        Rig.from_dict(data),
+        _held_rig(group, attrs["rig"]),
         json.loads(attrs["params"]),
         json.loads(attrs["tiling"]),
         np.asarray(group["tiles"][...]),

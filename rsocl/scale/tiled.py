@@ -2,15 +2,18 @@
 
 Every input is checked before anything is computed: the snapshots against the rig, the solver
 settings (:func:`~rsocl.solver.request.make_request`, as for :func:`rsocl.reconstruct`: ``lam``/``eta``
-settled once, from the regularizer's recommendation, for every tile),
-the tile and halo, the output path, and the scheduler (connected to first). With ``tune`` (the
-default, as for :func:`rsocl.reconstruct`) what the caller left unset is then chosen once from
-the centre tile of the first set (:mod:`rsocl.scale.tuning_tile`) and every task runs with that choice.
+settled once, from the regularizer's recommendation, for every tile), the tile and halo, the output
+path (a store already there: its rig, tiling and dtype), and the scheduler (connected to first). With
+``tune`` (the default, as for :func:`rsocl.reconstruct`) what the caller left unset is then chosen once
+from the centre tile of the first set (:mod:`rsocl.scale.tuning_tile`) and every task runs with that
+choice.
 """
 
 from __future__ import annotations
 
+import os
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,10 +24,10 @@ from rsocl.device.context import Device
 from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
 from rsocl.scale.runner import RETRIES, Engine, non_negative_int
-from rsocl.scale.tiles import check_halo, place, tile_grid, tile_rig
+from rsocl.scale.tiles import check_halo, place, tile_grid
 from rsocl.scale.tuning_tile import tune_tiles
 from rsocl.scale.work import Job, RigPayload, TileSettings
-from rsocl.solver.memory import device_limit, memory_need
+from rsocl.solver.memory import device_limit
 from rsocl.solver.pipeline import Request, Tuning, applied_blend, make_request, run_params
 
 __all__ = ["reconstruct_tiled", "TiledResult", "TilesFailed"]
@@ -105,20 +108,42 @@ def _source(snapshots, rig):
 
 
 def _check_tile_memory(rig, grid, reg, dtype, projection, device):
-    """ValueError naming ``tile`` when the largest tile would not fit this process's device."""
+    """ValueError naming ``tile`` when the tile needing the most device memory, the one modelling the most
+    sub-frames times pixels (:func:`~rsocl.scale.proposal.tiling_cost`), would not fit this process's
+    device."""
     from rsocl.device.context import get_device
+    from rsocl.scale.proposal import tiling_cost
 
     dev = get_device(device)
     dev.real_dtype(dtype)
-    worst = max(grid, key=lambda t: t.outer_shape[0] * t.outer_shape[1])
-    largest, total = memory_need(tile_rig(rig, worst), reg, dtype=dtype, projection=projection)
+    total, largest, _, worst, voxels = tiling_cost(
+        rig, grid.tile, grid.halo, regularizer=reg, dtype=dtype, projection=projection
+    )
     limit = device_limit(dev, largest, total)
     if limit is not None:
         h, w = worst.outer_shape
         raise ValueError(
-            f"tile: a tile of {grid.tile[0]}x{grid.tile[1]} ({h}x{w} with the halo) needs {limit} "
-            f"({dev.name}); choose a smaller tile (rsocl plan proposes one)"
+            f"tile: a tile of {grid.tile[0]}x{grid.tile[1]} ({worst.describe()}: {h}x{w} with the halo, "
+            f"{voxels // (h * w)} sub-frames) needs {limit} ({dev.name}); choose a smaller tile (rsocl plan "
+            f"proposes one)"
         )
+
+
+@contextmanager
+def _before_the_store(out):
+    """Around a run into the store at ``out``: yields a list the run appends the store to once it has
+    checked (or made) it; an interrupt before then that says nothing yet is re-raised, of its own type,
+    saying that nothing was computed and what is at ``out``."""
+    checked = []
+    try:
+        yield checked
+    except KeyboardInterrupt as exc:
+        if out is None or checked or str(exc):
+            raise
+        path = Path(os.fspath(out))
+        held = path.is_dir() and any(path.iterdir())
+        where = f"the store at {out} (not checked yet) is unchanged" if held else f"no store made at {out}"
+        raise type(exc)(f"nothing computed; {where}") from None
 
 
 def _check_device(device, engine):
@@ -253,6 +278,13 @@ def reconstruct_tiled(
     ------
     TilesFailed
         When tasks still fail after their retries; the other tiles are kept (in the store).
+    ValueError
+        Before anything is read or computed, for an input out of range (naming it), and for an
+        ``out`` holding anything but a store of this rig (row maps included), tiling and dtype;
+        once the parameters are chosen, for a store of other snapshots or parameters.
+    KeyboardInterrupt
+        An interrupt before the store at ``out`` is checked says so: nothing computed, the store
+        unchanged.
     """
     if not isinstance(rig, Rig):
         raise ValueError(f"rig must be an rsocl.Rig, got {type(rig).__name__}")
@@ -290,52 +322,55 @@ def reconstruct_tiled(
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
     engine = Engine(scheduler, workers)
     _check_device(device, engine)
-    store = None
-    if out is not None:
-        from rsocl.scale.store import check_store_path, require_zarr
+    with _before_the_store(out) as checked:  # an interrupt before the store is checked leaves it as it was
+        store = None
+        if out is not None:  # an existing store: its rig, tiling and dtype, before the input is read
+            from rsocl.scale.store import StoreSpec, check_store
 
-        require_zarr("out")
-        store = check_store_path(out, "out").absolute()  # workers may run in another folder
-    if engine.mode != "distributed":
-        _check_tile_memory(rig, grid, request.regularizer, dtype, request.settings.projection, device)
-    span = rig.sampled_range()
-    with engine:  # a cluster is reached (or started) before the input is read
-        began = time.perf_counter()
-        digest, saturated = scan(source, saturation)
-        tuning = tune_tiles(source, grid, request, saturation)
-        settings, params = _settings(request, tuning, saturation)
-        params.update(
-            {
-                "saturated_pixels": saturated,
-                "solved_subframes": [span.start, span.stop],
-                "tile": list(grid.tile),
-                "halo": grid.halo,
-            }
-        )
-        done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)
-        identity = None
-        if store is not None:
-            from rsocl.scale.store import StoreSpec, prepare_store
+            dtype_name = str(np.dtype(request.dtype))
+            known = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, dtype_name, {}, "")
+            store = check_store(out, known, "out").absolute()  # workers may run in another folder
+        if engine.mode != "distributed":
+            _check_tile_memory(rig, grid, request.regularizer, dtype, request.settings.projection, device)
+        span = rig.sampled_range()
+        with engine:  # a cluster is reached (or started) before the input is read
+            began = time.perf_counter()
+            digest, saturated = scan(source, saturation)
+            tuning = tune_tiles(source, grid, request, saturation)
+            settings, params = _settings(request, tuning, saturation)
+            params.update(
+                {
+                    "saturated_pixels": saturated,
+                    "solved_subframes": [span.start, span.stop],
+                    "tile": list(grid.tile),
+                    "halo": grid.halo,
+                }
+            )
+            done = np.zeros((source.n_sets or 1,) + grid.grid, dtype=bool)
+            identity = None
+            if store is not None:
+                from rsocl.scale.store import prepare_store
 
-            spec = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, settings.dtype, params, digest)
-            done, identity = prepare_store(store, spec)  # the id of the store this run checked
-        sets = [None] if source.n_sets is None else list(range(source.n_sets))
-        jobs = [
-            Job(s, t, source.block(s, t), (span.start, span.stop), None if store is None else str(store), identity)
-            for s in sets
-            for t in grid
-            if not done[(s or 0,) + t.index]
-        ]
-        payload = RigPayload.of(rig)
-        pieces, failures = engine.run(
-            jobs,
-            payload,
-            settings,
-            retries=retries,
-            progress=progress,
-            desc="tiles" if source.n_sets is None else "tiles x sets",
-        )
-        seconds = time.perf_counter() - began
+                spec = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, settings.dtype, params, digest)
+                done, identity = prepare_store(store, spec)  # the id of the store this run checked
+                checked.append(store)
+            sets = [None] if source.n_sets is None else list(range(source.n_sets))
+            jobs = [
+                Job(s, t, source.block(s, t), (span.start, span.stop), None if store is None else str(store), identity)
+                for s in sets
+                for t in grid
+                if not done[(s or 0,) + t.index]
+            ]
+            payload = RigPayload.of(rig)
+            pieces, failures = engine.run(
+                jobs,
+                payload,
+                settings,
+                retries=retries,
+                progress=progress,
+                desc="tiles" if source.n_sets is None else "tiles x sets",
+            )
+            seconds = time.perf_counter() - began
     if store is not None:
         from rsocl.scale.store import load_store
 

@@ -18,6 +18,7 @@ range (:mod:`rsocl.solver.held`).
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,7 @@ from rsocl.model.rig import Rig
 from rsocl.solver.held import held_index
 
 __all__ = [
+    "rig_digest",
     "DEFAULT_HALO",
     "Tile",
     "TileGrid",
@@ -172,6 +174,17 @@ def tile_grid(shape, tile, halo=None) -> TileGrid:
     """The :class:`TileGrid` of ``tile = (H, W)`` pixels with ``halo`` pixels on every side."""
     shape = tuple(int(v) for v in shape)
     return TileGrid(shape, check_tile(tile, shape), check_halo(halo, shape))
+
+
+def rig_digest(data: dict) -> str:
+    """The SHA-256 (hex) of a rig's description ``data`` (:meth:`Rig.to_dict <rsocl.model.rig.Rig.to_dict>`),
+    its cameras' row maps included: what names the whole capture's rig to the tasks and in a store."""
+    digest = hashlib.sha256(repr({**data, "cameras": None}).encode())
+    for camera in data["cameras"]:
+        digest.update(repr({k: v for k, v in camera.items() if k != "row_map"}).encode())
+        if camera["row_map"] is not None:
+            digest.update(np.ascontiguousarray(camera["row_map"], dtype=np.float64).tobytes())
+    return digest.hexdigest()
 
 
 def tile_rig(rig: Rig, tile: Tile) -> Rig:

@@ -11,7 +11,6 @@ so two solvers must not launch on one device at once.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import threading
 import time
@@ -21,7 +20,7 @@ import numpy as np
 
 from rsocl.device.context import Device, get_device, list_devices
 from rsocl.model.rig import Rig
-from rsocl.scale.tiles import Tile, core_block, tile_rig
+from rsocl.scale.tiles import Tile, core_block, rig_digest, tile_rig
 from rsocl.solver.crossval import Tuning
 
 __all__ = ["TileSettings", "RigPayload", "FileBlock", "Job", "Piece", "solve_tile", "worker_device"]
@@ -76,12 +75,7 @@ class RigPayload:
     def of(cls, rig: Rig) -> RigPayload:
         """The payload of ``rig``, keyed by the SHA-256 of its description and row maps."""
         data = rig.to_dict()
-        digest = hashlib.sha256(repr({**data, "cameras": None}).encode())
-        for camera in data["cameras"]:
-            digest.update(repr({k: v for k, v in camera.items() if k != "row_map"}).encode())
-            if camera["row_map"] is not None:
-                digest.update(np.ascontiguousarray(camera["row_map"], dtype=np.float64).tobytes())
-        return cls(digest.hexdigest(), data)
+        return cls(rig_digest(data), data)
 
 
 @dataclass(frozen=True)
