@@ -33,7 +33,8 @@ def add_parser(subparsers):
 
 
 def cmd_capture(args) -> int:
-    """Run :func:`~rsocl.hardware.capture.capture_sets`: 0 on success, 1 when a camera failed (the file records it).
+    """Run :func:`~rsocl.hardware.capture.capture_sets`: 0 on success, 1 when a camera failed (the file records it)
+    or the capture file could not be completed or renamed to ``--out`` (the line names the file holding the sets).
 
     Bad arguments or rig files raise ValueError / FileNotFoundError (the CLI's exit status 2).
     """
@@ -52,7 +53,9 @@ def cmd_capture(args) -> int:
     refuse_camera_capture(out, "--out")
     rigfile = load_rig_file(args.rig)  # a shape beyond the host's memory: refused here
     try:
-        path = capture_sets(rigfile, args.out, sets=args.sets, timeout=args.timeout, progress=progress_bar(args))
+        path = capture_sets(
+            rigfile, args.out, sets=args.sets, timeout=args.timeout, progress=progress_bar(args), name="--out"
+        )
     except CaptureFailed as exc:
         print(f"rsocl capture: error: {exc}", file=sys.stderr)
         return 1

@@ -20,7 +20,8 @@ The capture is written incrementally to ``<out>.partial`` and renamed to
 ``<out>`` when the run ends, successfully **or not**: a failed run still gives
 ``<out>``, holding the frames captured before the failure and the failure
 itself. A ``<out>.partial`` left behind means the process itself died (power
-loss, ``kill -9``); it is a readable capture file up to the last flush. It is
+loss, ``kill -9``), or the rename failed (the run's error names the file and its complete sets);
+it is a readable capture file up to the last flush. It is
 never truncated nor appended to: a capture to the same ``<out>`` is refused
 (:func:`~rsocl.hardware.capture_file.check_partial`, naming the file and its complete sets) until the
 user renames it (to keep it as a capture) or removes it; so is a capture
@@ -48,6 +49,7 @@ must then equal the rig's). Integer frames are converted to model units as
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import warnings
@@ -56,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
-from rsocl.files.atomic import output_path
+from rsocl.files.atomic import fsync_directory, output_path
 from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture
 from rsocl.files.rigfile import RigFile, load_rigfile
 from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, check_partial, publish, readable
@@ -144,7 +146,7 @@ def _label(index, backend, config, name=None):
     return f"camera {index}{called} ({backend}{' ' + str(address) if address is not None else ''})"
 
 
-def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path:
+def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="out") -> Path:
     """Capture ``sets`` synchronized sets from the cameras of ``rigfile`` into the capture file ``out_path``.
 
     Parameters
@@ -160,6 +162,8 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         Seconds to wait for each frame (> 0).
     progress : bool
         Show a progress bar (tqdm).
+    name : str
+        How messages name ``out_path`` (``"--out"`` for ``rsocl capture``).
 
     Returns
     -------
@@ -170,12 +174,16 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
     ------
     CaptureFailed
         A camera (or the registration of its frame) failed: ``out_path`` holds
-        everything captured before and the failure (camera, set, error).
+        everything captured before and the failure (camera, set, error). Or the file could not be
+        closed or renamed to ``out_path``: :attr:`CaptureFailed.path` (``<out_path>.partial``) holds
+        the complete sets, and the message says so.
     ValueError, FileNotFoundError
         Bad arguments, rig file, unknown backend or camera config, or an ``out_path`` that holds frames
         from cameras (an earlier capture); nothing is written.
     KeyboardInterrupt
-        Re-raised after the file is closed with status ``"interrupted"``.
+        Re-raised (also when it comes while the cameras stop or close, which goes on for every camera)
+        after the file is closed, with status ``"interrupted"``; its message names the file, its complete
+        sets and its status.
 
     Warns
     -----
@@ -194,16 +202,16 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
             raise ValueError(f"camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger")
     folder = Path(rigfile.path).parent if rigfile.path is not None else Path(".")
     reads = [("rig file", rigfile.path)] + [
-        ("row_map_file", folder / cam["row_map_file"])
-        for cam in rigfile.cameras
+        (f"camera[{i}].row_map_file", folder / cam["row_map_file"])
+        for i, cam in enumerate(rigfile.cameras)
         if isinstance(cam.get("row_map_file"), (str, os.PathLike))
     ]
     reads += [(f"camera[{i}].config.scene", rigfile.scene_path(i)) for i in range(len(rigfile.cameras))]
     reads = [(what, path) for what, path in reads if path is not None]
-    out = output_path(out_path, "out", inputs=reads)
-    partial = output_path(out.with_name(out.name + PARTIAL_SUFFIX), "out", inputs=reads)
-    check_partial(partial)
-    refuse_camera_capture(out, "out")
+    out = output_path(out_path, name, inputs=reads)
+    partial = output_path(out.with_name(out.name + PARTIAL_SUFFIX), name, inputs=reads)
+    check_partial(partial, name)
+    refuse_camera_capture(out, name)
 
     backends = rigfile.backends()
     labels = [_label(i, b, c, cam.get("name")) for i, ((b, c), cam) in enumerate(zip(backends, rigfile.cameras))]
@@ -221,44 +229,52 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
         except BaseException as exc:  # KeyboardInterrupt, SystemExit: record, then let it through
             failure = dict(where, type=type(exc).__name__, error=_one_line(exc))
             interrupted = exc
-        for i, cam in enumerate(cameras):
-            for step in (cam.stop, cam.close):
-                try:
-                    step()
-                except Exception as exc:  # closing must reach every camera
-                    writer.warn(f"camera {i}: {step.__name__} failed: {type(exc).__name__}: {exc}")
+        failure, interrupted = _stop_cameras(cameras, writer, failure, interrupted)
         status = "complete" if failure is None else ("interrupted" if interrupted is not None else "failed")
         try:
             writer.finish(status, failure)
-        except Exception as exc:  # the file takes no more (disk full): whether it is readable decides below
+        except BaseException as exc:  # the file takes no more (disk full): whether it is readable decides below
             failure = failure or dict(where, phase="write", type=type(exc).__name__, error=_one_line(exc))
+            if not isinstance(exc, Exception):  # Ctrl-C while the status is written: written again
+                interrupted = interrupted or exc
+                with contextlib.suppress(Exception):
+                    writer.finish("interrupted", failure)
     finally:
         closed = writer.close()
+    interrupted = interrupted or writer.interrupt
+    status = writer.meta["status"]
     if not (closed and readable(partial)):
-        kept = "is unchanged" if out.exists() else "was not made"
+        state = "is unchanged" if out.exists() else "was not made"
         why = "" if failure is None else f"{failure['type']}: {failure['error']}; "
-        error = CaptureFailed(
+        message = (
             f"the capture file could not be completed ({why}HDF5 could not close it): {str(partial)!r} is kept as "
-            f"written, {writer.sets_complete} set(s) complete before the failure; {str(out)!r} {kept}",
-            path=partial,
-            camera=None if failure is None else failure["camera"],
-            set_index=None if failure is None else failure["set"],
-            phase="write",
-            sets_complete=writer.sets_complete,
+            f"written, {writer.sets_complete} set(s) complete before the failure; {str(out)!r} {state}"
         )
-        if isinstance(interrupted, KeyboardInterrupt):  # Ctrl-C (or SIGTERM): the line says what was kept
-            raise type(interrupted)(str(error)) from None
-        if interrupted is not None:
-            raise interrupted from error
-        raise error
-    with keeping_unless_simulated(out) as kept:  # a file there that is not a simulated capture keeps a name
-        publish(partial, out)
+        _raise_kept(message, partial, writer, failure, interrupted)
+    kept: Path | None = None
+    fault = None
+    try:
+        with keeping_unless_simulated(out) as kept:  # a file there that is not a simulated capture keeps a name
+            publish(partial, out)
+        fsync_directory(out.parent if str(out.parent) else Path("."))
+    except BaseException as exc:  # the rename failed (its kept copy is then removed again), or an interrupt
+        kept, fault = (kept if kept is not None and kept.exists() else None), exc
+        interrupted = interrupted or (None if isinstance(exc, Exception) else exc)
+    if partial.exists():  # not renamed: it holds the capture; out is as it was
+        how = "was interrupted" if not isinstance(fault, Exception) else f"failed ({_fault_words(fault)})"
+        what = "" if failure is None else f"; {failure['phase']} failed: {failure['type']}: {failure['error']}"
+        message = (
+            f"{str(partial)!r} holds the {writer.sets_complete} complete set(s) (capture_status {status!r}{what}) "
+            f"and is kept as it is: renaming it to {str(out)!r} {how}, so {str(out)!r} "
+            f"{'is unchanged' if out.exists() else 'was not made'}"
+        )
+        _raise_kept(message, partial, writer, failure, interrupted)
     note = "" if kept is None else f"; the earlier file there is kept as {kept}"
-    if kept is not None and failure is None:  # a failure's error line says it, an interrupt's too
+    if kept is not None and failure is None and interrupted is None:  # the error or interrupt line says it
         warnings.warn(f"{out}: the earlier file there is kept as {kept}", stacklevel=2)
     if isinstance(interrupted, KeyboardInterrupt):
         raise type(interrupted)(
-            f"{out} holds the {writer.sets_complete} complete set(s) (capture_status 'interrupted'){note}"
+            f"{out} holds the {writer.sets_complete} complete set(s) (capture_status {status!r}){note}"
         ) from None
     if interrupted is not None:
         raise interrupted
@@ -275,6 +291,51 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False) -> Path
             sets_complete=writer.sets_complete,
         )
     return out
+
+
+def _stop_cameras(cameras, writer, failure, interrupted):
+    """Stop and close every camera: an error is a warning; an interrupt (Ctrl-C, SIGTERM) is recorded (the
+    first, with the failure, where none is) and closing goes on. Returns ``(failure, interrupted)``."""
+    for i, cam in enumerate(cameras):
+        for step in (cam.stop, cam.close):
+            try:
+                try:
+                    step()
+                except Exception as exc:  # closing must reach every camera
+                    writer.warn(f"camera {i}: {step.__name__} failed: {type(exc).__name__}: {exc}")
+            except BaseException as exc:  # an interrupt (or a warning the file does not take): on to the next
+                if interrupted is None and not isinstance(exc, Exception):
+                    interrupted = exc
+                    error = _one_line(exc)
+                    failure = failure or dict(
+                        camera=i, set=None, phase=step.__name__, type=type(exc).__name__, error=error
+                    )
+    return failure, interrupted
+
+
+def _raise_kept(message, partial, writer, failure, interrupted):
+    """Raise the end of a capture whose file stays at ``partial``: a :class:`CaptureFailed` with ``message``,
+    or the interrupt with it as its message (Ctrl-C, SIGTERM: the line says what was kept)."""
+    error = CaptureFailed(
+        message,
+        path=partial,
+        camera=None if failure is None else failure["camera"],
+        set_index=None if failure is None else failure["set"],
+        phase="write",
+        sets_complete=writer.sets_complete,
+    )
+    if isinstance(interrupted, KeyboardInterrupt):
+        raise type(interrupted)(message) from None
+    if interrupted is not None:
+        raise interrupted from error
+    raise error
+
+
+def _fault_words(exc: Exception) -> str:
+    """An :class:`~rsocl.files.atomic.OutputError` as it is (it names its file), another fault on one line."""
+    from rsocl.files.atomic import OutputError
+
+    return str(exc) if isinstance(exc, OutputError) else _one_line(exc)
 
 
 def _one_line(exc: BaseException) -> str:

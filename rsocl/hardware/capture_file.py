@@ -25,7 +25,8 @@ rig with each camera's exposure as its device applied it, attribute ``meta``), r
 - root attributes ``capture_status`` (``"running"``, ``"complete"``,
   ``"failed"``, ``"interrupted"``), ``sets_complete`` and, after a failure,
   ``failure`` (JSON ``{"camera", "set", "phase", "type", "error"}``; ``set`` is
-  null for failures while opening or configuring). The same status, failure and
+  null for failures while opening or configuring, and for an interrupt while the cameras stop
+  or close, phase ``"stop"`` or ``"close"``). The same status, failure and
   per-camera settings are in ``meta`` (``meta["cameras"][i]``: ``backend``, ``name`` the label,
   ``camera_name`` the rig file's ``name`` or null, and the settings applied).
 """
@@ -129,6 +130,7 @@ class CaptureWriter:
     def _start(self, rig, rigfile, labels, sets, timeout, write_header):
         write_header(self.h5, "capture", rig)
         self.sets_complete = 0
+        self.interrupt: BaseException | None = None
         self.pending = {}
         self.meta = {
             "source": "rsocl capture",
@@ -197,51 +199,78 @@ class CaptureWriter:
 
     # ------------------------------------------------------------------ raw frames
     def add_raw(self, index: int, set_index: int, frame, camera) -> None:
-        import h5py
-
+        """Append ``frame`` to ``raw/<index>`` and its set, timestamp and metadata to ``raw_meta/<index>``, then
+        flush. All or nothing: on any exception (a write the disk refuses, Ctrl-C, SIGTERM) the datasets are
+        resized back to the frames written whole (or removed, on the camera's first frame) and it is
+        re-raised, so that frames and their metadata never differ in number."""
         image = np.asarray(frame.image)
         if image.ndim != 2:
             raise ValueError(f"camera {index}: frames must be 2-D images, got shape {image.shape}")
-        name = f"raw/{index}"
-        if name not in self.h5:
-            ds = self.h5.create_dataset(
-                name,
-                shape=(0,) + image.shape,
-                maxshape=(None,) + image.shape,
-                dtype=image.dtype,
-                chunks=(1,) + image.shape,
-            )
-            ds.attrs["backend"] = camera.backend
-            ds.attrs["name"] = camera.name
-            if self.meta["cameras"][index].get("camera_name") is not None:
-                ds.attrs["camera_name"] = self.meta["cameras"][index]["camera_name"]
-            ds.attrs["pixel_format"] = str(frame.pixel_format)
-            ds.attrs["bit_depth"] = int(frame.bit_depth)
-            ds.attrs["config"] = _json(camera.config)
-            info = self.meta["cameras"][index]
-            for key in ("exposure", "roi"):
-                if info.get(key) is not None:
-                    ds.attrs[key] = info[key]
-            group = self.h5.require_group(f"raw_meta/{index}")
-            group.create_dataset("set", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(64,))
-            group.create_dataset("timestamp", shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(64,))
-            group.create_dataset("meta", shape=(0,), maxshape=(None,), dtype=h5py.string_dtype(), chunks=(64,))
-        ds = self.h5[name]
-        if image.shape != ds.shape[1:] or image.dtype != ds.dtype:
-            raise ValueError(
-                f"camera {index}: frame changed from {ds.shape[1:]} {ds.dtype} to "
-                f"{image.shape} {image.dtype} during the capture"
-            )
-        n = ds.shape[0]
-        ds.resize(n + 1, axis=0)
-        ds[n] = image
-        group = self.h5[f"raw_meta/{index}"]
         meta = dict(frame.meta)
         meta.update(pixel_format=str(frame.pixel_format), bit_depth=int(frame.bit_depth))
-        for key, value in (("set", set_index), ("timestamp", float(frame.timestamp)), ("meta", _json(meta))):
-            group[key].resize(n + 1, axis=0)
-            group[key][n] = value
+        entries = (("set", int(set_index)), ("timestamp", float(frame.timestamp)), ("meta", _json(meta)))
+        name = f"raw/{index}"
+        first = name not in self.h5
+        if not first:
+            ds = self.h5[name]
+            if image.shape != ds.shape[1:] or image.dtype != ds.dtype:
+                raise ValueError(
+                    f"camera {index}: frame changed from {ds.shape[1:]} {ds.dtype} to "
+                    f"{image.shape} {image.dtype} during the capture"
+                )
+        n = 0 if first else self.h5[name].shape[0]
+        try:
+            if first:
+                self._create_raw(index, image, frame, camera)
+            ds, group = self.h5[name], self.h5[f"raw_meta/{index}"]
+            ds.resize(n + 1, axis=0)
+            ds[n] = image
+            for key, value in entries:
+                group[key].resize(n + 1, axis=0)
+                group[key][n] = value
+        except BaseException:
+            self._roll_back(index, n, first)
+            raise
         self.h5.flush()
+
+    def _create_raw(self, index: int, image: np.ndarray, frame, camera) -> None:
+        import h5py
+
+        ds = self.h5.create_dataset(
+            f"raw/{index}",
+            shape=(0,) + image.shape,
+            maxshape=(None,) + image.shape,
+            dtype=image.dtype,
+            chunks=(1,) + image.shape,
+        )
+        ds.attrs["backend"] = camera.backend
+        ds.attrs["name"] = camera.name
+        if self.meta["cameras"][index].get("camera_name") is not None:
+            ds.attrs["camera_name"] = self.meta["cameras"][index]["camera_name"]
+        ds.attrs["pixel_format"] = str(frame.pixel_format)
+        ds.attrs["bit_depth"] = int(frame.bit_depth)
+        ds.attrs["config"] = _json(camera.config)
+        info = self.meta["cameras"][index]
+        for key in ("exposure", "roi"):
+            if info.get(key) is not None:
+                ds.attrs[key] = info[key]
+        group = self.h5.require_group(f"raw_meta/{index}")
+        group.create_dataset("set", shape=(0,), maxshape=(None,), dtype=np.int64, chunks=(64,))
+        group.create_dataset("timestamp", shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(64,))
+        group.create_dataset("meta", shape=(0,), maxshape=(None,), dtype=h5py.string_dtype(), chunks=(64,))
+
+    def _roll_back(self, index: int, n: int, first: bool) -> None:
+        """Undo a frame that :meth:`add_raw` wrote in part: back to ``n`` frames, or, for the camera's first,
+        no ``raw/<index>`` nor ``raw_meta/<index>``. Best effort: the fault being raised is the one reported."""
+        names = [f"raw/{index}"] + [f"raw_meta/{index}/{key}" for key in ("set", "timestamp", "meta")]
+        if first:
+            names = [f"raw_meta/{index}", f"raw/{index}"]
+        for name in names:
+            with contextlib.suppress(Exception):
+                if name in self.h5 and first:
+                    del self.h5[name]
+                elif name in self.h5 and self.h5[name].shape[0] > n:
+                    self.h5[name].resize(n, axis=0)
 
     # ------------------------------------------------------------------ registered sets
     def add_registered(self, index: int, value: np.ndarray) -> None:
@@ -312,13 +341,18 @@ class CaptureWriter:
 
     def close(self) -> bool:
         """Flush and close the file; False when HDF5 could not (a write the disk refused). Never raises:
-        the caller decides from the file (:func:`readable`) whether it can be published."""
+        the caller decides from the file (:func:`readable`) whether it can be published. An interrupt
+        (Ctrl-C, SIGTERM) while it closes does not stop it; it is kept in :attr:`interrupt` (else None)
+        for the caller to raise."""
         closed = True
+        self.interrupt = None
         for step in (self.h5.flush, self.h5.close):
             try:
                 step()
             except Exception:  # HDF5's RuntimeError/OSError: the data it holds cannot reach the disk
                 closed = False
+            except BaseException as exc:
+                self.interrupt = self.interrupt or exc
         return closed
 
 
@@ -335,11 +369,14 @@ def readable(path: Path) -> bool:
 
 
 def publish(partial: Path, out: Path) -> None:
-    """fsync ``partial`` and rename it to ``out`` (atomic on one file system)."""
-    from rsocl.files.atomic import default_mode, fsync_directory, fsync_file
+    """fsync ``partial`` and rename it to ``out`` (atomic on one file system), the mode of a file there kept.
+
+    The rename is the last step, so that a block keeping the file there under a second name
+    (:func:`rsocl.files.atomic.keeping`) fails only while ``out`` is still that file; the caller then
+    persists the rename with :func:`rsocl.files.atomic.fsync_directory` on ``out``'s folder."""
+    from rsocl.files.atomic import default_mode, fsync_file
 
     mode = (out.stat().st_mode & 0o7777) if out.exists() else default_mode()
     os.chmod(partial, mode)
     fsync_file(partial)
     os.replace(partial, out)
-    fsync_directory(out.parent if str(out.parent) else Path("."))
