@@ -166,3 +166,14 @@ def test_dottest_with_explicit_shapes():
     assert dottest(_Shift(), (3, 4), (3, 5)) is True
     with pytest.raises(AssertionError, match="range_shape"):
         dottest(_Shift(), (3, 4), (3, 4))
+
+
+def test_the_readmes_rsocl_info_block_is_what_the_command_prints(capsys):
+    """Every ``$ rsocl info ...`` of the README's console blocks is followed by the command's whole output."""
+    from rsocl.cli.main import main
+
+    blocks = re.findall(r"```console\n\$ rsocl (info [^\n]*)\n(.*?)```", README.read_text(encoding="utf-8"), re.S)
+    assert blocks, "the README shows no `rsocl info` run"
+    for command, shown in blocks:
+        assert main(command.split()) == 0
+        assert capsys.readouterr().out == shown, f"README's `rsocl {command}` differs from what it prints"
