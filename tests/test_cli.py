@@ -658,6 +658,14 @@ def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
 
 
 @pytest.mark.parametrize(
+    "fps, match", [("-1", "--camera-fps must be > 0 Hz, got -1.0"), ("nan", "--camera-fps must be finite, got nan")]
+)
+def test_info_names_the_camera_frame_rate_as_typed(capsys, fps, match):
+    assert main(["info", "--shape", "8", "8", "--camera-fps", fps]) == 2
+    assert capsys.readouterr().err.startswith(f"rsocl info: error: {match}")
+
+
+@pytest.mark.parametrize(
     "capture, extra, match",
     [
         ("one", ["--overlap", "1"], "--overlap applies to --window (the frames consecutive windows share)"),

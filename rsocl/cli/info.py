@@ -8,6 +8,7 @@ file: the one ``rsocl reconstruct`` uses, as it is. The rig options cannot chang
 from __future__ import annotations
 
 from rsocl.cli.options import US, add_rig_args, refuse_rig_args, rig_from
+from rsocl.common import validation as check
 
 __all__ = ["add_parser", "check_info_args", "cmd_info"]
 
@@ -40,6 +41,7 @@ def cmd_info(args) -> int:
     """Print one ``key  value`` line per quantity of the rig; returns 0."""
     from rsocl.files.hdf5 import load_capture_rig
 
+    fps = check.positive("--camera-fps", args.camera_fps, "Hz")
     rig = load_capture_rig(args.capture) if args.capture else rig_from(args)
     m, n = rig.shape
     rows = [
@@ -56,7 +58,7 @@ def cmd_info(args) -> int:
             f"each seen by >= {rig.min_cameras} cameras)",
         ),
         ("compression ratio", f"{rig.compression_ratio:.2f}x (T_se / snapshots)"),
-        (f"effective fps at {args.camera_fps:g} fps", f"{rig.effective_fps(args.camera_fps):,.0f}"),
+        (f"effective fps at {fps:g} fps", f"{rig.effective_fps(fps):,.0f}"),
         ("datacube", f"{rig.datacube_bytes(4) / 2**20:.2f} MiB in float32"),
     ]
     width = max(len(k) for k, _ in rows)
