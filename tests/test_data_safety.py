@@ -219,6 +219,21 @@ def test_an_earlier_file_keeps_its_bytes_by_a_link_or_a_copy(tmp_path, monkeypat
     assert not gone.exists() and path.read_bytes() == b"newer"
 
 
+@pytest.mark.parametrize("links", [True, False])
+def test_a_block_that_fails_after_replacing_the_file_leaves_the_earlier_one_its_name(tmp_path, monkeypatch, links):
+    from rsocl.files.atomic import atomic_path, keeping
+
+    if not links:
+        monkeypatch.setattr(os, "link", lambda *a, **k: (_ for _ in ()).throw(OSError(errno.EPERM, "no links")))
+    path = tmp_path / "r.h5"
+    path.write_bytes(b"earlier")
+    with pytest.raises(KeyboardInterrupt), keeping(path, "earlier") as kept:
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(b"new")
+        raise KeyboardInterrupt  # Ctrl-C after the rename, before the block ends
+    assert path.read_bytes() == b"new" and kept.read_bytes() == b"earlier"
+
+
 def test_kept_note_words():
     from rsocl.cli.outputs import kept_note
 

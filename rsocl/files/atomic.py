@@ -330,7 +330,9 @@ def keep_copy(path, tag: str) -> Path | None:
 def keeping(path, tag: str):
     """Context manager for a block that replaces the file ``path``: the earlier file keeps a second name
     (:func:`keep_copy`, yielded; None where there was no file), which is removed again if the block fails
-    (``path`` is then the earlier file, as an :func:`atomic_path` write leaves it).
+    while ``path`` is still the earlier file (as an :func:`atomic_path` write that fails leaves it); a block
+    that fails (an interrupt, say) after ``path`` was replaced leaves the second name, the earlier file's
+    only one.
 
     Examples
     --------
@@ -341,7 +343,17 @@ def keeping(path, tag: str):
     try:
         yield kept
     except BaseException:
-        if kept is not None:
+        if kept is not None and _same_file(path, kept):
             with contextlib.suppress(OSError):
                 kept.unlink()
         raise
+
+
+def _same_file(path, kept: Path) -> bool:
+    """Whether ``path`` is still the file that :func:`keep_copy` gave the name ``kept``: the same inode (a
+    link), or the same size and modification time (a copy keeps them)."""
+    try:
+        now, held = os.stat(path), os.stat(kept)
+    except OSError:
+        return False
+    return os.path.samestat(now, held) or (now.st_size, now.st_mtime_ns) == (held.st_size, held.st_mtime_ns)
