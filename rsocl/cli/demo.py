@@ -42,9 +42,10 @@ def cmd_demo(args) -> int:
     ``demo-tuning.png``, the parameter search, to ``--out``; returns 0.
 
     A capture at one of these names is refused before any work; an earlier ``demo.h5`` is kept as
-    ``demo.earlier-<UTC time>.h5`` (:func:`rsocl.cli.outputs.save_result`)."""
+    ``demo.earlier-<UTC time>.h5`` (:func:`rsocl.cli.outputs.save_result`). An interrupt (Ctrl-C, SIGTERM)
+    ends in one line saying whether ``demo.h5`` was written and what was kept."""
     from rsocl.analysis.visual import comparison_gif, datacube_montage, snapshot_montage
-    from rsocl.cli.outputs import kept_note, refuse_kinds, save_result
+    from rsocl.cli.outputs import interrupted, kept_note, refuse_kinds, save_result, written
     from rsocl.files.atomic import output_folder
     from rsocl.model.operator import RollingShutterOperator
     from rsocl.model.scenes import builtin_scene
@@ -54,23 +55,27 @@ def cmd_demo(args) -> int:
     rig = rig_from(args)
     check_datacube_memory(rig)
     out.mkdir(parents=True, exist_ok=True)
-    truth = builtin_scene(rig.shape, rig.T)
-    op = RollingShutterOperator(rig, device=args.device, dtype=args.dtype)
-    g = op.forward(truth)
-    say(
-        args,
-        f"rig: {rig!r}\ndevice: {op.device.name}\ncompression: {rig.T} sub-frames from "
-        f"{rig.n_channels} snapshots (CR {rig.compression_ratio:.1f}x)",
-    )
-    result = run_reconstruction(args, g, rig, truth)
-    print(quality_line(result, truth))
-    kept = save_result(out / "demo.h5", result.datacube, rig, params=result.params, history=result.history, truth=truth)
-    files = [
-        out / "demo.h5",
-        comparison_gif(out / "demo.gif", truth, result.datacube),
-        snapshot_montage(out / "snapshots.png", g, rig=rig),
-        datacube_montage(out / "subframes.png", result.datacube, truth=truth),
-    ]
-    files += tuning_plot_files(args, result.params, out / "demo.gif")  # demo-tuning.png, after a search
+    result_file = out / "demo.h5"
+    unchanged = f"nothing written, {result_file} unchanged" if result_file.exists() else "nothing written"
+    with interrupted(unchanged):
+        truth = builtin_scene(rig.shape, rig.T)
+        op = RollingShutterOperator(rig, device=args.device, dtype=args.dtype)
+        g = op.forward(truth)
+        say(
+            args,
+            f"rig: {rig!r}\ndevice: {op.device.name}\ncompression: {rig.T} sub-frames from "
+            f"{rig.n_channels} snapshots (CR {rig.compression_ratio:.1f}x)",
+        )
+        result = run_reconstruction(args, g, rig, truth)
+        print(quality_line(result, truth))
+    kept = save_result(result_file, result.datacube, rig, params=result.params, history=result.history, truth=truth)
+    with written(result_file, [kept]):
+        files = [
+            result_file,
+            comparison_gif(out / "demo.gif", truth, result.datacube),
+            snapshot_montage(out / "snapshots.png", g, rig=rig),
+            datacube_montage(out / "subframes.png", result.datacube, truth=truth),
+        ]
+        files += tuning_plot_files(args, result.params, out / "demo.gif")  # demo-tuning.png, after a search
     say(args, "wrote " + ", ".join(str(f) for f in files) + kept_note([kept]))
     return 0

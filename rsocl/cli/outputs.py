@@ -12,7 +12,17 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-__all__ = ["save_result", "kept_note", "kept_clause", "interrupted", "refuse_kinds", "CAPTURES", "HDF5_FILES"]
+__all__ = [
+    "save_result",
+    "kept_note",
+    "kept_clause",
+    "interrupted",
+    "written",
+    "refuse_same_file",
+    "refuse_kinds",
+    "CAPTURES",
+    "HDF5_FILES",
+]
 
 #: The kinds of :func:`rsocl.files.hdf5.file_kind` no derived output replaces: captures, from cameras or simulated.
 CAPTURES = ("camera capture", "capture")
@@ -72,6 +82,54 @@ def interrupted(kept):
         if str(exc):
             raise
         raise type(exc)(kept() if callable(kept) else kept) from None
+
+
+@contextlib.contextmanager
+def written(results, kept):
+    """Around the pictures' writes after the results (``results``: the path, or words, of what is written;
+    ``kept``: the earlier files kept, paths or None): a failed write (a full disk) or an interrupt (Ctrl-C,
+    SIGTERM) that says nothing yet says, in its one line, that the results are written and what was kept."""
+    from rsocl.files.atomic import OutputError
+
+    done = f"{results} written" + kept_clause(kept)
+    try:
+        yield
+    except OutputError as exc:
+        exc.strerror = f"{exc.strerror}; {done}"
+        raise
+    except KeyboardInterrupt as exc:
+        if str(exc):
+            raise
+        raise type(exc)(f"{done}; the pictures are not all drawn") from None
+
+
+def refuse_same_file(option, path, derived, fix: str) -> None:
+    """Refuse, before any work, a run that would write one of its ``derived`` outputs (a GIF, a plot) at
+    ``path``, the path of ``option`` (another output or an input, a link or a hard link to it included):
+    one would replace the other.
+
+    Parameters
+    ----------
+    option : str
+        The option that names ``path``, as typed (``"--out"``).
+    path : path
+        The file of ``option``.
+    derived : iterable of (str, path)
+        Each derived output: the words that say what it is and where its path comes from (``"the tuning plot
+        of --gif"``), and its path.
+    fix : str
+        What to do instead, ending the message (``"choose another --out or --gif"``).
+
+    Raises
+    ------
+    ValueError
+        ``"--out 'x-tuning.png' is where the tuning plot of --gif ... would be written, replacing it; ..."``.
+    """
+    from rsocl.files.atomic import same_file
+
+    for words, other in derived:
+        if same_file(path, other):
+            raise ValueError(f"{option} {str(path)!r} is where {words} would be written, replacing it; {fix}")
 
 
 def refuse_kinds(named, kinds=CAPTURES) -> None:

@@ -4,7 +4,6 @@ Zarr store (:mod:`rsocl.cli.tiling`)."""
 
 from __future__ import annotations
 
-import contextlib
 from pathlib import Path
 
 from rsocl.cli.options import (
@@ -15,7 +14,7 @@ from rsocl.cli.options import (
     solver_options,
     tuning_plot_files,
 )
-from rsocl.cli.outputs import interrupted, kept_clause, kept_note, save_result
+from rsocl.cli.outputs import interrupted, kept_clause, kept_note, save_result, written
 from rsocl.cli.result_lines import quality_line
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
@@ -131,7 +130,7 @@ def cmd_reconstruct(args) -> int:
             result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
         print(quality_line(result, truth))
         kept = save_result(out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth)
-        with _written(out, [kept]):
+        with written(out, [kept]):
             comparison_gif(gif, truth, result.datacube)
             files = [out, gif, *tuning_plot_files(args, result.params, gif)]
         say(args, "wrote " + ", ".join(str(p) for p in files) + kept_note([kept]))
@@ -142,7 +141,7 @@ def cmd_reconstruct(args) -> int:
     earlier: list = []
     with interrupted(lambda: _sets_written(out, len(earlier), batch.batch)):
         _write_sets(args, batch, capture.rig, truth, out, earlier)
-    with _written(f"{set_path(out, 0)} .. {set_path(out, batch.batch - 1)}", earlier):
+    with written(f"{set_path(out, 0)} .. {set_path(out, batch.batch - 1)}", earlier):
         comparison_gif(gif, truth, batch.set(0).datacube)
         plots = tuning_plot_files(args, batch.set(0).params, gif)
     pictures = ", ".join(map(str, [gif, *plots]))
@@ -177,24 +176,6 @@ def _sets_written(out, written: int, sets: int) -> str:
     if not older:
         return done
     return f"{done}; {len(older)} of the files of sets {written} to {sets - 1} are an earlier run's ({older[0]} ..)"
-
-
-@contextlib.contextmanager
-def _written(results, kept):
-    """Around the pictures' writes after the results: a failed write (a full disk) or an interrupt says the
-    results are written."""
-    from rsocl.files.atomic import OutputError
-
-    written = f"{results} written" + kept_clause(kept)
-    try:
-        yield
-    except OutputError as exc:
-        exc.strerror = f"{exc.strerror}; {written}"
-        raise
-    except KeyboardInterrupt as exc:
-        if str(exc):
-            raise
-        raise type(exc)(f"{written}; the pictures are not all drawn") from None
 
 
 def _reconstruct_sets(args, sets, rig):

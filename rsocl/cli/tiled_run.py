@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.cli.outputs import interrupted, kept_note, save_result
+from rsocl.cli.outputs import interrupted, kept_note, save_result, written
 
 __all__ = ["is_zarr", "zarr_gif", "run_tiles", "run_stream"]
 
@@ -56,9 +56,9 @@ def _discarded(exc, out, what: str, why: str) -> str:
 def run_tiles(args, capture):
     """Reconstruct ``capture`` (a :class:`rsocl.scale.inputs.CaptureSets`) in tiles of ``--tile``, or of
     the tile :func:`rsocl.scale.proposal.propose_tiling` proposes for the device, into ``--out`` (an
-    HDF5 file, or a Zarr store of every set with ``--sets``); the exit code (1 when tiles failed)."""
-    from rsocl.cli.options import regularizer_from, say, solver_options, tuning_plot_files
-    from rsocl.cli.result_lines import truth_quality
+    HDF5 file, or a Zarr store of every set with ``--sets``); the exit code (1 when tiles failed). An
+    interrupt ends in one line saying what was kept: the tiles in the store, or whether ``--out`` is written."""
+    from rsocl.cli.options import regularizer_from, say, solver_options
     from rsocl.scale.proposal import propose_tiling
     from rsocl.scale.tiled import TilesFailed, reconstruct_tiled
 
@@ -94,9 +94,39 @@ def run_tiles(args, capture):
         store = Path(args.out).with_suffix(".zarr").name
         why = f"an HDF5 --out is written once every task is solved; a Zarr --out, e.g. {store}, keeps solved tiles"
         return _error(_discarded(exc, args.out, "", why + " and a re-run redoes only the failed ones"))
-    ran = len(result.pieces)
+    from rsocl.analysis.visual import comparison_gif
+    from rsocl.cli.options import tuning_plot_files
+
+    if zarr_out:  # the store is complete: an interrupt from here on says so
+        with written(args.out, []):
+            truth, first = _tiles_line(args, capture, result)
+            gif = [comparison_gif(zarr_gif(args), truth, first)] if first is not None else []
+            plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
+        say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
+        return 0
+    with interrupted(_nothing_written(args.out)):
+        truth, _ = _tiles_line(args, capture, result)
+    history = {
+        "tile_seconds": np.array([p.seconds for p in result.pieces]),
+        "tile_residual": np.array([p.residual for p in result.pieces]),
+    }
+    kept = save_result(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
+    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
+    with written(args.out, [kept]):
+        comparison_gif(gif, truth, result.datacube)
+        files = [args.out, gif, *tuning_plot_files(args, result.params, gif)]
+    say(args, "wrote " + ", ".join(map(str, files)) + kept_note([kept]))
+    return 0
+
+
+def _tiles_line(args, capture, result) -> tuple:
+    """Print the line of :func:`run_tiles`' ``result`` (its tasks, seconds and, with a truth, set 0's
+    quality); ``(truth, first)``: set 0's truth (None with ``--no-truth`` or none stored) and set 0's
+    datacube in memory, read only where the truth or the store's ``--gif`` needs it (else None)."""
+    from rsocl.cli.result_lines import truth_quality
+
     kept = f", {result.skipped} already in the store" if result.skipped else ""
-    text = f"{ran} tile task(s) in {result.seconds:.2f} s{kept}"
+    text = f"{len(result.pieces)} tile task(s) in {result.seconds:.2f} s{kept}"
     truth = None if args.no_truth else capture.truth()  # set 0's
     # set 0 in memory (from a Zarr store, GiBs) only for what reads it: the truth's PSNR, the store's GIF
     compared = truth is not None or args.gif
@@ -104,23 +134,12 @@ def run_tiles(args, capture):
     if truth is not None:
         text = ("set 0: " if args.sets else "") + f"{truth_quality(first, truth)}, " + text
     print(text, flush=True)
-    from rsocl.analysis.visual import comparison_gif
+    return truth, first
 
-    if zarr_out:
-        gif = [comparison_gif(zarr_gif(args), truth, first)] if compared else []
-        plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
-        say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
-        return 0
-    history = {
-        "tile_seconds": np.array([p.seconds for p in result.pieces]),
-        "tile_residual": np.array([p.residual for p in result.pieces]),
-    }
-    kept = save_result(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
-    gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
-    comparison_gif(gif, truth, result.datacube)
-    files = [args.out, gif, *tuning_plot_files(args, result.params, gif)]
-    say(args, "wrote " + ", ".join(map(str, files)) + kept_note([kept]))
-    return 0
+
+def _nothing_written(out) -> str:
+    """What an interrupt before an HDF5 ``out`` is written kept: one clause."""
+    return f"nothing written, {out} unchanged" if Path(out).exists() else "nothing written"
 
 
 def _interrupted_tiles(out, zarr_out: bool) -> str:
@@ -150,7 +169,7 @@ def _window(rig, failed, args) -> tuple:
 
 def run_stream(args):
     """``--window``: set 0 of the capture as a stream of overlapping frame windows, into an HDF5 file;
-    the exit code."""
+    the exit code. An interrupt ends in one line saying whether ``--out`` is written and what was kept."""
     from rsocl.analysis.visual import comparison_gif
     from rsocl.cli.options import say, solver_options, tuning_plot_files
     from rsocl.cli.result_lines import truth_quality
@@ -160,35 +179,36 @@ def run_stream(args):
 
     loaded = load_capture(args.capture, set_index=0)
     try:
-        stream = reconstruct_stream(
-            loaded.snapshots,
-            loaded.rig,
-            window=args.window,
-            overlap=args.overlap,
-            tile=args.tile,
-            halo=args.halo,
-            scheduler=args.scheduler,
-            retries=_retries(args),
-            **solver_options(args),
-        )
+        with interrupted(_nothing_written(args.out)):  # a stream's --out is written once every window is solved
+            stream = reconstruct_stream(
+                loaded.snapshots,
+                loaded.rig,
+                window=args.window,
+                overlap=args.overlap,
+                tile=args.tile,
+                halo=args.halo,
+                scheduler=args.scheduler,
+                retries=_retries(args),
+                **solver_options(args),
+            )
+            truth = None if args.no_truth else loaded.truth
+            text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
+            if truth is not None:
+                text = f"{truth_quality(stream.datacube, truth)}, " + text
+            print(text, flush=True)
     except TilesFailed as exc:
         label, before = _window(loaded.rig, exc.result.rig, args)
         done = f", with the {before} window(s) done before it" if before else ""
         why = "a stream's --out is written once every window is solved"
         return _error(f"{label} failed: " + _discarded(exc, args.out, done, why))
-    truth = None if args.no_truth else loaded.truth
-    text = f"{len(stream.windows)} window(s) of {args.window} frame(s)"
-    if truth is not None:
-        text = f"{truth_quality(stream.datacube, truth)}, " + text
-    print(text, flush=True)
     overlap = default_overlap(args.window) if args.overlap is None else args.overlap
     params = dict(
         stream.results[0].params, window=args.window, overlap=overlap, windows=[list(w) for w in stream.windows]
     )
     kept = save_result(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
-    comparison_gif(gif, truth, stream.datacube)
-    say(
-        args, "wrote " + ", ".join(map(str, [args.out, gif, *tuning_plot_files(args, params, gif)])) + kept_note([kept])
-    )
+    with written(args.out, [kept]):
+        comparison_gif(gif, truth, stream.datacube)
+        files = [args.out, gif, *tuning_plot_files(args, params, gif)]
+    say(args, "wrote " + ", ".join(map(str, files)) + kept_note([kept]))
     return 0

@@ -93,9 +93,11 @@ def add_reconstruct_tiling_args(p):
 
 
 def check_outputs(args) -> None:
-    """Check ``--out`` (and ``--gif``) before anything is computed; errors name the option."""
+    """Check ``--out`` (and ``--gif``) before anything is computed; errors name the option. No picture (the
+    GIF, the tuning plot beside it) is written over ``--out`` or an input."""
     from rsocl.cli.options import tuning_plot_path
-    from rsocl.files.atomic import output_path
+    from rsocl.cli.outputs import refuse_same_file
+    from rsocl.files.atomic import output_path, same_file
 
     if args.window is not None and (is_zarr(args.out) or args.sets):
         raise ValueError(
@@ -129,11 +131,14 @@ def check_outputs(args) -> None:
         raise ValueError(f"--out: every set (--sets) goes to a Zarr store (--out NAME.zarr), got {args.out!r}")
     out = output_path(args.out, "--out", inputs=reads)
     gif = output_path(Path(args.gif) if args.gif else out.with_suffix(".gif"), "--gif", inputs=reads)
-    if gif.resolve() == out.resolve():
+    if same_file(gif, out):
         raise ValueError(f"--gif {str(gif)!r} is the --out file; give the GIF another name")
     _gif_suffix(gif, args)
     if tuned:  # next to the GIF
-        output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
+        plot = output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
+        if not getattr(args, "fixed", False):  # --fixed: no search, no plot
+            words = "the tuning plot of --gif (NAME-tuning.png beside NAME.gif)"
+            refuse_same_file("--out", out, [(words, plot)], "choose another --out or --gif")
 
 
 def _check_store(args) -> None:

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 __all__ = [
+    "same_file",
     "atomic_path",
     "EARLIER",
     "keep_copy",
@@ -169,7 +170,7 @@ def output_path(path, name: str = "path", inputs=()) -> Path:
     if path.is_dir():
         raise ValueError(f"{name} must name a file, {str(path)!r} is a directory")
     for option, source in inputs:
-        if source is not None and _same_file(path, Path(os.fspath(source))):
+        if source is not None and same_file(path, Path(os.fspath(source))):
             raise ValueError(f"{name} {str(path)!r} is the {option} it reads; writing it would replace the input")
     _check_takes_files(directory, name, prefix=f".{path.name}.")
     return path
@@ -204,8 +205,10 @@ def _check_takes_files(directory: Path, name: str, prefix: str) -> None:
     os.unlink(probe)
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    """Whether ``a`` and ``b`` name one file (the same inode when both exist, else the same resolved path)."""
+def same_file(a, b) -> bool:
+    """Whether the paths ``a`` and ``b`` name one file (the same inode, a link or a hard link included, when
+    both exist, else the same resolved path)."""
+    a, b = Path(a), Path(b)
     try:
         if a.exists() and b.exists():
             return os.path.samefile(a, b)
@@ -343,13 +346,13 @@ def keeping(path, tag: str):
     try:
         yield kept
     except BaseException:
-        if kept is not None and _same_file(path, kept):
+        if kept is not None and _still_earlier(path, kept):
             with contextlib.suppress(OSError):
                 kept.unlink()
         raise
 
 
-def _same_file(path, kept: Path) -> bool:
+def _still_earlier(path, kept: Path) -> bool:
     """Whether ``path`` is still the file that :func:`keep_copy` gave the name ``kept``: the same inode (a
     link), or the same size and modification time (a copy keeps them)."""
     try:
