@@ -156,15 +156,19 @@ def check_datacube_memory(rig, option=None, hint="choose a smaller grid or a lon
     )
 
 
-def add_device_args(p):
-    """Add ``--device``, ``--dtype`` and ``--quiet`` to parser ``p``."""
+def add_device_args(p, dtype="float32"):
+    """Add ``--device``, ``--dtype`` (default ``dtype``; None: float64 where the device has it, else
+    float32) and ``--quiet`` to parser ``p``."""
     p.add_argument(
         "--device",
         default=None,
         help="OpenCL device: 'P:D' indices from 'rsocl devices', or a name substring "
         "(default: RSOCL_DEVICE, PYOPENCL_CTX, else first GPU, else CPU)",
     )
-    p.add_argument("--dtype", choices=["float32", "float64"], default="float32", help="device precision")
+    default = "float64 where the device has it, else float32" if dtype is None else dtype
+    p.add_argument(
+        "--dtype", choices=["float32", "float64"], default=dtype, help=f"device precision (default {default})"
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar, only errors and the result line")
 
 

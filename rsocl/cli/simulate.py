@@ -2,9 +2,43 @@
 
 from __future__ import annotations
 
-from rsocl.cli.options import US, add_device_args, add_rig_args, check_datacube_memory, check_rig_memory, rig_from, say
+from rsocl.cli.options import (
+    RIG_BYTES_PER_PIXEL,
+    US,
+    add_device_args,
+    add_rig_args,
+    check_datacube_memory,
+    check_host_memory,
+    progress_bar,
+    rig_from,
+    say,
+)
 
-__all__ = ["add_parser", "check_noise_args", "multi_frame_rig", "scene_datacube", "cmd_simulate"]
+__all__ = [
+    "add_parser",
+    "check_noise_args",
+    "run_bytes",
+    "check_run_memory",
+    "multi_frame_rig",
+    "scene_datacube",
+    "cmd_simulate",
+    "RUN_MEMORY_FACTOR",
+    "STEPS",
+]
+
+# Peak resident memory of a run over run_bytes() (the rig, the float32 truth and the float64
+# snapshots), per --dtype: the forward model's temporaries (the truth and the snapshots in the device
+# dtype, on the host and in device buffers, which a CPU OpenCL device keeps in host memory; the
+# operator's geometry per channel and pixel; the float64 copy of its result) and the file's writer.
+# Measured with /usr/bin/time -v on `rsocl simulate builtin --shape 16 16` on PoCL (CPU), 1 / 2000 /
+# 5000 / 10000 frames (run_bytes 0.0 / 90.1 / 225.3 / 450.6 MB; 20000 frames 901.1 MB):
+#   float32: peak RSS 143.6 / 349.4 / 629.7 / 1014.0 MB: 2.07x then 1.71x run_bytes per added frame,
+#            2.25x in all at 10000 frames;
+#   float64: peak RSS 143.5 / 421.4 / 853.7 / 1495.5 MB (2851.7 MB at 20000): 3.20x, 2.85x, 3.01x
+#            per added frame, 3.32x in all at 10000 frames.
+# Each factor is above every ratio measured for its dtype (float32 by 11 %, float64 by 5 %); the
+# in-all ratios include the ~140 MB of a one-frame run, so larger runs sit further below it.
+RUN_MEMORY_FACTOR = {"float32": 2.5, "float64": 3.5}
 
 
 def add_parser(subparsers):
@@ -52,7 +86,7 @@ def add_parser(subparsers):
     )
     p.add_argument("--bit-depth", type=int, default=None, help="quantise to this many bits, 1..32")
     p.add_argument("--seed", type=int, default=0, help="seed of the noise generator, >= 0 (default 0)")
-    add_device_args(p)
+    add_device_args(p, dtype=None)  # rsocl.simulate's own default
     p.set_defaults(func=cmd_simulate)
     return p
 
@@ -83,9 +117,61 @@ def check_noise_args(args) -> None:
     check_seed("--seed", args.seed)
 
 
+def run_bytes(rig, frames: int, subframes: float) -> int:
+    """Bytes of the arrays of a run of ``rig`` (one frame per camera) with ``frames`` frames per camera
+    and ``subframes`` sub-frames: the rig's row maps and exposure windows
+    (:data:`~rsocl.cli.options.RIG_BYTES_PER_PIXEL` per channel and pixel), the float32 truth
+    ``(subframes, m, n)`` and the float64 snapshots ``(cameras * frames, m, n)``."""
+    m, n = rig.shape
+    channels = len(rig.cameras) * frames
+    return int(channels * m * n * (RIG_BYTES_PER_PIXEL + 8) + 4 * subframes * m * n)
+
+
+def check_run_memory(args, rig, frames: int = 1, t_d: float = 0.0) -> None:
+    """Refuse, before anything is allocated, a run whose arrays (:func:`run_bytes`) times
+    :data:`RUN_MEMORY_FACTOR` of ``--dtype`` (the forward model's temporaries) exceed the host memory
+    (:func:`~rsocl.common.memory.check_host_memory`), naming ``--frames`` and the most frames that fit
+    (``--shape`` when one frame does not fit).
+
+    ``rig`` is the one-frame rig of the command line and ``t_d`` the period of its frames, seconds: a
+    run of ``frames`` frames spans at most ``rig.T + 1 + (frames - 1) * t_d / dt`` sub-frames.
+    """
+    from rsocl.common import memory
+
+    factor = RUN_MEMORY_FACTOR[args.dtype or "float64"]  # the device's choice: at most float64's
+
+    def need(count: int) -> float:
+        return factor * run_bytes(rig, count, rig.T + 1 + (count - 1) * t_d / rig.dt)
+
+    limit = memory.host_memory_bytes()
+    if limit is None or need(frames) <= limit:
+        return
+    m, n = rig.shape
+    C = len(rig.cameras)
+    most = 1 + int((limit - need(1)) // (need(2) - need(1))) if need(1) <= limit else 0
+    if frames > 1 and most >= 1:
+        option = f"--frames {frames}"
+        hint = (
+            f"--frames must be 1..{most:,} at --shape {m} {n}, --cameras {C}, --t-d-us {t_d / US:g} and "
+            f"--dtype {args.dtype or 'float64'}; give fewer --frames or a smaller --shape"
+        )
+    else:
+        option = f"--shape {m} {n}" + (f" --frames {frames}" if frames > 1 else "")
+        hint = "not even one frame fits: choose a smaller --shape or a longer --dt-us (fewer sub-frames)"
+    span = rig.T + 1 + (frames - 1) * t_d / rig.dt
+    check_host_memory(
+        need(frames),
+        option,
+        f"simulating {C} x {frames} snapshots of {m} x {n} over about {span:,.0f} sub-frames (the rig, the "
+        f"float32 scene and the float64 snapshots, {factor:g}x for the {args.dtype or 'float64'} forward model)",
+        hint,
+    )
+
+
 def multi_frame_rig(args, rig):
     """``rig`` with every camera capturing ``--frames`` frames, ``--t-d-us`` apart (default: the longest
-    readout, ``t_r`` times the most rows a camera reads); ``rig`` itself for one frame."""
+    readout, ``t_r`` times the most rows a camera reads); ``rig`` itself for one frame. A run that
+    would not fit the host memory (:func:`check_run_memory`) is refused first."""
     from rsocl.common import validation as check
     from rsocl.model.rig import MAX_T, Camera, Rig
 
@@ -95,6 +181,8 @@ def multi_frame_rig(args, rig):
             raise ValueError(
                 "--t-d-us is the period between the frames of --frames N > 1; with one frame it would be ignored"
             )
+        check_datacube_memory(rig)
+        check_run_memory(args, rig)
         return rig
     if args.t_d_us is None:
         t_d = max((float(rig.row_map(i).max()) + 1.0) * cam.t_r for i, cam in enumerate(rig.cameras))
@@ -109,7 +197,7 @@ def multi_frame_rig(args, rig):
             f"--frames {frames} frames {t_d / US:g} µs apart span {span / rig.dt:,.0f} sub-frames of "
             f"{rig.dt / US:g} µs, above the {MAX_T:,} a rig may span; give fewer --frames"
         )
-    check_rig_memory(rig.C * frames, rig.shape, f"--frames {frames}", hint="give fewer --frames or a smaller --shape")
+    check_run_memory(args, rig, frames, t_d)
     cameras = [Camera(cam.angle, t_e=cam.t_e, t_r=cam.t_r, t_d=t_d, frames=frames) for cam in rig.cameras]
     try:
         return Rig(cameras, rig.shape, dt=rig.dt, mask=rig.mask)
@@ -140,6 +228,30 @@ def scene_datacube(args, rig):
     return benchmark_protocol(video, rig.shape, rig.T)
 
 
+#: The steps of a run, as its progress bar names them.
+STEPS = ("rig", "scene", "snapshots", "writing")
+
+
+def _steps(args):
+    """A progress bar (tqdm) over :data:`STEPS`, drawn where :func:`~rsocl.cli.options.progress_bar` says."""
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=len(STEPS),
+        desc="simulate",
+        unit="step",
+        leave=False,
+        disable=not progress_bar(args),
+        bar_format="{desc}: {n_fmt}/{total_fmt} steps |{bar}| {elapsed}",
+    )
+
+
+def _step(bar, name: str) -> None:
+    """Mark the steps before ``name`` done and show ``name`` as the one running."""
+    bar.update(STEPS.index(name) - bar.n)
+    bar.set_description_str(f"simulate ({name})")
+
+
 def cmd_simulate(args) -> int:
     """Simulate the snapshots of ``args.scene`` and write them, the rig and the truth to ``--out``; returns 0.
 
@@ -154,29 +266,34 @@ def cmd_simulate(args) -> int:
     check_noise_args(args)
     output_path(args.out, "--out", inputs=(("scene", None if args.scene == "builtin" else args.scene),))
     refuse_camera_capture(args.out, "--out")
-    rig = multi_frame_rig(args, rig_from(args))
-    check_datacube_memory(rig)
-    truth = scene_datacube(args, rig)
-    g = simulate(
-        truth,
-        rig,
-        noise=args.noise,
-        sigma=args.sigma or 0.0,
-        photons=args.photons,
-        bit_depth=args.bit_depth,
-        seed=args.seed,
-        device=args.device,
-    )
-    meta = {
-        "scene": str(args.scene),
-        "noise": args.noise,
-        "sigma": args.sigma,
-        "photons": args.photons,
-        "bit_depth": args.bit_depth,
-        "seed": args.seed,
-    }
-    with keeping_unless_simulated(args.out) as kept:
-        path = save_capture(args.out, g, rig, truth=truth, attrs=meta)
+    with _steps(args) as bar:
+        _step(bar, "rig")
+        rig = multi_frame_rig(args, rig_from(args))
+        _step(bar, "scene")
+        truth = scene_datacube(args, rig)
+        _step(bar, "snapshots")
+        g = simulate(
+            truth,
+            rig,
+            noise=args.noise,
+            sigma=args.sigma or 0.0,
+            photons=args.photons,
+            bit_depth=args.bit_depth,
+            seed=args.seed,
+            device=args.device,
+            dtype=args.dtype,
+        )
+        meta = {
+            "scene": str(args.scene),
+            "noise": args.noise,
+            "sigma": args.sigma,
+            "photons": args.photons,
+            "bit_depth": args.bit_depth,
+            "seed": args.seed,
+        }
+        _step(bar, "writing")
+        with keeping_unless_simulated(args.out) as kept:
+            path = save_capture(args.out, g, rig, truth=truth, attrs=meta)
     frames = f" ({rig.C} cameras x {rig.cameras[0].frames} frames)" if rig.cameras[0].frames > 1 else ""
     size = f"{rig.shape[0]}x{rig.shape[1]}, T = {rig.T}"
     say(args, f"wrote {path}: {rig.n_channels} snapshots{frames} of {size}" + kept_note([kept]))
