@@ -1,7 +1,7 @@
 """What the scale-out checks refuse, and when: a store of another rig (its row maps included), an ``out``
-that is not a store of the same rig, tiling and dtype (before the input is read), a tile too large for the
-device (the one modelling the most sub-frames), an interrupt before the store is checked, and ``--halo`` on
-a stream of windows run in one piece."""
+that is not a store of the same rig, tiling and dtype, or of other settings known before the search (before
+the input is read), a tile too large for the device (the one modelling the most sub-frames), an interrupt
+before the store is checked, and ``--halo`` on a stream of windows run in one piece."""
 
 import re
 
@@ -201,15 +201,15 @@ def test_the_cli_refuses_a_foreign_out_naming_it_before_the_input_is_read(
 def test_an_interrupt_before_the_store_is_checked_says_nothing_was_computed(capture, tmp_path, capsys, monkeypatch):
     out = tmp_path / "rec.zarr"
     argv = ["reconstruct", str(capture), "--out", str(out), "--tile", "16", "16", "--quiet", "--no-truth"]
-    assert main(argv + ["--iterations", "2", "--fixed"]) == 0  # another reconstruction: other parameters
+    assert main(argv + ["--iterations", "2", "--fixed"]) == 0
     held, marks = store_id(out), load_store(out).tiles.copy()
     capsys.readouterr()
 
     def ctrl_c(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(tiled_module, "tune_tiles", ctrl_c)  # Ctrl-C during the tuning search
-    assert main(argv + ["--iterations", "30"]) == 130
+    monkeypatch.setattr(tiled_module, "tune_tiles", ctrl_c)  # Ctrl-C where the search runs, its input unchecked
+    assert main(argv + ["--iterations", "2", "--fixed"]) == 130
     assert capsys.readouterr().err == (
         f"rsocl reconstruct: interrupted: nothing computed; the store at {out} (not checked yet) is unchanged\n"
     )
@@ -237,3 +237,94 @@ def test_halo_on_a_stream_of_windows_without_tiles_is_refused(tmp_path, capsys):
     )
     assert not out.exists()
     assert main(argv + ["--fixed", "--quiet", "--halo", "4", "--tile", "8", "16"]) == 0  # windows in tiles
+
+
+def _spied(monkeypatch):
+    """The input scan and the tuning search, replaced by spies that record their calls and raise :class:`_Read`."""
+    calls = []
+
+    def read(*args, **kwargs):
+        calls.append(args)
+        raise _Read
+
+    monkeypatch.setattr(tiled_module, "scan", read)
+    monkeypatch.setattr(tiled_module, "tune_tiles", read)
+    return calls
+
+
+@pytest.mark.parametrize(
+    "second, differ",
+    [
+        ({"iterations": 4}, "params.iterations"),
+        ({"lam": 0.1}, "params.lam"),
+        ({"eta": 0.5}, "params.eta"),
+        ({"quality": "best"}, "params.quality"),
+        ({"projection": "paper"}, "params.projection"),
+        ({"saturation": 1e6}, "params.saturation"),
+        ({"regularizer_options": {"temporal_weight": 10.0}}, "params.regularizer_options.temporal_weight"),
+        ({"regularizer": "wavelet"}, "params.regularizer, params.regularizer_options.levels, "),
+        ({"tune": True}, "params.start"),  # a search would run: zero start in the store, the interpolation here
+        ({"tune": True, "quality": "best", "regularizer_options": {"step": 0.5}}, "params.quality, "),
+    ],
+)
+def test_a_store_of_other_settings_is_refused_before_the_input_is_read_and_the_search(
+    tmp_path, monkeypatch, second, differ
+):
+    a, _ = _two_rigs()
+    g = rsocl.RollingShutterOperator(a).forward(builtin_scene(a.shape, a.T, seed=1))
+    out = tmp_path / "rec.zarr"
+    reconstruct_tiled(g, a, out=out, **KW)
+    held = sorted((p.relative_to(out), p.stat().st_mtime_ns) for p in out.rglob("*"))
+    calls = _spied(monkeypatch)
+    message = f"^out: {re.escape(repr(str(out)))} holds another reconstruction \\(it differs in {re.escape(differ)}"
+    with pytest.raises(ValueError, match=message) as caught:
+        reconstruct_tiled(g, a, out=out, **{**KW, **second})
+    assert calls == [] and sorted((p.relative_to(out), p.stat().st_mtime_ns) for p in out.rglob("*")) == held
+    assert "params.device" not in str(caught.value) and "params.tuning" not in str(caught.value)
+
+
+def test_a_tuned_store_is_refused_on_known_settings_before_the_search_and_resumed_by_the_same_run(
+    tmp_path, monkeypatch
+):
+    a, _ = _two_rigs()
+    g = rsocl.RollingShutterOperator(a).forward(builtin_scene(a.shape, a.T, seed=1))
+    out = tmp_path / "rec.zarr"
+    tuned = dict(tile=(16, 16), halo=4, iterations=3, quality="fast", regularizer_options={"step": 0.8})
+    whole = reconstruct_tiled(g, a, out=out, **tuned)
+    assert whole.tuning is not None and whole.params["start"] == "interp3d"
+    group = zarr.open_group(str(out), mode="r+")
+    group["tiles"][0, 1, 0] = np.zeros(6)  # a tile left undone
+    real_scan, real_tune = tiled_module.scan, tiled_module.tune_tiles
+    calls = _spied(monkeypatch)
+    for other, differ in [
+        ({"iterations": 4}, "params.iterations"),
+        ({"regularizer_options": {"step": 0.7}}, "params.regularizer_options.step"),
+        ({"tune": False}, "params.lam, params.start"),  # the fixed run's lam: not the one the search chose
+    ]:
+        with pytest.raises(ValueError, match=rf"holds another reconstruction \(it differs in {re.escape(differ)}\)"):
+            reconstruct_tiled(g, a, out=out, **{**tuned, **other})
+    assert calls == []
+    monkeypatch.setattr(tiled_module, "scan", real_scan)
+    monkeypatch.setattr(tiled_module, "tune_tiles", real_tune)
+    resumed = reconstruct_tiled(g, a, out=out, **tuned)  # the same run: the undone tile only, the same choice
+    assert [p.index for p in resumed.pieces] == [(1, 0)] and resumed.skipped == 3 and load_store(out).complete
+    assert resumed.tuning.chosen == whole.tuning.chosen
+    np.testing.assert_array_equal(np.asarray(resumed.datacube[...]), np.asarray(whole.datacube[...]))
+
+
+def test_the_cli_refuses_a_store_of_other_settings_before_the_search(capture, tmp_path, monkeypatch, capsys):
+    out = tmp_path / "rec.zarr"
+    argv = ["reconstruct", str(capture), "--out", str(out), "--tile", "16", "16", "--quiet", "--no-truth"]
+    assert main(argv + ["--iterations", "2", "--fixed"]) == 0
+    held = sorted((p.relative_to(out), p.stat().st_mtime_ns) for p in out.rglob("*"))
+    capsys.readouterr()
+    calls = _spied(monkeypatch)
+    assert main(argv + ["--iterations", "2", "--quality", "best"]) == 2  # tuned, on another rung
+    err = capsys.readouterr().err
+    assert re.search(r"holds another reconstruction \(it differs in params\.quality, params\.start\)", err), err
+    assert calls == [] and sorted((p.relative_to(out), p.stat().st_mtime_ns) for p in out.rglob("*")) == held
+    group = zarr.open_group(str(out), mode="r+")
+    group["tiles"][0, 0, 1] = np.zeros(6)
+    monkeypatch.undo()
+    assert main(argv + ["--iterations", "2", "--fixed"]) == 0  # the same command resumes it
+    assert load_store(out).complete

@@ -26,9 +26,9 @@ outside them are never written and read as 0), then the tile's chunk of ``tiles`
 file is written to a temporary name and renamed): a tile reads as done only once its data are
 complete. Running the same reconstruction on an existing store redoes only the tiles not
 done; a store of another reconstruction (different rig or row maps, settings, tiling or
-snapshots) is refused, and a path holding anything but a store of the same rig, tiling and dtype is
-refused before the input is read (:func:`check_store`). A store without ``rig_digest`` (an earlier
-format) is compared by the row maps it holds.
+snapshots) is refused, and a path holding anything but a store of the same rig, tiling, dtype and
+parameters known before the search is refused before the input is read (:func:`check_store`). A
+store without ``rig_digest`` (an earlier format) is compared by the row maps it holds.
 
 A new store is built under a hidden sibling name, ``.NAME.partial-<host>-<pid>-<random>``, and
 renamed to ``NAME`` once its arrays and attributes are written, so the path holds either nothing
@@ -50,6 +50,7 @@ import numpy as np
 from rsocl.files.atomic import fsync_directory, fsync_file, owned_prefix, remove_stale
 from rsocl.files.hdf5_header import FORMAT_VERSION
 from rsocl.model.rig import Rig
+from rsocl.scale.store_params import differing_params
 from rsocl.scale.tiles import expand, rig_digest
 
 __all__ = [
@@ -75,9 +76,6 @@ TILE_FIELDS = ("done", "start", "stop", "seconds", "iterations", "residual")
 _IDENTITY = ("rsocl_file", "rig", "rig_digest", "tiling", "input_digest", "dtype")
 #: the part of it known before the input is read and the parameters are chosen (:func:`check_store`)
 KNOWN_FIRST = ("rsocl_file", "rig", "rig_digest", "tiling", "dtype")
-#: parameters that may differ in a resumed store: the device, and the tuning record (its timing;
-#: the values it chose are compared as ``lam`` and ``regularizer_options``)
-_NOT_COMPARED = ("device", "tuning")
 
 
 def require_zarr(name="out"):
@@ -175,12 +173,13 @@ def prepare_store(path, spec: StoreSpec, name="out") -> tuple[np.ndarray, str | 
 def check_store(path, spec: StoreSpec, name="out", keys=KNOWN_FIRST) -> Path:
     """``path`` checked as :func:`check_store_path` does; where it holds files, ValueError naming ``name``
     unless they are an rsocl reconstruction store whose attributes ``keys`` (default: the rig with its
-    row maps, the tiling and the dtype, all known before the input is read) are ``spec``'s. Nothing is
-    written."""
+    row maps, the tiling and the dtype, all known before the input is read) are ``spec``'s, and whose
+    parameters hold those of ``spec.params`` (the ones known before the search; of a dict, its entries:
+    :func:`~rsocl.scale.store_params.differing_params`). Nothing is written."""
     zarr = require_zarr(name)
     path = check_store_path(path, name)
     if _holds_files(path):
-        _open_same(zarr, path, spec, name, keys, "r")
+        _open_same(zarr, path, spec, name, keys, "r", params="known")
     return path
 
 
@@ -188,9 +187,10 @@ def _holds_files(path: Path) -> bool:
     return path.is_dir() and any(path.iterdir())
 
 
-def _open_same(zarr, path: Path, spec: StoreSpec, name: str, keys: tuple, mode: str, params=False):
+def _open_same(zarr, path: Path, spec: StoreSpec, name: str, keys: tuple, mode: str, params: str):
     """The group of the store at ``path``, opened with ``mode``; ValueError naming ``name`` unless it is an
-    rsocl store whose attributes ``keys`` (and with ``params`` its parameters) are ``spec``'s."""
+    rsocl store whose attributes ``keys`` are ``spec``'s, and its parameters too: ``params`` "all" of them,
+    or "known", those ``spec.params`` holds."""
     try:
         group = zarr.open_group(str(path), mode=mode)
     except Exception as exc:
@@ -204,13 +204,8 @@ def _open_same(zarr, path: Path, spec: StoreSpec, name: str, keys: tuple, mode: 
     if "rig_digest" in differ:  # it covers the rig's description too: alone, it names the row maps
         differ[differ.index("rig_digest")] = "" if "rig" in differ else "rig row maps"
     differ = [key for key in differ if key]
-    if params:
-        old_params, new_params = json.loads(found.get("params", "{}")), json.loads(attrs["params"])
-        differ += [
-            f"params.{k}"
-            for k in sorted(set(old_params) | set(new_params))
-            if k not in _NOT_COMPARED and old_params.get(k) != new_params.get(k)
-        ]
+    stored, run = json.loads(found.get("params", "{}")), json.loads(attrs["params"])
+    differ += differing_params(stored, run, known_only=params == "known")
     if differ:
         raise ValueError(
             f"{name}: {str(path)!r} holds another reconstruction (it differs in "
@@ -240,7 +235,7 @@ def _held_rig_digest(group, text: str) -> str | None:
 def _resume(zarr, path: Path, spec: StoreSpec, name: str) -> tuple[np.ndarray, str | None]:
     """The ``done`` marks and ``store_id`` of the store at ``path``; ValueError naming ``name`` unless it is
     ``spec``'s."""
-    group = _open_same(zarr, path, spec, name, _IDENTITY, "r+", params=True)
+    group = _open_same(zarr, path, spec, name, _IDENTITY, "r+", params="all")
     return np.asarray(group["tiles"][..., 0]) > 0, group.attrs.get("store_id")
 
 

@@ -3,10 +3,10 @@
 Every input is checked before anything is computed: the snapshots against the rig, the solver
 settings (:func:`~rsocl.solver.request.make_request`, as for :func:`rsocl.reconstruct`: ``lam``/``eta``
 settled once, from the regularizer's recommendation, for every tile), the tile and halo, the output
-path (a store already there: its rig, tiling and dtype), and the scheduler (connected to first). With
-``tune`` (the default, as for :func:`rsocl.reconstruct`) what the caller left unset is then chosen once
-from the centre tile of the first set (:mod:`rsocl.scale.tuning_tile`) and every task runs with that
-choice.
+path (a store already there: its rig, tiling, dtype and the parameters known before the search), and
+the scheduler (connected to first). With ``tune`` (the default, as for :func:`rsocl.reconstruct`) what
+the caller left unset is then chosen once from the centre tile of the first set
+(:mod:`rsocl.scale.tuning_tile`) and every task runs with that choice.
 """
 
 from __future__ import annotations
@@ -23,12 +23,13 @@ from rsocl.common import validation as check
 from rsocl.device.context import Device
 from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
+from rsocl.scale.run_settings import known_params, tile_settings
 from rsocl.scale.runner import RETRIES, Engine, non_negative_int
 from rsocl.scale.tiles import check_halo, place, tile_grid
 from rsocl.scale.tuning_tile import tune_tiles
-from rsocl.scale.work import Job, RigPayload, TileSettings
+from rsocl.scale.work import Job, RigPayload
 from rsocl.solver.memory import device_limit
-from rsocl.solver.pipeline import Request, Tuning, applied_blend, make_request, run_params
+from rsocl.solver.pipeline import Tuning, make_request
 
 __all__ = ["reconstruct_tiled", "TiledResult", "TilesFailed"]
 
@@ -157,45 +158,6 @@ def _check_device(device, engine):
         )
 
 
-def _settings(request: Request, tuning, saturation):
-    """Every task's :class:`TileSettings` and the run's ``params``
-    (:func:`~rsocl.solver.request.run_params`), with ``tuning``'s choice (None: as requested)."""
-    reg, settled = request.settled(tuning)
-    options = {**request.given.options, **request.tuned_options(tuning)}
-    start = "zeros" if tuning is None else "interp3d"
-    blend = applied_blend(tuning) if request.blend is None else request.blend
-    device = request.device
-    assert settled.lam is not None and settled.eta is not None  # a Request's settings are settled
-    settings = TileSettings(
-        request.name,
-        options,
-        settled.iterations,
-        settled.lam,
-        settled.eta,
-        settled.tv_iterations,
-        settled.projection,
-        str(np.dtype(request.dtype)),
-        saturation,
-        device,
-        start,
-        blend,
-        request.quality,
-    )
-    params = run_params(
-        request,
-        reg,
-        settled,
-        lam=settled.lam,
-        eta=settled.eta,
-        device=device.name if isinstance(device, Device) else device,
-        saturation=saturation,
-        tuning=tuning,
-        blend=blend,
-        start=start,
-    )
-    return settings, params
-
-
 def reconstruct_tiled(
     snapshots,
     rig: Rig,
@@ -280,8 +242,10 @@ def reconstruct_tiled(
         When tasks still fail after their retries; the other tiles are kept (in the store).
     ValueError
         Before anything is read or computed, for an input out of range (naming it), and for an
-        ``out`` holding anything but a store of this rig (row maps included), tiling and dtype;
-        once the parameters are chosen, for a store of other snapshots or parameters.
+        ``out`` holding anything but a store of this rig (row maps included), tiling, dtype and
+        parameters known before the search (all but what it chooses:
+        :func:`~rsocl.scale.run_settings.known_params`); once the parameters are chosen, for a
+        store of other snapshots or parameters.
     KeyboardInterrupt
         An interrupt before the store at ``out`` is checked says so: nothing computed, the store
         unchanged.
@@ -324,11 +288,11 @@ def reconstruct_tiled(
     _check_device(device, engine)
     with _before_the_store(out) as checked:  # an interrupt before the store is checked leaves it as it was
         store = None
-        if out is not None:  # an existing store: its rig, tiling and dtype, before the input is read
+        if out is not None:  # an existing store: its rig, tiling, dtype and settings, before the input is read
             from rsocl.scale.store import StoreSpec, check_store
 
-            dtype_name = str(np.dtype(request.dtype))
-            known = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, dtype_name, {}, "")
+            dtype_name, before = str(np.dtype(request.dtype)), known_params(request, saturation, grid)
+            known = StoreSpec(rig, grid.tile, grid.halo, grid.grid, source.n_sets, dtype_name, before, "")
             store = check_store(out, known, "out").absolute()  # workers may run in another folder
         if engine.mode != "distributed":
             _check_tile_memory(rig, grid, request.regularizer, dtype, request.settings.projection, device)
@@ -337,7 +301,7 @@ def reconstruct_tiled(
             began = time.perf_counter()
             digest, saturated = scan(source, saturation)
             tuning = tune_tiles(source, grid, request, saturation)
-            settings, params = _settings(request, tuning, saturation)
+            settings, params = tile_settings(request, tuning, saturation)
             params.update(
                 {
                     "saturated_pixels": saturated,
