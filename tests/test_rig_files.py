@@ -107,6 +107,8 @@ def test_angle_in_camera_config_is_never_silently_dropped(tmp_path, capsys):
             r"camera\[0\] has unknown key\(s\) \['scene'\].*the backend's own settings go in its \[camera\.config\]",
         ),
         ("t_r = 3.5e-05\n", "t_r = 3.5e-05\nt_ee = 1e-4\n", r"\('t_ee': did you mean 't_e'\?\)"),
+        ("shape = [8, 8]\n", 'shape = [8, 8]\nmsak = "binary"\n', r"\[rig\].*\('msak': did you mean 'mask'\?\)"),
+        ("[[camera]]", "[[cameras]]", r"top-level key\(s\) \['cameras'\] \('cameras': did you mean 'camera'\?\)"),
     ],
 )
 def test_a_key_in_the_wrong_table_says_where_it_belongs(tmp_path, old, new, message):
@@ -181,3 +183,12 @@ def test_the_full_examples_of_the_docs_load(tmp_path):
         backends |= {cam["backend"] for cam in rigfile.cameras}
         assert rigfile.rig().T >= 1
     assert backends == {"simulated", "aravis", "v4l2"}
+
+
+def test_a_rig_file_made_from_a_rig_gives_the_rig_back(tmp_path):
+    # t_d of a one-frame camera included: it leaves the model as it is, and the rig compares equal
+    from rsocl import Camera, Rig
+    from rsocl.files.rigfile import RigFile
+
+    rig = Rig([Camera(0, 1.8e-4, 3.5e-5, t_d=6e-4), Camera(90, 1.8e-4, 3.5e-5, t_a=1e-5)], (8, 8))
+    assert RigFile.from_rig(rig).rig() == rig

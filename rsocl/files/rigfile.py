@@ -53,7 +53,7 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.files.atomic import atomic_path
-from rsocl.files.rigfile_schema import CAMERA_KEYS, check_camera, check_rig_table, resolve_path, to_camera
+from rsocl.files.rigfile_schema import CAMERA_KEYS, check_camera, check_rig_table, closest, resolve_path, to_camera
 from rsocl.files.toml_writer import dumps_toml
 from rsocl.model.rig import Camera, Rig
 
@@ -186,7 +186,9 @@ class RigFile:
                 "config": dict(config or {}),
             }
             if cam.frames > 1:
-                d.update(frames=cam.frames, t_d=cam.t_d)
+                d["frames"] = cam.frames
+            if cam.t_d is not None:
+                d["t_d"] = cam.t_d
             if cam.row_map is not None:
                 d["row_map"] = cam.row_map
             else:
@@ -230,7 +232,10 @@ def load_rigfile(path, check_shape=None) -> RigFile:
     try:
         unknown = sorted(set(data) - {"rig", "camera"})
         if unknown:
-            raise ValueError(f"unknown top-level key(s) {unknown}; expected [rig] and [[camera]] tables")
+            raise ValueError(
+                f"unknown top-level key(s) {unknown}{closest(unknown, ('rig', 'camera'))}; expected [rig] and "
+                "[[camera]] tables"
+            )
         if "rig" not in data:
             raise ValueError("the [rig] table (shape = [m, n], optional dt, mask) is missing")
         cameras = data.get("camera")

@@ -23,6 +23,7 @@ __all__ = [
     "CAMERA_KEYS",
     "MISPLACED_CONFIG_KEYS",
     "check_rig_table",
+    "closest",
     "check_camera",
     "resolve_path",
     "to_camera",
@@ -90,6 +91,13 @@ def _int_list(name, value, length, minimum):
     return out
 
 
+def closest(unknown, known) -> str:
+    """`` ('KEY': did you mean 'NEAR'?)`` for each of the ``unknown`` keys with a close one in ``known``
+    (``difflib.get_close_matches``), or ``""``."""
+    close = {key: difflib.get_close_matches(str(key), list(known), n=1) for key in unknown}
+    return "".join(f" ({key!r}: did you mean {close[key][0]!r}?)" for key in unknown if close[key])
+
+
 def check_rig_table(rig) -> dict:
     """The ``[rig]`` table normalised: ``shape`` (tuple of 2 ints), ``dt`` (seconds or None), ``mask``."""
     if not isinstance(rig, dict):
@@ -99,7 +107,7 @@ def check_rig_table(rig) -> dict:
         if key in CAMERA_KEYS:
             raise ValueError(f"rig.{key} belongs in each [[camera]] table (camera[i].{key} = ...), not in [rig]")
     if unknown:
-        raise ValueError(f"[rig] has unknown key(s) {unknown}; known: {list(RIG_KEYS)}")
+        raise ValueError(f"[rig] has unknown key(s) {unknown}{closest(unknown, RIG_KEYS)}; known: {list(RIG_KEYS)}")
     if "shape" not in rig:
         raise ValueError("rig.shape = [m, n] (rows, columns of the reference ROI, pixels) is required")
     out: dict = {"shape": tuple(_int_list("rig.shape", rig["shape"], 2, (1, 1)))}
@@ -120,10 +128,8 @@ def check_camera(i, cam, shape, base_dir):
                 "it is the same for every camera"
             )
     if unknown:
-        close = {key: difflib.get_close_matches(str(key), CAMERA_KEYS, n=1) for key in unknown}
-        hints = "".join(f" ({key!r}: did you mean {close[key][0]!r}?)" for key in unknown if close[key])
         raise ValueError(
-            f"camera[{i}] has unknown key(s) {unknown}{hints}; known: {list(CAMERA_KEYS)}; the "
+            f"camera[{i}] has unknown key(s) {unknown}{closest(unknown, CAMERA_KEYS)}; known: {list(CAMERA_KEYS)}; the "
             "backend's own settings go in its [camera.config] table"
         )
     out = {}
