@@ -226,6 +226,53 @@ def _fail_on_dataset(monkeypatch):
     monkeypatch.setattr(h5py.Group, "create_dataset", boom)
 
 
+def _replace(path, edit):
+    with h5py.File(path, "a") as h5:
+        edit(h5)
+
+
+def _dataset(name, value):
+    def edit(h5):
+        if name in h5:
+            del h5[name]
+        h5[name] = value
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (_dataset("datacube", np.full((4,) + SHAPE, np.nan)), "datacube contains 252 NaN or inf value"),
+        (_dataset("datacube", np.zeros(SHAPE)), r"datacube must be 3-D \[T, m, n\]"),
+        (_dataset("truth", np.zeros((3,) + SHAPE)), r"truth must have shape \(4, 9, 7\) \(the datacube's shape\)"),
+        (lambda h5: h5.attrs.__setitem__("params", "[1, 2]"), "params must be a JSON object, got list"),
+        (_dataset("history/residual", np.zeros((2, 2))), r"history\['residual'\] must be a 1-D real array"),
+    ],
+)
+def test_a_damaged_reconstruction_is_refused_on_loading_naming_the_file(tmp_path, rig, truth, edit, match):
+    path = save_reconstruction(tmp_path / "r.h5", truth[:4], rig, truth=truth[:4])
+    _replace(path, edit)
+    with pytest.raises(ValueError, match=f"^{re.escape(str(path))}: damaged: {match}"):
+        load_reconstruction(path)
+
+
+def test_a_reconstruction_longer_than_the_rig_is_refused_on_loading(tmp_path, rig, truth):
+    path = save_reconstruction(tmp_path / "r.h5", truth, rig)
+    _replace(path, _dataset("datacube", np.zeros((rig.T + 5,) + SHAPE)))
+    with pytest.raises(ValueError, match=rf"damaged: datacube must have shape .* 1 <= T <= rig.T = {rig.T}"):
+        load_reconstruction(path)
+
+
+@pytest.mark.parametrize("bad", ["short", "nan"])
+def test_a_captures_damaged_truth_is_refused_on_loading(tmp_path, rig, snapshots, truth, bad):
+    path = save_capture(tmp_path / "c.h5", snapshots, rig, truth=truth)
+    value = truth[:3] if bad == "short" else np.full_like(truth, np.nan)
+    _replace(path, _dataset("truth", value))
+    with pytest.raises(ValueError, match=f"^{re.escape(str(path))}: damaged: truth"):
+        load_capture(path)
+
+
 def test_failed_write_leaves_nothing(tmp_path, rig, snapshots, monkeypatch):
     _fail_on_dataset(monkeypatch)
     with pytest.raises(_DiskFull):

@@ -215,6 +215,11 @@ def load_capture(path: PathLike, set_index: int | None = None) -> Capture:
                 bad = int(np.count_nonzero(~np.isfinite(snapshots)))
                 raise ValueError(f"{source}: dataset 'snapshots' holds {bad} NaN or inf value(s); all must be finite")
             truth = optional_array(h5, "truth", source, rig.shape)
+            if truth is not None:  # as save_capture takes it
+                try:
+                    truth = check_cube("truth", truth, (rig.T,) + rig.shape, "[T = rig.T, m, n]")
+                except ValueError as exc:
+                    raise ValueError(f"{source}: damaged: {exc}") from None
         return Capture(snapshots=snapshots, rig=rig, truth=truth, meta=_meta(h5, source))
 
 

@@ -116,28 +116,8 @@ def save_reconstruction(
     >>> folder.cleanup()
     """
     rig = check_rig(rig)
-    datacube = check_cube("datacube", datacube, None, "[T, m, n]")
-    if datacube.shape[1:] != rig.shape or not 1 <= datacube.shape[0] <= rig.T:
-        raise ValueError(
-            f"datacube must have shape [T, m, n] with (m, n) = rig.shape = {rig.shape} and "
-            f"1 <= T <= rig.T = {rig.T}, got {datacube.shape}"
-        )
-    if truth is not None:
-        truth = check_cube("truth", truth, datacube.shape, "(the datacube's shape)")
+    datacube, truth, traces = _checked(rig, datacube, truth, history)
     params_json = dumps_json("params", params)
-    traces = {}
-    if history is not None:
-        if not isinstance(history, dict):
-            raise ValueError(f"history must be a dict of name -> 1-D array, got {type(history).__name__}")
-        for name, trace in history.items():
-            if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
-                raise ValueError(f"history names must be non-empty str without '/', got {name!r}")
-            trace = np.asarray(trace)
-            if trace.ndim != 1 or trace.dtype.kind not in "biuf":
-                raise ValueError(
-                    f"history[{name!r}] must be a 1-D real array, got shape {trace.shape} dtype {trace.dtype}"
-                )
-            traces[name] = trace
     path = Path(os.fspath(path))
     with atomic_path(path) as tmp:
         with new_file(tmp) as h5:
@@ -183,10 +163,41 @@ def load_reconstruction(path: PathLike) -> Reconstruction:
                 raise ValueError(f"{source}: 'history' must be a group of datasets")
             for name in h5["history"]:
                 history[name] = read_array(h5, f"history/{name}", source)
-        return Reconstruction(
-            datacube=datacube,
-            rig=rig,
-            params=json_attr(h5, "params", source),
-            history=history,
-            truth=optional_array(h5, "truth", source, rig.shape),
+        params = json_attr(h5, "params", source)
+        truth = optional_array(h5, "truth", source, rig.shape)
+    if not isinstance(params, dict):
+        raise ValueError(f"{source}: damaged: params must be a JSON object, got {type(params).__name__}")
+    try:
+        datacube, truth, history = _checked(rig, datacube, truth, history)
+    except ValueError as exc:
+        raise ValueError(f"{source}: damaged: {exc}") from None
+    return Reconstruction(datacube=datacube, rig=rig, params=params, history=history, truth=truth)
+
+
+def _checked(rig: Rig, datacube, truth, history) -> tuple:
+    """``(datacube, truth, history)`` of a reconstruction of ``rig`` as :func:`save_reconstruction` takes
+    them and :func:`load_reconstruction` returns them: a finite ``[T, m, n]`` datacube with ``(m, n) =
+    rig.shape`` and ``1 <= T <= rig.T``, a truth of its shape or None, and 1-D real traces under names
+    without ``/``; a ValueError naming what is wrong otherwise."""
+    datacube = check_cube("datacube", datacube, None, "[T, m, n]")
+    if datacube.shape[1:] != rig.shape or not 1 <= datacube.shape[0] <= rig.T:
+        raise ValueError(
+            f"datacube must have shape [T, m, n] with (m, n) = rig.shape = {rig.shape} and "
+            f"1 <= T <= rig.T = {rig.T}, got {datacube.shape}"
         )
+    if truth is not None:
+        truth = check_cube("truth", truth, datacube.shape, "(the datacube's shape)")
+    traces = {}
+    if history is not None:
+        if not isinstance(history, dict):
+            raise ValueError(f"history must be a dict of name -> 1-D array, got {type(history).__name__}")
+        for name, trace in history.items():
+            if not isinstance(name, str) or not name or "/" in name or name in (".", ".."):
+                raise ValueError(f"history names must be non-empty str without '/', got {name!r}")
+            trace = np.asarray(trace)
+            if trace.ndim != 1 or trace.dtype.kind not in "biuf":
+                raise ValueError(
+                    f"history[{name!r}] must be a 1-D real array, got shape {trace.shape} dtype {trace.dtype}"
+                )
+            traces[name] = trace
+    return datacube, truth, traces
