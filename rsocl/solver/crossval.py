@@ -120,7 +120,15 @@ class Tuning:
 
     @classmethod
     def from_params(cls, record: dict) -> Tuning:
-        """The choice recorded by :meth:`as_params` (e.g. ``Result.params["tuning"]``), to run again with."""
+        """The choice recorded by :meth:`as_params` (e.g. ``Result.params["tuning"]``), to run again with.
+
+        Raises
+        ------
+        ValueError
+            Naming ``params["tuning"]``, when ``record`` is not such a record: None (a run that did not
+            tune), the whole ``Result.params``, or a dict without a ``chosen`` dict.
+        """
+        _check_record(record)
         candidates = [
             {k: (math.inf if k == "score" and v is None else v) for k, v in c.items()}
             for c in record.get("candidates", [])
@@ -153,6 +161,20 @@ class Tuning:
             "preset": dict(self.preset),
             "blend": self.blend,
         }
+
+
+def _check_record(record) -> None:
+    """ValueError naming ``params["tuning"]`` unless ``record`` is a dict with a ``chosen`` dict."""
+    expected = 'params["tuning"] must be the record of a tuned run, a dict with a "chosen" dict'
+    if record is None:
+        raise ValueError(f"{expected}, got None: a run with tune=False (or nothing to choose) records no choice")
+    if not isinstance(record, dict):
+        raise ValueError(f"{expected}, got a {type(record).__name__}")
+    if "chosen" not in record and "tuning" in record:
+        raise ValueError(f'{expected}, got the whole Result.params: pass result.params["tuning"]')
+    if not isinstance(record.get("chosen"), dict):
+        got = "no 'chosen'" if "chosen" not in record else f"chosen = {record['chosen']!r}"
+        raise ValueError(f"{expected}, got a dict with {got} (keys {sorted(record, key=str)})")
 
 
 def _midpoints(values, best):

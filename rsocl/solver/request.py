@@ -26,6 +26,7 @@ from rsocl.solver.crossval import SearchSpace, Tuning
 from rsocl.solver.ladder import DEFAULT_QUALITY, Rung, check_iterations, rung
 from rsocl.solver.problem import Settings, check_settings
 from rsocl.solver.regularizer import Regularizer
+from rsocl.solver.tuning_check import check_tuning
 
 __all__ = [
     "Given",
@@ -98,18 +99,13 @@ def chosen_options(tuning: Tuning) -> dict:
     return {k: v for k, v in tuning.chosen.items() if k != "lam"}
 
 
-def check_tune(tune: bool | Tuning, reg: Regularizer | None = None) -> bool | Tuning:
+def check_tune(tune: bool | Tuning, reg: Regularizer | None = None, lam_given: bool = False) -> bool | Tuning:
     """``tune`` checked: ``True``/``False`` (a bool), or an earlier :class:`Tuning` to run with; with
-    ``reg`` (the regularizer to run), a Tuning must have chosen options ``reg`` has."""
+    ``reg`` (the regularizer to run), a Tuning is checked by
+    :func:`~rsocl.solver.tuning_check.check_tuning` (options ``reg`` has, in their ranges; ``chosen['lam']``
+    unless ``lam_given``; ``blend``) and returned as checked."""
     if isinstance(tune, Tuning):
-        foreign = sorted(set(chosen_options(tune)) - set(reg.values)) if reg is not None else []
-        if foreign and reg is not None:
-            raise ValueError(
-                f"tune: the earlier Tuning chose {foreign}, options {reg.name!r} does not have "
-                f"(it has {sorted(reg.values)}); pass tune=True to choose for {reg.name!r}, or "
-                "tune=False for its fixed defaults"
-            )
-        return tune
+        return tune if reg is None else check_tuning(tune, reg, lam_given)
     if isinstance(tune, (bool, np.bool_)):
         return bool(tune)
     raise ValueError(f"tune must be True, False or an rsocl.solver.crossval.Tuning, got {tune!r}")
@@ -264,8 +260,8 @@ class Request:
         return replace(self, given=given, settings=settings, sets=count)
 
     def with_tuning(self, tuning: Tuning) -> Request:
-        """This request running ``tuning`` (an earlier choice) instead of a search."""
-        return replace(self, tune=tuning)
+        """This request running ``tuning`` (an earlier choice, checked as ``tune`` is) instead of a search."""
+        return replace(self, tune=check_tuning(tuning, self.regularizer, self.given.lam is not None))
 
 
 def make_request(
@@ -333,7 +329,7 @@ def make_request(
         callback=callback,
     )
     reg = make_regularizer(regularizer, regularizer_options, checked.tv_iterations)
-    tune = check_tune(tune, reg)
+    tune = check_tune(tune, reg, lam_given=checked.lam is not None)
     given = Given(regularizer, dict(regularizer_options or {}), checked.lam, checked.eta)
     settings = checked.settled_for(reg, dtype, scale=default_scale(rig)).for_batch(sets)
     request = Request(rig, reg, settings, given, tune, None, dtype, device, sets, bool(progress), quality, auto)
