@@ -4,6 +4,7 @@ Selection order: an explicit ``device`` argument, the ``RSOCL_DEVICE`` environme
 ``PYOPENCL_CTX``, else the first GPU, else the first CPU. A device spec is ``"P:D"`` (platform and
 device index, as ``rsocl devices`` prints them), ``"P"`` (first device of platform P), or a
 case-insensitive substring of the platform or device name (``"pocl"``, ``"nvidia"``, ``"cpu"``, ``"gpu"``).
+An empty or blank spec, given or in ``RSOCL_DEVICE``, counts as none: the next in that order chooses.
 """
 
 from __future__ import annotations
@@ -64,12 +65,19 @@ def list_devices() -> list[tuple[int, int, cl.Platform, cl.Device]]:
     return found
 
 
-def _pick(spec: str | None):
+def _blank(spec) -> bool:
+    """Whether ``spec`` is None or an empty or blank string (no choice: the selection order's next)."""
+    return spec is None or (isinstance(spec, str) and not spec.strip())
+
+
+def _pick(spec: str | None, what: str = "device"):
+    """The pyopencl device ``spec`` names (None or blank: the first GPU, else CPU); a ValueError that names
+    ``what`` (where the spec came from: ``"device"``, ``"RSOCL_DEVICE"``) and lists the devices."""
     cl = _cl()
     found = list_devices()
     if not found:
         raise NoOpenCLError(f"no OpenCL platform with a device was found; {INSTALL_HINT}")
-    if spec is None:
+    if _blank(spec):
         # simulators (Oclgrind) claim every device type: never pick one unasked
         real = [e for e in found if "oclgrind" not in e[2].name.lower()] or found
         for kind in (cl.device_type.GPU, cl.device_type.CPU):
@@ -93,7 +101,8 @@ def _pick(spec: str | None):
             text = f"{entry[2].name} {entry[2].vendor} {dev.name} {dev.vendor}".lower()
             if low in text or low in kinds:
                 return dev
-    raise ValueError(f"device {spec!r} matches no OpenCL device; available: {_listing(found)}")
+    given = f"{what}={spec!r}" if what.isupper() else f"{what} {spec!r}"
+    raise ValueError(f"{given} matches no OpenCL device; available: {_listing(found)}")
 
 
 def _listing(found) -> str:
@@ -277,7 +286,9 @@ def _yes_or_no(name: str, value) -> bool:
 @functools.cache
 def _device_for(spec: str | None) -> Device:
     cl = _cl()
-    if spec is None and os.environ.get("PYOPENCL_CTX") and not os.environ.get("RSOCL_DEVICE"):
+    env = os.environ.get("RSOCL_DEVICE")
+    env = None if _blank(env) else env
+    if spec is None and os.environ.get("PYOPENCL_CTX") and env is None:
         try:
             ctx = cl.create_some_context(interactive=False)
         except (cl.Error, RuntimeError, ValueError) as exc:  # pyopencl's words for a PYOPENCL_CTX that matches nothing
@@ -287,7 +298,7 @@ def _device_for(spec: str | None) -> Device:
             ) from None
         dev = ctx.devices[0]
     else:
-        dev = _pick(spec if spec is not None else os.environ.get("RSOCL_DEVICE") or None)
+        dev = _pick(spec, "device") if spec is not None else _pick(env, "RSOCL_DEVICE")
         ctx = cl.Context([dev])
     found = Device(ctx, cl.CommandQueue(ctx), dev)
     _BY_QUEUE[found.queue.int_ptr] = found
@@ -301,7 +312,7 @@ def get_device(device: str | Device | None = None) -> Device:
     ----------
     device : Device, str or None
         A :class:`Device`, a spec (``"P:D"``, ``"P"`` or a name substring, as the module says), or
-        None: the module's selection order.
+        None: the module's selection order (so does an empty or blank spec, as ``--device ""``).
 
     Returns
     -------
@@ -311,7 +322,8 @@ def get_device(device: str | Device | None = None) -> Device:
     Raises
     ------
     ValueError
-        If ``device`` is neither a Device, a string nor None, or matches no device (the message lists them).
+        If ``device`` is neither a Device, a string nor None, or it (or ``RSOCL_DEVICE``, named when it
+        chose) matches no device (the message lists them).
     NoOpenCLError
         If no OpenCL platform has a device (the message says what to install).
     """
@@ -319,7 +331,7 @@ def get_device(device: str | Device | None = None) -> Device:
         return device
     if device is not None and not isinstance(device, str):
         raise ValueError(f"device must be a spec string like '0:0' or 'pocl', or an rsocl Device; got {device!r}")
-    return _device_for(device)
+    return _device_for(None if _blank(device) else device)
 
 
 _BY_QUEUE: dict = {}
