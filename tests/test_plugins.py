@@ -222,13 +222,15 @@ def test_broken_plugin_is_reported_and_others_keep_working(tmp_path, monkeypatch
 
 
 def test_two_distributions_claiming_one_name_is_an_error_for_that_name_only(tmp_path, monkeypatch):
-    _fake_distribution(tmp_path, "impostor-tv", "tv", "impostor_tv", "Thing = object\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    with pytest.raises(plugins.PluginError, match=r"'tv'.*impostor-tv.*rsocl|'tv'.*rsocl.*impostor-tv"):
-        plugins.load("rsocl.regularizers", "tv")
-    assert "tv" not in plugins.available("rsocl.regularizers")
+    _fake_distribution(tmp_path / "a", "shrink-one", "shrinky", "shrink_one", "Thing = object\n")
+    _fake_distribution(tmp_path / "b", "shrink-two", "shrinky", "shrink_two", "Thing = object\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "a"))
+    monkeypatch.syspath_prepend(str(tmp_path / "b"))
+    with pytest.raises(plugins.PluginError, match=r"'shrinky'.*shrink-one 0.1 and shrink-two 0.1"):
+        plugins.load("rsocl.regularizers", "shrinky")
+    assert "shrinky" not in plugins.available("rsocl.regularizers")
     assert plugins.load("rsocl.regularizers", "dct").name == "dct"  # the others stay usable
-    rows = [state for info, name, state in plugins.status("rsocl.regularizers") if name == "tv"]
+    rows = [state for info, name, state in plugins.status("rsocl.regularizers") if name == "shrinky"]
     assert len(rows) == 2 and all("claimed by" in s for s in rows)
 
 

@@ -13,7 +13,9 @@ def add_parser(subparsers):
 
 
 def cmd_plugins(args) -> int:
-    """Print each entry-point group with its plugins (name, distribution, version, target, status); returns 0."""
+    """Print each entry-point group with its plugins (name, distribution, version, target, status); returns 0.
+
+    A distribution whose entry points cannot be read is a ``?`` row that names it."""
     from rsocl.common.registry import GROUPS, status
 
     for group in GROUPS:
@@ -22,5 +24,8 @@ def cmd_plugins(args) -> int:
         if not rows:
             print("  (none)")
         for info, name, state in rows:
-            print(f"  {name:<12} {info.distribution} {info.version:<10} {info.value:<42} {state}")
+            if info is None:
+                print(f"  {name:<12} {state}")
+            else:
+                print(f"  {name:<12} {info.distribution} {info.version:<10} {info.value:<42} {state}")
     return 0

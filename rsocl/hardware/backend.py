@@ -8,6 +8,7 @@ failure is one of the exceptions below, with the camera named.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -63,9 +64,21 @@ class CameraBackend:
         Backend-specific settings (address, ROI, ...), from the rig file.
     name : str
         Human-readable name used in errors (``"camera 2 (aravis 127.0.0.1)"``).
+
+    Raises
+    ------
+    rsocl.common.registry.PluginError
+        A ValueError, when a subclass's constructor raises anything but a CameraError or ValueError (a
+        config key it lacks, ...): naming the camera, the backend's class and its distribution, with the cause.
     """
 
     backend = "base"
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        own = cls.__dict__.get("__init__")
+        if own is not None:
+            cls.__init__ = _guarded(cls, own)
 
     def __init__(self, config: dict | None = None, name: str | None = None):
         self.config = dict(config or {})
@@ -199,34 +212,57 @@ class CameraBackend:
     pixel_formats: tuple = ()
 
     def _open_device(self):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _open_device")
 
     def _close_device(self):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _close_device")
 
     def _set_exposure(self, seconds):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _set_exposure")
 
     def _set_roi(self, x, y, width, height):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _set_roi")
 
     def _set_pixel_format(self, pixel_format):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _set_pixel_format")
 
     def _set_trigger(self, mode, source):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _set_trigger")
 
     def _readout_time(self):
         return None
 
     def _start(self):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _start")
 
     def _stop(self):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _stop")
 
     def _trigger(self):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _trigger")
 
     def _read(self, timeout):
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _read")
+
+
+def _guarded(cls: type, init):
+    """``cls``'s own ``__init__`` made to raise a PluginError (a ValueError) naming the camera, the class and
+    its distribution for anything but a CameraError or ValueError (a config key the rig file lacks, ...)."""
+
+    @functools.wraps(init)
+    def __init__(self, config=None, name=None, *args, **kwargs):
+        try:
+            init(self, config, name, *args, **kwargs)
+        except (CameraError, ValueError):  # the backend's own words (a config value it refuses, ...)
+            raise
+        except Exception as exc:
+            from rsocl.common.registry import PluginError, origin
+
+            where = origin("rsocl.cameras", cls)
+            what = f"{cls.__module__}.{cls.__qualname__}{' from ' + where if where else ''}"
+            raise PluginError(
+                f"{name or cls.backend + ' camera'}: backend {cls.backend!r} ({what}) could not be set up: "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+
+    return __init__

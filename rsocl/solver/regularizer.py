@@ -48,6 +48,7 @@ class Option:
     The default's type (bool, int, float or str) is the type every value given for the option is
     converted to (:meth:`convert`); a value given for an option with another default (None) is
     refused with a ValueError naming it, and :func:`rsocl.testing.check_regularizer` fails on one.
+    ``minimum`` and ``maximum`` bound a number's values, the default's included (:meth:`check`).
     """
 
     default: object
@@ -79,6 +80,26 @@ class Option:
             f"option {name} has a default of type {type(self.default).__name__}; an Option's default must be "
             f"a bool, int, float or str"
         )
+
+    def check(self, name: str) -> None:
+        """Check the declaration of the option ``name``: each bound a real number or None, ``minimum <=
+        maximum``, and a number default within them; ValueError naming ``name`` and what is allowed."""
+        for which in ("minimum", "maximum"):
+            bound = getattr(self, which)
+            real = isinstance(bound, numbers.Real) and not isinstance(bound, (bool, np.bool_))
+            if bound is not None and not (real and not np.isnan(bound)):
+                raise ValueError(f"option {name!r}: {which} must be a real number or None, got {bound!r}")
+        if self.minimum is not None and self.maximum is not None and self.minimum > self.maximum:
+            raise ValueError(
+                f"option {name!r}: the range is empty: minimum {self.minimum!r} > maximum {self.maximum!r}"
+            )
+        if _kind(self.default) in (int, float):
+            try:
+                self.convert(name, self.default)
+            except ValueError as exc:
+                raise ValueError(
+                    f"option {name!r}: the default {self.default!r} is not a value it accepts ({exc})"
+                ) from None
 
     def _number(self, name: str, value: Any, kind: type) -> int | float:
         """``value`` as a finite ``kind`` (int or float) in ``[minimum, maximum]``; ValueError naming ``name``."""
@@ -156,6 +177,7 @@ class Regularizer:
         return False
 
     def __init__(self, **options: Any) -> None:
+        self.check_options()
         unknown = sorted(set(options) - set(self.options))
         if unknown:
             raise ValueError(
@@ -170,6 +192,18 @@ class Regularizer:
         if key in values:
             return values[key]
         raise AttributeError(key)
+
+    @classmethod
+    def check_options(cls) -> None:
+        """Check the class's declared :attr:`options`: each an :class:`Option` whose declaration is valid
+        (:meth:`Option.check`); ValueError naming the regularizer and the option."""
+        for key, opt in cls.options.items():
+            try:
+                if not isinstance(opt, Option):
+                    raise ValueError(f"option {key!r} must be declared as rsocl.solver.regularizer.Option, got {opt!r}")
+                opt.check(key)
+            except ValueError as exc:
+                raise ValueError(f"regularizer {cls.name!r} ({cls.__module__}.{cls.__qualname__}): {exc}") from None
 
     @classmethod
     def for_sets(cls, instances: list) -> Regularizer | None:
@@ -242,6 +276,24 @@ class Regularizer:
             return self._set_by_set(x, weights, out)
         except ValueError as exc:
             raise ValueError(f"{self!r}: {exc}") from exc
+        except (RuntimeError, TypeError, AttributeError, LookupError, cl.Error) as exc:
+            if isinstance(exc, cl.MemoryError):  # the device's memory, not the plugin: the caller's to handle
+                raise
+            raise self._failed(exc) from exc
+
+    def _failed(self, exc: BaseException) -> ValueError:
+        """A PluginError (a ValueError) on one line: ``exc`` raised by this regularizer's ``_denoise``, with
+        the regularizer's name, class and distribution (a build log is cut after 600 characters)."""
+        from rsocl.common.registry import PluginError, origin
+
+        cls = type(self)
+        where = origin("rsocl.regularizers", cls)
+        cause = " ".join(f"{type(exc).__name__}: {exc}".split())
+        cause = cause if len(cause) <= 600 else cause[:600] + " ..."
+        return PluginError(
+            f"regularizer {self.name!r} ({cls.__module__}.{cls.__qualname__}{' from ' + where if where else ''}) "
+            f"failed in _denoise: {cause}"
+        )
 
     def _checked(self, x, weight, out):
         """``denoise``'s arguments checked: ``(weights, out)``, the weights one per set (float64) and ``out``
@@ -311,7 +363,7 @@ class Regularizer:
         return out
 
     def _denoise(self, x, weight, out):  # pragma: no cover - abstract
-        raise NotImplementedError
+        raise NotImplementedError(f"{type(self).__name__} does not implement _denoise")
 
     def __repr__(self):
         opts = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
