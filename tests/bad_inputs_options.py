@@ -63,7 +63,7 @@ CASES = [
     ),
     Bad(
         "cli-iterations-auto-on-fast",
-        ["iterations='auto'", "quality 'fast'"],
+        ["--iterations auto", "quality 'fast'"],
         argv=["demo", "--fast", "--iterations", "auto", "--out", "{tmp}/d"],
     ),
     Bad(

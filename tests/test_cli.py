@@ -169,7 +169,7 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
         ),
         (
             ["--lam", "0.1", "--reg-opt", "temporal_weight=3", "--blend", "0.5"],
-            "blend = 0.5 moves the result towards the run's start, and this run starts from zeros",
+            "--blend 0.5 moves the result towards the run's start, and this run starts from zeros",
         ),
     ],
 )
@@ -574,7 +574,7 @@ def test_reg_opt_iterations_and_tv_iterations_that_disagree_are_refused(tmp_path
         (["--reg-opt", "step=1.5"], "option step must be in [0.01, 1.0], got '1.5'"),
         (["--reg-opt", "temporal_wieght=3"], "unknown option"),
         (["--regularizer", "nope"], "unknown regularizer 'nope'"),
-        (["--regularizer", "dct", "--tv-iterations", "3"], "tv_iterations applies to iterative denoisers"),
+        (["--regularizer", "dct", "--tv-iterations", "3"], "--tv-iterations applies to iterative denoisers"),
     ],
 )
 def test_regularizer_and_its_options_are_checked_before_any_work(tmp_path, capsys, extra, match):
@@ -655,6 +655,22 @@ def test_time_errors_use_the_microseconds_of_the_option(capsys, extra, match):
         assert main(command + ["--shape", "8", "8"] + extra) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"rsocl {command[0]}: error: {match}") and "seconds" not in err, err
+
+
+@pytest.mark.parametrize(
+    "extra, match",
+    [
+        (["--lam", "-1"], "--lam must be >= 0, got -1.0"),
+        (["--eta", "nan"], "--eta must be finite, got nan"),
+        (["--tile", "0", "4"], "--tile must be (H, W) pixels with 1 <= H <= m = 12"),
+        (["--device", "no-such-device"], "--device 'no-such-device' matches no OpenCL device"),
+    ],
+)
+def test_an_api_check_on_an_option_names_the_option_as_typed(tmp_path, capsys, extra, match):
+    cap = tmp_path / "one.h5"
+    _capture_with_truth(cap, "one")
+    assert main(["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5"), "--quiet", *extra]) == 2
+    assert capsys.readouterr().err.startswith(f"rsocl reconstruct: error: {match}")
 
 
 @pytest.mark.parametrize(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import signal
 import sys
 import threading
@@ -16,7 +17,7 @@ import warnings
 
 from rsocl.cli import bench, calibrate, capture, demo, devices, info, plan, plugins, reconstruct, simulate
 
-__all__ = ["build_parser", "main", "entry"]
+__all__ = ["build_parser", "main", "entry", "as_typed"]
 
 #: In the order ``rsocl --help`` lists them.
 SUBCOMMANDS = (demo, simulate, reconstruct, info, plan, bench, capture, calibrate, devices, plugins)
@@ -73,7 +74,10 @@ def main(argv=None) -> int:
                 check_options(args)
             return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, NoOpenCLError, FloatingPointError) as exc:
-        print(f"rsocl {args.command}: error: {exc}", file=sys.stderr)
+        print(
+            f"rsocl {args.command}: error: {as_typed(str(exc), sys.argv[1:] if argv is None else argv)}",
+            file=sys.stderr,
+        )
         return 2
     except MemoryError as exc:
         print(
@@ -95,6 +99,27 @@ def main(argv=None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def as_typed(message: str, argv) -> str:
+    """``message`` with the API parameter it starts with (``lam must be >= 0``, ``tile: ...``,
+    ``iterations='auto' applies ...``, ``blend = 0.5 ...``) written as the option the command line ``argv``
+    gave for it (``--lam``, ``--tile``, ``--iterations auto``, ``--blend 0.5``); as it is where it names no
+    option of ``argv``.
+
+    Examples
+    --------
+    >>> as_typed("lam must be >= 0, got -1.0", ["reconstruct", "c.h5", "--lam", "-1"])
+    '--lam must be >= 0, got -1.0'
+    """
+    found = re.match(r"([a-z][a-z0-9_]*)(='auto'| = (?=\S))?(?=[\s:=\[]|(?<= = ))", message)
+    if found is None:
+        return message
+    option = "--" + found.group(1).replace("_", "-")
+    if option not in {str(a).split("=", 1)[0] for a in argv}:
+        return message
+    value = {None: "", "='auto'": " auto"}.get(found.group(2), " ")  # "blend = 0.5" as "--blend 0.5"
+    return option + value + message[found.end() :]
 
 
 class Terminated(KeyboardInterrupt):
