@@ -45,7 +45,7 @@ def cmd_demo(args) -> int:
     ``demo.earlier-<UTC time>.h5`` (:func:`rsocl.cli.outputs.save_result`). An interrupt (Ctrl-C, SIGTERM)
     ends in one line saying whether ``demo.h5`` was written and what was kept."""
     from rsocl.analysis.visual import comparison_gif, datacube_montage, snapshot_montage
-    from rsocl.cli.outputs import interrupted, kept_note, refuse_kinds, save_result, written
+    from rsocl.cli.outputs import interrupted, kept_note, nothing_written, refuse_kinds, save_result, written
     from rsocl.files.atomic import output_folder
     from rsocl.model.operator import RollingShutterOperator
     from rsocl.model.scenes import builtin_scene
@@ -56,8 +56,7 @@ def cmd_demo(args) -> int:
     check_datacube_memory(rig)
     out.mkdir(parents=True, exist_ok=True)
     result_file = out / "demo.h5"
-    unchanged = f"nothing written, {result_file} unchanged" if result_file.exists() else "nothing written"
-    with interrupted(unchanged):
+    with interrupted(nothing_written(result_file)):
         truth = builtin_scene(rig.shape, rig.T)
         op = RollingShutterOperator(rig, device=args.device, dtype=args.dtype)
         g = op.forward(truth)

@@ -18,6 +18,7 @@ __all__ = [
     "kept_clause",
     "interrupted",
     "written",
+    "nothing_written",
     "refuse_same_file",
     "refuse_kinds",
     "CAPTURES",
@@ -82,6 +83,11 @@ def interrupted(kept):
         if str(exc):
             raise
         raise type(exc)(kept() if callable(kept) else kept) from None
+
+
+def nothing_written(out) -> str:
+    """What an interrupt before the result file ``out`` is written kept: one clause for :func:`interrupted`."""
+    return f"nothing written, {out} unchanged" if Path(out).exists() else "nothing written"
 
 
 @contextlib.contextmanager

@@ -14,7 +14,7 @@ from rsocl.cli.options import (
     solver_options,
     tuning_plot_files,
 )
-from rsocl.cli.outputs import interrupted, kept_clause, kept_note, save_result, written
+from rsocl.cli.outputs import interrupted, kept_clause, kept_note, nothing_written, save_result, written
 from rsocl.cli.result_lines import quality_line
 from rsocl.cli.tiling import add_reconstruct_tiling_args, check_outputs, reconstruct_tiled_if_needed
 
@@ -126,7 +126,7 @@ def cmd_reconstruct(args) -> int:
     out = Path(args.out)
     gif = Path(args.gif) if args.gif else out.with_suffix(".gif")
     if sets is None or sets.shape[0] == 1:
-        with interrupted(f"nothing written, {out} unchanged" if out.exists() else "nothing written"):
+        with interrupted(nothing_written(out)):
             result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
         print(quality_line(result, truth))
         kept = save_result(out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rsocl.cli.outputs import interrupted, kept_note, save_result, written
+from rsocl.cli.outputs import interrupted, kept_note, nothing_written, save_result, written
 
 __all__ = ["is_zarr", "zarr_gif", "run_tiles", "run_stream"]
 
@@ -104,7 +104,7 @@ def run_tiles(args, capture):
             plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
         say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
         return 0
-    with interrupted(_nothing_written(args.out)):
+    with interrupted(nothing_written(args.out)):
         truth, _ = _tiles_line(args, capture, result)
     history = {
         "tile_seconds": np.array([p.seconds for p in result.pieces]),
@@ -135,11 +135,6 @@ def _tiles_line(args, capture, result) -> tuple:
         text = ("set 0: " if args.sets else "") + f"{truth_quality(first, truth)}, " + text
     print(text, flush=True)
     return truth, first
-
-
-def _nothing_written(out) -> str:
-    """What an interrupt before an HDF5 ``out`` is written kept: one clause."""
-    return f"nothing written, {out} unchanged" if Path(out).exists() else "nothing written"
 
 
 def _interrupted_tiles(out, zarr_out: bool) -> str:
@@ -179,7 +174,7 @@ def run_stream(args):
 
     loaded = load_capture(args.capture, set_index=0)
     try:
-        with interrupted(_nothing_written(args.out)):  # a stream's --out is written once every window is solved
+        with interrupted(nothing_written(args.out)):  # a stream's --out is written once every window is solved
             stream = reconstruct_stream(
                 loaded.snapshots,
                 loaded.rig,
