@@ -138,13 +138,17 @@ def check_run_memory(args, rig, frames: int = 1, t_d: float = 0.0) -> None:
     """
     from rsocl.common import memory
 
-    factor = RUN_MEMORY_FACTOR[args.dtype or "float64"]  # the device's choice: at most float64's
+    dtype = args.dtype or "float64"  # the device's choice: at most float64's
+    factor = RUN_MEMORY_FACTOR[dtype]
+
+    def span(count: int) -> float:
+        return rig.T + 1 + (count - 1) * t_d / rig.dt
 
     def need(count: int) -> float:
-        return factor * run_bytes(rig, count, rig.T + 1 + (count - 1) * t_d / rig.dt)
+        return factor * run_bytes(rig, count, span(count))
 
-    limit = memory.host_memory_bytes()
-    if limit is None or need(frames) <= limit:
+    limit, total = memory.host_memory_bytes(), need(frames)
+    if limit is None or total <= limit:
         return
     m, n = rig.shape
     C = len(rig.cameras)
@@ -153,17 +157,16 @@ def check_run_memory(args, rig, frames: int = 1, t_d: float = 0.0) -> None:
         option = f"--frames {frames}"
         hint = (
             f"--frames must be 1..{most:,} at --shape {m} {n}, --cameras {C}, --t-d-us {t_d / US:g} and "
-            f"--dtype {args.dtype or 'float64'}; give fewer --frames or a smaller --shape"
+            f"--dtype {dtype}; give fewer --frames or a smaller --shape"
         )
     else:
         option = f"--shape {m} {n}" + (f" --frames {frames}" if frames > 1 else "")
         hint = "not even one frame fits: choose a smaller --shape or a longer --dt-us (fewer sub-frames)"
-    span = rig.T + 1 + (frames - 1) * t_d / rig.dt
     check_host_memory(
-        need(frames),
+        total,
         option,
-        f"simulating {C} x {frames} snapshots of {m} x {n} over about {span:,.0f} sub-frames (the rig, the "
-        f"float32 scene and the float64 snapshots, {factor:g}x for the {args.dtype or 'float64'} forward model)",
+        f"simulating {C} x {frames} snapshots of {m} x {n} over about {span(frames):,.0f} sub-frames (the rig, "
+        f"the float32 scene and the float64 snapshots, {factor:g}x for the {dtype} forward model)",
         hint,
     )
 
