@@ -2,12 +2,12 @@
  * (rsocl.model.interpolation.evaluate is the reference). Needs common.cl; the host defines NCH
  * (samples per pixel, the channels).
  *
- * Per set, the host sorts each pixel's samples by time: times and values [NCH][m][n] (left-out
- * samples last, at +inf), count[m][n] the samples a pixel keeps, fallback the value of a pixel
- * that keeps none, and per pair of neighbouring samples j, j + 1 the inverse of their distance in
- * time, inverse[NCH - 1][m][n], worked out in double precision: 0 for samples at equal times (their
- * mean is taken), so that whether two times are equal is decided as in the reference, not after
- * rounding them to float. A batch of sets lies end to end; the set is grid dimension 1.
+ * Per set, the host sorts each pixel's samples by time, those at one time merged into their mean
+ * (rsocl.model.interpolation.samples): times and values [NCH][m][n] (the distinct times, the rest
+ * at +inf), count[m][n] the distinct times a pixel keeps, fallback the value of a pixel that keeps
+ * none, and per pair of neighbouring samples j, j + 1 the inverse of their distance in time,
+ * inverse[NCH - 1][m][n], worked out in double precision (> 0 between kept samples, however close
+ * their times are in float). A batch of sets lies end to end; the set is grid dimension 1.
  *
  * global size (solved sub-frames x m x n, sets) on an exact grid (rsocl.device.launch.batch_launches):
  * no bounds test. Work item i is sub-frame first + i / mn, pixel i % mn; neighbouring work items
@@ -34,7 +34,7 @@ __kernel void interp3d(__global const real *times, __global const real *values, 
         hi = clamp(hi, 1, c - 1);                        /* before the first two / after the last two: theirs */
         size_t h = (size_t)hi * mn, l = h - (size_t)mn;
         real inv = inverse[set * (size_t)(NCH > 1 ? NCH - 1 : 1) * (size_t)mn + l + p];
-        real w = inv > (real)0 ? clamp((q - t[l]) * inv, (real)0, (real)1) : (real)0.5;   /* equal times: mean */
+        real w = clamp((q - t[l]) * inv, (real)0, (real)1);
         value = v[l] + w * (v[h] - v[l]);
     }
     out[set * (size_t)per_set + i] = value;
