@@ -1,11 +1,13 @@
-/* The ADMM data step of docs/model.md. Needs common.cl and residual.cl; the host defines NCH
- * (channels), ACC, PROJECTION_EXACT 0|1 and SATURATED 0|1 (samples of residual weight 0 one-sided:
- * one_sided_step).
+/* The ADMM data step of docs/model.md. Needs common.cl and residual.cl (and jacobi.cl with
+ * GAP_ONE_SIDED); the host defines NCH (channels), ACC, PROJECTION_EXACT 0|1, SATURATED 0|1 (samples
+ * of residual weight 0 one-sided: one_sided_step) and GAP_ONE_SIDED 0|1 with GAP_RCOND (a set at
+ * eta = 0 among them: gap_one_sided_step).
  *
  *   admm_dual      (one work item per voxel)  b <- b - (f - theta)  [sets with eta > 0]
  *                                             f  = v = theta + b
  *   admm_project   (one work item per block   r = g - H v,  z = (eta I + M)^-1 r  (exact)
- *                                             [SATURATED: samples with w = 0 one-sided, one_sided_step]
+ *                                             [SATURATED: samples with w = 0 one-sided, one_sided_step;
+ *                                              at eta = 0 with GAP_ONE_SIDED, gap_one_sided_step]
  *                   of TILE_R x TILE_W px)                   | r / (eta + psi)    (paper, Eq. 15)
  *                                             f += Hᵀ z     (window loops only)
  *                                             [difference = 1: then u = f - b over the block's column]
@@ -34,6 +36,9 @@
 #endif
 #ifndef SATURATED
 #define SATURATED 0
+#endif
+#ifndef GAP_ONE_SIDED
+#define GAP_ONE_SIDED 0
 #endif
 
 /* admm_dual: global size (per-set voxels, sets) on an exact grid (rsocl.device.launch.batch_launches),
@@ -128,6 +133,90 @@ inline void one_sided_step(const real *r, __global const real *w, __global const
 }
 #endif
 
+#if SATURATED && PROJECTION_EXACT && GAP_ONE_SIDED
+/* The one-sided exact data step of one pixel p at eta = 0 (GAP), the limit eta -> 0+ of one_sided_step
+ * (docs/model.md, saturated pixels). There an active set's sub-block M_AA may be singular (cameras whose
+ * windows weight only the same sub-frames), and the pseudo-inverse blocks no longer give M z = r' - eta z.
+ * So each round solves z_A = M_AA⁺ r_A from M itself (its block, from the windows as H uses them, in
+ * pixel_gram; jacobi.cl's decomposition, GAP_RCOND of the run's dtype) and checks every sample's
+ * residual after the step, s = r - M z: an active saturated sample needs s_k > 0, or s_k = 0 and z_k >= 0;
+ * an inactive one s_k <= 0 (to GAP_TOL of the largest |r|). Rows left out of the blocks (B_kk = 0) take
+ * no part. At most 2 NCH + 2 rounds. */
+#if REAL_IS_DOUBLE
+#define GAP_TOL 1e-9
+#else
+#define GAP_TOL 1e-4f
+#endif
+
+/* M's block of pixel p, gain_k gain_l sum_s w_k(s) w_l(s), rows and columns with keep = 0 zeroed. */
+inline void pixel_gram(__global const int *first, __global const real *frac, __global const real *len,
+                       __global const real *gain, const int *keep, int T, int L, size_t mn, size_t p, jac_t *m)
+{
+    for (int k = 0; k < NCH; ++k)
+        for (int l = k; l < NCH; ++l) {
+            size_t qk = (size_t)k * mn + p, ql = (size_t)l * mn + p;
+            jac_t acc = (jac_t)0;
+            for (int j = 0; j < L && keep[k] && keep[l]; ++j) {
+                int s = first[qk] + j, jl = s - first[ql];
+                if (s < 0 || jl < 0 || jl >= L) continue;
+                if (s >= T) break;
+                acc += (jac_t)shutter_weight(j, frac[qk], WINDOW_LENGTH(len, k)) *
+                       (jac_t)shutter_weight(jl, frac[ql], WINDOW_LENGTH(len, l));
+            }
+            m[k * NCH + l] = m[l * NCH + k] = (jac_t)gain[k] * (jac_t)gain[l] * acc;
+        }
+}
+
+inline void gap_one_sided_step(const real *r, __global const real *w, __global const real *inverse,
+                               __global const int *first, __global const real *frac, __global const real *len,
+                               __global const real *gain, int T, int L, size_t mn, size_t p, real *z)
+{
+    int sat[NCH], act[NCH], keep[NCH];
+    jac_t m[NCH * NCH], a[NCH * NCH], v[NCH * NCH], inv[NCH], y[NCH], zz[NCH];
+    jac_t top_r = (jac_t)0, top_m = (jac_t)0;
+    for (int k = 0; k < NCH; ++k) {
+        keep[k] = inverse[((size_t)k * NCH + k) * mn + p] != (real)0;
+        sat[k] = keep[k] && w[(size_t)k * mn + p] == (real)0;
+        act[k] = keep[k] && (!sat[k] || r[k] > (real)0);
+        top_r = fmax(top_r, fabs((jac_t)r[k]));
+    }
+    pixel_gram(first, frac, len, gain, keep, T, L, mn, p, m);
+    for (int k = 0; k < NCH; ++k) top_m = fmax(top_m, m[k * NCH + k]);
+    jac_t tol = (jac_t)GAP_TOL * top_r, tol_z = top_m > (jac_t)0 ? tol / top_m : (jac_t)0;
+    for (int round = 0; round < 2 * NCH + 2; ++round) {
+        for (int k = 0; k < NCH; ++k)
+            for (int l = 0; l < NCH; ++l) a[k * NCH + l] = act[k] && act[l] ? m[k * NCH + l] : (jac_t)0;
+        jacobi_eigen(a, v);
+        pinv_scales(a, (jac_t)0, (jac_t)GAP_RCOND, inv);
+        for (int j = 0; j < NCH; ++j) {
+            jac_t s = (jac_t)0;
+            for (int l = 0; l < NCH; ++l) s += act[l] ? v[l * NCH + j] * (jac_t)r[l] : (jac_t)0;
+            y[j] = inv[j] * s;
+        }
+        for (int k = 0; k < NCH; ++k) {
+            jac_t s = (jac_t)0;
+            for (int j = 0; j < NCH; ++j) s += v[k * NCH + j] * y[j];
+            zz[k] = act[k] ? s : (jac_t)0;
+        }
+        int changed = 0;
+        for (int k = 0; k < NCH; ++k) {
+            if (!sat[k]) continue;
+            jac_t after = (jac_t)r[k];
+            for (int l = 0; l < NCH; ++l) after -= m[k * NCH + l] * zz[l];
+            if (act[k] && !(after > tol || (after >= -tol && zz[k] >= -tol_z))) {
+                act[k] = 0;
+                changed = 1;
+            } else if (!act[k] && after > tol) {
+                act[k] = 1;
+                changed = 1;
+            }
+        }
+        if (!changed) break;
+    }
+    for (int k = 0; k < NCH; ++k) z[k] = (real)zz[k];
+}
+#endif
+
 /* The projection of one pixel p (scalar path: the last, partial tile; with SATURATED, every pixel of a
  * block that holds a saturated sample). */
 inline void project_pixel(__global real *f, __global const real *g, __global const real *w,
@@ -145,7 +234,12 @@ inline void project_pixel(__global real *f, __global const real *g, __global con
     }
 #if SATURATED && PROJECTION_EXACT
     if (w) {
-        one_sided_step(r, w, inverse, mn, p, z);
+#if GAP_ONE_SIDED
+        if (eta == (real)0)
+            gap_one_sided_step(r, w, inverse, first, frac, len, gain, T, L, mn, p, z);
+        else
+#endif
+            one_sided_step(r, w, inverse, mn, p, z);
     } else
 #endif
     {

@@ -79,11 +79,11 @@ def project(rig: Rig, v, g, eta: float, projection: str = "exact", saturated=Non
 def _one_sided(rig: Rig, r, eta: float, saturated) -> np.ndarray:
     """``z`` of the exact data step with the ``saturated`` samples one-sided (``f = v + Hᵀ z``), pixel by pixel:
     the minimiser of ``½ Σ_two-sided (r - M z)² + ½ Σ_saturated max(r - M z, 0)² + ½ eta zᵀ M z`` found by
-    trying every set of active saturated samples (solved with ``M``'s sub-blocks, not the inverse blocks
-    the kernels use) until one meets the optimality conditions."""
+    trying every set of active saturated samples (solved with the pseudo-inverse of ``eta I + M``'s sub-block,
+    not the inverse blocks the kernels use) until one meets the optimality conditions. ``eta = 0`` is the limit
+    ``eta → 0⁺`` (docs/model.md, saturated pixels), where an active set's sub-block may be singular."""
     from itertools import combinations
 
-    K = rig.n_channels
     M = gram(rig)
     z = np.zeros_like(r)
     for y, x in np.ndindex(rig.shape):
@@ -91,24 +91,33 @@ def _one_sided(rig: Rig, r, eta: float, saturated) -> np.ndarray:
         m = M[y, x]
         two = np.flatnonzero(~sat)
         ones = np.flatnonzero(sat)
+        tol = 1e-9 * max(1.0, np.abs(rp).max())
         for count in range(len(ones), -1, -1):
             for chosen in combinations(ones, count):
-                active = np.sort(np.concatenate([two, np.asarray(chosen, int)]))
-                zz = np.zeros(K)
-                if len(active):
-                    sub = m[np.ix_(active, active)] + eta * np.eye(len(active))
-                    zz[active] = np.linalg.pinv(sub, hermitian=True) @ rp[active]
-                # an active saturated sample's multiplier z_k >= 0 (its residual after the step is eta z_k);
-                # an inactive one's residual after the step <= 0 (its lower bound is met)
-                after = rp - m @ zz
-                tol = 1e-9 * max(1.0, np.abs(rp).max())
-                if all(zz[k] >= -tol for k in chosen) and all(after[k] <= tol for k in ones if k not in chosen):
+                zz = _active_step(m, rp, eta, np.sort(np.concatenate([two, np.asarray(chosen, int)])))
+                after = rp - m @ zz  # each sample's residual after the step
+                # an active saturated sample needs a residual >= 0 after the step, and where it is 0 a multiplier
+                # z_k >= 0 (with eta > 0 the residual is eta z_k; at eta = 0 a residual left by a singular
+                # sub-block makes z_k grow as residual / eta); an inactive one's residual after the step <= 0
+                if all(after[k] > tol or (after[k] >= -tol and zz[k] >= -tol) for k in chosen) and all(
+                    after[k] <= tol for k in ones if k not in chosen
+                ):
                     z[:, y, x] = zz
                     break
             else:
                 continue
             break
     return z
+
+
+def _active_step(m: np.ndarray, r: np.ndarray, eta: float, active: np.ndarray) -> np.ndarray:
+    """``z`` with the samples ``active`` only: ``z_A = (eta I + M_AA)⁺ r_A`` (the pseudo-inverse: the least-norm
+    solution of a singular sub-block at ``eta = 0``), 0 elsewhere."""
+    zz = np.zeros(len(r))
+    if len(active):
+        sub = m[np.ix_(active, active)] + eta * np.eye(len(active))
+        zz[active] = np.linalg.pinv(sub, hermitian=True) @ r[active]
+    return zz
 
 
 def tv_chambolle(image, weight: float, iterations: int, temporal_weight: float = 1.0, step: float = 1.0) -> np.ndarray:

@@ -24,7 +24,7 @@ from rsocl.device import pool
 from rsocl.device.launch import batch_launches, element_launches
 from rsocl.device.program import c_type
 from rsocl.model.operator import RollingShutterOperator
-from rsocl.solver.inverse import inverse_blocks
+from rsocl.solver.inverse import inverse_blocks, one_sided_program
 from rsocl.solver.residuals import DeviceResiduals
 
 __all__ = ["ADMM", "RESIDUAL_SLOTS", "GPU_PROJECT_LANES", "lanes_that_fit"]
@@ -148,13 +148,9 @@ class ADMM:
         self.lanes = GPU_PROJECT_LANES if self.fused and not op.device.is_cpu else 1
         while True:  # once more with fewer lanes where the projection's work groups would not fit
             self.program = self._build(projection)
+            sets = self.sets if self.batched else None
             self.residuals = DeviceResiduals(
-                op,
-                g,
-                self.valid,
-                self.sets if self.batched else None,
-                RESIDUAL_SLOTS,
-                kernels=(self.program.admm_project,),
+                op, g, self.valid, sets, RESIDUAL_SLOTS, kernels=(self.program.admm_project,)
             )
             self.blocks = op.block_grid(self.sets, kernels=(self.program.admm_project, self.residuals.kernel))
             limit = op.device.group_limit(self.program.admm_project)
@@ -181,8 +177,9 @@ class ADMM:
         makes the denoiser's deferred last launch, and admm.cl with ``self.lanes`` lanes per block."""
         op = self.op
         deferred = {} if self._defines is None else {"DEFER_PRIMAL": 1, **self._defines}
+        gap_files, gap = one_sided_program(projection, self.etas, self.one_sided, op.dtype)
         return op.device.program(
-            ["residual.cl"] + (["tv.cl"] if deferred else []) + ["admm.cl"],
+            ["residual.cl"] + (["tv.cl"] if deferred else []) + gap_files + ["admm.cl"],
             REAL=c_type(op.dtype),
             ACC=c_type(op.device.acc_dtype),
             MASK_BINARY=int(op.rig.mask == "binary"),
@@ -190,6 +187,7 @@ class ADMM:
             PROJECTION_EXACT=int(projection == "exact"),
             PROJECT_LANES=self.lanes,
             SATURATED=int(self.one_sided),
+            **gap,
             **op.tile_defines,
             **deferred,
         )

@@ -25,6 +25,7 @@ __all__ = [
     "inverse_blocks",
     "inverts_on_device",
     "device_block_inverse",
+    "one_sided_program",
 ]
 
 #: Eigenvalues of ``eta I + M`` below this fraction of the largest one (per pixel) are
@@ -62,6 +63,19 @@ def block_inverse(gram: np.ndarray, eta: float, rcond: float = RCOND["float64"])
     keep = lam > rcond * top
     inv = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
     return np.einsum("...ij,...j,...kj->...ik", vec, inv, vec)
+
+
+def one_sided_program(projection: str, etas, one_sided: bool, dtype) -> tuple[list, dict]:
+    """The files and definitions that admm.cl's one-sided step at ``eta = 0`` needs: ``jacobi.cl``, and
+    ``GAP_ONE_SIDED`` with the run's :data:`RCOND`, where some set has ``eta = 0`` and saturated samples under
+    the exact projection (its step solves ``M_AA⁺ r_A`` per round); none otherwise.
+
+    >>> one_sided_program("exact", [0.2, 0.0], True, np.float32)
+    (['jacobi.cl'], {'GAP_ONE_SIDED': 1, 'GAP_RCOND': '1e-06'})
+    """
+    if not (one_sided and projection == "exact" and np.any(np.asarray(etas) == 0)):
+        return [], {}
+    return ["jacobi.cl"], {"GAP_ONE_SIDED": 1, "GAP_RCOND": repr(RCOND[np.dtype(dtype).name])}
 
 
 def own_inverses(projection: str, etas, valid, sets: int) -> bool:
@@ -189,7 +203,7 @@ def device_block_inverse(device, queue, gram, etas, rcond: float, valid=None):
     count = len(etas)
     if valid is not None and valid.shape not in ((K,) + gram.shape[2:], (count, K) + gram.shape[2:]):
         raise ValueError(f"valid must be (K, m, n) or ({count}, K, m, n), got shape {valid.shape}")
-    program = device.program(["inverse.cl"], REAL=c_type(gram.dtype), NCH=K, INV_REAL="double")
+    program = device.program(["jacobi.cl", "inverse.cl"], REAL=c_type(gram.dtype), NCH=K, INV_REAL="double")
     kernel = program.block_inverse
     out = pool.empty(queue, (count, K, K) + gram.shape[2:], gram.dtype)
     etas_device = pool.to_device(queue, etas)
