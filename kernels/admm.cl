@@ -58,78 +58,99 @@ __kernel void admm_dual(__global const real *theta, __global real *b, __global r
 /* The one-sided exact data step of one pixel p (docs/model.md, saturated pixels): z, where f += Hᵀ z, from
  * the residuals r = g - H v of its NCH samples; w[q] = 0 marks a saturated sample (its g a lower bound).
  * The per-pixel minimiser of the two-sided terms, the one-sided ones and eta |f - v|^2, by an active set
- * over the saturated samples with the blocks B = (eta I + M)^-1 alone: an inactive sample's
- * pseudo-residual r' makes its z zero (B_DD r'_D = -B_DA r_A, Gaussian elimination with partial
- * pivoting), z = B r', and (M z)_k = r'_k - eta z_k gives the checks: an active saturated sample needs
- * z_k >= 0, an inactive one r'_k >= r_k. Rows left out of the blocks (B_kk = 0) take no part. At most
- * 2 NCH + 2 rounds. (The paper's diagonal step needs none of this: its terms separate, and the clamp
- * r = max(r, 0) of project_pixel is its exact one-sided step.) */
-inline void one_sided_step(const real *r, __global const real *w, __global const real *inverse, size_t mn,
+ * over the saturated samples: act[k] = 1 where sample k's term counts. A trial of act computes z for it and
+ * switches the saturated samples that break the optimality tests; SEARCH_ACTIVE_SET runs trials until one
+ * switches none: the switching first (at most 2 NCH + 2 rounds), then, where it cycles, every active set in
+ * turn, the most active first (as the NumPy reference). (The paper's diagonal step needs none of this: its
+ * terms separate, and the clamp r = max(r, 0) of project_pixel is its exact one-sided step.) */
+#define SEARCH_ACTIVE_SET(TRIAL)                                                        \
+    do {                                                                                \
+        int done_ = 0, idx_[NCH], ns_ = 0;                                              \
+        for (int round_ = 0; round_ < 2 * NCH + 2 && !done_; ++round_) done_ = !(TRIAL); \
+        for (int k_ = 0; k_ < NCH; ++k_)                                                \
+            if (sat[k_]) idx_[ns_++] = k_;                                              \
+        for (int count_ = ns_; count_ >= 0 && !done_; --count_)                         \
+            for (uint set_ = 0; set_ < (1u << ns_) && !done_; ++set_) {                 \
+                if (popcount(set_) != (uint)count_) continue;                           \
+                for (int i_ = 0; i_ < ns_; ++i_) act[idx_[i_]] = (int)((set_ >> i_) & 1u); \
+                done_ = !(TRIAL);                                                       \
+            }                                                                           \
+    } while (0)
+
+/* A trial with the blocks B = (eta I + M)^-1 alone (eta > 0): an inactive sample's pseudo-residual r'
+ * makes its z zero (B_DD r'_D = -B_DA r_A, Gaussian elimination with partial pivoting), z = B r', and
+ * (M z)_k = r'_k - eta z_k gives the tests: an active saturated sample needs z_k >= 0, an inactive one
+ * r'_k >= r_k. Rows left out of the blocks (B_kk = 0) take no part. Returns 1 where it switched samples. */
+inline int one_sided_trial(const real *r, const int *sat, int *act, __global const real *inverse, size_t mn,
                            size_t p, real *z)
 {
 #define BLOCK(k, l) inverse[((size_t)(k) * NCH + (size_t)(l)) * mn + p]
-    int sat[NCH], act[NCH];
+    int idx[NCH], nd = 0;
     real rp[NCH];
     for (int k = 0; k < NCH; ++k) {
-        sat[k] = w[(size_t)k * mn + p] == (real)0 && BLOCK(k, k) != (real)0;
+        rp[k] = r[k];
+        if (!act[k]) idx[nd++] = k;
+    }
+    if (nd > 0) {
+        real a[NCH][NCH + 1];
+        for (int i = 0; i < nd; ++i) {
+            real s = (real)0;
+            for (int l = 0; l < NCH; ++l)
+                if (act[l]) s += BLOCK(idx[i], l) * r[l];
+            for (int j = 0; j < nd; ++j) a[i][j] = BLOCK(idx[i], idx[j]);
+            a[i][nd] = -s;
+        }
+        for (int c = 0; c < nd; ++c) {      /* forward elimination, partial pivoting */
+            int piv = c;
+            for (int i = c + 1; i < nd; ++i)
+                if (fabs(a[i][c]) > fabs(a[piv][c])) piv = i;
+            for (int j = 0; j <= nd; ++j) {
+                real t = a[c][j];
+                a[c][j] = a[piv][j];
+                a[piv][j] = t;
+            }
+            if (a[c][c] == (real)0) continue;
+            for (int i = c + 1; i < nd; ++i) {
+                real factor = a[i][c] / a[c][c];
+                for (int j = c; j <= nd; ++j) a[i][j] -= factor * a[c][j];
+            }
+        }
+        for (int c = nd - 1; c >= 0; --c) { /* back substitution; a zero pivot leaves its unknown 0 */
+            real s = a[c][nd];
+            for (int j = c + 1; j < nd; ++j) s -= a[c][j] * a[j][nd];
+            a[c][nd] = a[c][c] != (real)0 ? s / a[c][c] : (real)0;
+        }
+        for (int i = 0; i < nd; ++i) rp[idx[i]] = a[i][nd];
+    }
+    for (int k = 0; k < NCH; ++k) {
+        real s = (real)0;
+        for (int l = 0; l < NCH; ++l) s += BLOCK(k, l) * rp[l];
+        z[k] = act[k] ? s : (real)0;
+    }
+    int changed = 0;
+    for (int k = 0; k < NCH; ++k) {
+        if (!sat[k]) continue;
+        if (act[k] && z[k] < (real)0) {
+            act[k] = 0;
+            changed = 1;
+        } else if (!act[k] && rp[k] < r[k]) {
+            act[k] = 1;
+            changed = 1;
+        }
+    }
+    return changed;
+#undef BLOCK
+}
+
+inline void one_sided_step(const real *r, __global const real *w, __global const real *inverse, size_t mn,
+                           size_t p, real *z)
+{
+    int sat[NCH], act[NCH];
+    for (int k = 0; k < NCH; ++k) {
+        sat[k] = w[(size_t)k * mn + p] == (real)0 && inverse[((size_t)k * NCH + k) * mn + p] != (real)0;
         act[k] = !sat[k] || r[k] > (real)0;
     }
-    for (int round = 0; round < 2 * NCH + 2; ++round) {
-        int idx[NCH], nd = 0;
-        for (int k = 0; k < NCH; ++k) {
-            rp[k] = r[k];
-            if (!act[k]) idx[nd++] = k;
-        }
-        if (nd > 0) {
-            real a[NCH][NCH + 1];
-            for (int i = 0; i < nd; ++i) {
-                real s = (real)0;
-                for (int l = 0; l < NCH; ++l)
-                    if (act[l]) s += BLOCK(idx[i], l) * r[l];
-                for (int j = 0; j < nd; ++j) a[i][j] = BLOCK(idx[i], idx[j]);
-                a[i][nd] = -s;
-            }
-            for (int c = 0; c < nd; ++c) {      /* forward elimination, partial pivoting */
-                int piv = c;
-                for (int i = c + 1; i < nd; ++i)
-                    if (fabs(a[i][c]) > fabs(a[piv][c])) piv = i;
-                for (int j = 0; j <= nd; ++j) {
-                    real t = a[c][j];
-                    a[c][j] = a[piv][j];
-                    a[piv][j] = t;
-                }
-                if (a[c][c] == (real)0) continue;
-                for (int i = c + 1; i < nd; ++i) {
-                    real factor = a[i][c] / a[c][c];
-                    for (int j = c; j <= nd; ++j) a[i][j] -= factor * a[c][j];
-                }
-            }
-            for (int c = nd - 1; c >= 0; --c) { /* back substitution; a zero pivot leaves its unknown 0 */
-                real s = a[c][nd];
-                for (int j = c + 1; j < nd; ++j) s -= a[c][j] * a[j][nd];
-                a[c][nd] = a[c][c] != (real)0 ? s / a[c][c] : (real)0;
-            }
-            for (int i = 0; i < nd; ++i) rp[idx[i]] = a[i][nd];
-        }
-        for (int k = 0; k < NCH; ++k) {
-            real s = (real)0;
-            for (int l = 0; l < NCH; ++l) s += BLOCK(k, l) * rp[l];
-            z[k] = act[k] ? s : (real)0;
-        }
-        int changed = 0;
-        for (int k = 0; k < NCH; ++k) {
-            if (!sat[k]) continue;
-            if (act[k] && z[k] < (real)0) {
-                act[k] = 0;
-                changed = 1;
-            } else if (!act[k] && rp[k] < r[k]) {
-                act[k] = 1;
-                changed = 1;
-            }
-        }
-        if (!changed) break;
-    }
-#undef BLOCK
+    SEARCH_ACTIVE_SET(one_sided_trial(r, sat, act, inverse, mn, p, z));
 }
 #endif
 
@@ -137,11 +158,12 @@ inline void one_sided_step(const real *r, __global const real *w, __global const
 /* The one-sided exact data step of one pixel p at eta = 0 (GAP), the limit eta -> 0+ of one_sided_step
  * (docs/model.md, saturated pixels). There an active set's sub-block M_AA may be singular (cameras whose
  * windows weight only the same sub-frames), and the pseudo-inverse blocks no longer give M z = r' - eta z.
- * So each round solves z_A = M_AA⁺ r_A from M itself (its block, from the windows as H uses them, in
- * pixel_gram; jacobi.cl's decomposition, GAP_RCOND of the run's dtype) and checks every sample's
+ * So each trial solves z_A = M_AA⁺ r_A from M itself (its block, from the windows as H uses them, in
+ * pixel_gram; jacobi.cl's decomposition, GAP_RCOND of the run's dtype) and tests every sample's
  * residual after the step, s = r - M z: an active saturated sample needs s_k > 0, or s_k = 0 and z_k >= 0;
- * an inactive one s_k <= 0 (to GAP_TOL of the largest |r|). Rows left out of the blocks (B_kk = 0) take
- * no part. At most 2 NCH + 2 rounds. */
+ * an inactive one s_k <= 0. "0" is within GAP_TOL of the largest |r| and the terms of (M z)_k (a nearly
+ * singular sub-block's large z leaves its rounding in s), and that over M's largest diagonal for z_k.
+ * Rows left out of the blocks (B_kk = 0) take no part. */
 #if REAL_IS_DOUBLE
 #define GAP_TOL 1e-9
 #else
@@ -167,13 +189,50 @@ inline void pixel_gram(__global const int *first, __global const real *frac, __g
         }
 }
 
+/* A trial of act at eta = 0 (z in jac_t); returns 1 where it switched samples. */
+inline int gap_trial(const real *r, const int *sat, int *act, const jac_t *m, jac_t top_r, jac_t top_m, jac_t *z)
+{
+    jac_t a[NCH * NCH], v[NCH * NCH], inv[NCH], y[NCH];
+    for (int k = 0; k < NCH; ++k)
+        for (int l = 0; l < NCH; ++l) a[k * NCH + l] = act[k] && act[l] ? m[k * NCH + l] : (jac_t)0;
+    jacobi_eigen(a, v);
+    pinv_scales(a, (jac_t)0, (jac_t)GAP_RCOND, inv);
+    for (int j = 0; j < NCH; ++j) {
+        jac_t s = (jac_t)0;
+        for (int l = 0; l < NCH; ++l) s += act[l] ? v[l * NCH + j] * (jac_t)r[l] : (jac_t)0;
+        y[j] = inv[j] * s;
+    }
+    for (int k = 0; k < NCH; ++k) {
+        jac_t s = (jac_t)0;
+        for (int j = 0; j < NCH; ++j) s += v[k * NCH + j] * y[j];
+        z[k] = act[k] ? s : (jac_t)0;
+    }
+    int changed = 0;
+    for (int k = 0; k < NCH; ++k) {
+        if (!sat[k]) continue;
+        jac_t after = (jac_t)r[k], size = (jac_t)0;
+        for (int l = 0; l < NCH; ++l) {
+            after -= m[k * NCH + l] * z[l];
+            size += fabs(m[k * NCH + l] * z[l]);
+        }
+        jac_t tol = (jac_t)GAP_TOL * (top_r + size), tol_z = tol / top_m;
+        if (act[k] && !(after > tol || (after >= -tol && z[k] >= -tol_z))) {
+            act[k] = 0;
+            changed = 1;
+        } else if (!act[k] && after > tol) {
+            act[k] = 1;
+            changed = 1;
+        }
+    }
+    return changed;
+}
+
 inline void gap_one_sided_step(const real *r, __global const real *w, __global const real *inverse,
                                __global const int *first, __global const real *frac, __global const real *len,
                                __global const real *gain, int T, int L, size_t mn, size_t p, real *z)
 {
     int sat[NCH], act[NCH], keep[NCH];
-    jac_t m[NCH * NCH], a[NCH * NCH], v[NCH * NCH], inv[NCH], y[NCH], zz[NCH];
-    jac_t top_r = (jac_t)0, top_m = (jac_t)0;
+    jac_t m[NCH * NCH], zz[NCH], top_r = (jac_t)0, top_m = (jac_t)JAC_TINY;
     for (int k = 0; k < NCH; ++k) {
         keep[k] = inverse[((size_t)k * NCH + k) * mn + p] != (real)0;
         sat[k] = keep[k] && w[(size_t)k * mn + p] == (real)0;
@@ -182,37 +241,7 @@ inline void gap_one_sided_step(const real *r, __global const real *w, __global c
     }
     pixel_gram(first, frac, len, gain, keep, T, L, mn, p, m);
     for (int k = 0; k < NCH; ++k) top_m = fmax(top_m, m[k * NCH + k]);
-    jac_t tol = (jac_t)GAP_TOL * top_r, tol_z = top_m > (jac_t)0 ? tol / top_m : (jac_t)0;
-    for (int round = 0; round < 2 * NCH + 2; ++round) {
-        for (int k = 0; k < NCH; ++k)
-            for (int l = 0; l < NCH; ++l) a[k * NCH + l] = act[k] && act[l] ? m[k * NCH + l] : (jac_t)0;
-        jacobi_eigen(a, v);
-        pinv_scales(a, (jac_t)0, (jac_t)GAP_RCOND, inv);
-        for (int j = 0; j < NCH; ++j) {
-            jac_t s = (jac_t)0;
-            for (int l = 0; l < NCH; ++l) s += act[l] ? v[l * NCH + j] * (jac_t)r[l] : (jac_t)0;
-            y[j] = inv[j] * s;
-        }
-        for (int k = 0; k < NCH; ++k) {
-            jac_t s = (jac_t)0;
-            for (int j = 0; j < NCH; ++j) s += v[k * NCH + j] * y[j];
-            zz[k] = act[k] ? s : (jac_t)0;
-        }
-        int changed = 0;
-        for (int k = 0; k < NCH; ++k) {
-            if (!sat[k]) continue;
-            jac_t after = (jac_t)r[k];
-            for (int l = 0; l < NCH; ++l) after -= m[k * NCH + l] * zz[l];
-            if (act[k] && !(after > tol || (after >= -tol && zz[k] >= -tol_z))) {
-                act[k] = 0;
-                changed = 1;
-            } else if (!act[k] && after > tol) {
-                act[k] = 1;
-                changed = 1;
-            }
-        }
-        if (!changed) break;
-    }
+    SEARCH_ACTIVE_SET(gap_trial(r, sat, act, m, top_r, top_m, zz));
     for (int k = 0; k < NCH; ++k) z[k] = (real)zz[k];
 }
 #endif

@@ -1,17 +1,21 @@
 /* The eigen-decomposition of a small symmetric NCH x NCH matrix by cyclic Jacobi rotations, and the
  * scales of the pseudo-inverse built from it: for inverse.cl (the exact projection's blocks, in double)
  * and admm.cl (the GAP step with saturated samples, in real). Needs common.cl and NCH; the type is
- * jac_t: INV_REAL where the host defines it (double), else real. Matrices are row-major, a[k * NCH + l].
+ * jac_t: INV_REAL where the host defines it (double), else real (JAC_EPS, JAC_TINY: its epsilon and
+ * smallest normal number). Matrices are row-major, a[k * NCH + l].
  */
 #ifdef INV_REAL
 typedef INV_REAL jac_t;
 #define JAC_EPS 2.220446049250313e-16
+#define JAC_TINY 2.2250738585072014e-308
 #elif REAL_IS_DOUBLE
 typedef real jac_t;
 #define JAC_EPS 2.220446049250313e-16
+#define JAC_TINY 2.2250738585072014e-308
 #else
 typedef real jac_t;
 #define JAC_EPS 1.1920928955078125e-7f
+#define JAC_TINY 1.17549435e-38f
 #endif
 
 /* Sweeps of the cyclic Jacobi method at most: it converges quadratically, within 10 sweeps for the

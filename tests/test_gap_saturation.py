@@ -73,3 +73,24 @@ def test_a_gap_set_beside_an_eta_set_in_one_batch_equals_each_alone(clipped, dev
         alone = rsocl.reconstruct(g, rig, eta=eta, **kw)
         tol = 1e-5 if dtype == "float32" else 1e-11
         np.testing.assert_allclose(batch.datacube[i], alone.datacube, atol=tol * np.abs(alone.datacube).max())
+
+
+def test_the_device_step_where_switching_samples_cycles(device, dtype):
+    # at pixel (1, 3) switching the samples that break the tests returns to its first active set every 3
+    # rounds; the step then tries every active set, as the reference does
+    C = rsocl.Camera
+    spec = [(90, 98, 59, 2.0), (0, 96, 31, 1.0), (180, 98, 16, 0.7), (90, 68, 64, 1.9)]  # angle, t_e, t_a (µs), gain
+    rig = rsocl.Rig([C(a, te * 1e-6, 35e-6, t_a=ta * 1e-6, gain=gn) for a, te, ta, gn in spec], (4, 4), dt=70e-6)
+    rng = np.random.default_rng(564)
+    g = ref.forward(rig, rng.uniform(0, 1, (rig.T,) + rig.shape))
+    level = float(np.percentile(g, 60))
+    g = np.minimum(g, level)
+    x0 = rng.uniform(0, 1.5, (rig.T,) + rig.shape)
+    want = ref.project(rig, x0, g, 0.0, "exact", g >= level)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # lam = 0: the identity denoiser
+        got = rsocl.reconstruct(
+            g, rig, iterations=1, lam=0.0, eta=0.0, tune=False, dtype=dtype, device=device, saturation=level, x0=x0
+        )
+    tol = 1e-4 if dtype == "float32" else 1e-12
+    np.testing.assert_allclose(got.datacube, want, atol=tol * np.abs(want).max())

@@ -91,16 +91,17 @@ def _one_sided(rig: Rig, r, eta: float, saturated) -> np.ndarray:
         m = M[y, x]
         two = np.flatnonzero(~sat)
         ones = np.flatnonzero(sat)
-        tol = 1e-9 * max(1.0, np.abs(rp).max())
+        top_m = max(np.diag(m).max(), np.finfo(float).tiny)
         for count in range(len(ones), -1, -1):
             for chosen in combinations(ones, count):
                 zz = _active_step(m, rp, eta, np.sort(np.concatenate([two, np.asarray(chosen, int)])))
                 after = rp - m @ zz  # each sample's residual after the step
+                tol = 1e-9 * (np.abs(rp).max() + np.abs(m) @ np.abs(zz))  # over the rounding of r - M z
                 # an active saturated sample needs a residual >= 0 after the step, and where it is 0 a multiplier
                 # z_k >= 0 (with eta > 0 the residual is eta z_k; at eta = 0 a residual left by a singular
                 # sub-block makes z_k grow as residual / eta); an inactive one's residual after the step <= 0
-                if all(after[k] > tol or (after[k] >= -tol and zz[k] >= -tol) for k in chosen) and all(
-                    after[k] <= tol for k in ones if k not in chosen
+                if all(after[k] > tol[k] or (after[k] >= -tol[k] and zz[k] >= -tol[k] / top_m) for k in chosen) and all(
+                    after[k] <= tol[k] for k in ones if k not in chosen
                 ):
                     z[:, y, x] = zz
                     break
@@ -116,7 +117,7 @@ def _active_step(m: np.ndarray, r: np.ndarray, eta: float, active: np.ndarray) -
     zz = np.zeros(len(r))
     if len(active):
         sub = m[np.ix_(active, active)] + eta * np.eye(len(active))
-        zz[active] = np.linalg.pinv(sub, hermitian=True) @ r[active]
+        zz[active] = np.linalg.pinv(sub, rcond=1e-10, hermitian=True) @ r[active]
     return zz
 
 
