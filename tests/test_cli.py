@@ -258,6 +258,20 @@ def test_demo_of_one_camera_writes_no_search_plot_where_no_search_ran(tmp_path, 
     assert (tmp_path / "two" / "demo-tuning.png").is_file()
 
 
+def test_a_run_without_a_search_moves_an_earlier_runs_search_plot_aside(tmp_path, capsys):
+    # demo-tuning.png beside a new demo.h5 of a --fixed run would be read as that run's search
+    small = ["--cameras", "2", "--shape", "8", "8", "--iterations", "5", "--out", str(tmp_path)]
+    assert main(["demo", "--quiet", *small]) == 0
+    plot = (tmp_path / "demo-tuning.png").read_bytes()
+    assert main(["demo", "--fixed", *small]) == 0
+    assert not (tmp_path / "demo-tuning.png").exists()
+    (moved,) = tmp_path.glob("demo-tuning.earlier-*.png")
+    assert moved.read_bytes() == plot and f"to {moved}" in capsys.readouterr().out
+    assert len(list(tmp_path.glob("demo.earlier-*.h5"))) == 1
+    assert main(["demo", "--fixed", *small]) == 0  # nothing there to move this time
+    assert len(list(tmp_path.glob("demo-tuning.earlier-*.png"))) == 1 and "search plot" not in capsys.readouterr().out
+
+
 def test_devices_and_plugins_list(capsys):
     assert main(["devices"]) == 0
     assert "0:0" in capsys.readouterr().out

@@ -370,18 +370,24 @@ def tuning_plot_path(gif):
 
 def tuning_plot_files(args, params, gif) -> list:
     """Say the values chosen from the snapshots and plot the criterion next to ``gif`` (as
-    ``NAME-tuning.png``); the files written (none when nothing was tuned)."""
-    if not params.get("tuning"):
+    ``NAME-tuning.png``); the files written. With no search to plot, an earlier run's plot there is moved to
+    ``NAME-tuning.earlier-<UTC time>.png`` (:func:`rsocl.cli.outputs.set_aside_plot`) and said."""
+    tuning = params.get("tuning")
+    if tuning:
+        chosen = ", ".join(f"{k} = {v:.3g}" for k, v in tuning["chosen"].items())
+        if params.get("blend") is not None and params["blend"] < 1:
+            chosen += f", blend with the interpolation {params['blend']:.2f}"
+        say(args, f"chosen from the snapshots: {chosen}")
+    if not tuning or not tuning.get("candidates"):  # no search (one snapshot per pixel: no criterion)
+        from rsocl.cli.outputs import set_aside_plot
+
+        kept = set_aside_plot(tuning_plot_path(gif))
+        if kept is not None:
+            say(args, f"moved an earlier run's search plot {tuning_plot_path(gif)} to {kept}")
         return []
     from rsocl.analysis.tuning_plot import tuning_plot
 
-    chosen = ", ".join(f"{k} = {v:.3g}" for k, v in params["tuning"]["chosen"].items())
-    if params.get("blend") is not None and params["blend"] < 1:
-        chosen += f", blend with the interpolation {params['blend']:.2f}"
-    say(args, f"chosen from the snapshots: {chosen}")
-    if not params["tuning"].get("candidates"):
-        return []  # set without a search (one snapshot per pixel): no criterion
-    return [tuning_plot(tuning_plot_path(gif), params["tuning"])]
+    return [tuning_plot(tuning_plot_path(gif), tuning)]
 
 
 def run_reconstruction(args, g, rig, truth=None):

@@ -21,6 +21,7 @@ __all__ = [
     "nothing_written",
     "refuse_same_file",
     "refuse_kinds",
+    "set_aside_plot",
     "CAPTURES",
     "HDF5_FILES",
 ]
@@ -50,6 +51,35 @@ def save_result(path, datacube, rig, **kwargs) -> Path | None:
 
     with keeping(path, EARLIER) as kept:
         save_reconstruction(path, datacube, rig, **kwargs)
+    return kept
+
+
+def set_aside_plot(path) -> Path | None:
+    """Move a PNG picture at ``path`` that an earlier run drew and this run does not draw again (the parameter
+    search's plot, after a run without a search) to ``<stem>.earlier-<UTC time><suffix>``, so that it is not
+    taken for this run's. A file there that is no PNG (this run's ``--out``, say) is left where it is.
+
+    Returns
+    -------
+    pathlib.Path or None
+        The picture's new name; None where ``path`` held no PNG.
+
+    Raises
+    ------
+    rsocl.files.atomic.OutputError
+        No second name could be made: ``path`` is unchanged.
+    """
+    from rsocl.files.atomic import EARLIER, keep_copy
+
+    try:
+        with open(path, "rb") as f:
+            if f.read(8) != b"\x89PNG\r\n\x1a\n":
+                return None
+    except OSError:  # no file there (or none this process may read: not one it drew)
+        return None
+    kept = keep_copy(path, EARLIER)
+    if kept is not None:
+        Path(path).unlink()
     return kept
 
 
