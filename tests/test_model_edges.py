@@ -82,6 +82,24 @@ def test_lam_over_eta_is_checked_before_any_device_work(monkeypatch):
         rsocl.reconstruct(g, rig, lam=0.1, eta=[0.2, 1e-310], tune=False, iterations=2)
 
 
+def test_the_searchs_largest_lam_candidate_over_eta_is_checked_before_any_device_work(monkeypatch):
+    # the default lam passes the check, 3 times it (the search's largest candidate) overflows
+    import rsocl.solver.pipeline as pipeline
+
+    def staged(*args, **kwargs):
+        raise AssertionError("staged before the check")
+
+    monkeypatch.setattr(pipeline, "stage_on_device", staged)
+    rig = rsocl.Rig.paper_array(4, shape=(8, 8), t_e=180e-6, t_r=T_R)
+    lam = make_request(rig, eta=1.0, tune=False).settled(None)[1].lam
+    top = float(np.finfo(np.float64).max)
+    eta = 2 * lam / top  # lam / eta = top / 2
+    make_request(rig, eta=eta, tune=False)
+    g = np.zeros((rig.n_channels,) + rig.shape)
+    with pytest.raises(ValueError, match=r"lam / eta overflows \(lam \(the search's largest candidate\) = "):
+        rsocl.reconstruct(g, rig, eta=eta, iterations=2)
+
+
 # ---------------------------------------------------------------- binary windows holding no sub-frame start
 def _two_camera_rig():
     """Rows 0..1 of a long exposure (weights on 0..4), and a camera whose windows [8.2, 8.7], [9.2, 9.7]

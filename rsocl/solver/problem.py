@@ -130,9 +130,9 @@ class Settings:
         return self
 
 
-def check_weight_ratio(lam, eta) -> None:
-    """Raise a ValueError naming ``lam``, ``eta`` (and the set, for per-set values) and the range of ``eta``
-    where ``eta > 0`` and the denoiser's weight ``lam / eta`` overflows float64 (``eta`` below
+def check_weight_ratio(lam, eta, lam_name: str = "lam") -> None:
+    """Raise a ValueError naming ``lam`` (as ``lam_name``), ``eta`` (and the set, for per-set values) and the
+    range of ``eta`` where ``eta > 0`` and the denoiser's weight ``lam / eta`` overflows float64 (``eta`` below
     ``lam / 1.8e308``); ``eta = 0`` (GAP) takes ``lam`` itself."""
     lams, etas = np.broadcast_arrays(
         np.atleast_1d(np.asarray(lam, np.float64)), np.atleast_1d(np.asarray(eta, np.float64))
@@ -144,7 +144,7 @@ def check_weight_ratio(lam, eta) -> None:
         i, top = int(bad[0]), float(np.finfo(np.float64).max)
         where = f" of set {i}" if isinstance(lam, tuple) or isinstance(eta, tuple) else ""
         raise ValueError(
-            f"lam / eta{where} overflows (lam = {float(lams[i])!r}, eta = {float(etas[i])!r}): "
+            f"lam / eta{where} overflows ({lam_name} = {float(lams[i])!r}, eta = {float(etas[i])!r}): "
             f"eta must be 0 (GAP) or at least lam / {top:.3g} = {lams[i] / top:.3g} (or lam at most eta * {top:.3g})"
         )
 

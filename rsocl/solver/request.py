@@ -24,7 +24,7 @@ from rsocl.model.rig import Rig
 from rsocl.solver.checks import check_blend
 from rsocl.solver.crossval import SearchSpace, Tuning
 from rsocl.solver.ladder import DEFAULT_QUALITY, Rung, check_iterations, rung
-from rsocl.solver.problem import Settings, check_settings
+from rsocl.solver.problem import Settings, check_settings, check_weight_ratio
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.tuning_check import check_tuning
 
@@ -203,7 +203,8 @@ class Request:
     def search_space(self) -> SearchSpace | None:
         """What the search chooses (:class:`~rsocl.solver.crossval.SearchSpace`; the ``lam`` candidates are
         the settled ``lam`` times the rung's ``lam_factors``, the options those the rung searches), or None
-        when the caller left nothing to choose. For per-set values, the first set's."""
+        when the caller left nothing to choose. For per-set values, the first set's. A ValueError where the
+        largest candidate's ``lam / eta`` overflows (:func:`~rsocl.solver.problem.check_weight_ratio`)."""
         reg, search = self.regularizer, self.rung.search
         given = self.given.option_names(reg)
         tunable = {k: v for k, v in getattr(reg, "tunable", {}).items() if k not in given and search.options}
@@ -211,6 +212,8 @@ class Request:
         fixed_lam = self.given.lam
         if fixed_lam is None:
             lam = [lam0 * f for f in search.lam_factors] if lam0 > 0 else lam0
+            if lam0 > 0:  # the largest candidate's lam / eta, as the settled lam's (Settings.for_batch)
+                check_weight_ratio(max(lam), first_value(self.settings.eta), "lam (the search's largest candidate)")
         else:
             lam = first_value(fixed_lam)
         if (not tunable and np.isscalar(lam)) or (np.isscalar(lam) and lam == 0):
