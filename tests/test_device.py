@@ -62,7 +62,7 @@ def test_fp64_on_a_device_without_it_is_a_clear_error(device, monkeypatch):
 def test_rsocl_device_environment_variable(monkeypatch):
     monkeypatch.setenv("RSOCL_DEVICE", "no-such-accelerator")
     with pytest.raises(ValueError, match="no-such-accelerator"):
-        devmod._device_for.__wrapped__(None)  # the uncached resolver, so other tests keep their device
+        devmod._device_for.__wrapped__(None, "no-such-accelerator", None)  # uncached: other tests keep their device
 
 
 def test_fits_check_names_the_numbers(device):

@@ -41,6 +41,16 @@ def test_an_rsocl_device_that_matches_nothing_is_named_in_the_error(fresh, capsy
         devmod.get_device("no-such-accelerator")  # a spec given is not the variable
 
 
+def test_a_change_of_rsocl_device_in_the_process_is_seen(fresh):
+    chosen = devmod.get_device(None)  # cached for these variables
+    fresh.setenv("RSOCL_DEVICE", "no-such-accelerator")
+    with pytest.raises(ValueError, match=r"^RSOCL_DEVICE='no-such-accelerator'"):
+        devmod.get_device(None)
+    fresh.delenv("RSOCL_DEVICE")
+    assert devmod.get_device(None) is chosen  # the same variables: the same device, context and programs
+    assert devmod.get_device("0:0") is devmod.get_device("0:0")
+
+
 @pytest.mark.parametrize("blank", ["", "  "])
 def test_a_blank_spec_is_the_default_choice_not_the_first_device(fresh, blank):
     real = devmod.list_devices()

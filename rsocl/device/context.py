@@ -284,16 +284,16 @@ def _yes_or_no(name: str, value) -> bool:
 
 
 @functools.cache
-def _device_for(spec: str | None) -> Device:
+def _device_for(spec: str | None, env: str | None, ctx_env: str | None) -> Device:
+    """The device of ``spec``, else of ``RSOCL_DEVICE`` (``env``), else of ``PYOPENCL_CTX`` (``ctx_env``)."""
     cl = _cl()
-    env = os.environ.get("RSOCL_DEVICE")
     env = None if _blank(env) else env
-    if spec is None and os.environ.get("PYOPENCL_CTX") and env is None:
+    if spec is None and ctx_env and env is None:
         try:
             ctx = cl.create_some_context(interactive=False)
         except (cl.Error, RuntimeError, ValueError) as exc:  # pyopencl's words for a PYOPENCL_CTX that matches nothing
             raise ValueError(
-                f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r} matches no OpenCL device ({' '.join(str(exc).split())}); "
+                f"PYOPENCL_CTX={ctx_env!r} matches no OpenCL device ({' '.join(str(exc).split())}); "
                 f"available: {_listing(list_devices())} (RSOCL_DEVICE or --device choose one too)"
             ) from None
         dev = ctx.devices[0]
@@ -317,7 +317,8 @@ def get_device(device: str | Device | None = None) -> Device:
     Returns
     -------
     Device
-        Cached: calls with one spec share one context, queue and program cache.
+        Cached: calls with one spec (without one: with the same ``RSOCL_DEVICE`` and ``PYOPENCL_CTX``)
+        share one context, queue and program cache.
 
     Raises
     ------
@@ -331,7 +332,9 @@ def get_device(device: str | Device | None = None) -> Device:
         return device
     if device is not None and not isinstance(device, str):
         raise ValueError(f"device must be a spec string like '0:0' or 'pocl', or an rsocl Device; got {device!r}")
-    return _device_for(None if _blank(device) else device)
+    spec = None if _blank(device) else device
+    chosen_by = (os.environ.get("RSOCL_DEVICE"), os.environ.get("PYOPENCL_CTX")) if spec is None else (None, None)
+    return _device_for(spec, *chosen_by)
 
 
 _BY_QUEUE: dict = {}
