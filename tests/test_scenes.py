@@ -53,6 +53,16 @@ def test_builtin_scene_moves_noticeably():
     assert np.count_nonzero((edge > 0.6) & (edge < 0.99)) > 10
 
 
+@pytest.mark.parametrize("shape, T", [((16, 16), 2500), ((5, 70), 1600), ((1, 1), 7)])
+def test_builtin_scene_renders_the_same_frames_in_chunks_as_one_at_a_time(monkeypatch, shape, T):
+    import rsocl.model.scenes as scenes
+
+    chunked = scenes.builtin_scene(shape, T, seed=3, dtype=np.float64)
+    assert scenes._CHUNK_VALUES // (shape[0] * shape[1]) < T or shape == (1, 1)  # several chunks
+    monkeypatch.setattr(scenes, "_CHUNK_VALUES", 1)  # one sub-frame per chunk
+    assert np.array_equal(chunked, scenes.builtin_scene(shape, T, seed=3, dtype=np.float64))
+
+
 def test_builtin_scene_other_shapes():
     assert builtin_scene((7, 3), 2).shape == (2, 7, 3)
     assert builtin_scene((1, 1), 1).shape == (1, 1, 1)

@@ -129,14 +129,18 @@ def builtin_scene(
     turn = math.pi if rng.random() < 0.5 else -math.pi
 
     out = np.empty((T, m, n), dtype=dtype)
-    for s in range(T):
-        tau = (s + 0.5) / T
-        frame = background.copy()
+    chunk = max(1, _CHUNK_VALUES // (m * n))
+    for s0 in range(0, T, chunk):  # sub-frames s0 .. s0 + chunk at once; per sub-frame, the scalars first
+        taus = [(s + 0.5) / T for s in range(s0, min(s0 + chunk, T))]
+        angles = [phase + turn * tau for tau in taus]
+        cos_a, sin_a = _column([math.cos(a) for a in angles]), _column([math.sin(a) for a in angles])
+        cy = _column([disc_y0 + (disc_y1 - disc_y0) * tau for tau in taus])
+        cx = _column([disc_x0 + (disc_x1 - disc_x0) * tau for tau in taus])
+        frame = np.broadcast_to(background, (len(taus), m, n))
         # bar (drawn first, the disc passes over it)
-        angle = phase + turn * tau
         dy, dx = yy - bar_cy, xx - bar_cx
-        along = dx * math.cos(angle) + dy * math.sin(angle)
-        across = -dx * math.sin(angle) + dy * math.cos(angle)
+        along = dx * cos_a + dy * sin_a
+        across = -dx * sin_a + dy * cos_a
         qa = np.abs(along) - half_length
         qc = np.abs(across) - half_width
         outside = np.hypot(np.maximum(qa, 0.0), np.maximum(qc, 0.0))
@@ -144,12 +148,19 @@ def builtin_scene(
         cover = _coverage(outside + inside)
         frame = frame * (1.0 - cover) + 0.8 * cover
         # disc
-        cy = disc_y0 + (disc_y1 - disc_y0) * tau
-        cx = disc_x0 + (disc_x1 - disc_x0) * tau
         cover = _coverage(np.hypot(yy - cy, xx - cx) - radius)
         frame = frame * (1.0 - cover) + 1.0 * cover
-        out[s] = np.clip(frame, 0.0, 1.0)
+        out[s0 : s0 + len(taus)] = np.clip(frame, 0.0, 1.0)
     return out
+
+
+#: Values (sub-frames x pixels) :func:`builtin_scene` renders at once: a few MiB per float64 array.
+_CHUNK_VALUES = 1 << 18
+
+
+def _column(values) -> np.ndarray:
+    """Per-sub-frame scalars as a ``(k, 1, 1)`` float64 array, to broadcast over a chunk's frames."""
+    return np.asarray(values, dtype=np.float64)[:, None, None]
 
 
 # ---------------------------------------------------------------------- protocol
