@@ -99,9 +99,10 @@ class SimulatedCamera(SimulatedConfig, CameraBackend):
 
     @property
     def full_scale(self) -> float:
-        """Model value of full scale: ``saturation``, else ``t_e/dt`` (white scene, unit gain)."""
+        """Model value of full scale: ``saturation``, else a white scene's value at unit gain (``t_e/dt``; with
+        the binary mask, the most sub-frame starts an exposure holds: :func:`rsocl.model.curvature.full_scales`)."""
         sat = self.sensor["saturation"]
-        return float(sat) if sat is not None else self.t_e / self.dt
+        return float(sat) if sat is not None else self.white
 
     def scene_truth(self, set_index: int = 0) -> np.ndarray:
         """The ``(scene_frames, m, n)`` datacube (float64, [0, 1]) that set ``set_index`` sees."""

@@ -30,6 +30,7 @@ import os
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.model.rig import Rig
 from rsocl_plugins.simulated_sensor import SENSOR_KEYS
 
 __all__ = ["CONFIG_KEYS", "SimulatedConfig", "check_int"]
@@ -83,6 +84,9 @@ class SimulatedConfig:
         return f"{self.name}: config[{key!r}]"
 
     def _parse(self, cfg):
+        from rsocl.model.curvature import full_scales
+        from rsocl.model.simulate import MAX_PHOTONS, check_photons
+
         check.unknown_keys(self.name, cfg, CONFIG_KEYS)
         k = self._key
         for key in ("t_e", "t_r"):
@@ -161,7 +165,8 @@ class SimulatedConfig:
                 )
             self.exposure_range = (low, high)
         self.device_spec = cfg.get("device")
-        self.dtype = cfg.get("dtype")
+        dtype = cfg.get("dtype")
+        self.dtype = None if dtype is None else check.choice(k("dtype"), dtype, {"float32", "float64"})
 
         sensor = cfg.get("sensor") or {}
         if not isinstance(sensor, dict):
@@ -170,7 +175,7 @@ class SimulatedConfig:
         s = {key: sensor.get(key) for key in SENSOR_KEYS}
         sk = lambda key: f"{self.name}: sensor[{key!r}]"  # noqa: E731
         if s["shot_noise_photons"] is not None:
-            s["shot_noise_photons"] = check.positive(sk("shot_noise_photons"), s["shot_noise_photons"])
+            s["shot_noise_photons"] = check_photons(sk("shot_noise_photons"), s["shot_noise_photons"])
         s["read_noise"] = check.non_negative(sk("read_noise"), s["read_noise"] or 0.0, "(fraction of full scale)")
         if s["bit_depth"] is not None:
             s["bit_depth"] = check.positive_int(sk("bit_depth"), s["bit_depth"], maximum=16)
@@ -191,9 +196,20 @@ class SimulatedConfig:
                 f"{self.name}: pixel_format 'Mono8' holds at most 8 bits, sensor bit_depth is {s['bit_depth']}"
             )
         try:
-            own_T = self._rig(self.t_e, self.t_a).T
+            own = self._rig(self.t_e, self.t_a)
         except ValueError as exc:
             raise ValueError(f"{self.name}: {exc}") from None
+        own_T = own.T
+        self.white = float(full_scales(own)[0]) / self.gain  # a white scene's value at unit gain
+        full = s["saturation"] if s["saturation"] is not None else self.white
+        photons = s["shot_noise_photons"]
+        if photons is not None and photons * self.gain * self.white / full > MAX_PHOTONS:
+            most = MAX_PHOTONS * full / (self.gain * self.white)
+            raise ValueError(
+                f"{sk('shot_noise_photons')} must be at most {most:.3g} here: a white scene's mean "
+                f"(photons x gain x white / full scale) must stay within the Poisson sampler's {MAX_PHOTONS:g}, "
+                f"got {photons!r}"
+            )
         if self.scene_frames is None:
             self.scene_frames = own_T
         from rsocl.common.memory import check_host_memory
@@ -209,7 +225,14 @@ class SimulatedConfig:
         )
 
     def _rig(self, t_e, t_a):
-        from rsocl.model.rig import Camera, Rig
+        from rsocl.model.rig import Camera
 
         camera = Camera(self.angle, t_e=t_e, t_r=self.t_r, t_a=t_a, gain=self.gain, row_map=self.row_map)
-        return Rig([camera], self.shape, dt=self.dt, mask=self.mask)
+        return CameraOfRig([camera], self.shape, dt=self.dt, mask=self.mask)
+
+
+class CameraOfRig(Rig):
+    """The rig of one camera of a larger rig: its ``dt``, the larger rig's, may be below this camera's ``t_r``
+    (the larger rig's smallest ``t_r`` bounds it)."""
+
+    _part_of_larger = True

@@ -4,9 +4,11 @@ The ``sensor`` table of a simulated camera's config (:mod:`rsocl_plugins.simulat
 effects; each is off by default.
 
 Applied in this order to the model value ``g`` (scene in [0, 1] gives
-``g`` in ``[0, gain * t_e/dt]``). The *full scale* is ``saturation`` when given,
-else ``t_e/dt`` (the value of a white scene at unit gain: a camera with
-``gain > 1`` saturates on scenes brighter than ``1/gain``).
+``g`` in ``[0, gain * white]``). The *full scale* is ``saturation`` when given,
+else ``white``, the value of a white scene at unit gain: ``t_e/dt``, or with the
+binary mask the most sub-frame starts one exposure holds
+(:func:`rsocl.model.curvature.full_scales`; a camera with ``gain > 1`` saturates
+on scenes brighter than ``1/gain``).
 
 1. ``trigger_jitter`` (s): each trigger offsets ``t_a`` by a normal draw with
    this standard deviation (the offset start is clipped at 0: nothing exists
@@ -50,11 +52,11 @@ def apply_sensor(g, sensor: dict, full_scale: float, pixel_format: str, rng) -> 
     Parameters
     ----------
     g : numpy.ndarray
-        Model values of one frame (float64; ``[0, gain * t_e/dt]`` for a scene in [0, 1]).
+        Model values of one frame (float64; ``[0, gain * white]`` for a scene in [0, 1]).
     sensor : dict
         The parsed ``sensor`` table (every key of :data:`SENSOR_KEYS`; None or 0 where off).
     full_scale : float
-        Model value of full scale (``saturation`` when given, else ``t_e/dt``).
+        Model value of full scale (``saturation`` when given, else ``white``).
     pixel_format : str
         ``"Mono8"``, ``"Mono16"`` or ``"Float32"``.
     rng : numpy.random.Generator

@@ -332,3 +332,15 @@ def test_capture_options_are_named_as_typed(tmp_path, capsys, extra, said):
     assert capsys.readouterr().err == f"rsocl capture: error: {said}\n" and not (tmp_path / "c.h5").exists()
     assert main(["capture", "--rig", str(rig_path), "--out", str(tmp_path)]) == 2
     assert capsys.readouterr().err.startswith("rsocl capture: error: --out must name a file")
+
+
+@pytest.mark.parametrize("mask, white", [("exact", T_E / T_R), ("binary", 6.0)])
+def test_integer_frames_without_a_full_scale_map_the_sensors_top_to_a_white_scene(mask, white):
+    # the paper's Eq. 4 (binary) counts the 6 sub-frame starts of a 5.14-sub-frame exposure
+    from types import SimpleNamespace
+
+    from rsocl.hardware.capture import _register
+
+    rig = Rig.paper_array(2, SHAPE, t_e=T_E, t_r=T_R, mask=mask)
+    frame = SimpleNamespace(image=np.full(SHAPE, 4095, np.uint16), bit_depth=12, meta={"registered": True})
+    assert _register(RigFile.from_rig(rig), rig, 1, frame) == pytest.approx(np.full(SHAPE, white))

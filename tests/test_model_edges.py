@@ -190,3 +190,15 @@ def test_simulate_refuses_a_truth_beyond_the_dtype(has_fp64):
         rsocl.simulate(truth, rig, dtype="float32")
     if has_fp64:
         assert np.isfinite(rsocl.simulate(truth, rig, dtype="float64")).all()
+
+
+def test_simulate_refuses_the_settings_of_another_noise_model_and_a_too_bright_poisson_mean():
+    rig = rsocl.Rig.paper_array(2, shape=(4, 4), t_e=180e-6, t_r=T_R)
+    truth = np.ones((rig.T,) + rig.shape)
+    with pytest.raises(ValueError, match=r"sigma applies to noise='gaussian' only, got sigma = 0.5 with noise = 'n"):
+        rsocl.simulate(truth, rig, sigma=0.5)
+    with pytest.raises(ValueError, match=r"photons applies to noise='poisson' only"):
+        rsocl.simulate(truth, rig, noise="gaussian", sigma=0.1, photons=10)
+    with pytest.raises(ValueError, match=r"photons must be at most 5e\+16 for this scene.*20x full scale"):
+        rsocl.simulate(20 * truth, rig, noise="poisson", photons=1e17)
+    assert rsocl.simulate(truth, rig, sigma=0.0).shape == (2, 4, 4)  # sigma 0 is no setting

@@ -223,3 +223,34 @@ def test_fail_after_disconnects():
         with pytest.raises(CameraDisconnected):
             cam.trigger()
     assert not cam._open
+
+
+def test_a_camera_slower_than_its_rigs_dt_renders_its_own_windows():
+    # a rig of cameras at t_r = 35 and 40 µs has dt = 35 µs: the slower camera's frames use that dt too
+    slow = Camera(90.0, t_e=T_E, t_r=40e-6)
+    rig = Rig([Camera(0.0, t_e=T_E, t_r=T_R), slow], SHAPE)
+    (frame,) = _frames(_config(t_r=40e-6, dt=rig.dt, scene_frames=rig.T))
+    truth = builtin_scene(SHAPE, rig.T, dtype=np.float64, seed=0)
+    np.testing.assert_allclose(frame.image, reference.forward(rig, truth)[1], rtol=1e-5, atol=1e-5)
+
+
+def test_full_scale_of_the_binary_mask_is_a_white_scenes_value():
+    # t_e / dt = 5.14 sub-frames, and the paper's Eq. 4 counts the 6 sub-frame starts an exposure holds
+    from rsocl.model.curvature import full_scales
+
+    rig = Rig([Camera(90.0, t_e=T_E, t_r=T_R)], SHAPE, mask="binary")
+    white = np.ones((rig.T,) + SHAPE)
+    cfg = _config(mask="binary", scene=white, sensor={"bit_depth": 12}, pixel_format="Mono16")
+    (frame,) = _frames(cfg)
+    assert frame.meta["full_scale"] == full_scales(rig)[0] == 6.0
+    assert frame.image.max() == 4095  # white is full scale, not clipped below it
+
+
+def test_sensor_and_dtype_keys_beyond_their_ranges_are_refused_when_the_camera_is_made():
+    with pytest.raises(ValueError, match=r"sensor\['shot_noise_photons'\] must be in \(0, 1e\+18\]"):
+        SimulatedCamera(_config(sensor={"shot_noise_photons": 1e20}), name="sim")
+    with pytest.raises(ValueError, match=r"sensor\['shot_noise_photons'\] must be at most 1.25e\+17 here"):
+        SimulatedCamera(_config(gain=8.0, sensor={"shot_noise_photons": 1e18, "saturation": T_E / T_R}))
+    for dtype in ("float16", "int32", 5):
+        with pytest.raises(ValueError, match=r"sim: config\['dtype'\] must be one of \['float32', 'float64'\]"):
+            SimulatedCamera(_config(dtype=dtype), name="sim")

@@ -55,7 +55,7 @@ class Rig:
         ``(m, n)``: rows and columns of the common reference ROI, pixels.
     dt : float or None
         Sub-frame duration, seconds. Defaults to the smallest ``t_r``; must
-        not be smaller than any camera's ``t_r``.
+        not be smaller than it.
     mask : {"exact", "binary"}
         Shutter weights: exact overlap fraction, or the paper's Eq. 4.
 
@@ -76,6 +76,9 @@ class Rig:
     >>> round(rig.effective_fps(67))                        # Hz, cameras at 67 fps
     3685
     """
+
+    #: Whether ``dt`` may be below every camera's ``t_r``: set by a subclass that models cameras of a larger rig.
+    _part_of_larger = False
 
     def __init__(
         self, cameras: Camera | Sequence[Camera], shape: tuple[int, int], dt: float | None = None, mask: str = "exact"
@@ -98,7 +101,7 @@ class Rig:
         if dt is None:
             dt = t_r_min
         dt = check.positive("dt", dt, "seconds")
-        if dt < t_r_min * (1 - SNAP):
+        if dt < t_r_min * (1 - SNAP) and not self._part_of_larger:
             raise ValueError(f"dt must be >= t_r = {t_r_min!r} s (the smallest row time), got {dt!r}")
         self.dt = dt
         self.mask = check.choice("mask", mask, {"exact", "binary"})

@@ -37,6 +37,23 @@ def check_photons(name: str, photons) -> float:
     return photons
 
 
+def _noise_settings(noise: str, sigma, photons, bit_depth):
+    """``(sigma, photons, bit_depth)`` of :func:`simulate`, checked before any work: each in its range, the
+    settings of another noise model than ``noise`` refused (``sigma`` 0 counts as none)."""
+    if noise != "gaussian" and not (isinstance(sigma, numbers.Number) and sigma == 0):
+        raise ValueError(f"sigma applies to noise='gaussian' only, got sigma = {sigma!r} with noise = {noise!r}")
+    if noise != "poisson" and photons is not None:
+        raise ValueError(f"photons applies to noise='poisson' only, got photons = {photons!r} with noise = {noise!r}")
+    if noise == "gaussian":
+        sigma = check.non_negative("sigma", sigma, "(fraction of full scale)")
+    if noise == "poisson":
+        if photons is None:
+            raise ValueError("photons (photo-electrons at full scale, > 0) is required for noise='poisson'")
+        photons = check_photons("photons", photons)
+    bits = None if bit_depth is None else check.positive_int("bit_depth", bit_depth, maximum=32)
+    return sigma, photons, bits
+
+
 def check_seed(name: str, seed):
     """``seed`` of the noise generator: an integer ``>= 0``, or None (fresh entropy); ValueError naming ``name``."""
     if seed is None:
@@ -98,9 +115,10 @@ def simulate(
         fraction of the full scale); ``poisson`` draws shot noise with ``photons``
         photo-electrons at full scale.
     sigma : float
-        Gaussian standard deviation, fraction of full scale (>= 0).
-    photons : float
-        Photo-electrons at full scale for Poisson noise, ``0 < photons <=`` :data:`MAX_PHOTONS`.
+        Gaussian standard deviation, fraction of full scale (>= 0); with another ``noise``, 0 only.
+    photons : float or None
+        Photo-electrons at full scale for Poisson noise, ``0 < photons <=`` :data:`MAX_PHOTONS` (and the
+        brightest snapshot's mean within it); with another ``noise``, None only.
     bit_depth : int or None
         Quantise to ``2**bit_depth`` levels over ``[0, full_scale]`` (1..32), with saturation.
     seed : int or None
@@ -121,8 +139,9 @@ def simulate(
     ------
     ValueError
         If ``truth`` is not ``(T, m, n)`` and finite or holds values beyond ``dtype``'s largest, a noise
-        parameter is out of range (the message names it), ``noise="poisson"`` lacks ``photons`` or sees a
-        negative scene, or no window of the rig gives any sub-frame a weight (:func:`full_scale`).
+        parameter is out of range or belongs to another noise model (the message names it),
+        ``noise="poisson"`` lacks ``photons`` or sees a negative scene, or no window of the rig gives any
+        sub-frame a weight (:func:`full_scale`).
 
     Examples
     --------
@@ -140,6 +159,7 @@ def simulate(
     if truth.shape != expected:
         raise ValueError(f"truth must have shape (T, m, n) = {expected} for this rig, got {truth.shape}")
     noise = check.choice("noise", noise, {"none", "gaussian", "poisson"})
+    sigma, photons, bits = _noise_settings(noise, sigma, photons, bit_depth)
     seed = check_seed("seed", seed)
     scale = full_scale(rig)
     if dtype is None:
@@ -148,17 +168,18 @@ def simulate(
     g = RollingShutterOperator(rig, device=device, dtype=dtype).forward(truth).astype(np.float64)
     rng = np.random.default_rng(seed)
     if noise == "gaussian":
-        sigma = check.non_negative("sigma", sigma, "(fraction of full scale)")
         g = g + rng.normal(0.0, sigma * scale, g.shape)
     elif noise == "poisson":
-        if photons is None:
-            raise ValueError("photons (photo-electrons at full scale, > 0) is required for noise='poisson'")
-        photons = check_photons("photons", photons)
         if np.any(g < 0):
             raise ValueError("poisson noise needs a non-negative scene")
+        peak = float(g.max()) / scale
+        if peak * photons > MAX_PHOTONS:
+            raise ValueError(
+                f"photons must be at most {MAX_PHOTONS / peak:.3g} for this scene, whose brightest snapshot is "
+                f"{peak:.3g}x full scale (the Poisson sampler's largest mean is {MAX_PHOTONS:g}), got {photons!r}"
+            )
         g = rng.poisson(g * (photons / scale)) * (scale / photons)
-    if bit_depth is not None:
-        bits = check.positive_int("bit_depth", bit_depth, maximum=32)
+    if bits is not None:
         levels = 2**bits - 1
         g = np.round(np.clip(g, 0.0, scale) / scale * levels) * (scale / levels)
     return g
