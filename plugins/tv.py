@@ -362,7 +362,7 @@ class TV(Regularizer):
         one = self.one_launch_on(dev)
         prog = self._program(x, "tv.cl")
         grids = self.__dict__.setdefault("_grids", {})
-        key = (x.shape, x.queue.int_ptr, dev.max_work_group_size)
+        key = (x.shape, x.dtype.str, x.queue.int_ptr, dev.max_work_group_size)  # the grid fits prog of this dtype
         if key not in grids:
             grids.clear()
             grids[key] = launches(prog, dev, (x.shape[0] if x.ndim == 4 else 1) * x.shape[-3], *x.shape[-2:])

@@ -25,6 +25,7 @@ import numpy as np
 
 from rsocl.device.context import device_for_queue
 from rsocl.device.launch import voxel_grid
+from rsocl.device.pool import same_memory
 from rsocl.solver.regularizer import Option, Regularizer
 from rsocl_plugins.wavelet_filters import MODES, WAVELETS, Plan, axis_levels, filters
 from rsocl_plugins.wavelet_passes import analysis_levels, approximation_box, copy_frames, synthesis_levels
@@ -51,6 +52,8 @@ class Wavelet(Regularizer):
     forward and inverse transforms on device arrays, with the coefficients of
     each block in the in-place (Mallat) layout of ``pywt.coeffs_to_array(
     pywt.wavedecn(block, wavelet, mode="periodization", level=L, axes=axes), axes=axes)``.
+    The ``out`` of :meth:`denoise` and :meth:`transform` must be another buffer than ``x``: their analysis
+    passes read ``x`` while they write.
     """
 
     name = "wavelet"
@@ -181,8 +184,10 @@ class Wavelet(Regularizer):
 
     def transform(self, x, out=None):
         """Forward transform of the device array ``x`` (T, m, n): the coefficients of each
-        block of :meth:`plan` in Mallat layout (a copy of ``x`` when nothing is transformed)."""
+        block of :meth:`plan` in Mallat layout (a copy of ``x`` when nothing is transformed). ``out``, when
+        given, must be another buffer than ``x`` (ValueError)."""
         out = self._check(x, out)
+        self._not_x(x, out)
         self._analyse(x, out.data, self._workspace(x).data)
         return out
 
@@ -202,9 +207,14 @@ class Wavelet(Regularizer):
         )
         return out
 
+    def _not_x(self, x, out):
+        if same_memory(out, x):
+            raise ValueError(f"{self.name}: out must be another buffer than x (the analysis reads x as it writes)")
+
     def _denoise(self, x, weight, out):
         import pyopencl as cl
 
+        self._not_x(x, out)
         plan = self.plan(x.shape)
         if not plan.levels:  # nothing can be transformed: all coefficients are approximation
             cl.enqueue_copy(x.queue, out.data, x.data)
