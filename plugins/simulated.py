@@ -100,7 +100,7 @@ class SimulatedCamera(SimulatedConfig, CameraBackend):
     @property
     def full_scale(self) -> float:
         """Model value of full scale: ``saturation``, else a white scene's value at unit gain (``t_e/dt``; with
-        the binary mask, the most sub-frame starts an exposure holds: :func:`rsocl.model.curvature.full_scales`)."""
+        the binary mask, the most sub-frame starts an exposure holds: :func:`rsocl.model.curvature.white_levels`)."""
         sat = self.sensor["saturation"]
         return float(sat) if sat is not None else self.white
 

@@ -84,7 +84,7 @@ class SimulatedConfig:
         return f"{self.name}: config[{key!r}]"
 
     def _parse(self, cfg):
-        from rsocl.model.curvature import full_scales
+        from rsocl.model.curvature import white_levels
         from rsocl.model.simulate import MAX_PHOTONS, check_photons
 
         check.unknown_keys(self.name, cfg, CONFIG_KEYS)
@@ -200,7 +200,7 @@ class SimulatedConfig:
         except ValueError as exc:
             raise ValueError(f"{self.name}: {exc}") from None
         own_T = own.T
-        self.white = float(full_scales(own)[0]) / self.gain  # a white scene's value at unit gain
+        self.white = float(white_levels(own)[0])  # a white scene's value at unit gain
         full = s["saturation"] if s["saturation"] is not None else self.white
         photons = s["shot_noise_photons"]
         if photons is not None and photons * self.gain * self.white / full > MAX_PHOTONS:

@@ -7,7 +7,7 @@ Applied in this order to the model value ``g`` (scene in [0, 1] gives
 ``g`` in ``[0, gain * white]``). The *full scale* is ``saturation`` when given,
 else ``white``, the value of a white scene at unit gain: ``t_e/dt``, or with the
 binary mask the most sub-frame starts one exposure holds
-(:func:`rsocl.model.curvature.full_scales`; a camera with ``gain > 1`` saturates
+(:func:`rsocl.model.curvature.white_levels`; a camera with ``gain > 1`` saturates
 on scenes brighter than ``1/gain``).
 
 1. ``trigger_jitter`` (s): each trigger offsets ``t_a`` by a normal draw with

@@ -535,3 +535,15 @@ def test_keep_copy_names_and_refusals(tmp_path):
     assert len(set(copies)) == 3 and all(c.read_text() == "x" and c.parent == tmp_path for c in copies)
     with pytest.raises(ValueError, match="tag must be"):
         keep_copy(tmp_path / "a.toml", "../x")
+
+
+def test_api_parameters_out_of_range_are_named():
+    frame, H = np.ones((8, 8)), np.eye(3)
+    for order in (2.7, -1, 6, "x", None, True):
+        with pytest.raises(ValueError, match=r"order must be an integer in \[0, 5\]"):
+            cal.warp_to_reference(frame, H, (8, 8), order=order)
+    with pytest.raises(ValueError, match=r"shift must be \(dx, dy\) in pixels, got \(1,\)"):
+        cal.rotation_homography(0.0, (8, 8), shift=(1,))
+    for dark in (-np.inf, np.nan):
+        with pytest.raises(ValueError, match="dark must be finite"):
+            cal.flat_field_gain([frame, frame], dark=dark)

@@ -134,6 +134,10 @@ def test_raw_flat_fields_of_cameras_of_different_bit_depths_are_refused(flat_cap
         (["--flicker", "f.npy", "--flicker-hz", "0"], "--flicker-hz must be > 0 Hz, got 0.0"),
         (["--flicker", "f.npy", "--flicker-hz", "2500", "--tolerance", "-1"], "--tolerance must be >= 0, got -1.0"),
         (["--flat", "f.npy", "--dark", "nan"], "--dark must be finite, got nan"),
+        (
+            ["--frames", "f.npy", "--flicker", "f.npy"],
+            "--flicker needs --flicker-hz (the light's intensity frequency, Hz)",
+        ),
     ],
 )
 def test_calibrate_options_are_checked_as_typed_before_any_frame_is_read(tmp_path, capsys, extra, said):
@@ -157,3 +161,56 @@ def test_calibrate_options_are_checked_as_typed_before_any_frame_is_read(tmp_pat
 def test_the_threshold_hint_names_the_option():
     with pytest.raises(ValueError, match=r"--threshold"):
         cal.detect_markers(np.zeros((16, 16)) + np.eye(16), 4)
+
+
+def test_flat_fields_of_binary_mask_cameras_of_other_exposures_give_their_gains(tmp_path, capsys):
+    # the binary mask's white level is the sub-frame starts an exposure holds (6 and 4 here), not t_e / dt
+    np.save(tmp_path / "flat_scene.npy", np.full((12, 16, 16), 128, np.uint8))
+    scene = (tmp_path / "flat_scene.npy").as_posix()
+    cameras = ""
+    for t_e in ("1.1e-04", "0.7e-04"):
+        cameras += (
+            f'[[camera]]\nbackend = "simulated"\nt_e = {t_e}\nt_r = 2.0e-05\n[camera.config]\nscene = "{scene}"\n'
+        )
+    rig = '[rig]\nshape = [16, 16]\nmask = "binary"\n'
+    (tmp_path / "rig.toml").write_text(rig + cameras, encoding="utf-8")
+    capture_sets(tmp_path / "rig.toml", tmp_path / "flat.h5")
+    assert _calibrate(tmp_path, "--flat", tmp_path / "flat.h5") == 0, capsys.readouterr().err
+    assert load_rigfile(tmp_path / "rig.toml").cameras[1]["gain"] == pytest.approx(1.0, rel=1e-6)
+
+
+def test_an_overlay_in_the_frames_folder_is_refused_before_any_work(tmp_path, capsys):
+    # a picture there would replace a frame, or be read as one by the next run
+    shots = tmp_path / "shots"
+    shots.mkdir()
+    for c, shape in enumerate((SHAPE, SENSOR)):
+        np.save(shots / f"cam{c}.npy", _dots(shape, REF5))
+    _write_rig(tmp_path, "angle = 0.0", "angle = 0.0")
+    before = {p.name: p.read_bytes() for p in shots.iterdir()}
+    refs = ["--markers-ref", ";".join(f"{x:g},{y:g}" for x, y in REF5)]
+    for png in (["--png", shots / "cam0.png"], ["--png", shots / "overlay.png"]):
+        assert _calibrate(tmp_path, "--frames", shots, *refs, *png) == 2
+        err = capsys.readouterr().err
+        assert f"--png {str(png[1])!r} lies in the --frames folder {str(shots)!r}" in err, err
+    assert {p.name: p.read_bytes() for p in shots.iterdir()} == before
+
+
+def test_an_interrupt_says_what_calibrate_wrote_and_kept(mirrored, capsys, monkeypatch):
+    import rsocl.files.rigfile as rigfile
+
+    folder, H, frames = mirrored
+    angle = cal.homography_angle(H, SHAPE)
+    rig = _write_rig(folder, "angle = 0.0", f"angle = {angle:.1f}")
+    before = rig.read_bytes()
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(rigfile, "save_rigfile", interrupted)  # after the overlay, before the rig file
+    assert _calibrate(folder, *frames, "--mirrored", "1") == 130
+    png = folder / "rig-calibration.png"
+    said = f"rsocl calibrate: interrupted: {png} written, {rig} unchanged\n"
+    assert capsys.readouterr().err == said and png.is_file() and rig.read_bytes() == before
+    monkeypatch.setattr(cal, "register_camera", interrupted)  # while measuring
+    assert _calibrate(folder, *frames, "--mirrored", "1") == 130
+    assert capsys.readouterr().err == f"rsocl calibrate: interrupted: nothing written, {rig} unchanged\n"

@@ -56,6 +56,21 @@ def rigfile(tmp_path):
     return RigFile(shape=SHAPE, cameras=cameras, dt=T_R * 1.3, mask="binary")
 
 
+def test_a_row_map_an_earlier_rig_file_names_is_not_replaced_by_another(tmp_path):
+    # rsocl calibrate keeps the earlier rig file (its TOML) beside the new one: its copied row map must stay
+    maps = [np.arange(SHAPE[0] * SHAPE[1], dtype=float).reshape(SHAPE) * f for f in (0.5, 0.25)]
+    files = []
+    for i, row_map in enumerate(maps):
+        cameras = [{"backend": "simulated", "row_map": row_map, "t_e": T_E, "t_r": T_R}]
+        save_rigfile(tmp_path / "rig.toml", RigFile(shape=SHAPE, cameras=cameras))
+        files.append((tmp_path / "rig.toml").read_text())
+        (tmp_path / f"earlier{i}.toml").write_text(files[-1])  # the earlier file, as keeping() keeps it
+    for i, row_map in enumerate(maps):
+        np.testing.assert_array_equal(load_rigfile(tmp_path / f"earlier{i}.toml").rig().row_map(0), row_map)
+    save_rigfile(tmp_path / "rig.toml", RigFile(shape=SHAPE, cameras=[dict(cameras[0], row_map=maps[0])]))
+    assert "rig.camera0.rows.npy" in (tmp_path / "rig.toml").read_text()  # the same map: the same file
+
+
 def test_round_trip(tmp_path, rigfile):
     path = tmp_path / "rig.toml"
     assert save_rigfile(path, rigfile) == path

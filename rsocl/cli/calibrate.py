@@ -25,7 +25,6 @@ The layouts of the frame files (``.npz``, ``.npy``, a folder of images) are in
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 
@@ -279,8 +278,6 @@ def _detected_hint(frame, reference_points, reference, angle, origin, options, c
 def _row_times(args, rigfile, updates):
     from rsocl.hardware.calibration import check_row_time, estimate_row_time
 
-    if args.flicker_hz is None:
-        raise ValueError("--flicker needs --flicker-hz (the light's intensity frequency, Hz)")
     frames, _ = load_frames(args.flicker, "--flicker")
     C = len(rigfile.cameras)
     if len(frames) == 1 and C > 1 and frames[0].ndim == 2:
@@ -343,53 +340,47 @@ def cmd_calibrate(args) -> int:
     """Run ``rsocl calibrate`` with parsed ``args`` (see :func:`add_parser`); returns 0.
 
     Raises ``ValueError`` / ``FileNotFoundError`` with a message naming the
-    option and camera at fault; nothing is written then.
+    option and camera at fault; nothing is written then. An interrupt (Ctrl-C, SIGTERM) ends in one line
+    saying what was written and kept (:func:`rsocl.cli.calibrate_outputs.interrupt_line`).
     """
+    from rsocl.cli.calibrate_outputs import REPLACED, calibration_outputs, interrupt_line
+    from rsocl.cli.outputs import interrupted, kept_note
+    from rsocl.common import validation as check
+    from rsocl.files.atomic import keeping
     from rsocl.files.rigfile import save_rigfile
     from rsocl.hardware.calibration import marker_overlay_png
 
     if args.frames is None and args.flicker is None and args.flat is None:
         raise ValueError("nothing to calibrate: give --frames, --flicker (with --flicker-hz) and/or --flat")
     check_needs(args, args.option_defaults)
-    from rsocl.common import validation as check
-
-    if args.flicker is not None and args.flicker_hz is not None:  # as typed, before any frame is read
+    if args.flicker is not None:  # as typed, before any frame is read
+        if args.flicker_hz is None:
+            raise ValueError("--flicker needs --flicker-hz (the light's intensity frequency, Hz)")
         check.positive("--flicker-hz", args.flicker_hz, "Hz")
     check.non_negative("--tolerance", args.tolerance)
     check.finite("--dark", args.dark)
     if args.threshold is not None:
         check.finite("--threshold", args.threshold)
-    from rsocl.cli.outputs import HDF5_FILES, kept_note, refuse_kinds
-    from rsocl.files.atomic import keeping, output_path
-
-    reads = (("--frames", args.frames), ("--flicker", args.flicker), ("--flat", args.flat))
-    out = output_path(Path(args.out) if args.out else Path(args.rig), "--out", inputs=reads)  # before any work
-    named = [("--out" if args.out else "--rig", out)]  # a rig file (TOML) never replaces a capture or result
-    png = None
-    if args.frames is not None:
-        png = output_path(
-            Path(args.png) if args.png else out.with_name(out.stem + "-calibration.png"),
-            "--png",
-            inputs=reads + (("--rig", args.rig), ("--out", out)),
-        )
-        named.append(("--png", png))
-    if args.png is not None and Path(args.png).suffix.lower() != ".png":
-        raise ValueError(f"--png must name a .png file (the overlay is written as a PNG), got {args.png!r}")
-    refuse_kinds(named, HDF5_FILES)
-    rigfile = load_rig_file(args.rig)
-    updates: list[dict] = [{} for _ in rigfile.cameras]
-    overlay = _register(args, rigfile, updates) if args.frames is not None else None
-    if args.flicker is not None:
-        _row_times(args, rigfile, updates)
-    if args.flat is not None:
-        _gains(args, rigfile, updates)
-    calibrated = _updated(rigfile, updates)
-    written = []
-    if overlay is not None:
-        frames, detected, reprojected, outlines, titles = overlay
-        written.append(marker_overlay_png(png, frames, detected, reprojected, outlines=outlines, titles=titles))
-    with keeping(out, "before-calibration") as kept:  # the rig file it replaces, --rig or another
-        written.insert(0, save_rigfile(out, calibrated))
+    out, png = calibration_outputs(args)  # before any work
+    done: dict = {}
+    with interrupted(lambda: interrupt_line(out, png, done)):
+        rigfile = load_rig_file(args.rig)
+        updates: list[dict] = [{} for _ in rigfile.cameras]
+        overlay = _register(args, rigfile, updates) if args.frames is not None else None
+        if args.flicker is not None:
+            _row_times(args, rigfile, updates)
+        if args.flat is not None:
+            _gains(args, rigfile, updates)
+        calibrated = _updated(rigfile, updates)
+        written = []
+        if overlay is not None:
+            frames, detected, reprojected, outlines, titles = overlay
+            written.append(marker_overlay_png(png, frames, detected, reprojected, outlines=outlines, titles=titles))
+            done["png"] = True
+        with keeping(out, REPLACED) as kept:  # the rig file it replaces, --rig or another
+            done["kept"] = kept
+            written.insert(0, save_rigfile(out, calibrated))
+            done["rig"] = True
     rig = calibrated.rig()
     say(args, f"rig: {rig!r}\nwrote " + ", ".join(str(p) for p in written) + kept_note([kept]))
     return 0

@@ -28,7 +28,8 @@ import numpy as np
 
 __all__ = ["NEEDS", "check_needs", "load_frames", "load_flats", "one_frame", "parse_points", "per_camera"]
 
-_IMAGE_SUFFIXES = (".npy", ".png", ".tif", ".tiff")
+#: The files of a folder that :func:`load_frames` reads as frames.
+IMAGE_SUFFIXES = (".npy", ".png", ".tif", ".tiff")
 
 
 def parse_points(tokens) -> np.ndarray:
@@ -87,9 +88,9 @@ def load_frames(path, what="--frames"):
         raise FileNotFoundError(f"{what}: {str(path)!r} does not exist")
     extras = {}
     if path.is_dir():
-        files = sorted(p for p in path.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES and p.is_file())
+        files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
         if not files:
-            raise ValueError(f"{what}: folder {str(path)!r} holds no {', '.join(_IMAGE_SUFFIXES)} file")
+            raise ValueError(f"{what}: folder {str(path)!r} holds no {', '.join(IMAGE_SUFFIXES)} file")
         frames = [_read_image(p, what) for p in files]
     elif path.suffix.lower() == ".npz":
         with reading(what, path, "an .npz archive"):
@@ -119,7 +120,7 @@ def load_frames(path, what="--frames"):
                     )
                 frames = [array(k) for k in cameras]
             extras = {k: array(k) for k in keys if k != "frames" and not k.startswith("camera")}
-    elif path.suffix.lower() in _IMAGE_SUFFIXES:
+    elif path.suffix.lower() in IMAGE_SUFFIXES:
         array = _read_image(path, what)
         frames = [array] if array.ndim == 2 else list(array)
     else:
@@ -217,8 +218,9 @@ def load_flats(path, rigfile, dark: float):
     -------
     (frames, darks) : (list of ndarray, ndarray of float64)
         Per camera. A capture file's raw frames are converted as the capture converts them
-        (``raw / (2**bit_depth - 1) * full_scale``, model units) and divided by the camera's
-        ``t_e / dt``, so their levels are ``gain * light`` whatever the bit depth and exposure.
+        (``raw / (2**bit_depth - 1) * full_scale``, model units) and divided by the camera's white level
+        (``t_e / dt``; binary mask: :func:`rsocl.model.curvature.white_levels`), so their levels are
+        ``gain * light`` whatever the bit depth and exposure.
         Other frames are taken as they are: they must be in one unit for every camera.
 
     Raises
@@ -241,12 +243,13 @@ def load_flats(path, rigfile, dark: float):
         return frames, np.full(C, dark)
     from rsocl.files.hdf5 import load_capture_rig
     from rsocl.hardware.capture_raw import load_raw
+    from rsocl.model.curvature import white_levels
 
     raw, rig = load_raw(path), load_capture_rig(path)
     frames = per_camera([f for f in raw.frames if f.size], C, "--flat")
     out, darks = [], []
     for c, (frame, metas) in enumerate(zip(frames, raw.frame_meta)):
-        exposure = rig.cameras[c].t_e / rig.dt
+        exposure = white_levels(rig)[c]  # the white scene's level, as the capture converts frames
         full_scale = float(metas[0].get("full_scale") or exposure)
         if frame.dtype.kind in "biu":
             value = frame.astype(np.float64) * (full_scale / (2 ** int(metas[0]["bit_depth"]) - 1))

@@ -44,6 +44,7 @@ TOML has no null: keys whose value is None are left out when writing.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import sys
 from dataclasses import dataclass, field
@@ -258,7 +259,8 @@ def save_rigfile(path, rigfile: RigFile) -> Path:
     ``row_map_file`` names are rewritten relative to the new file's folder; cameras holding a
     ``row_map`` array, or a ``row_map_file`` outside that folder (a rig file reads only its own
     folder and below), get it written next to the file as ``<stem>.camera<i>.rows.npy``
-    (atomically too) and referenced from it.
+    (atomically too) and referenced from it; where that file holds another map, which an earlier rig
+    file may name, the copy is ``<stem>.camera<i>.rows-<hash>.npy`` instead and the earlier file stays.
     Loading the result gives an equal :meth:`RigFile.rig`.
     """
     if not isinstance(rigfile, RigFile):
@@ -281,7 +283,7 @@ def save_rigfile(path, rigfile: RigFile) -> Path:
                 table["row_map_file"] = relative.as_posix()
         if "row_map_file" not in table and cam.get("row_map") is not None:
             # an array, or a file outside the new folder (a rig file reads only its folder and below): a copy beside it
-            name = f"{path.stem}.camera{i}.rows.npy"
+            name = _row_map_name(folder, f"{path.stem}.camera{i}", cam["row_map"])
             arrays[name] = cam["row_map"]
             table["row_map_file"] = name
         table.pop("address", None)
@@ -302,6 +304,20 @@ def save_rigfile(path, rigfile: RigFile) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return path
+
+
+def _row_map_name(folder: Path, stem: str, row_map) -> str:
+    """``<stem>.rows.npy``, unless a file of that name in ``folder`` holds another map (an earlier rig file, a
+    kept one, may name it): then ``<stem>.rows-<12 hex digits of the map's SHA-256>.npy``, which no other map
+    takes."""
+    name, values = f"{stem}.rows.npy", np.asarray(row_map, dtype=np.float64)
+    try:
+        there = np.load(folder / name, allow_pickle=False)
+    except (OSError, ValueError):  # no file there, or none that is a map: nothing an earlier file reads
+        return name
+    if isinstance(there, np.ndarray) and there.shape == values.shape and np.array_equal(there, values):
+        return name
+    return f"{stem}.rows-{hashlib.sha256(np.ascontiguousarray(values).tobytes()).hexdigest()[:12]}.npy"
 
 
 def _is_video_path(scene) -> bool:

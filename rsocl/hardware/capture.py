@@ -45,7 +45,7 @@ must then equal the rig's). Integer frames are converted to model units as
 ``image / (2**bit_depth - 1) * full_scale`` with ``full_scale`` from
 ``frame.meta["full_scale"]`` when the backend reports it, else a white scene's value at unit gain (which
 fills the sensor): ``t_e/dt``, the applied exposure, or with the binary mask the most sub-frame starts one
-exposure holds (:func:`rsocl.model.curvature.full_scales`); float frames are taken as they are.
+exposure holds (:func:`rsocl.model.curvature.white_levels`); float frames are taken as they are.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ from rsocl.files.atomic import fsync_directory, output_path
 from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture
 from rsocl.files.rigfile import RigFile, load_rigfile
 from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, check_partial, publish, readable
-from rsocl.model.curvature import full_scales
+from rsocl.model.curvature import white_levels
 
 __all__ = ["capture_sets", "CaptureFailed"]
 
@@ -103,8 +103,7 @@ def _register(rigfile: RigFile, rig, index: int, frame) -> np.ndarray:
         levels = 2 ** int(frame.bit_depth) - 1
         full_scale = frame.meta.get("full_scale")
         if full_scale is None:  # a white scene at unit gain: the exposure the device applied, in sub-frames
-            own = rig.cameras[index]
-            full_scale = own.t_e / rig.dt if rig.mask != "binary" else full_scales(rig)[index] / own.gain
+            full_scale = white_levels(rig)[index]
         value = image.astype(np.float64) * (float(full_scale) / levels)
     else:
         value = image.astype(np.float64)

@@ -12,7 +12,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["binary_span", "psi_values", "psi_mean", "full_scales", "REFERENCE_PSI", "NO_WEIGHT", "default_scale"]
+__all__ = [
+    "binary_span",
+    "psi_values",
+    "psi_mean",
+    "full_scales",
+    "white_levels",
+    "REFERENCE_PSI",
+    "NO_WEIGHT",
+    "default_scale",
+]
 
 #: The ValueError's message for a rig whose windows give no sub-frame a weight (:func:`default_scale`,
 #: :func:`rsocl.model.simulate.full_scale`).
@@ -68,6 +77,23 @@ def full_scales(rig) -> np.ndarray:
     first, last = binary_span(rig)  # the sub-frame starts of 0 .. T-1 that a window holds
     starts = np.maximum(last - first + 1.0, 0.0).reshape(len(win.gain), -1).max(axis=1)
     return win.gain * starts
+
+
+def white_levels(rig) -> np.ndarray:
+    """Each camera's value of a white (1.0) scene at unit gain, ``(len(rig.cameras),)`` float64: the level a
+    sensor's full scale stands for. ``t_e/dt`` (its exposure in sub-frames); with the ``binary`` mask the most
+    sub-frame starts one of its exposures holds (:func:`full_scales` over its gain, its frames' largest).
+
+    >>> from rsocl import Rig
+    >>> white_levels(Rig.paper_array(1, (4, 4), t_e=180e-6, t_r=35e-6, mask="binary"))
+    array([6.])
+    """
+    white = np.array([camera.t_e / rig.dt for camera in rig.cameras])
+    if rig.mask == "binary":
+        white[:] = 0.0
+        for scale, (c, _) in zip(full_scales(rig), rig.channels):
+            white[c] = max(white[c], scale / rig.cameras[c].gain)
+    return white
 
 
 def _reference() -> float:

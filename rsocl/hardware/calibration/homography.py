@@ -11,6 +11,7 @@ frame. Coordinates are as described in :mod:`rsocl.hardware.calibration`.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -140,6 +141,8 @@ def rotation_homography(angle, shape, *, sensor_shape=None, scale=1.0, shift=(0.
     cos, sin = (float(round(v)) if abs(v - round(v)) < 1e-12 else v for v in (math.cos(a), math.sin(a)))
     to_centre = np.array([[1, 0, -(n - 1) / 2], [0, 1, -(m - 1) / 2], [0, 0, 1]], dtype=np.float64)
     rotate = np.array([[scale * cos, -scale * sin, 0], [scale * sin, scale * cos, 0], [0, 0, 1]], dtype=np.float64)
+    if np.ndim(shift) != 1 or len(shift) != 2:
+        raise ValueError(f"shift must be (dx, dy) in pixels, got {shift!r}")
     dx, dy = (check.finite("shift[0]", shift[0]), check.finite("shift[1]", shift[1]))
     to_sensor = np.array([[1, 0, (sn - 1) / 2 + dx], [0, 1, (sm - 1) / 2 + dy], [0, 0, 1]], dtype=np.float64)
     return to_sensor @ rotate @ to_centre
@@ -237,7 +240,7 @@ def warp_to_reference(frame, H, shape, *, frame_origin=(0, 0), order=1, cval=0.0
         camera ROI (``roi = [x, y, width, height]`` in the rig file), since
         ``H`` maps to full-sensor coordinates.
     order : int
-        Spline interpolation order (1: bilinear).
+        Spline interpolation order, an integer in [0, 5] (1: bilinear).
     cval : float
         Value of reference pixels that map outside the sensor.
 
@@ -253,6 +256,8 @@ def warp_to_reference(frame, H, shape, *, frame_origin=(0, 0), order=1, cval=0.0
         raise ValueError(f"frame must be a non-empty (rows, columns) image or a stack of them, got {frame.shape}")
     H = _homography("H", H)
     shape = _shape(shape)
+    if isinstance(order, bool) or not isinstance(order, numbers.Integral) or not 0 <= int(order) <= 5:
+        raise ValueError(f"order must be an integer in [0, 5] (spline order, 1: bilinear), got {order!r}")
     order = int(order)
     cval = check.finite("cval", cval)
     x0, y0 = _origin(frame_origin)

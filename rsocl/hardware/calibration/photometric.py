@@ -57,7 +57,7 @@ def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1) ->
     if not 0 <= trim < 0.5:
         raise ValueError(f"trim must be in [0, 0.5), got {trim!r}")
     darks = (
-        np.broadcast_to(np.asarray(dark, dtype=np.float64), (C,))
+        np.full(C, check.finite("dark", dark))
         if np.ndim(dark) == 0
         else check.finite_array("dark", dark).astype(np.float64)
     )

@@ -162,7 +162,8 @@ def leave_one_out_errors(reference_points, sensor_points):
 def fit_summary(registration) -> str:
     """What the markers say about a :class:`~rsocl.hardware.calibration.CameraRegistration`'s fit.
 
-    Four markers: that they fit exactly and cannot check it. Five or more: the rms reprojection
+    Four markers: that they fit exactly and cannot check it (nor a mirror image, on a target with a
+    mirror symmetry). Five or more: the rms reprojection
     error and the largest leave-one-out error (one misplaced marker raises every marker's, since
     the homography of the others includes it).
     """
@@ -170,7 +171,8 @@ def fit_summary(registration) -> str:
     loo = leave_one_out_errors(registration.reference_points, registration.sensor_points)
     if loo is None:
         return (
-            f"{N} markers fit a homography exactly, so they cannot check it (no rms); 5 or more markers "
+            f"{N} markers fit a homography exactly, so they cannot check it (no rms), nor, on a target as "
+            "symmetric as a rectangle, whether the camera sees it in a mirror (--mirrored); 5 or more markers "
             "give a leave-one-out check"
         )
     unchecked = np.flatnonzero(np.isnan(loo)).tolist()
