@@ -169,7 +169,9 @@ def test_simulate_reconstruct_round_trip(tmp_path, capsys):
         ),
         (
             ["--lam", "0.1", "--reg-opt", "temporal_weight=3", "--blend", "0.5"],
-            "--blend 0.5 moves the result towards the run's start, and this run starts from zeros",
+            "--blend 0.5 moves the result towards the run's start, and this run starts from zeros (--fixed, or "
+            "nothing left to choose from the data): drop --fixed, or a value you gave that the search would "
+            "choose (--lam, --reg-opt), so that the run starts from the interpolation; or leave out --blend\n",
         ),
     ],
 )

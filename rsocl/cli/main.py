@@ -101,6 +101,17 @@ def main(argv=None) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
+#: API words of error messages and what the command line says instead.
+_API_WORDS = (
+    ("(tune=False, or nothing left to choose", "(--fixed, or nothing left to choose"),
+    (
+        "give the start as x0 (an array or 'interp3d'), or leave blend None",
+        "drop --fixed, or a value you gave that the search would choose (--lam, --reg-opt), so that the run "
+        "starts from the interpolation; or leave out --blend",
+    ),
+)
+
+
 def as_typed(message: str, argv) -> str:
     """``message`` with the API parameter it starts with (``lam must be >= 0``, ``tile: ...``,
     ``iterations='auto' applies ...``, ``blend = 0.5 ...``) written as the option the command line ``argv``
@@ -112,6 +123,8 @@ def as_typed(message: str, argv) -> str:
     >>> as_typed("lam must be >= 0, got -1.0", ["reconstruct", "c.h5", "--lam", "-1"])
     '--lam must be >= 0, got -1.0'
     """
+    for api, words in _API_WORDS:  # advice that names API arguments the command line does not have
+        message = message.replace(api, words)
     found = re.match(r"([a-z][a-z0-9_]*)(='auto'| = (?=\S))?(?=[\s:=\[]|(?<= = ))", message)
     if found is None:
         return message
