@@ -27,6 +27,7 @@ Readout time
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 from rsocl.hardware.backend import CameraError
@@ -103,6 +104,17 @@ class AravisSettings:
         offsets = self._has("OffsetX") and self._has("OffsetY")
         if (x or y) and not offsets:
             raise CameraError(f"{self.name}: the device has no OffsetX/OffsetY, the ROI must start at (0, 0)")
+        sizes = [(f, self._get_int(f)) for f in ("Width", "Height")]
+        origin = [(f, self._get_int(f)) for f in ("OffsetX", "OffsetY")] if offsets else []
+        try:
+            self._write_roi(x, y, width, height, offsets)
+        except CameraError:  # the ROI refused: the device back at its earlier one (offsets 0 first: they bound it)
+            with contextlib.suppress(CameraError):
+                for feature, value in [(f, 0) for f, _ in origin] + sizes + origin:
+                    self._set_int(feature, value)
+            raise
+
+    def _write_roi(self, x, y, width, height, offsets):
         if offsets:
             self._set_int("OffsetX", 0)
             self._set_int("OffsetY", 0)
@@ -152,6 +164,14 @@ class AravisSettings:
         selectors = self._enum_values("TriggerSelector") if self._has("TriggerSelector") else []
         if mode != "free" and selectors and "FrameStart" not in selectors:
             raise CameraError(f"{self.name}: the device has no TriggerSelector FrameStart (it has {selectors})")
+        if mode == "software" and not self._has("TriggerSoftware"):
+            raise CameraError(f"{self.name}: the device has no TriggerSoftware command")
+        wanted = {"software": "Software", "line": source}.get(mode)
+        sources = self._enum_values("TriggerSource") if wanted is not None else []
+        if wanted is not None and wanted not in sources:  # before any setting changes
+            raise CameraError(f"{self.name}: TriggerSource cannot be {wanted!r}; the device offers {sources}")
+        if not selectors:  # the one trigger off
+            self._set_enum("TriggerMode", "Off")
         for selector in selectors:  # every trigger off first (AcquisitionStart, FrameBurstStart, ...)
             self._call(
                 f"setting TriggerSelector = {selector}",
@@ -166,8 +186,6 @@ class AravisSettings:
             if "FrameStart" in selectors:
                 self._set_enum("TriggerSelector", "FrameStart")
             return
-        if mode == "software" and not self._has("TriggerSoftware"):
-            raise CameraError(f"{self.name}: the device has no TriggerSoftware command")
         if selectors:
             self._set_enum("TriggerSelector", "FrameStart")
         self._set_enum("TriggerMode", "On")

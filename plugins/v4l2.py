@@ -130,7 +130,7 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         self._exposure = None
         self._trigger_time = None
         self._last_sequence = None
-        self._skipped = 0
+        self._skipped = self._dropped = 0
 
     # ---------------------------------------------------------------- state
     @property
@@ -254,6 +254,10 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
             x, y, w, h = self._soft_roi
             if x + w > width or y + h > height:
                 self._soft_roi, self._roi_kind = None, None
+                raise CameraError(
+                    f"{self.name}: the ROI {[x, y, w, h]} does not fit the {got} frames of {width}x{height}; "
+                    "it is cleared: set the ROI after the pixel format"
+                )
         return self._fmt
 
     def _apply_format(self, name, width=None, height=None):

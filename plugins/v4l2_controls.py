@@ -14,7 +14,9 @@ ROI
     cropped in software. Drivers without it (most UVC webcams) get a software crop: the
     full frame is transferred and ``read`` returns the requested region (no frame-rate
     gain). ``frame.meta["roi"]`` says which (``"hardware"`` / ``"software"`` / ``None``).
-    Changing the ROI or the pixel format needs acquisition stopped.
+    A driver that scales its crop (binning) cannot be cropped in sensor pixels: a CameraError.
+    Changing the ROI or the pixel format needs acquisition stopped; a pixel format whose frames the
+    ROI no longer fits clears it with a CameraError (set the pixel format first).
 """
 
 from __future__ import annotations
@@ -132,7 +134,13 @@ class V4L2Controls:
         else:  # adjusted inwards or scaled: back to the full frame, crop in software
             default = lvd.get_selection(self._dev, capture, lvd.SelectionTarget.CROP_DEFAULT)
             lvd.set_selection(self._dev, capture, lvd.SelectionTarget.CROP, default)
-            self._read_format(self._fmt["name"])
+            full = self._read_format(self._fmt["name"])
+            if (full["width"], full["height"]) != (default.width, default.height):
+                raise CameraError(
+                    f"{self.name}: the driver scales its {default.width}x{default.height} sensor area to "
+                    f"{full['width']}x{full['height']} frames, so a ROI in sensor pixels cannot be cut from them; "
+                    "choose a frame size the driver delivers unscaled, or no ROI"
+                )
             self._software_roi(x + bounds.left - default.left, y + bounds.top - default.top, width, height)
 
     def _software_roi(self, x, y, width, height):

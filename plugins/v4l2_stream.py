@@ -72,7 +72,7 @@ class V4L2Stream:
             self._release_buffers(dev, free=True)
             raise
         self._streaming = True
-        self._last_sequence = None
+        self._last_sequence, self._dropped = None, 0
         self._trigger_time = None
 
     @os_errors
@@ -113,10 +113,13 @@ class V4L2Stream:
         lvd.enqueue_buffer(self._dev, lvd.BufferType.VIDEO_CAPTURE, lvd.Memory.MMAP, 0, index)
 
     def _note_sequence(self, buff):
+        """``(sequence, dropped)`` of a dequeued buffer: the driver's gaps since the last frame returned, the
+        gaps before buffers skipped since (corrupt, early, drained by ``trigger()``) included."""
         seq = int(buff.sequence)
-        dropped = 0 if self._last_sequence is None else max(0, seq - self._last_sequence - 1)
+        gap = 0 if self._last_sequence is None else max(0, seq - self._last_sequence - 1)
         self._last_sequence = seq
-        return seq, dropped
+        self._dropped += gap
+        return seq, self._dropped
 
     @os_errors
     def _read(self, timeout):
@@ -196,7 +199,7 @@ class V4L2Stream:
             "roi": self._roi_kind,
             "device": self.path,
         }
-        self._skipped = 0
+        self._skipped = self._dropped = 0
         return Frame(
             image=image, timestamp=stamp, pixel_format=fmt["name"], bit_depth=PIXEL_FORMATS[fmt["name"]][1], meta=meta
         )

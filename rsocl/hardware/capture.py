@@ -364,12 +364,12 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
         exposure = cam.set_exposure(spec["t_e"])
         exposures.append(exposure)
         settings = {"exposure": exposure}
+        if spec.get("pixel_format"):  # first: the frame size and the ROI's bounds may depend on it
+            cam.set_pixel_format(spec["pixel_format"])
+            settings["pixel_format"] = spec["pixel_format"]
         if spec.get("roi"):
             cam.set_roi(*spec["roi"])
             settings["roi"] = list(spec["roi"])
-        if spec.get("pixel_format"):
-            cam.set_pixel_format(spec["pixel_format"])
-            settings["pixel_format"] = spec["pixel_format"]
         cam.set_trigger("software")
         readout = cam.readout_time
         settings["readout_time"] = readout
