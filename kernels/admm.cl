@@ -264,7 +264,10 @@ inline void project_pixel(__global real *f, __global const real *g, __global con
 #if SATURATED && PROJECTION_EXACT
     if (w) {
 #if GAP_ONE_SIDED
-        if (eta == (real)0)
+        int saturated = 0;                 /* a pixel without one takes the plain step, as in a run without any */
+        for (int k = 0; k < NCH; ++k)
+            saturated |= w[(size_t)k * mn + p] == (real)0 && inverse[((size_t)k * NCH + k) * mn + p] != (real)0;
+        if (eta == (real)0 && saturated)
             gap_one_sided_step(r, w, inverse, first, frac, len, gain, T, L, mn, p, z);
         else
 #endif

@@ -94,3 +94,13 @@ def test_the_device_step_where_switching_samples_cycles(device, dtype):
         )
     tol = 1e-4 if dtype == "float32" else 1e-12
     np.testing.assert_allclose(got.datacube, want, atol=tol * np.abs(want).max())
+
+
+def test_a_set_without_saturated_samples_takes_in_a_batch_the_step_it_takes_alone(clipped, device, dtype):
+    # 0.7 g stays below the level: alone its run has no one-sided step at all, and in a batch beside g its
+    # pixels take the plain step too, to the last bit
+    rig, g, level, x0 = clipped
+    kw = dict(iterations=3, lam=0.05, eta=0.0, tune=False, dtype=dtype, device=device, saturation=level, x0=x0)
+    batch = rsocl.reconstruct(np.stack([g, 0.7 * g]), rig, **kw)
+    for i, one in enumerate((g, 0.7 * g)):
+        np.testing.assert_array_equal(batch.datacube[i], rsocl.reconstruct(one, rig, **kw).datacube)
