@@ -376,3 +376,8 @@ def test_cmd_bench_fails_when_every_reconstruction_point_is_skipped(tmp_path, ca
     captured = capsys.readouterr()
     assert "points in" in captured.out
     assert "rsocl bench: note: C=1: failed (RuntimeError: device lost (C=1))" in captured.err
+
+
+def test_a_point_of_more_iterations_than_a_run_takes_is_refused_when_made():
+    with pytest.raises(ValueError, match=r"iterations must be an integer >= 1 and <= 1000000, got 2000000"):
+        BenchPoint(shape=16, iterations=2_000_000)

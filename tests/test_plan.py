@@ -146,3 +146,33 @@ def test_plan_run_it_command_includes_sets_when_there_are_several(capsys, sets, 
     run_it = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("run it:"))
     assert run_it.startswith("run it: rsocl reconstruct CAPTURE --out rec.zarr --tile 7 5")
     assert run_it.endswith(" --sets") is flag
+
+
+def test_without_a_speed_or_frame_rate_the_rigs_dt_is_kept_and_the_table_says_what_it_costs(capsys):
+    # dt = 50 µs is not a multiple of t_r = 35 µs: "dt kept" keeps it as it is
+    assert (
+        main(["plan", "--shape", "16", "16", "--t-e-us", "180", "--t-r-us", "35", "--dt-us", "50", "--no-measure"]) == 0
+    )
+    out = capsys.readouterr().out
+    assert next(line for line in out.splitlines() if line.startswith("dt ")).split()[1:] == ["50", "µs", "50", "µs"]
+    assert "note: no speed or frame rate given: dt kept" in out
+    assert "device memory, fixed run" in out and "the self-tuned default runs its parameter search first" in out
+
+
+def test_info_says_how_many_kept_sub_frames_between_the_ends_too_few_cameras_see():
+    from rsocl.cli.info import _kept_line
+
+    C = rsocl.Camera
+    late = [C(a, t_e=180e-6, t_r=35e-6, t_a=2e-3 if a >= 180 else 0.0) for a in (0, 90, 180, 270)]
+    rig = rsocl.Rig(late, (16, 16))
+    assert _kept_line(rig) == "78 (sub-frames 0..77, the first and last seen by >= 2 cameras; 36 between them by fewer)"
+    assert _kept_line(rsocl.Rig.paper_array(4, (50, 50), t_e=180e-6, t_r=35e-6)) == (
+        "55 (sub-frames 0..54, each seen by >= 2 cameras)"
+    )
+
+
+def test_info_names_capture_in_its_errors(tmp_path, capsys):
+    (tmp_path / "bad.h5").write_text("x")
+    for path in (tmp_path / "none.h5", tmp_path / "bad.h5"):
+        assert main(["info", "--capture", str(path)]) == 2
+        assert capsys.readouterr().err.startswith("rsocl info: error: --capture: ")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from rsocl.solver.problem import DEFAULTS
+from rsocl.solver.problem import DEFAULTS, MAX_ITERATIONS
 
 __all__ = ["BenchPoint", "BenchResult", "BASELINE", "US", "on_iterations_line"]
 
@@ -89,7 +89,7 @@ class BenchPoint:
         if self.dt_factor < 1 - 1e-9:
             raise ValueError(f"dt_factor must be >= 1 (dt >= t_r), got {self.dt_factor!r}")
         if self.regularizer != BASELINE:
-            check.positive_int("iterations", self.iterations)
+            check.positive_int("iterations", self.iterations, MAX_ITERATIONS)
         if self.tv_iterations is not None:
             check.positive_int("tv_iterations", self.tv_iterations)
         check.positive("t_e", self.t_e, "seconds")

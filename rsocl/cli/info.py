@@ -42,7 +42,7 @@ def cmd_info(args) -> int:
     from rsocl.files.hdf5 import load_capture_rig
 
     fps = check.positive("--camera-fps", args.camera_fps, "Hz")
-    rig = load_capture_rig(args.capture) if args.capture else rig_from(args)
+    rig = load_capture_rig(args.capture, "--capture") if args.capture else rig_from(args)
     m, n = rig.shape
     rows = [
         ("cameras", f"{rig.C} ({rig.n_channels} snapshots)"),
@@ -52,11 +52,7 @@ def cmd_info(args) -> int:
         ("T (sub-frames)", f"{rig.T}"),
         ("N_s = ceil(t_e/t_r)", f"{rig.N_s}"),
         ("t_e/dt (exact rule)", f"{rig.exposure_subframes:.2f}"),
-        (
-            "T_se (trimmed)",
-            f"{rig.T_se} (sub-frames {rig.kept_subframes().start}..{rig.kept_subframes().stop - 1}, "
-            f"each seen by >= {rig.min_cameras} cameras)",
-        ),
+        ("T_se (trimmed)", _kept_line(rig)),
         ("compression ratio", f"{rig.compression_ratio:.2f}x (T_se / snapshots)"),
         (f"effective fps at {fps:g} fps", f"{rig.effective_fps(fps):,.0f}"),
         ("datacube", f"{rig.datacube_bytes(4) / 2**20:.2f} MiB in float32"),
@@ -65,3 +61,19 @@ def cmd_info(args) -> int:
     for key, value in rows:
         print(f"{key:<{width}}  {value}")
     return 0
+
+
+def _kept_line(rig) -> str:
+    """``T_se`` and its sub-frames: the first and last seen by ``min_cameras`` cameras or more, and how many
+    between them fewer see (the trimming keeps them: ``docs/model.md``)."""
+    import numpy as np
+
+    kept = rig.kept_subframes()
+    if kept.stop == kept.start:
+        return f"0 (no sub-frame is seen by >= {rig.min_cameras} cameras)"
+    fewer = int(np.count_nonzero(rig.cameras_per_subframe()[kept] < rig.min_cameras))
+    between = "" if not fewer else f"; {fewer} between them by fewer"
+    ends = "each" if not fewer else "the first and last"
+    return (
+        f"{rig.T_se} (sub-frames {kept.start}..{kept.stop - 1}, {ends} seen by >= {rig.min_cameras} cameras{between})"
+    )

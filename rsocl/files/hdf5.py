@@ -240,13 +240,13 @@ def _set_index(value) -> int:
     return int(value)
 
 
-def load_capture_rig(path) -> Rig:
+def load_capture_rig(path, name: str = "path") -> Rig:
     """The rig of a capture file (as :func:`load_capture` returns it), reading no snapshots.
 
     Raises the errors of :func:`load_capture` for a missing file, another kind of file or a
-    damaged rig description.
+    damaged rig description; they name the parameter ``name`` (a command line's option, say).
     """
-    with open_checked(path, "capture") as h5:
+    with open_checked(path, "capture", name) as h5:
         return read_rig(h5, str(path))
 
 

@@ -67,7 +67,7 @@ def estimate(
 ) -> Estimate:
     """Memory (from the buffer sizes, :func:`rsocl.solver.memory.memory_need` of the configured
     regularizer: a name takes its default options, an instance its own) and, when ``measure`` and
-    it fits, time per iteration (3 timed iterations)."""
+    it fits, time per iteration (3 timed iterations), of a fixed run (``tune=False``: no parameter search)."""
     from rsocl.device.context import get_device
     from rsocl.solver.reconstruct import reconstruct
 
@@ -132,7 +132,7 @@ def plan(
         bound = min(bound, 1.0 / fps)
         notes.append(f"{fps:g} sub-frames/s wanted: dt <= {1e6 / fps:.1f} µs")
     if math.isinf(bound):
-        k = max(1, round(rig.dt / t_r))
+        k = None
         notes.append("no speed or frame rate given: dt kept")
     else:
         k = max(1, math.floor(bound / t_r * (1 + 1e-9)))
@@ -141,7 +141,7 @@ def plan(
                 f"the motion needs dt <= {bound * 1e6:.2f} µs, below t_r = {t_r * 1e6:.2f} µs: "
                 f"dt = t_r, with {t_r / bound:.1f}x the blur asked for"
             )
-    dt = k * t_r
+    dt = rig.dt if k is None else k * t_r
     roi = (0, 0) + rig.shape if roi is None else tuple(int(v) for v in roi)
     proposed = rig.crop(roi, dt=dt)
     kwargs = dict(iterations=iterations, regularizer=regularizer, dtype=dtype, device=device)
@@ -172,7 +172,16 @@ def format_plan(p: Plan) -> str:
             secs,
         ]
 
-    rows = ["ROI", "dt", "T", "sub-frames solved", "T_se", "compression", "device memory", "time"]
+    rows = [
+        "ROI",
+        "dt",
+        "T",
+        "sub-frames solved",
+        "T_se",
+        "compression",
+        "device memory, fixed run",
+        "time, iterations",
+    ]
     a, b = col(p.full), col(p.proposed)
     width = max(len(r) for r in rows)
     wa = max(len(v) for v in a + ["as given"])
@@ -181,6 +190,10 @@ def format_plan(p: Plan) -> str:
     y, x, h, w = p.roi
     lines.append(f"proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): {x} {y} {w} {h}")
     lines += [f"note: {n}" for n in p.notes]
+    lines.append(
+        "note: memory and time are a fixed run's (tune=False, --fixed); the self-tuned default runs its parameter "
+        "search first, which takes more time and can take more memory (rsocl bench measures both)"
+    )
     lines += [
         f"note: the {label} problem does not fit one device: it needs {e.limit}"
         for label, e in (("given", p.full), ("proposed", p.proposed))
