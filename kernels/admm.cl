@@ -55,6 +55,13 @@ __kernel void admm_dual(__global const real *theta, __global real *b, __global r
 }
 
 #if SATURATED && PROJECTION_EXACT
+/* Whether sample k of pixel p enters one-sided: weight 0 (saturated) in a row the blocks hold (B_kk != 0; a
+ * row left out of them has weight 0 too). */
+inline int one_sided_sample(__global const real *w, __global const real *inverse, size_t mn, size_t p, int k)
+{
+    return w[(size_t)k * mn + p] == (real)0 && inverse[((size_t)k * NCH + k) * mn + p] != (real)0;
+}
+
 /* The one-sided exact data step of one pixel p (docs/model.md, saturated pixels): z, where f += Hᵀ z, from
  * the residuals r = g - H v of its NCH samples; w[q] = 0 marks a saturated sample (its g a lower bound).
  * The per-pixel minimiser of the two-sided terms, the one-sided ones and eta |f - v|^2, by an active set
@@ -147,7 +154,7 @@ inline void one_sided_step(const real *r, __global const real *w, __global const
 {
     int sat[NCH], act[NCH];
     for (int k = 0; k < NCH; ++k) {
-        sat[k] = w[(size_t)k * mn + p] == (real)0 && inverse[((size_t)k * NCH + k) * mn + p] != (real)0;
+        sat[k] = one_sided_sample(w, inverse, mn, p, k);
         act[k] = !sat[k] || r[k] > (real)0;
     }
     SEARCH_ACTIVE_SET(one_sided_trial(r, sat, act, inverse, mn, p, z));
@@ -235,7 +242,7 @@ inline void gap_one_sided_step(const real *r, __global const real *w, __global c
     jac_t m[NCH * NCH], zz[NCH], top_r = (jac_t)0, top_m = (jac_t)JAC_TINY;
     for (int k = 0; k < NCH; ++k) {
         keep[k] = inverse[((size_t)k * NCH + k) * mn + p] != (real)0;
-        sat[k] = keep[k] && w[(size_t)k * mn + p] == (real)0;
+        sat[k] = one_sided_sample(w, inverse, mn, p, k);
         act[k] = keep[k] && (!sat[k] || r[k] > (real)0);
         top_r = fmax(top_r, fabs((jac_t)r[k]));
     }
@@ -266,7 +273,7 @@ inline void project_pixel(__global real *f, __global const real *g, __global con
 #if GAP_ONE_SIDED
         int saturated = 0;                 /* a pixel without one takes the plain step, as in a run without any */
         for (int k = 0; k < NCH; ++k)
-            saturated |= w[(size_t)k * mn + p] == (real)0 && inverse[((size_t)k * NCH + k) * mn + p] != (real)0;
+            saturated |= one_sided_sample(w, inverse, mn, p, k);
         if (eta == (real)0 && saturated)
             gap_one_sided_step(r, w, inverse, first, frac, len, gain, T, L, mn, p, z);
         else
