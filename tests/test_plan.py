@@ -27,6 +27,16 @@ def test_plan_picks_the_coarsest_dt_that_resolves_the_motion(device):
     assert p.dt == pytest.approx(35e-6) and any("below t_r" in n for n in p.notes)
 
 
+@pytest.mark.parametrize("speed", [1e-12, 300.0])
+def test_a_still_scene_gets_one_subframe_not_a_dt_beyond_the_exposures(device, speed):
+    rig = rsocl.Rig.paper_array(4, (32, 32), t_e=0.18e-3, t_r=35e-6)
+    p = plan(rig, speed=speed, measure=False)
+    span = float(rig.windows.end.max()) * rig.dt
+    assert p.dt == pytest.approx(37 * 35e-6) and span <= p.dt < span + 35e-6
+    assert p.proposed.rig.T == 1 and any("one sub-frame" in n for n in p.notes)
+    assert plan(rig, speed=1 / 36e-6, measure=False).proposed.rig.T > 1  # 1 px per 36 µs: dt = t_r
+
+
 def test_plan_reports_memory_and_time_of_both_problems(device):
     rig = rsocl.Rig.paper_array(4, (48, 48), t_e=0.18e-3, t_r=35e-6)
     p = plan(rig, roi=(8, 8, 16, 16), iterations=10)
@@ -35,6 +45,27 @@ def test_plan_reports_memory_and_time_of_both_problems(device):
     assert p.full.seconds_per_iteration > 0 and p.proposed.seconds == pytest.approx(
         p.proposed.seconds_per_iteration * 10
     )
+
+
+def test_the_timed_iterations_run_after_the_same_call_once(device, monkeypatch):
+    """The time per iteration is the iterations' own: the timed call runs after an identical one, which
+    builds the programs and lets the runtime compile what it compiles at a kernel's first launches
+    (PoCL: seconds on a cold cache, 50x the iterations at 64x64; a 1-iteration call does not launch all)."""
+    import rsocl.solver.reconstruct as solver
+
+    calls = []
+    run = solver.reconstruct
+
+    def recorded(g, rig, **kwargs):
+        calls.append((g.shape, rig, kwargs))
+        return run(g, rig, **kwargs)
+
+    monkeypatch.setattr(solver, "reconstruct", recorded)
+    rig = rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6)
+    p = plan(rig, iterations=10, device=device)
+    assert len(calls) == 4 and p.full.seconds_per_iteration > 0  # two per problem: as given, proposed
+    for first, timed in (calls[0:2], calls[2:4]):
+        assert first[0] == timed[0] and first[1] is timed[1] and first[2] == timed[2]
 
 
 def test_plan_command(capsys):

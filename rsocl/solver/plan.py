@@ -80,8 +80,8 @@ def estimate(
     per_iteration = None
     if measure and limit is None:
         g = np.zeros((rig.n_channels,) + rig.shape)
-        reconstruct(g, rig, regularizer=regularizer, iterations=1, device=dev, dtype=dtype, tune=False)  # compile
-        result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=dev, dtype=dtype, tune=False)
+        for _ in range(2):  # the first call builds every program the timed one runs (a build takes seconds)
+            result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=dev, dtype=dtype, tune=False)
         per_iteration = result.history["time"][-1] / 3
     return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations, limit is None, limit)
 
@@ -125,17 +125,25 @@ def plan(
         blur_pixels = check.positive("blur_pixels", blur_pixels, "pixels")
         bound = min(bound, blur_pixels / speed)
         notes.append(
-            f"speed {speed:g} px/s with {blur_pixels:g} px per sub-frame: dt <= {blur_pixels / speed * 1e6:.1f} µs"
+            f"speed {speed:g} px/s with {blur_pixels:g} px per sub-frame: dt <= {blur_pixels / speed * 1e6:.6g} µs"
         )
     if fps is not None:
         fps = check.positive("fps", fps, "Hz")
         bound = min(bound, 1.0 / fps)
-        notes.append(f"{fps:g} sub-frames/s wanted: dt <= {1e6 / fps:.1f} µs")
+        notes.append(f"{fps:g} sub-frames/s wanted: dt <= {1e6 / fps:.6g} µs")
     if math.isinf(bound):
         k = None
         notes.append("no speed or frame rate given: dt kept")
     else:
         k = max(1, math.floor(bound / t_r * (1 + 1e-9)))
+        span = float(rig.windows.end.max()) * rig.dt  # the latest exposure end, s
+        longest = max(1, math.ceil(span / t_r * (1 - 1e-9)))
+        if k > longest:
+            notes.append(
+                f"the motion allows dt <= {bound * 1e6:.4g} µs, longer than the exposures' span of "
+                f"{span * 1e6:.4g} µs: dt = {longest} t_r, one sub-frame (a still image)"
+            )
+            k = longest
         if bound < t_r:
             notes.append(
                 f"the motion needs dt <= {bound * 1e6:.2f} µs, below t_r = {t_r * 1e6:.2f} µs: "
