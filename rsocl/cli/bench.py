@@ -60,7 +60,7 @@ def default_point(args):
     """
     from rsocl.bench.point import US, BenchPoint
     from rsocl.bench.run import canonical_device
-    from rsocl.cli.options import check_datacube_memory, check_rig_memory
+    from rsocl.cli.options import check_datacube_memory, check_exposure_us, check_rig_memory
     from rsocl.common import validation as check
     from rsocl.solver.problem import DEFAULTS, MAX_ITERATIONS
 
@@ -84,8 +84,7 @@ def default_point(args):
         check.non_negative("--lam", args.lam)
     if args.eta is not None:
         check.non_negative("--eta", args.eta, "(0 runs GAP)")
-    check.positive("--t-e-us", args.t_e_us, "µs")
-    check.positive("--t-r-us", args.t_r_us, "µs")
+    check_exposure_us(check.positive("--t-e-us", args.t_e_us, "µs"), check.positive("--t-r-us", args.t_r_us, "µs"))
 
     def pick(value, fallback):
         return fallback if value is None else value
@@ -97,8 +96,8 @@ def default_point(args):
         iterations=pick(args.iterations, 100 if quick else DEFAULTS["iterations"]),
         tv_iterations=pick(args.tv_iterations, DEFAULTS["tv_iterations"]),
         device=canonical_device(args.device),
-        lam=pick(args.lam, DEFAULTS["lam"]),
-        eta=pick(args.eta, DEFAULTS["eta"]),
+        lam=args.lam,
+        eta=args.eta,
         t_e=args.t_e_us * US,
         t_r=args.t_r_us * US,
     )
