@@ -60,8 +60,9 @@ def default_point(args):
     """
     from rsocl.bench.point import US, BenchPoint
     from rsocl.bench.run import canonical_device
-    from rsocl.cli.options import check_datacube_memory, check_exposure_us, check_rig_memory
+    from rsocl.cli.options import check_datacube_memory, check_rig_memory
     from rsocl.common import validation as check
+    from rsocl.model.plausible import check_window_us
     from rsocl.solver.problem import DEFAULTS, MAX_ITERATIONS
 
     scene = args.scene
@@ -84,7 +85,7 @@ def default_point(args):
         check.non_negative("--lam", args.lam)
     if args.eta is not None:
         check.non_negative("--eta", args.eta, "(0 runs GAP)")
-    check_exposure_us(check.positive("--t-e-us", args.t_e_us, "µs"), check.positive("--t-r-us", args.t_r_us, "µs"))
+    check_window_us(check.positive("--t-e-us", args.t_e_us, "µs"), check.positive("--t-r-us", args.t_r_us, "µs"))
 
     def pick(value, fallback):
         return fallback if value is None else value

@@ -4,18 +4,16 @@ print about a result: :mod:`rsocl.cli.result_lines`)."""
 from __future__ import annotations
 
 import argparse
-import math
 import re
 
 from rsocl.common.memory import check_host_memory, host_memory_bytes
-from rsocl.model.plausible import RIG_BYTES_PER_PIXEL, check_rig_memory
+from rsocl.model.plausible import RIG_BYTES_PER_PIXEL, check_rig_memory, check_window_us
 
 __all__ = [
     "US",
     "RIG_BYTES_PER_PIXEL",
     "add_rig_args",
     "rig_from",
-    "check_exposure_us",
     "refuse_rig_args",
     "host_memory_bytes",
     "check_host_memory",
@@ -99,18 +97,6 @@ def refuse_rig_args(args, option: str, why: str) -> None:
         )
 
 
-def check_exposure_us(t_e: float, dt: float) -> None:
-    """Refuse ``--t-e-us t_e`` spanning more sub-frames of ``dt`` µs than one exposure may
-    (:data:`~rsocl.model.plausible.MAX_WINDOW`): a ValueError naming the option, in the µs it was given in."""
-    from rsocl.model.plausible import MAX_WINDOW
-
-    if t_e / dt > MAX_WINDOW:
-        raise ValueError(
-            f"--t-e-us {t_e:g} µs is {math.ceil(t_e / dt):,} sub-frames of {dt:g} µs, more than the "
-            f"{MAX_WINDOW:,} one exposure may span; give the exposure in µs (or a longer --dt-us)"
-        )
-
-
 def rig_from(args):
     """The :class:`~rsocl.model.rig.Rig` of the arguments :func:`add_rig_args` added.
 
@@ -131,7 +117,7 @@ def rig_from(args):
             raise ValueError(
                 f"--dt-us must be >= --t-r-us = {t_r:g} µs (a sub-frame lasts at least one row time), got {dt:g}"
             )
-    check_exposure_us(t_e, dt)
+    check_window_us(t_e, dt)
     m, n = check.grid_shape("--shape", args.shape)
     cameras = check.positive_int("--cameras", args.cameras, maximum=8)
     check_rig_memory(cameras, (m, n), f"--shape {m} {n}")

@@ -11,6 +11,7 @@ camera and pixel) exceed the host memory is refused before they are allocated
 
 from __future__ import annotations
 
+import math
 import warnings
 
 from rsocl.common.memory import check_host_memory
@@ -19,6 +20,7 @@ __all__ = [
     "T_E_PLAUSIBLE",
     "T_R_PLAUSIBLE",
     "MAX_WINDOW",
+    "check_window_us",
     "RIG_BYTES_PER_PIXEL",
     "warn_unlikely_times",
     "check_window",
@@ -74,6 +76,16 @@ def check_window(name: str, t_e: float, dt: float) -> None:
             f"{name} = {t_e:g} s is {span:,.0f} sub-frames of dt = {dt:g} s, more than the "
             f"{MAX_WINDOW:,} one exposure may span (rsocl.model.plausible.MAX_WINDOW); times are in "
             f"seconds: {hint}"
+        )
+
+
+def check_window_us(t_e: float, dt: float) -> None:
+    """Refuse ``--t-e-us t_e`` spanning more sub-frames of ``dt`` µs than one exposure may (:data:`MAX_WINDOW`):
+    a ValueError naming the option, in the µs the command line gives."""
+    if t_e / dt > MAX_WINDOW:
+        raise ValueError(
+            f"--t-e-us {t_e:g} µs is {math.ceil(t_e / dt):,} sub-frames of {dt:g} µs, more than the "
+            f"{MAX_WINDOW:,} one exposure may span; give the exposure in µs (or a longer --dt-us)"
         )
 
 
