@@ -138,10 +138,18 @@ def test_row_map_of_quarter_turn_is_angle_90():
 
 
 @pytest.mark.parametrize("angle", [0, 90, 180, 270, 45, 135, 225, 315, 30])
-def test_row_map_of_rotation_matches_camera_angle(angle):
+def test_row_map_of_rotation_is_the_angles_plus_the_sensor_row_of_the_roi(angle):
+    """docs/model.md: r is the sensor row of the mapped point, so the ROI's first row read is read
+    that many rows after the trigger: the angle's row map (first row 0) plus that row."""
     H = cal.rotation_homography(angle, SHAPE, sensor_shape=SENSOR, shift=(2.0, 5.0))
+    rows = cal.row_map_from_homography(H, SHAPE)
+    y, x = np.mgrid[0 : SHAPE[0], 0 : SHAPE[1]]
+    first = cal.project_points(H, np.column_stack([x.ravel(), y.ravel()]))[:, 1].min()
+    assert 5 < first < SENSOR[0] / 2
+    np.testing.assert_allclose(rows, Camera(angle, t_e=1e-4, t_r=1e-5).rows(SHAPE) + first, atol=1e-9)
+    # a sensor roi whose top row is that row: the camera reads it first
     np.testing.assert_allclose(
-        cal.row_map_from_homography(H, SHAPE), Camera(angle, t_e=1e-4, t_r=1e-5).rows(SHAPE), atol=1e-9
+        cal.row_map_from_homography(H, SHAPE, first_row=first), Camera(angle, t_e=1e-4, t_r=1e-5).rows(SHAPE), atol=1e-9
     )
 
 
@@ -150,8 +158,8 @@ def test_row_map_with_perspective_is_the_sensor_row():
     rows = cal.row_map_from_homography(H, SHAPE)
     y, x = np.mgrid[0 : SHAPE[0], 0 : SHAPE[1]]
     mapped = cal.project_points(H, np.column_stack([x.ravel(), y.ravel()]))[:, 1].reshape(SHAPE)
-    np.testing.assert_allclose(rows, mapped - mapped.min(), atol=1e-9)
-    assert rows.min() == 0.0
+    np.testing.assert_allclose(rows, mapped, atol=1e-9)
+    assert rows.min() > 0
     camera = Camera(t_e=2e-4, t_r=26e-6, row_map=rows)  # accepted as a calibrated camera
     np.testing.assert_array_equal(camera.rows(SHAPE), rows)
     horizon = np.array([[1, 0, 0], [0, 1, 0], [-1 / 30, 0, 1.0]])  # w = 0 at x = 30, inside the ROI
@@ -380,7 +388,8 @@ def test_calibrate_writes_homographies_row_times_gains_and_png(calibration_files
         assert cal.homography_difference(calibrated.homography(c), H, SHAPE) < 0.5
         assert calibrated.cameras[c]["t_r"] == pytest.approx(t_r[c], rel=0.01)
         assert calibrated.cameras[c]["gain"] == pytest.approx(gains[c], rel=0.01)
-        np.testing.assert_allclose(rig.row_map(c), cal.row_map_from_homography(H, SHAPE), atol=0.5)
+        first_row = 4 if c == 1 else 0  # camera 1 reads from the top row of its roi, sensor row 4
+        np.testing.assert_allclose(rig.row_map(c), cal.row_map_from_homography(H, SHAPE, first_row), atol=0.5)
     assert calibrated.cameras[1]["roi"] == [6, 4, SENSOR[1], SENSOR[0]]
     assert rig.dt == pytest.approx(min(cam["t_r"] for cam in calibrated.cameras))  # dt followed t_r
     assert iio.imread(folder / "calibration.png").ndim == 3

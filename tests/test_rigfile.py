@@ -102,14 +102,25 @@ def test_round_trip(tmp_path, rigfile):
 
 
 @pytest.mark.parametrize("angle", [0.0, 90.0, 180.0, 270.0, 45.0, 135.0, 30.0])
-def test_homography_row_map_matches_the_angle(angle):
+def test_homography_row_map_is_the_angles_from_the_first_sensor_row_read(angle):
     expected = Camera(angle, t_e=T_E, t_r=T_R).rows(SHAPE)
-    got = row_map_from_homography(_rotation(angle), SHAPE)
-    np.testing.assert_array_equal(row_map_from_homography(-2.0 * _rotation(angle), SHAPE), got)  # same homography
-    if angle % 90 == 0:
-        np.testing.assert_array_equal(got, expected)
-    else:
-        np.testing.assert_allclose(got, expected, atol=1e-12)
+    y, x = np.mgrid[0 : SHAPE[0], 0 : SHAPE[1]]
+    a = math.radians(angle)
+    sensor_rows = math.sin(a) * x + math.cos(a) * y + 100.0  # rows of _rotation(angle, offset=(3, 100))
+    first = float(sensor_rows.min())
+    got = row_map_from_homography(_rotation(angle, offset=(3.0, 100.0)), SHAPE)
+    np.testing.assert_allclose(got, sensor_rows, atol=1e-12)  # docs/model.md: the sensor row
+    from_first = row_map_from_homography(_rotation(angle, offset=(3.0, 100.0)), SHAPE, first_row=first)
+    assert_same = np.testing.assert_array_equal if angle % 90 == 0 else np.testing.assert_allclose
+    assert_same(from_first, expected)
+    np.testing.assert_array_equal(row_map_from_homography(-2.0 * _rotation(angle, offset=(3.0, 100.0)), SHAPE), got)
+
+
+def test_pixels_a_homography_maps_above_the_first_row_read_get_its_time():
+    """Not read by the camera (capture registers them as 0), they take row 0; the rest keep theirs."""
+    got = row_map_from_homography(_rotation(0.0, offset=(0.0, 40.0)), SHAPE, first_row=43)
+    y = np.arange(SHAPE[0], dtype=float)[:, None] + np.zeros(SHAPE)
+    np.testing.assert_array_equal(got, np.maximum(y - 3, 0))
 
 
 def test_identity_and_rotation_homography_in_a_rig_file(tmp_path):

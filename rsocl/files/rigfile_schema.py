@@ -166,11 +166,7 @@ def check_camera(i, cam, shape, base_dir):
         except (TypeError, ValueError):
             raise ValueError(f"{_where(i, 'homography')} must be a 3x3 list of numbers, got {H!r}") from None
         _check_invertible(i, array)
-        try:
-            row_map_from_homography(array, shape)
-        except ValueError as exc:
-            raise ValueError(f"{_where(i, 'homography')}: {exc}") from None
-        out["homography"] = array.tolist()
+        out["homography"] = array.tolist()  # its row map is checked with the roi, below
     elif "row_map_file" in geometry:
         name = cam["row_map_file"]
         if not isinstance(name, (str, os.PathLike)):
@@ -205,6 +201,11 @@ def check_camera(i, cam, shape, base_dir):
         if not isinstance(cam["pixel_format"], str):
             raise ValueError(f"{_where(i, 'pixel_format')} must be a string, got {cam['pixel_format']!r}")
         out["pixel_format"] = cam["pixel_format"]
+    if out.get("homography") is not None:
+        try:
+            homography_row_map(out, shape)
+        except ValueError as exc:
+            raise ValueError(f"{_where(i, 'homography')}: {exc}") from None
     try:
         to_camera(out)
     except ValueError as exc:
@@ -288,11 +289,18 @@ def _load_row_map(i, path, shape):
     return _check_row_map(i, "row_map_file", array, shape)
 
 
+def homography_row_map(cam, shape) -> np.ndarray:
+    """The row map of a normalised camera dict's ``homography`` on a grid of ``shape``: the sensor row of each
+    reference pixel less the first row the camera reads, the top row of its ``roi`` (0 without one)."""
+    first_row = cam["roi"][1] if cam.get("roi") is not None else 0
+    return row_map_from_homography(cam["homography"], shape, first_row)
+
+
 def to_camera(cam, shape=None) -> Camera:
     """The :class:`~rsocl.model.rig.Camera` of a normalised camera dict."""
     row_map = cam.get("row_map")
     if cam.get("homography") is not None and shape is not None:
-        row_map = row_map_from_homography(cam["homography"], shape)
+        row_map = homography_row_map(cam, shape)
     angle = cam.get("angle", 0.0)
     return Camera(
         angle,

@@ -148,7 +148,7 @@ def rotation_homography(angle, shape, *, sensor_shape=None, scale=1.0, shift=(0.
     return to_sensor @ rotate @ to_centre
 
 
-def row_map_from_homography(H, shape) -> np.ndarray:
+def row_map_from_homography(H, shape, first_row: float = 0.0) -> np.ndarray:
     """Row-time map ``r(y, x)`` of a camera from its registration (``docs/model.md``).
 
     Parameters
@@ -157,15 +157,20 @@ def row_map_from_homography(H, shape) -> np.ndarray:
         Homography from reference ``(x, y)`` to the camera's sensor ``(x, y)``.
     shape : (int, int)
         ``(m, n)`` of the reference ROI.
+    first_row : float
+        Sensor row the camera reads first after its trigger, rows (0, or the top row of a
+        sensor ROI it reads; default 0).
 
     Returns
     -------
     ndarray of float64, shape (m, n)
         The sensor row (``Y``, in sensor rows) of each mapped reference pixel
-        centre, minus its minimum over the ROI (first row read is 0); values
+        centre, less ``first_row``: how many rows the camera reads before it (0 for a
+        pixel above ``first_row``, which the camera does not read); values
         within 1e-9 of an integer are snapped to it. Pass it as
         ``Camera(row_map=...)``. For a rotation (:func:`rotation_homography`)
-        it equals ``Camera(angle).rows(shape)``. This is
+        it is ``Camera(angle).rows(shape)`` plus the sensor row of the ROI's first
+        row read. This is
         :func:`rsocl.model.row_map.row_map_from_homography` (one implementation for
         the rig file and calibration); ``H`` is first scaled to
         ``H[2, 2] = 1`` so that ``H`` and ``-H`` give the same map.
@@ -180,7 +185,7 @@ def row_map_from_homography(H, shape) -> np.ndarray:
     shape = _shape(shape)
     if H[2, 2] != 0:
         H = H / H[2, 2]
-    return model_row_map(H, shape)
+    return model_row_map(H, shape, first_row)
 
 
 def reference_outline(H, shape, *, frame_origin=(0, 0), samples=16) -> np.ndarray:
