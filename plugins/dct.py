@@ -59,6 +59,8 @@ class DCT(Regularizer):
     """
 
     name = "dct"
+    #: its transform spans the whole frame (or blocks placed from the frame's corner): not tiled
+    local = False
     #: ``lam`` and ``eta`` when the caller gives none (docs/regularizer_defaults.md)
     recommended = {"lam": 0.3, "eta": 0.2}
     options = {

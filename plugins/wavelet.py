@@ -57,6 +57,8 @@ class Wavelet(Regularizer):
     """
 
     name = "wavelet"
+    #: its transform spans the whole frame (or blocks placed from the frame's corner): not tiled
+    local = False
     options = {
         "wavelet": Option("haar", "", "wavelet: haar, db2 or db4 (PyWavelets names)"),
         "mode": Option("3d", "", "2d: transform y and x of each sub-frame; 3d: also t"),

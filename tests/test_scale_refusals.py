@@ -262,7 +262,7 @@ def _spied(monkeypatch):
         ({"projection": "paper"}, "params.projection"),
         ({"saturation": 1e6}, "params.saturation"),
         ({"regularizer_options": {"temporal_weight": 10.0}}, "params.regularizer_options.temporal_weight"),
-        ({"regularizer": "wavelet"}, "params.regularizer, params.regularizer_options.levels, "),
+        ({"tv_iterations": 5}, "params.regularizer_options.iterations"),
         ({"tune": True}, "params.start"),  # a search would run: zero start in the store, the interpolation here
         ({"tune": True, "quality": "best", "regularizer_options": {"step": 0.5}}, "params.quality, "),
     ],

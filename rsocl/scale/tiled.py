@@ -25,7 +25,7 @@ from rsocl.model.rig import Rig
 from rsocl.scale.inputs import ArraySets, CaptureSets, scan
 from rsocl.scale.run_settings import known_params, tile_settings
 from rsocl.scale.runner import RETRIES, Engine, non_negative_int
-from rsocl.scale.tiles import check_halo, place, tile_grid
+from rsocl.scale.tiles import check_halo, check_local, place, tile_grid
 from rsocl.scale.tuning_tile import tune_tiles
 from rsocl.scale.work import Job, RigPayload
 from rsocl.solver.memory import device_limit
@@ -284,6 +284,7 @@ def reconstruct_tiled(
             "tile one count: give a number"
         )
     grid = tile_grid(rig.shape, tile, check_halo(halo, rig.shape))
+    check_local(request.regularizer, len(grid))
     engine = Engine(scheduler, workers)
     _check_device(device, engine)
     with _before_the_store(out) as checked:  # an interrupt before the store is checked leaves it as it was

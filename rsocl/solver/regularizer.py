@@ -157,6 +157,10 @@ class Regularizer:
         True when the instance has ``denoise_and_update(u, weight, theta, b, f, dual)``: the
         denoiser's output and the ADMM's next dual update in its own launches (see
         :class:`rsocl.solver.admm.ADMM`).
+    local : bool
+        True (default) when a pixel's output depends only on pixels near it in space, so that tiles
+        with halos (:mod:`rsocl.scale`) reproduce a run in one piece; False for a transform over the
+        whole frame (a global DCT, a periodized wavelet), which a tiled run refuses.
 
     Subclasses implement ``_denoise(x, weight, out)``; they may override
     :meth:`workspace_bytes` so the solver can check memory before running.
@@ -167,6 +171,7 @@ class Regularizer:
     dtypes = ("float32", "float64")
     recommended: dict = {}
     batched = False
+    local = True
     tunable: dict = {}
     one_snapshot: dict = {}
     per_set_options: tuple = ()
