@@ -146,4 +146,5 @@ def reconstruct(
         progress=progress,
         quality=quality,
     )
-    return tune_and_run(prepare(request, problem), started)
+    with request.regularizer.in_use:  # an instance another thread runs with: its turn first
+        return tune_and_run(prepare(request, problem), started)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import numbers
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -191,6 +192,13 @@ class Regularizer:
         self.values = {key: opt.default for key, opt in self.options.items()}
         for key, value in options.items():
             self.values[key] = self.options[key].convert(key, value)
+
+    @property
+    def in_use(self) -> threading.RLock:
+        """The lock a reconstruction holds while it runs with this instance, whose device buffers and
+        launch settings are cached on it: threads sharing one instance take turns (correct results);
+        an instance per thread, or a regularizer given by name, runs them side by side."""
+        return self.__dict__.setdefault("_in_use", threading.RLock())
 
     def __getattr__(self, key):
         values = self.__dict__.get("values", {})

@@ -228,8 +228,8 @@ def reconstruct_sets(
             part = slice(start, min(start + batch, count))
             pick = {k: (np.asarray(v)[part] if v is not None and np.ndim(v) == 4 else v) for k, v in cubes.items()}
             problem = check_problem(g[part], rig, x0=pick["x0"], truth=pick["truth"], saturation=saturation)
-            prepared = prepare(request.for_sets(part), problem)
-            results.append(tune_and_run(prepared, started))
+            with request.regularizer.in_use:  # an instance another thread runs with: its turn first
+                results.append(tune_and_run(prepare(request.for_sets(part), problem), started))
             if start == 0 and results[0].params.get("tuning"):
                 # one capture, one setting: the first batch's choice serves the later batches
                 request = request.with_tuning(Tuning.from_params(results[0].params["tuning"]))
