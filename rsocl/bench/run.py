@@ -83,7 +83,7 @@ QUICK: dict[str, list] = {
     "tv_iterations": [2, 5, 10],
     "dt": [1, 2, 4],
     "roi": [0.5, 0.75, 1.0],
-    "regularizer": ["tv"],
+    "regularizer": ["tv", "dct", "wavelet"],
     "tune": [False, True],
 }
 
