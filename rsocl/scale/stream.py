@@ -6,9 +6,11 @@ offset moved to ``t_a + k0*t_d`` and ``window`` frames, so every exposure keeps 
 ``t_a + r*t_r + k*t_d`` and the window's sub-frames are those of the whole capture (time 0 is the
 same). Each window is an
 ordinary (tiled) reconstruction that models only the sub-frames its exposures touch
-(:meth:`rsocl.model.rig.Rig.sampled_range`), so the memory of a window does not grow with the
-length of the capture. Where windows overlap (readout continuous: ``t_d`` close to the
-readout time, so consecutive frames' exposures abut), each sub-frame is taken from the window
+(:meth:`rsocl.model.rig.Rig.sampled_range`), so the device memory of a window does not grow with the
+length of the capture; the host holds the assembled datacube, one window's result on the capture's
+grid while it is placed, and each window's own sub-frames. Where windows overlap (readout
+continuous: ``t_d`` close to the readout time, so consecutive frames' exposures abut), each
+sub-frame is taken from the window
 it lies deepest inside (farthest from that window's first and last modelled sub-frame), where
 both neighbouring frames constrain it.
 """
@@ -72,7 +74,9 @@ class StreamResult:
     """A stream: ``datacube`` ``(T, m, n)`` on the capture's sub-frame grid; ``windows`` ``[(k0, k1)]``;
     ``spans`` the sub-frames each window modelled; ``owner[s]`` the window sub-frame ``s`` comes from
     (where no exposure reaches, the window with the nearest modelled sub-frame, which it holds:
-    :mod:`rsocl.solver.held`); ``results`` each window's :class:`rsocl.scale.TiledResult`."""
+    :mod:`rsocl.solver.held`); ``results`` each window's :class:`rsocl.scale.TiledResult`, whose
+    ``datacube`` holds the sub-frames ``spans[w]`` it modelled (so the results together take about the
+    memory of ``datacube``, not of every window's grid from time 0)."""
 
     datacube: np.ndarray
     rig: Rig
@@ -141,11 +145,13 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
             kwargs["tune"] = result.tuning  # the first window's choice, for every later window
         elif not results:
             kwargs["tune"] = False  # nothing was left to choose
-        results.append(result)
         cube = np.asarray(result.datacube)
         if datacube is None:
             datacube = np.zeros((T,) + rig.shape, dtype=cube.dtype)
         mine = np.nonzero(owner == w)[0]
         datacube[mine] = cube[np.minimum(mine, cube.shape[0] - 1)]  # past the window's T: its last, held
+        result.datacube = cube[spans[w]].copy()  # kept: its own sub-frames, not the capture's up to its end
+        del cube
+        results.append(result)
     assert datacube is not None  # frame_windows gives at least one window
     return StreamResult(datacube, rig, windows, [(s.start, s.stop) for s in spans], owner, results)
