@@ -64,6 +64,14 @@ def test_comparison_gif_estimate_alone_and_small(tmp_path, cubes):
     assert frames.shape == (estimate.shape[0], 3, 4)
 
 
+@pytest.mark.parametrize("side, scale", [(64, 4), (128, 4), (129, 3), (256, 2), (300, 1)])
+def test_the_default_scale_keeps_a_panel_within_512_pixels(tmp_path, side, scale):
+    """At 4 a 256 x 256 capture of 150 sub-frames took 1 GB to encode; panels stay within GIF_PANEL."""
+    estimate = np.random.default_rng(0).random((2, side, side // 2))
+    frames = _gray(iio.imread(comparison_gif(tmp_path / "g.gif", None, estimate), index=None))
+    assert frames.shape[2] == (side // 2) * scale and side * scale <= visual.GIF_PANEL
+
+
 def test_comparison_gif_rejects_bad_input(tmp_path, cubes):
     truth, estimate = cubes
     path = tmp_path / "x.gif"

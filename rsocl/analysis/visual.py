@@ -17,7 +17,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.files.atomic import atomic_path
 
-__all__ = ["comparison_gif", "snapshot_montage", "datacube_montage", "channel_titles"]
+__all__ = ["GIF_PANEL", "comparison_gif", "snapshot_montage", "datacube_montage", "channel_titles"]
 
 #: Gray level (0..255) of the separators between GIF panels.
 _SEPARATOR = 128
@@ -107,7 +107,11 @@ def channel_titles(rig) -> list:
 
 
 # ---------------------------------------------------------------------- GIF
-def comparison_gif(path, truth, estimate, *, fps=10, scale=4) -> Path:
+#: Largest side of a GIF panel the automatic ``scale`` of :func:`comparison_gif` upscales to, pixels.
+GIF_PANEL = 512
+
+
+def comparison_gif(path, truth, estimate, *, fps=10, scale=None) -> Path:
     """Write an animated GIF: ground truth and reconstruction side by side.
 
     Both panels share one display range (the joint minimum and maximum of
@@ -128,8 +132,11 @@ def comparison_gif(path, truth, estimate, *, fps=10, scale=4) -> Path:
     fps : float
         Playback rate, frames per second (> 0; GIF stores delays in 10 ms
         steps, so rates above 100 fps play at most at 100).
-    scale : int
-        Integer upscaling factor (>= 1, <= 64).
+    scale : int or None
+        Integer upscaling factor (>= 1, <= 64); None (default): 4, less for frames whose larger
+        side passes ``GIF_PANEL / 4`` pixels, so that a panel's side stays within
+        :data:`GIF_PANEL` (512) pixels (1 from 257 pixels up): memory about ``T`` times one frame
+        of at most 512 x 1026 pixels (a 256 x 256 capture of 300 sub-frames takes 0.5 GB at 2, 2 GB at 4).
 
     Returns
     -------
@@ -158,10 +165,10 @@ def comparison_gif(path, truth, estimate, *, fps=10, scale=4) -> Path:
                 f"truth and estimate must have the same shape, got truth {truth.shape} and estimate {estimate.shape}"
             )
     fps = check.positive("fps", fps, "frames per second")
-    scale = check.positive_int("scale", scale, maximum=64)
+    T, m, n = estimate.shape
+    scale = max(1, min(4, GIF_PANEL // max(m, n))) if scale is None else check.positive_int("scale", scale, maximum=64)
     low, high = _display_range(truth, estimate)
 
-    T, m, n = estimate.shape
     height, width = m * scale, n * scale
     panels = (
         [("ground truth", truth), ("reconstruction", estimate)] if truth is not None else [("reconstruction", estimate)]
@@ -205,7 +212,7 @@ def comparison_gif(path, truth, estimate, *, fps=10, scale=4) -> Path:
     duration = 1000.0 / fps
     # encoded in memory first: a write that fails (a full disk) then fails once, in the write below, and
     # not again when the encoder is collected with frames still buffered
-    data = iio.imwrite("<bytes>", np.stack(frames), extension=".gif", is_batch=True, duration=duration, loop=0)
+    data = iio.imwrite("<bytes>", frames, extension=".gif", is_batch=True, duration=duration, loop=0)
     with atomic_path(path) as tmp:
         Path(tmp).write_bytes(data)
     return path
