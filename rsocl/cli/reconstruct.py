@@ -114,22 +114,26 @@ def cmd_reconstruct(args) -> int:
 
     if args.batch is not None and args.batch < 1:  # before anything runs, whatever the capture holds
         raise ValueError(f"--batch must be >= 1 (sets per batch), got {args.batch}")
-    check_outputs(args)
-    check_set_outputs(args)
-    code = reconstruct_tiled_if_needed(args)
+    out = Path(args.out)
+    with interrupted(nothing_written(out)):
+        check_outputs(args)
+        check_set_outputs(args)
+    code = reconstruct_tiled_if_needed(args)  # says itself what an interrupt kept
     if code is not None:
         return code
 
-    capture = load_capture(args.capture, set_index=0)  # every set: load_snapshot_sets
+    with interrupted(nothing_written(out)):
+        capture = load_capture(args.capture, set_index=0)  # every set: load_snapshot_sets
+        sets = None if args.first_set_only else load_snapshot_sets(args.capture)
     truth = capture.truth if not args.no_truth else None
-    sets = None if args.first_set_only else load_snapshot_sets(args.capture)
-    out = Path(args.out)
     gif = Path(args.gif) if args.gif else out.with_suffix(".gif")
     if sets is None or sets.shape[0] == 1:
-        with interrupted(nothing_written(out)):
+        with interrupted(nothing_written(out)):  # until the file is renamed into place, the last step of the save
             result = run_reconstruction(args, capture.snapshots, capture.rig, truth)
-        print(quality_line(result, truth))
-        kept = save_result(out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth)
+            print(quality_line(result, truth))
+            kept = save_result(
+                out, result.datacube, capture.rig, params=result.params, history=result.history, truth=truth
+            )
         with written(out, [kept]):
             comparison_gif(gif, truth, result.datacube)
             files = [out, gif, *tuning_plot_files(args, result.params, gif)]
@@ -139,7 +143,7 @@ def cmd_reconstruct(args) -> int:
         batch = _reconstruct_sets(args, sets, capture.rig)
     say(args, f"{sets.shape[0]} sets in batches of {batch.params['batch']}")
     earlier: list = []
-    with interrupted(lambda: _sets_written(out, len(earlier), batch.batch)):
+    with interrupted(lambda: _sets_written(out, len(earlier), batch.batch) + kept_clause(earlier)):
         _write_sets(args, batch, capture.rig, truth, out, earlier)
     with written(f"{set_path(out, 0)} .. {set_path(out, batch.batch - 1)}", earlier):
         comparison_gif(gif, truth, batch.set(0).datacube)

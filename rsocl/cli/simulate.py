@@ -261,7 +261,7 @@ def cmd_simulate(args) -> int:
     A capture from cameras at ``--out`` is refused first; a file there other than a simulated capture (a
     reconstruction, say) is kept as ``<stem>.earlier-<UTC time><suffix>``.
     """
-    from rsocl.cli.outputs import kept_note
+    from rsocl.cli.outputs import interrupted, kept_note, nothing_written
     from rsocl.files.atomic import output_path
     from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture, save_capture
     from rsocl.model.simulate import simulate
@@ -269,7 +269,7 @@ def cmd_simulate(args) -> int:
     check_noise_args(args)
     output_path(args.out, "--out", inputs=(("scene", None if args.scene == "builtin" else args.scene),))
     refuse_camera_capture(args.out, "--out")
-    with _steps(args) as bar:
+    with interrupted(nothing_written(args.out)), _steps(args) as bar:  # --out is replaced by its last step
         _step(bar, "rig")
         rig = multi_frame_rig(args, rig_from(args))
         _step(bar, "scene")
