@@ -852,9 +852,12 @@ def test_an_interrupt_while_writing_sets_says_which_are_written_and_which_are_ol
     capsys.readouterr()
     assert main([*run, "--lam", "0.3"]) == 130
     err = capsys.readouterr().err
+    kept = sorted(tmp_path.glob("rec-set*.earlier-*.h5"))  # sets 0 and 1's earlier files
+    assert len(kept) == 2 and kept[0].name.startswith("rec-set000.earlier-")
     assert err == (
         f"rsocl reconstruct: interrupted: sets 0 to 1 written ({tmp_path / 'rec-set000.h5'} ..); 2 of the files "
-        f"of sets 2 to 3 are an earlier run's ({tmp_path / 'rec-set002.h5'} ..)\n"
+        f"of sets 2 to 3 are an earlier run's ({tmp_path / 'rec-set002.h5'} ..), the 2 earlier files there are "
+        f"kept as <stem>.earlier-<UTC time><suffix>: {kept[0]} ..\n"
     )
 
 

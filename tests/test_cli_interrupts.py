@@ -199,40 +199,6 @@ def test_reconstruct_interrupted_before_its_file_is_in_place_says_nothing_is_wri
     assert out.read_bytes() == before and not list(tmp_path.glob("rec.earlier-*"))
 
 
-def test_sets_interrupted_while_written_name_the_earlier_files_kept(tmp_path, capsys, monkeypatch):
-    import rsocl.cli.outputs as outputs
-
-    cap, out = tmp_path / "sets.h5", tmp_path / "r.h5"
-    assert main(["simulate", "builtin", "--out", str(cap), "--shape", "12", "12", "--quiet"]) == 0
-    from rsocl.files.hdf5 import load_capture
-
-    one = load_capture(cap)
-    with h5py.File(cap, "a") as h5:  # as rsocl capture writes 3 sets, registered
-        h5.create_dataset("snapshot_sets", data=[one.snapshots, one.snapshots * 0.9, one.snapshots * 0.8])
-    argv = ["reconstruct", str(cap), "--out", str(out), "--iterations", "2", "--fixed", "--quiet"]
-    assert main(argv) == 0
-    real, calls = outputs.save_result, []
-
-    def third_interrupted(*args, **kwargs):
-        calls.append(args)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return real(*args, **kwargs)
-
-    import rsocl.cli.reconstruct as reconstruct
-
-    monkeypatch.setattr(reconstruct, "save_result", third_interrupted)
-    capsys.readouterr()
-    assert main(argv) == 130
-    kept = sorted(tmp_path.glob("r-set000.earlier-*.h5"))
-    assert len(kept) == 1 and len(list(tmp_path.glob("r-set*.earlier-*.h5"))) == 2
-    err = capsys.readouterr().err
-    assert err.startswith(f"rsocl reconstruct: interrupted: sets 0 to 1 written ({tmp_path / 'r-set000.h5'} ..); ")
-    assert err.endswith(f", the 2 earlier files there are kept as <stem>.earlier-<UTC time><suffix>: {kept[0]} ..\n"), (
-        err
-    )
-
-
 @pytest.mark.parametrize("step", ["scene_datacube", "save_capture"])
 def test_simulate_interrupted_says_nothing_is_written(tmp_path, capsys, monkeypatch, step):
     import rsocl.cli.simulate as simulate
