@@ -127,11 +127,17 @@ def admm_tv(g, rig, *, iterations, lam, eta, tv_iterations, dtype=np.float64, tr
 
 
 if __name__ == "__main__":
+    import argparse
+
     import rsocl
     from rsocl.model.scenes import builtin_scene
 
-    rig = rsocl.Rig.paper_array(4, (64, 64), 0.18e-3, 35e-6)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--size", type=int, default=64, help="frame side, pixels (default 64)")
+    parser.add_argument("--iterations", type=int, default=30, help="ADMM iterations (default 30)")
+    cli = parser.parse_args()
+    rig = rsocl.Rig.paper_array(4, (cli.size, cli.size), 0.18e-3, 35e-6)
     truth = builtin_scene(rig.shape, rig.T, dtype=np.float64)
     g = forward(shutter_mask(rig), truth)
-    theta, history, sec = admm_tv(g, rig, iterations=30, lam=0.1, eta=0.2, tv_iterations=10, truth=truth)
+    theta, history, sec = admm_tv(g, rig, iterations=cli.iterations, lam=0.1, eta=0.2, tv_iterations=10, truth=truth)
     print(f"{rig}: PSNR {history[-1]:.2f} dB after {len(history)} iterations, {sec * 1e3:.1f} ms/iteration")
