@@ -34,8 +34,8 @@ Every key, its unit and its table, and an example per backend: ``docs/rig-files.
 Only one of ``angle``, ``row_map_file`` and ``homography`` may be given (none
 means ``angle = 0``). A homography maps a reference pixel centre ``(x, y)``
 (column, row; pixel centres at integer coordinates) to full-sensor coordinates
-``(x', y')`` (before the ROI); the camera row of the pixel is ``y'``, shifted so
-that the smallest over the reference ROI is 0 (docs/model.md). Content errors raise
+``(x', y')`` (before the ROI); the camera row of the pixel is ``y'``, less the top row of the
+camera's ``roi`` (the first row it reads; 0 without one) (docs/model.md). Content errors raise
 :class:`ValueError` naming the file, the camera index and the key, e.g.
 ``rig.toml: camera[2].t_e must be > 0 seconds, got -1.0``.
 

@@ -2,8 +2,8 @@
 
 Conventions follow ``docs/model.md``: the exposure of reference pixel ``(y, x)`` in frame ``k``
 starts at ``t_a + r(y, x)*t_r + k*t_d`` seconds and lasts ``t_e`` seconds, where ``r(y, x)`` is
-the camera row (in rows, first row read is 0) that sees it. :class:`~rsocl.model.rig.Rig` puts
-cameras together into an array.
+the camera row that sees it (the rows read after the trigger before it).
+:class:`~rsocl.model.rig.Rig` puts cameras together into an array.
 """
 
 from __future__ import annotations
@@ -106,7 +106,7 @@ class Camera:
         self.row_map = row_map
 
     def rows(self, shape: tuple[int, int]) -> np.ndarray:
-        """Camera row ``r(y, x)`` (rows, float64, first row read is 0) for a ROI of ``shape``."""
+        """Camera row ``r(y, x)`` (rows read after the trigger before the pixel's, float64) for a ROI of ``shape``."""
         m, n = shape
         if self.row_map is not None:
             if self.row_map.shape != (m, n):

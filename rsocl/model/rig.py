@@ -3,7 +3,7 @@
 Conventions follow ``docs/model.md``: sub-frame ``s`` covers ``[s*dt, (s+1)*dt)``;
 the exposure of reference pixel ``(y, x)`` in frame ``k`` of a camera starts at
 ``t_a + r(y, x)*t_r + k*t_d`` seconds and lasts ``t_e`` seconds, where
-``r(y, x)`` is the camera row (in rows, first row read is 0) that sees it.
+``r(y, x)`` is the camera row that sees it (the rows read after the trigger before it).
 
 A *channel* is one snapshot: one frame of one camera. Single-frame rigs have
 one channel per camera; a camera with ``frames=F`` contributes ``F`` channels,
