@@ -1,5 +1,7 @@
 """Numerical soundness at extreme settings: every result is checked, not only computed."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -248,6 +250,33 @@ def test_saturation_that_leaves_nothing_is_refused():
     g[0, 0, :2] = 0.0  # only dark pixels stay below the level
     with pytest.warns(UserWarning, match=r"keeps only snapshot pixels that are 0 \(the brightest is 1\)"):
         rsocl.reconstruct(g, rig, saturation=0.5, iterations=2, tune=False)
+
+
+def test_saturation_that_marks_most_samples_clipped_warns_in_snapshot_units():
+    # a level given in scene units (1.0 for white) on snapshots whose white reads t_e/dt
+    rig = rsocl.Rig.paper_array(2, (8, 8), t_e=1.8e-4, t_r=3.5e-5)
+    truth = rsocl.builtin_scene(rig.shape, rig.T)
+    g = rsocl.simulate(truth, rig)
+    assert (g >= 1.0).mean() > 0.5
+    with pytest.warns(
+        UserWarning, match=r"saturation = 1\.0 marks \d+ % of the snapshot samples as clipped.*white scene reads 5\.14"
+    ):
+        rsocl.reconstruct(g, rig, saturation=1.0, iterations=2, tune=False)
+    level = float(np.percentile(g, 75))  # a quarter clipped: no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rsocl.reconstruct(g, rig, saturation=level, iterations=2, tune=False)
+
+
+def test_simulate_warns_when_bit_depth_saturates_most_samples():
+    rig = rsocl.Rig.paper_array(2, (8, 8), t_e=1.8e-4, t_r=3.5e-5)
+    raw = np.round(rsocl.builtin_scene(rig.shape, rig.T) * 4095.0)  # raw counts, not [0, 1]
+    with pytest.warns(UserWarning, match=r"bit_depth = 12 saturates \d+ % .*truth peaks at 4\d{3}"):
+        g = rsocl.simulate(raw, rig, bit_depth=12)
+    assert np.all(g == rsocl.model.simulate.full_scale(rig))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rsocl.simulate(raw / 4095.0, rig, bit_depth=12)
 
 
 def test_subframes_no_camera_samples_are_not_modelled_and_hold_the_first_solved_one(device):

@@ -10,6 +10,7 @@ The sensor's full scale is that maximum (the largest over channels,
 from __future__ import annotations
 
 import numbers
+import warnings
 
 import numpy as np
 
@@ -20,10 +21,20 @@ from rsocl.model.curvature import NO_WEIGHT, full_scales
 from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.rig import Rig
 
-__all__ = ["simulate", "full_scale", "check_photons", "check_seed", "check_fits_dtype", "MAX_PHOTONS"]
+__all__ = [
+    "simulate",
+    "full_scale",
+    "check_photons",
+    "check_seed",
+    "check_fits_dtype",
+    "MAX_PHOTONS",
+    "CLIPPED_SHARE_WARN",
+]
 
 #: Most photo-electrons at full scale: NumPy's Poisson sampler draws means below about 9.2e18.
 MAX_PHOTONS = 1e18
+#: Share of the snapshot samples above full scale over which ``bit_depth`` warns that it saturates them.
+CLIPPED_SHARE_WARN = 0.5
 
 
 def check_photons(name: str, photons) -> float:
@@ -120,7 +131,8 @@ def simulate(
         Photo-electrons at full scale for Poisson noise, ``0 < photons <=`` :data:`MAX_PHOTONS` (and the
         brightest snapshot's mean within it); with another ``noise``, None only.
     bit_depth : int or None
-        Quantise to ``2**bit_depth`` levels over ``[0, full_scale]`` (1..32), with saturation.
+        Quantise to ``2**bit_depth`` levels over ``[0, full_scale]`` (1..32), with saturation (a warning when
+        it saturates more than :data:`CLIPPED_SHARE_WARN` of the samples).
     seed : int or None
         Seed of the noise generator, ``>= 0`` (None: fresh entropy).
     device : str, Device or None
@@ -180,6 +192,15 @@ def simulate(
             )
         g = rng.poisson(g * (photons / scale)) * (scale / photons)
     if bits is not None:
+        over = float(np.mean(g > scale))
+        if over > CLIPPED_SHARE_WARN:
+            warnings.warn(
+                f"bit_depth = {bits} saturates {100 * over:.0f} % of the snapshot samples: full scale is a white scene "
+                f"(1.0), and truth peaks at {float(np.max(truth)):.4g}; a scene in raw counts needs dividing by its "
+                "white level first",
+                UserWarning,
+                stacklevel=2,
+            )
         levels = 2**bits - 1
         g = np.round(np.clip(g, 0.0, scale) / scale * levels) * (scale / levels)
     return g

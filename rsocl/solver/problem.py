@@ -34,6 +34,7 @@ __all__ = [
     "DEFAULTS",
     "PAPER_ETA",
     "MAX_ITERATIONS",
+    "CLIPPED_SHARE_WARN",
     "Problem",
     "Settings",
     "Staged",
@@ -58,6 +59,9 @@ PAPER_ETA = 5.0
 #: Most ADMM iterations a run takes: runs converge within hundreds, and a larger count is a slip
 #: (``10**12`` would run for ever, its search first) that is refused before anything runs.
 MAX_ITERATIONS = 1_000_000
+#: Share of the snapshot samples at or above ``saturation`` over which a warning says so: a level given in
+#: scene units (1.0 for white) instead of snapshot units marks most samples clipped.
+CLIPPED_SHARE_WARN = 0.5
 
 
 @dataclass(frozen=True)
@@ -263,6 +267,8 @@ def check_problem(
                 UserWarning,
                 stacklevel=3,
             )
+        else:
+            _warn_mostly_clipped(g, rig, valid, saturation, batch)
     warn_off_scale(g, rig, valid)
     cube = (rig.T,) + rig.shape
     return Problem(
@@ -361,3 +367,24 @@ def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, d
         else:
             staged.data_range = np.array([default_data_range(t) for t in truth])
     return staged
+
+
+def _warn_mostly_clipped(g, rig, valid, saturation, batch) -> None:
+    """Warn when more than :data:`CLIPPED_SHARE_WARN` of a set's snapshot samples are at or above ``saturation``."""
+    share = 1.0 - valid.reshape(batch or 1, -1).mean(axis=1)
+    worst = int(np.argmax(share))
+    if share[worst] <= CLIPPED_SHARE_WARN:
+        return
+    from rsocl.model.simulate import full_scale
+
+    try:
+        white = f" (a white scene reads {full_scale(rig):.4g} on this rig)"
+    except ValueError:
+        white = ""
+    which = "" if batch is None else f" of set {worst}"
+    warnings.warn(
+        f"saturation = {saturation!r} marks {100 * share[worst]:.0f} % of the snapshot samples{which} as clipped "
+        f"(fitted only as lower bounds); saturation is the level the sensor clips at, in snapshot units{white}",
+        UserWarning,
+        stacklevel=4,
+    )
