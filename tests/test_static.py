@@ -7,7 +7,7 @@ import pytest
 import rsocl
 from rsocl.model import reference as ref
 from rsocl.model.operator import RollingShutterOperator
-from rsocl.solver.static import static_fix, static_mask
+from rsocl.solver.static import noise_level, point_mask, static_fix, static_mask, static_weights
 
 
 def _snapshots(rig, rng, sets):
@@ -51,6 +51,7 @@ def test_the_static_fix_pulls_static_pixels_towards_the_start(device, dtype, rng
     solver.theta.set(theta)
     counts = static_fix(solver, cla.to_device(op.queue, start), g, weight)
     masks = np.stack([static_mask(one) for one in g]) if sets else static_mask(g)[None]
+    assert not any(point_mask(one).any() for one in (g if sets else [g]))  # random textures hold no points
     assert counts == ([int(m.sum()) for m in masks] if sets else int(masks[0].sum()))
     half = rig.shape[1] // 2
     assert masks[0, :, : half - 1].any() and not masks[0, :, half + 1 :].any()
@@ -96,3 +97,92 @@ def test_a_blend_outside_0_to_1_is_refused(device, rng, alpha):
     solver, op = _solver(device, _snapshots(_rig(), rng, None))
     with pytest.raises(ValueError, match=rf"blend must be in \[0.0, 1.0\], got {alpha}"):
         solver.blend_towards(cla.to_device(op.queue, np.zeros(solver.theta.shape, op.dtype)), alpha)
+
+
+# ---------------------------------------------------------------------------------------- point sources
+def _points(rig, places, speed=0.0, sigma=None):
+    """Datacube of single bright pixels (1 on 0) at ``places``, moving ``speed`` pixels per sub-frame to the right
+    (wrapping); blurred by a Gaussian of ``sigma`` pixels and scaled to peak 1 when given."""
+    from scipy.ndimage import gaussian_filter
+
+    cube = np.zeros((rig.T,) + rig.shape)
+    for t in range(rig.T):
+        for y, x in places:
+            cube[t, y, int(round(x + speed * t)) % rig.shape[1]] = 1.0
+    if sigma is not None:
+        cube = np.stack([gaussian_filter(f, sigma) for f in cube])
+        cube /= cube.max()
+    return cube
+
+
+def _noisy(g, rig, photons, read, seed):
+    from rsocl.model.simulate import full_scale
+
+    scale = full_scale(rig)
+    rng = np.random.default_rng(seed)
+    return rng.poisson(np.clip(g, 0, None) * photons / scale) * (scale / photons) + rng.normal(0, read * scale, g.shape)
+
+
+def _paper(cameras=4, side=32):
+    return rsocl.Rig.paper_array(cameras, (side, side), t_e=1.8e-4, t_r=3.5e-5)
+
+
+@pytest.mark.parametrize("cameras", [2, 4, 8])
+@pytest.mark.parametrize("sigma", [None, 1.0])
+def test_a_static_point_under_noise_is_found_with_its_window(cameras, sigma):
+    rig = _paper(cameras)
+    places = [(16, 16), (7, 23)]
+    g = _noisy(ref.forward(rig, _points(rig, places, sigma=sigma)), rig, photons=100, read=0.01, seed=cameras)
+    assert not static_mask(g)[16, 16]  # the cameras disagree by more than the static mask's 2 %
+    mask = point_mask(g)
+    for y, x in places:
+        assert mask[y - 2 : y + 3, x - 2 : x + 3].all()
+    assert mask.sum() == 2 * 25
+
+
+@pytest.mark.parametrize("cameras", [2, 4, 8])
+def test_moving_points_textures_and_flat_noise_have_no_points(cameras):
+    rig = _paper(cameras)
+    moving = ref.forward(rig, _points(rig, [(10, 5), (22, 20)], speed=0.3))
+    assert not point_mask(moving).any()
+    texture = ref.forward(rig, rsocl.builtin_scene(rig.shape, rig.T))
+    assert not point_mask(texture).any() and not point_mask(_noisy(texture, rig, 300, 0.01, 1)).any()
+    flat = _noisy(ref.forward(rig, np.full((rig.T,) + rig.shape, 0.5)), rig, 300, 0.01, 2)
+    assert not point_mask(flat).any()
+
+
+def test_one_camera_or_a_grid_smaller_than_the_window_has_no_points():
+    g = np.zeros((1, 12, 12))
+    g[0, 6, 6] = 5.0
+    assert not point_mask(g).any()
+    g = np.zeros((4, 6, 12))
+    g[:, 3, 6] = 5.0
+    assert not point_mask(g).any()
+
+
+def test_noise_level_is_the_noise_of_one_camera():
+    rng = np.random.default_rng(3)
+    g = np.repeat(rng.random((1, 64, 64)), 4, axis=0) + rng.normal(0, 0.05, (4, 64, 64))
+    assert noise_level(g) == pytest.approx(0.05, rel=0.1)
+    assert noise_level(np.repeat(rng.random((1, 8, 8)), 3, axis=0)) == 0.0
+
+
+def test_static_weights_give_points_their_weight_and_nothing_at_weight_zero():
+    g = np.zeros((4, 16, 16))
+    g[:, 8, 8] = 5.0
+    w = static_weights(g, 0.6)
+    assert np.all(w[6:11, 6:11] == 1.0) and w[2, 2] == 0.6  # the black surround: static
+    assert not static_weights(g, 0.0).any()
+
+
+@pytest.mark.parametrize("cameras", [2, 4])
+def test_the_default_keeps_a_static_point_under_noise_as_the_interpolation_does(cameras):
+    rig = _paper(cameras)
+    truth = _points(rig, [(16, 16)])
+    g = _noisy(ref.forward(rig, truth), rig, photons=100, read=0.01, seed=0)
+    result = rsocl.reconstruct(g, rig)
+    start = rsocl.interp3d(g, rig)
+    assert result.params["static_pixels"] >= 25
+    np.testing.assert_allclose(result.datacube[:, 14:19, 14:19], start[:, 14:19, 14:19], rtol=1e-5, atol=1e-5)
+    assert result.datacube[:, 16, 16].mean() > 0.9
+    assert rsocl.psnr(result.datacube, truth) > rsocl.psnr(start, truth) - 1.0

@@ -7,20 +7,57 @@ fade such a background in the first and last sub-frames. :func:`static_mask` fin
 stay out) and :func:`static_fix` moves the result towards the interpolation on them. With noise
 in the snapshots the cameras rarely agree that closely, and the mask is empty.
 
-Measured effect (PSNR and SSIM): ``docs/quality_ladder.md``.
+Small bright features that every camera sees alike, points and spots up to
+``2 * POINT_HALF + 1`` pixels across on a darker surround, are held only in the few sub-frames a
+camera exposes there: in the others TV's spatial term shrinks them towards the surround, and the
+held-out pixels of the parameter search cannot see those sub-frames. :func:`point_mask` finds them
+with a tolerance scaled to the feature's own contrast and to the snapshots' noise, and
+:func:`static_fix` sets them, with their surround, to the interpolation (:data:`POINT_WEIGHT`).
+
+Measured effect (PSNR and SSIM): ``docs/quality_ladder.md``; on point sources:
+``docs/point_sources.md``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SPREAD", "BRIGHT_PERCENTILE", "static_mask", "static_fix"]
+__all__ = [
+    "SPREAD",
+    "BRIGHT_PERCENTILE",
+    "POINT_HALF",
+    "POINT_AGREE",
+    "POINT_CONTRAST",
+    "POINT_NOISE",
+    "POINT_SURROUND",
+    "POINT_WEIGHT",
+    "static_mask",
+    "noise_level",
+    "point_mask",
+    "static_weights",
+    "static_fix",
+]
 
 #: Largest spread of a pixel over the cameras (max - min), as a fraction of the bright level, for
 #: the pixel to count as static.
 SPREAD = 0.02
 #: Percentile of the snapshots that sets their bright level.
 BRIGHT_PERCENTILE = 99.9
+#: Half the side of the window a point feature fits in, pixels (features up to 5x5 pixels).
+POINT_HALF = 2
+#: Largest spread of the cameras (max - min) anywhere in a point's window, as a fraction of its contrast.
+POINT_AGREE = 0.5
+#: Smallest contrast of a point over its surround, as a fraction of the snapshots' range (bright level
+#: minus the darkest value).
+POINT_CONTRAST = 0.25
+#: Smallest contrast of a point, in standard deviations of the snapshots' noise (:func:`noise_level`).
+POINT_NOISE = 5.0
+#: Brightest value just outside a point's window, over the surround, as a fraction of its contrast.
+POINT_SURROUND = 0.25
+#: How far a point's window moves to the interpolation in :func:`static_fix` (1: all the way).
+POINT_WEIGHT = 1.0
+#: Why these values, measured on point sources and on the quality benchmarks' scenes:
+#: ``docs/solver-notes.md`` (point sources).
 
 
 def _erode(mask: np.ndarray) -> np.ndarray:
@@ -57,9 +94,103 @@ def static_mask(g: np.ndarray) -> np.ndarray:
     return _erode((g.max(axis=0) - g.min(axis=0)) < SPREAD * bright)
 
 
+def noise_level(g: np.ndarray) -> float:
+    """Standard deviation of the noise of snapshots ``g`` ``(K, m, n)``, ``K >= 2``, in their units: the
+    median absolute deviation of the differences of consecutive cameras at each pixel, scaled to a
+    Gaussian's standard deviation and divided by sqrt(2). Moving parts only raise it; on a scene that
+    is mostly black with shot noise only it is 0.
+
+    Examples
+    --------
+    >>> g = np.random.default_rng(0).normal(1.0, 0.1, (4, 64, 64))
+    >>> round(noise_level(g), 2)
+    0.1
+    """
+    g = np.asarray(g, dtype=np.float64)
+    d = (g[1:] - g[:-1]).ravel()
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+
+
+def point_mask(g: np.ndarray) -> np.ndarray:
+    """The windows of small static bright features of snapshots ``g`` ``(K, m, n)``: bool ``(m, n)``.
+
+    A feature is a pixel whose camera mean is the largest in its window of ``2 * POINT_HALF + 1``
+    pixels a side, with a contrast ``c`` over the darkest camera mean in the window grown by one
+    pixel that is above :data:`POINT_CONTRAST` of the snapshots' range and :data:`POINT_NOISE` times
+    their :func:`noise_level`; the camera means on the ring just outside the window stay within
+    :data:`POINT_SURROUND` ``c`` of that darkest value, and at every pixel of the window the cameras
+    spread by less than :data:`POINT_AGREE` ``c``. Its whole window is marked. One camera, or a grid
+    smaller than the window grown by one pixel, has none.
+
+    Parameters
+    ----------
+    g : ndarray, shape (K, m, n)
+        Snapshots of every camera on the reference grid.
+
+    Returns
+    -------
+    ndarray of bool, shape (m, n)
+
+    Examples
+    --------
+    >>> g = np.zeros((4, 12, 12)); g[:, 6, 6] = 5.0
+    >>> int(point_mask(g).sum())
+    25
+    """
+    from scipy.ndimage import binary_dilation, maximum_filter, minimum_filter
+
+    g = np.asarray(g, dtype=np.float64)
+    K, m, n = g.shape
+    side = 2 * POINT_HALF + 1
+    if K < 2 or min(m, n) < side + 2:
+        return np.zeros((m, n), bool)
+    mean = g.mean(axis=0)
+    surround = minimum_filter(mean, size=side + 2, mode="nearest")
+    contrast = mean - surround
+    ring = np.ones((side + 2, side + 2), bool)
+    ring[1:-1, 1:-1] = False
+    outside = maximum_filter(mean, footprint=ring, mode="nearest") - surround
+    spread = maximum_filter(g.max(axis=0) - g.min(axis=0), size=side, mode="nearest")
+    span = float(np.percentile(g, BRIGHT_PERCENTILE) - g.min())
+    points = (
+        (mean >= maximum_filter(mean, size=side, mode="nearest"))
+        & (contrast > POINT_CONTRAST * span)
+        & (contrast > POINT_NOISE * noise_level(g))
+        & (outside <= POINT_SURROUND * contrast)
+        & (spread < POINT_AGREE * contrast)
+    )
+    if not points.any():
+        return points
+    return binary_dilation(points, structure=np.ones((side, side), bool))
+
+
+def _parts(g: np.ndarray) -> tuple:
+    """``(still, points)``: the pixels of :func:`static_mask` of ``g`` outside :func:`point_mask`, and
+    :func:`point_mask`."""
+    points = point_mask(g)
+    return static_mask(g) & ~points, points
+
+
+def static_weights(g: np.ndarray, weight: float) -> np.ndarray:
+    """How far :func:`static_fix` moves each pixel of snapshots ``g`` ``(K, m, n)`` to the interpolation:
+    ``(m, n)`` floats, :data:`POINT_WEIGHT` on :func:`point_mask` (where ``weight > 0``), ``weight`` on the
+    rest of :func:`static_mask`, 0 elsewhere.
+
+    Examples
+    --------
+    >>> g = np.zeros((4, 12, 12)); g[:, 6, 6] = 5.0; g[0, 0, 0] = 1.0
+    >>> w = static_weights(g, 0.75)
+    >>> float(w[6, 6]), float(w[2, 6]), float(w[0, 0])
+    (1.0, 0.75, 0.0)
+    """
+    still, points = _parts(g)
+    return weight * still + (POINT_WEIGHT if weight > 0 else 0.0) * points
+
+
 def static_fix(solver, start, g: np.ndarray, weight: float):
-    """Move ``solver``'s estimate by ``weight`` towards ``start`` on the static pixels of ``g``
-    (:func:`static_mask`), on the device; how many pixels those are (one count per set for a batch).
+    """Move ``solver``'s estimate towards ``start`` by :func:`static_weights` (``weight`` on the static
+    pixels of ``g``, :data:`POINT_WEIGHT` on the point windows), on the device; how many pixels move (or
+    would, at ``weight`` 0; one count per set for a batch).
 
     Parameters
     ----------
@@ -73,8 +204,8 @@ def static_fix(solver, start, g: np.ndarray, weight: float):
         In [0, 1]; 0 leaves the estimate as it is.
     """
     g = np.asarray(g)
-    masks = np.stack([static_mask(one) for one in g]) if g.ndim == 4 else static_mask(g)[None]
-    counts = [int(m.sum()) for m in masks]
+    parts = [_parts(one) for one in (g if g.ndim == 4 else g[None])]
+    counts = [int(still.sum() + points.sum()) for still, points in parts]
     if weight > 0 and any(counts):
-        solver.pull_towards(start, weight * masks)
+        solver.pull_towards(start, np.stack([weight * still + POINT_WEIGHT * points for still, points in parts]))
     return counts if g.ndim == 4 else counts[0]
