@@ -21,6 +21,15 @@ def captures(tmp_path_factory):
     return cap, stream
 
 
+@pytest.fixture(autouse=True)
+def _sigint_raises():
+    """SIGINT raises KeyboardInterrupt in these tests, as in an interactive run, even where the suite was started
+    with SIGINT ignored (a background job of a non-interactive shell: Python then keeps it ignored)."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
 def _signal_in_the_gif(monkeypatch, signum=signal.SIGINT):
     """Send the process ``signum`` as the comparison GIF starts to be drawn (after the result file is written)."""
     import rsocl.analysis.visual as visual
