@@ -81,3 +81,11 @@ def shared_video(name):
     if not path.exists():
         pytest.skip(f"shared data {path} not present")
     return path
+
+
+def pytest_collection_modifyitems(config, items):
+    """Each ``not_under_oclgrind`` mark says why the test is left out there (``.ci/run``'s step 3 reads them)."""
+    for item in items:
+        for mark in item.iter_markers("not_under_oclgrind"):
+            if not (mark.args and isinstance(mark.args[0], str) and mark.args[0].strip()):
+                raise pytest.UsageError(f"{item.nodeid}: @pytest.mark.not_under_oclgrind(reason) needs its reason")

@@ -89,6 +89,7 @@ def test_gpu_path_matches_the_reference(problem, not_cpu, monkeypatch, dtype, et
     np.testing.assert_allclose(got.datacube, want, atol=tol * np.abs(want).max())
 
 
+@pytest.mark.not_under_oclgrind("whole runs; test_project_lanes.py runs the GPU path's batch kernels")
 def test_gpu_path_of_a_batch_equals_its_sets_on_the_cpu_path(problem, device, monkeypatch):
     rig, g = problem
     batch = np.stack([g, 0.5 * g, 2 * g])
@@ -100,6 +101,7 @@ def test_gpu_path_of_a_batch_equals_its_sets_on_the_cpu_path(problem, device, mo
     np.testing.assert_allclose(gpu.history["residual"], cpu.history["residual"], rtol=1e-9)
 
 
+@pytest.mark.not_under_oclgrind("counts the launches of every path; their kernels run in the kept tests")
 def test_launches_per_iteration_of_each_path(problem, device, monkeypatch):
     rig, g = problem
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: True))  # as a CPU device, whatever it is
@@ -148,6 +150,7 @@ def test_memory_counts_the_dual_buffers_of_the_devices_choice(device, monkeypatc
     assert TV(fused=0, one_launch=0).workspace_bytes(shape, np.float32, device=device) == plain
 
 
+@pytest.mark.not_under_oclgrind("a self-tuned call that counts launches; the kernels it launches run in the kept tests")
 @pytest.mark.parametrize("cpu", [True, False])
 def test_a_self_tuned_call_launches_only_rsocl_kernels(problem, device, monkeypatch, cpu):
     """Every launch of a self-tuned call (search, run, static fix, blend) goes through rsocl's kernels, none
@@ -194,6 +197,7 @@ def test_saturated_samples_enter_one_sided_as_in_the_reference(
     np.testing.assert_allclose(got.datacube, want, atol=tol * np.abs(want).max())
 
 
+@pytest.mark.not_under_oclgrind("whole runs; test_gap_saturation.py runs this batch step")
 @pytest.mark.filterwarnings("ignore:saturation = .* marks:UserWarning")  # the 1.3 g set: over half clipped
 def test_a_batch_with_saturation_equals_its_sets(problem, device):
     rig, g = problem

@@ -56,6 +56,7 @@ def test_a_batch_with_a_set_without_dual_update_gives_one_lanes_datacube(device,
     assert_same_arithmetic(many.history["residual"], one.history["residual"], device, np.float32)
 
 
+@pytest.mark.not_under_oclgrind("the CPU lane choice of whole runs; the one-lane kernels run in the kept tests")
 def test_a_cpu_device_and_a_regularizer_that_does_not_fuse_take_one_lane(problem, monkeypatch, admm_lanes):
     rig, g = problem
     monkeypatch.setattr(Device, "is_cpu", property(lambda self: True))  # as a CPU device, whatever it is
@@ -90,6 +91,9 @@ def test_lanes_that_fit(lanes, local, limit, max_1, expected):
     assert lanes_that_fit(lanes, local, limit, max_1) == expected
 
 
+@pytest.mark.not_under_oclgrind(
+    "two self-tuned calls that compare lanes choices; the lanes kernels run in the kept tests"
+)
 def test_a_self_tuned_call_makes_one_lanes_choices_and_datacube(device, not_cpu, problem, monkeypatch, admm_lanes):
     rig, g = problem
     monkeypatch.setattr(admm_module, "GPU_PROJECT_LANES", 1)
