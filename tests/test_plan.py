@@ -207,3 +207,52 @@ def test_info_names_capture_in_its_errors(tmp_path, capsys):
     for path in (tmp_path / "none.h5", tmp_path / "bad.h5"):
         assert main(["info", "--capture", str(path)]) == 2
         assert capsys.readouterr().err.startswith("rsocl info: error: --capture: ")
+
+
+@pytest.mark.parametrize("shape, cut", [((32, 40), (32, 40)), ((100, 120), (48, 48))])
+def test_the_search_is_timed_on_the_block_a_real_run_searches_with_the_whole_rigs_settings(
+    device, monkeypatch, shape, cut
+):
+    """As :func:`rsocl.solver.pipeline.tune`: a frame the rung crops is searched on its central block with the
+    crop's search, under the whole rig's request (its lam and eta); an untimed search first, then the timed one."""
+    import rsocl.solver.pipeline as pipeline
+    from rsocl.solver.ladder import rung
+    from rsocl.solver.search_cost import WARM_ITERATIONS, search_seconds
+
+    seen, real = [], pipeline.tune_with
+    monkeypatch.setattr(pipeline, "tune_with", lambda p, s: seen.append((p, s)) or real(p, s))
+    rig = rsocl.Rig.paper_array(4, shape, t_e=0.18e-3, t_r=35e-6)
+    assert search_seconds(rig, iterations=30, device=device) > 0
+    want, box = rung("balanced").search_for(shape)
+    assert [p.problem.rig.shape for p, _ in seen] == [cut, cut] and all(s is want for _, s in seen)
+    assert (box is None) == (cut == shape)
+    assert [p.request.settings.iterations for p, _ in seen] == [WARM_ITERATIONS, 30]
+    assert all(p.request.search_space().tunable for p, _ in seen)  # TV's temporal weight, as reconstruct searches
+    assert all(p.request.rig is rig for p, _ in seen)
+
+
+def test_plan_costs_the_self_tuned_run_as_its_search_and_the_iterations(device, monkeypatch, capsys):
+    import rsocl.solver.plan as plan_module
+
+    quality, given = [], []
+
+    def searched(rig, **kw):
+        quality.append(kw["quality"])
+        given.append((kw["regularizer"], kw["regularizer_options"]))
+        return 1.25
+
+    monkeypatch.setattr(plan_module, "search_seconds", searched)
+    rig = rsocl.Rig.paper_array(4, (16, 16), t_e=0.18e-3, t_r=35e-6)
+    p = plan(rig, iterations=10, device=device, quality="best")
+    assert quality == ["best", "best"] and given == [("tv", None)] * 2  # a name: its options are searched
+    for e in (p.full, p.proposed):
+        assert e.search_seconds == 1.25 and e.tuned_seconds == pytest.approx(1.25 + e.seconds)
+    assert "time, self-tuned (best)" in plan_module.format_plan(p)
+    assert plan(rig, iterations=10, measure=False).full.tuned_seconds is None
+    with pytest.raises(ValueError, match="quality must be one of fast, balanced, best"):
+        plan(rig, quality="slow", measure=False)
+    argv = ["plan", "--shape", "16", "16", "--quality", "fast", "--iterations", "10", "--reg-opt", "temporal_weight=3"]
+    assert main(argv) == 0
+    assert quality[-2:] == ["fast", "fast"] and given[-1] == ("tv", {"temporal_weight": "3"})
+    out = capsys.readouterr().out
+    assert "1.2 s search + " in out and "time, self-tuned (fast)" in out

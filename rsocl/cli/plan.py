@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from rsocl.cli.options import add_device_args, add_rig_args, regularizer_from, rig_from
+from rsocl.cli.options import add_device_args, add_rig_args, reg_options, regularizer_from, rig_from
 from rsocl.cli.tiling import add_plan_tiling_args, check_plan_tiling_args, print_plan_tiling
+from rsocl.solver.ladder import DEFAULT_QUALITY, QUALITIES
 
 __all__ = ["add_parser", "roi_from", "cmd_plan"]
 
@@ -33,7 +34,15 @@ def add_parser(subparsers):
         metavar="KEY=VALUE",
         help="regularizer option, repeatable (its workspace is counted: TV's fused=N keeps a second dual buffer)",
     )
-    p.add_argument("--no-measure", action="store_true", help="memory only; do not time 3 iterations")
+    p.add_argument(
+        "--quality",
+        choices=QUALITIES,
+        default=DEFAULT_QUALITY,
+        help="rung of the self-tuned run costed (default balanced; docs/quality_ladder.md)",
+    )
+    p.add_argument(
+        "--no-measure", action="store_true", help="memory only; do not time 3 iterations and the parameter search"
+    )
     add_device_args(p)
     add_plan_tiling_args(p)
     p.set_defaults(func=cmd_plan)
@@ -67,7 +76,7 @@ def cmd_plan(args) -> int:
 
     check.positive_int("--iterations", args.iterations, MAX_ITERATIONS)
     check.positive("--blur", args.blur, "pixels")
-    regularizer = regularizer_from(args)
+    regularizer_from(args)  # its options checked now; the plan takes them as rsocl reconstruct does
     rig = rig_from(args)
     roi = roi_from(args.roi, rig.shape)
     check_plan_tiling_args(args, rig.shape if roi is None else rig.crop(roi).shape)
@@ -78,10 +87,12 @@ def cmd_plan(args) -> int:
         fps=args.fps,
         blur_pixels=args.blur,
         iterations=args.iterations,
-        regularizer=regularizer,
+        regularizer=args.regularizer,
+        regularizer_options=reg_options(args.reg_opt),
         dtype=args.dtype,
         device=args.device,
         measure=not args.no_measure,
+        quality=args.quality,
     )
     print(format_plan(p))
     print_plan_tiling(args, p)

@@ -38,6 +38,7 @@ __all__ = [
     "Prepared",
     "prepare",
     "tune",
+    "tune_with",
     "run",
     "tune_and_run",
     "check_problem",
@@ -99,6 +100,13 @@ def tune(prepared: Prepared) -> Tuning | None:
     if isinstance(choice, Tuning):
         return choice
     return _search_first_set(prepared)
+
+
+def tune_with(prepared: Prepared, search) -> Tuning | None:
+    """:func:`tune`'s search of one set with ``search`` (a :class:`~rsocl.solver.ladder.Search`) over the
+    whole of ``prepared``'s frame: how :func:`tune` searches the central block of a large frame, here on
+    a problem that holds only that block (:mod:`rsocl.solver.search_cost`)."""
+    return _choose_unset(prepared, search=search)
 
 
 def run(prepared: Prepared, tuning: Tuning | None = None) -> Result:

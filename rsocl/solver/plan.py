@@ -24,8 +24,10 @@ import numpy as np
 
 from rsocl.common import validation as check
 from rsocl.model.rig import Rig
+from rsocl.solver.ladder import DEFAULT_QUALITY, check_quality
 from rsocl.solver.memory import device_limit, memory_need
 from rsocl.solver.request import make_regularizer
+from rsocl.solver.search_cost import search_seconds
 
 __all__ = ["Plan", "Estimate", "plan", "estimate", "format_plan"]
 
@@ -35,7 +37,8 @@ class Estimate:
     """Cost of reconstructing one rig: sub-frames, device memory (bytes), seconds.
 
     ``fits`` is False when the largest buffer or the total exceeds the device (``limit`` says
-    which); the time is then not measured.
+    which); the time is then not measured. ``search_seconds``: the self-tuned default's parameter
+    search (:func:`rsocl.solver.search_cost.search_seconds`), None when not measured.
     """
 
     rig: Rig
@@ -45,10 +48,19 @@ class Estimate:
     iterations: int
     fits: bool = True
     limit: str | None = None
+    search_seconds: float | None = None
 
     @property
     def seconds(self) -> float | None:
+        """A fixed run's iterations, seconds (None: not measured)."""
         return None if self.seconds_per_iteration is None else self.seconds_per_iteration * self.iterations
+
+    @property
+    def tuned_seconds(self) -> float | None:
+        """The self-tuned default's: the search and the run, seconds (None: not measured)."""
+        if self.seconds is None or self.search_seconds is None:
+            return None
+        return self.search_seconds + self.seconds
 
 
 @dataclass
@@ -60,30 +72,48 @@ class Plan:
     dt: float
     roi: tuple
     notes: list = field(default_factory=list)
+    quality: str = DEFAULT_QUALITY
 
 
 def estimate(
-    rig: Rig, *, iterations=200, regularizer="tv", dtype="float32", device=None, measure=True, projection="exact"
+    rig: Rig,
+    *,
+    iterations=200,
+    regularizer="tv",
+    regularizer_options=None,
+    dtype="float32",
+    device=None,
+    measure=True,
+    projection="exact",
+    search=False,
+    quality=DEFAULT_QUALITY,
 ) -> Estimate:
     """Memory (from the buffer sizes, :func:`rsocl.solver.memory.memory_need` of the configured
-    regularizer: a name takes its default options, an instance its own) and, when ``measure`` and
-    it fits, time per iteration (3 timed iterations), of a fixed run (``tune=False``: no parameter search)."""
+    regularizer: a name takes ``regularizer_options`` over its defaults, an instance its own) and, when ``measure`` and
+    it fits, time per iteration (3 timed iterations), of a fixed run (``tune=False``: no parameter search);
+    with ``search`` too, the ``quality`` rung's parameter search on the built-in scene
+    (:func:`rsocl.solver.search_cost.search_seconds`), which searches the options a name leaves unset, as
+    :func:`rsocl.reconstruct` does."""
     from rsocl.device.context import get_device
     from rsocl.solver.reconstruct import reconstruct
 
     dev = get_device(device)
     dev.real_dtype(dtype)
-    regularizer = make_regularizer(regularizer)
+    configured = make_regularizer(regularizer, regularizer_options)
     solved = rig.sampled_range()
-    largest, memory = memory_need(rig, regularizer, dtype=dtype, projection=projection)
+    largest, memory = memory_need(rig, configured, dtype=dtype, projection=projection)
     limit = device_limit(dev, largest, memory)
     per_iteration = None
     if measure and limit is None:
         g = np.zeros((rig.n_channels,) + rig.shape)
         for _ in range(2):  # the first call builds every program the timed one runs (a build takes seconds)
-            result = reconstruct(g, rig, regularizer=regularizer, iterations=3, device=dev, dtype=dtype, tune=False)
+            result = reconstruct(g, rig, regularizer=configured, iterations=3, device=dev, dtype=dtype, tune=False)
         per_iteration = result.history["time"][-1] / 3
-    return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations, limit is None, limit)
+    searched = None
+    if measure and limit is None and search:
+        kwargs = dict(iterations=iterations, regularizer=regularizer, dtype=dtype, device=dev, quality=quality)
+        searched = search_seconds(rig, regularizer_options=regularizer_options, **kwargs)
+    return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations, limit is None, limit, searched)
 
 
 def plan(
@@ -95,11 +125,17 @@ def plan(
     blur_pixels=1.0,
     iterations=200,
     regularizer="tv",
+    regularizer_options=None,
     dtype="float32",
     device=None,
     measure=True,
+    quality=DEFAULT_QUALITY,
 ) -> Plan:
     """Propose ``dt`` and ROI for ``rig`` and a scene; estimate both problems' cost.
+
+    The cost of each: memory, and when ``measure``, the time of a fixed run and of the self-tuned
+    default, whose parameter search (the ``quality`` rung's) is timed on the built-in scene
+    (:func:`rsocl.solver.search_cost.search_seconds`; how close it comes: ``docs/plan_search.md``).
 
     Parameters
     ----------
@@ -111,11 +147,15 @@ def plan(
         Sub-frame rate wanted, Hz.
     blur_pixels : float
         Motion allowed within one sub-frame, pixels.
-    regularizer : str or Regularizer
-        A registry name (default options) or the configured instance, whose options decide its
-        workspace (:mod:`rsocl.solver.memory`).
+    regularizer, regularizer_options : str or Regularizer, dict or None
+        A registry name with options over its defaults, or the configured instance, as
+        :func:`rsocl.reconstruct` takes them: the options decide its workspace (:mod:`rsocl.solver.memory`),
+        and the search chooses those left unset.
+    quality : {"fast", "balanced", "best"}
+        The rung of the self-tuned run costed (:mod:`rsocl.solver.ladder`).
     """
     iterations = check.positive_int("iterations", iterations)
+    quality = check_quality(quality)
     blur_pixels = check.positive("blur_pixels", blur_pixels, "(pixels)")
     notes = []
     t_r = max(cam.t_r for cam in rig.cameras)
@@ -152,10 +192,15 @@ def plan(
     dt = rig.dt if k is None else k * t_r
     roi = (0, 0) + rig.shape if roi is None else tuple(int(v) for v in roi)
     proposed = rig.crop(roi, dt=dt)
-    kwargs = dict(iterations=iterations, regularizer=regularizer, dtype=dtype, device=device)
+    kwargs = dict(iterations=iterations, regularizer=regularizer, dtype=dtype, device=device, search=True)
+    kwargs.update(quality=quality, regularizer_options=regularizer_options)
     full = estimate(rig, measure=measure, **kwargs)
     new = estimate(proposed, measure=measure, **kwargs)
-    return Plan(full, new, dt, roi, notes)
+    return Plan(full, new, dt, roi, notes, quality)
+
+
+def _secs(seconds: float) -> str:
+    return f"{seconds:.2f} s" if seconds < 1 else f"{seconds:.1f} s"
 
 
 def format_plan(p: Plan) -> str:
@@ -167,8 +212,11 @@ def format_plan(p: Plan) -> str:
             if e.seconds_per_iteration is None
             else f"{e.seconds_per_iteration * 1e3:.1f} ms x {e.iterations} = {e.seconds:.1f} s"
         )
+        tuned = "-"
+        if e.tuned_seconds is not None:
+            tuned = f"{_secs(e.search_seconds)} search + {_secs(e.seconds)} = {_secs(e.tuned_seconds)}"
         if not e.fits:
-            secs = "does not fit the device: tile it"
+            secs = tuned = "does not fit the device: tile it"
         return [
             f"{e.rig.shape[0]} x {e.rig.shape[1]}",
             f"{e.rig.dt * 1e6:g} µs",
@@ -178,6 +226,7 @@ def format_plan(p: Plan) -> str:
             f"{e.rig.compression_ratio:.1f}x",
             f"{e.memory_bytes / 2**20:.1f} MiB",
             secs,
+            tuned,
         ]
 
     rows = [
@@ -188,7 +237,8 @@ def format_plan(p: Plan) -> str:
         "T_se",
         "compression",
         "device memory, fixed run",
-        "time, iterations",
+        "time, fixed run",
+        f"time, self-tuned ({p.quality})",
     ]
     a, b = col(p.full), col(p.proposed)
     width = max(len(r) for r in rows)
@@ -199,8 +249,8 @@ def format_plan(p: Plan) -> str:
     lines.append(f"proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): {x} {y} {w} {h}")
     lines += [f"note: {n}" for n in p.notes]
     lines.append(
-        "note: memory and time are a fixed run's (tune=False, --fixed); the self-tuned default runs its parameter "
-        "search first, which takes more time and can take more memory (rsocl bench measures both)"
+        "note: memory is a fixed run's (tune=False, --fixed); the self-tuned default runs its parameter search "
+        "first, timed here on the built-in scene (docs/plan_search.md), which can take more memory"
     )
     lines += [
         f"note: the {label} problem does not fit one device: it needs {e.limit}"
