@@ -212,9 +212,9 @@ def format_plan(p: Plan) -> str:
             if e.seconds_per_iteration is None
             else f"{e.seconds_per_iteration * 1e3:.1f} ms x {e.iterations} = {e.seconds:.1f} s"
         )
-        tuned = "-"
-        if e.tuned_seconds is not None:
-            tuned = f"{_secs(e.search_seconds)} search + {_secs(e.seconds)} = {_secs(e.tuned_seconds)}"
+        tuned, search, fixed, total = "-", e.search_seconds, e.seconds, e.tuned_seconds
+        if search is not None and fixed is not None and total is not None:
+            tuned = f"{_secs(search)} search + {_secs(fixed)} = {_secs(total)}"
         if not e.fits:
             secs = tuned = "does not fit the device: tile it"
         return [
