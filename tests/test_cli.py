@@ -596,6 +596,7 @@ def test_reg_opt_iterations_and_tv_iterations_that_disagree_are_refused(tmp_path
 def test_regularizer_and_its_options_are_checked_before_any_work(tmp_path, capsys, extra, match):
     cap = tmp_path / "cap.h5"
     assert main(["simulate", "builtin", "--out", str(cap), "--shape", "8", "8", "--cameras", "2", "--quiet"]) == 0
+    capsys.readouterr()  # simulate's result line
     commands = (
         ["demo", "--out", str(tmp_path / "demo"), "--shape", "8", "8"],
         ["reconstruct", str(cap), "--out", str(tmp_path / "rec.h5")],

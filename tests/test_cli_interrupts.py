@@ -152,9 +152,7 @@ def test_demo_interrupted_before_writing_says_nothing_is_written(tmp_path, capsy
         pytest.param(["--window", "1"], id="stream"),
     ],
 )
-def test_an_out_where_the_tuning_plot_would_go_is_refused_before_anything_runs(
-    captures, tmp_path, capsys, monkeypatch, run
-):
+def test_an_out_named_as_the_tuning_plot_is_refused_before_anything_runs(captures, tmp_path, capsys, monkeypatch, run):
     import rsocl.solver.reconstruct as solver
 
     def computed(*args, **kwargs):
@@ -166,18 +164,18 @@ def test_an_out_where_the_tuning_plot_would_go_is_refused_before_anything_runs(
     argv = ["reconstruct", str(stream if "--window" in run else cap), "--out", str(out), "--gif", str(gif), *run]
     assert main([*argv, "--iterations", "2"]) == 2
     assert capsys.readouterr().err == (
-        f"rsocl reconstruct: error: --out {str(out)!r} is where the tuning plot of --gif (NAME-tuning.png beside "
-        "NAME.gif) would be written, replacing it; choose another --out or --gif\n"
+        "rsocl reconstruct: error: --out must name an HDF5 file (.h5, .hdf5, .hdf, .he5) or a Zarr store (.zarr), "
+        f"got {str(out)!r}\n"
     )
     assert list(tmp_path.iterdir()) == []
 
 
-def test_with_fixed_parameters_no_plot_is_drawn_so_such_an_out_is_written(captures, tmp_path, capsys):
+def test_with_fixed_parameters_no_plot_is_drawn(captures, tmp_path, capsys):
     cap, _ = captures
-    out, gif = tmp_path / "tp-tuning.png", tmp_path / "tp.gif"
+    out, gif = tmp_path / "tp.h5", tmp_path / "tp.gif"
     argv = ["reconstruct", str(cap), "--out", str(out), "--gif", str(gif), "--iterations", "2", "--fixed", "--quiet"]
     assert main(argv) == 0
-    assert h5py.is_hdf5(out) and gif.is_file()
+    assert h5py.is_hdf5(out) and gif.is_file() and sorted(p.name for p in tmp_path.iterdir()) == ["tp.gif", "tp.h5"]
 
 
 def _interrupt(monkeypatch, module, name):

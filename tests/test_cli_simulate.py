@@ -115,6 +115,7 @@ def test_simulate_draws_a_progress_bar_over_its_steps_on_a_terminal(tmp_path, ca
     for step in ("rig", "scene", "snapshots", "writing"):
         assert f"simulate ({step})" in captured.err, captured.err
     assert "4/4" not in captured.out and "wrote" in captured.out
-    assert main(argv + ["--quiet"]) == 0  # --quiet: no bar, no result line
+    assert main(argv + ["--quiet"]) == 0  # --quiet: no bar, the result line only
     captured = capsys.readouterr()
-    assert captured.err == "" and captured.out == ""
+    assert captured.err == "" and captured.out.startswith(f"wrote {tmp_path / 'c.h5'}: ")
+    assert len(captured.out.splitlines()) == 1

@@ -214,3 +214,14 @@ def test_an_interrupt_says_what_calibrate_wrote_and_kept(mirrored, capsys, monke
     monkeypatch.setattr(cal, "register_camera", interrupted)  # while measuring
     assert _calibrate(folder, *frames, "--mirrored", "1") == 130
     assert capsys.readouterr().err == f"rsocl calibrate: interrupted: nothing written, {rig} unchanged\n"
+
+
+def test_a_simulated_capture_as_flat_field_says_it_holds_no_raw_frames(tmp_path, capsys):
+    (tmp_path / "rig.toml").write_text("[rig]\nshape = [16, 16]\n" + TWO % "" + TWO % "", encoding="utf-8")
+    assert main(["simulate", "builtin", "--out", str(tmp_path / "sim.h5"), "--shape", "16", "16", "--quiet"]) == 0
+    before = (tmp_path / "rig.toml").read_bytes()
+    capsys.readouterr()
+    assert _calibrate(tmp_path, "--flat", tmp_path / "sim.h5") == 2
+    err = capsys.readouterr().err
+    assert f"--flat: {tmp_path / 'sim.h5'} holds no raw frames (a capture from rsocl simulate" in err, err
+    assert len(err.strip().splitlines()) == 1 and (tmp_path / "rig.toml").read_bytes() == before

@@ -246,7 +246,13 @@ def load_flats(path, rigfile, dark: float):
     from rsocl.model.curvature import white_levels
 
     raw, rig = load_raw(path), load_capture_rig(path)
-    frames = per_camera([f for f in raw.frames if f.size], C, "--flat")
+    frames = [f for f in raw.frames if f.size]
+    if not frames:
+        raise ValueError(
+            f"--flat: {path} holds no raw frames (a capture from rsocl simulate keeps snapshots only): give "
+            "one from rsocl capture, or an image per camera"
+        )
+    frames = per_camera(frames, C, "--flat")
     out, darks = [], []
     for c, (frame, metas) in enumerate(zip(frames, raw.frame_meta)):
         exposure = white_levels(rig)[c]  # the white scene's level, as the capture converts frames

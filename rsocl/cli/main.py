@@ -39,13 +39,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _warning_line(command, shown=None):
     """A ``warnings.showwarning`` that writes ``rsocl COMMAND: warning: MESSAGE`` (one line per
-    warning, no source line) to stderr, as errors are written. Deprecation warnings (meant for
+    warning, no source line, each message once) to stderr, as errors are written. Deprecation warnings (meant for
     developers, from the libraries underneath) keep ``shown``'s form (None: the current one)."""
     shown = warnings.showwarning if shown is None else shown
+    said: set = set()
 
     def show(message, category, filename, lineno, file=None, line=None):
         if issubclass(category, (DeprecationWarning, PendingDeprecationWarning)):
             return shown(message, category, filename, lineno, file, line)
+        if str(message) in said:  # once: a rig built again (a crop, each camera's backend) warns again
+            return None
+        said.add(str(message))
         print(f"rsocl {command}: warning: {message}", file=sys.stderr if file is None else file)
 
     return show
@@ -114,18 +118,20 @@ _API_WORDS = (
 
 def as_typed(message: str, argv) -> str:
     """``message`` with the API parameter it starts with (``lam must be >= 0``, ``tile: ...``,
-    ``iterations='auto' applies ...``, ``blend = 0.5 ...``) written as the option the command line ``argv``
-    gave for it (``--lam``, ``--tile``, ``--iterations auto``, ``--blend 0.5``); as it is where it names no
-    option of ``argv``.
+    ``iterations='auto' applies ...``, ``blend = 0.5 ...``, ``option tv_iterations ...``) written as the
+    option the command line ``argv`` gave for it (``--lam``, ``--tile``, ``--iterations auto``,
+    ``--blend 0.5``, ``--tv-iterations``); as it is where it names no option of ``argv``.
 
     Examples
     --------
     >>> as_typed("lam must be >= 0, got -1.0", ["reconstruct", "c.h5", "--lam", "-1"])
     '--lam must be >= 0, got -1.0'
+    >>> as_typed("option tv_iterations must be in [1, 100000], got 0", ["reconstruct", "--tv-iterations", "0"])
+    '--tv-iterations must be in [1, 100000], got 0'
     """
     for api, words in _API_WORDS:  # advice that names API arguments the command line does not have
         message = message.replace(api, words)
-    found = re.match(r"([a-z][a-z0-9_]*)(='auto'| = (?=\S))?(?=[\s:=\[]|(?<= = ))", message)
+    found = re.match(r"(?:option )?([a-z][a-z0-9_]*)(='auto'| = (?=\S))?(?=[\s:=\[]|(?<= = ))", message)
     if found is None:
         return message
     option = "--" + found.group(1).replace("_", "-")

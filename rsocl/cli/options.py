@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import argparse
 import re
+import warnings
 
 from rsocl.common.memory import check_host_memory, host_memory_bytes
-from rsocl.model.plausible import RIG_BYTES_PER_PIXEL, check_rig_memory, check_window_us
+from rsocl.model.plausible import RIG_BYTES_PER_PIXEL, check_rig_memory, check_window_us, warn_unlikely_times_us
 
 __all__ = [
     "US",
@@ -118,6 +119,8 @@ def rig_from(args):
                 f"--dt-us must be >= --t-r-us = {t_r:g} µs (a sub-frame lasts at least one row time), got {dt:g}"
             )
     check_window_us(t_e, dt)
+    if warn_unlikely_times_us(t_e, t_r):  # said in µs, naming the option: not again in seconds by each camera
+        warnings.filterwarnings("ignore", message=r"camera t_[er] = .* times are in seconds", category=UserWarning)
     m, n = check.grid_shape("--shape", args.shape)
     cameras = check.positive_int("--cameras", args.cameras, maximum=8)
     check_rig_memory(cameras, (m, n), f"--shape {m} {n}")
@@ -179,7 +182,7 @@ def add_solver_args(p):
         metavar="N|auto",
         help="ADMM iterations (default: the --quality rung's: "
         + ", ".join(f"{name} {r.iterations}" for name, r in RUNGS.items())
-        + "); auto: until the residual settles, with a cap",
+        + "); auto: until the residual settles, with a cap (not with --fast, whose rung runs a fixed count)",
     )
     g.add_argument(
         "--quality",

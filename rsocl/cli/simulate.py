@@ -11,7 +11,6 @@ from rsocl.cli.options import (
     check_host_memory,
     progress_bar,
     rig_from,
-    say,
 )
 
 __all__ = [
@@ -299,5 +298,5 @@ def cmd_simulate(args) -> int:
             path = save_capture(args.out, g, rig, truth=truth, attrs=meta)
     frames = f" ({rig.C} cameras x {rig.cameras[0].frames} frames)" if rig.cameras[0].frames > 1 else ""
     size = f"{rig.shape[0]}x{rig.shape[1]}, T = {rig.T}"
-    say(args, f"wrote {path}: {rig.n_channels} snapshots{frames} of {size}" + kept_note([kept]))
+    print(f"wrote {path}: {rig.n_channels} snapshots{frames} of {size}" + kept_note([kept]))  # --quiet too
     return 0

@@ -18,6 +18,9 @@ from pathlib import Path
 
 from rsocl.cli.tiled_run import is_zarr, run_stream, run_tiles, zarr_gif
 
+#: The suffixes ``rsocl reconstruct --out`` takes for an HDF5 reconstruction file (``.zarr``: a store).
+HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf", ".he5")
+
 __all__ = [
     "add_reconstruct_tiling_args",
     "check_outputs",
@@ -99,6 +102,11 @@ def check_outputs(args) -> None:
     from rsocl.cli.outputs import refuse_same_file
     from rsocl.files.atomic import output_path, same_file
 
+    suffix = Path(str(args.out).rstrip("/")).suffix.lower()
+    if suffix not in HDF5_SUFFIXES + (".zarr",):
+        raise ValueError(
+            f"--out must name an HDF5 file ({', '.join(HDF5_SUFFIXES)}) or a Zarr store (.zarr), got {str(args.out)!r}"
+        )
     if args.window is not None and (is_zarr(args.out) or args.sets):
         raise ValueError(
             "--window: a stream of frame windows is written to an HDF5 file (--out NAME.h5), one set at a time"

@@ -23,6 +23,7 @@ __all__ = [
     "check_window_us",
     "RIG_BYTES_PER_PIXEL",
     "warn_unlikely_times",
+    "warn_unlikely_times_us",
     "check_window",
     "check_rig_memory",
 ]
@@ -65,6 +66,35 @@ def warn_unlikely_times(name: str, t_e: float, t_r: float) -> None:
             UserWarning,
             stacklevel=3,
         )
+
+
+def warn_unlikely_times_us(t_e_us: float, t_r_us: float) -> bool:
+    """:func:`warn_unlikely_times` for the command line's ``--t-e-us`` and ``--t-r-us`` (µs): one line naming
+    the option, in µs. Returns whether it warned (the rig's cameras, in seconds, would then say it again).
+
+    Examples
+    --------
+    >>> warn_unlikely_times_us(180.0, 5000.0)     # doctest: +SKIP
+    UserWarning: --t-r-us 5000 µs is 5 ms per row, longer than 1 ms: a rolling-shutter sensor reads a row in µs
+    """
+    said = False
+    if t_e_us > T_E_PLAUSIBLE * 1e6:
+        warnings.warn(
+            f"--t-e-us {t_e_us:g} µs is {t_e_us * 1e-6:g} s, longer than {T_E_PLAUSIBLE:g} s: is it the exposure "
+            "in µs?",
+            UserWarning,
+            stacklevel=3,
+        )
+        said = True
+    if t_r_us > T_R_PLAUSIBLE * 1e6:
+        warnings.warn(
+            f"--t-r-us {t_r_us:g} µs is {t_r_us * 1e-3:g} ms per row, longer than {T_R_PLAUSIBLE * 1e3:g} ms: "
+            "a rolling-shutter sensor reads a row in µs",
+            UserWarning,
+            stacklevel=3,
+        )
+        said = True
+    return said
 
 
 def check_window(name: str, t_e: float, dt: float) -> None:
