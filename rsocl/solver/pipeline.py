@@ -209,6 +209,15 @@ def _choose_unset(prepared: Prepared, checked=False, search=None):
     space = request.search_space()
     if space is None:
         return None
+    if rig.n_channels == 1:  # one snapshot per pixel: the criterion cannot rank priors in time
+        reg = request.regularizer  # its preset applies on every rung, whether the rung searches options or not
+        unset = set(getattr(reg, "tunable", {})) - request.given.option_names(reg)
+        preset = {k: float(v) for k, v in getattr(reg, "one_snapshot", {}).items() if k in unset}
+        space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
+        if not space.tunable and (preset or np.isscalar(space.lam)):
+            # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)
+            lam = space.lam if isinstance(space.lam, (float, int, np.number)) else first_value(settings.lam)
+            return Tuning(chosen={**preset, "lam": float(lam)}, fixed=space.fixed, preset=preset)
     if not can_hold_out(rig.shape, rig.n_channels):
         warnings.warn(
             f"the snapshots of a {rig.n_channels}-camera rig on {rig.shape[0]}x"
@@ -219,15 +228,6 @@ def _choose_unset(prepared: Prepared, checked=False, search=None):
             stacklevel=5,
         )
         return None
-    if rig.n_channels == 1:  # one snapshot per pixel: the criterion cannot rank priors in time
-        reg = request.regularizer  # its preset applies on every rung, whether the rung searches options or not
-        unset = set(getattr(reg, "tunable", {})) - request.given.option_names(reg)
-        preset = {k: float(v) for k, v in getattr(reg, "one_snapshot", {}).items() if k in unset}
-        space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
-        if not space.tunable and (preset or np.isscalar(space.lam)):
-            # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)
-            lam = space.lam if isinstance(space.lam, (float, int, np.number)) else first_value(settings.lam)
-            return Tuning(chosen={**preset, "lam": float(lam)}, fixed=space.fixed, preset=preset)
     if search is None:
         search, box = request.rung.search_for(rig.shape)
         if box is not None:
