@@ -91,8 +91,9 @@ def tune(prepared: Prepared) -> Tuning | None:
     does not tune or the caller left nothing to choose.
 
     The search's memory beside the staged problem is checked against the device before it runs;
-    when the snapshots leave no pixels to hold out (one camera on 2x2 pixels or fewer) a warning
-    says so and None is returned.
+    when a search is needed and the snapshots leave no pixels to hold out (one camera on 2x2 pixels or
+    fewer, with a regularizer that has no one-snapshot preset for what it would search) a warning says
+    so and None is returned.
     """
     choice = prepared.request.tune
     if choice is False:
