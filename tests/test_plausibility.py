@@ -397,3 +397,13 @@ def test_simulate_asks_for_fp64_only_where_the_device_has_it(device):
     np.testing.assert_allclose(rsocl.simulate(truth, rig, device=no_fp64), ref.forward(rig, truth), rtol=1e-6)
     with pytest.raises(ValueError, match="needs cl_khr_fp64"):
         rsocl.simulate(truth, rig, device=no_fp64, dtype="float64")
+
+
+def test_an_exposure_of_astronomically_many_subframes_is_one_short_line():
+    import rsocl
+
+    with pytest.raises(ValueError) as info:
+        rsocl.Rig([rsocl.Camera(0, t_e=1e-4, t_r=1e-300)], (4, 4))
+    said = str(info.value)
+    assert "is 1e+296 sub-frames of dt = 1e-300 s" in said and "choose a longer dt (t_r unless given)" in said
+    assert len(said) < 250

@@ -101,9 +101,10 @@ def check_window(name: str, t_e: float, dt: float) -> None:
     """Refuse an exposure ``t_e`` (seconds) of more than :data:`MAX_WINDOW` sub-frames of ``dt``, naming ``name``."""
     span = t_e / dt
     if span > MAX_WINDOW:
-        hint = _in_us(name.rsplit(".", 1)[-1], t_e) if t_e > T_E_PLAUSIBLE else "choose a longer dt"
+        hint = _in_us(name.rsplit(".", 1)[-1], t_e) if t_e > T_E_PLAUSIBLE else "choose a longer dt (t_r unless given)"
+        count = f"{span:,.0f}" if span < 1e12 else f"{span:.3g}"
         raise ValueError(
-            f"{name} = {t_e:g} s is {span:,.0f} sub-frames of dt = {dt:g} s, more than the "
+            f"{name} = {t_e:g} s is {count} sub-frames of dt = {dt:g} s, more than the "
             f"{MAX_WINDOW:,} one exposure may span (rsocl.model.plausible.MAX_WINDOW); times are in "
             f"seconds: {hint}"
         )
