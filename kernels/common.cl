@@ -233,9 +233,16 @@ inline void block_scatter(__global real *f, __global const int *first, __global 
 /* sqrt(v) for v >= 0 from the classic bit-level estimate of 1/sqrt refined by
  * Newton steps: plain arithmetic that CPU vectorisers (PoCL) keep in SIMD lanes,
  * where the library sqrt is called one lane at a time (docs/implementation_notes.md).
- * Accurate to a few ulp in float and double. */
+ * Accurate to a few ulp in float and double. The estimate is made in float: in double,
+ * v beyond float's range (above 2^100 or below 2^-100) is first scaled by 4^-100 or 4^100,
+ * exact powers of two, so double data far from 1 (1e19, 1e-16) keep their precision. */
 inline real vector_friendly_sqrt(real v)
 {
+#if REAL_IS_DOUBLE
+    const real scale = v > 0x1p100 ? 0x1p-200 : (v < 0x1p-100 ? 0x1p200 : 1.0);
+    const real unscale = v > 0x1p100 ? 0x1p100 : (v < 0x1p-100 ? 0x1p-100 : 1.0);
+    v *= scale;
+#endif
     float vf = (float)v;
     float y = as_float(0x5f375a86 - (as_int(vf) >> 1));
     float h = 0.5f * vf;
@@ -247,6 +254,8 @@ inline real vector_friendly_sqrt(real v)
     real hd = (real)0.5 * v;
     r = r * ((real)1.5 - hd * r * r);
     r = r * ((real)1.5 - hd * r * r);
-#endif
+    return v * r * unscale;
+#else
     return v * r;
+#endif
 }

@@ -245,3 +245,38 @@ def test_growth_check_of_one_set_equals_that_of_a_batch(sequence):
         flags = batch._grown(np.array([value]))
         assert bool(flag) == bool(flags[0]), value
         assert np.array_equal(np.atleast_1d(one.lowest), batch.lowest, equal_nan=True), value
+
+
+def test_float64_runs_hold_data_far_from_one_as_the_reference_does(device):
+    """TV's square roots start from a float estimate; float64 data of 1e-18 or 1e19 (squares beyond float's
+    range) keep the reference's result, scaled."""
+    if not device.has_fp64:
+        pytest.skip(f"device {device.name} has no cl_khr_fp64")
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=180e-6, t_r=35e-6)
+    g = ref.forward(rig, builtin_scene(rig.shape, rig.T, dtype=np.float64))
+    want = ref.admm(rig, g, iterations=5, lam=0.1, eta=0.2, tv_iterations=10, temporal_weight=3.0, step=STEP)
+    for scale in (1e-18, 1e19):
+        got = rsocl.reconstruct(
+            g * scale,
+            rig,
+            iterations=5,
+            lam=0.1 * scale,
+            eta=0.2,
+            tune=False,
+            dtype="float64",
+            regularizer_options={"temporal_weight": 3.0},
+            device=device,
+        ).datacube
+        assert np.abs(got / scale - want).max() < 1e-10 * np.abs(want).max(), scale
+
+
+@pytest.mark.parametrize("scale, warned", [(1e19, True), (1e-17, True), (1.0, False), (1e16, False)])
+def test_float32_warns_of_data_beyond_its_squares(device, scale, warned):
+    rig = rsocl.Rig.paper_array(2, (6, 6), t_e=180e-6, t_r=35e-6)
+    g = ref.forward(rig, builtin_scene(rig.shape, rig.T, dtype=np.float64)) * scale
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        rsocl.reconstruct(g, rig, iterations=2, lam=0.1 * scale, tune=False, device=device)
+    said = [str(w.message) for w in seen if "float32 holds the squares" in str(w.message)]
+    assert len(said) == int(warned), said
+    assert not warned or "use dtype='float64' (--dtype float64)" in said[0]
