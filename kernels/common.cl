@@ -233,29 +233,25 @@ inline void block_scatter(__global real *f, __global const int *first, __global 
 /* sqrt(v) for v >= 0 from the classic bit-level estimate of 1/sqrt refined by
  * Newton steps: plain arithmetic that CPU vectorisers (PoCL) keep in SIMD lanes,
  * where the library sqrt is called one lane at a time (docs/implementation_notes.md).
- * Accurate to a few ulp in float and double. The estimate is made in float: in double,
- * v beyond float's range (above 2^100 or below 2^-100) is first scaled by 4^-100 or 4^100,
- * exact powers of two, so double data far from 1 (1e19, 1e-16) keep their precision. */
+ * Accurate to a few ulp in float and double. In double the estimate is double's own
+ * (64-bit constant), so it holds over double's whole range (data of 1e-18 or 1e19,
+ * whose squares float cannot hold). */
 inline real vector_friendly_sqrt(real v)
 {
 #if REAL_IS_DOUBLE
-    const real scale = v > 0x1p100 ? 0x1p-200 : (v < 0x1p-100 ? 0x1p200 : 1.0);
-    const real unscale = v > 0x1p100 ? 0x1p100 : (v < 0x1p-100 ? 0x1p-100 : 1.0);
-    v *= scale;
-#endif
-    float vf = (float)v;
-    float y = as_float(0x5f375a86 - (as_int(vf) >> 1));
-    float h = 0.5f * vf;
-    y = y * (1.5f - h * y * y);
-    y = y * (1.5f - h * y * y);
-    y = y * (1.5f - h * y * y);
-    real r = (real)y;
-#if REAL_IS_DOUBLE
-    real hd = (real)0.5 * v;
-    r = r * ((real)1.5 - hd * r * r);
-    r = r * ((real)1.5 - hd * r * r);
-    return v * r * unscale;
+    real y = as_double(0x5fe6eb50c7b537a9L - (as_long(v) >> 1));
+    real h = (real)0.5 * v;
+    y = y * ((real)1.5 - h * y * y);
+    y = y * ((real)1.5 - h * y * y);
+    y = y * ((real)1.5 - h * y * y);
+    y = y * ((real)1.5 - h * y * y);
+    return v * y;
 #else
-    return v * r;
+    float y = as_float(0x5f375a86 - (as_int(v) >> 1));
+    float h = 0.5f * v;
+    y = y * (1.5f - h * y * y);
+    y = y * (1.5f - h * y * y);
+    y = y * (1.5f - h * y * y);
+    return v * y;
 #endif
 }
