@@ -103,7 +103,7 @@ def check_outputs(args) -> None:
     from rsocl.files.atomic import output_path, same_file
 
     suffix = Path(str(args.out).rstrip("/")).suffix.lower()
-    if suffix not in HDF5_SUFFIXES + (".zarr",):
+    if suffix not in HDF5_SUFFIXES + (".zarr",) and not Path(args.out).is_dir():  # a folder: said as such below
         raise ValueError(
             f"--out must name an HDF5 file ({', '.join(HDF5_SUFFIXES)}) or a Zarr store (.zarr), got {str(args.out)!r}"
         )
