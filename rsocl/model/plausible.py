@@ -24,6 +24,8 @@ __all__ = [
     "RIG_BYTES_PER_PIXEL",
     "warn_unlikely_times",
     "warn_unlikely_times_us",
+    "FLOAT32_SCALES",
+    "warn_float32_scale",
     "check_window",
     "check_rig_memory",
 ]
@@ -95,6 +97,29 @@ def warn_unlikely_times_us(t_e_us: float, t_r_us: float) -> bool:
         )
         said = True
     return said
+
+
+#: ``(low, high)``: the largest snapshot magnitude float32 runs without a warning: beyond it the squares
+#: the solver forms (TV's gradient norms) overflow or flush to zero. float64 holds 1e-30 to 1e19 and beyond.
+FLOAT32_SCALES = (1e-15, 1e17)
+
+
+def warn_float32_scale(g, dtype) -> None:
+    """Warn (``UserWarning``, one line) when a float32 run's snapshots ``g`` peak outside :data:`FLOAT32_SCALES`."""
+    import numpy as np
+
+    if np.dtype(dtype) != np.float32:
+        return
+    peak = float(np.max(np.abs(g))) if np.size(g) else 0.0
+    low, high = FLOAT32_SCALES
+    if peak > high or 0.0 < peak < low:
+        warnings.warn(
+            f"g: the snapshots' largest magnitude {peak:.3g} is outside [{low:g}, {high:g}], where float32 "
+            "holds the squares the solver forms (TV's gradient norms overflow or flush to 0): use "
+            "dtype='float64' (--dtype float64), or scale g and lam toward data in [0, 1]",
+            UserWarning,
+            stacklevel=5,
+        )
 
 
 def check_window(name: str, t_e: float, dt: float) -> None:

@@ -21,6 +21,7 @@ from rsocl.common.memory import check_host_memory
 from rsocl.device import pool
 from rsocl.model.curvature import full_scales
 from rsocl.model.operator import RollingShutterOperator
+from rsocl.model.plausible import warn_float32_scale
 from rsocl.model.rig import Rig
 from rsocl.model.simulate import check_fits_dtype
 from rsocl.solver.held import HeldSumSquares
@@ -314,28 +315,13 @@ class Staged:
     held: HeldSumSquares | None = None
 
 
-#: ``(low, high)``: the largest snapshot magnitude float32 runs without a warning: beyond it the squares
-#: the solver forms (TV's gradient norms) overflow or flush to zero. float64 holds 1e-30 to 1e19 and beyond.
-FLOAT32_SCALES = (1e-15, 1e17)
-
-
 def check_representable(problem: Problem, dtype):
     """Raise a ValueError naming the array when ``g``, ``x0`` or ``truth`` holds values beyond the
     largest finite value of ``dtype`` (float64 data above 3.4e38 run in float32 would turn into inf);
-    in float32, warn (one line) when ``g``'s largest magnitude is outside :data:`FLOAT32_SCALES`."""
+    warn of float32 snapshots of a scale it does not hold (:func:`~rsocl.model.plausible.warn_float32_scale`)."""
     for name in ("g", "x0", "truth"):
         check_fits_dtype(name, getattr(problem, name), dtype)
-    if np.dtype(dtype) == np.float32:
-        peak = float(np.max(np.abs(problem.g))) if problem.g.size else 0.0
-        low, high = FLOAT32_SCALES
-        if peak > high or 0.0 < peak < low:
-            warnings.warn(
-                f"g: the snapshots' largest magnitude {peak:.3g} is outside [{low:g}, {high:g}], where float32 "
-                "holds the squares the solver forms (TV's gradient norms overflow or flush to 0): use "
-                "dtype='float64' (--dtype float64), or scale g and lam toward data in [0, 1]",
-                UserWarning,
-                stacklevel=4,
-            )
+    warn_float32_scale(problem.g, dtype)
 
 
 def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32", start=False) -> Staged:
