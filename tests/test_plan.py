@@ -14,6 +14,9 @@ def test_crop_keeps_real_start_times():
     assert sub.sampled_range().stop - sub.sampled_range().start < rig.T
     with pytest.raises(ValueError, match="roi"):
         rig.crop((15, 0, 10, 5))
+    with pytest.raises(ValueError, match=r"roi must be \(y, x, height, width\), 4 whole numbers of pixels"):
+        rig.crop((2.7, 1.2, 2, 2))  # not cut to (2, 1, 2, 2)
+    assert rig.crop(np.array([5.0, 7, 6, 8])).shape == (6, 8)
 
 
 def test_plan_picks_the_coarsest_dt_that_resolves_the_motion(device):

@@ -212,9 +212,11 @@ class Rig:
         return rows.copy()
 
     def _checked_roi(self, roi) -> tuple[int, int, int, int]:
-        """``roi = (y, x, height, width)`` as ints, inside the grid; ValueError naming ``roi`` otherwise."""
-        y, x, h, w = (int(v) for v in roi)
-        m, n = self.shape
+        """``roi = (y, x, height, width)`` as ints (whole pixels) inside the grid; else a ValueError naming ``roi``."""
+        (m, n), values = self.shape, (tuple(roi) if np.ndim(roi) == 1 else ())
+        if len(values) != 4 or not all(isinstance(v, numbers.Real) and float(v).is_integer() for v in values):
+            raise ValueError(f"roi must be (y, x, height, width), 4 whole numbers of pixels, got {roi!r}")
+        y, x, h, w = (int(v) for v in values)
         if not (0 <= y and 0 <= x and h >= 1 and w >= 1 and y + h <= m and x + w <= n):
             raise ValueError(f"roi must be (y, x, height, width) inside the {m}x{n} grid, got {tuple(roi)}")
         return y, x, h, w
