@@ -111,8 +111,15 @@ def estimate(
         per_iteration = result.history["time"][-1] / 3
     searched = None
     if measure and limit is None and search:
-        kwargs = dict(iterations=iterations, regularizer=regularizer, dtype=dtype, device=dev, quality=quality)
-        searched = search_seconds(rig, regularizer_options=regularizer_options, **kwargs)
+        searched = search_seconds(
+            rig,
+            iterations=iterations,
+            regularizer=regularizer,
+            regularizer_options=regularizer_options,
+            dtype=dtype,
+            device=dev,
+            quality=quality,
+        )
     return Estimate(rig, solved.stop - solved.start, memory, per_iteration, iterations, limit is None, limit, searched)
 
 
@@ -192,10 +199,18 @@ def plan(
     dt = rig.dt if k is None else k * t_r
     roi = (0, 0) + rig.shape if roi is None else tuple(int(v) for v in roi)
     proposed = rig.crop(roi, dt=dt)
-    kwargs = dict(iterations=iterations, regularizer=regularizer, dtype=dtype, device=device, search=True)
-    kwargs.update(quality=quality, regularizer_options=regularizer_options)
-    full = estimate(rig, measure=measure, **kwargs)
-    new = estimate(proposed, measure=measure, **kwargs)
+    kwargs = dict(
+        iterations=iterations,
+        regularizer=regularizer,
+        regularizer_options=regularizer_options,
+        dtype=dtype,
+        device=device,
+        measure=measure,
+        search=True,
+        quality=quality,
+    )
+    full = estimate(rig, **kwargs)
+    new = estimate(proposed, **kwargs)
     return Plan(full, new, dt, roi, notes, quality)
 
 
