@@ -117,6 +117,14 @@ def test_flat_fields_of_a_capture_file_are_normalised_by_each_cameras_bit_depth(
     assert load_rigfile(folder / "rig.toml").cameras[1]["gain"] == pytest.approx(1.0, rel=2e-3)
 
 
+@pytest.mark.parametrize("name", ["flat.hdf", "flat.he5", "flat-capture"])
+def test_a_flat_capture_file_is_recognised_by_any_hdf5_suffix_or_its_signature(flat_capture, capsys, name):
+    folder = flat_capture
+    (folder / "flat.h5").rename(folder / name)
+    assert _calibrate(folder, "--flat", folder / name) == 0, capsys.readouterr().err
+    assert load_rigfile(folder / "rig.toml").cameras[1]["gain"] == pytest.approx(1.0, rel=2e-3)
+
+
 def test_raw_flat_fields_of_cameras_of_different_bit_depths_are_refused(flat_capture, capsys):
     folder = flat_capture
     with h5py.File(folder / "flat.h5") as h5:

@@ -123,7 +123,8 @@ def add_parser(subparsers):
         "--flat",
         default=None,
         help="flat-field frame(s) per camera in one unit for all (raw levels of one bit depth), same exposure; "
-        "or an rsocl capture file (.h5) of the flat field, whose frames are normalised per camera",
+        "or an rsocl capture file (HDF5: .h5, .hdf5, .hdf, .he5) of the flat field, whose frames are normalised "
+        "per camera",
     )
     g.add_argument(
         "--dark",

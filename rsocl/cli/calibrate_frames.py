@@ -14,9 +14,10 @@ File layouts (``FRAMES`` for ``--frames``, ``--flicker`` and ``--flat``):
 
 Frames are raw sensor images after the camera's ROI (``roi = [x, y, w, h]``
 in the rig file gives their offset on the sensor). ``--flat`` also takes an ``rsocl capture`` file
-(``.h5``): its raw frames are converted to one unit for every camera (:func:`load_flats`); the
-frames of other files must be in one unit for all cameras (raw levels of cameras of one bit depth, or
-``DN / (2**bit_depth - 1)``), and raw levels of cameras of different bit depths are refused.
+(HDF5: ``.h5``, ``.hdf5``, ``.hdf``, ``.he5``, or any file of HDF5's signature): its raw frames are
+converted to one unit for every camera (:func:`load_flats`); the frames of other files must be in one
+unit for all cameras (raw levels of cameras of one bit depth, or ``DN / (2**bit_depth - 1)``), and raw
+levels of cameras of different bit depths are refused.
 """
 
 from __future__ import annotations
@@ -50,6 +51,17 @@ def parse_points(tokens) -> np.ndarray:
     if not np.all(np.isfinite(out)):
         raise ValueError("--markers-ref points must be finite")
     return out
+
+
+def _is_hdf5(path) -> bool:
+    """Whether ``path`` names an HDF5 file: by its suffix (:data:`~rsocl.files.hdf5_header.HDF5_SUFFIXES`), or
+    by its signature whatever its suffix."""
+    import h5py
+
+    from rsocl.files.hdf5_header import HDF5_SUFFIXES
+
+    path = Path(os.fspath(path))
+    return path.suffix.lower() in HDF5_SUFFIXES or (path.is_file() and h5py.is_hdf5(path))
 
 
 def _read_image(path: Path, what: str) -> np.ndarray:
@@ -230,7 +242,7 @@ def load_flats(path, rigfile, dark: float):
         would be off by ``2**`` the difference.
     """
     C = len(rigfile.cameras)
-    if Path(os.fspath(path)).suffix.lower() not in (".h5", ".hdf5"):
+    if not _is_hdf5(path):
         frames = per_camera(load_frames(path, "--flat")[0], C, "--flat")
         bits = [_bit_depth(camera) for camera in rigfile.cameras]
         if len({b for b in bits if b is not None}) > 1 and all(np.array_equal(f, np.round(f)) for f in frames):

@@ -17,9 +17,7 @@ import sys
 from pathlib import Path
 
 from rsocl.cli.tiled_run import is_zarr, run_stream, run_tiles, zarr_gif
-
-#: The suffixes ``rsocl reconstruct --out`` takes for an HDF5 reconstruction file (``.zarr``: a store).
-HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf", ".he5")
+from rsocl.files.hdf5_header import HDF5_SUFFIXES
 
 __all__ = [
     "add_reconstruct_tiling_args",

@@ -34,8 +34,11 @@ from rsocl.common import validation as check
 from rsocl.common.memory import check_host_memory
 from rsocl.model.rig import Rig
 
+#: The suffixes of HDF5 files (``rsocl reconstruct --out`` takes these for a reconstruction file).
+HDF5_SUFFIXES = (".h5", ".hdf5", ".hdf", ".he5")
 __all__ = [
     "FORMAT_VERSION",
+    "HDF5_SUFFIXES",
     "json_default",
     "dumps_json",
     "write_rig",
