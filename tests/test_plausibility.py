@@ -285,6 +285,17 @@ def test_one_camera_far_above_its_full_scale_is_warned_in_one_line():
     assert len([w for w in caught if "full scale" in str(w.message)]) == 1
 
 
+def test_a_camera_whose_binary_windows_hold_no_subframe_does_not_hide_anothers_full_scale(recwarn):
+    t_r = 1e-5  # camera 0: 0.3 t_r from 0.2 t_r into a sub-frame, no sub-frame start inside: full scale 0
+    cameras = [rsocl.Camera(0, t_e=0.3 * t_r, t_r=t_r, t_a=0.2 * t_r), rsocl.Camera(90, t_e=3 * t_r, t_r=t_r)]
+    rig = rsocl.Rig(cameras, (6, 7), mask="binary")
+    g = ref.forward(rig, np.random.default_rng(0).random((rig.T,) + rig.shape))
+    g[1] *= 1000
+    with pytest.warns(UserWarning, match=r"^g: snapshots of camera 1 reach .*, \d+ times its full scale 4 "):
+        rsocl.reconstruct(g, rig, tune=False, lam=0.1, eta=0.2, iterations=2)
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]  # no 0/0 from camera 0
+
+
 def test_snapshots_within_their_full_scale_or_saturated_warn_nothing(recwarn):
     rig, _, g = _demo()
     rsocl.reconstruct(g, rig, tune=False, iterations=3)

@@ -197,11 +197,12 @@ OFF_SCALE = 10.0
 def warn_off_scale(g, rig, valid=None) -> None:
     """Warn (``UserWarning``, one line) when some snapshot channel of ``g`` (``(K, m, n)`` or a batch) peaks
     above :data:`OFF_SCALE` times its full scale ``gain * t_e / dt`` (:func:`~rsocl.model.curvature.full_scales`;
-    over the ``valid`` pixels: those below the saturation), naming the highest such camera."""
+    over the ``valid`` pixels: those below the saturation), naming the highest such camera. A channel whose
+    exposures hold no sub-frame (full scale 0: a binary window between two sub-frame starts) is not compared."""
     full = full_scales(rig)
     values = np.abs(g) if valid is None else np.where(valid, np.abs(g), 0.0)
     peak = np.max(values.reshape((-1, rig.n_channels, g.shape[-2] * g.shape[-1])), axis=(0, 2))
-    ratio = peak / full
+    ratio = np.divide(peak, full, out=np.zeros_like(peak, dtype=np.float64), where=full > 0)
     k = int(np.argmax(ratio))
     if ratio[k] > OFF_SCALE:
         camera, frame = rig.channels[k]
