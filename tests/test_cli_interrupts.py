@@ -206,6 +206,31 @@ def test_reconstruct_interrupted_before_its_file_is_in_place_says_nothing_is_wri
     assert out.read_bytes() == before and not list(tmp_path.glob("rec.earlier-*"))
 
 
+@pytest.mark.parametrize(
+    "run",
+    [
+        pytest.param(["--window", "1"], id="stream"),
+        pytest.param(["--tile", "6", "6"], id="tiles"),
+    ],
+)
+def test_a_tiled_or_streamed_run_interrupted_while_its_file_is_saved_says_nothing_is_written(
+    captures, tmp_path, capsys, monkeypatch, run
+):
+    import rsocl.cli.tiled_run as tiled_run
+
+    cap, stream = captures
+    out = tmp_path / "rec.h5"
+    argv = ["reconstruct", str(stream if "--window" in run else cap), "--out", str(out), *run]
+    argv += ["--iterations", "2", "--fixed", "--quiet"]
+    assert main(argv) == 0
+    before = out.read_bytes()
+    _interrupt(monkeypatch, tiled_run, "save_result")
+    capsys.readouterr()
+    assert main(argv) == 130
+    assert capsys.readouterr().err == f"rsocl reconstruct: interrupted: nothing written, {out} unchanged\n"
+    assert out.read_bytes() == before and not list(tmp_path.glob("rec.earlier-*"))
+
+
 @pytest.mark.parametrize("step", ["scene_datacube", "save_capture"])
 def test_simulate_interrupted_says_nothing_is_written(tmp_path, capsys, monkeypatch, step):
     import rsocl.cli.simulate as simulate

@@ -185,3 +185,17 @@ def test_a_stream_whose_window_fails_ends_in_one_error_naming_the_window(tmp_pat
     ), err
     assert len(rest) == 1 and rest[0].startswith("  tile (0, 0) ") and "FloatingPointError: ADMM diverged" in rest[0]
     assert "Traceback" not in err and not out.exists()
+
+
+def test_a_streams_params_hold_the_whole_captures_subframes_and_saturated_pixels():
+    t_r, shape = 3.5e-5, (12, 12)
+    cameras = [Camera(a, t_e=1.8e-4, t_r=t_r, t_d=shape[0] * t_r, frames=3) for a in (0, 90, 180, 270)]
+    rig = Rig(cameras, shape)
+    g = rsocl.RollingShutterOperator(rig).forward(builtin_scene(shape, rig.T, seed=2))
+    level = float(np.percentile(g, 90))
+    stream = reconstruct_stream(g, rig, window=2, overlap=1, iterations=3, tune=False, saturation=level)
+    first = stream.results[0].params
+    span = rig.sampled_range()
+    assert stream.params["solved_subframes"] == [span.start, span.stop] != first["solved_subframes"]
+    assert stream.params["saturated_pixels"] == int(np.count_nonzero(g >= level)) > first["saturated_pixels"]
+    assert stream.params["lam"] == first["lam"]

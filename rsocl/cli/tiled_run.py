@@ -104,13 +104,13 @@ def run_tiles(args, capture):
             plots = tuning_plot_files(args, result.params, Path(args.out).with_suffix(".gif"))
         say(args, "wrote " + ", ".join(map(str, [args.out, *gif, *plots])))
         return 0
-    with interrupted(nothing_written(args.out)):
-        truth, _ = _tiles_line(args, capture, result)
     history = {
         "tile_seconds": np.array([p.seconds for p in result.pieces]),
         "tile_residual": np.array([p.residual for p in result.pieces]),
     }
-    kept = save_result(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
+    with interrupted(nothing_written(args.out)):  # until the file is renamed into place, the last step of the save
+        truth, _ = _tiles_line(args, capture, result)
+        kept = save_result(args.out, result.datacube, capture.rig, params=result.params, history=history, truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     with written(args.out, [kept]):
         comparison_gif(gif, truth, result.datacube)
@@ -197,10 +197,9 @@ def run_stream(args):
         why = "a stream's --out is written once every window is solved"
         return _error(f"{label} failed: " + _discarded(exc, args.out, done, why))
     overlap = default_overlap(args.window) if args.overlap is None else args.overlap
-    params = dict(
-        stream.results[0].params, window=args.window, overlap=overlap, windows=[list(w) for w in stream.windows]
-    )
-    kept = save_result(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
+    params = dict(stream.params, window=args.window, overlap=overlap, windows=[list(w) for w in stream.windows])
+    with interrupted(nothing_written(args.out)):  # until the file is renamed into place
+        kept = save_result(args.out, stream.datacube, loaded.rig, params=params, truth=truth)
     gif = Path(args.gif) if args.gif else Path(args.out).with_suffix(".gif")
     with written(args.out, [kept]):
         comparison_gif(gif, truth, stream.datacube)

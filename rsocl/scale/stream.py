@@ -76,7 +76,10 @@ class StreamResult:
     (where no exposure reaches, the window with the nearest modelled sub-frame, which it holds:
     :mod:`rsocl.solver.held`); ``results`` each window's :class:`rsocl.scale.TiledResult`, whose
     ``datacube`` holds the sub-frames ``spans[w]`` it modelled (so the results together take about the
-    memory of ``datacube``, not of every window's grid from time 0)."""
+    memory of ``datacube``, not of every window's grid from time 0); ``params`` the stream's: the first
+    window's settings (every window runs with them), with the capture's ``solved_subframes`` (the
+    windows' spans together) and ``saturated_pixels`` (snapshot pixels of the whole capture at or above
+    ``saturation``)."""
 
     datacube: np.ndarray
     rig: Rig
@@ -84,6 +87,7 @@ class StreamResult:
     spans: list
     owner: np.ndarray
     results: list = field(default_factory=list)
+    params: dict = field(default_factory=dict)
 
 
 def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=None, progress=False, **kwargs):
@@ -154,4 +158,10 @@ def reconstruct_stream(snapshots, rig: Rig, *, window=None, overlap=None, tile=N
         del cube
         results.append(result)
     assert datacube is not None  # frame_windows gives at least one window
-    return StreamResult(datacube, rig, windows, [(s.start, s.stop) for s in spans], owner, results)
+    saturation = kwargs.get("saturation")
+    params = dict(
+        results[0].params,
+        solved_subframes=[min(span.start for span in spans), max(span.stop for span in spans)],
+        saturated_pixels=0 if saturation is None else int(np.count_nonzero(g >= saturation)),
+    )
+    return StreamResult(datacube, rig, windows, [(s.start, s.stop) for s in spans], owner, results, params)
