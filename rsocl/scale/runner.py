@@ -20,10 +20,14 @@ memory) has its task run again on another worker by Dask.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import numbers
 import os
+import signal
+import threading
 import uuid
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 from rsocl.scale.work import solve_tile
@@ -103,15 +107,44 @@ def _check_address(address):
         ) from None
 
 
+@contextlib.contextmanager
+def _sigint_ignored():
+    """SIGINT ignored while the block runs (in the main thread; elsewhere the block runs as it is).
+
+    Processes started in the block inherit the ignored disposition (an ignored signal stays ignored
+    across ``exec``, and Python then installs no handler of its own): a local cluster's worker processes
+    never receive the terminal's Ctrl-C, which reaches the whole process group, so only this process
+    ends the run, in one line, closing the cluster itself. A Ctrl-C while the cluster starts (seconds) is
+    not seen.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
 def _cause(exc) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
-def _attempts(job, payload, settings, retries):
-    """``solve_tile`` tried up to ``retries + 1`` times: the Piece, or a Failure."""
+def _attempts(job, payload, settings, retries, stop=None):
+    """``solve_tile`` tried up to ``retries + 1`` times: the Piece, or a Failure; None once ``stop`` (a
+    ``threading.Event``) is set: the run in progress ends at its next booking
+    (:func:`rsocl.solver.stop.stopping`) and no attempt follows."""
+    from rsocl.solver.stop import Stopped, stopping
+
     for _attempt in range(retries + 1):
+        if stop is not None and stop.is_set():
+            return None
         try:
-            return solve_tile(job, payload, settings)
+            with stopping(stop):
+                return solve_tile(job, payload, settings)
+        except Stopped:
+            return None
         except Exception as exc:  # noqa: BLE001 - any cause is reported with the tile
             last = exc
     return Failure(job.set_index, job.tile.index, job.label, retries + 1, _cause(last))
@@ -163,14 +196,15 @@ class Engine:
         from distributed import Client, LocalCluster
 
         if self.workers is not None:
-            self.cluster = LocalCluster(
-                n_workers=self.workers,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                dashboard_address="127.0.0.1:0",
-                silence_logs=logging.ERROR,
-            )
+            with _sigint_ignored():  # the workers started here never see the terminal's Ctrl-C
+                self.cluster = LocalCluster(
+                    n_workers=self.workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",
+                    dashboard_address="127.0.0.1:0",
+                    silence_logs=logging.ERROR,
+                )
             self.client = Client(self.cluster)
         else:
             try:
@@ -183,11 +217,18 @@ class Engine:
                 ) from None
         return self
 
-    def __exit__(self, *exc):
-        if self.client is not None:
-            self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
+    def __exit__(self, kind, *exc):
+        quiet = contextlib.nullcontext()
+        if self.mode == "distributed" and kind is not None and not issubclass(kind, Exception):
+            from distributed.utils import silence_logging_cmgr
+
+            # interrupted (Ctrl-C, SIGTERM): what the scheduler says of the tasks cut short is not news
+            quiet = silence_logging_cmgr(logging.CRITICAL)
+        with quiet:
+            if self.client is not None:
+                self.client.close()
+            if self.cluster is not None:
+                self.cluster.close()
         self.client = self.cluster = None
         return False
 
@@ -224,17 +265,18 @@ class Engine:
     def _split(outcomes):
         pieces, failures = [], []
         for outcome in outcomes:
-            (failures if isinstance(outcome, Failure) else pieces).append(outcome)
+            if outcome is not None:  # None: a task stopped by an interrupt (:func:`_attempts`)
+                (failures if isinstance(outcome, Failure) else pieces).append(outcome)
         return pieces, failures
 
     def _run_local(self, jobs, payload, settings, retries, bar):
         import dask
         from dask.callbacks import Callback
 
-        token = uuid.uuid4().hex[:8]
+        token, stop = uuid.uuid4().hex[:8], threading.Event()
         tasks = [
             dask.delayed(_attempts, pure=False)(
-                job, payload, settings, retries, dask_key_name=f"rsocl-tile-{token}-{i}"
+                job, payload, settings, retries, stop, dask_key_name=f"rsocl-tile-{token}-{i}"
             )
             for i, job in enumerate(jobs)
         ]
@@ -244,8 +286,21 @@ class Engine:
                 if bar is not None and str(key).startswith("rsocl-tile-"):
                     bar.update(1)
 
-        with Bar():
-            outcomes = dask.compute(*tasks, scheduler="threads", num_workers=1)
+        # the task's thread is rsocl's: an interrupt of this (main) thread stops the task in progress and
+        # waits for it, so that what the store holds is settled before the interrupt is said
+        name = f"rsocl-tiles-{token}"
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=name)
+        try:
+            with Bar():
+                outcomes = dask.compute(*tasks, scheduler="threads", pool=pool)
+        except BaseException:
+            stop.set()
+            raise
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+            for thread in threading.enumerate():  # one the interrupt came upon before the pool booked it too
+                if thread.name.startswith(name):
+                    thread.join()
         return self._split(outcomes)
 
     def _run_distributed(self, jobs, payload, settings, retries, bar):

@@ -20,6 +20,7 @@ import numpy as np
 from rsocl.device.reduction import sum_sq_diff
 from rsocl.solver.held import hold
 from rsocl.solver.ladder import auto_settled
+from rsocl.solver.stop import check_stop
 
 __all__ = ["run_iterations", "collect"]
 
@@ -230,7 +231,9 @@ class _History:
                 self.values[key][row] = booked
 
     def record(self, it, residual) -> bool:
-        """Book iteration ``it``'s residual (one per set for a batch); True when the run should stop after it."""
+        """Book iteration ``it``'s residual (one per set for a batch); True when the run should stop after it.
+        Raises :class:`~rsocl.solver.stop.Stopped` where the thread's stop event is set."""
+        check_stop()
         if self.stopped is not None:  # the sets that stopped before are not booked (NaN) nor checked
             residual = np.where(self.stopped >= 0, np.nan, residual)
         bad = self._grown(residual)
