@@ -141,3 +141,25 @@ def test_bad_shapes_are_refused():
         device_block_inverse(dev, dev.queue, gram, [0.1, 0.2], 1e-6, cla.zeros(dev.queue, (3, 3, 2, 2), np.float32))
     with pytest.raises(ValueError, match="gram must be"):
         device_block_inverse(dev, dev.queue, cla.zeros(dev.queue, (3, 2, 2, 2), np.float32), [0.1], 1e-6)
+
+
+@pytest.mark.parametrize("dtype, offset", [("float32", 1e-3), ("float64", 1e-5)])
+def test_a_gap_step_drops_the_directions_below_its_precisions_cutoff_as_the_reference_told_so(dtype, offset):
+    """Two cameras whose windows differ by ``offset`` row times: their blocks' smallest eigenvalues lie at about
+    0.1 offset² of the largest, below the precision's cutoff (``RCOND``) and above NumPy's own (1e-15)."""
+    from rsocl.model import reference as ref
+
+    assert ref.RCOND == RCOND["float64"]  # the reference's default is float64's cutoff
+    t_r = 3.5e-5
+    cameras = [rsocl.Camera(0, t_e=1.8e-4, t_r=t_r), rsocl.Camera(0, t_e=1.8e-4, t_r=t_r, t_a=offset * t_r)]
+    rig = rsocl.Rig(cameras + [rsocl.Camera(90, t_e=1.8e-4, t_r=t_r)], (6, 6))
+    ratios = np.linalg.eigvalsh(ref.gram(rig))
+    ratios = ratios[..., 0] / ratios[..., -1]
+    assert np.any((ratios > 1e-14) & (ratios < RCOND[dtype]))  # directions the cutoff drops
+    g = ref.forward(rig, np.random.default_rng(0).random((rig.T,) + rig.shape))
+    got = rsocl.reconstruct(g, rig, dtype=dtype, tune=False, iterations=1, lam=0.0, eta=0.0).datacube
+    zero = np.zeros((rig.T,) + rig.shape)
+    want = ref.project(rig, zero, g, 0.0, rcond=RCOND[dtype])
+    scale = np.abs(want).max()
+    assert np.abs(got - want).max() <= (1e-4 if dtype == "float32" else 1e-9) * scale
+    assert np.abs(got - ref.project(rig, zero, g, 0.0, rcond=1e-15)).max() > 1e-2 * scale  # the cutoff matters

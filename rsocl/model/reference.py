@@ -54,12 +54,18 @@ def gram(rig: Rig) -> np.ndarray:
     return np.einsum("ksyx,lsyx->yxkl", w, w)
 
 
-def project(rig: Rig, v, g, eta: float, projection: str = "exact", saturated=None) -> np.ndarray:
+#: The pseudo-inverse's cutoff of :func:`project`: a block's eigenvalues below this fraction of its largest
+#: are dropped, as rsocl's float64 runs drop them (``rsocl.solver.inverse.RCOND``; float32 runs: 1e-6).
+RCOND = 1e-10
+
+
+def project(rig: Rig, v, g, eta: float, projection: str = "exact", saturated=None, rcond: float = RCOND) -> np.ndarray:
     """The ADMM data step ``f = v + Hᵀ (eta I + H Hᵀ)⁻¹ (g - H v)`` (docs/model.md Eq. 12).
 
     ``projection="paper"`` uses the diagonal ``psi`` instead (Eq. 15). Singular
-    blocks (``eta = 0``) use the pseudo-inverse; nothing is divided by zero. ``saturated``
-    (bool, shape of ``g``): those samples enter one-sided (docs/model.md, saturated pixels).
+    blocks (``eta = 0``) use the pseudo-inverse, whose eigenvalues below ``rcond`` of the block's largest are
+    dropped (:data:`RCOND`: float64's cutoff; give 1e-6 to check a float32 run); nothing is divided by zero.
+    ``saturated`` (bool, shape of ``g``): those samples enter one-sided (docs/model.md, saturated pixels).
     """
     r = np.asarray(g, dtype=np.float64) - forward(rig, v)
     if projection == "paper":
@@ -72,7 +78,7 @@ def project(rig: Rig, v, g, eta: float, projection: str = "exact", saturated=Non
     else:
         K = rig.n_channels
         block = gram(rig) + eta * np.eye(K)
-        z = np.einsum("yxkl,lyx->kyx", np.linalg.pinv(block, hermitian=True), r)
+        z = np.einsum("yxkl,lyx->kyx", np.linalg.pinv(block, rcond=rcond, hermitian=True), r)
     return np.asarray(v, dtype=np.float64) + adjoint(rig, z)
 
 
@@ -117,7 +123,7 @@ def _active_step(m: np.ndarray, r: np.ndarray, eta: float, active: np.ndarray) -
     zz = np.zeros(len(r))
     if len(active):
         sub = m[np.ix_(active, active)] + eta * np.eye(len(active))
-        zz[active] = np.linalg.pinv(sub, rcond=1e-10, hermitian=True) @ r[active]
+        zz[active] = np.linalg.pinv(sub, rcond=RCOND, hermitian=True) @ r[active]
     return zz
 
 
@@ -165,18 +171,20 @@ def admm(
     x0=None,
     step: float = 1.0,
     saturated=None,
+    rcond: float = RCOND,
 ) -> np.ndarray:
     """The ADMM-TV of docs/model.md with the reference pieces above; returns ``theta``.
 
     ``eta = 0`` is GAP: the dual ``b`` stays zero and the TV weight is ``lam``. ``step``: the TV
-    step of :func:`tv_chambolle`. ``saturated``: the samples :func:`project` takes one-sided.
+    step of :func:`tv_chambolle`. ``saturated``: the samples :func:`project` takes one-sided; ``rcond``: its
+    pseudo-inverse's cutoff.
     """
     theta = np.zeros((rig.T,) + rig.shape) if x0 is None else np.asarray(x0, dtype=np.float64).copy()
     b = np.zeros_like(theta)
     weight = lam / eta if eta > 0 else lam
     for _ in range(iterations):
         v = theta + b
-        f = project(rig, v, g, eta, projection, saturated)
+        f = project(rig, v, g, eta, projection, saturated, rcond)
         theta = tv_chambolle(f - b, weight, tv_iterations, temporal_weight, step)
         if eta > 0:
             b = b - (f - theta)
