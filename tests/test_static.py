@@ -187,3 +187,36 @@ def test_the_default_keeps_a_static_point_under_noise_as_the_interpolation_does(
     np.testing.assert_allclose(result.datacube[:, 14:19, 14:19], start[:, 14:19, 14:19], rtol=1e-5, atol=1e-5)
     assert result.datacube[:, 16, 16].mean() > 0.9
     assert rsocl.psnr(result.datacube, truth) > rsocl.psnr(start, truth) - 1.0
+
+
+def test_a_tile_under_its_frames_levels_marks_the_pixels_the_whole_frame_marks():
+    from rsocl.solver.static import frame_levels, levels
+
+    g = np.ones((4, 24, 24))
+    g[:, :, 10:] = 0.2  # a dark right part with no bright pixel of its own
+    g[0, 5, 18] = 0.21  # cameras that disagree by 0.01: static against the dark half's level, not the frame's
+    block = g[:, :, 11:]  # a tile of columns 12.. with a halo of one column (the mask's erosion)
+    whole = static_weights(g, 0.75)[:, 12:]
+    assert not np.array_equal(static_weights(block, 0.75)[:, 1:], whole)  # its own bright level is 0.2
+    with frame_levels(levels(g)):
+        np.testing.assert_array_equal(static_weights(block, 0.75)[:, 1:], whole)
+
+
+def test_every_tile_of_a_tiled_run_fixes_its_static_part_with_the_whole_frames_levels(monkeypatch):
+    import rsocl.solver.pipeline as pipeline
+    import rsocl.solver.static as static
+    from rsocl.scale import reconstruct_tiled
+
+    rig = rsocl.Rig.paper_array(4, (24, 24), t_e=1.8e-4, t_r=3.5e-5)
+    g = RollingShutterOperator(rig).forward(rsocl.builtin_scene(rig.shape, rig.T, seed=1))
+    seen, fix = [], pipeline.static_fix
+
+    def spy(solver, start, snapshots, weight):
+        seen.append((static._FRAME.get(), snapshots.shape))
+        return fix(solver, start, snapshots, weight)
+
+    monkeypatch.setattr(pipeline, "static_fix", spy)
+    reconstruct_tiled(g, rig, tile=(12, 12), halo=4, iterations=3)
+    assert len(seen) == 4 and all(shape == (4, 16, 16) for _, shape in seen)
+    assert all(measured == static.levels(g) for measured, _ in seen)
+    assert static._FRAME.get() is None  # outside the tiles' runs

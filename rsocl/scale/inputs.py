@@ -123,15 +123,20 @@ class CaptureSets:
 
 
 def scan(source, saturation=None) -> tuple:
-    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count)``.
+    """One pass over every set of ``source``: ``(SHA-256 hex digest, saturated pixel count, levels)``, with
+    ``levels`` each set's :class:`~rsocl.solver.static.Levels` (the static-part fix's measures of the
+    whole frame, which every tile takes).
 
     A ValueError naming the set (:meth:`where`) when a set holds NaN or inf, or when none of its
     pixels is below ``saturation`` (nothing to fit, as :func:`rsocl.reconstruct` refuses it).
     """
-    digest, saturated = hashlib.sha256(), 0
+    from rsocl.solver.static import levels
+
+    digest, saturated, measured = hashlib.sha256(), 0, []
     for set_index, g in source.sets():
         check.finite_array(source.where(set_index), g)
         _digest_update(digest, g)
+        measured.append(levels(g))
         if saturation is None:
             continue
         valid = g < saturation
@@ -141,4 +146,4 @@ def scan(source, saturation=None) -> tuple:
                 f"{saturation!r}: nothing left to fit"
             )
         saturated += int(valid.size - np.count_nonzero(valid))
-    return digest.hexdigest(), saturated
+    return digest.hexdigest(), saturated, tuple(measured)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -300,9 +300,10 @@ def reconstruct_tiled(
         span = rig.sampled_range()
         with engine:  # a cluster is reached (or started) before the input is read
             began = time.perf_counter()
-            digest, saturated = scan(source, saturation)
+            digest, saturated, measured = scan(source, saturation)
             tuning = tune_tiles(source, grid, request, saturation)
             settings, params = tile_settings(request, tuning, saturation)
+            settings = replace(settings, frame_levels=measured)  # every tile's static-part fix: its frame's
             params.update(
                 {
                     "saturated_pixels": saturated,

@@ -38,7 +38,9 @@ class TileSettings:
     its rig, computed on the device; the start of a tuned :func:`rsocl.reconstruct`). ``blend`` moves
     each tile's result back towards its start (:func:`rsocl.reconstruct`'s ``blend``; 1: not at all), as
     the capture's search chose it. ``quality`` names the rung (:mod:`rsocl.solver.ladder`) whose
-    static-part fix a tile started from the interpolation gets, as the untiled tuned run does.
+    static-part fix a tile started from the interpolation gets, as the untiled tuned run does; that fix
+    measures ``frame_levels`` (one :class:`~rsocl.solver.static.Levels` per set, of the whole frame; None:
+    each tile its own snapshots), so that a tile marks the pixels the run in one piece marks.
     """
 
     regularizer: str
@@ -54,6 +56,7 @@ class TileSettings:
     start: str = "zeros"
     blend: float = 1.0
     quality: str = "balanced"
+    frame_levels: tuple | None = None
 
     def for_set(self, set_index) -> TileSettings:
         """The settings of set ``set_index``'s tasks: its own ``lam`` and ``eta`` where they are per set."""
@@ -230,6 +233,7 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     of its clipped snapshots, 0 iterations and residual 0.
     """
     from rsocl.solver.reconstruct import reconstruct
+    from rsocl.solver.static import frame_levels
 
     rig = _rig_for(payload, job.tile)
     settings = settings.for_set(job.set_index)
@@ -240,7 +244,8 @@ def solve_tile(job: Job, payload: RigPayload, settings: TileSettings) -> Piece:
     if settings.saturation is not None and not np.any(g < settings.saturation):
         piece = _unfitted(job, rig, g, solved, settings, device)
     else:
-        with _lock_for(device):
+        measured = None if settings.frame_levels is None else settings.frame_levels[job.set_index or 0]
+        with _lock_for(device), frame_levels(measured):
             began = time.perf_counter()
             result = reconstruct(
                 g,

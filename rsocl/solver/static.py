@@ -14,11 +14,19 @@ held-out pixels of the parameter search cannot see those sub-frames. :func:`poin
 with a tolerance scaled to the feature's own contrast and to the snapshots' noise, and
 :func:`static_fix` sets them, with their surround, to the interpolation (:data:`POINT_WEIGHT`).
 
+Both masks measure the snapshots as a whole: their bright level, darkest value and noise
+(:class:`Levels`). A tile of a larger frame (:mod:`rsocl.scale`) takes the frame's levels
+(:func:`frame_levels`), so that it marks the pixels the run in one piece marks.
+
 Measured effect (PSNR and SSIM): ``docs/quality_ladder.md``; on point sources:
 ``docs/point_sources.md``.
 """
 
 from __future__ import annotations
+
+import contextlib
+import contextvars
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,6 +39,9 @@ __all__ = [
     "POINT_NOISE",
     "POINT_SURROUND",
     "POINT_WEIGHT",
+    "Levels",
+    "levels",
+    "frame_levels",
     "static_mask",
     "noise_level",
     "point_mask",
@@ -60,6 +71,50 @@ POINT_WEIGHT = 1.0
 #: ``docs/solver-notes.md`` (point sources).
 
 
+class Levels(NamedTuple):
+    """What the masks measure on the snapshots as a whole, in their units: ``bright`` (their
+    :data:`BRIGHT_PERCENTILE` th percentile), ``darkest`` (their minimum) and ``noise``
+    (:func:`noise_level`)."""
+
+    bright: float
+    darkest: float
+    noise: float
+
+
+def levels(g: np.ndarray) -> Levels:
+    """The :class:`Levels` of snapshots ``g`` ``(K, m, n)``.
+
+    Examples
+    --------
+    >>> levels(np.arange(8.0).reshape(2, 2, 2))
+    Levels(bright=7.0, darkest=0.0, noise=0.0)
+    """
+    g = np.asarray(g, dtype=np.float64)
+    bright = float(np.percentile(g, BRIGHT_PERCENTILE))
+    return Levels(bright, float(g.min()), noise_level(g) if g.shape[0] >= 2 else 0.0)
+
+
+_FRAME: contextvars.ContextVar[Levels | None] = contextvars.ContextVar("rsocl_static_levels", default=None)
+
+
+@contextlib.contextmanager
+def frame_levels(measured: Levels | None):
+    """Within the block, the static-part fix of this thread's runs measures nothing on their own snapshots and
+    takes ``measured`` (None: their own, as outside the block): a tile's run takes its frame's."""
+    token = _FRAME.set(measured)
+    try:
+        yield
+    finally:
+        _FRAME.reset(token)
+
+
+def _levels(g, given: Levels | None) -> Levels:
+    """``given``, else the levels of :func:`frame_levels`, else ``g``'s own."""
+    if given is None:
+        given = _FRAME.get()
+    return levels(g) if given is None else given
+
+
 def _erode(mask: np.ndarray) -> np.ndarray:
     """``mask`` ``(m, n)`` shrunk by one pixel (4-neighbourhood; pixels on the border are dropped)."""
     out = mask.copy()
@@ -69,13 +124,15 @@ def _erode(mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def static_mask(g: np.ndarray) -> np.ndarray:
+def static_mask(g: np.ndarray, measured: Levels | None = None) -> np.ndarray:
     """The static pixels of snapshots ``g`` ``(K, m, n)``: bool ``(m, n)`` (module doc).
 
     Parameters
     ----------
     g : ndarray, shape (K, m, n)
         Snapshots of every camera on the reference grid.
+    measured : Levels or None
+        The levels to hold the spread against (None: :func:`frame_levels`' or ``g``'s own).
 
     Returns
     -------
@@ -88,7 +145,7 @@ def static_mask(g: np.ndarray) -> np.ndarray:
     16
     """
     g = np.asarray(g, dtype=np.float64)
-    bright = float(np.percentile(g, BRIGHT_PERCENTILE))
+    bright = _levels(g, measured).bright
     if g.shape[0] < 2 or bright <= 0 or min(g.shape[1:]) < 3:
         return np.zeros(g.shape[1:], bool)
     return _erode((g.max(axis=0) - g.min(axis=0)) < SPREAD * bright)
@@ -111,7 +168,7 @@ def noise_level(g: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
 
 
-def point_mask(g: np.ndarray) -> np.ndarray:
+def point_mask(g: np.ndarray, measured: Levels | None = None) -> np.ndarray:
     """The windows of small static bright features of snapshots ``g`` ``(K, m, n)``: bool ``(m, n)``.
 
     A feature is a pixel whose camera mean is the largest in its window of ``2 * POINT_HALF + 1``
@@ -126,6 +183,8 @@ def point_mask(g: np.ndarray) -> np.ndarray:
     ----------
     g : ndarray, shape (K, m, n)
         Snapshots of every camera on the reference grid.
+    measured : Levels or None
+        The snapshots' range and noise (None: :func:`frame_levels`' or ``g``'s own).
 
     Returns
     -------
@@ -151,11 +210,12 @@ def point_mask(g: np.ndarray) -> np.ndarray:
     ring[1:-1, 1:-1] = False
     outside = maximum_filter(mean, footprint=ring, mode="nearest") - surround
     spread = maximum_filter(g.max(axis=0) - g.min(axis=0), size=side, mode="nearest")
-    span = float(np.percentile(g, BRIGHT_PERCENTILE) - g.min())
+    measured = _levels(g, measured)
+    span = measured.bright - measured.darkest
     points = (
         (mean >= maximum_filter(mean, size=side, mode="nearest"))
         & (contrast > POINT_CONTRAST * span)
-        & (contrast > POINT_NOISE * noise_level(g))
+        & (contrast > POINT_NOISE * measured.noise)
         & (outside <= POINT_SURROUND * contrast)
         & (spread < POINT_AGREE * contrast)
     )
