@@ -48,7 +48,7 @@ import rsocl
 from rsocl.analysis.metrics import psnr
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import DOCS, git_revision, header_lines, write_page  # noqa: E402
+from provenance import DOCS, cpu_model, git_revision, header_lines, usable_cores, write_page  # noqa: E402
 
 RESULTS = DOCS / "scale.json"
 #: The sensor part's tile side, pixels (a smaller ``--sensor-shape`` side: that side).
@@ -302,7 +302,11 @@ def page(results, argv):
     from rsocl.device.context import get_device
 
     lines = header_lines("Tiles, Dask and Zarr: seams, the whole sensor, workers", get_device(None), argv)
-    lines += ["Written by `benchmarks/scale.py`; each part below names when and at which commit it was measured.", ""]
+    lines += [
+        "Written by `benchmarks/scale.py`; each part below names when, on which CPU and at which commit it was "
+        "measured (the header above names the latest part's machine).",
+        "",
+    ]
     seams = results.get("seams")
     if seams:
         lines += [
@@ -411,7 +415,8 @@ def page(results, argv):
 
 def _stamp(part):
     load = f" (load average at start {part['_load']})" if part.get("_load") else ""
-    return f"_measured {part['_measured']}{load} at commit {part['_commit']}: `{part['_command']}`_\n"
+    cpu = f" on {part['_cpu']}" if part.get("_cpu") else ""
+    return f"_measured {part['_measured']}{load}{cpu} at commit {part['_commit']}: `{part['_command']}`_\n"
 
 
 def main(argv=None):
@@ -468,6 +473,7 @@ def main(argv=None):
             _measured=datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             _load=", ".join(f"{x:.2f}" for x in os.getloadavg()),
             _commit=git_revision(),
+            _cpu=f"{cpu_model()}, {usable_cores()} usable cores",
             _command=" ".join(["python", "benchmarks/scale.py"] + argv[1:]),
         )
         part = {**globals()[f"part_{name}"](args), **stamp}
