@@ -216,8 +216,13 @@ def test_an_unreachable_scheduler_is_an_error_before_anything_runs(monkeypatch, 
     with pytest.raises(ValueError, match="scheduler: cannot reach a dask.distributed scheduler at 'tcp://127.0.0.1:9'"):
         reconstruct_tiled(g, rig, tile=(8, 8), scheduler="tcp://127.0.0.1:9", out=tmp_path / "rec.zarr")
     assert not calls and not (tmp_path / "rec.zarr").exists()
-    monkeypatch.setenv("RSOCL_SCHEDULER", "tcp://127.0.0.1:9")
-    with pytest.raises(ValueError, match="cannot reach"):
+    monkeypatch.setenv("RSOCL_SCHEDULER", "tcp://127.0.0.1:9")  # what the user set is what the message names
+    with pytest.raises(ValueError, match=r"^RSOCL_SCHEDULER: cannot reach .*or unset RSOCL_SCHEDULER for the local"):
+        reconstruct_tiled(g, rig, tile=(8, 8))
+    with pytest.raises(ValueError, match=r"^workers asks for a local cluster of 2 while RSOCL_SCHEDULER="):
+        reconstruct_tiled(g, rig, tile=(8, 8), workers=2)
+    monkeypatch.setenv("RSOCL_SCHEDULER", "garbage::::")
+    with pytest.raises(ValueError, match=r"^RSOCL_SCHEDULER must be the address of a dask.distributed scheduler"):
         reconstruct_tiled(g, rig, tile=(8, 8))
     monkeypatch.delenv("RSOCL_SCHEDULER")
     # a malformed address is refused before any connection is tried

@@ -5,8 +5,9 @@
   two solvers must not launch on one device at once.
 * ``scheduler="ADDRESS"`` (or the ``RSOCL_SCHEDULER`` environment variable): a running
   ``dask.distributed`` scheduler. It is connected to before anything is computed; an
-  unreachable address is a ValueError naming ``scheduler``. Its workers must be able to import
-  rsocl and, for file inputs and Zarr output, see the same paths.
+  unreachable address is a ValueError naming ``scheduler`` (or ``RSOCL_SCHEDULER``, where that gave
+  it). Its workers must be able to import rsocl and, for file inputs and Zarr output, see the same
+  paths.
 * ``workers=N``: a ``LocalCluster`` of ``N`` worker processes (one thread each) on 127.0.0.1,
   closed at the end; ``N`` is at most :func:`max_workers`, :data:`WORKERS_PER_CORE` per CPU core
   this process may run on (each worker is a Python process with its own OpenCL context).
@@ -88,10 +89,11 @@ class Failure:
         return f"{self.label} failed after {self.attempts} attempt(s): {self.cause}"
 
 
-def _check_address(address):
-    """ValueError naming ``scheduler`` unless ``address`` parses as a scheduler address (``tcp://host:port``,
-    ``host:port``, another dask scheme). Checked before any connection: a ``distributed.Client`` that
-    fails in its constructor on a malformed address spends 20 s closing itself when it is collected."""
+def _check_address(address, name="scheduler"):
+    """ValueError naming ``name`` (``scheduler``, or the environment variable that gave it) unless ``address``
+    parses as a scheduler address (``tcp://host:port``, ``host:port``, another dask scheme). Checked before any
+    connection: a ``distributed.Client`` that fails in its constructor on a malformed address spends 20 s
+    closing itself when it is collected."""
     from distributed.comm.addressing import parse_address, parse_host_port
 
     try:
@@ -102,7 +104,7 @@ def _check_address(address):
             parse_host_port(location)
     except (TypeError, ValueError) as exc:
         raise ValueError(
-            f"scheduler must be the address of a dask.distributed scheduler, tcp://host:port (or "
+            f"{name} must be the address of a dask.distributed scheduler, tcp://host:port (or "
             f"host:port), got {address!r} ({exc})"
         ) from None
 
@@ -164,8 +166,10 @@ class Engine:
     """
 
     def __init__(self, scheduler=None, workers=None):
+        name = "scheduler"  # what the messages name: the argument, or the environment variable the user set
         if scheduler is None:
             scheduler = os.environ.get(SCHEDULER_ENV) or None
+            name = SCHEDULER_ENV if scheduler is not None else name
         if workers is not None:
             cap = max_workers()
             if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or not 1 <= workers <= cap:
@@ -176,16 +180,21 @@ class Engine:
                 )
             workers = int(workers)
         if scheduler is not None and workers is not None:
+            if name == SCHEDULER_ENV:
+                raise ValueError(
+                    f"workers asks for a local cluster of {workers} while {SCHEDULER_ENV}={scheduler!r} names a "
+                    f"running one: unset {SCHEDULER_ENV}, or leave out workers"
+                )
             raise ValueError(
                 f"give scheduler (a running cluster, here {scheduler!r}) or workers (a local "
                 f"cluster of {workers}), not both"
             )
         if (scheduler is not None or workers is not None) and not have_dask():
-            what = "scheduler" if scheduler is not None else "workers"
+            what = name if scheduler is not None else "workers"
             raise ValueError(f"{what}: running on a Dask cluster needs dask[distributed]: pip install 'rsocl[dask]'")
         if scheduler is not None:
-            _check_address(scheduler)
-        self.scheduler, self.workers = scheduler, workers
+            _check_address(scheduler, name)
+        self.scheduler, self.workers, self._name = scheduler, workers, name
         self.mode = "distributed" if scheduler or workers else ("local" if have_dask() else "process")
         self.client = self.cluster = None
 
@@ -210,10 +219,10 @@ class Engine:
             try:
                 self.client = Client(self.scheduler, timeout=f"{CONNECT_TIMEOUT}s")
             except Exception as exc:  # noqa: BLE001 - OSError, TimeoutError, ValueError on a bad address
+                unset = f"unset {SCHEDULER_ENV}" if self._name == SCHEDULER_ENV else "leave scheduler unset"
                 raise ValueError(
-                    f"scheduler: cannot reach a dask.distributed scheduler at {self.scheduler!r} "
-                    f"({_cause(exc)}); start one (dask scheduler) or leave scheduler unset "
-                    "for the local scheduler"
+                    f"{self._name}: cannot reach a dask.distributed scheduler at {self.scheduler!r} "
+                    f"({_cause(exc)}); start one (dask scheduler) or {unset} for the local scheduler"
                 ) from None
         return self
 
