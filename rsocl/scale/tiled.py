@@ -349,6 +349,9 @@ def reconstruct_tiled(
             target = datacube if piece.set_index is None else datacube[piece.set_index]
             place(target, tiles[piece.index], piece.start, piece.block, (span.start, span.stop))
             piece.block = None
+    if params.get("device") is None and pieces:  # none asked for: the devices the tasks ran on
+        devices = sorted({piece.device for piece in pieces})
+        params["device"] = devices[0] if len(devices) == 1 else devices
     result = TiledResult(datacube, rig, params, pieces, int(done.sum()), failures, seconds, store, tuning)
     if failures:
         raise TilesFailed(result)
