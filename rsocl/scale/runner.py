@@ -28,6 +28,7 @@ import os
 import signal
 import threading
 import uuid
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -150,6 +151,16 @@ def _attempts(job, payload, settings, retries, stop=None):
         except Exception as exc:  # noqa: BLE001 - any cause is reported with the tile
             last = exc
     return Failure(job.set_index, job.tile.index, job.label, retries + 1, _cause(last))
+
+
+def _solve_noting_warnings(job, payload, settings):
+    """``solve_tile`` on a cluster's worker: ``(piece, warned)``, ``warned`` the ``(category, message)`` of each
+    warning the task raised, which the client raises again (a worker's own stderr shows them raw, once per
+    task)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        piece = solve_tile(job, payload, settings)
+    return piece, tuple(dict.fromkeys((w.category, str(w.message)) for w in caught))
 
 
 class Engine:
@@ -320,18 +331,28 @@ class Engine:
         token = uuid.uuid4().hex[:8]
         futures = {
             client.submit(
-                solve_tile, job, shared, settings, key=f"rsocl-tile-{token}-{i}", retries=retries, pure=False
+                _solve_noting_warnings,
+                job,
+                shared,
+                settings,
+                key=f"rsocl-tile-{token}-{i}",
+                retries=retries,
+                pure=False,
             ): job
             for i, job in enumerate(jobs)
         }
-        pieces, failures = [], []
+        pieces, failures, said = [], [], {}
         for future in as_completed(futures):
             job = futures[future]
             try:
-                pieces.append(future.result())
+                piece, warned = future.result()
+                pieces.append(piece)
+                said.update(dict.fromkeys(warned))
             except Exception as exc:  # noqa: BLE001 - reported with the tile
                 failures.append(Failure(job.set_index, job.tile.index, job.label, retries + 1, _cause(exc)))
             _tick(bar, None)
+        for category, message in said:  # in this process, once each, where the caller shows warnings
+            warnings.warn(message, category, stacklevel=4)
         return pieces, failures
 
 

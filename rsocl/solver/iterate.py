@@ -1,12 +1,11 @@
 """Running the ADMM iterations of a staged problem, and collecting the result.
 
-:func:`run_iterations` books each iteration's residual (and PSNR with a ground truth) in a
-history, drives the progress bar, the callback and the ``tol`` stop, raises on divergence and warns
-when the run ends unstable though bounded; :func:`collect` reads the
-estimate back with what the run's ``params`` record about the data. For a batch of sets every
-record is one value per set, and each set stops on its own under ``tol`` or ``iterations="auto"``: its
-estimate is kept from the iteration at which it met the criterion, its later records are NaN, and the
-batch runs until every set has stopped, so each set's result is its single-set run's.
+:func:`run_iterations` books each iteration's residual (and PSNR with a ground truth) in a history, drives the
+progress bar, the callback and the ``tol`` stop, raises on divergence and warns when the run ends unstable though
+bounded; :func:`collect` reads the estimate back with what the run's ``params`` record about the data. For a batch
+of sets every record is one value per set, and each set stops on its own under ``tol`` or ``iterations="auto"``: its
+estimate is kept from the iteration at which it met the criterion, its later records are NaN, and the batch runs
+until every set has stopped, so each set's result is its single-set run's.
 """
 
 from __future__ import annotations
@@ -102,9 +101,9 @@ class _History:
             return
         where = f" in set(s) {np.flatnonzero(bad).tolist()}" if np.ndim(self.values["residual"][-1]) else ""
         warnings.warn(
-            f"ADMM ended unstable{where}: the last residual {np.round(last[bad], 4).tolist()} is above 1 "
+            f"ADMM ended unstable{where}: the last residual {_listed(last[bad], 4)} is above 1 "
             "(the snapshots are fitted worse than by zeros) and more than "
-            f"{END_GROWTH:g} times the smallest of the run, {np.round(lowest[bad], 4).tolist()}; "
+            f"{END_GROWTH:g} times the smallest of the run, {_listed(lowest[bad], 4)}; "
             f"the result does not reconstruct the data.{self._hint()}",
             RuntimeWarning,
             stacklevel=4,
@@ -125,8 +124,8 @@ class _History:
             return
         where = f" in set(s) {np.flatnonzero(far).tolist()}" if np.ndim(self.values["residual"][-1]) else ""
         warnings.warn(
-            f"ADMM ended far from the data{where}: the residual is {np.round(last[far], 4).tolist()} after "
-            f"{self._ran(far)} iterations with eta = {np.round(eta[far], 6).tolist()}, over "
+            f"ADMM ended far from the data{where}: the residual is {_listed(last[far], 4)} after "
+            f"{self._ran(far)} iterations with eta = {_listed(eta[far], 6)}, over "
             f"{FAR_ETA:g} times the data term's curvature (psi up to {psi:.3g}): each iteration moves the "
             f"estimate by about psi/eta; choose eta up to about 4 psi = {4 * psi:.3g} (leave eta and lam out "
             "for the defaults)",
@@ -283,6 +282,11 @@ class _History:
         for i, kept in self.kept.items():
             theta[i].set(kept)
         self.kept = {}
+
+
+def _listed(values, digits: int) -> str:
+    """``values`` rounded to ``digits`` decimals: one value as a number, several as a list."""
+    return f"{r[0]:g}" if len(r := np.round(np.atleast_1d(values), digits).tolist()) == 1 else str(r)
 
 
 def run_iterations(solver, staged, settings, *, progress=False, blend=None, auto=False, fix=None) -> dict:
