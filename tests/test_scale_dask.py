@@ -206,6 +206,14 @@ def test_a_failing_tile_on_the_cluster_is_reported_with_its_index_and_cause(clus
     np.testing.assert_array_equal(marks, [[1, 1], [1, 0]])
 
 
+def test_a_warning_of_the_tiles_on_workers_is_raised_in_the_client_once(cluster, recwarn):
+    rig, g = _problem((16, 16))
+    kwargs = dict(tile=(8, 8), halo=2, iterations=4, tune=False, eta=1e6, lam=0.1)
+    reconstruct_tiled(g, rig, scheduler=cluster[0].scheduler_address, **kwargs)
+    far = [w for w in recwarn if "ended far from the data" in str(w.message)]
+    assert len(far) == 1 and far[0].category is RuntimeWarning, [str(w.message) for w in recwarn]
+
+
 def test_an_unreachable_scheduler_is_an_error_before_anything_runs(monkeypatch, tmp_path):
     from rsocl.scale import runner
 
