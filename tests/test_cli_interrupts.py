@@ -30,6 +30,17 @@ def _sigint_raises():
     signal.signal(signal.SIGINT, before)
 
 
+#: A stream of windows and a run in tiles: the runs whose result is written once every piece is solved.
+IN_PIECES = [pytest.param(["--window", "1"], id="stream"), pytest.param(["--tile", "6", "6"], id="tiles")]
+
+
+def _in_pieces(captures, out, run):
+    """``rsocl reconstruct``'s arguments for ``run`` (of :data:`IN_PIECES`) into ``out``, 2 fixed iterations."""
+    cap, stream = captures
+    argv = ["reconstruct", str(stream if "--window" in run else cap), "--out", str(out), *run]
+    return argv + ["--iterations", "2", "--fixed", "--quiet"]
+
+
 def _signal_in_the_gif(monkeypatch, signum=signal.SIGINT):
     """Send the process ``signum`` as the comparison GIF starts to be drawn (after the result file is written)."""
     import rsocl.analysis.visual as visual
@@ -49,20 +60,12 @@ def _earlier(out):
     return kept
 
 
-@pytest.mark.parametrize(
-    "run",
-    [
-        pytest.param(["--window", "1"], id="stream"),
-        pytest.param(["--tile", "6", "6"], id="tiles"),
-    ],
-)
+@pytest.mark.parametrize("run", IN_PIECES)
 def test_an_interrupt_after_an_hdf5_result_is_written_names_it_and_the_earlier_file(
     captures, tmp_path, capsys, monkeypatch, run
 ):
-    cap, stream = captures
     out = tmp_path / "rec.h5"
-    argv = ["reconstruct", str(stream if "--window" in run else cap), "--out", str(out), *run]
-    argv += ["--iterations", "2", "--fixed", "--quiet"]
+    argv = _in_pieces(captures, out, run)
     assert main(argv) == 0  # an earlier result at --out
     _signal_in_the_gif(monkeypatch)
     capsys.readouterr()
@@ -206,22 +209,14 @@ def test_reconstruct_interrupted_before_its_file_is_in_place_says_nothing_is_wri
     assert out.read_bytes() == before and not list(tmp_path.glob("rec.earlier-*"))
 
 
-@pytest.mark.parametrize(
-    "run",
-    [
-        pytest.param(["--window", "1"], id="stream"),
-        pytest.param(["--tile", "6", "6"], id="tiles"),
-    ],
-)
+@pytest.mark.parametrize("run", IN_PIECES)
 def test_a_tiled_or_streamed_run_interrupted_while_its_file_is_saved_says_nothing_is_written(
     captures, tmp_path, capsys, monkeypatch, run
 ):
     import rsocl.cli.tiled_run as tiled_run
 
-    cap, stream = captures
     out = tmp_path / "rec.h5"
-    argv = ["reconstruct", str(stream if "--window" in run else cap), "--out", str(out), *run]
-    argv += ["--iterations", "2", "--fixed", "--quiet"]
+    argv = _in_pieces(captures, out, run)
     assert main(argv) == 0
     before = out.read_bytes()
     _interrupt(monkeypatch, tiled_run, "save_result")
