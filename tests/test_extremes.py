@@ -156,11 +156,13 @@ def test_eta_extremes(eta):
             _solve(rig, truth, eta=eta, lam=0.01, iterations=20)
 
 
-def test_denormal_intensities(dtype):
+def test_denormal_intensities(dtype, recwarn):
     rig = rsocl.Rig.paper_array(4, (10, 10), t_e=1e-4, t_r=3e-5)
     truth = _scene(rig) * 1e-38
     res, g = _solve(rig, truth, dtype=dtype, lam=1e-40, eta=1e-40)
     assert np.abs(res.datacube).max() < 1e-30
+    scale = [w for w in recwarn if "where float32 holds the squares" in str(w.message)]
+    assert len(scale) == (dtype == "float32")  # float32 is told to use float64 for data this far from 1
 
 
 @pytest.mark.filterwarnings("ignore:g. snapshots of camera:UserWarning")  # raw 16-bit counts, on purpose
