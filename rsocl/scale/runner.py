@@ -157,8 +157,7 @@ def _solve_noting_warnings(job, payload, settings):
     """``solve_tile`` on a cluster's worker: ``(piece, warned)``, ``warned`` the ``(category, message)`` of each
     warning the task raised, which the client raises again (a worker's own stderr shows them raw, once per
     task)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
+    with warnings.catch_warnings(record=True) as caught:  # the worker's filters apply, as they would to stderr
         piece = solve_tile(job, payload, settings)
     return piece, tuple(dict.fromkeys((w.category, str(w.message)) for w in caught))
 
