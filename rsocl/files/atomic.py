@@ -18,6 +18,7 @@ the same target on the same host, whose process is gone, and removed
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import re
 import shutil
@@ -329,27 +330,40 @@ def keep_copy(path, tag: str) -> Path | None:
     return copy
 
 
+#: The paths the :func:`keeping` blocks of this thread keep now (absolute): a block within one keeps nothing more.
+_KEEPING: contextvars.ContextVar[frozenset] = contextvars.ContextVar("rsocl_keeping", default=frozenset())
+
+
 @contextlib.contextmanager
 def keeping(path, tag: str):
     """Context manager for a block that replaces the file ``path``: the earlier file keeps a second name
     (:func:`keep_copy`, yielded; None where there was no file), which is removed again if the block fails
     while ``path`` is still the earlier file (as an :func:`atomic_path` write that fails leaves it); a block
     that fails (an interrupt, say) after ``path`` was replaced leaves the second name, the earlier file's
-    only one.
+    only one. Within a block that keeps ``path`` already (a command around a save that keeps too), it keeps
+    nothing more and yields None.
 
     Examples
     --------
     >>> with keeping("rec.h5", "earlier") as kept:       # doctest: +SKIP
     ...     save_reconstruction("rec.h5", cube, rig)
     """
-    kept = keep_copy(path, tag)
+    key = os.path.abspath(os.fspath(path))
+    if key in _KEEPING.get():
+        yield None
+        return
+    token = _KEEPING.set(_KEEPING.get() | {key})
     try:
-        yield kept
-    except BaseException:
-        if kept is not None and _still_earlier(path, kept):
-            with contextlib.suppress(OSError):
-                kept.unlink()
-        raise
+        kept = keep_copy(path, tag)
+        try:
+            yield kept
+        except BaseException:
+            if kept is not None and _still_earlier(path, kept):
+                with contextlib.suppress(OSError):
+                    kept.unlink()
+            raise
+    finally:
+        _KEEPING.reset(token)
 
 
 def _still_earlier(path, kept: Path) -> bool:

@@ -96,8 +96,10 @@ def save_capture(
     Parameters
     ----------
     path : str or os.PathLike
-        Destination file (conventionally ``.h5``); its directory must exist.
-        An existing file is replaced only once the new one is complete.
+        Destination file (conventionally ``.h5``); its directory must exist. A simulated capture already
+        there (snapshots only) is replaced once the new file is complete; any other file is kept as
+        ``<stem>.earlier-<UTC time><suffix>``; a capture with frames from cameras is never replaced: a
+        ValueError, nothing written.
     snapshots : array_like, shape (K, m, n)
         One registered snapshot per channel, ``K = rig.n_channels`` and
         ``(m, n) = rig.shape``; stored in its own dtype.
@@ -118,7 +120,8 @@ def save_capture(
     ------
     ValueError
         If a shape does not match the rig, an array is not finite, or
-        ``attrs`` is not a JSON-serialisable dict with str keys.
+        ``attrs`` is not a JSON-serialisable dict with str keys; where ``path`` holds frames from cameras,
+        or a file that cannot be read to tell.
 
     Examples
     --------
@@ -141,7 +144,8 @@ def save_capture(
         truth = check_cube("truth", truth, (rig.T, m, n), "[T = rig.T, m, n]")
     meta = dumps_json("attrs", attrs)
     path = Path(os.fspath(path))
-    with atomic_path(path) as tmp:
+    refuse_camera_capture(path, "path")
+    with keeping_unless_simulated(path), atomic_path(path) as tmp:
         with new_file(tmp) as h5:
             write_header(h5, "capture", rig)
             h5.attrs["meta"] = meta

@@ -76,7 +76,9 @@ def save_reconstruction(
     Parameters
     ----------
     path : str or os.PathLike
-        Destination file (conventionally ``.h5``); its directory must exist.
+        Destination file (conventionally ``.h5``); its directory must exist. A file already there is
+        kept as ``<stem>.earlier-<UTC time><suffix>`` (a hard link where the file system has them); a
+        capture there (snapshots, frames from cameras) is never replaced: a ValueError, nothing written.
     datacube : array_like, shape (T, m, n)
         Reconstructed sub-frames: ``(m, n) = rig.shape`` and
         ``1 <= T <= rig.T`` (all sub-frames, or a trimmed range such as the
@@ -100,7 +102,8 @@ def save_reconstruction(
     ------
     ValueError
         On shape mismatches, non-finite datacube/truth, bad history names or
-        non-1-D traces, or non-JSON ``params``.
+        non-1-D traces, or non-JSON ``params``; where ``path`` holds a capture, or a file that cannot be
+        read to tell.
 
     Examples
     --------
@@ -115,11 +118,20 @@ def save_reconstruction(
     ({'lam': 0.1}, ['residual'], True)
     >>> folder.cleanup()
     """
+    from rsocl.files.atomic import EARLIER, keeping
+    from rsocl.files.hdf5 import file_kind, refuse_camera_capture
+
     rig = check_rig(rig)
     datacube, truth, traces = _checked(rig, datacube, truth, history)
     params_json = dumps_json("params", params)
     path = Path(os.fspath(path))
-    with atomic_path(path) as tmp:
+    refuse_camera_capture(path, "path")
+    if file_kind(path) == "capture":
+        raise ValueError(
+            f"path {str(path)!r} is an rsocl capture file; a reconstruction never replaces a capture: it is kept, "
+            "choose another path"
+        )
+    with keeping(path, EARLIER), atomic_path(path) as tmp:
         with new_file(tmp) as h5:
             write_header(h5, "reconstruction", rig)
             h5.attrs["params"] = params_json
