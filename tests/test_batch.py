@@ -266,6 +266,26 @@ def test_reconstruct_sets_runs_batches_and_joins_them(sets):
         reconstruct_sets(g, rig, batch=0)
 
 
+def test_every_set_is_checked_and_warned_of_once_before_the_first_batch_runs(sets, monkeypatch, recwarn):
+    import rsocl.solver.sets as sets_module
+
+    rig, _, g = sets
+    ran = []
+    monkeypatch.setattr(sets_module, "tune_and_run", lambda *a, **k: ran.append(1))
+    bad = np.array(g, dtype=np.float64)
+    bad[2, 0, 3, 3] = np.nan  # the last set: refused before the batches of the others run, naming it
+    with pytest.raises(ValueError, match=r"^g: set\(s\) \[2\] of 3 hold NaN or inf values"):
+        reconstruct_sets(bad, rig, batch=1, iterations=2, tune=False)
+    assert not ran
+    monkeypatch.undo()
+    off = np.array(g) * np.array([100.0, 200.0, 300.0])[:, None, None, None]  # off-scale, more in each batch
+    result = reconstruct_sets(off, rig, batch=1, iterations=2, tune=False, lam=0.1)
+    said = [w for w in recwarn if "times its full scale" in str(w.message)]
+    assert len(said) == 1 and "reach" in str(said[0].message), [str(w.message) for w in recwarn]
+    assert result.params["batch"] == 1
+    assert reconstruct_sets(g, rig, batch=10, iterations=2, tune=False).params["batch"] == 3  # no batch held more
+
+
 def test_a_tuned_batch_applies_its_first_sets_choice_to_every_set(sets):
     """Self-tuning a batch: the choice made on set 0 serves every set, each started from its own interp3d."""
     rig, _, g = sets

@@ -11,6 +11,7 @@ global memory cache (the measurements behind these limits: ``docs/solver-notes.m
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from rsocl.solver.inverse import own_inverses
 from rsocl.solver.ladder import DEFAULT_QUALITY
 from rsocl.solver.memory import batch_memory
 from rsocl.solver.pipeline import prepare, tune_and_run
-from rsocl.solver.problem import check_problem
+from rsocl.solver.problem import check_problem, check_representable
 from rsocl.solver.regularizer import Regularizer
 from rsocl.solver.request import make_regularizer, make_request
 from rsocl.solver.result import Result
@@ -168,7 +169,8 @@ def reconstruct_sets(
     run (the default) chooses its values on the first set, and every later batch runs with them, each set from its own
     ``interp3d`` start. Returns one batch :class:`Result` of all ``S`` sets: datacube ``(S, T, m, n)``,
     every history entry ``(iterations, S)`` (``time`` counts from the start of each set's batch; with
-    ``tol`` a batch that stopped early is padded with NaN), ``params["batch"]`` the batch size.
+    ``tol`` a batch that stopped early is padded with NaN), ``params["batch"]`` the batch size (at most the
+    number of sets). Every set's snapshots are checked, and warned of, once before the first batch runs.
     """
     g = np.asarray(g)
     if g.ndim != 4 or g.shape[0] < 1:
@@ -215,7 +217,8 @@ def reconstruct_sets(
             own_inverse=own,
             start=x0 is not None or tune is not False,
         )
-    batch = check.positive_int("batch", batch)
+    batch = min(check.positive_int("batch", batch), count)
+    _check_every_set(g, rig, x0, truth, saturation, request.dtype)
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -227,8 +230,9 @@ def reconstruct_sets(
         for start in range(0, count, batch):
             part = slice(start, min(start + batch, count))
             pick = {k: (np.asarray(v)[part] if v is not None and np.ndim(v) == 4 else v) for k, v in cubes.items()}
-            problem = check_problem(g[part], rig, x0=pick["x0"], truth=pick["truth"], saturation=saturation)
-            with request.regularizer.in_use:  # an instance another thread runs with: its turn first
+            with warnings.catch_warnings(), request.regularizer.in_use:  # an instance in use elsewhere: its turn first
+                warnings.filterwarnings("ignore", DATA_WARNINGS, UserWarning)  # said once for every set, above
+                problem = check_problem(g[part], rig, x0=pick["x0"], truth=pick["truth"], saturation=saturation)
                 results.append(tune_and_run(prepare(request.for_sets(part), problem), started))
             if start == 0 and results[0].params.get("tuning"):
                 # one capture, one setting: the first batch's choice serves the later batches
@@ -239,6 +243,25 @@ def reconstruct_sets(
         if bar is not None:
             bar.close()
     return _joined(results, batch)
+
+
+#: The warnings of the snapshots' checks (off-scale, float32's range, saturation): :func:`reconstruct_sets` gives
+#: them once for every set before the first batch, not again for each batch.
+DATA_WARNINGS = r"(g: |saturation = )"
+
+
+def _check_every_set(g, rig, x0, truth, saturation, dtype) -> None:
+    """Every set's snapshots (and ``x0``, ``truth``) checked, and warned of, once before the first batch runs: a
+    set holding NaN or inf is refused naming it, instead of after the batches before it ran."""
+    if g.dtype.kind == "f":
+        finite = np.isfinite(g).reshape(g.shape[0], -1).all(axis=1)
+        if not finite.all():
+            bad = np.flatnonzero(~finite)
+            more = " ..." if bad.size > 10 else ""
+            raise ValueError(
+                f"g: set(s) {bad[:10].tolist()}{more} of {g.shape[0]} hold NaN or inf values; all values must be finite"
+            )
+    check_representable(check_problem(g, rig, x0=x0, truth=truth, saturation=saturation), dtype)
 
 
 def _joined(results, batch) -> Result:
