@@ -125,6 +125,18 @@ def test_a_flat_capture_file_is_recognised_by_any_hdf5_suffix_or_its_signature(f
     assert load_rigfile(folder / "rig.toml").cameras[1]["gain"] == pytest.approx(1.0, rel=2e-3)
 
 
+def test_a_flat_capture_with_no_complete_set_is_refused_and_the_rig_file_kept(flat_capture, capsys):
+    folder = flat_capture
+    with h5py.File(folder / "flat.h5", "r+") as h5:  # a capture that failed in its first set
+        h5.attrs["sets_complete"] = 0
+        h5.attrs["capture_status"] = "failed"
+    before = (folder / "rig.toml").read_bytes()
+    assert _calibrate(folder, "--flat", folder / "flat.h5") == 2
+    err = capsys.readouterr().err
+    assert "holds no complete set (capture status 'failed')" in err and len(err.strip().splitlines()) == 1, err
+    assert (folder / "rig.toml").read_bytes() == before
+
+
 def test_raw_flat_fields_of_cameras_of_different_bit_depths_are_refused(flat_capture, capsys):
     folder = flat_capture
     with h5py.File(folder / "flat.h5") as h5:

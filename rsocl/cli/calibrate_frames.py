@@ -258,15 +258,24 @@ def load_flats(path, rigfile, dark: float):
     from rsocl.model.curvature import white_levels
 
     raw, rig = load_raw(path), load_capture_rig(path)
-    frames = [f for f in raw.frames if f.size]
-    if not frames:
+    if not any(f.size for f in raw.frames):
         raise ValueError(
             f"--flat: {path} holds no raw frames (a capture from rsocl simulate keeps snapshots only): give "
             "one from rsocl capture, or an image per camera"
         )
-    frames = per_camera(frames, C, "--flat")
+    if raw.sets_complete < 1:
+        raise ValueError(
+            f"--flat: {path} holds no complete set (capture status {raw.status!r}): its frames are not a flat "
+            "field to trust; capture the flat field again"
+        )
+    kept = [np.asarray(s) < raw.sets_complete for s in raw.sets]  # the frames of complete sets only
+    frames = per_camera([f[k] for f, k in zip(raw.frames, kept)], C, "--flat")
+    missing = [c for c, f in enumerate(frames) if not len(f)]
+    if missing:
+        raise ValueError(f"--flat: {path} holds no frame of a complete set from camera(s) {missing}")
+    metas_kept = [[m for m, keep in zip(metas, k) if keep] for metas, k in zip(raw.frame_meta, kept)]
     out, darks = [], []
-    for c, (frame, metas) in enumerate(zip(frames, raw.frame_meta)):
+    for c, (frame, metas) in enumerate(zip(frames, metas_kept)):
         exposure = white_levels(rig)[c]  # the white scene's level, as the capture converts frames
         full_scale = float(metas[0].get("full_scale") or exposure)
         if frame.dtype.kind in "biu":
