@@ -4,6 +4,7 @@ says where the captured sets are."""
 
 import errno
 import os
+import signal
 import stat
 
 import h5py
@@ -98,6 +99,30 @@ def test_ctrl_c_or_sigterm_while_a_camera_stops_ends_in_one_line_naming_the_capt
     err = capsys.readouterr().err
     assert err == f"rsocl capture: {how}: {out} holds the 3 complete set(s) (capture_status 'interrupted')\n"
     assert sorted(closed) == [0, 1] and load_raw(out).sets_complete == 3
+
+
+@pytest.mark.parametrize(
+    "signum, how, code", [(signal.SIGINT, "interrupted", 130), (signal.SIGTERM, "terminated", 143)]
+)
+def test_a_signal_whose_exception_python_dropped_still_ends_the_capture_after_its_set(
+    tmp_path, monkeypatch, capsys, signum, how, code
+):
+    from rsocl.common import interrupts
+
+    real = CaptureWriter.complete_set
+
+    def complete_set(self, j, cameras):  # the signal came in a weakref callback: noted, its exception dropped
+        real(self, j, cameras)
+        if j == 1:
+            interrupts._NOTED.append(signum)
+
+    monkeypatch.setattr(CaptureWriter, "complete_set", complete_set)
+    out = tmp_path / "c.h5"
+    assert _capture(_rig_path(tmp_path), out, sets=6) == code
+    assert capsys.readouterr().err == (
+        f"rsocl capture: {how}: {out} holds the 2 complete set(s) (capture_status 'interrupted')\n"
+    )
+    assert load_raw(out).sets_complete == 2 and not interrupts._NOTED
 
 
 def test_an_interrupt_while_the_status_is_written_still_publishes_the_capture(tmp_path, monkeypatch, closed):
@@ -288,10 +313,9 @@ def test_an_out_that_is_a_row_map_is_refused_naming_the_option_and_the_camera(tm
     rig_path = tmp_path / "rig.toml"
     save_rigfile(rig_path, RigFile(shape=SHAPE, cameras=cameras, path=rig_path))
     before = rows.read_bytes()
-    assert main(["capture", "--rig", str(rig_path), "--out", str(rows), "--quiet"]) == 2
+    assert main(["capture", "--rig", str(rig_path), "--out", str(rows), "--quiet"]) == 2  # no HDF5 name, first
     assert capsys.readouterr().err == (
-        f"rsocl capture: error: --out {str(rows)!r} is the camera[1].row_map_file it reads; "
-        "writing it would replace the input\n"
+        f"rsocl capture: error: --out must name an HDF5 file (.h5, .hdf5, .hdf, .he5), got {str(rows)!r}\n"
     )
     with pytest.raises(ValueError, match=r"^out '.*rows\.npy' is the camera\[1\]\.row_map_file it reads"):
         capture_sets(rig_path, rows)

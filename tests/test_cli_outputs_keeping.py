@@ -151,6 +151,31 @@ def test_calibrate_out_never_replaces_an_hdf5_file(three_sets, reconstruction, t
 
 
 # ---------------------------------------------------------------------- 3. rsocl simulate, rsocl capture
+@pytest.mark.parametrize("picture", ["x.gif", "x-tuning.png"])
+@pytest.mark.parametrize("out", ["x.h5", "x.zarr"])
+def test_reconstruct_never_draws_a_picture_over_a_capture(three_sets, tmp_path, capsys, monkeypatch, picture, out):
+    import rsocl.cli.reconstruct as reconstruct
+
+    shutil.copy(three_sets, tmp_path / picture)  # a capture from cameras under a picture's name
+    before = _md5(tmp_path / picture)
+    monkeypatch.setattr(reconstruct, "run_reconstruction", _no_work)
+    argv = ["reconstruct", str(three_sets), "--out", str(tmp_path / out), "--first-set-only", "--quiet"]
+    assert main(argv) == 2
+    [line] = _error_lines(capsys.readouterr().err)
+    assert f"'{tmp_path / picture}' holds 12 frame(s) from cameras (rsocl capture)" in line, line
+    assert _md5(tmp_path / picture) == before and not (tmp_path / out).exists()
+
+
+@pytest.mark.parametrize("command", ["capture", "simulate"])
+def test_a_capture_must_have_an_hdf5_name(tmp_path, capsys, command):
+    argv = ["capture", "--rig", str(_rig(tmp_path))] if command == "capture" else ["simulate", "builtin"]
+    assert main([*argv, "--out", str(tmp_path / "x.gif"), "--quiet"]) == 2
+    assert _error_lines(capsys.readouterr().err) == [
+        f"rsocl {command}: error: --out must name an HDF5 file (.h5, .hdf5, .hdf, .he5), got '{tmp_path / 'x.gif'}'"
+    ]
+    assert not (tmp_path / "x.gif").exists()
+
+
 def test_simulate_keeps_an_earlier_reconstruction_or_other_file(reconstruction, tmp_path, capsys):
     rec = tmp_path / "rec.h5"
     shutil.copy(reconstruction, rec)

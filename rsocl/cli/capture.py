@@ -39,6 +39,7 @@ def cmd_capture(args) -> int:
     Bad arguments or rig files raise ValueError / FileNotFoundError (the CLI's exit status 2).
     """
     from rsocl.cli.options import load_rig_file, progress_bar
+    from rsocl.cli.outputs import require_hdf5_name
     from rsocl.common import validation as check
     from rsocl.files.atomic import output_path
     from rsocl.files.hdf5 import refuse_camera_capture
@@ -48,7 +49,8 @@ def cmd_capture(args) -> int:
     quiet = bool(getattr(args, "quiet", False))
     check.positive_int("--sets", args.sets)  # named as typed, before the rig file is read (capture_sets checks again)
     check.positive("--timeout", args.timeout, "seconds")
-    out = output_path(args.out, "--out", inputs=(("--rig", args.rig),))
+    out = output_path(args.out, "--out", inputs=(("--rig", args.rig),))  # an input at --out: said as such
+    require_hdf5_name(args.out)
     check_partial(out.with_name(out.name + PARTIAL_SUFFIX), "--out")  # as typed (capture_sets checks again)
     refuse_camera_capture(out, "--out")
     rigfile = load_rig_file(args.rig)  # a shape beyond the host's memory: refused here

@@ -16,8 +16,10 @@ import threading
 import warnings
 
 from rsocl.cli import bench, calibrate, capture, demo, devices, info, plan, plugins, reconstruct, simulate
+from rsocl.common import interrupts
+from rsocl.common.interrupts import Terminated
 
-__all__ = ["build_parser", "main", "entry", "as_typed"]
+__all__ = ["build_parser", "main", "entry", "as_typed", "Terminated"]
 
 #: In the order ``rsocl --help`` lists them.
 SUBCOMMANDS = (demo, simulate, reconstruct, info, plan, bench, capture, calibrate, devices, plugins)
@@ -67,9 +69,12 @@ def main(argv=None) -> int:
     from rsocl.device.context import NoOpenCLError
 
     args = build_parser().parse_args(argv)
-    previous = None
+    previous = {}
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _terminate)
+        interrupts.forget()
+        previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, interrupts.handle)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored Ctrl-C stays ignored
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, interrupts.handle)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _warning_line(args.command)
@@ -96,13 +101,14 @@ def main(argv=None) -> int:
         print(f"rsocl {args.command}: error: {fault_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt as exc:  # a command may say what it kept (the interrupt's message)
+        interrupts.forget()
         kept = f": {exc}" if str(exc) else ""
         how, code = ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
         print(f"rsocl {args.command}: {how}{kept}", file=sys.stderr)
         return code
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 #: API words of error messages and what the command line says instead.
@@ -139,15 +145,6 @@ def as_typed(message: str, argv) -> str:
         return message
     value = {None: "", "='auto'": " auto"}.get(found.group(2), " ")  # "blend = 0.5" as "--blend 0.5"
     return option + value + message[found.end() :]
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the command runs (:func:`main` installs the handler), so that the command ends
-    as on Ctrl-C: closing its files and saying in one line what was kept (exit status 143)."""
-
-
-def _terminate(signum, frame):
-    raise Terminated()
 
 
 def fault_line(exc: OSError) -> str:

@@ -21,6 +21,7 @@ __all__ = [
     "nothing_written",
     "refuse_same_file",
     "refuse_kinds",
+    "require_hdf5_name",
     "set_aside_plot",
     "CAPTURES",
     "HDF5_FILES",
@@ -104,7 +105,7 @@ def kept_clause(kept) -> str:
 
 @contextlib.contextmanager
 def interrupted(kept):
-    """Around a step of a command: an interrupt (Ctrl-C, or SIGTERM's :class:`rsocl.cli.main.Terminated`)
+    """Around a step of a command: an interrupt (Ctrl-C, or SIGTERM's :class:`rsocl.common.interrupts.Terminated`)
     that says nothing yet is re-raised, of its own type, with ``kept`` (a string, or a callable giving it
     then) as its message, which the command's last line prints."""
     try:
@@ -195,3 +196,14 @@ def refuse_kinds(named, kinds=CAPTURES) -> None:
                 f"{name} {str(path)!r} is {what}; it is never replaced by this output: it is kept, move it or "
                 f"choose another {name}"
             )
+
+
+def require_hdf5_name(path, option: str = "--out") -> None:
+    """Refuse, naming ``option``, a capture's path whose suffix is not an HDF5 one
+    (:data:`~rsocl.files.hdf5_header.HDF5_SUFFIXES`): a capture named ``x.gif`` or ``x-tuning.png`` is taken for
+    a picture, by people and by the commands that draw pictures beside a result. An existing folder is let
+    through, for the message that says it is one."""
+    from rsocl.files.hdf5_header import HDF5_SUFFIXES
+
+    if Path(path).suffix.lower() not in HDF5_SUFFIXES and not Path(path).is_dir():
+        raise ValueError(f"{option} must name an HDF5 file ({', '.join(HDF5_SUFFIXES)}), got {str(path)!r}")

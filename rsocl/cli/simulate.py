@@ -260,13 +260,14 @@ def cmd_simulate(args) -> int:
     A capture from cameras at ``--out`` is refused first; a file there other than a simulated capture (a
     reconstruction, say) is kept as ``<stem>.earlier-<UTC time><suffix>``.
     """
-    from rsocl.cli.outputs import interrupted, kept_note, nothing_written
+    from rsocl.cli.outputs import interrupted, kept_note, nothing_written, require_hdf5_name
     from rsocl.files.atomic import output_path
     from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture, save_capture
     from rsocl.model.simulate import simulate
 
     check_noise_args(args)
     output_path(args.out, "--out", inputs=(("scene", None if args.scene == "builtin" else args.scene),))
+    require_hdf5_name(args.out)
     refuse_camera_capture(args.out, "--out")
     with interrupted(nothing_written(args.out)), _steps(args) as bar:  # --out is replaced by its last step
         _step(bar, "rig")

@@ -95,9 +95,9 @@ def add_reconstruct_tiling_args(p):
 
 def check_outputs(args) -> None:
     """Check ``--out`` (and ``--gif``) before anything is computed; errors name the option. No picture (the
-    GIF, the tuning plot beside it) is written over ``--out`` or an input."""
+    GIF, the tuning plot beside it) is written over ``--out``, an input or any HDF5 file (a capture)."""
     from rsocl.cli.options import tuning_plot_path
-    from rsocl.cli.outputs import refuse_same_file
+    from rsocl.cli.outputs import HDF5_FILES, refuse_kinds, refuse_same_file
     from rsocl.files.atomic import output_path, same_file
 
     suffix = Path(str(args.out).rstrip("/")).suffix.lower()
@@ -129,9 +129,13 @@ def check_outputs(args) -> None:
         require_zarr("--out")
         _check_store(args)
         gif_name = "--gif" if args.gif else "--out's NAME.gif"  # the GIF beside the store, unless --gif names one
-        _gif_suffix(output_path(zarr_gif(args), gif_name, inputs=reads), args)
+        gif = output_path(zarr_gif(args), gif_name, inputs=reads)
+        _gif_suffix(gif, args)
+        pictures = [(gif_name, gif)]
         if tuned:
-            output_path(tuning_plot_path(Path(args.out).with_suffix(".gif")), "--out's NAME-tuning.png", inputs=reads)
+            plot_name = "--out's NAME-tuning.png"
+            pictures.append((plot_name, output_path(tuning_plot_path(Path(args.out).with_suffix(".gif")), plot_name)))
+        refuse_kinds(pictures, HDF5_FILES)  # a picture never replaces a capture, a result or any HDF5 file
         return
     if args.sets:
         raise ValueError(f"--out: every set (--sets) goes to a Zarr store (--out NAME.zarr), got {args.out!r}")
@@ -140,11 +144,14 @@ def check_outputs(args) -> None:
     if same_file(gif, out):
         raise ValueError(f"--gif {str(gif)!r} is the --out file; give the GIF another name")
     _gif_suffix(gif, args)
+    pictures = [("--gif" if args.gif else "--out's NAME.gif", gif)]
     if tuned:  # next to the GIF
         plot = output_path(tuning_plot_path(gif), "--gif's NAME-tuning.png", inputs=reads)
         if not getattr(args, "fixed", False):  # --fixed: no search, no plot
             words = "the tuning plot of --gif (NAME-tuning.png beside NAME.gif)"
             refuse_same_file("--out", out, [(words, plot)], "choose another --out or --gif")
+            pictures.append(("--gif's NAME-tuning.png", plot))
+    refuse_kinds(pictures, HDF5_FILES)  # a picture never replaces a capture, a result or any HDF5 file
 
 
 def _check_store(args) -> None:

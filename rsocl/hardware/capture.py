@@ -59,6 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from rsocl.common import validation as check
+from rsocl.common.interrupts import raise_dropped
 from rsocl.files.atomic import fsync_directory, output_path
 from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture
 from rsocl.files.rigfile import RigFile, load_rigfile
@@ -396,3 +397,4 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
             at(None, j, "write")
             writer.complete_set(j, cameras)
             bar.update(1)
+            raise_dropped()  # a Ctrl-C or SIGTERM whose exception Python dropped (rsocl.common.interrupts)
