@@ -147,7 +147,7 @@ def test_a_simulated_capture_may_be_replaced(tmp_path, capsys):
 
 
 def test_camera_frames_counts_only_frames_from_cameras(three_sets, tmp_path, monkeypatch):
-    import rsocl.files.hdf5 as hdf5_module
+    import rsocl.files.hdf5_kinds as kinds_module
     from rsocl.files.hdf5 import camera_frames, refuse_camera_capture
 
     sim = tmp_path / "sim.h5"
@@ -161,7 +161,7 @@ def test_camera_frames_counts_only_frames_from_cameras(three_sets, tmp_path, mon
     def unreadable(*args, **kwargs):
         raise PermissionError(errno.EACCES, "Permission denied")
 
-    monkeypatch.setattr(hdf5_module, "open", unreadable, raising=False)
+    monkeypatch.setattr(kinds_module, "open", unreadable, raising=False)
     with pytest.raises(PermissionError):
         camera_frames(sim)
     with pytest.raises(ValueError, match=r"--out .* cannot be read to tell .* \(Permission denied\); it is kept"):

@@ -119,7 +119,7 @@ def save_reconstruction(
     >>> folder.cleanup()
     """
     from rsocl.files.atomic import EARLIER, keeping
-    from rsocl.files.hdf5 import file_kind, refuse_camera_capture
+    from rsocl.files.hdf5_kinds import file_kind, refuse_camera_capture
 
     rig = check_rig(rig)
     datacube, truth, traces = _checked(rig, datacube, truth, history)
