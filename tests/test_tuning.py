@@ -183,6 +183,19 @@ def test_values_the_caller_fixes_win():
     assert (fast.params["lam"], fast.params["regularizer_options"]["temporal_weight"]) == (lam, 3.0)
 
 
+def test_an_instance_keeps_the_options_it_was_made_with_and_the_search_chooses_the_others():
+    from rsocl_plugins.tv import TV
+
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=1e-4, t_r=3e-5)
+    g = ref.forward(rig, np.random.default_rng(3).random((rig.T,) + rig.shape))
+    by_name = rsocl.reconstruct(g, rig, "tv", iterations=12)
+    plain = rsocl.reconstruct(g, rig, TV(), iterations=12)  # as by name: temporal_weight searched
+    assert plain.params["tuning"] == by_name.params["tuning"] | {"seconds": plain.params["tuning"]["seconds"]}
+    np.testing.assert_array_equal(plain.datacube, by_name.datacube)
+    made = rsocl.reconstruct(g, rig, TV(temporal_weight=2.0), iterations=12, lam=0.05)
+    assert made.params["tuning"] is None and made.params["regularizer_options"]["temporal_weight"] == 2.0
+
+
 def test_tuning_survives_blank_and_saturated_captures():
     rig = rsocl.Rig.paper_array(2, (12, 12), t_e=1e-4, t_r=3e-5)
     blank = rsocl.reconstruct(np.zeros((2, 12, 12)), rig, iterations=10)

@@ -71,7 +71,8 @@ def reconstruct(
         Snapshots on the reference grid (a scene in [0, 1] gives values in [0, t_e/dt]).
     rig : Rig
     regularizer : str or Regularizer
-        Registry name (``"tv"``) or an instance; ``regularizer_options``: options of a named one.
+        Registry name (``"tv"``) or an instance; ``regularizer_options``: options of a named one. The
+        options given (by name, or when making the instance) are kept; the search chooses the others.
     iterations : int or "auto"
         ADMM iterations, 1 to :data:`rsocl.solver.problem.MAX_ITERATIONS` (default: the ``quality`` rung's);
         ``"auto"``: until the residual settles, with a cap (:func:`rsocl.solver.ladder.auto_stop`; the count

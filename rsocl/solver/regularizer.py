@@ -192,6 +192,7 @@ class Regularizer:
         self.values = {key: opt.default for key, opt in self.options.items()}
         for key, value in options.items():
             self.values[key] = self.options[key].convert(key, value)
+        self._given = frozenset(options)  # the options the caller set: kept; the parameter search may choose others
 
     @property
     def in_use(self) -> threading.RLock:

@@ -132,9 +132,12 @@ class Given:
         return self.regularizer if isinstance(self.regularizer, str) else None
 
     def option_names(self, reg: Regularizer) -> set:
-        """Names of the regularizer options the caller fixed: every option of an instance, else those
-        given. They are neither searched nor replaced by an earlier choice."""
-        return set(reg.values) if self.name is None else set(self.options)
+        """Names of the regularizer options the caller fixed: those given by name (``regularizer_options``),
+        or those an instance was made with (every option of one whose class skipped the base ``__init__``).
+        They are neither searched nor replaced by an earlier choice."""
+        if self.name is not None:
+            return set(self.options)
+        return set(reg.__dict__.get("_given", reg.values))
 
 
 @dataclass(frozen=True)
