@@ -46,6 +46,19 @@ def test_a_row_time_in_us_given_as_seconds_is_warned_in_one_line_naming_t_r():
     assert all("\n" not in str(w.message) for w in caught)
 
 
+@pytest.mark.parametrize(
+    "kwargs, said",
+    [
+        (dict(t_r=35e-3), r"camera t_r = 0\.035 s is longer than 1 ms per row; .*did you mean 0\.035 ms"),
+        (dict(t_a=20.0), r"camera t_a = 20 s is longer than 1 s \(the trigger offset\); .*did you mean 20 µs"),
+        (dict(t_d=3.0, frames=2), r"camera t_d = 3 s is longer than 1 s \(the frame period\); .*did you mean 3 ms"),
+    ],
+)
+def test_a_time_in_ms_or_a_trigger_offset_or_frame_period_in_us_is_warned_with_its_likely_unit(kwargs, said):
+    with pytest.warns(UserWarning, match=said):
+        rsocl.Camera(0, **{"t_e": 180e-6, "t_r": 35e-6, **kwargs})
+
+
 def test_an_exposure_of_seconds_is_warned_and_kept():
     with pytest.warns(UserWarning, match=r"camera t_e = 2 s is longer than 1 s.*did you mean 2 µs"):
         camera = rsocl.Camera(0, t_e=2.0, t_r=35e-6)

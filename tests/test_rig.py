@@ -127,7 +127,7 @@ def test_rig_validation():
         (dict(t_e=1e-4, t_r=1e3), r"cameras\[1\].t_r x its 7 rows = 7000 s makes the rig span"),
     ],
 )
-@pytest.mark.filterwarnings("ignore:camera t_r = .* is longer than 1 ms:UserWarning")  # on purpose
+@pytest.mark.filterwarnings("ignore:camera t_[rad] = .* is longer than 1:UserWarning")  # on purpose
 def test_a_time_that_makes_T_absurd_is_refused_naming_it_and_T(kwargs, match):
     from rsocl.model.rig import MAX_T
 

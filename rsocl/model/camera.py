@@ -88,7 +88,6 @@ class Camera:
         self.angle = check.finite("angle", angle)
         self.t_e = check.positive("t_e", t_e, "seconds")
         self.t_r = check.positive("t_r", t_r, "seconds")
-        warn_unlikely_times("camera", self.t_e, self.t_r)
         self.t_a = check.non_negative("t_a", t_a, "seconds")
         self.gain = check.positive("gain", gain)
         self.frames = check.positive_int("frames", frames)
@@ -97,6 +96,7 @@ class Camera:
         elif self.frames > 1:
             raise ValueError(f"t_d (frame period, seconds) is required when frames > 1 (frames={self.frames})")
         self.t_d = t_d
+        warn_unlikely_times("camera", self.t_e, self.t_r, self.t_a, self.t_d)
         if row_map is not None:
             row_map = check.finite_array("row_map", row_map).astype(np.float64)
             if row_map.ndim != 2 or row_map.size == 0:

@@ -41,33 +41,46 @@ MAX_WINDOW = 2**20
 RIG_BYTES_PER_PIXEL = 20
 
 
+#: Longest trigger offset ``t_a`` and frame period ``t_d`` (seconds) taken without a warning: each adds
+#: ``t / dt`` sub-frames to the datacube.
+T_A_PLAUSIBLE = T_D_PLAUSIBLE = 1.0
+#: The shortest ``t_e``, ``t_r``, ``t_a``, ``t_d`` (seconds) a reading of an implausible value in µs or ms may give.
+SHORTEST = {"t_e": 1e-6, "t_r": 1e-7, "t_a": 0.0, "t_d": 1e-4}
+
+
 def _in_us(name: str, seconds: float) -> str:
-    """``"did you mean 180 µs (t_e=0.00018)?"``: the value read as µs."""
-    return f"did you mean {seconds:g} µs ({name}={seconds * 1e-6:g})?"
+    """``"did you mean 180 µs (t_e=0.00018)?"``: the value read in µs, or else in ms, whichever lands in the
+    plausible range of ``name`` (``t_r = 0.035``: 35 µs given in ms); ``""`` where neither does."""
+    highest = {"t_e": T_E_PLAUSIBLE, "t_r": T_R_PLAUSIBLE, "t_a": T_A_PLAUSIBLE, "t_d": T_D_PLAUSIBLE}[name]
+    for unit, factor in (("µs", 1e-6), ("ms", 1e-3)):
+        if SHORTEST[name] <= seconds * factor <= highest:
+            return f": did you mean {seconds:g} {unit} ({name}={seconds * factor:g})?"
+    return ""
 
 
-def warn_unlikely_times(name: str, t_e: float, t_r: float) -> None:
-    """Warn (``UserWarning``, one line naming ``name.t_e`` or ``name.t_r``) when ``t_e`` (seconds) is
-    above :data:`T_E_PLAUSIBLE` or ``t_r`` above :data:`T_R_PLAUSIBLE`.
+def warn_unlikely_times(name: str, t_e: float, t_r: float, t_a: float = 0.0, t_d: float | None = None) -> None:
+    """Warn (``UserWarning``, one line naming ``name.t_e``, ``.t_r``, ``.t_a`` or ``.t_d``) when ``t_e`` (seconds)
+    is above :data:`T_E_PLAUSIBLE`, ``t_r`` above :data:`T_R_PLAUSIBLE`, the trigger offset ``t_a`` above
+    :data:`T_A_PLAUSIBLE` or the frame period ``t_d`` above :data:`T_D_PLAUSIBLE`.
 
     Examples
     --------
     >>> warn_unlikely_times("camera", 180.0, 35e-6)     # doctest: +SKIP
     UserWarning: camera t_e = 180 s is longer than 1 s; times are in seconds: did you mean 180 µs (t_e=0.00018)?
     """
-    if t_e > T_E_PLAUSIBLE:
-        warnings.warn(
-            f"{name} t_e = {t_e:g} s is longer than {T_E_PLAUSIBLE:g} s; times are in seconds: {_in_us('t_e', t_e)}",
-            UserWarning,
-            stacklevel=3,
-        )
-    if t_r > T_R_PLAUSIBLE:
-        warnings.warn(
-            f"{name} t_r = {t_r:g} s is longer than {T_R_PLAUSIBLE * 1e3:g} ms per row; times are in "
-            f"seconds: {_in_us('t_r', t_r)}",
-            UserWarning,
-            stacklevel=3,
-        )
+    said = (
+        ("t_e", t_e, T_E_PLAUSIBLE, f"{T_E_PLAUSIBLE:g} s"),
+        ("t_r", t_r, T_R_PLAUSIBLE, f"{T_R_PLAUSIBLE * 1e3:g} ms per row"),
+        ("t_a", t_a, T_A_PLAUSIBLE, f"{T_A_PLAUSIBLE:g} s (the trigger offset)"),
+        ("t_d", t_d, T_D_PLAUSIBLE, f"{T_D_PLAUSIBLE:g} s (the frame period)"),
+    )
+    for key, value, highest, words in said:
+        if value is not None and value > highest:
+            warnings.warn(
+                f"{name} {key} = {value:g} s is longer than {words}; times are in seconds{_in_us(key, value)}",
+                UserWarning,
+                stacklevel=3,
+            )
 
 
 def warn_unlikely_times_us(t_e_us: float, t_r_us: float) -> bool:
@@ -126,12 +139,14 @@ def check_window(name: str, t_e: float, dt: float) -> None:
     """Refuse an exposure ``t_e`` (seconds) of more than :data:`MAX_WINDOW` sub-frames of ``dt``, naming ``name``."""
     span = t_e / dt
     if span > MAX_WINDOW:
-        hint = _in_us(name.rsplit(".", 1)[-1], t_e) if t_e > T_E_PLAUSIBLE else "choose a longer dt (t_r unless given)"
+        key = name.rsplit(".", 1)[-1]
+        hint = _in_us(key if key in SHORTEST else "t_e", t_e) if t_e > T_E_PLAUSIBLE else ""
+        hint = hint or ": choose a longer dt (t_r unless given)"
         count = f"{span:,.0f}" if span < 1e12 else f"{span:.3g}"
         raise ValueError(
             f"{name} = {t_e:g} s is {count} sub-frames of dt = {dt:g} s, more than the "
             f"{MAX_WINDOW:,} one exposure may span (rsocl.model.plausible.MAX_WINDOW); times are in "
-            f"seconds: {hint}"
+            f"seconds{hint}"
         )
 
 
