@@ -346,3 +346,11 @@ def test_integer_frames_without_a_full_scale_map_the_sensors_top_to_a_white_scen
     rig = Rig.paper_array(2, SHAPE, t_e=T_E, t_r=T_R, mask=mask)
     frame = SimpleNamespace(image=np.full(SHAPE, 4095, np.uint16), bit_depth=12, meta={"registered": True})
     assert _register(RigFile.from_rig(rig), rig, 1, frame) == pytest.approx(np.full(SHAPE, white))
+
+
+def test_a_rig_file_with_a_multi_frame_camera_is_refused_naming_the_file_and_camera(tmp_path):
+    path = tmp_path / "rig.toml"
+    save_rigfile(path, _rigfile(c1={"frames": 2, "t_d": 1e-3}))
+    with pytest.raises(ValueError, match=r"rig\.toml: camera\[1\]\.frames = 2: rsocl capture reads one frame per "):
+        capture_sets(path, tmp_path / "c.h5")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]

@@ -202,7 +202,11 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     rig = rigfile.rig()
     for i, cam in enumerate(rig.cameras):
         if cam.frames != 1:
-            raise ValueError(f"camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger")
+            where = f"{rigfile.path}: " if rigfile.path is not None else ""
+            raise ValueError(
+                f"{where}camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger; set frames = 1 "
+                "(multi-frame captures: rsocl simulate --frames N)"
+            )
     folder = Path(rigfile.path).parent if rigfile.path is not None else Path(".")
     reads = [("rig file", rigfile.path)] + [
         (f"camera[{i}].row_map_file", folder / cam["row_map_file"])
