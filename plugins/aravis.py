@@ -54,6 +54,9 @@ __all__ = ["AravisCamera", "PIXEL_FORMATS"]
 
 _CONFIG_KEYS = {"address", "interfaces", "buffers", "packet_size"}
 _DEFAULT_BUFFERS = 8
+#: Longest single wait for a frame, seconds: a read waits its timeout in slices this long, so that Ctrl-C
+#: (which Python raises between them) and a lost camera end it within one slice, not after the whole timeout.
+WAIT_SLICE = 0.1
 _MAX_BUFFERS = 256
 
 
@@ -255,7 +258,12 @@ class AravisCamera(AravisSettings, CameraBackend):
         if self._stream is None:
             raise CameraError(f"{self.name}: acquisition not started (call start() first)")
         stream = self._stream
-        buffer = stream.timeout_pop_buffer(max(1, int(round(timeout * 1e6))))
+        deadline = time.monotonic() + timeout
+        while True:
+            left = deadline - time.monotonic()
+            buffer = stream.timeout_pop_buffer(max(1, int(round(min(left, WAIT_SLICE) * 1e6))))
+            if buffer is not None or left <= WAIT_SLICE or self._lost:
+                break
         if buffer is None:
             if self._lost:
                 raise self._gone()

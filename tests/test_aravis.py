@@ -167,6 +167,26 @@ def test_missing_pygobject_is_a_clear_camera_error(monkeypatch):
     assert "closed" in repr(cam)
 
 
+def test_a_read_waits_its_timeout_in_slices_so_an_interrupt_or_a_lost_camera_ends_it_early():
+    import rsocl_plugins.aravis as aravis
+
+    class Stream:  # never delivers a frame; after 3 waits the camera is lost
+        def __init__(self):
+            self.waits = []
+
+        def timeout_pop_buffer(self, microseconds):
+            self.waits.append(microseconds)
+            if len(self.waits) == 3:
+                cam._lost = True
+
+    cam = AravisCamera({"address": "Fake_1"}, name="cam0")
+    cam._stream, cam._lost = Stream(), False
+    cam._gone = lambda: CameraError("cam0: lost")
+    with pytest.raises(CameraError, match="cam0: lost"):
+        cam._read(30.0)
+    assert cam._stream.waits == [int(aravis.WAIT_SLICE * 1e6)] * 3  # 0.3 s of a 30 s timeout
+
+
 def test_entry_point():
     from rsocl.common.registry import load
 
