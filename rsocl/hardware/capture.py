@@ -223,6 +223,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     backends = rigfile.backends()
     labels = [_label(i, b, c, cam.get("name")) for i, ((b, c), cam) in enumerate(zip(backends, rigfile.cameras))]
     cameras = [load("rsocl.cameras", b)(c, name=label) for (b, c), label in zip(backends, labels)]
+    _check_pixel_formats(rigfile, cameras)
 
     writer = CaptureWriter(partial, rig, rigfile, labels, sets, timeout)
     where = {"camera": None, "set": None, "phase": "open"}
@@ -351,6 +352,16 @@ def _one_line(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.errno:
         return f"[Errno {exc.errno}] {os.strerror(exc.errno)}"
     return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _check_pixel_formats(rigfile, cameras) -> None:
+    """Refuse, before any camera opens or ``out`` is made, a rig file's ``pixel_format`` that the camera's
+    backend does not deliver (its declared :attr:`~rsocl.hardware.backend.CameraBackend.pixel_formats`)."""
+    for i, (spec, cam) in enumerate(zip(rigfile.cameras, cameras)):
+        wanted, known = spec.get("pixel_format"), tuple(getattr(cam, "pixel_formats", ()))
+        if wanted and known and wanted not in known:
+            where = f"{rigfile.path}: " if rigfile.path is not None else ""
+            raise ValueError(f"{where}camera[{i}].pixel_format must be one of {list(known)}, got {wanted!r}")
 
 
 def _run(cameras, rigfile, writer, sets, timeout, progress, where):
