@@ -145,6 +145,14 @@ def test_load_rejects_wrong_files(tmp_path, rig, snapshots, truth):
         load_capture(tmp_path / "missing.h5")
 
 
+def test_a_batch_or_a_zarr_store_is_pointed_to_what_saves_or_reads_it(tmp_path, rig, truth):
+    with pytest.raises(ValueError, match=r"got a batch of 2 sets .*: save each set on its own \(a batch Result's set"):
+        save_reconstruction(tmp_path / "rec.h5", np.stack([truth, truth]), rig)
+    (tmp_path / "rec.zarr").mkdir()
+    with pytest.raises(ValueError, match=r"is a directory, not a reconstruction file \(a Zarr store .*load_store"):
+        load_reconstruction(tmp_path / "rec.zarr")
+
+
 def test_a_directory_or_a_damaged_file_gets_a_one_line_error_naming_it(tmp_path):
     from rsocl.files.rigfile import load_rigfile
     from rsocl.model.scenes import load_scene

@@ -248,6 +248,18 @@ def test_growth_check_of_one_set_equals_that_of_a_batch(sequence):
         assert np.array_equal(np.atleast_1d(one.lowest), batch.lowest, equal_nan=True), value
 
 
+def test_a_callback_of_the_wrong_signature_is_refused_before_the_search(monkeypatch):
+    import rsocl.solver.reconstruct as reconstruct_module
+
+    rig = rsocl.Rig.paper_array(4, (12, 12), t_e=180e-6, t_r=35e-6)
+    g = ref.forward(rig, builtin_scene(rig.shape, rig.T, dtype=np.float64))
+    monkeypatch.setattr(reconstruct_module, "tune_and_run", lambda *a: pytest.fail("the run started"))
+    with pytest.raises(ValueError, match=r"callback must take \(iteration, residual, theta\), got .*lambda"):
+        rsocl.reconstruct(g, rig, callback=lambda iteration: None)
+    with pytest.raises(ValueError, match=r"callback must be callable, got 3"):
+        rsocl.reconstruct(g, rig, callback=3)
+
+
 @pytest.mark.filterwarnings("ignore:g. snapshots of camera 0 reach:UserWarning")  # 1e19 is off-scale, on purpose
 def test_float64_runs_hold_data_far_from_one_as_the_reference_does(device):
     """TV's square roots start from a float estimate; float64 data of 1e-18 or 1e19 (squares beyond float's

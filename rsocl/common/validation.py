@@ -180,7 +180,8 @@ def existing_file(name: str, path, what: str) -> Path:
     if not path.exists():
         raise FileNotFoundError(f"{prefix}{what} {str(path)!r} does not exist")
     if path.is_dir():
-        raise ValueError(f"{prefix}{str(path)!r} is a directory, not a {what}")
+        store = " (a Zarr store of a tiled run: rsocl.scale.load_store reads it)" if path.suffix == ".zarr" else ""
+        raise ValueError(f"{prefix}{str(path)!r} is a directory, not a {what}{store}")
     if not path.is_file():
         raise ValueError(f"{prefix}{str(path)!r} is not a regular file (expected a {what})")
     return path

@@ -191,6 +191,11 @@ def _checked(rig: Rig, datacube, truth, history) -> tuple:
     them and :func:`load_reconstruction` returns them: a finite ``[T, m, n]`` datacube with ``(m, n) =
     rig.shape`` and ``1 <= T <= rig.T``, a truth of its shape or None, and 1-D real traces under names
     without ``/``; a ValueError naming what is wrong otherwise."""
+    if np.ndim(datacube) == 4:
+        raise ValueError(
+            f"datacube must be 3-D [T, m, n], got a batch of {np.shape(datacube)[0]} sets {np.shape(datacube)}: save "
+            "each set on its own (a batch Result's set(i), or sets())"
+        )
     datacube = check_cube("datacube", datacube, None, "[T, m, n]")
     if datacube.shape[1:] != rig.shape or not 1 <= datacube.shape[0] <= rig.T:
         raise ValueError(

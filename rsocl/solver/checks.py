@@ -1,10 +1,10 @@
-"""Checks of a reconstruction's arguments that tie several of them together."""
+"""Checks of a reconstruction's arguments beyond one value's range: several together, a callback's signature."""
 
 from __future__ import annotations
 
 from rsocl.common import validation as check
 
-__all__ = ["check_blend"]
+__all__ = ["check_blend", "check_callback"]
 
 
 def check_blend(blend: float | None, has_start: bool) -> float | None:
@@ -21,3 +21,19 @@ def check_blend(blend: float | None, has_start: bool) -> float | None:
             "array or 'interp3d'), or leave blend None"
         )
     return blend
+
+
+def check_callback(callback) -> None:
+    """Refuse, before any work, a ``callback`` that cannot be called as ``callback(iteration, residual, theta)``."""
+    import inspect
+
+    if not callable(callback):
+        raise ValueError(f"callback must be callable, got {callback!r}")
+    try:
+        signature = inspect.signature(callback)
+    except (TypeError, ValueError):  # a builtin without one: called as it is
+        return
+    try:
+        signature.bind(0, 0.0, None)
+    except TypeError as exc:
+        raise ValueError(f"callback must take (iteration, residual, theta), got {callback!r} ({exc})") from None

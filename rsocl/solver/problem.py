@@ -24,6 +24,7 @@ from rsocl.model.operator import RollingShutterOperator
 from rsocl.model.plausible import warn_float32_scale
 from rsocl.model.rig import Rig
 from rsocl.model.simulate import check_fits_dtype
+from rsocl.solver.checks import check_callback
 from rsocl.solver.held import HeldSumSquares
 from rsocl.solver.inverse import own_inverses
 from rsocl.solver.memory import memory_bytes
@@ -283,8 +284,8 @@ def check_settings(
 ) -> Settings:
     """Validate the solver settings (None keeps a default); ``lam``/``eta`` may give one value per set
     (see :func:`per_set_value`; :meth:`Settings.for_batch` checks the count)."""
-    if callback is not None and not callable(callback):
-        raise ValueError(f"callback must be callable, got {callback!r}")
+    if callback is not None:
+        check_callback(callback)
     return Settings(
         iterations=check.positive_int(
             "iterations", DEFAULTS["iterations"] if iterations is None else iterations, MAX_ITERATIONS
