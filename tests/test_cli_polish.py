@@ -159,7 +159,8 @@ def test_plan_roi_is_x_y_width_height_as_in_a_rig_file(capsys):
     assert roi_from([2, 5, 16, 8], (32, 40)) == (5, 2, 8, 16)  # -> (y, x, height, width) of the API
     assert main(["plan", "--shape", "16", "32", "--roi", "4", "2", "24", "8", "--no-measure"]) == 0
     out = capsys.readouterr().out
-    assert "proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): 4 2 24 8" in out
+    assert "proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): 4 2 24 8; " in out
+    assert "in Python: rig.crop((2, 4, 8, 24)), (y, x, height, width)" in out
     # a block that fits only in the other order is refused, saying the order
     assert main(["plan", "--shape", "16", "32", "--roi", "2", "4", "8", "24", "--no-measure"]) == 2
     err = capsys.readouterr().err

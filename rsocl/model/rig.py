@@ -347,8 +347,8 @@ class Rig:
 
     # ------------------------------------------------------------------ rigs made from this one
     def crop(self, roi, dt=None) -> Rig:
-        """This rig restricted to ``roi = (y, x, height, width)`` of its reference grid, pixels (and
-        sub-frames of ``dt`` seconds; None keeps this rig's).
+        """This rig restricted to ``roi = (y, x, height, width)`` of its reference grid, pixels, NumPy's order (a
+        rig file's ``roi`` is ``x, y, width, height``), and sub-frames of ``dt`` seconds (None keeps this rig's).
 
         Each camera's row map is cut from the whole one (not re-zeroed), so the exposure start
         times are those of the whole sensor readout.

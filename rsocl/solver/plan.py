@@ -261,7 +261,10 @@ def format_plan(p: Plan) -> str:
     lines = [f"{'':<{width}}  {'as given':<{wa}}  proposed"]
     lines += [f"{r:<{width}}  {x:<{wa}}  {y}" for r, x, y in zip(rows, a, b)]
     y, x, h, w = p.roi
-    lines.append(f"proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): {x} {y} {w} {h}")
+    lines.append(
+        f"proposed ROI (x, y, width, height, as rsocl plan --roi and a rig file's roi): {x} {y} {w} {h}; "
+        f"in Python: rig.crop(({y}, {x}, {h}, {w})), (y, x, height, width)"
+    )
     lines += [f"note: {n}" for n in p.notes]
     lines.append(
         "note: memory is a fixed run's (tune=False, --fixed); the self-tuned default runs its parameter search "
