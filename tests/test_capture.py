@@ -341,11 +341,11 @@ def test_integer_frames_without_a_full_scale_map_the_sensors_top_to_a_white_scen
     # the paper's Eq. 4 (binary) counts the 6 sub-frame starts of a 5.14-sub-frame exposure
     from types import SimpleNamespace
 
-    from rsocl.hardware.capture import _register
+    from rsocl.hardware.registration import register
 
     rig = Rig.paper_array(2, SHAPE, t_e=T_E, t_r=T_R, mask=mask)
     frame = SimpleNamespace(image=np.full(SHAPE, 4095, np.uint16), bit_depth=12, meta={"registered": True})
-    assert _register(RigFile.from_rig(rig), rig, 1, frame) == pytest.approx(np.full(SHAPE, white))
+    assert register(RigFile.from_rig(rig), rig, 1, frame) == pytest.approx(np.full(SHAPE, white))
 
 
 def test_a_rig_file_with_a_multi_frame_camera_is_refused_naming_the_file_and_camera(tmp_path):

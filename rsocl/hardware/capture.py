@@ -56,15 +56,13 @@ import os
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 from rsocl.common import validation as check
 from rsocl.common.interrupts import raise_dropped
 from rsocl.files.atomic import fsync_directory, output_path
 from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture
 from rsocl.files.rigfile import RigFile, load_rigfile
 from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, check_partial, publish, readable
-from rsocl.model.curvature import white_levels
+from rsocl.hardware.registration import register
 
 __all__ = ["capture_sets", "CaptureFailed"]
 
@@ -93,52 +91,6 @@ class CaptureFailed(RuntimeError):
         self.set_index = set_index
         self.phase = phase
         self.sets_complete = sets_complete
-
-
-# ---------------------------------------------------------------------- registration
-def _register(rigfile: RigFile, rig, index: int, frame) -> np.ndarray:
-    """Frame of camera ``index`` on the reference grid, model units, float64 ``(m, n)``."""
-    cam = rigfile.cameras[index]
-    image = np.asarray(frame.image)
-    if image.dtype.kind in "biu":
-        levels = 2 ** int(frame.bit_depth) - 1
-        full_scale = frame.meta.get("full_scale")
-        if full_scale is None:  # a white scene at unit gain: the exposure the device applied, in sub-frames
-            full_scale = white_levels(rig)[index]
-        value = image.astype(np.float64) * (float(full_scale) / levels)
-    else:
-        value = image.astype(np.float64)
-    H = rigfile.homography(index)
-    registered = frame.meta.get("registered", False)
-    if registered and frame.meta.get("roi") is not None and value.shape != rig.shape:
-        value = _in_grid(value, frame.meta["roi"], rig.shape, index)
-    if H is not None and not registered:
-        from rsocl.hardware.calibration import warp_to_reference
-
-        origin = tuple(cam["roi"][:2]) if cam.get("roi") else (0, 0)
-        value = warp_to_reference(value, H, rig.shape, frame_origin=origin, order=1, cval=0.0)
-    if value.shape != rig.shape:
-        raise ValueError(
-            f"camera {index}: frame shape {value.shape} is not the rig's shape {rig.shape} "
-            "and the rig file gives no homography to register it"
-        )
-    if not np.all(np.isfinite(value)):
-        raise ValueError(f"camera {index}: frame has NaN or inf values")
-    return value
-
-
-def _in_grid(value, roi, shape, index) -> np.ndarray:
-    """A frame already on the reference grid but cut to ``roi`` (``[x, y, width, height]``, pixels) put back
-    in its place on a grid of ``shape`` ``(m, n)``, 0 outside."""
-    x, y, width, height = (int(v) for v in roi)
-    if value.shape != (height, width) or x < 0 or y < 0 or x + width > shape[1] or y + height > shape[0]:
-        raise ValueError(
-            f"camera {index}: a registered frame of shape {value.shape} with roi [x, y, width, height] = "
-            f"{[x, y, width, height]} does not fit the rig's shape {shape}"
-        )
-    grid = np.zeros(shape)
-    grid[y : y + height, x : x + width] = value
-    return grid
 
 
 # ---------------------------------------------------------------------- capture
@@ -408,7 +360,7 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
                 at(i, j, "write")
                 writer.add_raw(i, j, frame, cam)
                 at(i, j, "register")
-                writer.add_registered(i, _register(rigfile, writer.rig, i, frame))
+                writer.add_registered(i, register(rigfile, writer.rig, i, frame))
             at(None, j, "write")
             writer.complete_set(j, cameras)
             bar.update(1)
