@@ -365,3 +365,22 @@ def test_a_pixel_format_the_backend_does_not_deliver_is_refused_before_any_camer
     with pytest.raises(ValueError, match=r"rig\.toml: camera\[2\]\.pixel_format must be one of \['Mono8', 'Mono16',"):
         capture_sets(path, tmp_path / "c.h5")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
+
+
+def test_a_disk_without_room_for_the_truth_and_the_sets_gets_the_sets_only(tmp_path, monkeypatch):
+    import collections
+    import shutil
+
+    from rsocl.hardware import capture_file
+
+    path = tmp_path / "rig.toml"
+    save_rigfile(path, _rigfile())
+    with_truth = capture_sets(path, tmp_path / "a.h5", sets=2)
+    assert load_capture(with_truth, set_index=0).truth is not None
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: usage(2**30, 2**30 - 2**12, 2**12))
+    with pytest.warns(UserWarning, match=r"no ground truth stored: it takes .* MiB and the disk has 0\.0 MiB free"):
+        out = capture_sets(path, tmp_path / "b.h5", sets=2)
+    capture = load_capture(out, set_index=1)
+    assert capture.truth is None and load_raw(out).sets_complete == 2
+    assert capture_file.shutil.disk_usage is shutil.disk_usage

@@ -36,6 +36,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import time
 import warnings
 from pathlib import Path
@@ -292,7 +293,7 @@ class CaptureWriter:
         ds.resize(set_index + 1, axis=0)
         ds[set_index] = stack
         if set_index == 0:  # under temporary names until all are written whole; then the count says so
-            truth = self._truth(cameras)
+            truth = self._room_for(self._truth(cameras), stack.nbytes)
             names = ["snapshots"] + (["truth"] if truth is not None else [])
             for name, data in zip(names, (stack, truth)):
                 self.h5.create_dataset(f"{name}.writing", data=data)
@@ -305,6 +306,21 @@ class CaptureWriter:
         self.meta["sets_complete"] = self.sets_complete
         self._write_meta()
         self.h5.flush()
+
+    def _room_for(self, truth, set_bytes: int):
+        """``truth``, or None (with a warning) where the disk has no room for it and, twice over, for every set
+        asked for: the truth is a bonus, the sets come first."""
+        if truth is None:
+            return None
+        need = truth.nbytes + 2 * set_bytes * int(self.meta["sets_requested"])
+        free = shutil.disk_usage(self.partial.parent).free
+        if free >= need:
+            return truth
+        self.warn(
+            f"no ground truth stored: it takes {truth.nbytes / 2**20:.1f} MiB and the disk has "
+            f"{free / 2**20:.1f} MiB free, which the sets asked for need"
+        )
+        return None
 
     def _truth(self, cameras):
         if not all(callable(getattr(cam, "scene_truth", None)) for cam in cameras):
