@@ -371,7 +371,7 @@ def test_a_disk_without_room_for_the_truth_and_the_sets_gets_the_sets_only(tmp_p
     import collections
     import shutil
 
-    from rsocl.hardware import capture_file
+    from rsocl.hardware import capture_truth
 
     path = tmp_path / "rig.toml"
     save_rigfile(path, _rigfile())
@@ -383,4 +383,28 @@ def test_a_disk_without_room_for_the_truth_and_the_sets_gets_the_sets_only(tmp_p
         out = capture_sets(path, tmp_path / "b.h5", sets=2)
     capture = load_capture(out, set_index=1)
     assert capture.truth is None and load_raw(out).sets_complete == 2
-    assert capture_file.shutil.disk_usage is shutil.disk_usage
+    assert capture_truth.shutil.disk_usage is shutil.disk_usage
+
+
+def test_a_frame_whose_shape_changed_is_kept_beside_the_raw_frames(tmp_path, monkeypatch):
+    import h5py
+
+    from rsocl.hardware.capture import CaptureFailed
+    from rsocl_plugins.simulated import SimulatedCamera
+
+    real = SimulatedCamera._read
+
+    def read(self, timeout):  # camera 1 delivers a frame 5 rows short in set 1
+        frame = real(self, timeout)
+        if self.index == 1 and frame.meta["set"] == 1:
+            frame.image = frame.image[:-5]
+        return frame
+
+    monkeypatch.setattr(SimulatedCamera, "_read", read)
+    path = tmp_path / "rig.toml"
+    save_rigfile(path, _rigfile())
+    with pytest.raises(CaptureFailed, match=r"frame changed from .* \(the frame is kept as raw_changed/1/1\)"):
+        capture_sets(path, tmp_path / "c.h5", sets=3)
+    with h5py.File(tmp_path / "c.h5") as h5:
+        assert h5["raw_changed/1/1"].shape == (SHAPE[0] - 5, SHAPE[1]) and "meta" in h5["raw_changed/1/1"].attrs
+    assert load_raw(tmp_path / "c.h5").sets_complete == 1

@@ -22,6 +22,8 @@ rig with each camera's exposure as its device applied it, attribute ``meta``), r
   ``exposure`` (s, as the camera reports it), ``roi`` and ``config`` (JSON);
 - ``raw_meta/<i>/set``, ``.../timestamp`` (s), ``.../meta`` (JSON of the
   frame's metadata): one entry per raw frame;
+- ``raw_changed/<i>/<set>``: a frame of camera ``i`` whose shape or dtype changed during the capture (it
+  ends the capture), kept as delivered, attributes ``timestamp`` and ``meta``;
 - root attributes ``capture_status`` (``"running"``, ``"complete"``,
   ``"failed"``, ``"interrupted"``), ``sets_complete`` and, after a failure,
   ``failure`` (JSON ``{"camera", "set", "phase", "type", "error"}``; ``set`` is
@@ -36,7 +38,6 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import shutil
 import time
 import warnings
 from pathlib import Path
@@ -45,6 +46,7 @@ import numpy as np
 
 from rsocl.files.rigfile import RigFile
 from rsocl.hardware.capture_raw import RawCapture, load_raw
+from rsocl.hardware.capture_truth import room_for, set_truth
 
 __all__ = ["CaptureWriter", "check_partial", "readable", "publish", "RawCapture", "load_raw", "PARTIAL_SUFFIX"]
 
@@ -215,9 +217,10 @@ class CaptureWriter:
         if not first:
             ds = self.h5[name]
             if image.shape != ds.shape[1:] or image.dtype != ds.dtype:
+                kept = self._keep_changed(index, set_index, image, frame, meta)
                 raise ValueError(
                     f"camera {index}: frame changed from {ds.shape[1:]} {ds.dtype} to "
-                    f"{image.shape} {image.dtype} during the capture"
+                    f"{image.shape} {image.dtype} during the capture{kept}"
                 )
         n = 0 if first else self.h5[name].shape[0]
         try:
@@ -233,6 +236,21 @@ class CaptureWriter:
             self._roll_back(index, n, first)
             raise
         self.h5.flush()
+
+    def _keep_changed(self, index: int, set_index: int, image, frame, meta) -> str:
+        """Keep a frame that does not fit ``raw/<index>`` as ``raw_changed/<index>/<set_index>``: the clause
+        that says so, or ``""`` where the file does not take it."""
+        name = f"raw_changed/{index}/{set_index}"
+        try:
+            ds = self.h5.create_dataset(name, data=image)
+            ds.attrs["timestamp"] = float(frame.timestamp)
+            ds.attrs["meta"] = _json(meta)
+            self.h5.flush()
+        except Exception:  # noqa: BLE001 - the failure is said either way, the frame only where kept
+            with contextlib.suppress(Exception):
+                del self.h5[name]
+            return ""
+        return f" (the frame is kept as {name})"
 
     def _create_raw(self, index: int, image: np.ndarray, frame, camera) -> None:
         import h5py
@@ -293,7 +311,8 @@ class CaptureWriter:
         ds.resize(set_index + 1, axis=0)
         ds[set_index] = stack
         if set_index == 0:  # under temporary names until all are written whole; then the count says so
-            truth = self._room_for(self._truth(cameras), stack.nbytes)
+            truth = set_truth(cameras, self.rig, self.warn)
+            truth = room_for(truth, self.partial.parent, stack.nbytes * int(self.meta["sets_requested"]), self.warn)
             names = ["snapshots"] + (["truth"] if truth is not None else [])
             for name, data in zip(names, (stack, truth)):
                 self.h5.create_dataset(f"{name}.writing", data=data)
@@ -306,46 +325,6 @@ class CaptureWriter:
         self.meta["sets_complete"] = self.sets_complete
         self._write_meta()
         self.h5.flush()
-
-    def _room_for(self, truth, set_bytes: int):
-        """``truth``, or None (with a warning) where the disk has no room for it and, twice over, for every set
-        asked for: the truth is a bonus, the sets come first."""
-        if truth is None:
-            return None
-        need = truth.nbytes + 2 * set_bytes * int(self.meta["sets_requested"])
-        free = shutil.disk_usage(self.partial.parent).free
-        if free >= need:
-            return truth
-        self.warn(
-            f"no ground truth stored: it takes {truth.nbytes / 2**20:.1f} MiB and the disk has "
-            f"{free / 2**20:.1f} MiB free, which the sets asked for need"
-        )
-        return None
-
-    def _truth(self, cameras):
-        if not all(callable(getattr(cam, "scene_truth", None)) for cam in cameras):
-            return None
-        try:
-            truths = [np.asarray(cam.scene_truth(0), dtype=np.float64) for cam in cameras]
-        except Exception as exc:  # the truth is a bonus, never a reason to fail a capture
-            self.warn(f"no ground truth: {type(exc).__name__}: {exc}")
-            return None
-        truth = truths[0]
-        for i, other in enumerate(truths[1:], start=1):
-            if other.shape != truth.shape or not np.array_equal(other, truth):
-                self.warn(
-                    f"no ground truth: camera {i} sees another scene than camera 0 (their [camera.config] "
-                    "scene, scene_seed or scene_sets differ), so no one datacube is the truth of this capture"
-                )
-                return None
-        if truth.ndim == 3 and truth.shape[0] > self.rig.T:  # the scene outlasts the exposures: its first T
-            truth = truth[: self.rig.T]
-        if truth.shape != (self.rig.T,) + self.rig.shape:
-            self.warn(
-                f"no ground truth: the scene has shape {truth.shape}, the rig needs {(self.rig.T,) + self.rig.shape}"
-            )
-            return None
-        return truth
 
     # ------------------------------------------------------------------ end
     def finish(self, status: str, failure: dict | None) -> None:

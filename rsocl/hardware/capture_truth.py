@@ -1,0 +1,55 @@
+"""The ground truth a capture of simulated cameras stores beside set 0: a bonus, never a reason to fail a capture.
+
+:func:`set_truth` is the datacube every camera tells (the ``simulated`` backend's ``scene_truth``) where all tell
+the same one of the rig's shape; :func:`room_for` keeps it only where the disk has room for it beside the sets.
+Each says why there is none through ``warn`` (:meth:`rsocl.hardware.capture_file.CaptureWriter.warn`).
+"""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+
+__all__ = ["set_truth", "room_for"]
+
+
+def set_truth(cameras, rig, warn):
+    """Set 0's datacube ``(T, m, n)`` float64 as every camera of ``cameras`` tells it, or None (with ``warn``'s
+    reason where a camera could tell one)."""
+    if not all(callable(getattr(cam, "scene_truth", None)) for cam in cameras):
+        return None
+    try:
+        truths = [np.asarray(cam.scene_truth(0), dtype=np.float64) for cam in cameras]
+    except Exception as exc:  # the truth is a bonus, never a reason to fail a capture
+        warn(f"no ground truth: {type(exc).__name__}: {exc}")
+        return None
+    truth = truths[0]
+    for i, other in enumerate(truths[1:], start=1):
+        if other.shape != truth.shape or not np.array_equal(other, truth):
+            warn(
+                f"no ground truth: camera {i} sees another scene than camera 0 (their [camera.config] "
+                "scene, scene_seed or scene_sets differ), so no one datacube is the truth of this capture"
+            )
+            return None
+    if truth.ndim == 3 and truth.shape[0] > rig.T:  # the scene outlasts the exposures: its first T
+        truth = truth[: rig.T]
+    if truth.shape != (rig.T,) + rig.shape:
+        warn(f"no ground truth: the scene has shape {truth.shape}, the rig needs {(rig.T,) + rig.shape}")
+        return None
+    return truth
+
+
+def room_for(truth, folder, sets_bytes: int, warn):
+    """``truth``, or None (with a warning) where the disk of ``folder`` has no room for it and, twice over, for the
+    ``sets_bytes`` of every set asked for: the sets come first."""
+    if truth is None:
+        return None
+    free = shutil.disk_usage(folder).free
+    if free >= truth.nbytes + 2 * sets_bytes:
+        return truth
+    warn(
+        f"no ground truth stored: it takes {truth.nbytes / 2**20:.1f} MiB and the disk has "
+        f"{free / 2**20:.1f} MiB free, which the sets asked for need"
+    )
+    return None
