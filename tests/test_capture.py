@@ -114,7 +114,8 @@ def test_camera_failure_keeps_what_was_captured(tmp_path):
         "error": raw.failure["error"],
     }
     assert "fail_after=2" in raw.failure["error"]
-    assert [f.shape[0] for f in raw.frames] == [2, 2, 1, 1]  # set 1: cameras 0, 1 read before camera 2 failed
+    # set 1: cameras 0, 1 read before camera 2 failed, and camera 3's frame, triggered with them, kept after
+    assert [f.shape[0] for f in raw.frames] == [2, 2, 1, 2] and list(raw.sets[3]) == [0, 1]
     assert raw.snapshot_sets.shape == (1, 4) + SHAPE
     capture = load_capture(out)  # set 0 is complete: a valid capture file
     assert capture.meta["status"] == "failed" and capture.meta["failure"]["camera"] == 2
@@ -125,7 +126,7 @@ def test_camera_failure_keeps_what_was_captured(tmp_path):
     with pytest.raises(CaptureFailed, match="in set 0"):
         capture_sets(_rigfile(configs=[{}, {"fail_after": 1}, {}, {}]), first, sets=2)
     raw = load_raw(first)
-    assert [f.shape[0] for f in raw.frames] == [1, 0, 0, 0] and raw.failure["camera"] == 1
+    assert [f.shape[0] for f in raw.frames] == [1, 0, 1, 1] and raw.failure["camera"] == 1  # 2, 3: triggered
     with pytest.raises(ValueError, match="snapshots"):
         load_capture(first)
 

@@ -316,6 +316,18 @@ def _check_pixel_formats(rigfile, cameras) -> None:
             raise ValueError(f"{where}camera[{i}].pixel_format must be one of {list(known)}, got {wanted!r}")
 
 
+#: Longest wait, seconds, for each frame a failed set had triggered: it should be there already.
+FIRED_WAIT = 1.0
+
+
+def _keep_fired(cameras, fired, set_index, writer, timeout) -> None:
+    """After a failure in set ``set_index``, read and keep the raw frames of the cameras ``fired`` (triggered,
+    not read yet): captured frames are saved, though the set is not complete. A camera that fails too is left."""
+    for i in fired:
+        with contextlib.suppress(Exception):
+            writer.add_raw(i, set_index, cameras[i].read(min(timeout, FIRED_WAIT)), cameras[i])
+
+
 def _run(cameras, rigfile, writer, sets, timeout, progress, where):
     from tqdm import tqdm
 
@@ -351,16 +363,23 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
         cam.start()
     with tqdm(total=sets, unit="set", desc="capture", disable=not progress) as bar:
         for j in range(sets):
-            for i, cam in enumerate(cameras):  # fire all triggers back to back
-                at(i, j, "trigger")
-                cam.trigger()
-            for i, cam in enumerate(cameras):
-                at(i, j, "read")
-                frame = cam.read(timeout)
-                at(i, j, "write")
-                writer.add_raw(i, j, frame, cam)
-                at(i, j, "register")
-                writer.add_registered(i, register(rigfile, writer.rig, i, frame))
+            fired: list = []  # cameras triggered in this set whose frame is not read yet
+            try:
+                for i, cam in enumerate(cameras):  # fire all triggers back to back
+                    at(i, j, "trigger")
+                    cam.trigger()
+                    fired.append(i)
+                for i, cam in enumerate(cameras):
+                    at(i, j, "read")
+                    fired.remove(i)  # this camera's frame comes now, or its failure
+                    frame = cam.read(timeout)
+                    at(i, j, "write")
+                    writer.add_raw(i, j, frame, cam)
+                    at(i, j, "register")
+                    writer.add_registered(i, register(rigfile, writer.rig, i, frame))
+            except Exception:
+                _keep_fired(cameras, fired, j, writer, timeout)
+                raise
             at(None, j, "write")
             writer.complete_set(j, cameras)
             bar.update(1)
