@@ -154,9 +154,8 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     rig = rigfile.rig()
     for i, cam in enumerate(rig.cameras):
         if cam.frames != 1:
-            where = f"{rigfile.path}: " if rigfile.path is not None else ""
             raise ValueError(
-                f"{where}camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger; set frames = 1 "
+                f"{_in_file(rigfile)}camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger; set frames = 1 "
                 "(multi-frame captures: rsocl simulate --frames N)"
             )
     folder = Path(rigfile.path).parent if rigfile.path is not None else Path(".")
@@ -312,8 +311,12 @@ def _check_pixel_formats(rigfile, cameras) -> None:
     for i, (spec, cam) in enumerate(zip(rigfile.cameras, cameras)):
         wanted, known = spec.get("pixel_format"), tuple(getattr(cam, "pixel_formats", ()))
         if wanted and known and wanted not in known:
-            where = f"{rigfile.path}: " if rigfile.path is not None else ""
-            raise ValueError(f"{where}camera[{i}].pixel_format must be one of {list(known)}, got {wanted!r}")
+            raise ValueError(f"{_in_file(rigfile)}camera[{i}].pixel_format must be one of {list(known)}, got {wanted!r}")
+
+
+def _in_file(rigfile) -> str:
+    """``"<rig file>: "``, how a message about a key of ``rigfile`` starts (``""`` for a rig file made in memory)."""
+    return f"{rigfile.path}: " if rigfile.path is not None else ""
 
 
 #: Longest wait, seconds, for each frame a failed set had triggered: it should be there already.
