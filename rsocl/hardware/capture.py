@@ -155,8 +155,8 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     for i, cam in enumerate(rig.cameras):
         if cam.frames != 1:
             raise ValueError(
-                f"{_in_file(rigfile)}camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger; set frames = 1 "
-                "(multi-frame captures: rsocl simulate --frames N)"
+                f"{_in_file(rigfile)}camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger; "
+                "set frames = 1 (multi-frame captures: rsocl simulate --frames N)"
             )
     folder = Path(rigfile.path).parent if rigfile.path is not None else Path(".")
     reads = [("rig file", rigfile.path)] + [
@@ -311,7 +311,8 @@ def _check_pixel_formats(rigfile, cameras) -> None:
     for i, (spec, cam) in enumerate(zip(rigfile.cameras, cameras)):
         wanted, known = spec.get("pixel_format"), tuple(getattr(cam, "pixel_formats", ()))
         if wanted and known and wanted not in known:
-            raise ValueError(f"{_in_file(rigfile)}camera[{i}].pixel_format must be one of {list(known)}, got {wanted!r}")
+            where = _in_file(rigfile)
+            raise ValueError(f"{where}camera[{i}].pixel_format must be one of {list(known)}, got {wanted!r}")
 
 
 def _in_file(rigfile) -> str:
