@@ -202,6 +202,7 @@ def test_a_tile_under_its_frames_levels_marks_the_pixels_the_whole_frame_marks()
         np.testing.assert_array_equal(static_weights(block, 0.75)[:, 1:], whole)
 
 
+@pytest.mark.not_under_oclgrind("four self-tuned tile runs: minutes under Oclgrind; the levels are host code")
 def test_every_tile_of_a_tiled_run_fixes_its_static_part_with_the_whole_frames_levels(monkeypatch):
     import rsocl.solver.pipeline as pipeline
     import rsocl.solver.static as static
