@@ -145,7 +145,8 @@ def static_mask(g: np.ndarray, measured: Levels | None = None) -> np.ndarray:
     16
     """
     g = np.asarray(g, dtype=np.float64)
-    bright = _levels(g, measured).bright
+    measured = measured if measured is not None else _FRAME.get()  # else its own bright level alone
+    bright = float(np.percentile(g, BRIGHT_PERCENTILE)) if measured is None else measured.bright
     if g.shape[0] < 2 or bright <= 0 or min(g.shape[1:]) < 3:
         return np.zeros(g.shape[1:], bool)
     return _erode((g.max(axis=0) - g.min(axis=0)) < SPREAD * bright)
@@ -227,8 +228,9 @@ def point_mask(g: np.ndarray, measured: Levels | None = None) -> np.ndarray:
 def _parts(g: np.ndarray) -> tuple:
     """``(still, points)``: the pixels of :func:`static_mask` of ``g`` outside :func:`point_mask`, and
     :func:`point_mask`."""
-    points = point_mask(g)
-    return static_mask(g) & ~points, points
+    measured = _levels(np.asarray(g, dtype=np.float64), None)  # once for both masks
+    points = point_mask(g, measured)
+    return static_mask(g, measured) & ~points, points
 
 
 def static_weights(g: np.ndarray, weight: float) -> np.ndarray:
