@@ -64,6 +64,19 @@ def test_matches_the_reference_on_oblique_cameras_gains_offsets_and_equal_times(
     _check(rig, g, rng.random(g.shape) > 0.3, None, dtype, device)
 
 
+@pytest.mark.parametrize("frames", [8, 200])
+def test_late_sub_frames_of_a_long_multi_frame_capture_are_as_close_as_early_ones(frames, dtype, device, rng):
+    # T = 6683 and 189540: a sample time held as one float32 would be off by up to 8e-3 of a sub-frame
+    cams = [Camera(a, 1.8e-4, 3.5e-5, frames=frames, t_d=1 / 30) for a in (0, 90, 180, 270)]
+    rig = Rig(cams, (5, 6))
+    g = rng.random((rig.n_channels,) + rig.shape)
+    op = rsocl.RollingShutterOperator(rig, device=device, dtype=dtype)
+    ref = interp3d(g, rig)
+    for solved in (slice(0, 300), slice(rig.T - 300, rig.T)):
+        got = interp3d_device(op, g, None, solved).get()
+        assert np.abs(got - ref[solved]).max() <= 8 * np.finfo(dtype).eps * np.abs(ref).max()
+
+
 def test_equal_sample_times_give_their_mean(device):
     rig = Rig([Camera(0, 1.8e-4, 3.5e-5), Camera(0, 1.8e-4, 3.5e-5)], (4, 5))
     g = np.stack([np.full(rig.shape, 1.0), np.full(rig.shape, 3.0)])

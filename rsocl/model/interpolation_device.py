@@ -74,9 +74,18 @@ def interp3d_device(op, g, valid=None, solved=None, *, out=None):
         raise ValueError(
             f"out must hold {want[1:] if one else want} values of {dtype.name}, got {out.shape} {out.dtype}"
         )
+    kept = np.isfinite(times)  # a kept time is whole + part (kernels/interp.cl); the rest are not read
+    whole = np.floor(np.where(kept, times, 0.0))
     up = [
         pool.to_device(queue, np.asarray(a, dtype=t))
-        for a, t in ((times, dtype), (values, dtype), (inverse, dtype), (count, np.int32), (fallback, dtype))
+        for a, t in (
+            (whole, np.int32),
+            (np.where(kept, times - whole, 0.0), dtype),
+            (values, dtype),
+            (inverse, dtype),
+            (count, np.int32),
+            (fallback, dtype),
+        )
     ]
     prog = op.device.program(["interp.cl"], REAL=c_type(dtype), NCH=K)
     kernel = prog.interp3d
