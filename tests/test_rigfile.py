@@ -226,6 +226,8 @@ t_r = {T_R!r}
         ("angle = 90", 'angle = "ninety"', r"camera\[1\]\.angle must be a finite real number"),
         ("angle = 90", "angle = 90\nt_a = -1e-6", r"camera\[1\]\.t_a must be >= 0 seconds"),
         ("angle = 90", "angle = 90\nframes = 2", r"camera\[1\]: t_d .* is required when frames > 1"),
+        ("angle = 90\nt_e = 0.00018", "angle = 90\nt_e = 1e-5\nframes = 2\nt_d = 1e-9", r"camera\[1\]\.t_d must be >="),
+        ("angle = 90", "angle = 90\nt_a = 500.0", r"camera\[1\]\.t_a = 500 s makes the rig span"),
         ("shape = [9, 7]", "shape = [9]", r"rig\.shape must be a list of 2 integers"),
         ("shape = [9, 7]", "shape = [9, 7]\ndt = 1e-6", r"dt must be >= t_r"),
         ("shape = [9, 7]", "shape = [9, 7]\nmask = 'fuzzy'", r"rig\.mask must be one of"),

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -115,7 +116,10 @@ class RigFile:
     def rig(self) -> Rig:
         """The :class:`~rsocl.model.rig.Rig` this file describes."""
         cams = [self.camera(i) for i in range(len(self.cameras))]
-        return Rig(cams, self.shape, dt=self.dt, mask=self.mask)
+        try:
+            return Rig(cams, self.shape, dt=self.dt, mask=self.mask)
+        except ValueError as exc:  # the model's cameras[i] is this file's i-th [[camera]] table
+            raise ValueError(re.sub(r"\bcameras\[(\d+)\]", r"camera[\1]", str(exc))) from None
 
     def homography(self, index: int):
         """The 3x3 homography (reference -> sensor) of camera ``index``, or None."""
