@@ -15,25 +15,36 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.hardware.calibration._common import _image
 
+#: Degree of the polynomial fitted beside the bands: a light that rises and falls over the rows
+#: (vignetting, a lamp's beam) is no straight trend, and a sinusoid fitted beside a straight one leans
+#: towards the curvature (t_r off by 2 % for a 10 % fall-off and a 10 % flicker over four periods).
+_TREND_DEGREE = 2
+
+
+def _trend(N: int) -> np.ndarray:
+    """``(N, _TREND_DEGREE + 1)`` Legendre polynomials over the profile's samples (scaled to [-1, 1])."""
+    return np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, N), _TREND_DEGREE)
+
 
 def _sinusoid_fit(profile: np.ndarray, frequency: float):
-    """Least-squares fit of offset + linear trend + a cos + b sin at ``frequency``; returns (rss, coefficients)."""
+    """Least-squares fit of a quadratic trend + a cos + b sin at ``frequency``; returns (rss, coefficients)."""
     k = np.arange(profile.size, dtype=np.float64)
     phase = 2 * np.pi * frequency * k
-    design = np.column_stack([np.ones_like(k), (k - k.mean()) / profile.size, np.cos(phase), np.sin(phase)])
+    design = np.column_stack([_trend(profile.size), np.cos(phase), np.sin(phase)])
     coefficients, *_ = np.linalg.lstsq(design, profile, rcond=None)
     residual = profile - design @ coefficients
-    return float(residual @ residual), coefficients
+    return float(residual @ residual), coefficients[-2:]
 
 
 def band_period(profile, *, min_periods=2.0) -> float:
     """Period, in samples, of the dominant sinusoid of a 1-D profile.
 
     The initial estimate is the peak of the Hann-windowed, zero-padded FFT
-    (linear trend removed), refined by parabolic interpolation of the log
+    (quadratic trend removed), refined by parabolic interpolation of the log
     magnitude; the final value minimises the residual of a least-squares fit
-    of ``offset + trend + a cos + b sin`` over the frequency, within one FFT
-    bin of the peak.
+    of ``quadratic trend + a cos + b sin`` over the frequency, within one FFT
+    bin of the peak. The quadratic takes up a light that rises and falls
+    smoothly over the profile (vignetting).
 
     Parameters
     ----------
@@ -60,8 +71,8 @@ def band_period(profile, *, min_periods=2.0) -> float:
     min_periods = check.positive("min_periods", min_periods)
     if N < 8:
         raise ValueError(f"profile must hold at least 8 samples, got {N}")
-    k = np.arange(N, dtype=np.float64)
-    detrended = profile - np.polyval(np.polyfit(k, profile, 1), k)
+    trend = _trend(N)
+    detrended = profile - trend @ np.linalg.lstsq(trend, profile, rcond=None)[0]
     pad = 16 * (1 << int(math.ceil(math.log2(N))))
     spectrum = np.abs(np.fft.rfft(detrended * np.hanning(N), pad))
     freqs = np.fft.rfftfreq(pad)
@@ -81,8 +92,8 @@ def band_period(profile, *, min_periods=2.0) -> float:
     )
     frequency = float(best.x)
     rss, coefficients = _sinusoid_fit(profile, frequency)
-    amplitude = float(np.hypot(coefficients[2], coefficients[3]))
-    noise = math.sqrt(rss / max(N - 5, 1))
+    amplitude = float(np.hypot(*coefficients))
+    noise = math.sqrt(rss / max(N - _TREND_DEGREE - 4, 1))
     if amplitude < 5 * noise * math.sqrt(2.0 / N):
         raise ValueError(
             f"no significant band found: fitted amplitude {amplitude:.3g} against a residual of {noise:.3g} per sample"
