@@ -36,3 +36,15 @@ def test_row_time_is_not_biased_by_an_illumination_falling_off_along_the_rows(de
     hz = periods / (480 * T_R)
     frame = rolling_shutter_frame(hz, 20e-6, depth=depth, falloff=falloff, noise=0.01)
     assert cal.estimate_row_time(frame, hz) == pytest.approx(T_R, rel=within)
+
+
+@pytest.mark.parametrize("bits", [None, 8, 12])
+@pytest.mark.parametrize("periods_exposed", [1, 2, 3])
+def test_an_exposure_of_whole_flicker_periods_has_no_band_and_is_refused(periods_exposed, bits):
+    # every row integrates whole periods: the rows are alike (to rounding), and no t_r may come out
+    hz = 1250.0
+    frame = rolling_shutter_frame(hz, periods_exposed / hz)
+    if bits is not None:
+        frame = np.round(frame * (2**bits - 1) * 0.98)  # raw levels: every row the same
+    with pytest.raises(ValueError, match="no periodic component|no significant band"):
+        cal.estimate_row_time(frame, hz)

@@ -19,6 +19,9 @@ from rsocl.hardware.calibration._common import _image
 #: (vignetting, a lamp's beam) is no straight trend, and a sinusoid fitted beside a straight one leans
 #: towards the curvature (t_r off by 2 % for a 10 % fall-off and a 10 % flicker over four periods).
 _TREND_DEGREE = 2
+#: A band weaker than this fraction of the profile's level is rounding, not light (a 16-bit level is
+#: 1.5e-5 of full scale): a frame whose exposure holds whole flicker periods is flat to rounding.
+_FLAT = 1e-9
 
 
 def _trend(N: int) -> np.ndarray:
@@ -62,7 +65,9 @@ def band_period(profile, *, min_periods=2.0) -> float:
     Raises
     ------
     ValueError
-        If the profile is too short or no significant periodic band is found.
+        If the profile is too short or no significant periodic band is found
+        (one weaker than the residual's noise, or than 1e-9 of the profile's
+        level: rounding).
     """
     from scipy.optimize import minimize_scalar
 
@@ -77,7 +82,8 @@ def band_period(profile, *, min_periods=2.0) -> float:
     spectrum = np.abs(np.fft.rfft(detrended * np.hanning(N), pad))
     freqs = np.fft.rfftfreq(pad)
     valid = freqs >= min_periods / N
-    if not valid.any() or spectrum[valid].max() <= 0:
+    level = float(np.abs(profile).max())
+    if not valid.any() or not np.abs(detrended).max() > _FLAT * level:  # a constant leaves rounding only
         raise ValueError("profile has no periodic component (flat after removing its trend)")
     index = int(np.flatnonzero(valid)[np.argmax(spectrum[valid])])
     f0 = freqs[index]
@@ -94,7 +100,7 @@ def band_period(profile, *, min_periods=2.0) -> float:
     rss, coefficients = _sinusoid_fit(profile, frequency)
     amplitude = float(np.hypot(*coefficients))
     noise = math.sqrt(rss / max(N - _TREND_DEGREE - 4, 1))
-    if amplitude < 5 * noise * math.sqrt(2.0 / N):
+    if amplitude < max(5 * noise * math.sqrt(2.0 / N), _FLAT * level):
         raise ValueError(
             f"no significant band found: fitted amplitude {amplitude:.3g} against a residual of {noise:.3g} per sample"
         )
