@@ -10,7 +10,8 @@ Rig-file configuration (the camera's ``[camera.config]`` table)::
                                # "Fake_1"; omitted: the first camera Aravis finds
     [camera.config]
     interfaces = ["GigEVision"]  # optional: enable only these Aravis interfaces ("GigEVision",
-                                 # "USB3Vision", "Fake"), disable the others (see aravis_discovery)
+                                 # "USB3Vision", "Fake"), disable the others (see aravis_discovery);
+                                 # a name this Aravis lacks is refused when the camera is made
     buffers = 8                  # stream buffers queued for the device, 1..256 (default 8)
     packet_size = 8192           # optional GigE Vision stream packet size, bytes (default: Aravis')
 
@@ -46,7 +47,7 @@ import time
 
 from rsocl.common.validation import unknown_keys
 from rsocl.hardware.backend import CameraBackend, CameraDisconnected, CameraError, CameraTimeout, Frame
-from rsocl_plugins.aravis_discovery import check_interfaces, import_aravis, select_interfaces
+from rsocl_plugins.aravis_discovery import aravis_interfaces, check_interfaces, import_aravis, select_interfaces
 from rsocl_plugins.aravis_formats import BY_CODE, PIXEL_FORMATS, convert_buffer
 from rsocl_plugins.aravis_settings import AravisSettings
 
@@ -86,7 +87,8 @@ class AravisCamera(AravisSettings, CameraBackend):
         if address is not None and (not isinstance(address, str) or not address.strip()):
             raise ValueError(f"{k('address')} must be a device id, IP address or serial number string, got {address!r}")
         self.address = None if address is None else address.strip()
-        self.interfaces = check_interfaces(k("interfaces"), cfg.get("interfaces"))
+        known = None if cfg.get("interfaces") is None else aravis_interfaces()  # before any file: a wrong name
+        self.interfaces = check_interfaces(k("interfaces"), cfg.get("interfaces"), known)
         self.buffers = _int(k("buffers"), cfg.get("buffers", _DEFAULT_BUFFERS), 1, _MAX_BUFFERS)
         packet = cfg.get("packet_size")
         self.packet_size = None if packet is None else _int(k("packet_size"), packet, 576, 65535)

@@ -8,7 +8,8 @@ Aravis and its GObject introspection data from the system, PyGObject from pip::
     apt-get install libgirepository1.0-dev libcairo2-dev pkg-config gcc python3-dev   # to build PyGObject
     pip install "rsocl[aravis]"                      # PyGObject<3.51 (built from source: no wheels)
 
-``gi`` is imported when a camera is opened, so listing plugins never needs it.
+``gi`` is imported when a camera is opened, or made with ``interfaces`` (to check their names against
+this Aravis': :func:`aravis_interfaces`), so listing plugins never needs it.
 
 Discovery
 ---------
@@ -22,7 +23,7 @@ from __future__ import annotations
 
 from rsocl.hardware.backend import CameraError
 
-__all__ = ["INSTALL_HINT", "import_aravis", "check_interfaces", "select_interfaces", "discover"]
+__all__ = ["INSTALL_HINT", "import_aravis", "aravis_interfaces", "check_interfaces", "select_interfaces", "discover"]
 
 INSTALL_HINT = (
     "install Aravis' introspection data with 'apt-get install gir1.2-aravis-0.8' and PyGObject with "
@@ -45,6 +46,16 @@ def import_aravis():
             f"the aravis camera backend needs Aravis 0.8 for GObject introspection ({exc}): {INSTALL_HINT}"
         ) from exc
     return Aravis, GLib
+
+
+def aravis_interfaces():
+    """The interface ids of the Aravis installed (``["Fake", "USB3Vision", "GigEVision"]``), or None where Aravis
+    does not import (opening a camera then says what to install). Asks no device: nothing is discovered."""
+    try:
+        Aravis, _ = import_aravis()
+    except CameraError:
+        return None
+    return [Aravis.get_interface_id(i) for i in range(Aravis.get_n_interfaces())]
 
 
 def select_interfaces(Aravis, interfaces, who="aravis"):
@@ -88,8 +99,10 @@ def discover(interfaces=None) -> list:
     return out
 
 
-def check_interfaces(key, value):
-    """``value`` as a list of Aravis interface names (None stays None); a ValueError naming ``key``."""
+def check_interfaces(key, value, known=None):
+    """``value`` as a list of Aravis interface names (None stays None); a ValueError naming ``key``, and
+    ``known`` (the interface ids of this Aravis, :func:`aravis_interfaces`; None: any name) where it names
+    another."""
     if value is None:
         return None
     if (
@@ -100,5 +113,11 @@ def check_interfaces(key, value):
     ):
         raise ValueError(
             f"{key} must be a non-empty list of Aravis interface names such as ['GigEVision'], got {value!r}"
+        )
+    unknown = [v for v in value if known is not None and v not in known]
+    if unknown:
+        missing = ", ".join(repr(v) for v in unknown)
+        raise ValueError(
+            f"{key} must list interfaces this Aravis has, any of {known}; got {list(value)!r} (no {missing})"
         )
     return list(value)

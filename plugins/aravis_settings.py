@@ -11,7 +11,8 @@ ROI
     shrink-and-move never exceeds the sensor on the way). Bounds and increments are checked
     first, and the region is read back: any difference raises
     :class:`~rsocl.hardware.backend.CameraError`. Change the ROI or the pixel format with acquisition
-    stopped (the stream's buffers are sized at :meth:`start`).
+    stopped (the stream's buffers are sized at :meth:`start`). ``sensor_size``, once the camera is
+    open: ``WidthMax``/``HeightMax``, else ``SensorWidth``/``SensorHeight``, else None.
 
 Trigger
     ``"free"``: ``TriggerMode = Off`` for every ``TriggerSelector``. ``"software"`` and
@@ -39,7 +40,7 @@ __all__ = ["AravisSettings"]
 class AravisSettings:
     """Typed access to GenICam features and the camera hooks built on them (a mixin of the camera).
 
-    The hooks ``_set_exposure``, ``_set_roi``, ``_set_pixel_format``, ``_set_trigger`` and
+    The hooks ``_set_exposure``, ``_sensor_size``, ``_set_roi``, ``_set_pixel_format``, ``_set_trigger`` and
     ``_readout_time``. Uses the camera's open device (``_device``), its error translation
     (``_call``) and ``_stream`` (settings change only with acquisition stopped); sets
     ``_exposure`` (seconds).
@@ -94,6 +95,14 @@ class AravisSettings:
         actual = float(self._call(f"reading {feature}", self._device.get_float_feature_value, feature)) * 1e-6
         self._exposure = actual
         return actual
+
+    def _sensor_size(self):
+        if self._device is None:  # known once open
+            return None
+        for features in (("WidthMax", "HeightMax"), ("SensorWidth", "SensorHeight")):
+            if all(self._has(f) for f in features):
+                return tuple(self._get_int(f) for f in features)
+        return None
 
     def _set_roi(self, x, y, width, height):
         if self._stream is not None:

@@ -33,7 +33,8 @@ actually used), ``full_scale`` (model value of the largest integer level, so
 ``image / (2**bit_depth - 1) * full_scale`` converts back to model units),
 ``exposure`` and ``registered = True`` (frames are on the reference grid: the simulated sensor *is*
 the reference grid, whatever the camera's ``angle``, ``row_map`` or homography). A ROI
-(:meth:`~rsocl.hardware.backend.CameraBackend.set_roi`) cuts a window out of that grid; its frames carry
+(:meth:`~rsocl.hardware.backend.CameraBackend.set_roi`) cuts a window out of that grid (the camera's
+``sensor_size`` is the grid's ``(n, m)``, known before it opens); its frames carry
 ``roi = [x, y, width, height]`` (pixels), which the capture uses to put them back in place (0 outside).
 ``fail_after = N`` makes the ``N``-th :meth:`read` raise
 :class:`~rsocl.hardware.backend.CameraDisconnected` (and every later call, as a camera
@@ -174,13 +175,12 @@ class SimulatedCamera(SimulatedConfig, CameraBackend):
             )
         self._roi = (x, y, width, height)
 
-    def _set_pixel_format(self, pixel_format):
+    def _set_pixel_format(self, pixel_format):  # one of pixel_formats: no Mono8 above 8 bits
         self._alive()
-        if pixel_format == "Mono8" and (self.sensor["bit_depth"] or 8) > 8:
-            raise CameraError(
-                f"{self.name}: pixel format Mono8 holds at most 8 bits, sensor bit_depth is {self.sensor['bit_depth']}"
-            )
         self.pixel_format = pixel_format
+
+    def _sensor_size(self):  # the simulated sensor is the reference grid
+        return self.shape[1], self.shape[0]
 
     def _set_trigger(self, mode, source):
         self._alive()

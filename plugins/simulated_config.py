@@ -9,7 +9,8 @@ reference ROI = the simulated sensor (required unless ``row_map`` or an array
 scene gives it), ``angle`` (0) or ``row_map`` (``(m, n)`` rows), ``t_e``, ``t_r``
 (required), ``t_a`` (0), ``gain`` (1), ``dt`` (default ``t_r``), ``mask``
 (``"exact"``), ``pixel_format`` (default: ``Float32`` without ``bit_depth``,
-else ``Mono8``/``Mono16``), ``sensor`` (:mod:`rsocl_plugins.simulated_sensor`),
+else ``Mono8``/``Mono16``; a ``bit_depth`` above 8 leaves ``Mono8`` out of the camera's
+``pixel_formats``), ``sensor`` (:mod:`rsocl_plugins.simulated_sensor`),
 ``fail_after``, ``device`` and ``dtype`` (OpenCL device spec, default rsocl's
 default device; ``float64`` when the device has it), ``index`` (camera index in
 the rig, mixed into the noise seed so that cameras draw independent noise),
@@ -74,7 +75,8 @@ class SimulatedConfig:
     ``sensor``, ...), and the one-camera :class:`~rsocl.model.rig.Rig` it describes.
 
     A mixin of :class:`rsocl_plugins.simulated.SimulatedCamera`, which calls :meth:`_parse` with its
-    config when it is made; ``name`` and ``pixel_formats`` are the camera's.
+    config when it is made; ``name`` and ``pixel_formats`` are the camera's (:meth:`_parse` narrows the
+    latter to those its sensor's ``bit_depth`` allows).
     """
 
     name: str
@@ -184,16 +186,18 @@ class SimulatedConfig:
         s["trigger_jitter"] = check.non_negative(sk("trigger_jitter"), s["trigger_jitter"] or 0.0, "seconds")
         s["seed"] = check_int(sk("seed"), 0 if s["seed"] is None else s["seed"], 0)
         self.sensor = s
+        if (s["bit_depth"] or 8) > 8:  # Mono8 holds at most 8 bits: this camera delivers the others
+            self.pixel_formats = tuple(f for f in self.pixel_formats if f != "Mono8")
 
         default_format = "Float32" if s["bit_depth"] is None else ("Mono8" if s["bit_depth"] <= 8 else "Mono16")
         self.pixel_format = cfg.get("pixel_format", default_format)
-        if self.pixel_format not in self.pixel_formats:
-            raise ValueError(
-                f"{k('pixel_format')} must be one of {list(self.pixel_formats)}, got {self.pixel_format!r}"
-            )
         if self.pixel_format == "Mono8" and (s["bit_depth"] or 8) > 8:
             raise ValueError(
                 f"{self.name}: pixel_format 'Mono8' holds at most 8 bits, sensor bit_depth is {s['bit_depth']}"
+            )
+        if self.pixel_format not in self.pixel_formats:
+            raise ValueError(
+                f"{k('pixel_format')} must be one of {list(self.pixel_formats)}, got {self.pixel_format!r}"
             )
         try:
             own = self._rig(self.t_e, self.t_a)

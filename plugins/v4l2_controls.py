@@ -16,7 +16,9 @@ ROI
     gain). ``frame.meta["roi"]`` says which (``"hardware"`` / ``"software"`` / ``None``).
     A driver that scales its crop (binning) cannot be cropped in sensor pixels: a CameraError.
     Changing the ROI or the pixel format needs acquisition stopped; a pixel format whose frames the
-    ROI no longer fits clears it with a CameraError (set the pixel format first).
+    ROI no longer fits clears it with a CameraError (set the pixel format first). ``sensor_size``, once
+    the camera is open: the selection API's crop bounds; None without that API (the software crop is
+    bounded by the frame, whose size the pixel format sets).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ _EXPOSURE_MANUAL = 1  # V4L2_EXPOSURE_MANUAL
 
 
 class V4L2Controls:
-    """The camera hooks ``_set_exposure`` and ``_set_roi``.
+    """The camera hooks ``_set_exposure``, ``_sensor_size`` and ``_set_roi``.
 
     Uses the camera's open device (``_lvd``, ``_dev``), its format (``_fmt``, ``_read_format``)
     and ``_streaming``; sets ``_exposure`` (seconds) and the ROI state ``_soft_roi`` (the crop
@@ -88,18 +90,28 @@ class V4L2Controls:
         return self._exposure
 
     # ---------------------------------------------------------------- ROI
+    def _crop_bounds(self):
+        """The selection API's CROP_BOUNDS (the sensor), or None for a driver without that API."""
+        lvd = self._lvd
+        try:
+            return lvd.get_selection(self._dev, lvd.BufferType.VIDEO_CAPTURE, lvd.SelectionTarget.CROP_BOUNDS)
+        except OSError as exc:
+            if exc.errno not in UNSUPPORTED:
+                raise
+            return None
+
+    @os_errors
+    def _sensor_size(self):
+        bounds = None if self._dev is None else self._crop_bounds()  # None: the frame's size, set by its format
+        return None if bounds is None else (bounds.width, bounds.height)
+
     @os_errors
     def _set_roi(self, x, y, width, height):
         if self._streaming:
             raise CameraError(f"{self.name}: stop() acquisition before changing the ROI")
         lvd = self._lvd
         capture = lvd.BufferType.VIDEO_CAPTURE
-        try:
-            bounds = lvd.get_selection(self._dev, capture, lvd.SelectionTarget.CROP_BOUNDS)
-        except OSError as exc:
-            if exc.errno not in UNSUPPORTED:
-                raise
-            bounds = None
+        bounds = self._crop_bounds()
         if bounds is None:  # no selection API: crop in software
             self._software_roi(x, y, width, height)
             return

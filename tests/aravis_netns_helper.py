@@ -177,10 +177,43 @@ def fake_checks(workdir):
             facts["outcomes"] = outcomes
             expect(any(o.startswith("timeout") for o in outcomes), f"no CameraTimeout: {outcomes}")
 
+    def c_roi_beyond_sensor(facts):
+        # The Fake camera's sensor (SensorWidth x SensorHeight, 2048 x 2048) is known once it is open: a roi
+        # beyond it is refused then, before any capture file is made, and the camera is closed again.
+        from rsocl.hardware.capture import capture_sets
+
+        folder = workdir / "roi-beyond-sensor"
+        folder.mkdir()
+        (folder / "rig.toml").write_text(
+            "\n".join(
+                [
+                    "[rig]",
+                    f"shape = [{SHAPE[0]}, {SHAPE[1]}]",
+                    "",
+                    "[[camera]]",
+                    'backend = "aravis"',
+                    "angle = 0.0",
+                    f"t_e = {EXPOSURE}",
+                    "t_r = 4e-05",
+                    f"roi = [2000, 0, {SHAPE[1]}, {SHAPE[0]}]",
+                    "",
+                    "[camera.config]",
+                    'address = "Fake_1"',
+                    'interfaces = ["Fake"]',
+                    "",
+                ]
+            )
+        )
+        facts["refusal"] = str(expect_raises(ValueError, capture_sets, folder / "rig.toml", folder / "c.h5"))
+        facts["files"] = sorted(p.name for p in folder.iterdir())
+        with AravisCamera(config, name="fake") as cam:  # it opens again: the refusal closed it
+            facts["sensor_size"] = list(cam.sensor_size)
+
     checks.run("discover", c_discover)
     checks.run("capture", c_capture)
     checks.run("errors", c_errors)
     checks.run("timeout", c_timeout)
+    checks.run("roi_beyond_sensor", c_roi_beyond_sensor)
     return checks.results
 
 

@@ -239,6 +239,15 @@ def test_fake_errors(fake):
     assert "NoSuchCamera" in facts["open"] and "Fake_1" in facts["open"]
 
 
+def test_fake_a_roi_beyond_the_sensor_is_refused_once_the_camera_opens_before_any_file(fake):
+    facts = _check(fake, "roi_beyond_sensor")
+    assert facts["files"] == ["rig.toml"] and facts["sensor_size"] == [2048, 2048]
+    assert facts["refusal"].endswith(
+        "rig.toml: camera[0].roi = [2000, 0, 64, 48] ([x, y, width, height]) must lie on the 2048x2048 "
+        "(width x height) sensor of camera 0 (aravis Fake_1): x + width <= 2048 and y + height <= 2048"
+    )
+
+
 def test_fake_timeout(fake):
     outcomes = _check(fake, "timeout")["outcomes"]
     assert any("no frame within 0.2 s" in o for o in outcomes), outcomes

@@ -108,6 +108,16 @@ def test_aravis_refused_roi_or_trigger_source_leave_the_camera_as_it_was():
     assert features["TriggerMode"]["value"] == "Off"
 
 
+def test_aravis_sensor_size_is_widthmax_heightmax_else_the_sensor_features_once_open():
+    sizes = {"WidthMax": 1024, "HeightMax": 768, "SensorWidth": 2048, "SensorHeight": 1536}
+    cam = _aravis({f: {"value": v} for f, v in sizes.items()})
+    assert cam.sensor_size == (1024, 768)  # binned: the ROI's bounds, not the physical sensor
+    cam = _aravis({f: {"value": v} for f, v in sizes.items() if f.startswith("Sensor")})
+    assert cam.sensor_size == (2048, 1536)
+    assert _aravis({"WidthMax": {"value": 1024}}).sensor_size is None
+    assert AravisCamera({}, name="closed").sensor_size is None  # known once open
+
+
 class _SmallerY16(FakeV4L2Device):
     """A driver whose GREY frames are 12x6 and whose Y16 frames only 8x4."""
 

@@ -358,11 +358,9 @@ def test_a_rig_file_with_a_multi_frame_camera_is_refused_naming_the_file_and_cam
 
 
 def test_a_pixel_format_the_backend_does_not_deliver_is_refused_before_any_camera_opens(tmp_path, monkeypatch):
-    from rsocl.hardware import capture as capture_module
-
     path = tmp_path / "rig.toml"
     save_rigfile(path, _rigfile(c2={"pixel_format": "Mono12"}))
-    monkeypatch.setattr(capture_module, "_run", lambda *a: pytest.fail("a camera opened"))
+    monkeypatch.setattr(SimulatedCamera, "_open_device", lambda self: pytest.fail("a camera opened"))
     with pytest.raises(ValueError, match=r"rig\.toml: camera\[2\]\.pixel_format must be one of \['Mono8', 'Mono16',"):
         capture_sets(path, tmp_path / "c.h5")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]

@@ -728,6 +728,25 @@ t_r = 0.001
         thread.join()
 
 
+def test_a_roi_beyond_the_sensor_is_refused_once_the_camera_opens_before_any_file(make_fake, tmp_path):
+    from rsocl.hardware.capture import capture_sets
+
+    fake = make_fake(selection=True)  # its crop bounds, the 12x6 sensor, are known once it is open
+    rig = tmp_path / "rig.toml"
+    rig.write_text(
+        f'[rig]\nshape = [6, 12]\n\n[[camera]]\nbackend = "v4l2"\naddress = "{fake.path}"\nangle = 0.0\n'
+        "t_e = 0.01\nt_r = 0.001\nroi = [4, 0, 12, 6]\n"
+    )
+    with pytest.raises(
+        ValueError,
+        match=rf"rig\.toml: camera\[0\]\.roi = \[4, 0, 12, 6\] \(\[x, y, width, height\]\) must lie on the 12x6 "
+        rf"\(width x height\) sensor of camera 0 \(v4l2 {fake.path}\): x \+ width <= 12 and y \+ height <= 6$",
+    ):
+        capture_sets(rig, tmp_path / "c.h5")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
+    assert fake.file.closed and "S_SELECTION" not in fake.log and "STREAMON" not in fake.log  # closed, untouched
+
+
 def test_rig_file_address_reaches_the_camera(fake, tmp_path):
     from rsocl.hardware.capture_file import load_raw
 

@@ -171,6 +171,12 @@ class CameraBackend:
         self._trigger_mode = mode
 
     @property
+    def sensor_size(self) -> tuple[int, int] | None:
+        """``(width, height)``, pixels, of the area a ROI is cut from (the whole sensor), or None where the
+        backend cannot tell: some know it only once the camera is open, some never."""
+        return self._wrap(self._sensor_size)
+
+    @property
     def readout_time(self) -> float | None:
         """Row readout time reported by the device (seconds per row), or None if it does not say."""
         self._need_open()
@@ -209,7 +215,11 @@ class CameraBackend:
         return f"<{type(self).__name__} {self.name!r} {'open' if self._open else 'closed'}>"
 
     # -------------------------------------------------------------- hooks
+    #: The pixel formats the camera delivers; a camera may narrow its backend's from its config.
     pixel_formats: tuple = ()
+
+    def _sensor_size(self):
+        return None
 
     def _open_device(self):
         raise NotImplementedError(f"{type(self).__name__} does not implement _open_device")

@@ -7,6 +7,13 @@ reads one frame per camera. Every raw frame is written to the file and flushed
 before the next frame is requested, so whatever happens later, everything
 already captured is on disk.
 
+Settings a camera cannot take are refused (a ValueError naming the rig file's key and what it may be)
+before the capture file is made (:mod:`rsocl.hardware.capture_checks`): a ``pixel_format`` the
+camera does not deliver and a ``roi`` beyond a sensor whose size the backend tells before the
+cameras open; a ``roi`` beyond a sensor whose size is known once the camera is open, right after
+the cameras open (they are closed again). A camera that fails to open is recorded in the file,
+as a camera that fails later is.
+
 A device may apply another exposure than ``t_e`` (rounded to its units, clamped to its range).
 The capture file's rig then holds, for that camera, the exposure the device applied (the
 frames' true exposure, which the reconstruction needs), and a warning names both values
@@ -61,6 +68,8 @@ from rsocl.common.interrupts import raise_dropped
 from rsocl.files.atomic import fsync_directory, output_path
 from rsocl.files.hdf5 import keeping_unless_simulated, refuse_camera_capture
 from rsocl.files.rigfile import RigFile, load_rigfile
+from rsocl.hardware.capture_cameras import closing_on_error, one_line, open_cameras, stop_cameras
+from rsocl.hardware.capture_checks import check_pixel_formats, check_rois, in_file
 from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, check_partial, publish, readable
 from rsocl.hardware.registration import register
 
@@ -155,7 +164,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     for i, cam in enumerate(rig.cameras):
         if cam.frames != 1:
             raise ValueError(
-                f"{_in_file(rigfile)}camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger; "
+                f"{in_file(rigfile)}camera[{i}].frames = {cam.frames}: rsocl capture reads one frame per trigger; "
                 "set frames = 1 (multi-frame captures: rsocl simulate --frames N)"
             )
     folder = Path(rigfile.path).parent if rigfile.path is not None else Path(".")
@@ -174,26 +183,29 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     backends = rigfile.backends()
     labels = [_label(i, b, c, cam.get("name")) for i, ((b, c), cam) in enumerate(zip(backends, rigfile.cameras))]
     cameras = [load("rsocl.cameras", b)(c, name=label) for (b, c), label in zip(backends, labels)]
-    _check_pixel_formats(rigfile, cameras)
+    check_pixel_formats(rigfile, cameras)
+    check_rois(rigfile, cameras)  # the sensors known before the cameras open
 
-    writer = CaptureWriter(partial, rig, rigfile, labels, sets, timeout)
     where = {"camera": None, "set": None, "phase": "open"}
-    failure: dict | None = None
-    interrupted = None
+    failure, interrupted = open_cameras(cameras, where)
+    if failure is None:
+        closing_on_error(cameras, check_rois, rigfile, cameras)  # the sensors known once open
+    writer = closing_on_error(cameras, CaptureWriter, partial, rig, rigfile, labels, sets, timeout)
     try:
         try:
-            _run(cameras, rigfile, writer, sets, timeout, progress, where)
+            if failure is None:
+                _run(cameras, rigfile, writer, sets, timeout, progress, where)
         except Exception as exc:
-            failure = dict(where, type=type(exc).__name__, error=_one_line(exc))
+            failure = dict(where, type=type(exc).__name__, error=one_line(exc))
         except BaseException as exc:  # KeyboardInterrupt, SystemExit: record, then let it through
-            failure = dict(where, type=type(exc).__name__, error=_one_line(exc))
+            failure = dict(where, type=type(exc).__name__, error=one_line(exc))
             interrupted = exc
-        failure, interrupted = _stop_cameras(cameras, writer, failure, interrupted)
+        failure, interrupted = stop_cameras(cameras, writer, failure, interrupted)
         status = "complete" if failure is None else ("interrupted" if interrupted is not None else "failed")
         try:
             writer.finish(status, failure)
         except BaseException as exc:  # the file takes no more (disk full): whether it is readable decides below
-            failure = failure or dict(where, phase="write", type=type(exc).__name__, error=_one_line(exc))
+            failure = failure or dict(where, phase="write", type=type(exc).__name__, error=one_line(exc))
             if not isinstance(exc, Exception):  # Ctrl-C while the status is written: written again
                 interrupted = interrupted or exc
                 with contextlib.suppress(Exception):
@@ -252,26 +264,6 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     return out
 
 
-def _stop_cameras(cameras, writer, failure, interrupted):
-    """Stop and close every camera: an error is a warning; an interrupt (Ctrl-C, SIGTERM) is recorded (the
-    first, with the failure, where none is) and closing goes on. Returns ``(failure, interrupted)``."""
-    for i, cam in enumerate(cameras):
-        for step in (cam.stop, cam.close):
-            try:
-                try:
-                    step()
-                except Exception as exc:  # closing must reach every camera
-                    writer.warn(f"camera {i}: {step.__name__} failed: {type(exc).__name__}: {exc}")
-            except BaseException as exc:  # an interrupt (or a warning the file does not take): on to the next
-                if interrupted is None and not isinstance(exc, Exception):
-                    interrupted = exc
-                    error = _one_line(exc)
-                    failure = failure or dict(
-                        camera=i, set=None, phase=step.__name__, type=type(exc).__name__, error=error
-                    )
-    return failure, interrupted
-
-
 def _raise_kept(message, partial, writer, failure, interrupted):
     """Raise the end of a capture whose file stays at ``partial``: a :class:`CaptureFailed` with ``message``,
     or the interrupt with it as its message (Ctrl-C, SIGTERM: the line says what was kept)."""
@@ -294,30 +286,7 @@ def _fault_words(exc: Exception) -> str:
     """An :class:`~rsocl.files.atomic.OutputError` as it is (it names its file), another fault on one line."""
     from rsocl.files.atomic import OutputError
 
-    return str(exc) if isinstance(exc, OutputError) else _one_line(exc)
-
-
-def _one_line(exc: BaseException) -> str:
-    """``str(exc)`` on one line (HDF5's messages hold line breaks), or the exception's type name; an
-    ``OSError`` with an error number as the system's words for it (HDF5 adds buffers and offsets)."""
-    if isinstance(exc, OSError) and exc.errno:
-        return f"[Errno {exc.errno}] {os.strerror(exc.errno)}"
-    return " ".join(str(exc).split()) or type(exc).__name__
-
-
-def _check_pixel_formats(rigfile, cameras) -> None:
-    """Refuse, before any camera opens or ``out`` is made, a rig file's ``pixel_format`` that the camera's
-    backend does not deliver (its declared :attr:`~rsocl.hardware.backend.CameraBackend.pixel_formats`)."""
-    for i, (spec, cam) in enumerate(zip(rigfile.cameras, cameras)):
-        wanted, known = spec.get("pixel_format"), tuple(getattr(cam, "pixel_formats", ()))
-        if wanted and known and wanted not in known:
-            where = _in_file(rigfile)
-            raise ValueError(f"{where}camera[{i}].pixel_format must be one of {list(known)}, got {wanted!r}")
-
-
-def _in_file(rigfile) -> str:
-    """``"<rig file>: "``, how a message about a key of ``rigfile`` starts (``""`` for a rig file made in memory)."""
-    return f"{rigfile.path}: " if rigfile.path is not None else ""
+    return str(exc) if isinstance(exc, OutputError) else one_line(exc)
 
 
 #: Longest wait, seconds, for each frame a failed set had triggered: it should be there already.
@@ -338,9 +307,6 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
     def at(camera, set_index, phase):
         where.update(camera=camera, set=set_index, phase=phase)
 
-    for i, cam in enumerate(cameras):
-        at(i, None, "open")
-        cam.open()
     exposures = []
     for i, cam in enumerate(cameras):
         at(i, None, "configure")
