@@ -48,3 +48,40 @@ def test_an_exposure_of_whole_flicker_periods_has_no_band_and_is_refused(periods
         frame = np.round(frame * (2**bits - 1) * 0.98)  # raw levels: every row the same
     with pytest.raises(ValueError, match="no periodic component|no significant band"):
         cal.estimate_row_time(frame, hz)
+
+
+RIG = '[rig]\nshape = [48, 64]\n[[camera]]\nbackend = "simulated"\nangle = 90.0\nt_e = %r\nt_r = 2.0e-05\n'
+
+
+@pytest.mark.parametrize(
+    "hz, t_e, said",
+    [
+        # 0.6 periods per row: the bands alias, and the measured t_r (13.3 µs) is no measurement of 20 µs
+        (30000.0, 10e-6, "the flicker advances 0.6 periods per row, 0.5 or more: its bands alias"),
+        (1250.0, 800e-6, "t_e = 800 µs spans 1 times the flicker's period, which averages its bands away"),
+        (100.0, 100e-6, "the frame's 480 rows hold 0.96 flicker periods, fewer than 2; use a light flickering at 208"),
+    ],
+)
+def test_calibrate_says_why_a_flicker_cannot_show_the_row_time(tmp_path, capsys, hz, t_e, said):
+    from rsocl.cli.main import main
+
+    (tmp_path / "rig.toml").write_text(RIG % t_e, encoding="utf-8")
+    before = (tmp_path / "rig.toml").read_bytes()
+    np.save(tmp_path / "f.npy", rolling_shutter_frame(hz, t_e, noise=0.01))
+    assert (
+        main(
+            ["calibrate", "--rig", str(tmp_path / "rig.toml"), "--flicker", str(tmp_path / "f.npy")]
+            + ["--flicker-hz", str(hz)]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert said in err and len(err.strip().splitlines()) == 1, err
+    assert (tmp_path / "rig.toml").read_bytes() == before
+
+
+def test_flicker_limits_are_silent_where_the_flicker_shows_the_row_time():
+    from rsocl.hardware.calibration.timing import flicker_limits
+
+    assert flicker_limits(1250.0, T_R, 100e-6, 480) == []  # 12 periods of 40 rows, t_e an eighth of a period
+    assert len(flicker_limits(1250.0, T_R, 1.01 / 1250.0, 480)) == 1  # t_e one period and 1 %: 1 % of the bands

@@ -278,6 +278,7 @@ def _detected_hint(frame, reference_points, reference, angle, origin, options, c
 
 def _row_times(args, rigfile, updates):
     from rsocl.hardware.calibration import check_row_time, estimate_row_time
+    from rsocl.hardware.calibration.timing import flicker_limits
 
     frames, _ = load_frames(args.flicker, "--flicker")
     C = len(rigfile.cameras)
@@ -286,12 +287,14 @@ def _row_times(args, rigfile, updates):
     frames = per_camera(frames, C, "--flicker")
     problems = []
     for c, camera in enumerate(rigfile.cameras):
+        stack = frames[c] if frames[c].ndim == 3 else frames[c][None]
+        why = "".join(f"; {r}" for r in flicker_limits(args.flicker_hz, camera["t_r"], camera["t_e"], len(stack[0])))
         try:
-            stack = frames[c] if frames[c].ndim == 3 else frames[c][None]
             t_r = float(np.mean([estimate_row_time(frame, args.flicker_hz) for frame in stack]))
         except ValueError as exc:
-            raise ValueError(f"camera {c}: {exc}") from None
+            raise ValueError(f"camera {c}: {exc}{why}") from None
         message = check_row_time(t_r, camera["t_r"], args.tolerance, raise_error=False)
+        message += why if message.startswith("t_r mismatch") else ""
         say(args, f"camera {c}: {message}")
         if message.startswith("t_r mismatch"):
             problems.append(f"camera {c}: {message}")

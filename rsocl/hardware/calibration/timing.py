@@ -143,7 +143,8 @@ def estimate_row_time(frame, flicker_hz, *, axis=0, min_periods=2.0) -> float:
     (:func:`band_period`), so it must span more than 2 rows
     (``flicker_hz * t_r < 0.5``) and the frame at least ``min_periods``
     periods. An exposure time that is a whole number of flicker periods
-    averages the bands away.
+    averages the bands away. :func:`flicker_limits` says which of these a
+    camera's stated ``t_r`` and ``t_e`` break.
     """
     frame = _image("frame", frame)
     flicker_hz = check.positive("flicker_hz", flicker_hz, "Hz")
@@ -151,6 +152,55 @@ def estimate_row_time(frame, flicker_hz, *, axis=0, min_periods=2.0) -> float:
         raise ValueError(f"axis must be 0 or 1, got {axis!r}")
     profile = frame.mean(axis=1 if axis in (0, -2) else 0)
     return 1.0 / (flicker_hz * band_period(profile, min_periods=min_periods))
+
+
+def flicker_limits(flicker_hz, t_r, t_e, rows, *, min_periods=2.0) -> list:
+    """Why a flicker cannot show a camera's row time, from its stated ``t_r`` and ``t_e``: one line each.
+
+    Parameters
+    ----------
+    flicker_hz : float
+        Frequency of the light's intensity oscillation, Hz.
+    t_r, t_e : float
+        The camera's row time and exposure time as the rig file states them, seconds.
+    rows : int
+        Rows of the camera's frame.
+    min_periods : float
+        Fewest band periods :func:`estimate_row_time` measures.
+
+    Returns
+    -------
+    list of str
+        Empty when the flicker can show ``t_r``; else the reasons: the bands alias (``flicker_hz * t_r >= 0.5``,
+        so every measurable ``t_r`` is below ``1 / (2 flicker_hz)``), the frame holds fewer than
+        ``min_periods`` periods, or the exposure spans so many periods (or so nearly a whole number of them)
+        that it averages the bands to under 10 % of the flicker (``|sinc(flicker_hz * t_e)| < 0.1``).
+    """
+    f = check.positive("flicker_hz", flicker_hz, "Hz")
+    t_r, t_e = check.positive("t_r", t_r, "seconds"), check.positive("t_e", t_e, "seconds")
+    rows = check.positive_int("rows", rows)
+    reasons = []
+    if f * t_r >= 0.5:
+        reasons.append(
+            f"at the rig file's t_r = {t_r * 1e6:.4g} µs the flicker advances {f * t_r:.3g} periods per row, "
+            f"0.5 or more: its bands alias, and no t_r above 1 / (2 x {f:.6g} Hz) = {0.5e6 / f:.4g} µs can be "
+            f"measured; use a light flickering below 1 / (2 t_r) = {0.5 / t_r:.6g} Hz"
+        )
+    elif rows * f * t_r < min_periods:
+        reasons.append(
+            f"at the rig file's t_r = {t_r * 1e6:.4g} µs the frame's {rows} rows hold {rows * f * t_r:.3g} "
+            f"flicker periods, fewer than {min_periods:g}; use a light flickering at "
+            f"{min_periods / (rows * t_r):.6g} Hz or more, or frames of more rows"
+        )
+    kept = abs(float(np.sinc(f * t_e)))  # the share of the flicker's fundamental an exposure keeps
+    if f * t_e >= 0.5 and kept < 0.1:
+        averaged = "away" if kept < 1e-3 else f"down to {100 * kept:.2g} % of the flicker"
+        reasons.append(
+            f"t_e = {t_e * 1e6:.4g} µs spans {f * t_e:.3g} times the flicker's period, which averages its bands "
+            f"{averaged} (a whole number of periods leaves none); an exposure of half a period, "
+            f"{0.5e6 / f:.4g} µs, keeps 64 %"
+        )
+    return reasons
 
 
 def check_row_time(estimated, expected, tolerance=0.01, *, raise_error=True) -> str:
