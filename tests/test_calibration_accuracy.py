@@ -85,3 +85,70 @@ def test_flicker_limits_are_silent_where_the_flicker_shows_the_row_time():
 
     assert flicker_limits(1250.0, T_R, 100e-6, 480) == []  # 12 periods of 40 rows, t_e an eighth of a period
     assert len(flicker_limits(1250.0, T_R, 1.01 / 1250.0, 480)) == 1  # t_e one period and 1 %: 1 % of the bands
+
+
+def raw_flat(gain, *, light, bits=12, dark=64, shape=(120, 160), seed=0):
+    """Raw levels of a flat field: ``gain * light`` of full scale, vignetted by up to 30 % at the corners,
+    Poisson noise, a dark offset, rounded and clipped at the top level ``2**bits - 1``."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0 : shape[0], 0 : shape[1]]
+    vignetting = 1 - 0.3 * (((x - shape[1] / 2) / shape[1]) ** 2 + ((y - shape[0] / 2) / shape[0]) ** 2) / 0.5
+    signal = rng.poisson(gain * light * (2**bits - 1 - dark) * vignetting)
+    return np.clip(np.round(dark + signal + rng.normal(0, 2, shape)), 0, 2**bits - 1).astype(np.uint16)
+
+
+GAINS = [1.0, 0.8, 1.25, 0.93]
+
+
+@pytest.mark.parametrize("bits, dark, light", [(8, 4, 0.5), (12, 64, 0.7), (12, 64, 0.05), (16, 1000, 0.5)])
+def test_gains_of_raw_flat_fields_within_half_a_percent(bits, dark, light):
+    # the error is the noise of the centre's mean (Poisson at one electron per level: 0.1 to 0.4 %)
+    flats = [raw_flat(g, light=light, bits=bits, dark=dark, seed=c) for c, g in enumerate(GAINS)]
+    gains = cal.flat_field_gain(flats, dark=dark, saturation=2**bits - 1)
+    np.testing.assert_allclose(gains, GAINS, rtol=5e-3)
+
+
+def test_calibrate_refuses_a_saturated_flat_field_of_raw_levels(tmp_path, capsys):
+    from rsocl.cli.main import main
+
+    camera = '[[camera]]\nbackend = "simulated"\nt_e = 1.0e-04\nt_r = 2.0e-05\n[camera.config.sensor]\nbit_depth = 12\n'
+    (tmp_path / "rig.toml").write_text("[rig]\nshape = [16, 16]\n" + camera * 4, encoding="utf-8")
+    before = (tmp_path / "rig.toml").read_bytes()
+    # camera 2's centre would be 1.06 of full scale: clipped, its gain came out 1.21, not 1.25
+    np.savez(tmp_path / "flats.npz", **{f"camera{c}": raw_flat(g, light=0.85, seed=c) for c, g in enumerate(GAINS)})
+    assert main(["calibrate", "--rig", str(tmp_path / "rig.toml"), "--flat", str(tmp_path / "flats.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "camera 2: 93" in err and "% of its flat field's measured pixels are saturated (at or above 4094.5)" in err
+    assert (tmp_path / "rig.toml").read_bytes() == before
+    # the same cameras under less light: the gains
+    np.savez(tmp_path / "flats.npz", **{f"camera{c}": raw_flat(g, light=0.7, seed=c) for c, g in enumerate(GAINS)})
+    assert (
+        main(
+            ["calibrate", "--rig", str(tmp_path / "rig.toml"), "--flat", str(tmp_path / "flats.npz")] + ["--dark", "64"]
+        )
+        == 0
+    )
+    from rsocl.files.rigfile import load_rigfile
+
+    written = [camera.get("gain", 1.0) for camera in load_rigfile(tmp_path / "rig.toml").cameras]
+    np.testing.assert_allclose(written, GAINS, rtol=5e-3)
+
+
+def test_calibrate_refuses_a_saturated_flat_field_capture(tmp_path, capsys):
+    from rsocl.cli.main import main
+    from rsocl.hardware.capture import capture_sets
+
+    # two simulated 12-bit cameras of gains 1 and 1.25 see a scene at 98 % of white: camera 1 clips at full
+    # scale, and its gain came out 1.02
+    np.save(tmp_path / "scene.npy", np.full((4, 16, 16), 250, np.uint8))
+    camera = (
+        '[[camera]]\nbackend = "simulated"\nt_e = 1.0e-04\nt_r = 2.0e-05\ngain = %g\n[camera.config]\n'
+        f'scene = "{(tmp_path / "scene.npy").as_posix()}"\n[camera.config.sensor]\nbit_depth = 12\n'
+    )
+    (tmp_path / "rig.toml").write_text("[rig]\nshape = [16, 16]\n" + camera % 1.0 + camera % 1.25, encoding="utf-8")
+    capture_sets(tmp_path / "rig.toml", tmp_path / "flat.h5")
+    before = (tmp_path / "rig.toml").read_bytes()
+    assert main(["calibrate", "--rig", str(tmp_path / "rig.toml"), "--flat", str(tmp_path / "flat.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "camera 1: 100 % of its flat field's measured pixels are saturated" in err, err
+    assert (tmp_path / "rig.toml").read_bytes() == before

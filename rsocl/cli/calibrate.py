@@ -307,8 +307,8 @@ def _gains(args, rigfile, updates):
     from rsocl.cli.calibrate_frames import load_flats
     from rsocl.hardware.calibration import flat_field_gain
 
-    frames, darks = load_flats(args.flat, rigfile, args.dark)
-    gains = flat_field_gain(frames, dark=darks)
+    frames, darks, saturation = load_flats(args.flat, rigfile, args.dark)
+    gains = flat_field_gain(frames, dark=darks, saturation=saturation)
     for c, gain in enumerate(gains):
         updates[c]["gain"] = float(gain)
     say(args, "gains relative to camera 0: " + ", ".join(f"{g:.4f}" for g in gains))

@@ -228,12 +228,15 @@ def load_flats(path, rigfile, dark: float):
 
     Returns
     -------
-    (frames, darks) : (list of ndarray, ndarray of float64)
+    (frames, darks, saturation) : (list of ndarray, ndarray of float64, list of float or None)
         Per camera. A capture file's raw frames are converted as the capture converts them
         (``raw / (2**bit_depth - 1) * full_scale``, model units) and divided by the camera's white level
         (``t_e / dt``; binary mask: :func:`rsocl.model.curvature.white_levels`), so their levels are
         ``gain * light`` whatever the bit depth and exposure.
         Other frames are taken as they are: they must be in one unit for every camera.
+        ``saturation`` is the level, in the frames' units, at or above which a pixel is clipped: half a level
+        below the top raw level (``2**bit_depth - 1``) of integer frames whose bit depth the capture file or
+        the rig file gives and which they do not exceed; None where it is unknown (float frames).
 
     Raises
     ------
@@ -245,14 +248,18 @@ def load_flats(path, rigfile, dark: float):
     if not _is_hdf5(path):
         frames = per_camera(load_frames(path, "--flat")[0], C, "--flat")
         bits = [_bit_depth(camera) for camera in rigfile.cameras]
-        if len({b for b in bits if b is not None}) > 1 and all(np.array_equal(f, np.round(f)) for f in frames):
+        integer = [bool(np.array_equal(f, np.round(f))) for f in frames]  # raw levels
+        tops = [
+            None if b is None or not i or f.max() > 2**b - 1 else 2**b - 1.5 for b, i, f in zip(bits, integer, frames)
+        ]
+        if len({b for b in bits if b is not None}) > 1 and all(integer):
             depths = ", ".join(f"camera {c}: {b}" for c, b in enumerate(bits) if b is not None)
             raise ValueError(
                 f"--flat: the cameras deliver different bit depths ({depths}) and the frames hold raw levels, "
                 "which would put 2**(the difference) into the gains; give the rsocl capture file (.h5) of the "
                 "flat field, or frames in one unit for all cameras (DN / (2**bit_depth - 1))"
             )
-        return frames, np.full(C, dark)
+        return frames, np.full(C, dark), tops
     from rsocl.files.hdf5 import load_capture_rig
     from rsocl.hardware.capture_raw import load_raw
     from rsocl.model.curvature import white_levels
@@ -274,14 +281,18 @@ def load_flats(path, rigfile, dark: float):
     if missing:
         raise ValueError(f"--flat: {path} holds no frame of a complete set from camera(s) {missing}")
     metas_kept = [[m for m, keep in zip(metas, k) if keep] for metas, k in zip(raw.frame_meta, kept)]
-    out, darks = [], []
+    out, darks, tops = [], [], []
     for c, (frame, metas) in enumerate(zip(frames, metas_kept)):
         exposure = white_levels(rig)[c]  # the white scene's level, as the capture converts frames
         full_scale = float(metas[0].get("full_scale") or exposure)
+        top = None
         if frame.dtype.kind in "biu":
-            value = frame.astype(np.float64) * (full_scale / (2 ** int(metas[0]["bit_depth"]) - 1))
+            levels = 2 ** int(metas[0]["bit_depth"]) - 1
+            value = frame.astype(np.float64) * (full_scale / levels)
+            top = (levels - 0.5) * (full_scale / levels) / exposure
         else:
             value = frame.astype(np.float64)
         out.append(value / exposure)
         darks.append(dark * full_scale / exposure)
-    return out, np.asarray(darks)
+        tops.append(top)
+    return out, np.asarray(darks), tops

@@ -10,7 +10,7 @@ import numpy as np
 from rsocl.common import validation as check
 
 
-def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1) -> np.ndarray:
+def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1, saturation=None) -> np.ndarray:
     """Photometric gain of each camera from flat-field frames.
 
     Parameters
@@ -33,6 +33,11 @@ def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1) ->
     trim : float
         Fraction [0, 0.5) cut from each tail before averaging (robust
         against hot pixels and dust).
+    saturation : float or sequence of float or None, optional
+        Level, in the frames' units, at or above which a camera's sensor
+        clips a pixel (e.g. ``2**bit_depth - 1`` for raw levels); one value,
+        or one per camera (None for a camera whose level is unknown).
+        Default None: not checked.
 
     Returns
     -------
@@ -42,7 +47,9 @@ def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1) ->
     Raises
     ------
     ValueError
-        If a camera's dark-subtracted level is not positive.
+        If a camera's dark-subtracted level is not positive, or more than
+        ``trim`` of its measured pixels are saturated (the trimmed mean would
+        hold clipped levels, and the gain would come out low).
     """
     from scipy.stats import trim_mean
 
@@ -63,6 +70,10 @@ def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1) ->
     )
     if darks.shape != (C,):
         raise ValueError(f"dark must be one value or one per camera ({C}), got shape {darks.shape}")
+    tops = list(saturation) if np.ndim(saturation) == 1 else [saturation] * C
+    if len(tops) != C:
+        raise ValueError(f"saturation must be one value or one per camera ({C}), got {len(tops)}")
+    tops = [None if t is None else check.finite(f"saturation[{c}]", t) for c, t in enumerate(tops)]
     levels = np.empty(C)
     for c, flat in enumerate(frames):
         if flat.ndim not in (2, 3) or 0 in flat.shape:
@@ -72,6 +83,13 @@ def flat_field_gain(frames, *, relative_to=0, dark=0.0, region=0.5, trim=0.1) ->
         rows, cols = flat.shape[-2:]
         dr, dc = (rows - max(1, round(rows * region))) // 2, (cols - max(1, round(cols * region))) // 2
         centre = flat[..., dr : rows - dr, dc : cols - dc].astype(np.float64)
+        clipped = 0.0 if tops[c] is None else float(np.mean(centre >= tops[c]))
+        if clipped > trim:
+            raise ValueError(
+                f"camera {c}: {100 * clipped:.3g} % of its flat field's measured pixels are saturated (at or "
+                f"above {tops[c]:.6g}), more than the {100 * trim:g} % (trim) that the mean leaves out: its gain "
+                "would come out low; lower the light or the exposure"
+            )
         scale = float(np.max(np.abs(centre))) or 1.0  # the mean of values near the float range's top
         levels[c] = float(trim_mean(centre.ravel() / scale, trim)) * scale - darks[c]  # does not overflow
         if not levels[c] > 0:
