@@ -464,8 +464,14 @@ def test_capture_on_a_disk_that_refuses_writes_ends_in_one_line_not_a_crash(tmp_
     capture_sets(rig, tmp_path / "warm.h5", sets=1)  # the kernels built (and cached) without the limit
     out = tmp_path / "f.h5"
     out.write_bytes(b"an earlier capture")
+    # the capture's own look at the limit blinded (it ends the capture before a set the limit has no room for:
+    # tests/test_capture_file_limit.py), so that HDF5's write itself is refused
+    blind = (
+        "import sys; from rsocl.hardware import capture_room; capture_room.file_size_limit = lambda: None; "
+        "from rsocl.cli.main import entry; sys.exit(entry(sys.argv[1:]))"
+    )
     run = subprocess.run(
-        [sys.executable, "-m", "rsocl.cli", "capture", "--rig", str(rig), "--out", str(out), "--sets", "40", "--quiet"],
+        [sys.executable, "-c", blind, "capture", "--rig", str(rig), "--out", str(out), "--sets", "40", "--quiet"],
         preexec_fn=_limited(3_000_000),
         capture_output=True,
         text=True,

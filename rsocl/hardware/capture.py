@@ -26,9 +26,12 @@ Files and atomicity
 The capture is written incrementally to ``<out>.partial`` and renamed to
 ``<out>`` when the run ends, successfully **or not**: a failed run still gives
 ``<out>``, holding the frames captured before the failure and the failure
-itself. A ``<out>.partial`` left behind means the process itself died (power
-loss, ``kill -9``), or the rename failed (the run's error names the file and its complete sets);
-it is a readable capture file up to the last flush. It is
+itself. So does a run whose next set (or frame) the process's file-size limit (``ulimit -f``)
+has no room for: it ends before that set is triggered (:mod:`rsocl.hardware.capture_room`), and
+a limit that leaves no room for a capture file at all is refused before any camera opens. A
+``<out>.partial`` left behind means the process itself died (power loss, ``kill -9``), or the rename
+failed (the run's error names the file and its complete sets); it is a readable capture file up to
+the last flush. It is
 never truncated nor appended to: a capture to the same ``<out>`` is refused
 (:func:`~rsocl.hardware.capture_file.check_partial`, naming the file and its complete sets) until the
 user renames it (to keep it as a capture) or removes it; so is a capture
@@ -71,6 +74,7 @@ from rsocl.files.rigfile import RigFile, load_rigfile
 from rsocl.hardware.capture_cameras import closing_on_error, one_line, open_cameras, stop_cameras
 from rsocl.hardware.capture_checks import check_pixel_formats, check_rois, in_file
 from rsocl.hardware.capture_file import PARTIAL_SUFFIX, CaptureWriter, check_partial, publish, readable
+from rsocl.hardware.capture_room import check_limit
 from rsocl.hardware.registration import register
 
 __all__ = ["capture_sets", "CaptureFailed"]
@@ -137,13 +141,15 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     Raises
     ------
     CaptureFailed
-        A camera (or the registration of its frame) failed: ``out_path`` holds
-        everything captured before and the failure (camera, set, error). Or the file could not be
+        A camera (or the registration of its frame) failed, or the next set would take the file past the
+        process's file-size limit: ``out_path`` holds everything captured before and the failure (camera,
+        set, error). Or the file could not be
         closed or renamed to ``out_path``: :attr:`CaptureFailed.path` (``<out_path>.partial``) holds
         the complete sets, and the message says so.
     ValueError, FileNotFoundError
-        Bad arguments, rig file, unknown backend or camera config, or an ``out_path`` that holds frames
-        from cameras (an earlier capture); nothing is written.
+        Bad arguments, rig file, unknown backend or camera config, a setting a camera cannot take
+        (:mod:`rsocl.hardware.capture_checks`), a file-size limit with no room for a capture file, or an
+        ``out_path`` that holds frames from cameras (an earlier capture); nothing is written.
     KeyboardInterrupt
         Re-raised (also when it comes while the cameras stop or close, which goes on for every camera)
         after the file is closed, with status ``"interrupted"``; its message names the file, its complete
@@ -179,6 +185,7 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     partial = output_path(out.with_name(out.name + PARTIAL_SUFFIX), name, inputs=reads)
     check_partial(partial, name)
     refuse_camera_capture(out, name)
+    check_limit()
 
     backends = rigfile.backends()
     labels = [_label(i, b, c, cam.get("name")) for i, ((b, c), cam) in enumerate(zip(backends, rigfile.cameras))]
@@ -335,6 +342,8 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
         for j in range(sets):
             fired: list = []  # cameras triggered in this set whose frame is not read yet
             try:
+                at(None, j, "write")
+                writer.check_room(j)  # a set the file-size limit has no room for ends the capture before it starts
                 for i, cam in enumerate(cameras):  # fire all triggers back to back
                     at(i, j, "trigger")
                     cam.trigger()

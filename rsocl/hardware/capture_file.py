@@ -46,6 +46,7 @@ import numpy as np
 
 from rsocl.files.rigfile import RigFile
 from rsocl.hardware.capture_raw import RawCapture, load_raw
+from rsocl.hardware.capture_room import check_room, set_bytes
 from rsocl.hardware.capture_truth import room_for, set_truth
 
 __all__ = ["CaptureWriter", "check_partial", "readable", "publish", "RawCapture", "load_raw", "PARTIAL_SUFFIX"]
@@ -200,12 +201,19 @@ class CaptureWriter:
                 f"t_e = {asked!r} s; the capture's rig uses {applied!r} s (T = {rig.T} sub-frames)"
             )
 
+    def check_room(self, set_index: int) -> None:
+        """Raise :class:`~rsocl.hardware.capture_room.FileSizeLimit` where set ``set_index`` would take the file
+        past the process's file-size limit (:mod:`rsocl.hardware.capture_room`)."""
+        data = set_bytes(self.h5, self.rig, self.meta["cameras"], set_index == 0)
+        check_room(self.h5.id.get_filesize(), data, f"set {set_index}")
+
     # ------------------------------------------------------------------ raw frames
     def add_raw(self, index: int, set_index: int, frame, camera) -> None:
         """Append ``frame`` to ``raw/<index>`` and its set, timestamp and metadata to ``raw_meta/<index>``, then
         flush. All or nothing: on any exception (a write the disk refuses, Ctrl-C, SIGTERM) the datasets are
         resized back to the frames written whole (or removed, on the camera's first frame) and it is
-        re-raised, so that frames and their metadata never differ in number."""
+        re-raised, so that frames and their metadata never differ in number. A frame the file-size limit has
+        no room for is refused before anything is written (:class:`~rsocl.hardware.capture_room.FileSizeLimit`)."""
         image = np.asarray(frame.image)
         if image.ndim != 2:
             raise ValueError(f"camera {index}: frames must be 2-D images, got shape {image.shape}")
@@ -222,6 +230,7 @@ class CaptureWriter:
                     f"camera {index}: frame changed from {ds.shape[1:]} {ds.dtype} to "
                     f"{image.shape} {image.dtype} during the capture{kept}"
                 )
+        check_room(self.h5.id.get_filesize(), image.nbytes, f"camera {index}'s frame of set {set_index}")
         n = 0 if first else self.h5[name].shape[0]
         try:
             if first:
@@ -242,6 +251,7 @@ class CaptureWriter:
         that says so, or ``""`` where the file does not take it."""
         name = f"raw_changed/{index}/{set_index}"
         try:
+            check_room(self.h5.id.get_filesize(), image.nbytes, "the changed frame")
             ds = self.h5.create_dataset(name, data=image)
             ds.attrs["timestamp"] = float(frame.timestamp)
             ds.attrs["meta"] = _json(meta)
@@ -312,7 +322,8 @@ class CaptureWriter:
         ds[set_index] = stack
         if set_index == 0:  # under temporary names until all are written whole; then the count says so
             truth = set_truth(cameras, self.rig, self.warn)
-            truth = room_for(truth, self.partial.parent, stack.nbytes * int(self.meta["sets_requested"]), self.warn)
+            sets_bytes = stack.nbytes * int(self.meta["sets_requested"])
+            truth = room_for(truth, self.partial.parent, sets_bytes, self.warn, self.h5.id.get_filesize())
             names = ["snapshots"] + (["truth"] if truth is not None else [])
             for name, data in zip(names, (stack, truth)):
                 self.h5.create_dataset(f"{name}.writing", data=data)

@@ -1,7 +1,8 @@
 """The ground truth a capture of simulated cameras stores beside set 0: a bonus, never a reason to fail a capture.
 
 :func:`set_truth` is the datacube every camera tells (the ``simulated`` backend's ``scene_truth``) where all tell
-the same one of the rig's shape; :func:`room_for` keeps it only where the disk has room for it beside the sets.
+the same one of the rig's shape; :func:`room_for` keeps it only where the disk and the process's file-size limit
+leave room for it beside the sets.
 Each says why there is none through ``warn`` (:meth:`rsocl.hardware.capture_file.CaptureWriter.warn`).
 """
 
@@ -10,6 +11,8 @@ from __future__ import annotations
 import shutil
 
 import numpy as np
+
+from rsocl.hardware.capture_room import room_under_limit
 
 __all__ = ["set_truth", "room_for"]
 
@@ -40,16 +43,20 @@ def set_truth(cameras, rig, warn):
     return truth
 
 
-def room_for(truth, folder, sets_bytes: int, warn):
-    """``truth``, or None (with a warning) where the disk of ``folder`` has no room for it and, twice over, for the
-    ``sets_bytes`` of every set asked for: the sets come first."""
+def room_for(truth, folder, sets_bytes: int, warn, file_size: int = 0):
+    """``truth``, or None (with a warning) where the disk of ``folder``, or the process's file-size limit for a
+    capture file of ``file_size`` bytes (:func:`~rsocl.hardware.capture_room.room_under_limit`), has no room for
+    it and, twice over, for the ``sets_bytes`` of every set asked for: the sets come first."""
     if truth is None:
         return None
     free = shutil.disk_usage(folder).free
-    if free >= truth.nbytes + 2 * sets_bytes:
+    limit = room_under_limit(file_size)
+    if free >= truth.nbytes + 2 * sets_bytes and (limit is None or limit >= truth.nbytes + 2 * sets_bytes):
         return truth
-    warn(
-        f"no ground truth stored: it takes {truth.nbytes / 2**20:.1f} MiB and the disk has "
-        f"{free / 2**20:.1f} MiB free, which the sets asked for need"
+    room = (
+        f"the disk has {free / 2**20:.1f} MiB free"
+        if limit is None or free <= limit
+        else f"the file-size limit (ulimit -f) leaves the capture file {limit / 2**20:.1f} MiB"
     )
+    warn(f"no ground truth stored: it takes {truth.nbytes / 2**20:.1f} MiB and {room}, which the sets asked for need")
     return None
