@@ -370,15 +370,17 @@ def test_a_disk_without_room_for_the_truth_and_the_sets_gets_the_sets_only(tmp_p
     import collections
     import shutil
 
-    from rsocl.hardware import capture_truth
+    from rsocl.hardware import capture_room, capture_truth
 
     path = tmp_path / "rig.toml"
     save_rigfile(path, _rigfile())
     with_truth = capture_sets(path, tmp_path / "a.h5", sets=2)
     assert load_capture(with_truth, set_index=0).truth is not None
     usage = collections.namedtuple("usage", "total used free")
-    monkeypatch.setattr(shutil, "disk_usage", lambda folder: usage(2**30, 2**30 - 2**12, 2**12))
-    with pytest.warns(UserWarning, match=r"no ground truth stored: it takes .* MiB and the disk has 0\.0 MiB free"):
+    free = capture_room.SLACK + 2**16  # room for each set (2 x 20 KiB at most), not for the truth (42 KiB) too
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: usage(2**30, 2**30 - free, free))
+    said = r"no ground truth stored: it takes 0\.0 MiB and the disk has 0\.1 MiB free beside"
+    with pytest.warns(UserWarning, match=said):
         out = capture_sets(path, tmp_path / "b.h5", sets=2)
     capture = load_capture(out, set_index=1)
     assert capture.truth is None and load_raw(out).sets_complete == 2

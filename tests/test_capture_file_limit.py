@@ -1,5 +1,5 @@
-"""rsocl capture under a file-size limit (``ulimit -f``, RLIMIT_FSIZE): a set the limit has no room for ends the
-capture as a full disk does, the complete sets kept in a file HDF5 opens, and one line saying what was kept."""
+"""rsocl capture under a file-size limit (``ulimit -f``, RLIMIT_FSIZE) and on a disk that fills: a set with no room
+ends the capture, the complete sets kept in a file HDF5 opens, and one line saying what was kept."""
 
 from __future__ import annotations
 
@@ -89,6 +89,32 @@ def test_a_capture_cut_by_the_file_size_limit_keeps_its_complete_sets_in_a_reada
         ),
         error,
     ), error
+
+
+def test_a_capture_onto_a_disk_that_fills_keeps_its_complete_sets_in_a_readable_file(tmp_path, monkeypatch):
+    import collections
+    import shutil
+
+    rig, folder = _rig_file(tmp_path / "rig.toml"), tmp_path / "disk"
+    folder.mkdir()
+    usage, size = collections.namedtuple("usage", "total used free"), 700_000  # a disk of 700 kB for the capture
+
+    def disk_usage(path):
+        used = sum(p.stat().st_size for p in folder.iterdir())
+        return usage(size, used, max(0, size - used))
+
+    monkeypatch.setattr(shutil, "disk_usage", disk_usage)
+    out = folder / "cap.h5"
+    with pytest.warns(UserWarning, match="no ground truth stored"):
+        with pytest.raises(CaptureFailed, match=r"write failed in set (\d+): DiskFull: set \1 would fill the disk of"):
+            capture_sets(rig, out, sets=SETS)
+    raw = load_raw(out)
+    sets = raw.sets_complete
+    assert 1 <= sets < SETS and out.stat().st_size <= size
+    assert raw.status == "failed" and raw.failure["type"] == "DiskFull" and raw.failure["set"] == sets
+    assert [f.shape[0] for f in raw.frames] == [sets, sets]  # the set refused was not triggered
+    capture = load_capture(out, set_index=sets - 1)
+    np.testing.assert_array_equal(capture.snapshots, raw.snapshot_sets[sets - 1])
 
 
 def test_a_frame_larger_than_the_set_was_counted_for_is_refused_before_it_is_written(tmp_path, monkeypatch):

@@ -202,10 +202,10 @@ class CaptureWriter:
             )
 
     def check_room(self, set_index: int) -> None:
-        """Raise :class:`~rsocl.hardware.capture_room.FileSizeLimit` where set ``set_index`` would take the file
-        past the process's file-size limit (:mod:`rsocl.hardware.capture_room`)."""
+        """Raise :class:`~rsocl.hardware.capture_room.NoRoom` where set ``set_index`` would take the file
+        past the process's file-size limit or fill its disk (:mod:`rsocl.hardware.capture_room`)."""
         data = set_bytes(self.h5, self.rig, self.meta["cameras"], set_index == 0)
-        check_room(self.h5.id.get_filesize(), data, f"set {set_index}")
+        check_room(self.h5.id.get_filesize(), data, f"set {set_index}", self.h5.filename)
 
     # ------------------------------------------------------------------ raw frames
     def add_raw(self, index: int, set_index: int, frame, camera) -> None:
@@ -213,7 +213,8 @@ class CaptureWriter:
         flush. All or nothing: on any exception (a write the disk refuses, Ctrl-C, SIGTERM) the datasets are
         resized back to the frames written whole (or removed, on the camera's first frame) and it is
         re-raised, so that frames and their metadata never differ in number. A frame the file-size limit has
-        no room for is refused before anything is written (:class:`~rsocl.hardware.capture_room.FileSizeLimit`)."""
+        no room for (under the file-size limit or on the disk) is refused before anything is written
+        (:class:`~rsocl.hardware.capture_room.NoRoom`)."""
         image = np.asarray(frame.image)
         if image.ndim != 2:
             raise ValueError(f"camera {index}: frames must be 2-D images, got shape {image.shape}")
@@ -230,7 +231,9 @@ class CaptureWriter:
                     f"camera {index}: frame changed from {ds.shape[1:]} {ds.dtype} to "
                     f"{image.shape} {image.dtype} during the capture{kept}"
                 )
-        check_room(self.h5.id.get_filesize(), image.nbytes, f"camera {index}'s frame of set {set_index}")
+        check_room(
+            self.h5.id.get_filesize(), image.nbytes, f"camera {index}'s frame of set {set_index}", self.h5.filename
+        )
         n = 0 if first else self.h5[name].shape[0]
         try:
             if first:
@@ -251,7 +254,7 @@ class CaptureWriter:
         that says so, or ``""`` where the file does not take it."""
         name = f"raw_changed/{index}/{set_index}"
         try:
-            check_room(self.h5.id.get_filesize(), image.nbytes, "the changed frame")
+            check_room(self.h5.id.get_filesize(), image.nbytes, "the changed frame", self.h5.filename)
             ds = self.h5.create_dataset(name, data=image)
             ds.attrs["timestamp"] = float(frame.timestamp)
             ds.attrs["meta"] = _json(meta)

@@ -1,17 +1,23 @@
-"""Room in the capture file under the process's file-size limit (``ulimit -f``, ``RLIMIT_FSIZE``).
+"""Room for the capture file: on its disk, and under the process's file-size limit (``ulimit -f``,
+``RLIMIT_FSIZE``).
 
-A write past the limit fails (EFBIG: Python ignores SIGXFSZ) part way through HDF5's own bookkeeping
-and leaves a file HDF5 cannot open, though the sets written before it were whole. So the capture asks
-first: before each set (:func:`set_bytes`: a frame per camera, the registered set and, for set 0, its
-copy in ``snapshots``) and before each frame it writes, :func:`check_room` raises :class:`FileSizeLimit`
-where the file would have less room left under the limit than twice the data and :data:`SLACK` for HDF5's
-metadata. The capture then ends as it does when the disk refuses a write: the complete sets are kept,
-readable, and the failure is recorded. :func:`room_under_limit` bounds the ground truth's room as well
+A write past the limit (EFBIG: Python ignores SIGXFSZ) or onto a full disk (ENOSPC) fails part way
+through HDF5's own bookkeeping and leaves a file HDF5 cannot read, though the sets written before it
+were whole. So the capture asks first: before each set (:func:`set_bytes`: a frame per camera, the
+registered set and, for set 0, its copy in ``snapshots``) and before each frame it writes,
+:func:`check_room` raises :class:`FileSizeLimit` where the file would have less room left under the
+limit than twice the data and :data:`SLACK` for HDF5's metadata, and :class:`DiskFull` where its disk
+has less free. The capture then ends as it does when a write fails: the complete sets are kept,
+readable, and the failure is recorded. (Another process filling the same disk between two checks
+can still make a write fail.) :func:`room_under_limit` bounds the ground truth's room as well
 (:func:`rsocl.hardware.capture_truth.room_for`), and :func:`check_limit` refuses, before any camera opens,
 a limit that leaves no room for a capture file at all.
 """
 
 from __future__ import annotations
+
+import os
+import shutil
 
 import numpy as np
 
@@ -20,7 +26,17 @@ try:
 except ImportError:  # no resource limits on this system (Windows)
     resource = None  # type: ignore[assignment]
 
-__all__ = ["SLACK", "FileSizeLimit", "file_size_limit", "room_under_limit", "check_limit", "check_room", "set_bytes"]
+__all__ = [
+    "SLACK",
+    "NoRoom",
+    "FileSizeLimit",
+    "DiskFull",
+    "file_size_limit",
+    "room_under_limit",
+    "check_limit",
+    "check_room",
+    "set_bytes",
+]
 
 #: Bytes kept free under the limit beside twice the data: HDF5's metadata (chunk indexes, heaps, the
 #: status and ``meta`` attributes the capture writes after its last set).
@@ -30,8 +46,16 @@ SLACK = 2**18
 UNKNOWN_PIXEL_BYTES = 8
 
 
-class FileSizeLimit(RuntimeError):
+class NoRoom(RuntimeError):
+    """What comes next has no room in the capture file (:class:`FileSizeLimit`, :class:`DiskFull`)."""
+
+
+class FileSizeLimit(NoRoom):
     """What comes next would take the capture file past the process's file-size limit."""
+
+
+class DiskFull(NoRoom):
+    """What comes next would leave the capture file's disk with less free than it needs."""
 
 
 def file_size_limit() -> int | None:
@@ -59,9 +83,20 @@ def check_limit() -> None:
         )
 
 
-def check_room(size: int, data_bytes: int, what: str) -> None:
+def check_room(size: int, data_bytes: int, what: str, path=None) -> None:
     """Raise :class:`FileSizeLimit` where ``what`` (``data_bytes`` of data) does not fit, twice over, in the
-    room a file of ``size`` bytes has left under the process's file-size limit (:func:`room_under_limit`)."""
+    room a file of ``size`` bytes has left under the process's file-size limit (:func:`room_under_limit`), and
+    :class:`DiskFull` where the disk of the file ``path`` (None: not asked) has less free than twice the data and
+    :data:`SLACK`."""
+    if path is not None:
+        folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+        free = shutil.disk_usage(folder).free
+        if free < 2 * int(data_bytes) + SLACK:
+            raise DiskFull(
+                f"{what} would fill the disk of {folder}: it has {free:,} bytes free, and {what} needs room for "
+                f"its {int(data_bytes):,} bytes twice over and {SLACK:,} for HDF5's metadata; free space on it "
+                "or capture fewer sets"
+            )
     room = room_under_limit(size)
     if room is not None and 2 * int(data_bytes) > room:
         raise FileSizeLimit(

@@ -12,7 +12,7 @@ import shutil
 
 import numpy as np
 
-from rsocl.hardware.capture_room import room_under_limit
+from rsocl.hardware.capture_room import SLACK, room_under_limit
 
 __all__ = ["set_truth", "room_for"]
 
@@ -49,12 +49,12 @@ def room_for(truth, folder, sets_bytes: int, warn, file_size: int = 0):
     it and, twice over, for the ``sets_bytes`` of every set asked for: the sets come first."""
     if truth is None:
         return None
-    free = shutil.disk_usage(folder).free
+    free = shutil.disk_usage(folder).free - SLACK  # as the sets' own checks keep (rsocl.hardware.capture_room)
     limit = room_under_limit(file_size)
     if free >= truth.nbytes + 2 * sets_bytes and (limit is None or limit >= truth.nbytes + 2 * sets_bytes):
         return truth
     room = (
-        f"the disk has {free / 2**20:.1f} MiB free"
+        f"the disk has {free / 2**20:.1f} MiB free beside HDF5's metadata"
         if limit is None or free <= limit
         else f"the file-size limit (ulimit -f) leaves the capture file {limit / 2**20:.1f} MiB"
     )
