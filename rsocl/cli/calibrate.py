@@ -8,7 +8,7 @@ needed:
   camera's ``homography`` (replacing its ``angle`` or ``row_map_file``), and
   a PNG of the registered markers (``--png``). Markers paired as no camera sees
   them are refused (:mod:`rsocl.hardware.calibration.plausibility`); four markers
-  fit exactly and cannot check the fit, five or more give a leave-one-out error;
+  fit exactly and cannot check the fit, five or more give its error over the grid;
 * ``--flicker`` + ``--flicker-hz``: frames of a flickering light -> each
   camera's ``t_r`` (the mean over its frames), checked against the rig
   file first (``--tolerance``);
@@ -254,8 +254,8 @@ def _register(args, rigfile, updates):
         titles.append(f"camera {c}" + (f" ({name})" if name else "") + f": {measured:.1f}°, {fit}")
         say(
             args,
-            f"camera {c}: homography from {fit_summary(registration)}; rotation {measured:.2f}° (rig file: "
-            f"{angle:g}°), sensor rows 0..{rows.max():.2f} over the ROI",
+            f"camera {c}: homography from {fit_summary(registration, rigfile.shape)}; rotation {measured:.2f}° "
+            f"(rig file: {angle:g}°), sensor rows 0..{rows.max():.2f} over the ROI",
         )
     return frames, detected, reprojected, outlines, titles
 

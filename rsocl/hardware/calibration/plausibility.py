@@ -13,13 +13,15 @@ no camera viewing a flat target changes:
   A wrong pairing fitted exactly needs a strong perspective: the local scale changes by large
   factors across the grid, or one direction is stretched far more than the other.
 
-With five or more markers the fit is over-determined, and the leave-one-out error (each marker
-predicted by the homography of the others) measures it honestly. Its size depends on how far the
-others extrapolate to the marker left out (four markers fitted exactly amplify their detection errors
-many times), so the fit is judged by its rms reprojection error instead (:func:`check_fit`): detected
-markers are placed to a small fraction of a pixel (docs/implementation_notes.md), a wrong pairing is
-off by pixels. :func:`pairing_alternatives` then says which other pairing fits (a mirror image, an
-order that starts at another marker).
+With five or more markers the fit is over-determined. Its residuals give the homography's error over
+the reference grid (:func:`grid_error`: the markers' scatter carried through the fit to the grid, to
+first order). The leave-one-out error (each marker predicted by the homography of the others) points at
+a misplaced marker, but its size depends on how far the others extrapolate to the marker left out: with
+five markers, four fitted exactly amplify their detection errors many times (measured: 14 to 180 times
+the grid's rms error, against 2 to 9 times with six or nine markers). The fit is judged by its rms
+reprojection error (:func:`check_fit`): detected markers are placed to a small fraction of a pixel
+(docs/implementation_notes.md), a wrong pairing is off by pixels. :func:`pairing_alternatives` then
+says which other pairing fits (a mirror image, an order that starts at another marker).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ __all__ = [
     "check_registration",
     "check_rotation",
     "leave_one_out_errors",
+    "grid_error",
     "fit_summary",
     "MAX_RMS",
     "check_fit",
@@ -159,13 +162,71 @@ def leave_one_out_errors(reference_points, sensor_points):
     return out
 
 
-def fit_summary(registration) -> str:
+def _parameter_jacobians(H, points) -> np.ndarray:
+    """``(2N, 8)`` derivative of the mapped ``points`` (every x, then every y) by ``H``'s entries but ``H[2, 2]``."""
+    x, y = points[:, 0], points[:, 1]
+    q = np.column_stack([points, np.ones(len(points))]) @ H.T
+    w = q[:, 2]
+    X, Y = q[:, 0] / w, q[:, 1] / w
+    zero, one = np.zeros_like(x), np.ones_like(x)
+    dX = np.column_stack([x, y, one, zero, zero, zero, -X * x, -X * y]) / w[:, None]
+    dY = np.column_stack([zero, zero, zero, x, y, one, -Y * x, -Y * y]) / w[:, None]
+    return np.vstack([dX, dY])
+
+
+def grid_error(reference_points, sensor_points, H, shape, *, lattice=33):
+    """The homography's error over the reference grid, estimated from the residuals of its markers.
+
+    The markers' scatter per coordinate, ``sigma**2 = sum(residual**2) / (2 N - 8)`` (sensor pixels), is
+    carried through the least-squares fit of ``H``'s eight parameters to where ``H`` maps a lattice of
+    ``lattice x lattice`` reference points spanning the grid (first order). Synthetic cameras (disc markers
+    through known homographies, blur, noise) put it at 0.23 to 2.1 times the true rms error for five
+    markers (two degrees of freedom; median 0.94) and 0.5 to 2.4 times for six or nine (5 % and 95 %
+    points of 60 cameras each).
+
+    Parameters
+    ----------
+    reference_points, sensor_points : array_like, shape (N, 2)
+        The markers, paired by order, ``(x, y)`` pixels.
+    H : array_like, shape (3, 3)
+        The homography fitted to them, reference -> sensor.
+    shape : (int, int)
+        ``(m, n)`` of the reference grid, pixels.
+    lattice : int
+        Points per side of the lattice the rms is taken over.
+
+    Returns
+    -------
+    float or None
+        The rms over the grid of the expected distance, sensor pixels, between where ``H`` and the true
+        homography map a reference point; None for four markers (they leave no residual).
+    """
+    ref = _points("reference_points", reference_points, minimum=4)
+    sensor = _points("sensor_points", sensor_points, minimum=4)
+    H = _homography("H", H)
+    H = H / H[2, 2]
+    m, n = _shape(shape)
+    N = len(ref)
+    if N < 5:
+        return None
+    q = np.column_stack([ref, np.ones(N)]) @ H.T
+    sigma2 = float(np.sum((q[:, :2] / q[:, 2:] - sensor) ** 2)) / (2 * N - 8)
+    markers = _parameter_jacobians(H, ref)
+    scale = np.linalg.norm(markers, axis=0)
+    scale[scale == 0] = 1.0
+    x, y = np.meshgrid(np.linspace(0, n - 1, lattice), np.linspace(0, m - 1, lattice))
+    grid = _parameter_jacobians(H, np.column_stack([x.ravel(), y.ravel()]))
+    spread = (grid / scale) @ np.linalg.pinv(markers / scale)  # how each marker coordinate moves the grid
+    return float(np.sqrt(sigma2 * np.sum(spread**2) / x.size))
+
+
+def fit_summary(registration, shape=None) -> str:
     """What the markers say about a :class:`~rsocl.hardware.calibration.CameraRegistration`'s fit.
 
     Four markers: that they fit exactly and cannot check it (nor a mirror image, on a target with a
-    mirror symmetry). Five or more: the rms reprojection
-    error and the largest leave-one-out error (one misplaced marker raises every marker's, since
-    the homography of the others includes it).
+    mirror symmetry). Five or more: the rms reprojection error, the homography's error over a reference
+    grid of ``shape`` ``(m, n)`` when given (:func:`grid_error`), and the largest leave-one-out error
+    (one misplaced marker raises every marker's, since the homography of the others includes it).
     """
     N = len(registration.reference_points)
     loo = leave_one_out_errors(registration.reference_points, registration.sensor_points)
@@ -175,16 +236,17 @@ def fit_summary(registration) -> str:
             "symmetric as a rectangle, whether the camera sees it in a mirror (--mirrored); 5 or more markers "
             "give a leave-one-out check"
         )
+    fit = f"{N} markers: rms reprojection {registration.rms_error:.3f} px"
+    if shape is not None:
+        error = grid_error(registration.reference_points, registration.sensor_points, registration.homography, shape)
+        fit += f", so the homography is off by about {error:.3f} px rms over the grid ({2 * N - 8} degrees of freedom)"
     unchecked = np.flatnonzero(np.isnan(loo)).tolist()
     if len(unchecked) == N:
-        return (
-            f"{N} markers: rms reprojection {registration.rms_error:.3f} px; no leave-one-out check (the "
-            "others of every marker have three on a line)"
-        )
+        return fit + "; no leave-one-out check (the others of every marker have three on a line)"
     note = f" (markers {unchecked} not checked: their others have three on a line)" if unchecked else ""
     return (
-        f"{N} markers: rms reprojection {registration.rms_error:.3f} px, leave-one-out largest "
-        f"{float(np.nanmax(loo)):.3f} px{note}"
+        f"{fit}; leave-one-out largest {float(np.nanmax(loo)):.3f} px{note}, each marker from the homography "
+        f"of the other {N - 1} (an extrapolation, larger than the error over the grid)"
     )
 
 
