@@ -1,6 +1,7 @@
 """mmap streaming I/O of a ``v4l2`` camera: :class:`V4L2Stream`, a mixin of :class:`~rsocl_plugins.v4l2.V4L2Camera`.
 
-``start`` queues ``buffers`` mmap buffers in the driver and turns streaming on; ``read`` waits
+``start`` queues ``buffers`` mmap buffers in the driver and turns streaming on (a start that fails unmaps
+and frees them, so the pixel format and ROI can be changed again); ``read`` waits
 with ``poll``, dequeues a completed buffer, copies the image out and queues the buffer again.
 
 Timestamps
@@ -59,8 +60,10 @@ class V4L2Stream:
         lvd, dev = self._lvd, self._dev
         capture, mmap_memory = lvd.BufferType.VIDEO_CAPTURE, lvd.Memory.MMAP
         self._read_format(self._fmt["name"])
+        requested = False  # the driver holds buffers: freed on failure, else S_FMT and S_SELECTION get EBUSY
         try:
             req = lvd.request_buffers(dev, capture, mmap_memory, self.n_buffers)
+            requested = True
             fd = dev.fileno()
             for index in range(req.count):
                 buff = lvd.query_buffer(dev, capture, mmap_memory, index)
@@ -69,7 +72,7 @@ class V4L2Stream:
                 lvd.enqueue_buffer(dev, capture, mmap_memory, 0, index)
             lvd.stream_on(dev, capture)
         except BaseException:
-            self._release_buffers(dev, free=True)
+            self._release_buffers(dev, free=requested)
             raise
         self._streaming = True
         self._last_sequence, self._dropped = None, 0
@@ -94,7 +97,7 @@ class V4L2Stream:
                 mm.close()
             except Exception:
                 pass
-        if free and maps and dev is not None:
+        if free and dev is not None:
             lvd = self._lvd
             lvd.free_buffers(dev, lvd.BufferType.VIDEO_CAPTURE, lvd.Memory.MMAP)
 

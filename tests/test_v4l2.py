@@ -1045,6 +1045,23 @@ def test_closed_camera(fake):
         cam.read(0.1)
 
 
+@pytest.mark.parametrize("step", ["QUERYBUF", "mmap"])
+def test_a_start_that_fails_before_any_mapping_frees_the_driver_buffers(fake, step):
+    def refuse(*args, **kwargs):
+        raise _err(errno.ENOMEM)
+
+    with V4L2Camera({"device": fake.path}) as cam:
+        where = ("linuxpy.video.device.mmap", SimpleNamespace(mmap=refuse))
+        with mock.patch.object(fake, "_ioc_QUERYBUF", refuse) if step == "QUERYBUF" else mock.patch(*where):
+            with pytest.raises(CameraError, match=r"Cannot allocate memory"):
+                cam.start()
+        assert fake.buffers == [] and fake.log[-1] == "REQBUFS"  # REQBUFS(0): the driver holds no buffers
+        cam.set_pixel_format("Y16")  # S_FMT, which a driver holding buffers refuses with EBUSY
+        cam.start()
+        fake.emit(sensor_image(fake, 65536))
+        assert cam.read(1.0).image.dtype == np.uint16
+
+
 # ====================================================================== disconnect
 def test_unplugged_while_idle(fake):
     cam = V4L2Camera({"device": fake.path}).open()
