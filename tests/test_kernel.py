@@ -116,7 +116,7 @@ def test_instances_are_bounded(program, monkeypatch):
     first = program.instance("fill", 0)
     for key in range(1, 5):
         program.instance("fill", key)
-    assert len(program._instances) == 3 and program.instance("fill", 4) is program.instance("fill", 4)
+    assert len(program._instances.__dict__) == 3 and program.instance("fill", 4) is program.instance("fill", 4)
     assert program.instance("fill", 0) is not first  # the oldest went first, and comes back anew
 
 
@@ -151,3 +151,33 @@ def test_a_leased_kernel_is_its_owners_alone_and_goes_to_the_next_owner_after_it
     third = Owner()
     got = {id(prog.lease("tv_step", third)), id(prog.lease("tv_step", third))}
     assert id(a) in got and id(b) not in got  # the gone owner's objects, never the live owner's
+
+
+def test_a_thread_launches_with_the_arguments_it_set_whatever_other_threads_set(program, device):
+    # OpenCL kernel objects hold one set of arguments: threads launching one kernel have objects of their own
+    import threading
+
+    import pyopencl.array as cla
+
+    q = device.queue
+    mine, theirs = cla.zeros(q, 8, np.float32), cla.zeros(q, 8, np.float32)
+    fill, one = program.fill, program.instance("fill", 1)
+    fill.set_args(mine.data, np.float32(1), np.int32(0))
+    one.set_args(mine.data, np.float32(3), np.int32(0))
+    seen = []
+
+    def other():  # between this thread's setting and its launch
+        seen.extend([program.fill, program.instance("fill", 1)])
+        program.fill(q, (8,), None, theirs.data, np.float32(2), np.int32(0))
+        program.instance("fill", 1)(q, (8,), None, theirs.data, np.float32(4), np.int32(1))
+
+    thread = threading.Thread(target=other)
+    thread.start()
+    thread.join()
+    fill.enqueue(q, (8,), None)
+    np.testing.assert_array_equal(mine.get(), np.full(8, 1, np.float32))
+    one.enqueue(q, (8,), None)
+    np.testing.assert_array_equal(mine.get(), np.full(8, 3, np.float32))
+    np.testing.assert_array_equal(theirs.get(), np.full(8, 5, np.float32))
+    assert seen[0] is not fill and seen[1] is not one
+    assert program.fill is fill and program.instance("fill", 1) is one  # this thread's, kept

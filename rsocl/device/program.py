@@ -9,6 +9,7 @@ are created once. :meth:`rsocl.device.Device.program` caches one build per devic
 from __future__ import annotations
 
 import re
+import threading
 import warnings
 import weakref
 from importlib import resources
@@ -83,23 +84,30 @@ class Kernels:
 
     Each is an :class:`rsocl.device.kernel.Kernel`: called like a ``pyopencl.Kernel``, it sets a by-value
     argument only when its value changes (:mod:`rsocl.device.kernel`).
+
+    **Threads.** OpenCL lets threads share a program and a queue but not a kernel object: an argument
+    one thread sets would be the one another thread's launch takes. The kernels of ``prog.NAME`` and of
+    :meth:`instance` are therefore each thread's own (made on a thread's first use and freed with the
+    thread), and :meth:`lease` hands an object to one owner at a time; threads can reconstruct side by
+    side with one program and one queue.
     """
 
     def __init__(self, program):
         self.program = program
-        self._kernels = {}
+        self._kernels = threading.local()  # attributes: this thread's kernel objects, by name
+        self._instances = threading.local()  # attributes: this thread's instances, by (name, key)
 
-    #: at most this many instances of :meth:`instance` are kept per program (the oldest go first)
+    #: at most this many instances of :meth:`instance` are kept per program and thread (the oldest go first)
     MAX_INSTANCES = 256
 
     def instance(self, name: str, key):
-        """A kernel object ``name`` of its own for ``key`` (any hashable), made once.
+        """A kernel object ``name`` of its own for ``key`` (any hashable) and this thread, made once.
 
         A kernel launched with a few recurring sets of by-value arguments (one per pass of a
         multi-pass transform, say) sets each set once when every set has its own instance: pass
         the by-value arguments themselves, or what determines them, as ``key``.
         """
-        instances = self.__dict__.setdefault("_instances", {})
+        instances = self._instances.__dict__
         k = (name, key)
         if k not in instances:
             kernel = self._create(name)
@@ -117,7 +125,10 @@ class Kernels:
         time (creating one costs tens of launches on PoCL: docs/implementation_notes.md).
         """
         pool = self.__dict__.setdefault("_pool", {}).setdefault(name, [])
-        kernel = pool.pop() if pool else self._create(name)
+        try:
+            kernel = pool.pop()  # one step, so that two threads never get one object
+        except IndexError:
+            kernel = self._create(name)
         weakref.finalize(owner, pool.append, kernel)
         return kernel
 
@@ -132,7 +143,9 @@ class Kernels:
     def __getattr__(self, name):
         if name.startswith("_"):
             raise AttributeError(name)
-        kernels = self.__dict__["_kernels"]
-        if name not in kernels:
-            kernels[name] = self._create(name)
-        return kernels[name]
+        kernels = self.__dict__["_kernels"].__dict__
+        try:
+            return kernels[name]
+        except KeyError:
+            kernel = kernels[name] = self._create(name)
+            return kernel

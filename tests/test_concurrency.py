@@ -1,0 +1,69 @@
+"""rsocl from several threads at once.
+
+Threads share one device (context, queue, programs): each result equals the same call's alone.
+"""
+
+import sys
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+import rsocl
+from rsocl.model import reference
+
+from conftest import SMALL
+
+
+@pytest.fixture()
+def switching():
+    """Threads switched as often as the interpreter can (every few bytecodes), so that a step another
+    thread may come between shows."""
+    before = sys.getswitchinterval()
+    sys.setswitchinterval(1e-5)
+    yield
+    sys.setswitchinterval(before)
+
+
+def _rigs(count):
+    side = 10 if SMALL else 24
+    return [rsocl.Rig.paper_array(4, (side + 4 * k, side + 2 * k), t_e=1.8e-4, t_r=3.5e-5) for k in range(count)]
+
+
+@pytest.mark.not_under_oclgrind("threads' host logic; the operator's kernels run in test_operator.py")
+def test_operators_used_from_threads_give_each_its_own_result(device, switching):
+    rigs = _rigs(4)
+    ops = [rsocl.RollingShutterOperator(r) for r in rigs]
+    rng = np.random.default_rng(3)
+    xs = [rng.random(op.domain_shape, dtype=np.float32) for op in ops]
+    ys = [rng.random(op.range_shape, dtype=np.float32) for op in ops]
+    alone = [(op.forward(x), op.adjoint(y)) for op, x, y in zip(ops, xs, ys)]
+
+    def wrong(k, op):  # ``op``: the shared operator or one of the thread's own
+        bad = 0
+        for _ in range(10 if SMALL else 40):
+            bad += not np.array_equal(op.forward(xs[k]), alone[k][0])
+            bad += not np.array_equal(op.adjoint(ys[k]), alone[k][1])
+        return bad
+
+    with ThreadPoolExecutor(4) as pool:
+        shared = list(pool.map(lambda k: wrong(k, ops[k]), range(4)))
+        own = list(pool.map(lambda k: wrong(k, rsocl.RollingShutterOperator(rigs[k])), range(4)))
+    assert shared == own == [0, 0, 0, 0]
+    assert all(np.array_equal(op.forward(x), a[0]) for op, x, a in zip(ops, xs, alone))  # and alone again after
+
+
+@pytest.mark.not_under_oclgrind("whole runs from threads (host logic); their kernels run in the other tests")
+@pytest.mark.parametrize("tune", [False, True], ids=["fixed", "tuned"])
+def test_reconstructions_from_threads_equal_each_alone_bit_for_bit(device, switching, tune):
+    rigs = _rigs(3 if tune else 4)
+    sets = [reference.forward(r, rsocl.builtin_scene(r.shape, r.T)) for r in rigs]
+    kw = dict(iterations=8 if tune else 30, tv_iterations=4, tune=tune)
+
+    def run(k):
+        return rsocl.reconstruct(sets[k], rigs[k], **kw).datacube
+
+    alone = [run(k) for k in range(len(rigs))]
+    with ThreadPoolExecutor(len(rigs)) as pool:
+        together = list(pool.map(run, range(len(rigs))))
+    assert [np.array_equal(a, b) for a, b in zip(alone, together)] == [True] * len(rigs)
