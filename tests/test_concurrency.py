@@ -1,15 +1,19 @@
 """rsocl from several threads at once.
 
-Threads share one device (context, queue, programs): each result equals the same call's alone.
+Threads share one device (context, queue, programs): each result equals the same call's alone, and the
+device and a program asked for at once are made once.
 """
 
 import sys
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
 
 import rsocl
+from rsocl.device import context
 from rsocl.model import reference
 
 from conftest import SMALL
@@ -67,3 +71,36 @@ def test_reconstructions_from_threads_equal_each_alone_bit_for_bit(device, switc
     with ThreadPoolExecutor(len(rigs)) as pool:
         together = list(pool.map(run, range(len(rigs))))
     assert [np.array_equal(a, b) for a, b in zip(alone, together)] == [True] * len(rigs)
+
+
+def _at_once(count, call):
+    """``call()`` from ``count`` threads released together; their results."""
+    start = threading.Barrier(count)
+
+    def one(_):
+        start.wait()
+        return call()
+
+    with ThreadPoolExecutor(count) as pool:
+        return list(pool.map(one, range(count)))
+
+
+def test_threads_asking_for_the_device_at_once_share_one(device, monkeypatch):
+    import functools
+
+    monkeypatch.setattr(context, "_device_for", functools.cache(context._device_for.__wrapped__))  # none made yet
+    pick = context._pick
+
+    def slow_pick(*args):  # as slow as a GPU's first context: the threads all come while it is made
+        time.sleep(0.2)
+        return pick(*args)
+
+    monkeypatch.setattr(context, "_pick", slow_pick)
+    made = _at_once(4, rsocl.get_device)
+    assert len({id(d) for d in made}) == 1 and len({d.context.int_ptr for d in made}) == 1
+
+
+def test_threads_asking_for_a_program_at_once_share_one_build(device):
+    fresh = device.limited()  # a program cache of its own, empty
+    built = _at_once(4, lambda: fresh.program(["reduce.cl"], REAL="float", ACC="float"))
+    assert len({id(p) for p in built}) == 1

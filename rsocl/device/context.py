@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -45,6 +46,11 @@ def _cl():
     except ImportError as exc:  # pragma: no cover - pyopencl is a dependency
         raise NoOpenCLError(f"pyopencl is not importable ({exc}); {INSTALL_HINT}") from exc
     return cl
+
+
+#: The lock under which a device or a program is made (threads asking for one at once share the one that the
+#: first makes).
+_MAKING = threading.RLock()
 
 
 def list_devices() -> list[tuple[int, int, cl.Platform, cl.Device]]:
@@ -261,14 +267,18 @@ class Device:
             )
 
     def program(self, files, **defines):
-        """Build (once per device and definitions) the program made of ``common.cl`` + ``files``."""
+        """Build (once per device and definitions, one build at a time) the program of ``common.cl`` + ``files``."""
         key = (tuple(files), tuple(sorted(defines.items())))
         if self.limits.get("fp64") is False and "double" in defines.values():
             raise ValueError(f"dtype='float64' needs cl_khr_fp64, which device {self.name!r} does not support")
         cache = self.__dict__.setdefault("_programs", {})
-        if key not in cache:
-            cache[key] = build_program(self.context, key[0], key[1])
-        return cache[key]
+        found = cache.get(key)
+        if found is None:
+            with _MAKING:  # threads asking for a program at once share one build
+                found = cache.get(key)
+                if found is None:
+                    found = cache[key] = build_program(self.context, key[0], key[1])
+        return found
 
 
 _WORDS = {"yes": True, "true": True, "no": False, "false": False}
@@ -318,7 +328,7 @@ def get_device(device: str | Device | None = None) -> Device:
     -------
     Device
         Cached: calls with one spec (without one: with the same ``RSOCL_DEVICE`` and ``PYOPENCL_CTX``)
-        share one context, queue and program cache.
+        share one context, queue and program cache, threads asking at once too.
 
     Raises
     ------
@@ -334,7 +344,8 @@ def get_device(device: str | Device | None = None) -> Device:
         raise ValueError(f"device must be a spec string like '0:0' or 'pocl', or an rsocl Device; got {device!r}")
     spec = None if _blank(device) else device
     chosen_by = (os.environ.get("RSOCL_DEVICE"), os.environ.get("PYOPENCL_CTX")) if spec is None else (None, None)
-    return _device_for(spec, *chosen_by)
+    with _MAKING:
+        return _device_for(spec, *chosen_by)
 
 
 _BY_QUEUE: dict = {}
