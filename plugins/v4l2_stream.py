@@ -15,10 +15,11 @@ Timestamps
 Errors
     ``read`` waits with ``poll`` and raises :class:`~rsocl.hardware.backend.CameraTimeout` when no
     frame completes in time; a device that vanished (``ENODEV``/``ENXIO``, e.g. unplugged)
-    raises :class:`~rsocl.hardware.backend.CameraDisconnected` (``close()`` still works; re-open to
-    use it again); everything else is a :class:`~rsocl.hardware.backend.CameraError`. Frames the
-    driver flags as corrupt (``V4L2_BUF_FLAG_ERROR``) or that are shorter than the format
-    are skipped and counted in ``meta["skipped"]``.
+    raises :class:`~rsocl.hardware.backend.CameraDisconnected` (``stop()`` and ``close()`` still work
+    and raise nothing for it; re-open to use it again); everything else is a
+    :class:`~rsocl.hardware.backend.CameraError`. Frames the driver flags as corrupt
+    (``V4L2_BUF_FLAG_ERROR``) or that are shorter than the format are skipped and counted in
+    ``meta["skipped"]``.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import time
 import numpy as np
 
 from rsocl.hardware.backend import CameraError, CameraTimeout, Frame
-from rsocl_plugins.v4l2_device import os_errors
+from rsocl_plugins.v4l2_device import GONE, os_errors
 from rsocl_plugins.v4l2_formats import PIXEL_FORMATS, convert_frame
 
 __all__ = ["V4L2Stream"]
@@ -84,11 +85,16 @@ class V4L2Stream:
             return
         lvd, dev = self._lvd, self._dev
         try:
-            if self._streaming:
-                lvd.stream_off(dev, lvd.BufferType.VIDEO_CAPTURE)
-        finally:
-            self._streaming = False
-            self._release_buffers(dev, free=True)
+            try:
+                if self._streaming:
+                    lvd.stream_off(dev, lvd.BufferType.VIDEO_CAPTURE)
+            finally:
+                self._streaming = False
+                self._release_buffers(dev, free=True)
+        except OSError as exc:
+            if exc.errno not in GONE:
+                raise
+            # unplugged: nothing streams; the kernel frees the buffers when the descriptor closes
 
     def _release_buffers(self, dev, free):
         maps, self._maps = self._maps, []

@@ -32,6 +32,7 @@ import os
 import sys
 import threading
 import time
+import warnings
 from contextlib import ExitStack
 from types import SimpleNamespace
 from unittest import mock
@@ -1089,6 +1090,45 @@ def test_unplugged_while_waiting(fake):
             cam.read(timeout=5.0)
         timer.join()
         assert time.monotonic() - t0 < 2.0
+
+
+def test_unplugged_mid_capture_ends_in_one_line_that_says_what_was_kept(fake, tmp_path):
+    from rsocl.hardware.capture import CaptureFailed, capture_sets
+    from rsocl.hardware.capture_file import load_raw
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text(
+        f'[rig]\nshape = [6, 12]\n\n[[camera]]\nbackend = "v4l2"\naddress = "{fake.path}"\nangle = 0.0\n'
+        "t_e = 0.001\nt_r = 0.001\n"
+    )
+    fds = sorted(os.listdir("/proc/self/fd"))
+    dequeued = []  # frames the backend took: a set takes at most 5 (4 thrown away by the trigger, 1 read)
+    take = fake._ioc_DQBUF
+    fake._ioc_DQBUF = lambda arg: (take(arg), dequeued.append(arg.index))
+
+    def sensor():  # a frame every 2 ms; the cable is pulled once the backend has taken 12: after set 0 at least
+        for k in range(5000):
+            if len(dequeued) >= 12:
+                break
+            time.sleep(0.002)
+            fake.emit(sensor_image(fake, seed=k))
+        fake.unplug()
+
+    thread = threading.Thread(target=sensor, daemon=True)
+    thread.start()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(
+            CaptureFailed, match=r"(trigger|read) failed in set \d+: CameraDisconnected: .*went away"
+        ) as info:
+            capture_sets(rig, tmp_path / "c.h5", sets=100, timeout=5.0)
+    thread.join()
+    raw = load_raw(tmp_path / "c.h5")
+    kept = raw.sets_complete
+    assert kept >= 1 and raw.frames[0].shape == (kept, 6, 12) and raw.status == "failed"
+    assert f"({kept} complete set(s) and the failure are in {tmp_path / 'c.h5'})" in str(info.value)
+    assert [str(w.message) for w in caught] == [] and raw.meta["warnings"] == []  # no 'stop failed' besides
+    assert sorted(os.listdir("/proc/self/fd")) == fds and fake.file.closed  # the device closed, nothing leaked
 
 
 # ====================================================================== trigger
