@@ -1,9 +1,13 @@
-"""rsocl from several threads at once.
+"""rsocl from several threads at once, and in processes forked after it used OpenCL.
 
 Threads share one device (context, queue, programs): each result equals the same call's alone, and the
-device and a program asked for at once are made once.
+device and a program asked for at once are made once. A process forked after rsocl called the OpenCL
+runtime gets a clear error instead of waiting for ever.
 """
 
+import os
+import select
+import signal
 import sys
 import threading
 import time
@@ -104,3 +108,56 @@ def test_threads_asking_for_a_program_at_once_share_one_build(device):
     fresh = device.limited()  # a program cache of its own, empty
     built = _at_once(4, lambda: fresh.program(["reduce.cl"], REAL="float", ACC="float"))
     assert len({id(p) for p in built}) == 1
+
+
+def _in_a_fork(child, seconds=60):
+    """Run ``child()`` (returning a short text) in a forked process; its text, or None when it did not end in
+    ``seconds`` (then it is killed)."""
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: never back into pytest
+        try:
+            os.close(read)
+            try:
+                said = child()
+            except BaseException as exc:  # noqa: BLE001 - the parent reads what happened
+                said = f"{type(exc).__name__}: {exc}"
+            os.write(write, said.encode()[:4000])
+        finally:
+            os._exit(0)
+    os.close(write)
+    try:
+        ready, _, _ = select.select([read], [], [], seconds)
+        text = os.read(read, 4000).decode() if ready else None
+    finally:
+        os.close(read)
+    if text is None:
+        os.kill(pid, signal.SIGKILL)
+    deadline = time.monotonic() + seconds
+    while os.waitpid(pid, os.WNOHANG) == (0, 0) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return text
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no os.fork on this platform")
+def test_a_process_forked_after_opencl_was_used_is_told_so_and_does_not_hang(device):
+    rig = _rigs(1)[0]
+    op = rsocl.RollingShutterOperator(rig)
+    x = np.ones(op.domain_shape, np.float32)
+    op.forward(x)  # the runtime is started in this process
+
+    def child():
+        said = []
+        for call in (lambda: op.forward(x), lambda: rsocl.reconstruct(op.forward(x), rig, iterations=2)):
+            try:
+                call()
+                said.append("ran")
+            except RuntimeError as exc:
+                said.append(str(exc))
+        return "\n".join(said)
+
+    said = _in_a_fork(child)
+    assert said is not None, "the forked child hung"
+    lines = said.splitlines()
+    assert len(lines) == 2 and all("was forked from process" in line and "'spawn'" in line for line in lines), said
+    np.testing.assert_array_equal(op.forward(x), op.forward(x))  # the parent goes on

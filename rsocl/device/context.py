@@ -26,6 +26,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Device",
+    "check_process",
     "get_device",
     "device_for_queue",
     "list_devices",
@@ -48,14 +49,39 @@ def _cl():
     return cl
 
 
-#: The lock under which a device or a program is made (threads asking for one at once share the one that the
-#: first makes).
+#: The process in which rsocl first called the OpenCL runtime (None: none yet), and the lock under which a
+#: device or a program is made (threads asking for one at once share the one that the first makes).
+_RUNTIME_PID: int | None = None
 _MAKING = threading.RLock()
 
 
+def check_process() -> None:
+    """Raise a RuntimeError in a process forked from one in which rsocl had called the OpenCL runtime.
+
+    OpenCL runtimes do not survive a fork: the child's calls wait for threads of the parent's runtime
+    that the child does not have (PoCL's wait for ever, even on a context the child makes itself).
+    Processes started with ``spawn`` or ``forkserver``, or forked before rsocl's first OpenCL call, are
+    free to use it.
+    """
+    global _RUNTIME_PID
+    pid = os.getpid()
+    if _RUNTIME_PID is None:
+        _RUNTIME_PID = pid
+    elif _RUNTIME_PID != pid:
+        raise RuntimeError(
+            f"this process ({pid}) was forked from process {_RUNTIME_PID} after rsocl had started the OpenCL "
+            "runtime there, and OpenCL runtimes do not survive a fork (their calls would wait for ever): start "
+            "worker processes with the 'spawn' or 'forkserver' method (multiprocessing.get_context('spawn').Pool(), "
+            "ProcessPoolExecutor(mp_context=...)), or before rsocl's first call in the parent"
+        )
+
+
 def list_devices() -> list[tuple[int, int, cl.Platform, cl.Device]]:
-    """Every OpenCL device, ``(P, D, platform, device)`` (``"P:D"`` of :func:`get_device`); ``[]`` when none."""
+    """Every OpenCL device, ``(P, D, platform, device)`` (``"P:D"`` of :func:`get_device`); ``[]`` when none.
+
+    Raises RuntimeError in a process forked after rsocl called the OpenCL runtime (:func:`check_process`)."""
     cl = _cl()
+    check_process()
     try:
         platforms = cl.get_platforms()
     except cl.Error:
@@ -337,7 +363,10 @@ def get_device(device: str | Device | None = None) -> Device:
         chose) matches no device (the message lists them).
     NoOpenCLError
         If no OpenCL platform has a device (the message says what to install).
+    RuntimeError
+        In a process forked after rsocl called the OpenCL runtime (:func:`check_process`).
     """
+    check_process()
     if isinstance(device, Device):
         return device
     if device is not None and not isinstance(device, str):

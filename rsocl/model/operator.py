@@ -15,7 +15,7 @@ import numpy as np
 from rsocl.common import validation as check
 from rsocl.common.hints import ArrayLike, DTypeLike
 from rsocl.device import pool
-from rsocl.device.context import Device, get_device
+from rsocl.device.context import Device, check_process, get_device
 from rsocl.device.kernel import Kernel
 from rsocl.device.launch import block_grid, element_launches
 from rsocl.device.program import c_type
@@ -156,6 +156,7 @@ class RollingShutterOperator:
         """``x`` on the device and whether it was there; ``shape`` or a batch of it (a leading axis)."""
         import pyopencl.array as cla
 
+        check_process()  # an operator made before a fork: a clear error in the child, not a wait for ever
         on_device = isinstance(x, cla.Array)
         if not on_device:
             x = check.finite_array(name, x)
