@@ -1,7 +1,8 @@
 """mmap streaming I/O of a ``v4l2`` camera: :class:`V4L2Stream`, a mixin of :class:`~rsocl_plugins.v4l2.V4L2Camera`.
 
 ``start`` queues ``buffers`` mmap buffers in the driver and turns streaming on (a start that fails unmaps
-and frees them, so the pixel format and ROI can be changed again); ``read`` waits
+and frees them, so the pixel format and ROI can be changed again; a driver that refuses to stream with
+``ENOSPC``, uvcvideo's answer when the USB bus lacks the bandwidth, is a CameraError that says so); ``read`` waits
 with ``poll``, dequeues a completed buffer, copies the image out and queues the buffer again.
 
 Timestamps
@@ -71,13 +72,29 @@ class V4L2Stream:
                 self._maps.append(lvd.mem_map(fd, buff.length, buff.m.offset))
             for index in range(req.count):
                 lvd.enqueue_buffer(dev, capture, mmap_memory, 0, index)
-            lvd.stream_on(dev, capture)
+            try:
+                lvd.stream_on(dev, capture)
+            except OSError as exc:
+                if exc.errno != errno.ENOSPC:
+                    raise
+                raise CameraError(self._no_bandwidth()) from exc
         except BaseException:
             self._release_buffers(dev, free=requested)
             raise
         self._streaming = True
         self._last_sequence, self._dropped = None, 0
         self._trigger_time = None
+
+    def _no_bandwidth(self):
+        """What STREAMON's ENOSPC ("No space left on device") says: uvcvideo's answer when the USB bus lacks
+        the bandwidth for the frames asked for, not a full disk."""
+        fmt = self._fmt
+        return (
+            f"{self.name}: the driver refused to start streaming {fmt['name']} {fmt['width']}x{fmt['height']} "
+            "frames (ENOSPC: for a USB camera, the bus lacks the bandwidth for them, the disk is not full): "
+            "put the camera on another USB controller or stream fewer cameras from this one, or ask for smaller "
+            "frames (config width and height)"
+        )
 
     @os_errors
     def _stop(self):

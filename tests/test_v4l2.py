@@ -1046,6 +1046,25 @@ def test_closed_camera(fake):
         cam.read(0.1)
 
 
+def test_a_usb_bus_short_of_bandwidth_is_named_not_a_full_disk(fake):
+    def no_bandwidth(arg):  # uvcvideo: no alternate setting of the interface has the bandwidth the format needs
+        raise _err(errno.ENOSPC)
+
+    with V4L2Camera({"device": fake.path, "pixel_format": "YUYV"}) as cam:
+        with mock.patch.object(fake, "_ioc_STREAMON", no_bandwidth):
+            with pytest.raises(CameraError) as info:
+                cam.start()
+        assert str(info.value) == (
+            f"v4l2 {fake.path}: the driver refused to start streaming YUYV 12x6 frames (ENOSPC: for a USB camera, "
+            "the bus lacks the bandwidth for them, the disk is not full): put the camera on another USB controller "
+            "or stream fewer cameras from this one, or ask for smaller frames (config width and height)"
+        )
+        assert fake.buffers == [] and not cam._maps  # unmapped and freed
+        cam.start()  # bandwidth back (another camera stopped): it streams
+        fake.emit(sensor_image(fake))
+        assert cam.read(1.0).image.shape == (6, 12)
+
+
 @pytest.mark.parametrize("step", ["QUERYBUF", "mmap"])
 def test_a_start_that_fails_before_any_mapping_frees_the_driver_buffers(fake, step):
     def refuse(*args, **kwargs):
