@@ -1,8 +1,8 @@
 """rsocl from several threads at once, and in processes forked after it used OpenCL.
 
-Threads share one device (context, queue, programs): each result equals the same call's alone, and the
-device and a program asked for at once are made once. A process forked after rsocl called the OpenCL
-runtime gets a clear error instead of waiting for ever.
+Threads share one device (context, queue, programs): each result equals the same call's alone, the device
+and a program asked for at once are made once, and the process's warning filters stay as they were. A
+process forked after rsocl called the OpenCL runtime gets a clear error instead of waiting for ever.
 """
 
 import os
@@ -11,6 +11,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -108,6 +109,18 @@ def test_threads_asking_for_a_program_at_once_share_one_build(device):
     fresh = device.limited()  # a program cache of its own, empty
     built = _at_once(4, lambda: fresh.program(["reduce.cl"], REAL="float", ACC="float"))
     assert len({id(p) for p in built}) == 1
+
+
+def test_reconstruct_sets_leaves_the_warning_filters_to_other_threads(device):
+    rig = _rigs(1)[0]
+    g = reference.forward(rig, rsocl.builtin_scene(rig.shape, rig.T))
+    before, during = list(warnings.filters), []
+
+    def look(iteration, residual, theta):  # while the batch runs, as another thread would see them
+        during.append(list(warnings.filters))
+
+    rsocl.reconstruct_sets(np.stack([g, g]), rig, batch=1, iterations=2, tune=False, callback=look)
+    assert during and all(f == before for f in during)
 
 
 def _in_a_fork(child, seconds=60):

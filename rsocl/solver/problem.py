@@ -76,6 +76,7 @@ class Problem:
     ``truth`` are ``(T, m, n)`` or None; ``interpolate``: the run starts from the ``interp3d``
     interpolation of the snapshots (the caller's ``x0="interp3d"``). A batch of ``batch`` sets has a
     leading axis of that length on ``g``, ``valid``, ``x0`` and ``truth`` (``batch`` is None for one set).
+    ``warn``: whether staging it warns of the data (:func:`check_representable`).
     """
 
     g: np.ndarray
@@ -86,6 +87,7 @@ class Problem:
     saturation: float | None = None
     batch: int | None = None
     interpolate: bool = False
+    warn: bool = True
 
 
 @dataclass(frozen=True)
@@ -224,11 +226,13 @@ def check_problem(
     x0: ArrayLike | str | None = None,
     truth: ArrayLike | None = None,
     saturation: float | None = None,
+    warn: bool = True,
 ) -> Problem:
     """Validate the snapshots and the arrays that go with them against ``rig``.
 
     ``g`` is ``(K, m, n)``, or ``(B, K, m, n)`` for a batch of ``B`` sets of the same rig; ``x0`` an
-    array, ``"interp3d"`` (the interpolation of the snapshots, made on the device) or None.
+    array, ``"interp3d"`` (the interpolation of the snapshots, made on the device) or None. ``warn=False``:
+    none of the data's warnings (off scale, saturation, float32's range), here or when it is staged.
     """
     interpolate = isinstance(x0, str)
     if interpolate and x0 != "interp3d":
@@ -262,7 +266,7 @@ def check_problem(
             which = "" if batch is None else f" of set(s) {np.flatnonzero(empty).tolist()}"
             raise ValueError(f"every snapshot pixel{which} is >= saturation = {saturation!r}: nothing left to fit")
         dark = ~np.where(valid, g != 0, False).reshape(batch or 1, -1).any(axis=1)
-        if dark.any():
+        if dark.any() and warn:
             which = "" if batch is None else f" of set(s) {np.flatnonzero(dark).tolist()}"
             warnings.warn(
                 f"saturation = {saturation!r} keeps only snapshot pixels that are 0{which} (the brightest is "
@@ -270,13 +274,13 @@ def check_problem(
                 UserWarning,
                 stacklevel=3,
             )
-        else:
+        elif warn:
             _warn_mostly_clipped(g, rig, valid, saturation, batch)
-    warn_off_scale(g, rig, valid)
+    if warn:
+        warn_off_scale(g, rig, valid)
     cube = (rig.T,) + rig.shape
-    return Problem(
-        g, rig, valid, _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch), saturation, batch, interpolate
-    )
+    start, known = _cube("x0", x0, cube, batch), _cube("truth", truth, cube, batch)
+    return Problem(g, rig, valid, start, known, saturation, batch, interpolate, warn)
 
 
 def check_settings(
@@ -319,11 +323,12 @@ class Staged:
 
 def check_representable(problem: Problem, dtype):
     """Raise a ValueError naming the array when ``g``, ``x0`` or ``truth`` holds values beyond the
-    largest finite value of ``dtype`` (float64 data above 3.4e38 run in float32 would turn into inf);
-    warn of float32 snapshots of a scale it does not hold (:func:`~rsocl.model.plausible.warn_float32_scale`)."""
+    largest finite value of ``dtype`` (float64 data above 3.4e38 run in float32 would turn into inf); unless
+    ``problem.warn`` is False, warn of float32 snapshots of a scale it does not hold (:func:`warn_float32_scale`)."""
     for name in ("g", "x0", "truth"):
         check_fits_dtype(name, getattr(problem, name), dtype)
-    warn_float32_scale(problem.g, dtype)
+    if problem.warn:
+        warn_float32_scale(problem.g, dtype)
 
 
 def stage_on_device(problem: Problem, reg, settings: Settings, *, device=None, dtype="float32", start=False) -> Staged:

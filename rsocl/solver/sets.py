@@ -11,7 +11,6 @@ global memory cache (the measurements behind these limits: ``docs/solver-notes.m
 from __future__ import annotations
 
 import time
-import warnings
 
 import numpy as np
 
@@ -230,9 +229,12 @@ def reconstruct_sets(
         for start in range(0, count, batch):
             part = slice(start, min(start + batch, count))
             pick = {k: (np.asarray(v)[part] if v is not None and np.ndim(v) == 4 else v) for k, v in cubes.items()}
-            with warnings.catch_warnings(), request.regularizer.in_use:  # an instance in use elsewhere: its turn first
-                warnings.filterwarnings("ignore", DATA_WARNINGS, UserWarning)  # said once for every set, above
-                problem = check_problem(g[part], rig, x0=pick["x0"], truth=pick["truth"], saturation=saturation)
+            with request.regularizer.in_use:  # an instance in use elsewhere: its turn first
+                # the data's warnings were given for every set above: not again (by an argument, not a warning
+                # filter, which would be every thread's)
+                problem = check_problem(
+                    g[part], rig, x0=pick["x0"], truth=pick["truth"], saturation=saturation, warn=False
+                )
                 results.append(tune_and_run(prepare(request.for_sets(part), problem), started))
             if start == 0 and results[0].params.get("tuning"):
                 # one capture, one setting: the first batch's choice serves the later batches
@@ -243,11 +245,6 @@ def reconstruct_sets(
         if bar is not None:
             bar.close()
     return _joined(results, batch)
-
-
-#: The warnings of the snapshots' checks (off-scale, float32's range, saturation): :func:`reconstruct_sets` gives
-#: them once for every set before the first batch, not again for each batch.
-DATA_WARNINGS = r"(g: |saturation = )"
 
 
 def _check_every_set(g, rig, x0, truth, saturation, dtype) -> None:
