@@ -25,7 +25,8 @@ class Kernel:
     from the one this object set last. The record is exact as long
     as every argument goes through this object: :meth:`set_arg` and :meth:`set_args` pass through
     and update it. Other attributes (``get_work_group_info``, ``function_name``, ...) are the
-    wrapped kernel's.
+    wrapped kernel's. An object serves one thread at a time (its arguments are one set, as an OpenCL
+    kernel's are): :class:`rsocl.device.Kernels` gives each thread objects of its own.
     """
 
     def __init__(self, kernel):
