@@ -20,7 +20,8 @@ Errors
     and raise nothing for it; re-open to use it again); everything else is a
     :class:`~rsocl.hardware.backend.CameraError`. Frames the driver flags as corrupt
     (``V4L2_BUF_FLAG_ERROR``) or that are shorter than the format are skipped and counted in
-    ``meta["skipped"]``.
+    ``meta["skipped"]``. A timeout after skipped frames says how many and why (corrupt, short, or
+    timestamped before the software trigger), with the largest bytesused or lag (seconds) among them.
 """
 
 from __future__ import annotations
@@ -152,6 +153,7 @@ class V4L2Stream:
         if not self._streaming:
             raise CameraError(f"{self.name}: not acquiring; call start() first")
         deadline = time.monotonic() + timeout
+        self._passed_over = {}  # frames this read skips, for its timeout's message: see _pass_over
         poller = select.poll()
         poller.register(self._dev.fileno(), select.POLLIN)
         while True:
@@ -163,10 +165,7 @@ class V4L2Stream:
                 continue
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise CameraTimeout(
-                    f"{self.name}: no frame within {timeout:g} s (is the device streaming? "
-                    "a long exposure or a low frame rate needs a longer timeout)"
-                )
+                raise self._timeout(timeout)
             events = poller.poll(max(1, int(math.ceil(remaining * 1000))))
             if events and not any(ev & select.POLLIN for _, ev in events):
                 # POLLERR / POLLHUP: DQBUF tells why (ENODEV when the device vanished)
@@ -177,6 +176,41 @@ class V4L2Stream:
                 frame = self._frame_from(buff)
                 if frame is not None:
                     return frame
+
+    def _frame_bytes(self):
+        """Bytes a frame of the format needs: every line but the last padded to ``bytesperline``."""
+        fmt = self._fmt
+        return fmt["bpl"] * (fmt["height"] - 1) + fmt["width"] * PIXEL_FORMATS[fmt["name"]][0]
+
+    def _pass_over(self, why, detail):
+        """Count a frame ``read`` skips: ``why`` is ``"corrupt"``, ``"short"`` (``detail``: its bytesused) or
+        ``"early"`` (``detail``: seconds its timestamp is before the trigger); the largest ``detail`` is kept."""
+        count, most = self._passed_over.get(why, (0, detail))
+        self._passed_over[why] = (count + 1, max(most, detail))
+
+    def _timeout(self, timeout):
+        """The CameraTimeout of a ``read`` that got no frame in ``timeout`` seconds, naming the frames it skipped."""
+        if not self._passed_over:
+            return CameraTimeout(
+                f"{self.name}: no frame within {timeout:g} s (is the device streaming? "
+                "a long exposure or a low frame rate needs a longer timeout)"
+            )
+        fmt = self._fmt
+        words = {
+            "corrupt": "flagged corrupt by the driver (V4L2_BUF_FLAG_ERROR: a USB bus short of bandwidth, a "
+            "loose cable?)",
+            "short": "shorter than a {name} {width}x{height} frame (bytesused up to {detail} of {need})",
+            "early": "timestamped before the software trigger, by up to {detail:.3g} s (a driver clock behind "
+            "time.monotonic() makes every frame look early)",
+        }
+        parts = [
+            f"{count} {words[why].format(detail=detail, need=self._frame_bytes(), **fmt)}"
+            for why, (count, detail) in self._passed_over.items()
+        ]
+        total = sum(count for count, _ in self._passed_over.values())
+        return CameraTimeout(
+            f"{self.name}: no usable frame within {timeout:g} s: {total} came and were skipped, {'; '.join(parts)}"
+        )
 
     def _frame_from(self, buff):
         """Copy a dequeued buffer out, requeue it; None for a frame to skip."""
@@ -194,12 +228,12 @@ class V4L2Stream:
                 and stamp > 0
                 and stamp < self._trigger_time
             ):
+                self._pass_over("early", self._trigger_time - stamp)
                 return None  # completed after trigger() but started before it
             fmt = self._fmt
-            bpp = PIXEL_FORMATS[fmt["name"]][0]
-            need = fmt["bpl"] * (fmt["height"] - 1) + fmt["width"] * bpp
             used = int(buff.bytesused)
-            if flags & _BUF_FLAG_ERROR or used < need:
+            if flags & _BUF_FLAG_ERROR or used < self._frame_bytes():
+                self._pass_over("corrupt" if flags & _BUF_FLAG_ERROR else "short", used)
                 self._skipped += 1
                 return None
             data = self._maps[index][: min(used, fmt["bpl"] * fmt["height"])]

@@ -29,6 +29,7 @@ import errno
 import glob
 import mmap as mmap_module
 import os
+import re
 import sys
 import threading
 import time
@@ -1005,6 +1006,35 @@ def test_read_timeout(fake):
         assert 0.19 <= time.monotonic() - t0 < 1.5
         with pytest.raises(ValueError):
             cam.read(timeout=0)
+
+
+def test_a_timeout_after_skipped_frames_says_which_and_why(fake):
+    with V4L2Camera({"device": fake.path}) as cam:
+        cam.set_trigger("free")
+        cam.start()
+        fake.emit(np.full((6, 12), 1), error=True)  # a USB bus short of bandwidth: every frame flagged
+        fake.emit(np.full((6, 12), 2), error=True)
+        fake.emit(np.full((6, 12), 3), bytesused=10)
+        with pytest.raises(CameraTimeout) as info:
+            cam.read(timeout=0.2)
+        assert str(info.value) == (
+            f"v4l2 {fake.path}: no usable frame within 0.2 s: 3 came and were skipped, 2 flagged corrupt by the "
+            "driver (V4L2_BUF_FLAG_ERROR: a USB bus short of bandwidth, a loose cable?); 1 shorter than a GREY "
+            "12x6 frame (bytesused up to 10 of 92)"
+        )
+        cam.stop()
+        cam.set_trigger("software")
+        cam.start()
+        cam.trigger()
+        for k in range(2):  # a driver whose monotonic timestamps lag the host's by 50 s: every frame looks early
+            fake.emit(np.full((6, 12), k), timestamp=time.monotonic() - 50)
+        with pytest.raises(CameraTimeout, match=r"no usable frame within 0\.2 s: 2 came and were skipped, 2 ") as info:
+            cam.read(timeout=0.2)
+        assert re.search(
+            r"2 timestamped before the software trigger, by up to (50|49\.\d) s \(a driver clock", str(info.value)
+        )
+        with pytest.raises(CameraTimeout, match=r"no frame within 0\.2 s \(is the device streaming"):
+            cam.read(timeout=0.2)  # nothing came: the message of a device that sends nothing
 
 
 def test_read_waits_in_poll_for_a_late_frame(fake):
