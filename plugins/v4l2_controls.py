@@ -4,8 +4,9 @@ Exposure
     ``set_exposure(seconds)`` sets ``auto_exposure`` to manual (when the device has that
     control), then ``exposure_time_absolute`` in its units of 100 µs: the value is rounded
     to the nearest unit, clamped to the control's minimum/maximum and snapped to its step.
-    The value read back from the device is returned, in seconds (so a request outside the
-    device's range returns the clamped value, never the request).
+    The value read back from the device is returned, in seconds: its units / 10000, the double nearest
+    the decimal value (123 -> 0.0123 s); so a request outside the device's range returns the clamped
+    value, never the request.
 
 ROI
     Coordinates are sensor pixels. When the driver implements the selection API
@@ -32,6 +33,7 @@ __all__ = ["V4L2Controls", "EXPOSURE_UNIT"]
 
 #: Unit of ``exposure_time_absolute`` (V4L2_CID_EXPOSURE_ABSOLUTE), seconds.
 EXPOSURE_UNIT = 100e-6
+_UNITS_PER_SECOND = 10_000  # 1 / EXPOSURE_UNIT: an exposure in seconds is its units divided by this
 
 _CID_EXPOSURE_AUTO = 0x009A0901  # V4L2_CID_EXPOSURE_AUTO, menu
 _CID_EXPOSURE_ABSOLUTE = 0x009A0902  # V4L2_CID_EXPOSURE_ABSOLUTE, integer, 100 us units
@@ -86,7 +88,7 @@ class V4L2Controls:
             actual = int(absolute.value)
         except AttributeError as exc:  # linuxpy: control not writeable (read-only, disabled, grabbed)
             raise CameraError(f"{self.name}: {exc}") from exc
-        self._exposure = actual * EXPOSURE_UNIT
+        self._exposure = actual / _UNITS_PER_SECOND  # 123 -> 0.0123 (123 * 1e-4 is 0.012300000000000002)
         return self._exposure
 
     # ---------------------------------------------------------------- ROI

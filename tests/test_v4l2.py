@@ -761,7 +761,7 @@ def test_rig_file_address_reaches_the_camera(fake, tmp_path):
 
 
 @pytest.mark.filterwarnings("ignore:camera t_e = 10 s is longer than 1 s:UserWarning")  # the clamp, on purpose
-@pytest.mark.parametrize("t_e, applied", [(10.0, 2047 * EXPOSURE_UNIT), (0.01234, 123 * EXPOSURE_UNIT)])
+@pytest.mark.parametrize("t_e, applied", [(10.0, 0.2047), (0.01234, 0.0123)])
 def test_the_capture_rig_holds_the_exposure_the_webcam_applied(fake, tmp_path, t_e, applied):
     from rsocl.files.hdf5 import load_capture
 
@@ -891,6 +891,8 @@ def test_exposure_goes_manual_then_sets_100us_units(fake):
         assert cam.set_exposure(0.012345) == pytest.approx(123 * EXPOSURE_UNIT)  # rounded to 123.45 -> 123
         assert cam.set_exposure(0.01236) == pytest.approx(124 * EXPOSURE_UNIT)  # 123.6 -> 124
         assert fake.controls[CID_EXPOSURE_ABSOLUTE]["value"] == 124
+        # the seconds are the decimal value of the units, as a rig file's t_e would be written
+        assert [cam.set_exposure(t) for t in (0.0003, 0.0123, 0.2047, 0.0007)] == [0.0003, 0.0123, 0.2047, 0.0007]
         assert fake.control_writes.count((CID_EXPOSURE_AUTO, 1)) == 1  # already manual: not rewritten
 
 
