@@ -118,9 +118,7 @@ class V4L2Controls:
             self._software_roi(x, y, width, height)
             return
         if x + width > bounds.width or y + height > bounds.height:
-            raise ValueError(
-                f"{self.name}: ROI {width}x{height}+{x}+{y} exceeds the sensor {bounds.width}x{bounds.height}"
-            )
+            raise ValueError(f"{self.name}: {_off('sensor', (x, y, width, height), bounds.width, bounds.height)}")
         want = lvd.Rect(bounds.left + x, bounds.top + y, width, height)
         try:
             lvd.set_selection(self._dev, capture, lvd.SelectionTarget.CROP, want)
@@ -160,9 +158,16 @@ class V4L2Controls:
     def _software_roi(self, x, y, width, height):
         fmt = self._fmt
         if x < 0 or y < 0 or x + width > fmt["width"] or y + height > fmt["height"]:
-            raise ValueError(
-                f"{self.name}: ROI {width}x{height}+{x}+{y} exceeds the frame {fmt['width']}x{fmt['height']}"
-            )
+            raise ValueError(f"{self.name}: {_off('frame', (x, y, width, height), fmt['width'], fmt['height'])}")
         full = (x, y, width, height) == (0, 0, fmt["width"], fmt["height"])
         self._soft_roi = None if full else (x, y, width, height)
         self._roi_kind = None if full else "software"
+
+
+def _off(what, roi, width, height):
+    """Why ``roi`` (x, y, width, height; pixels) is refused: it does not lie on the ``what`` of width x height
+    pixels; in the rig file's order, as :func:`rsocl.hardware.capture_checks.check_rois` says it."""
+    return (
+        f"roi = {list(roi)} ([x, y, width, height]) must lie on the {width}x{height} (width x height) {what}: "
+        f"x, y >= 0, x + width <= {width} and y + height <= {height}"
+    )
