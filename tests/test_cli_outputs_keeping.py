@@ -235,7 +235,7 @@ def test_a_capture_whose_first_set_never_completed_is_refused(tmp_path, capsys, 
         def __array__(self, *args, **kwargs):
             raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(capture_file, "room_for", lambda truth, folder, sets_bytes, warn: FullDisk())
+    monkeypatch.setattr(capture_file, "room_for", lambda truth, folder, sets_bytes, warn, file_size=0: FullDisk())
     out = tmp_path / "c.h5"
     with pytest.raises(CaptureFailed, match="write failed in set 0"):
         capture_sets(_rig(tmp_path), out, sets=3)
