@@ -214,6 +214,31 @@ def test_a_warning_of_the_tiles_on_workers_is_raised_in_the_client_once(cluster,
     assert len(far) == 1 and far[0].category is RuntimeWarning, [str(w.message) for w in recwarn]
 
 
+def test_a_worker_of_several_threads_runs_its_tasks_one_at_a_time_each_noting_its_own_warnings(monkeypatch):
+    import warnings
+    from concurrent.futures import ThreadPoolExecutor
+
+    from rsocl.scale import runner
+
+    running, most = [0], [0]
+
+    def solve(job, payload, settings):  # tasks of staggered lengths, each warning once in the middle
+        running[0] += 1
+        most[0] = max(most[0], running[0])
+        time.sleep(0.02 * job)
+        warnings.warn(f"task {job} warns", UserWarning, stacklevel=2)
+        time.sleep(0.08 - 0.02 * job)
+        running[0] -= 1
+        return job
+
+    monkeypatch.setattr(runner, "solve_tile", solve)
+    shown = (warnings.showwarning, getattr(warnings, "_showwarnmsg_impl", None))  # how the worker shows warnings
+    with ThreadPoolExecutor(4) as pool:  # as `dask worker` runs tasks: one thread per core
+        results = list(pool.map(lambda job: runner._solve_noting_warnings(job, None, None), range(4)))
+    assert results == [(j, ((UserWarning, f"task {j} warns"),)) for j in range(4)] and most[0] == 1
+    assert (warnings.showwarning, getattr(warnings, "_showwarnmsg_impl", None)) == shown  # not a dead task's list
+
+
 def test_an_unreachable_scheduler_is_an_error_before_anything_runs(monkeypatch, tmp_path):
     from rsocl.scale import runner
 

@@ -7,7 +7,8 @@
   ``dask.distributed`` scheduler. It is connected to before anything is computed; an
   unreachable address is a ValueError naming ``scheduler`` (or ``RSOCL_SCHEDULER``, where that gave
   it). Its workers must be able to import rsocl and, for file inputs and Zarr output, see the same
-  paths.
+  paths. A worker of several threads runs one task at a time all the same (:data:`ONE_TASK`): a tile
+  is sized to have the device to itself, and the warnings a task raises are noted as its own.
 * ``workers=N``: a ``LocalCluster`` of ``N`` worker processes (one thread each) on 127.0.0.1,
   closed at the end; ``N`` is at most :func:`max_workers`, :data:`WORKERS_PER_CORE` per CPU core
   this process may run on (each worker is a Python process with its own OpenCL context).
@@ -153,11 +154,18 @@ def _attempts(job, payload, settings, retries, stop=None):
     return Failure(job.set_index, job.tile.index, job.label, retries + 1, _cause(last))
 
 
+#: Held by a cluster worker's task while it runs: one task at a time per worker process, whatever its threads
+#: (``dask worker`` starts one per core). Each tile's size was chosen for a device of its own, and
+#: ``warnings.catch_warnings``, which notes a task's warnings, swaps process-wide state that two threads
+#: inside it at once would leave swapped (every later warning of the worker lost).
+ONE_TASK = threading.Lock()
+
+
 def _solve_noting_warnings(job, payload, settings):
     """``solve_tile`` on a cluster's worker: ``(piece, warned)``, ``warned`` the ``(category, message)`` of each
     warning the task raised, which the client raises again (a worker's own stderr shows them raw, once per
-    task)."""
-    with warnings.catch_warnings(record=True) as caught:  # the worker's filters apply, as they would to stderr
+    task). Tasks of one worker process run one at a time (:data:`ONE_TASK`)."""
+    with ONE_TASK, warnings.catch_warnings(record=True) as caught:  # the worker's filters apply, as to stderr
         piece = solve_tile(job, payload, settings)
     return piece, tuple(dict.fromkeys((w.category, str(w.message)) for w in caught))
 
