@@ -14,8 +14,10 @@ Configuration (the ``[camera.config]`` table of a ``backend = "v4l2"`` camera in
     width = 640                # optional requested frame size; the driver picks the nearest it has
     height = 480
 
-Any other key (a typo such as ``adress``) is refused with a ``ValueError`` that names it,
-suggests the closest accepted key and lists them all.
+A value out of range is refused with a ``ValueError`` that names the camera and its key as
+``config['buffers']``, the aravis backend's form, and says what the key may be. Any other key
+(a typo such as ``adress``) is refused with a ``ValueError`` that names it, suggests the closest
+accepted key and lists them all.
 
 Trigger
     V4L2 webcams are free-running: they have no trigger input. ``"free"`` reads the
@@ -63,7 +65,7 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         ``address`` arrives here as ``address``; both may be given only when they name
         the same node), ``pixel_format`` (``GREY``/``Y16``/``YUYV``, default the first
         the device offers in that order), ``buffers`` (default 4), optional ``width`` /
-        ``height``. See the module documentation for behaviour. Other keys are refused
+        ``height`` (pixels). See the module documentation for behaviour. Other keys are refused
         (``ValueError`` naming them).
     name : str
         Name used in errors (default ``"v4l2 /dev/videoN"``).
@@ -71,7 +73,8 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
     Raises
     ------
     ValueError
-        A config value out of range, or ``address`` and ``device`` naming different nodes.
+        A config value out of range, or ``address`` and ``device`` naming different nodes: the message
+        names the key as ``config['buffers']``.
     """
 
     backend = "v4l2"
@@ -88,32 +91,37 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         if name is None:
             self.name = f"v4l2 {self.path}"
         unknown_keys(self.name, self.config, _CONFIG_KEYS)
+        k = self._key
         buffers = self.config.get("buffers", 4)
         if isinstance(buffers, bool) or not isinstance(buffers, int) or not 1 <= buffers <= _MAX_BUFFERS:
-            raise ValueError(f"{self.name}: buffers must be an integer in 1..{_MAX_BUFFERS}, got {buffers!r}")
+            raise ValueError(f"{k('buffers')} must be an integer in 1..{_MAX_BUFFERS}, got {buffers!r}")
         self.n_buffers = buffers
         pixel_format = self.config.get("pixel_format")
-        if pixel_format is not None and pixel_format not in PIXEL_FORMATS:
-            raise ValueError(f"{self.name}: pixel_format must be one of {list(PIXEL_FORMATS)}, got {pixel_format!r}")
+        if pixel_format is not None and (not isinstance(pixel_format, str) or pixel_format not in PIXEL_FORMATS):
+            raise ValueError(f"{k('pixel_format')} must be one of {list(PIXEL_FORMATS)}, got {pixel_format!r}")
         self._requested_format = pixel_format
         self._requested_size = []
         for key in ("width", "height"):
             value = self.config.get(key)
             if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-                raise ValueError(f"{self.name}: {key} must be a positive integer, got {value!r}")
+                raise ValueError(f"{k(key)} must be a positive integer (pixels), got {value!r}")
             self._requested_size.append(value)
         self._lvd = None
         self._dev = None
         self._reset_state()
 
+    def _key(self, key: str) -> str:
+        """How messages name config key ``key``: ``"camera 0 (v4l2 /dev/video0): config['buffers']"``."""
+        return f"{self.name}: config[{key!r}]"
+
     def _device_node(self) -> str:
         """The node ``address`` or ``device`` names (``/dev/video0`` when neither is given)."""
         given = {key: self.config[key] for key in ("address", "device") if key in self.config}
-        paths = {key: device_path(value, key) for key, value in given.items()}
+        paths = {key: device_path(value, self._key(key)) for key, value in given.items()}
         if len(set(paths.values())) > 1:
             raise ValueError(
-                f"{self.name}: address = {given['address']!r} ({paths['address']}) and "
-                f"device = {given['device']!r} ({paths['device']}) name different devices; "
+                f"{self._key('address')} = {given['address']!r} ({paths['address']}) and "
+                f"config['device'] = {given['device']!r} ({paths['device']}) name different devices; "
                 "give one of them (a path like /dev/video0 or an index)"
             )
         return next(iter(paths.values()), device_path(0))
@@ -192,6 +200,10 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
                 offered.append(name)
         self.device_formats = tuple(offered)
         wanted = self._requested_format
+        if wanted is not None and wanted not in offered:
+            raise CameraError(
+                f"{self._key('pixel_format')} = {wanted!r}: the device does not offer {wanted}; it offers {offered}"
+            )
         if wanted is None:
             usable = [name for name in PIXEL_FORMATS if name in offered]
             if not usable:

@@ -26,7 +26,7 @@ def device_path(device, key: str = "device") -> str:
         An index (``0`` or ``"0"`` -> ``/dev/video0``) or a path, kept as given
         (``/dev/video2``, ``/dev/v4l/by-id/...``).
     key : str
-        The config key ``device`` came from, named in errors.
+        How errors name the config key ``device`` came from (``"camera 0 (v4l2): config['device']"``).
 
     Returns
     -------
@@ -39,14 +39,14 @@ def device_path(device, key: str = "device") -> str:
         If ``device`` is not a non-negative index or a non-empty path.
     """
     if isinstance(device, bool) or not isinstance(device, (numbers.Integral, str, os.PathLike)):
-        raise ValueError(f"{key} must be a path like /dev/video0 or an index, got {device!r}")
+        raise ValueError(f"{key} must be a path like /dev/video0 or an index >= 0, got {device!r}")
     if isinstance(device, numbers.Integral):
         if device < 0:
-            raise ValueError(f"{key} index must be >= 0, got {device!r}")
+            raise ValueError(f"{key} must be an index >= 0 or a path like /dev/video0, got {device!r}")
         return f"/dev/video{int(device)}"
     text = os.fsdecode(device).strip()
     if not text:
-        raise ValueError(f"{key} must be a path like /dev/video0 or an index, got an empty string")
+        raise ValueError(f"{key} must be a path like /dev/video0 or an index >= 0, got an empty string")
     if text.isdigit():
         return f"/dev/video{int(text)}"
     return text
