@@ -9,7 +9,8 @@ Configuration (the ``[camera.config]`` table of a ``backend = "v4l2"`` camera in
     device = "/dev/video0"     # a path, or an index: 0 -> /dev/video0 (default 0)
     address = "/dev/video0"    # the same forms; also the [[camera]] table's own ``address`` key.
                                # Give address or device, or both naming the same node
-    pixel_format = "GREY"      # "GREY", "Y16" or "YUYV" (default: the first of these the device offers)
+    pixel_format = "GREY"      # "GREY", "Y16", "Y12", "Y10" or "YUYV" (default: the first of these the
+                               # device offers); Y10/Y12: 10/12-bit levels, one pixel per 16-bit word
     buffers = 4                # mmap buffers queued in the driver, 1..32 (default 4)
     width = 640                # optional requested frame size; the driver picks the nearest it has
     height = 480
@@ -45,7 +46,7 @@ from rsocl.common.validation import unknown_keys
 from rsocl.hardware.backend import CameraBackend, CameraError
 from rsocl_plugins.v4l2_controls import EXPOSURE_UNIT, V4L2Controls
 from rsocl_plugins.v4l2_device import device_path, import_linuxpy, os_errors
-from rsocl_plugins.v4l2_formats import PIXEL_FORMATS
+from rsocl_plugins.v4l2_formats import PIXEL_FORMATS, packed_note
 from rsocl_plugins.v4l2_stream import V4L2Stream
 
 __all__ = ["V4L2Camera", "EXPOSURE_UNIT", "PIXEL_FORMATS"]
@@ -63,8 +64,8 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
     config : dict
         ``device`` or ``address`` (path or index, default 0; a rig file camera's
         ``address`` arrives here as ``address``; both may be given only when they name
-        the same node), ``pixel_format`` (``GREY``/``Y16``/``YUYV``, default the first
-        the device offers in that order), ``buffers`` (default 4), optional ``width`` /
+        the same node), ``pixel_format`` (``GREY``/``Y16``/``Y12``/``Y10``/``YUYV``, default
+        the first the device offers in that order), ``buffers`` (default 4), optional ``width`` /
         ``height`` (pixels). See the module documentation for behaviour. Other keys are refused
         (``ValueError`` naming them).
     name : str
@@ -98,7 +99,10 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
         self.n_buffers = buffers
         pixel_format = self.config.get("pixel_format")
         if pixel_format is not None and (not isinstance(pixel_format, str) or pixel_format not in PIXEL_FORMATS):
-            raise ValueError(f"{k('pixel_format')} must be one of {list(PIXEL_FORMATS)}, got {pixel_format!r}")
+            raise ValueError(
+                f"{k('pixel_format')} must be one of {list(PIXEL_FORMATS)}, got {pixel_format!r}"
+                + packed_note([pixel_format] if isinstance(pixel_format, str) else [])
+            )
         self._requested_format = pixel_format
         self._requested_size = []
         for key in ("width", "height"):
@@ -209,7 +213,7 @@ class V4L2Camera(V4L2Controls, V4L2Stream, CameraBackend):
             if not usable:
                 raise CameraError(
                     f"{self.name}: the device offers {offered or 'no formats'}, none of which this "
-                    f"backend reads ({list(PIXEL_FORMATS)})"
+                    f"backend reads ({list(PIXEL_FORMATS)}){packed_note(offered)}"
                 )
             wanted = usable[0]
         self._apply_format(wanted, *self._requested_size)

@@ -54,7 +54,7 @@ CID_CAMERA_CLASS = 0x009A0001
 CID_EXPOSURE_AUTO = 0x009A0901
 CID_EXPOSURE_ABSOLUTE = 0x009A0902
 EXPOSURE_MANUAL, EXPOSURE_APERTURE_PRIORITY = 1, 3
-BYTES_PER_PIXEL = {"GREY": 1, "Y16": 2, "YUYV": 2}
+BYTES_PER_PIXEL = {"GREY": 1, "Y16": 2, "Y12": 2, "Y10": 2, "YUYV": 2}
 PAD = 0xEE  # line padding bytes the fake writes: must never reach an image
 
 
@@ -517,7 +517,7 @@ class FakeV4L2Device:
         name = self.pixel_format
         if name == "GREY":
             rows = image.astype(np.uint8)
-        elif name == "Y16":
+        elif name in ("Y16", "Y12", "Y10"):  # one pixel per 16-bit little-endian word, the value in the low bits
             rows = image.astype("<u2").view(np.uint8)
         elif name == "YUYV":
             rows = np.empty((height, 2 * width), np.uint8)
@@ -1325,7 +1325,7 @@ def test_real_device():
                 cam.stop()
             width, height = cam.frame_size
             assert frame.image.shape == (height, width)
-            assert frame.image.dtype == (np.uint16 if cam.pixel_format == "Y16" else np.uint8)
+            assert frame.image.dtype == (np.uint8 if cam.pixel_format in ("GREY", "YUYV") else np.uint16)
             assert frame2.timestamp > frame.timestamp and frame2.meta["sequence"] > frame.meta["sequence"]
             with pytest.raises(CameraError):
                 cam.set_trigger("line", "Line1")
