@@ -108,10 +108,15 @@ def test_gains_of_raw_flat_fields_within_half_a_percent(bits, dark, light):
     np.testing.assert_allclose(gains, GAINS, rtol=5e-3)
 
 
-def test_calibrate_refuses_a_saturated_flat_field_of_raw_levels(tmp_path, capsys):
+@pytest.mark.parametrize(
+    "twelve_bits",  # how a rig file says a camera delivers 12 bits
+    ['backend = "simulated"\n[camera.config.sensor]\nbit_depth = 12', 'backend = "v4l2"\npixel_format = "Y12"'],
+)
+def test_calibrate_refuses_a_saturated_flat_field_of_raw_levels(tmp_path, capsys, twelve_bits):
     from rsocl.cli.main import main
 
-    camera = '[[camera]]\nbackend = "simulated"\nt_e = 1.0e-04\nt_r = 2.0e-05\n[camera.config.sensor]\nbit_depth = 12\n'
+    head, _, table = twelve_bits.partition("\n[")
+    camera = f"[[camera]]\n{head}\nt_e = 1.0e-04\nt_r = 2.0e-05\n" + (f"[{table}\n" if table else "")
     (tmp_path / "rig.toml").write_text("[rig]\nshape = [16, 16]\n" + camera * 4, encoding="utf-8")
     before = (tmp_path / "rig.toml").read_bytes()
     # camera 2's centre would be 1.06 of full scale: clipped, its gain came out 1.21, not 1.25

@@ -202,7 +202,10 @@ def _dest(option: str) -> str:
 
 
 #: Bits per pixel of the pixel formats a rig file names (a float format has none).
-_FORMAT_BITS = {"Mono8": 8, "Mono10": 10, "Mono12": 12, "Mono14": 14, "Mono16": 16, "GREY": 8, "Y16": 16, "YUYV": 8}
+_FORMAT_BITS = {
+    **{"Mono8": 8, "Mono10": 10, "Mono12": 12, "Mono14": 14, "Mono16": 16},  # aravis, simulated
+    **{"GREY": 8, "Y10": 10, "Y12": 12, "Y16": 16, "YUYV": 8},  # v4l2
+}
 
 
 def _bit_depth(camera: dict):
