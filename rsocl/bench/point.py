@@ -150,6 +150,9 @@ class BenchResult:
     timing_check: tuple | None = None
     #: 1-minute load average at the start and at the end of the run (None where unavailable).
     load: tuple | None = None
+    #: The interrupt (KeyboardInterrupt: Ctrl-C, SIGTERM) that ended the run before its last point,
+    #: with ``rows`` those measured before it; None for a run that ended on its own.
+    interrupted: BaseException | None = None
 
     def history(self):
         """History of the longest run whose knobs other than ``iterations`` are the default's."""

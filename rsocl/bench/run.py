@@ -268,7 +268,15 @@ def _label(point: BenchPoint, default: BenchPoint) -> str:
 
 
 def run_bench(
-    default: BenchPoint, sweeps=None, *, quick=False, baseline=True, progress=True, cache=None, repeat_default=True
+    default: BenchPoint,
+    sweeps=None,
+    *,
+    quick=False,
+    baseline=True,
+    progress=True,
+    cache=None,
+    repeat_default=True,
+    keep_on_interrupt=False,
 ) -> BenchResult:
     """Build the points (:func:`build_points`) and measure each (:func:`run_point`).
 
@@ -278,6 +286,11 @@ def run_bench(
 
     A point that fails (a broken plugin, a dtype the regularizer lacks, a problem too large
     for the device) is left out with a note; the others are measured.
+
+    An interrupt (Ctrl-C's KeyboardInterrupt, or its subclass for SIGTERM) propagates; with
+    ``keep_on_interrupt`` it ends the run instead, and the result holds the rows measured before
+    it, a note saying how many of the points were measured, and the exception
+    (:attr:`BenchResult.interrupted`).
     """
     from tqdm.auto import tqdm
 
@@ -286,7 +299,8 @@ def run_bench(
     default = replace(default, device=canonical_device(default.device))
     points, notes = build_points(default, sweeps, quick=quick, baseline=baseline)
     cache = {} if cache is None else cache
-    rows = []
+    rows: list = []
+    interrupted, timing_check, measuring = None, None, True
     bar = tqdm(points, desc="rsocl bench", unit="point", disable=None if progress else True, leave=False)
     try:
         for point, labels in bar:
@@ -301,14 +315,24 @@ def run_bench(
             row["sweep"] = "|".join(labels)
             row["label"] = _label(point, default)
             rows.append(row)
+        measuring = False
+        first = next((r for r in rows if r["_point"] == default), None)
+        if repeat_default and first is not None and len(rows) > 1:
+            timing_check = (first["seconds"], run_point(default, cache)["seconds"])
+    except KeyboardInterrupt as exc:
+        if not keep_on_interrupt:
+            raise
+        interrupted = exc
+        if measuring:
+            notes.append(f"interrupted: {len(rows)} of the {len(points)} points measured, the others not")
+        else:
+            notes.append("interrupted while the default point was timed again: no second timing")
     finally:
         bar.close()
-    timing_check = None
-    first = next((r for r in rows if r["_point"] == default), None)
-    if repeat_default and first is not None and len(rows) > 1:
-        timing_check = (first["seconds"], run_point(default, cache)["seconds"])
     device = _device_of(default.device).name
-    return BenchResult(rows, default, notes, time.perf_counter() - start, device, timing_check, (load_start, _load()))
+    return BenchResult(
+        rows, default, notes, time.perf_counter() - start, device, timing_check, (load_start, _load()), interrupted
+    )
 
 
 def _load():

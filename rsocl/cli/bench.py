@@ -127,24 +127,37 @@ def cmd_bench(args) -> int:
     measured (the reasons on stderr, no file written).
 
     The options, the ``--out`` folder and the sweep values given are checked first (a ValueError
-    naming the option).
+    naming the option). An interrupt (Ctrl-C, SIGTERM) ends the sweeps: the files are written with
+    the points measured before it (none where no reconstruction point was), and the interrupt is
+    raised again with a message saying what was written.
     """
     from rsocl.bench.report import _num
     from rsocl.bench.run import markdown, parse_sweep, picks, run_bench, write_outputs
-    from rsocl.cli.outputs import kept_note
+    from rsocl.cli.outputs import kept_clause, kept_note, nothing_written
     from rsocl.files.atomic import output_folder
 
     output_folder(args.out, "--out")
     default = default_point(args)
     sweeps = None if not args.sweep else [parse_sweep(s) for s in args.sweep]
     check_sweeps(default, sweeps)
-    result = run_bench(default, sweeps, quick=args.quick, progress=not args.quiet)
-    if not any(not row["_point"].is_baseline for row in result.rows):
+    result = run_bench(default, sweeps, quick=args.quick, progress=not args.quiet, keep_on_interrupt=True)
+    measured = any(not row["_point"].is_baseline for row in result.rows)
+    kept: list = []
+    if result.interrupted is not None:
+        stop = type(result.interrupted)
+        if not measured:
+            raise stop(f"no reconstruction point measured, {nothing_written(args.out)}")
+        files = write_outputs(result, args.out, kept)
+        raise stop(
+            f"written with the points measured before it ({len(result.rows)}): "
+            + ", ".join(str(f) for f in files)
+            + kept_clause(kept)
+        )
+    if not measured:
         print("rsocl bench: error: no reconstruction point could be measured, nothing written:", file=sys.stderr)
         for note in result.notes:
             print(f"  {note}", file=sys.stderr)
         return 1
-    kept: list = []
     files = write_outputs(result, args.out, kept)
     if not args.quiet:
         print(markdown(result))
