@@ -2,6 +2,7 @@
 
 import csv
 
+import numpy as np
 import pytest
 
 from rsocl.cli.main import main
@@ -49,3 +50,39 @@ def test_an_interrupt_before_any_reconstruction_writes_nothing(tmp_path, capsys,
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["rsocl bench: interrupted: no reconstruction point measured, nothing written"]
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "name, video, match",
+    [
+        (
+            "image.tif",
+            np.full((16, 16), 200, np.uint8),
+            r"holds 1 frame; rsocl bench needs a video of at least 2 frames",
+        ),
+        ("one.npz", np.zeros((1, 16, 16)), r"holds 1 frame; rsocl bench needs a video of at least 2 frames"),
+        ("nan.npz", np.full((4, 16, 16), np.nan), r"contains 1024 NaN or inf value\(s\)"),
+    ],
+)
+def test_a_scene_that_is_no_video_is_refused_before_any_point(tmp_path, capsys, monkeypatch, name, video, match):
+    """A still image (a one-page TIFF) gave every point an infinite PSNR; a NaN video failed every point."""
+    import re
+
+    import imageio.v3 as iio
+
+    from rsocl.bench import run as bench_run
+
+    path = tmp_path / name
+    if name.endswith(".tif"):
+        iio.imwrite(path, video)
+    else:
+        np.savez(path, video=video)
+    calls = []
+    monkeypatch.setattr(bench_run, "run_point", lambda *a, **k: calls.append(a))
+    out = tmp_path / "b"
+    assert main(SMALL + ["--scene", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        len(err) == 1 and err[0].startswith(f"rsocl bench: error: --scene {str(path)!r}") and re.search(match, err[0])
+    )
+    assert not calls and not out.exists()

@@ -21,7 +21,11 @@ def add_parser(subparsers):
         "3-D interpolation baseline; writes bench.csv, iterations.csv, bench.md, pareto.png, "
         "cameras.png and iterations.png.",
     )
-    p.add_argument("--scene", default="builtin", help="'builtin' or a video file (.npz key 'video', .tif, .gif)")
+    p.add_argument(
+        "--scene",
+        default="builtin",
+        help="'builtin' or a video file of 2 frames or more (.npz key 'video', .tif, .gif)",
+    )
     p.add_argument(
         "--sweep",
         action="append",
@@ -56,7 +60,8 @@ def default_point(args):
     ValueError
         Naming the option (``--lam``, ``--t-r-us``, ...) and its allowed range, before anything runs.
     FileNotFoundError
-        When ``--scene`` names no file (a ValueError names a file that is no readable video).
+        When ``--scene`` names no file (a ValueError names a file that is no readable video, one of
+        a single frame, a still image, and one holding NaN or inf).
     """
     from rsocl.bench.point import US, BenchPoint
     from rsocl.bench.run import canonical_device
@@ -71,7 +76,12 @@ def default_point(args):
             raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
         from rsocl.model.video import load_video
 
-        load_video(scene)  # an unreadable file is named now, not in every point's failure
+        video = load_video(scene)  # an unreadable file is named now, not in every point's failure
+        if video.shape[0] < 2:  # a still image: every sub-frame the same, PSNRs infinite
+            raise ValueError(
+                f"--scene {scene!r} holds {video.shape[0]} frame; rsocl bench needs a video of at least 2 frames"
+            )
+        check.finite_array(f"--scene {scene!r}", video)
     quick = bool(args.quick)
     for option, value, maximum in (
         ("--cameras", args.cameras, 8),
