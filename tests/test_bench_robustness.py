@@ -86,3 +86,50 @@ def test_a_scene_that_is_no_video_is_refused_before_any_point(tmp_path, capsys, 
         len(err) == 1 and err[0].startswith(f"rsocl bench: error: --scene {str(path)!r}") and re.search(match, err[0])
     )
     assert not calls and not out.exists()
+
+
+def _result(seconds):
+    """A run of a 12x12 grid whose times are replaced by ``seconds`` in the order of its rows (default, it=2,
+    dt=2t_r, interp3d, ROI 8, interp3d ROI 8), the default's second timing ``seconds[-1]``."""
+    from rsocl.bench.run import BenchPoint, run_bench
+
+    result = run_bench(BenchPoint(shape=12, iterations=4), ["iterations=2", "dt=1,2", "roi=8"], progress=False)
+    for row, value in zip(result.rows, seconds):
+        row["seconds"] = value
+    result.timing_check = (result.rows[0]["seconds"], seconds[-1])
+    return result
+
+
+#: Times of a quick run on a fast machine: hundredths of a second.
+QUICK_SECONDS = [0.0464, 0.0103, 0.0308, 0.0024, 0.0171, 0.0007, 0.0548]
+
+
+def test_the_times_the_text_states_agree_with_its_ratios():
+    """Times at two decimals read '0.02 s instead of 0.05 s (×0.34)' and '0.05 s ... 0.05 s (18% apart)'."""
+    import re
+
+    from rsocl.bench.run import markdown
+
+    text = markdown(_result(QUICK_SECONDS))
+    ratios = re.findall(r"([\d.]+) s instead of ([\d.]+) s \(×([\d.]+)\)", text)
+    assert len(ratios) == 2  # dt = 2 t_r and ROI 8
+    for shown, base, ratio in ratios:
+        assert float(shown) / float(base) == pytest.approx(float(ratio), abs=0.006), (shown, base, ratio)
+    a, b, apart = re.search(
+        r"took ([\d.]+) s at the start and ([\d.]+) s when timed again at the end \((\d+)%", text
+    ).groups()
+    assert abs(float(b) - float(a)) / min(float(a), float(b)) * 100 == pytest.approx(int(apart), abs=0.6)
+    assert "0.0464 s" in text and "0.0103 s" in text
+
+
+def test_the_iterations_plot_labels_each_run_with_its_time(tmp_path, monkeypatch):
+    """Its labels read '0.0 s' for every run of a quick bench."""
+    from matplotlib.axes import Axes
+
+    from rsocl.bench.run import write_outputs
+
+    labels, real = [], Axes.annotate
+    monkeypatch.setattr(Axes, "annotate", lambda self, text, *a, **k: labels.append(text) or real(self, text, *a, **k))
+    result = _result(QUICK_SECONDS)
+    write_outputs(result, tmp_path)
+    assert {"0.0464 s", "0.0103 s"} <= set(labels)  # the default and it=2

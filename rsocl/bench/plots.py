@@ -10,6 +10,7 @@ import math
 import os
 from pathlib import Path
 
+from rsocl.bench.point import seconds_text
 from rsocl.files.atomic import atomic_path
 
 __all__ = ["pareto_plot", "cameras_plot", "iterations_plot"]
@@ -159,7 +160,7 @@ def iterations_plot(path, history, rows, baseline_psnr=None, *, title="") -> Pat
         ax.plot([r["iterations"] for r in rows], [_psnr(r["psnr"]) for r in rows], "o", ms=4, label="measured runs")
         for r in rows:
             ax.annotate(
-                f"{r['seconds']:.1f} s",
+                f"{seconds_text(r['seconds'])} s",
                 (r["iterations"], _psnr(r["psnr"])),
                 textcoords="offset points",
                 xytext=(3, -10),

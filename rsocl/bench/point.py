@@ -7,7 +7,7 @@ from pathlib import Path
 
 from rsocl.solver.problem import DEFAULTS, MAX_ITERATIONS
 
-__all__ = ["BenchPoint", "BenchResult", "BASELINE", "US", "on_iterations_line"]
+__all__ = ["BenchPoint", "BenchResult", "BASELINE", "US", "on_iterations_line", "seconds_text"]
 
 US = 1e-6
 #: Name of the baseline's rows in the ``regularizer`` column.
@@ -124,6 +124,15 @@ class BenchPoint:
         """``(y, x, height, width)`` of the centred ROI."""
         offset = (self.shape - self.roi_size) // 2
         return (offset, offset, self.roi_size, self.roi_size)
+
+
+def seconds_text(seconds: float) -> str:
+    """A time in seconds as the text and plots write it (the number, without the unit): three
+    significant digits, never in exponent notation (``0.0464``, ``12.3``, ``1230``), so that the
+    ratios printed beside two times agree with them."""
+    import numpy as np
+
+    return np.format_float_positional(float(seconds), precision=3, unique=False, fractional=False, trim="-")
 
 
 def _scene_name(scene) -> str:

@@ -23,7 +23,7 @@ from rsocl.bench.analysis import (
     pareto_front,
     picks,
 )
-from rsocl.bench.point import US, BenchResult, _scene_name
+from rsocl.bench.point import US, BenchResult, _scene_name, seconds_text
 from rsocl.files.atomic import EARLIER, atomic_path, keeping
 
 __all__ = ["COLUMNS", "write_csv", "write_iterations_csv", "tradeoff_lines", "markdown", "write_outputs"]
@@ -122,7 +122,7 @@ def tradeoff_lines(result: BenchResult):
         return ["(the default point did not run)"]
     if result.timing_check:  # the reference time: the mean of the default's two timings
         base = dict(base, seconds=sum(result.timing_check) / 2)
-        lines.append(f"Times against the default point's mean of its two timings, {base['seconds']:.2f} s.")
+        lines.append(f"Times against the default point's mean of its two timings, {seconds_text(base['seconds'])} s.")
         lines.append("")
     for row in _varied(result, "dt_factor"):
         p = row["_point"]
@@ -130,7 +130,7 @@ def tradeoff_lines(result: BenchResult):
             continue
         lines.append(
             f"- **dt = {p.dt_factor:g}·t_r = {row['dt_us']:.0f} µs** (T {base['T']} → {row['T']}): "
-            f"{row['seconds']:.2f} s instead of {base['seconds']:.2f} s "
+            f"{seconds_text(row['seconds'])} s instead of {seconds_text(base['seconds'])} s "
             f"(×{_ratio(row['seconds'], base['seconds']):.2f}), "
             f"memory ×{_ratio(row['peak_device_memory_bytes'], base['peak_device_memory_bytes']):.2f}; "
             f"PSNR {_num(row['psnr'], '.2f')} dB vs {_num(base['psnr'], '.2f')} dB "
@@ -146,7 +146,7 @@ def tradeoff_lines(result: BenchResult):
         lines.append(
             f"- **ROI {p.roi_size}×{p.roi_size}** (centred crop of {p.shape}×{p.shape}, "
             f"{row['subframes_evaluated']} sub-frames sampled instead of {base['subframes_evaluated']}): "
-            f"{row['seconds']:.2f} s instead of {base['seconds']:.2f} s "
+            f"{seconds_text(row['seconds'])} s instead of {seconds_text(base['seconds'])} s "
             f"(×{_ratio(row['seconds'], base['seconds']):.2f}), "
             f"memory ×{_ratio(row['peak_device_memory_bytes'], base['peak_device_memory_bytes']):.2f}; "
             f"PSNR in the crop {_num(row['psnr'], '.2f')} dB vs {_num(full, '.2f')} dB for the full-ROI "
@@ -191,7 +191,8 @@ def markdown(result: BenchResult) -> str:
         if result.timing_check:
             a, b = result.timing_check
             timing += (
-                f"; the default point took {a:.2f} s at the start and {b:.2f} s when timed again at the end "
+                f"; the default point took {seconds_text(a)} s at the start and {seconds_text(b)} s when timed "
+                "again at the end "
                 f"({abs(b - a) / min(a, b) * 100:.0f}% apart): read time differences smaller than that as noise"
             )
         lines += [timing + ".", ""]
@@ -227,7 +228,7 @@ def markdown(result: BenchResult) -> str:
             str(row["T"]),
             _num(row["psnr"], ".2f"),
             _ssim(row["ssim_mean"]),
-            f"{row['seconds']:.3g}",
+            seconds_text(row["seconds"]),
             "–" if spi is None else f"{spi * 1e3:.1f}",
             f"{row['peak_device_memory_bytes'] / 2**20:.2f}",
         ]
@@ -242,13 +243,13 @@ def markdown(result: BenchResult) -> str:
     else:
         lines.append(
             f"- **pick for quality:** {quality['label']} — {_num(quality['psnr'], '.2f')} dB, "
-            f"SSIM {_ssim(quality['ssim_mean'])}, {quality['seconds']:.2f} s."
+            f"SSIM {_ssim(quality['ssim_mean'])}, {seconds_text(quality['seconds'])} s."
         )
         lines.append(
             f"- **pick for speed:** {speed['label']} — the fastest point of the Pareto front within "
             f"{SPEED_PICK_DB:g} dB of the best: {_num(speed['psnr'], '.2f')} dB, "
             f"SSIM {_ssim(speed['ssim_mean'])}, "
-            f"{speed['seconds']:.2f} s."
+            f"{seconds_text(speed['seconds'])} s."
         )
         coarse = [r for r in (quality, speed) if r["_point"].dt_factor > 1]
         if coarse:
@@ -272,7 +273,7 @@ def markdown(result: BenchResult) -> str:
         front = [recs[i] for i in pareto_front(recs)]
         lines.append(
             "- Pareto front of the reconstructions (PSNR against seconds, default capture), fastest first: "
-            + ", ".join(f"{r['label']} ({_num(r['psnr'], '.1f')} dB, {r['seconds']:.2g} s)" for r in front)
+            + ", ".join(f"{r['label']} ({_num(r['psnr'], '.1f')} dB, {seconds_text(r['seconds'])} s)" for r in front)
             + "."
         )
     if result.notes:

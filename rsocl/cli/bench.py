@@ -141,6 +141,7 @@ def cmd_bench(args) -> int:
     the points measured before it (none where no reconstruction point was), and the interrupt is
     raised again with a message saying what was written.
     """
+    from rsocl.bench.point import seconds_text
     from rsocl.bench.report import _num
     from rsocl.bench.run import markdown, parse_sweep, picks, run_bench, write_outputs
     from rsocl.cli.outputs import kept_clause, kept_note, nothing_written
@@ -180,7 +181,7 @@ def cmd_bench(args) -> int:
         if quality is not None:
             text += (
                 f"; quality: {quality['label']} {_num(quality['psnr'], '.2f')} dB; "
-                f"speed: {speed['label']} {_num(speed['psnr'], '.2f')} dB in {speed['seconds']:.2f} s"
+                f"speed: {speed['label']} {_num(speed['psnr'], '.2f')} dB in {seconds_text(speed['seconds'])} s"
             )
         print(text)
         for note in result.notes:  # the table, which lists them, is not printed
