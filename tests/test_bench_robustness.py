@@ -133,3 +133,12 @@ def test_the_iterations_plot_labels_each_run_with_its_time(tmp_path, monkeypatch
     result = _result(QUICK_SECONDS)
     write_outputs(result, tmp_path)
     assert {"0.0464 s", "0.0103 s"} <= set(labels)  # the default and it=2
+
+
+def test_every_sweep_has_a_colour_of_its_own_in_the_pareto_plot():
+    """tune and quality were both drawn gray, two legend entries alike."""
+    from rsocl.bench.plots import COLOURS
+    from rsocl.bench.run import SWEEPS
+
+    assert set(SWEEPS) | {"default", "baseline"} <= set(COLOURS)
+    assert len(set(COLOURS.values())) == len(COLOURS)

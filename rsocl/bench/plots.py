@@ -29,6 +29,8 @@ COLOURS = {
     "dt": "tab:pink",
     "roi": "tab:olive",
     "device": "tab:cyan",
+    "tune": "tab:gray",
+    "quality": "darkgoldenrod",
 }
 
 
