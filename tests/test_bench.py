@@ -11,6 +11,7 @@ import pytest
 from rsocl.bench.run import (
     BASELINE,
     COLUMNS,
+    HEADER,
     BenchPoint,
     build_points,
     device_memory_bytes,
@@ -240,13 +241,13 @@ def test_writers_produce_csv_markdown_and_pngs(tmp_path, tiny_result):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(FILES)  # no temporary files left
     with open(tmp_path / "bench.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
-    assert len(rows) == len(tiny_result.rows) and tuple(rows[0]) == COLUMNS
+    assert len(rows) == len(tiny_result.rows) and tuple(rows[0]) == HEADER
     assert {r["regularizer"] for r in rows} == {"tv", BASELINE}
     default = next(r for r in rows if r["label"] == "default")
-    assert float(default["psnr"]) > 0 and len(default["ssim_per_subframe"].split()) == int(default["T"])
+    assert float(default["psnr_db"]) > 0 and len(default["ssim_per_subframe"].split()) == int(default["T"])
     with open(tmp_path / "iterations.csv", newline="") as handle:
         its = list(csv.DictReader(handle))
-    assert len(its) == 4 and float(its[-1]["psnr"]) == pytest.approx(float(default["psnr"]), abs=1e-3)
+    assert len(its) == 4 and float(its[-1]["psnr_db"]) == pytest.approx(float(default["psnr_db"]), abs=1e-3)
     md = (tmp_path / "bench.md").read_text(encoding="utf-8")
     assert "| point |" in md and "dt = 2·t_r" in md and "ROI 8×8" in md
     assert "pick for speed" in md and "pick for quality" in md and "interp3d" in md
@@ -307,7 +308,7 @@ def test_cmd_bench_quick_end_to_end(tmp_path, capsys):
         rows = list(csv.DictReader(handle))
     assert {int(r["cameras"]) for r in rows} == {1, 2, 4}
     assert {float(r["dt_factor"]) for r in rows} == {1.0, 2.0, 4.0}
-    assert {int(r["roi"]) for r in rows} == {6, 9, 12}
+    assert {int(r["roi_px"]) for r in rows} == {6, 9, 12}
 
 
 def test_ssim_of_an_roi_under_3_pixels_is_reported_as_not_available(tmp_path):

@@ -142,3 +142,26 @@ def test_every_sweep_has_a_colour_of_its_own_in_the_pareto_plot():
 
     assert set(SWEEPS) | {"default", "baseline"} <= set(COLOURS)
     assert len(set(COLOURS.values())) == len(COLOURS)
+
+
+#: Columns of bench.csv that hold no quantity of a unit: text, counts, ratios, weights.
+UNITLESS = {
+    "scene", "sweep", "label", "regularizer", "cameras", "dt_factor", "iterations", "tv_iterations", "dtype",
+    "device", "lam", "eta", "T", "T_se", "subframes_evaluated", "ssim_mean", "ssim_per_subframe",
+}  # fmt: skip
+
+
+def test_every_number_of_the_tables_has_its_unit(tmp_path):
+    """bench.csv's psnr, psnr_full_roi, shape and roi, iterations.csv's psnr and bench.md's ROI said none."""
+    import re
+
+    from rsocl.bench.run import write_outputs
+
+    write_outputs(_result(QUICK_SECONDS), tmp_path)
+    header = (tmp_path / "bench.csv").read_text(encoding="utf-8").splitlines()[0].split(",")
+    with_units = [name for name in header if name not in UNITLESS]
+    assert with_units and all(re.search(r"(_db|_px|_us|seconds.*|_bytes)$", name) for name in with_units), with_units
+    assert "psnr_db" in header and "roi_px" in header
+    assert (tmp_path / "iterations.csv").read_text(encoding="utf-8").startswith("iteration,psnr_db,residual,seconds\n")
+    table = next(line for line in (tmp_path / "bench.md").read_text(encoding="utf-8").splitlines() if "| point" in line)
+    assert "| ROI (px) |" in table and "| PSNR (dB) |" in table and "| memory (MiB) |" in table

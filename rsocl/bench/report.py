@@ -26,7 +26,7 @@ from rsocl.bench.analysis import (
 from rsocl.bench.point import US, BenchResult, _scene_name, seconds_text
 from rsocl.files.atomic import EARLIER, atomic_path, keeping
 
-__all__ = ["COLUMNS", "write_csv", "write_iterations_csv", "tradeoff_lines", "markdown", "write_outputs"]
+__all__ = ["COLUMNS", "HEADER", "write_csv", "write_iterations_csv", "tradeoff_lines", "markdown", "write_outputs"]
 
 #: Columns of ``bench.csv``, in order.
 COLUMNS = (
@@ -56,6 +56,11 @@ COLUMNS = (
     "psnr_full_roi",
     "ssim_per_subframe",
 )
+#: Units the header of ``bench.csv`` adds to the columns whose names do not say them (``psnr_db``);
+#: the others are counts, ratios, text or named with their unit (``dt_us``, ``seconds``).
+UNITS = {"shape": "px", "roi": "px", "psnr": "db", "psnr_full_roi": "db"}
+#: The header of ``bench.csv``: :data:`COLUMNS` with :data:`UNITS`.
+HEADER = tuple(f"{name}_{UNITS[name]}" if name in UNITS else name for name in COLUMNS)
 
 
 def _fmt(value, digits=6):
@@ -71,13 +76,14 @@ def _fmt(value, digits=6):
 
 
 def write_csv(path, rows) -> Path:
-    """``bench.csv``: one line per row, :data:`COLUMNS` (SSIM per sub-frame space-separated)."""
+    """``bench.csv``: one line per row, :data:`COLUMNS` under :data:`HEADER` (PSNR in dB, sides in pixels,
+    ``dt_us`` in µs, times in seconds, memory in bytes; SSIM per sub-frame space-separated)."""
     path = Path(os.fspath(path))
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
-    writer.writeheader()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(HEADER)
     for row in rows:
-        writer.writerow({k: _fmt(row.get(k)) for k in COLUMNS})
+        writer.writerow([_fmt(row.get(k)) for k in COLUMNS])
     with atomic_path(path) as tmp:
         tmp.write_text(buffer.getvalue(), encoding="utf-8")
     return path
@@ -87,7 +93,7 @@ def write_iterations_csv(path, history) -> Path:
     """``iterations.csv``: iteration, PSNR (dB), relative residual, seconds since the start."""
     path = Path(os.fspath(path))
     buffer = io.StringIO()
-    buffer.write("iteration,psnr,residual,seconds\n")
+    buffer.write("iteration,psnr_db,residual,seconds\n")
     if history is not None:
         psnr_values = history.get("psnr", [math.nan] * len(history["residual"]))
         for i, (p, r, t) in enumerate(zip(psnr_values, history["residual"], history["time"]), start=1):
@@ -206,7 +212,7 @@ def markdown(result: BenchResult) -> str:
         "and the scene is resampled to it by the protocol.",
         "",
     ]
-    head = ["point", "regularizer", "cameras", "ROI", "dt (µs)", "iterations", "inner", "dtype"]
+    head = ["point", "regularizer", "cameras", "ROI (px)", "dt (µs)", "iterations", "inner", "dtype"]
     head += ["device"] if show_device else []
     head += ["T", "PSNR (dB)", "SSIM", "seconds", "ms/it", "memory (MiB)"]
     lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

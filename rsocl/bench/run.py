@@ -30,7 +30,15 @@ from rsocl.bench.analysis import SPEED_PICK_DB, pareto_front, picks  # noqa: F40
 from rsocl.bench.measure import _device_of, run_point
 from rsocl.bench.memory import device_memory_bytes
 from rsocl.bench.point import BASELINE, BenchPoint, BenchResult, on_iterations_line
-from rsocl.bench.report import COLUMNS, markdown, tradeoff_lines, write_csv, write_iterations_csv, write_outputs  # noqa: F401
+from rsocl.bench.report import (  # noqa: F401
+    COLUMNS,
+    HEADER,
+    markdown,
+    tradeoff_lines,
+    write_csv,
+    write_iterations_csv,
+    write_outputs,
+)
 from rsocl.model.interpolation import interp3d
 
 __all__ = [
