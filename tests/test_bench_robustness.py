@@ -165,3 +165,18 @@ def test_every_number_of_the_tables_has_its_unit(tmp_path):
     assert (tmp_path / "iterations.csv").read_text(encoding="utf-8").startswith("iteration,psnr_db,residual,seconds\n")
     table = next(line for line in (tmp_path / "bench.md").read_text(encoding="utf-8").splitlines() if "| point" in line)
     assert "| ROI (px) |" in table and "| PSNR (dB) |" in table and "| memory (MiB) |" in table
+
+
+def test_the_text_says_whether_the_default_point_is_fixed_or_self_tuned():
+    """It called the fixed lam 'rsocl's defaults', while rsocl's default self-tunes lam."""
+    from dataclasses import replace
+
+    from rsocl.bench.run import BenchResult, markdown
+
+    result = _result(QUICK_SECONDS)
+    fixed = markdown(result).splitlines()[2]
+    assert "fixed settings from zeros, as `rsocl reconstruct --fixed` (rsocl's default self-tunes" in fixed
+    assert "lam and eta: the fixed defaults for each point's rig" in fixed
+    tuned = markdown(BenchResult(result.rows, replace(result.default, tune=True))).splitlines()[2]
+    assert "self-tuned as rsocl's default (lam chosen from each point's snapshots" in tuned
+    assert "fixed" not in tuned

@@ -162,16 +162,23 @@ def tradeoff_lines(result: BenchResult):
 
 
 def _weights(point) -> str:
-    """``lam`` and ``eta`` of the default point as the report states them."""
+    """How the default point is run, self-tuned or fixed, and its ``lam`` and ``eta``, as the report states them."""
+    if point.tune or point.quality is not None:
+        rung = "" if point.quality is None else f", quality {point.quality}"
+        eta = "" if point.eta is None else f", eta = {point.eta:g}"
+        return (
+            f"self-tuned as rsocl's default (lam chosen from each point's snapshots, started from interp3d{rung}){eta}"
+        )
     said = [f"{name} = {value:g}" for name, value in (("lam", point.lam), ("eta", point.eta)) if value is not None]
+    fixed = "fixed settings from zeros, as `rsocl reconstruct --fixed` (rsocl's default self-tunes: sweep `tune`)"
     if len(said) == 2:
-        return ", ".join(said)
+        return ", ".join([fixed] + said)
     own = (
-        "rsocl's defaults for each point's rig (0.1 and 0.2 at the paper's configuration, scaled by the data "
+        "the fixed defaults for each point's rig (0.1 and 0.2 at the paper's configuration, scaled by the data "
         "term's curvature; the csv has each point's)"
     )
     left = " and ".join(name for name, value in (("lam", point.lam), ("eta", point.eta)) if value is None)
-    return ", ".join(said + [f"{left}: {own}"])
+    return ", ".join([fixed] + said + [f"{left}: {own}"])
 
 
 def markdown(result: BenchResult) -> str:

@@ -17,7 +17,8 @@ def add_parser(subparsers):
         "bench",
         help="sweep settings on a scene: PSNR/SSIM against seconds and memory; CSV, Markdown, plots",
         description="Measure what each setting buys: sweeps one knob at a time around a default point "
-        "(4 cameras, 64x64, 200 ADMM-TV iterations with 10 inner, float32, dt = t_r), with a "
+        "(4 cameras, 64x64, 200 ADMM-TV iterations with 10 inner, float32, dt = t_r, fixed settings as "
+        "rsocl reconstruct --fixed; the sweep tune adds the self-tuned default), with a "
         "3-D interpolation baseline; writes bench.csv, iterations.csv, bench.md, pareto.png, "
         "cameras.png and iterations.png.",
     )
