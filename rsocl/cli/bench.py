@@ -35,7 +35,9 @@ def add_parser(subparsers):
         help=f"sweep to run, repeatable: {', '.join(SWEEPS)} (default: all; --quick: {', '.join(QUICK)})",
     )
     p.add_argument(
-        "--quick", action="store_true", help="32x32, 100 iterations, fewer values: about a minute on 2 CPU cores"
+        "--quick",
+        action="store_true",
+        help="32x32, 100 iterations, fewer values: 4-15 s on 2 CPU cores (15 s with the kernels to build)",
     )
     p.add_argument("--out", default="rsocl-bench", help="output folder (default ./rsocl-bench)")
     p.add_argument("--device", default=None, help="OpenCL device for every point but the device sweep")
