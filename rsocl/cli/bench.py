@@ -79,7 +79,7 @@ def default_point(args):
             raise FileNotFoundError(f"--scene: video file {scene!r} does not exist")
         from rsocl.model.video import load_video
 
-        video = load_video(scene)  # an unreadable file is named now, not in every point's failure
+        video = load_video(scene)  # an unreadable file is named here, before any point runs
         if video.shape[0] < 2:  # a still image: every sub-frame the same, PSNRs infinite
             raise ValueError(
                 f"--scene {scene!r} holds {video.shape[0]} frame; rsocl bench needs a video of at least 2 frames"
