@@ -704,8 +704,6 @@ def test_address_opens_the_named_node(fake):
 def _capture_from_webcam(fake, tmp_path, t_e, sets=2):
     """capture_sets on a one-camera rig file of ``fake`` (6x12, t_r = 1 ms), which runs free with a frame every
     5 ms; returns the capture file and the image the fake sends."""
-    from rsocl.hardware.capture import capture_sets
-
     rig_path = tmp_path / "rig.toml"
     rig_path.write_text(f"""
 [rig]
@@ -719,6 +717,14 @@ t_e = {t_e!r}
 t_r = 0.001
 """)
     image = sensor_image(fake)
+    return capture_while_sending(fake, image, rig_path, tmp_path / "capture.h5", sets), image
+
+
+def capture_while_sending(fake, image, rig_path, out, sets):
+    """capture_sets of ``sets`` sets from the rig file ``rig_path`` into ``out`` while ``fake`` sends ``image``
+    every 5 ms (it runs free); returns the capture file."""
+    from rsocl.hardware.capture import capture_sets
+
     stop = threading.Event()
 
     def sensor():
@@ -728,7 +734,7 @@ t_r = 0.001
     thread = threading.Thread(target=sensor, daemon=True)
     thread.start()
     try:
-        return capture_sets(rig_path, tmp_path / "capture.h5", sets=sets, timeout=2.0), image
+        return capture_sets(rig_path, out, sets=sets, timeout=2.0)
     finally:
         stop.set()
         thread.join()

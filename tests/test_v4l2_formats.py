@@ -4,7 +4,6 @@ against the ioctl-level fake of tests/test_v4l2.py."""
 from __future__ import annotations
 
 import re
-import threading
 from contextlib import ExitStack
 
 import numpy as np
@@ -14,7 +13,7 @@ from rsocl.hardware.backend import CameraError
 from rsocl_plugins.v4l2 import V4L2Camera
 from rsocl_plugins.v4l2_formats import convert_frame
 
-from test_v4l2 import PAD, FakeV4L2Device, sensor_image
+from test_v4l2 import PAD, FakeV4L2Device, capture_while_sending, sensor_image
 
 READ = "['GREY', 'Y16', 'Y12', 'Y10', 'YUYV']"  # the formats the backend reads, as its messages list them
 
@@ -97,26 +96,12 @@ def test_y10_and_y12_are_set_by_name(make_fake, name):
 def _capture(fake, tmp_path, image, camera_keys="", config_keys=""):
     """capture_sets of 2 sets on a one-camera rig file of ``fake`` (6x12, t_e = 10 ms, t_r = dt = 1 ms, so a
     white scene is 10 model units), the fake sending ``image`` every 5 ms; returns the capture file."""
-    from rsocl.hardware.capture import capture_sets
-
     rig = tmp_path / "rig.toml"
     rig.write_text(
         f'[rig]\nshape = [6, 12]\n\n[[camera]]\nbackend = "v4l2"\naddress = "{fake.path}"\nangle = 0.0\n'
         f"t_e = 0.01\nt_r = 0.001\n{camera_keys}\n[camera.config]\n{config_keys}\n"
     )
-    stop = threading.Event()
-
-    def sensor():
-        while not stop.wait(0.005):
-            fake.emit(image)
-
-    thread = threading.Thread(target=sensor, daemon=True)
-    thread.start()
-    try:
-        return capture_sets(rig, tmp_path / "capture.h5", sets=2, timeout=2.0)
-    finally:
-        stop.set()
-        thread.join()
+    return capture_while_sending(fake, image, rig, tmp_path / "capture.h5", 2)
 
 
 @pytest.mark.parametrize(
