@@ -128,7 +128,7 @@ class TV(Regularizer):
     batched = True
     tunable = {"temporal_weight": (1.0, 3.0, 10.0, 30.0)}
     per_set_options = ("temporal_weight",)
-    #: One snapshot per pixel (one camera): temporal weight 10, not searched (docs/regularizer_defaults.md).
+    #: One camera (one frame or several): temporal weight 10, not searched (docs/regularizer_defaults.md).
     one_snapshot = {"temporal_weight": 10.0}
     options = {
         "iterations": Option(10, "iterations", "Chambolle iterations per denoising call", 1, 100000),

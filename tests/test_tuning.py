@@ -499,6 +499,19 @@ def test_the_search_summary_says_how_pixels_were_held_out(tmp_path):
     assert tuning_plot(tmp_path / "t.png", record).stat().st_size > 0
 
 
+def test_one_camera_of_several_frames_takes_the_preset_weight_and_searches_lam_alone():
+    """A camera's frames far apart in time do not let the criterion rank temporal weights either
+    (docs/one_camera_frames.md): the weight is the one-camera preset and the search chooses lam."""
+    from rsocl_plugins.tv import TV
+
+    weight = TV.one_snapshot["temporal_weight"]
+    rig = rsocl.Rig([rsocl.Camera(90, t_e=0.18e-3, t_r=35e-6, frames=3, t_d=2e-3)], SHAPE)
+    record = rsocl.reconstruct(ref.forward(rig, _static(rig)), rig, iterations=20).params["tuning"]
+    assert record["preset"] == {"temporal_weight": weight} and record["chosen"]["temporal_weight"] == weight
+    assert {c["temporal_weight"] for c in record["candidates"]} == {weight}
+    assert len({c["lam"] for c in record["candidates"]}) > 1
+
+
 def test_one_snapshot_per_pixel_sets_the_temporal_weight_and_runs_no_search(tmp_path, capsys):
     """With one camera a held-out block of the only snapshot is predicted across space alone: the
     temporal weight comes from ``TV.one_snapshot``, not from the criterion; lam, which hardly matters

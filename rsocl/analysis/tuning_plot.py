@@ -34,7 +34,7 @@ def search_summary(record) -> str:
     parts.append(f"{len(record.get('candidates', []))} candidates")
     if record.get("preset"):
         preset = ", ".join(f"{k} = {v:.3g}" for k, v in record["preset"].items())
-        parts.append(f"{preset} set, not searched (one snapshot per pixel)")
+        parts.append(f"{preset} set, not searched (one camera)")
     if record.get("blend") is not None:
         parts.append(f"blend with the interpolation {record['blend']:.2f}")
     if record.get("seconds"):

@@ -100,8 +100,8 @@ class Tuning:
     seconds : float
         Wall time of the whole search, seconds.
     preset : dict
-        Options set without a search (in ``chosen`` too): a rig with one snapshot per pixel gets
-        the regularizer's :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values.
+        Options set without a search (in ``chosen`` too): a rig of one camera gets the
+        regularizer's :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values.
     blend : float or None
         The chosen candidate's blend with the interpolation, in [0, 1] (module doc): the run that
         starts from :func:`interp3d` returns ``x0 + blend (theta - x0)``. None: no search ran.

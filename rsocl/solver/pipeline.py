@@ -200,22 +200,22 @@ def _choose_unset(prepared: Prepared, checked=False, search=None):
     ``lam`` candidates, hold-out folds and iterations per candidate; on a frame its crop applies to,
     the search runs on that central block (over the block's own rig). Unless
     ``checked`` (the caller did it, for a batch), the search's memory beside the staged problem is
-    checked first. A rig with one snapshot per pixel gets the regularizer's
-    :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values instead of a search for them,
-    and when those leave only ``lam`` unset, the settled ``lam`` without a search
-    (``docs/solver-notes.md``, one snapshot per pixel).
+    checked first. A rig of one camera gets the regularizer's
+    :attr:`~rsocl.solver.regularizer.Regularizer.one_snapshot` values instead of a search for them;
+    with one snapshot per pixel, when those leave only ``lam`` unset, the settled ``lam`` without a
+    search (``docs/solver-notes.md``, one camera).
     """
     request, problem, staged = prepared.request, prepared.problem, prepared.staged
     settings, rig = request.settings, problem.rig
     space = request.search_space()
     if space is None:
         return None
-    if rig.n_channels == 1:  # one snapshot per pixel: the criterion cannot rank priors in time
+    if len(rig.cameras) == 1:  # one camera, one frame or several: the criterion cannot rank priors in time
         reg = request.regularizer  # its preset applies on every rung, whether the rung searches options or not
         unset = set(getattr(reg, "tunable", {})) - request.given.option_names(reg)
         preset = {k: float(v) for k, v in getattr(reg, "one_snapshot", {}).items() if k in unset}
         space = replace(space, tunable={k: v for k, v in space.tunable.items() if k not in preset}, preset=preset)
-        if not space.tunable and (preset or np.isscalar(space.lam)):
+        if rig.n_channels == 1 and not space.tunable and (preset or np.isscalar(space.lam)):
             # the caller fixed lam, or the preset leaves only lam, which hardly matters here (see the docstring)
             lam = space.lam if isinstance(space.lam, (float, int, np.number)) else first_value(settings.lam)
             return Tuning(chosen={**preset, "lam": float(lam)}, fixed=space.fixed, preset=preset)

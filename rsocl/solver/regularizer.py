@@ -143,11 +143,12 @@ class Regularizer:
         Options that :func:`rsocl.solver.crossval.tune_parameters` may choose from the data,
         with their coarse candidate values (positive, log spaced); empty: only ``lam`` is tuned.
     one_snapshot : dict of str -> float
-        Values of tunable options for a rig with one snapshot per pixel (one camera, one frame):
-        the search then sets them instead of choosing them (:func:`rsocl.solver.pipeline.tune`),
-        because held-out pixels of the only snapshot are predicted across space alone and the
-        criterion cannot rank priors in time. When they leave only ``lam`` unset, ``lam`` keeps its
-        default and nothing is searched. Measured per regularizer; empty: searched as always.
+        Values of tunable options for a rig of one camera: the search then sets them instead of
+        choosing them (:func:`rsocl.solver.pipeline.tune`), because held-out pixels are predicted
+        across space alone (one frame) or from frames far apart in time (several), and the criterion
+        cannot rank priors in time. With one snapshot per pixel, when they leave only ``lam`` unset,
+        ``lam`` keeps its default and nothing is searched. Measured per regularizer
+        (docs/regularizer_defaults.md); empty: searched as always.
 
     per_set_options : tuple of str
         Options whose value may differ from set to set of one batch (:meth:`for_sets`); empty: none.
