@@ -370,7 +370,7 @@ def test_a_disk_without_room_for_the_truth_and_the_sets_gets_the_sets_only(tmp_p
     import collections
     import shutil
 
-    from rsocl.hardware import capture_room, capture_truth
+    from rsocl.hardware import capture_room
 
     path = tmp_path / "rig.toml"
     save_rigfile(path, _rigfile())
@@ -384,7 +384,7 @@ def test_a_disk_without_room_for_the_truth_and_the_sets_gets_the_sets_only(tmp_p
         out = capture_sets(path, tmp_path / "b.h5", sets=2)
     capture = load_capture(out, set_index=1)
     assert capture.truth is None and load_raw(out).sets_complete == 2
-    assert capture_truth.shutil.disk_usage is shutil.disk_usage
+    assert capture_room.shutil.disk_usage is shutil.disk_usage  # the module that reads the disk's room
 
 
 def test_a_frame_whose_shape_changed_is_kept_beside_the_raw_frames(tmp_path, monkeypatch):

@@ -32,6 +32,7 @@ __all__ = [
     "FileSizeLimit",
     "DiskFull",
     "file_size_limit",
+    "room_on_disk",
     "room_under_limit",
     "check_limit",
     "check_room",
@@ -66,6 +67,12 @@ def file_size_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else int(soft)
 
 
+def room_on_disk(folder) -> int:
+    """Bytes free on the disk of ``folder`` beyond :data:`SLACK` kept for HDF5's metadata (negative where
+    the disk has less than that)."""
+    return shutil.disk_usage(folder).free - SLACK
+
+
 def room_under_limit(size: int) -> int | None:
     """Bytes a file of ``size`` bytes may still grow by under the file-size limit, :data:`SLACK` kept for
     HDF5's metadata (0 at least), or None where there is no limit."""
@@ -90,11 +97,11 @@ def check_room(size: int, data_bytes: int, what: str, path=None) -> None:
     :data:`SLACK`."""
     if path is not None:
         folder = os.path.dirname(os.path.abspath(os.fspath(path)))
-        free = shutil.disk_usage(folder).free
-        if free < 2 * int(data_bytes) + SLACK:
+        on_disk = room_on_disk(folder)
+        if on_disk < 2 * int(data_bytes):
             raise DiskFull(
-                f"{what} would fill the disk of {folder}: it has {free:,} bytes free, and {what} needs room for "
-                f"its {int(data_bytes):,} bytes twice over and {SLACK:,} for HDF5's metadata; free space on it "
+                f"{what} would fill the disk of {folder}: it has {on_disk + SLACK:,} bytes free, and {what} needs room "
+                f"for its {int(data_bytes):,} bytes twice over and {SLACK:,} for HDF5's metadata; free space on it "
                 "or capture fewer sets"
             )
     room = room_under_limit(size)

@@ -8,11 +8,9 @@ Each says why there is none through ``warn`` (:meth:`rsocl.hardware.capture_file
 
 from __future__ import annotations
 
-import shutil
-
 import numpy as np
 
-from rsocl.hardware.capture_room import SLACK, room_under_limit
+from rsocl.hardware.capture_room import room_on_disk, room_under_limit
 
 __all__ = ["set_truth", "room_for"]
 
@@ -44,12 +42,13 @@ def set_truth(cameras, rig, warn):
 
 
 def room_for(truth, folder, sets_bytes: int, warn, file_size: int = 0):
-    """``truth``, or None (with a warning) where the disk of ``folder``, or the process's file-size limit for a
-    capture file of ``file_size`` bytes (:func:`~rsocl.hardware.capture_room.room_under_limit`), has no room for
-    it and, twice over, for the ``sets_bytes`` of every set asked for: the sets come first."""
+    """``truth``, or None (with a warning) where the disk of ``folder``
+    (:func:`~rsocl.hardware.capture_room.room_on_disk`) or the process's file-size limit for a capture file
+    of ``file_size`` bytes (:func:`~rsocl.hardware.capture_room.room_under_limit`) has no room for it and,
+    twice over, for the ``sets_bytes`` of every set asked for: the sets come first."""
     if truth is None:
         return None
-    free = shutil.disk_usage(folder).free - SLACK  # as the sets' own checks keep (rsocl.hardware.capture_room)
+    free = room_on_disk(folder)
     limit = room_under_limit(file_size)
     if free >= truth.nbytes + 2 * sets_bytes and (limit is None or limit >= truth.nbytes + 2 * sets_bytes):
         return truth
