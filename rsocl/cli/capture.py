@@ -14,8 +14,8 @@ def add_parser(subparsers):
         help="rig file (TOML) -> capture file (HDF5): synchronized sets from the cameras",
         description="Capture synchronized sets from the cameras of a rig file. Each raw frame is written "
         "before the next is requested, to OUT.partial, renamed to OUT at the end; if a camera "
-        "fails, or the next set would take the file past the file-size limit (ulimit -f), OUT keeps everything "
-        "captured and records the failure, and the exit status is 1. "
+        "fails, or the next set would fill the disk or take the file past the file-size limit (ulimit -f), OUT "
+        "keeps everything captured and records the failure, and the exit status is 1. "
         "Settings a camera cannot take (a pixel_format it does not deliver, a roi beyond its sensor, an Aravis "
         "interface this Aravis lacks) are refused before OUT.partial is made (exit status 2). "
         "An OUT.partial left by a killed capture is never overwritten: the capture is refused "

@@ -26,8 +26,8 @@ Files and atomicity
 The capture is written incrementally to ``<out>.partial`` and renamed to
 ``<out>`` when the run ends, successfully **or not**: a failed run still gives
 ``<out>``, holding the frames captured before the failure and the failure
-itself. So does a run whose next set (or frame) the process's file-size limit (``ulimit -f``)
-has no room for: it ends before that set is triggered (:mod:`rsocl.hardware.capture_room`), and
+itself. So does a run whose next set (or frame) its disk or the process's file-size limit
+(``ulimit -f``) has no room for: it ends before that set is triggered (:mod:`rsocl.hardware.capture_room`), and
 a limit that leaves no room for a capture file at all is refused before any camera opens. A
 ``<out>.partial`` left behind means the process itself died (power loss, ``kill -9``), or the rename
 failed (the run's error names the file and its complete sets); it is a readable capture file up to
@@ -141,11 +141,10 @@ def capture_sets(rigfile, out_path, sets=1, timeout=2.0, progress=False, name="o
     Raises
     ------
     CaptureFailed
-        A camera (or the registration of its frame) failed, or the next set would take the file past the
-        process's file-size limit: ``out_path`` holds everything captured before and the failure (camera,
-        set, error). Or the file could not be
-        closed or renamed to ``out_path``: :attr:`CaptureFailed.path` (``<out_path>.partial``) holds
-        the complete sets, and the message says so.
+        A camera (or the registration of its frame) failed, or the next set would fill the file's disk or take
+        the file past the process's file-size limit: ``out_path`` holds everything captured before and the
+        failure (camera, set, error). Or the file could not be closed or renamed to ``out_path``:
+        :attr:`CaptureFailed.path` (``<out_path>.partial``) holds the complete sets, and the message says so.
     ValueError, FileNotFoundError
         Bad arguments, rig file, unknown backend or camera config, a setting a camera cannot take
         (:mod:`rsocl.hardware.capture_checks`), a file-size limit with no room for a capture file, or an
@@ -343,7 +342,7 @@ def _run(cameras, rigfile, writer, sets, timeout, progress, where):
             fired: list = []  # cameras triggered in this set whose frame is not read yet
             try:
                 at(None, j, "write")
-                writer.check_room(j)  # a set the file-size limit has no room for ends the capture before it starts
+                writer.check_room(j)  # a set the disk or the file-size limit has no room for ends the capture first
                 for i, cam in enumerate(cameras):  # fire all triggers back to back
                     at(i, j, "trigger")
                     cam.trigger()

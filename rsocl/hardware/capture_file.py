@@ -212,8 +212,8 @@ class CaptureWriter:
         """Append ``frame`` to ``raw/<index>`` and its set, timestamp and metadata to ``raw_meta/<index>``, then
         flush. All or nothing: on any exception (a write the disk refuses, Ctrl-C, SIGTERM) the datasets are
         resized back to the frames written whole (or removed, on the camera's first frame) and it is
-        re-raised, so that frames and their metadata never differ in number. A frame the file-size limit has
-        no room for (under the file-size limit or on the disk) is refused before anything is written
+        re-raised, so that frames and their metadata never differ in number. A frame with no room (on the
+        file's disk or under the file-size limit) is refused before anything is written
         (:class:`~rsocl.hardware.capture_room.NoRoom`)."""
         image = np.asarray(frame.image)
         if image.ndim != 2:
