@@ -33,7 +33,7 @@ __all__ = ["V4L2Controls", "EXPOSURE_UNIT"]
 
 #: Unit of ``exposure_time_absolute`` (V4L2_CID_EXPOSURE_ABSOLUTE), seconds.
 EXPOSURE_UNIT = 100e-6
-_UNITS_PER_SECOND = 10_000  # 1 / EXPOSURE_UNIT: an exposure in seconds is its units divided by this
+_UNITS_PER_SECOND = round(1 / EXPOSURE_UNIT)  # 10000: an exposure in seconds is its units divided by this
 
 _CID_EXPOSURE_AUTO = 0x009A0901  # V4L2_CID_EXPOSURE_AUTO, menu
 _CID_EXPOSURE_ABSOLUTE = 0x009A0902  # V4L2_CID_EXPOSURE_ABSOLUTE, integer, 100 us units
